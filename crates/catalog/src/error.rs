@@ -1,0 +1,43 @@
+//! Errors of the catalogue and the log reader/writer. Every variant names the file it is about,
+//! so a command-line user sees one line with the file and the cause.
+
+use std::path::PathBuf;
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not a readable MCAP file: {cause}")]
+    Mcap { path: PathBuf, cause: String },
+    #[error("{path}: the file is empty")]
+    Empty { path: PathBuf },
+    #[error("{path}: message on {topic} at log time {log_time_ns} ns does not decode as {schema}: {source}")]
+    Decode {
+        path: PathBuf,
+        topic: String,
+        schema: String,
+        log_time_ns: u64,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("{path}: cannot write MCAP: {cause}")]
+    Write { path: PathBuf, cause: String },
+}
+
+impl Error {
+    pub(crate) fn mcap(path: &std::path::Path, e: impl std::fmt::Display) -> Self {
+        Error::Mcap { path: path.to_owned(), cause: e.to_string() }
+    }
+    pub(crate) fn write(path: &std::path::Path, e: impl std::fmt::Display) -> Self {
+        Error::Write { path: path.to_owned(), cause: e.to_string() }
+    }
+    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        Error::Io { path: path.to_owned(), source }
+    }
+}

@@ -1,0 +1,26 @@
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum EventKind {
+    StationArrival,
+    StationDeparture,
+    CorrectionLinkUp,
+    CorrectionLinkDown,
+    TunnelEntry,
+    TunnelExit,
+    OperatorNote,
+    FaultInjected,
+    FaultCleared,
+}
+
+/// Something that happened during the run, worth a mark on the timeline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Event {
+    pub stamp_ns: u64,
+    pub kind: EventKind,
+    /// Station name, device name or free text.
+    pub text: String,
+}
+super::channel_message!(Event, "railfuse.Event");

@@ -1,0 +1,61 @@
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+/// The fused along-track state of one pipeline after a measurement update.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct FusedState {
+    pub stamp_ns: u64,
+    pub chainage_m: f64,
+    pub speed_mps: f64,
+    pub acceleration_mps2: f64,
+    /// Covariance of `[chainage, speed, acceleration]`, row-major 3×3, SI units squared.
+    pub covariance: [f64; 9],
+    /// Topic of the measurement that produced this state.
+    pub source: String,
+}
+super::channel_message!(FusedState, "railfuse.FusedState");
+
+impl FusedState {
+    pub fn chainage_std_m(&self) -> f64 {
+        self.covariance[0].max(0.0).sqrt()
+    }
+    pub fn speed_std_mps(&self) -> f64 {
+        self.covariance[4].max(0.0).sqrt()
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum GateDecision {
+    /// Used in the update.
+    Accepted,
+    /// NIS above the pipeline's gate: not used.
+    RejectedGate,
+    /// NaN, infinite or flagged invalid by the sensor: not used.
+    RejectedInvalid,
+    /// Older than the filter's time after the reorder window: not used.
+    RejectedLate,
+    /// Arrived before the filter had its first position: not used.
+    BeforeInitialisation,
+}
+
+/// What one measurement did to one pipeline.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct FusedDiagnostics {
+    pub stamp_ns: u64,
+    /// Topic of the measurement.
+    pub source: String,
+    pub measurement: f64,
+    pub measurement_variance: f64,
+    /// z − H x⁻ (absent when the measurement never reached the update).
+    #[serde(default)]
+    pub innovation: Option<f64>,
+    /// H P⁻ Hᵀ + R.
+    #[serde(default)]
+    pub innovation_variance: Option<f64>,
+    /// Normalised innovation squared, ν² / S.
+    #[serde(default)]
+    pub nis: Option<f64>,
+    pub decision: GateDecision,
+}
+super::channel_message!(FusedDiagnostics, "railfuse.FusedDiagnostics");

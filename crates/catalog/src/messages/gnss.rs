@@ -1,0 +1,49 @@
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+/// Quality of a GNSS solution as the receiver reports it. `None` means "no position: do not
+/// use": a fix message with `None` carries no latitude or longitude.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum FixType {
+    None,
+    Single,
+    Dgps,
+    RtkFloat,
+    RtkFixed,
+}
+
+impl FixType {
+    pub fn has_position(self) -> bool {
+        self != FixType::None
+    }
+}
+
+/// One GNSS solution (e.g. UBX-NAV-PVT, NMEA GGA+RMC).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct GnssFix {
+    pub stamp_ns: u64,
+    pub fix_type: FixType,
+    /// Satellites used in the solution.
+    pub satellites: u8,
+    /// Horizontal dilution of precision (dimensionless).
+    #[serde(default)]
+    pub hdop: Option<f64>,
+    #[serde(default)]
+    pub latitude_deg: Option<f64>,
+    #[serde(default)]
+    pub longitude_deg: Option<f64>,
+    /// Height above the WGS84 ellipsoid.
+    #[serde(default)]
+    pub altitude_m: Option<f64>,
+    /// Position covariance in the local east/north/up frame, row-major 3×3, m².
+    #[serde(default)]
+    pub position_covariance_enu_m2: Option<[f64; 9]>,
+    /// Speed over ground.
+    #[serde(default)]
+    pub speed_mps: Option<f64>,
+    /// Course over ground, clockwise from true north.
+    #[serde(default)]
+    pub course_rad: Option<f64>,
+}
+super::channel_message!(GnssFix, "railfuse.GnssFix");

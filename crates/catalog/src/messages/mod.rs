@@ -1,0 +1,92 @@
+//! One module per sensor kind, plus the static track map, ground truth, events and the fused
+//! channels. Each type implements [`ChannelMessage`], which ties it to its schema name.
+
+mod balise;
+mod eddy_current;
+mod events;
+mod fused;
+mod gnss;
+mod ground_truth;
+mod imu;
+mod induction_loop;
+mod odometer;
+mod radar;
+mod track_map;
+
+pub use balise::BalisePassage;
+pub use eddy_current::EddyCurrentBlock;
+pub use events::{Event, EventKind};
+pub use fused::{FusedDiagnostics, FusedState, GateDecision};
+pub use gnss::{FixType, GnssFix};
+pub use ground_truth::GroundTruth;
+pub use imu::Imu;
+pub use induction_loop::LoopPosition;
+pub use odometer::Odometer;
+pub use radar::RadarSpeed;
+pub use track_map::{Station, TrackBalise, TrackMap, TrackVertex, Tunnel};
+
+use serde::{de::DeserializeOwned, Serialize};
+
+/// A message type that travels on a railfuse channel.
+pub trait ChannelMessage: Serialize + DeserializeOwned + schemars::JsonSchema {
+    /// The MCAP schema name, `railfuse.<Type>`.
+    const SCHEMA_NAME: &'static str;
+
+    /// The sensor's own timestamp, ns since the Unix epoch.
+    fn stamp_ns(&self) -> u64;
+
+    /// The JSON schema of this type (draft 2020-12), as stored in the MCAP schema record.
+    fn schema_bytes() -> Vec<u8> {
+        let schema = schemars::schema_for!(Self);
+        serde_json::to_vec_pretty(&schema).expect("a generated schema always serialises")
+    }
+}
+
+macro_rules! channel_message {
+    ($ty:ty, $name:literal) => {
+        impl $crate::messages::ChannelMessage for $ty {
+            const SCHEMA_NAME: &'static str = $name;
+            fn stamp_ns(&self) -> u64 {
+                self.stamp_ns
+            }
+        }
+    };
+}
+pub(crate) use channel_message;
+
+/// Every schema of the catalogue, by name: what a validator or a new recorder source needs.
+pub fn all_schemas() -> Vec<(&'static str, Vec<u8>)> {
+    fn entry<M: ChannelMessage>() -> (&'static str, Vec<u8>) {
+        (M::SCHEMA_NAME, M::schema_bytes())
+    }
+    vec![
+        entry::<GnssFix>(),
+        entry::<Imu>(),
+        entry::<RadarSpeed>(),
+        entry::<Odometer>(),
+        entry::<LoopPosition>(),
+        entry::<BalisePassage>(),
+        entry::<EddyCurrentBlock>(),
+        entry::<TrackMap>(),
+        entry::<GroundTruth>(),
+        entry::<Event>(),
+        entry::<FusedState>(),
+        entry::<FusedDiagnostics>(),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_schema_is_an_object_schema_with_the_stamp() {
+        for (name, bytes) in all_schemas() {
+            let v: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
+            assert_eq!(v["type"], "object", "{name}");
+            if name != TrackMap::SCHEMA_NAME {
+                assert!(v["properties"]["stamp_ns"].is_object(), "{name} lacks stamp_ns");
+            }
+        }
+    }
+}

@@ -1,0 +1,314 @@
+//! The train-run simulator: truth, sensors and the writing of a simulated run as a railfuse
+//! log. Deterministic for a seed: the same scenario, seed and duration give the same file.
+
+mod driver;
+mod scenario;
+pub mod seed000;
+pub mod sensors;
+mod track;
+mod world;
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use railfuse_catalog::geodesy::GeodeticOrigin;
+use railfuse_catalog::log::{ChannelId, LogWriter};
+use railfuse_catalog::messages::*;
+use railfuse_catalog::topics;
+
+pub use driver::DriverParams;
+pub use scenario::{LineScenario, Scenario, SIMULATED_START_NS};
+pub use track::{Segment, TrackParams};
+
+use driver::{Driver, DriverEvent, Phase};
+use seed000::{JerkStep, Seed000Params};
+use sensors::{balise::BaliseReader, gnss::Gnss, imu::ImuSensor, induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream};
+use track::Track;
+use world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
+
+/// What a simulation wrote.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct SimulationReport {
+    pub scenario: String,
+    pub seed: u64,
+    pub duration_s: f64,
+    pub messages: u64,
+    pub per_topic: BTreeMap<String, u64>,
+    pub track_length_m: f64,
+}
+
+/// The channels of a simulated log and the writer behind them.
+struct SimLog {
+    writer: LogWriter,
+    channels: BTreeMap<&'static str, ChannelId>,
+    report: SimulationReport,
+}
+
+impl SimLog {
+    fn create(path: &Path, scenario: &Scenario, seed: u64) -> railfuse_catalog::Result<Self> {
+        let mut writer = LogWriter::create(path)?;
+        let mut channels = BTreeMap::new();
+        macro_rules! channel {
+            ($ty:ty, $topic:expr) => {
+                channels.insert($topic, writer.add_channel::<$ty>($topic)?);
+            };
+        }
+        channel!(TrackMap, topics::TRACK_MAP);
+        channel!(GroundTruth, topics::GROUND_TRUTH);
+        channel!(Event, topics::EVENTS);
+        channel!(LoopPosition, topics::LOOP_POSITION);
+        channel!(RadarSpeed, topics::RADAR_SPEED);
+        channel!(BalisePassage, topics::BALISE);
+        if let Scenario::Default(_) = scenario {
+            channel!(GnssFix, topics::GNSS_FIX);
+            channel!(Imu, topics::IMU);
+            channel!(Odometer, topics::ODOMETER_1);
+            channel!(Odometer, topics::ODOMETER_2);
+        }
+        let report = SimulationReport { scenario: scenario.name().into(), seed, ..Default::default() };
+        Ok(Self { writer, channels, report })
+    }
+
+    fn write<M: ChannelMessage>(&mut self, topic: &'static str, log_time_ns: u64, msg: &M) -> railfuse_catalog::Result<()> {
+        self.writer.write(self.channels[topic], log_time_ns, msg)?;
+        self.report.messages += 1;
+        *self.report.per_topic.entry(topic.to_owned()).or_insert(0) += 1;
+        Ok(())
+    }
+
+    fn write_emit(&mut self, log_time_ns: u64, emit: Emit) -> railfuse_catalog::Result<()> {
+        match emit {
+            Emit::Gnss(m) => self.write(topics::GNSS_FIX, log_time_ns, &m),
+            Emit::Imu(m) => self.write(topics::IMU, log_time_ns, &m),
+            Emit::Radar(m) => self.write(topics::RADAR_SPEED, log_time_ns, &m),
+            Emit::Odometer(0, m) => self.write(topics::ODOMETER_1, log_time_ns, &m),
+            Emit::Odometer(_, m) => self.write(topics::ODOMETER_2, log_time_ns, &m),
+            Emit::Loop(m) => self.write(topics::LOOP_POSITION, log_time_ns, &m),
+            Emit::Balise(m) => self.write(topics::BALISE, log_time_ns, &m),
+            Emit::Truth(m) => self.write(topics::GROUND_TRUTH, log_time_ns, &m),
+            Emit::Event(m) => self.write(topics::EVENTS, log_time_ns, &m),
+        }
+    }
+
+    fn finish(mut self, scenario: &Scenario, track: &TrackMap, duration_s: f64) -> railfuse_catalog::Result<SimulationReport> {
+        let train = match scenario {
+            Scenario::Default(p) => p.train.clone(),
+            Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
+        };
+        let run = BTreeMap::from([
+            ("run_id".into(), format!("sim-{}-seed{}", scenario.name(), self.report.seed)),
+            ("train".into(), train),
+            ("route".into(), track.name.clone()),
+            ("scenario".into(), scenario.name().into()),
+            ("seed".into(), self.report.seed.to_string()),
+            ("duration_s".into(), format!("{duration_s:.3}")),
+            ("start_time_ns".into(), SIMULATED_START_NS.to_string()),
+            ("scenario_parameters".into(), serde_json::to_string(scenario).expect("parameters serialise")),
+            ("tool_version".into(), crate::TOOL_VERSION.into()),
+            ("source".into(), "simulated".into()),
+        ]);
+        self.writer.write_metadata(topics::metadata::RUN, run)?;
+        self.writer.finish()?;
+        self.report.duration_s = duration_s;
+        self.report.track_length_m = track.length_m();
+        Ok(self.report)
+    }
+}
+
+/// Simulates a run and writes it to `out`. `duration_s` cuts the run short or, for the line
+/// scenario, makes the route long enough (more stations) to fill it.
+pub fn simulate(scenario: &Scenario, seed: u64, duration_s: Option<f64>, out: &Path) -> railfuse_catalog::Result<SimulationReport> {
+    match scenario {
+        Scenario::Default(p) => simulate_line(scenario, p, seed, duration_s, out),
+        Scenario::Seed000(p) => simulate_seed000(scenario, p, seed, duration_s, out),
+    }
+}
+
+fn simulate_line(scenario: &Scenario, p: &LineScenario, seed: u64, duration_s: Option<f64>, out: &Path) -> railfuse_catalog::Result<SimulationReport> {
+    let start = SIMULATED_START_NS;
+    // About 260 s per 5.7 km leg with its dwell: add stations until the duration is covered.
+    let stations = match duration_s {
+        Some(d) => p.stations.max((d / 200.0).ceil() as usize + 2),
+        None => p.stations,
+    };
+    let track = Track::build(&p.track, stations, start, &mut rng_stream(seed, 0));
+    let map = &track.map;
+    let mut log = SimLog::create(out, scenario, seed)?;
+    log.write(topics::TRACK_MAP, start, map)?;
+
+    let mut driver = Driver::new(p.driver.clone(), map.stations.iter().map(|s| s.chainage_m).collect());
+    let mut sensors: Vec<Box<dyn SimSensor>> = vec![
+        Box::new(Gnss::new(p.gnss.clone(), map.origin, start, rng_stream(seed, 1))),
+        Box::new(ImuSensor::new(p.imu.clone(), start, rng_stream(seed, 2))),
+        Box::new(Radar::new(p.radar.clone(), start, rng_stream(seed, 3))),
+        Box::new(InductionLoop::new(p.induction_loop.clone(), rng_stream(seed, 4))),
+        Box::new(BaliseReader::new(p.balise.clone(), map.balises.clone(), rng_stream(seed, 5))),
+    ];
+    for (i, o) in p.odometers.iter().take(2).enumerate() {
+        sensors.push(Box::new(OdometerSensor::new(o.clone(), i, start, rng_stream(seed, 10 + i as u64))));
+    }
+    let mut truth_schedule = Schedule::new(start, p.truth_rate_hz);
+    let mut outbox = Outbox::default();
+    let step_ns: u64 = 1_000_000;
+    let dt = step_ns as f64 / 1e9;
+    let limit_ns = duration_s.map(|d| start + seconds(d));
+    let mut was_in_tunnel = false;
+    let mut had_corrections = true;
+    let mut t_ns = start;
+    loop {
+        let t = (t_ns - start) as f64 / 1e9;
+        let event = |kind, text: String| Emit::Event(Event { stamp_ns: t_ns, kind, text });
+        match driver.step(t, dt) {
+            Some(DriverEvent::Arrived(i)) => outbox.push(t_ns, event(EventKind::StationArrival, map.stations[i].name.clone())),
+            Some(DriverEvent::Departed(i)) => outbox.push(t_ns, event(EventKind::StationDeparture, map.stations[i].name.clone())),
+            None => {}
+        }
+        let (east_m, north_m, heading_rad) = map.locate(driver.s).expect("a built track has vertices");
+        let tunnel = map.in_tunnel(driver.s);
+        if tunnel.is_some() != was_in_tunnel {
+            let name = tunnel.map_or_else(|| "tunnel".to_owned(), |t| t.name.clone());
+            let kind = if tunnel.is_some() { EventKind::TunnelEntry } else { EventKind::TunnelExit };
+            outbox.push(t_ns, event(kind, name));
+            was_in_tunnel = tunnel.is_some();
+        }
+        let corrections = !p.correction_outages_s.iter().any(|&(a, len)| t >= a && t < a + len);
+        if corrections != had_corrections {
+            let kind = if corrections { EventKind::CorrectionLinkUp } else { EventKind::CorrectionLinkDown };
+            outbox.push(t_ns, event(kind, "RTCM corrections".into()));
+            had_corrections = corrections;
+        }
+        let world = World {
+            t_ns,
+            dt,
+            chainage_m: driver.s,
+            speed_mps: driver.v,
+            acceleration_mps2: driver.a,
+            east_m,
+            north_m,
+            heading_rad,
+            curvature: track.curvature(driver.s),
+            in_tunnel: was_in_tunnel,
+            corrections,
+        };
+        for s in &mut sensors {
+            s.step(&world, &mut outbox);
+        }
+        if truth_schedule.due(t_ns) {
+            outbox.push(t_ns, Emit::Truth(truth(&world, &map.origin)));
+        }
+        while let Some((log_time, emit)) = outbox.pop_due(t_ns) {
+            log.write_emit(log_time, emit)?;
+        }
+        let finished = driver.phase == Phase::Finished;
+        if finished || limit_ns.is_some_and(|l| t_ns >= l) {
+            break;
+        }
+        t_ns += step_ns;
+    }
+    while let Some((log_time, emit)) = outbox.pop_due(u64::MAX) {
+        log.write_emit(log_time, emit)?;
+    }
+    log.finish(scenario, map, (t_ns - start) as f64 / 1e9)
+}
+
+fn truth(w: &World, origin: &GeodeticOrigin) -> GroundTruth {
+    let (lat, lon, _) = origin.to_geodetic(w.east_m, w.north_m, 0.0);
+    GroundTruth {
+        stamp_ns: w.t_ns,
+        chainage_m: w.chainage_m,
+        speed_mps: w.speed_mps,
+        acceleration_mps2: w.acceleration_mps2,
+        east_m: w.east_m,
+        north_m: w.north_m,
+        latitude_deg: lat,
+        longitude_deg: lon,
+        heading_rad: w.heading_rad,
+    }
+}
+
+fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_s: Option<f64>, out: &Path) -> railfuse_catalog::Result<SimulationReport> {
+    use sensors::gauss;
+    let start = SIMULATED_START_NS;
+    let duration = duration_s.unwrap_or(p.duration_s);
+    let period = p.sample_period_s;
+    let steps = (duration / period).round() as u64;
+    // A straight guideway long enough for the run, due east.
+    let v_end = p.initial_speed_mps + p.initial_acceleration_mps2 * duration;
+    let length = (p.initial_speed_mps + v_end) / 2.0 * duration * 1.2 + 1000.0;
+    let origin = GeodeticOrigin { latitude_deg: 31.19, longitude_deg: 121.34, altitude_m: 5.0 };
+    let n_balises = (length / p.balise_spacing_m) as usize;
+    let map = TrackMap {
+        stamp_ns: start,
+        name: "maglev guideway (source 000 simulation)".into(),
+        origin,
+        vertices: vec![
+            TrackVertex { chainage_m: 0.0, east_m: 0.0, north_m: 0.0 },
+            TrackVertex { chainage_m: length, east_m: length, north_m: 0.0 },
+        ],
+        balises: (1..=n_balises)
+            .map(|k| TrackBalise { balise_id: format!("BG{k:04}"), chainage_m: k as f64 * p.balise_spacing_m })
+            .collect(),
+        tunnels: vec![],
+        stations: vec![],
+        sleeper_spacing_m: 1.032,
+        loop_crossing_spacing_m: None,
+    };
+    let mut log = SimLog::create(out, scenario, seed)?;
+    log.write(topics::TRACK_MAP, start, &map)?;
+    let mut process = rng_stream(seed, 0);
+    let mut loop_rng = rng_stream(seed, 1);
+    let mut radar_rng = rng_stream(seed, 2);
+    let (loop_sigma, radar_sigma) = (p.loop_variance_m2.sqrt(), p.radar_variance_m2ps2.sqrt());
+    let truth_per_step = (p.truth_rate_hz * period).round().max(1.0) as u64;
+    let mut x = JerkStep { s: 0.0, v: p.initial_speed_mps, a: p.initial_acceleration_mps2, jerk: 0.0 };
+    let mut next_balise = 0;
+    let stamp = |k: u64, tau: f64| start + seconds(k as f64 * period + tau);
+    for k in 0..=steps {
+        // Measurements at the sample instant k.
+        let t_ns = stamp(k, 0.0);
+        let z_loop = x.s + gauss(&mut loop_rng, loop_sigma);
+        let z_radar = x.v + gauss(&mut radar_rng, radar_sigma);
+        log.write(topics::LOOP_POSITION, t_ns, &LoopPosition { stamp_ns: t_ns, chainage_m: z_loop, crossing: None, variance_m2: Some(p.loop_variance_m2) })?;
+        log.write(
+            topics::RADAR_SPEED,
+            t_ns,
+            &RadarSpeed { stamp_ns: t_ns, speed_mps: z_radar, quality: 1.0, valid: true, speed_variance_m2ps2: Some(p.radar_variance_m2ps2) },
+        )?;
+        if k == steps {
+            write_seed000_truth(&mut log, &x, t_ns, &origin)?;
+            break;
+        }
+        // The jerk w_k acting over (k, k+1].
+        x.jerk = gauss(&mut process, p.process_noise_variance.sqrt());
+        for i in 0..truth_per_step {
+            let tau = i as f64 * period / truth_per_step as f64;
+            let (s, v, a) = x.at(tau);
+            write_seed000_truth(&mut log, &JerkStep { s, v, a, jerk: x.jerk }, stamp(k, tau), &origin)?;
+        }
+        while let Some(b) = map.balises.get(next_balise) {
+            let Some(tau) = x.passes(b.chainage_m, period) else { break };
+            let t_b = stamp(k, tau);
+            log.write(topics::BALISE, t_b, &BalisePassage { stamp_ns: t_b, balise_id: b.balise_id.clone(), chainage_m: b.chainage_m, variance_m2: Some(p.balise_variance_m2) })?;
+            next_balise += 1;
+        }
+        let (s, v, a) = x.at(period);
+        x = JerkStep { s, v, a, jerk: 0.0 };
+    }
+    log.finish(scenario, &map, steps as f64 * period)
+}
+
+fn write_seed000_truth(log: &mut SimLog, x: &JerkStep, t_ns: u64, origin: &GeodeticOrigin) -> railfuse_catalog::Result<()> {
+    let (lat, lon, _) = origin.to_geodetic(x.s, 0.0, 0.0);
+    let truth = GroundTruth {
+        stamp_ns: t_ns,
+        chainage_m: x.s,
+        speed_mps: x.v,
+        acceleration_mps2: x.a,
+        east_m: x.s,
+        north_m: 0.0,
+        latitude_deg: lat,
+        longitude_deg: lon,
+        heading_rad: std::f64::consts::FRAC_PI_2,
+    };
+    log.write(topics::GROUND_TRUTH, t_ns, &truth)
+}

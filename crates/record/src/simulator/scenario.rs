@@ -1,0 +1,162 @@
+//! Scenario presets: every parameter of a simulated run, serialisable so that each log
+//! carries the exact parameters that made it (in its run metadata).
+
+use railfuse_catalog::geodesy::GeodeticOrigin;
+use serde::{Deserialize, Serialize};
+
+use super::driver::DriverParams;
+use super::seed000::Seed000Params;
+use super::sensors::{balise::BaliseParams, gnss::GnssParams, imu::ImuParams, induction_loop::LoopParams, odometer::OdometerParams, radar::RadarParams};
+use super::track::{Segment, TrackParams};
+
+/// 2026-06-01T08:00:00Z: simulated runs start here, so logs are reproducible to the byte.
+pub const SIMULATED_START_NS: u64 = 1_780_300_800 * 1_000_000_000;
+
+/// A conventional line run with every sensor: what `--scenario default` simulates.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LineScenario {
+    pub train: String,
+    pub track: TrackParams,
+    pub driver: DriverParams,
+    /// Stations on the route (the run starts at the first and ends at the last).
+    pub stations: usize,
+    /// Windows (start, length) in seconds from the start without RTK correction data.
+    pub correction_outages_s: Vec<(f64, f64)>,
+    pub truth_rate_hz: f64,
+    pub gnss: GnssParams,
+    pub imu: ImuParams,
+    pub radar: RadarParams,
+    pub odometers: Vec<OdometerParams>,
+    pub induction_loop: LoopParams,
+    pub balise: BaliseParams,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "preset", rename_all = "snake_case")]
+pub enum Scenario {
+    Default(Box<LineScenario>),
+    Seed000(Seed000Params),
+}
+
+impl Scenario {
+    pub const NAMES: &'static [&'static str] = &["default", "seed000"];
+
+    pub fn preset(name: &str) -> Option<Scenario> {
+        match name {
+            "default" => Some(Scenario::Default(Box::new(LineScenario::default_run()))),
+            "seed000" => Some(Scenario::Seed000(Seed000Params::source())),
+            _ => None,
+        }
+    }
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            Scenario::Default(_) => "default",
+            Scenario::Seed000(_) => "seed000",
+        }
+    }
+}
+
+impl LineScenario {
+    /// A mixed run near Modena: three stations 5.7 km apart, curves, a tunnel, a correction
+    /// link outage, every sensor at a realistic rate.
+    pub fn default_run() -> Self {
+        let odometer = |id: &str, true_diameter_m: f64, powered: bool| OdometerParams {
+            sensor_id: id.into(),
+            rate_hz: 25.0,
+            latency_s: 0.002,
+            pulses_per_revolution: 200,
+            configured_diameter_m: 0.85,
+            true_diameter_m,
+            speed_window_s: 0.2,
+            slip_rate_per_s: if powered { 0.04 } else { 0.0 },
+            slide_rate_per_s: 0.04,
+            slip_range: (0.03, 0.10),
+            slide_range: (0.05, 0.15),
+            episode_s: (1.0, 4.0),
+        };
+        LineScenario {
+            train: "simulated EMU, 4 cars".into(),
+            track: TrackParams {
+                name: "Modena test line (simulated)".into(),
+                origin: GeodeticOrigin { latitude_deg: 44.6551, longitude_deg: 10.9297, altitude_m: 40.0 },
+                heading_deg: 60.0,
+                pattern: vec![
+                    Segment::Straight { length_m: 1800.0 },
+                    Segment::Curve { radius_m: 1500.0, angle_deg: 35.0 },
+                    Segment::Straight { length_m: 2600.0 },
+                    Segment::Curve { radius_m: 2000.0, angle_deg: -30.0 },
+                    Segment::Straight { length_m: 2200.0 },
+                    Segment::Curve { radius_m: 1200.0, angle_deg: 25.0 },
+                    Segment::Straight { length_m: 1500.0 },
+                    Segment::Curve { radius_m: 1800.0, angle_deg: -30.0 },
+                ],
+                station_spacing_m: 5700.0,
+                balise_spacing_m: 1000.0,
+                balise_jitter_m: 60.0,
+                tunnels: vec![(7000.0, 7800.0)],
+                sleeper_spacing_m: 0.6,
+                loop_crossing_spacing_m: Some(25.0),
+                vertex_spacing_m: 5.0,
+            },
+            driver: DriverParams {
+                max_speed_mps: 33.3,
+                acceleration_mps2: 0.8,
+                power_limit_speed_mps: 15.0,
+                braking_mps2: 0.7,
+                jerk_mps3: 0.6,
+                dwell_s: 30.0,
+                initial_dwell_s: 10.0,
+            },
+            stations: 3,
+            correction_outages_s: vec![(120.0, 45.0)],
+            truth_rate_hz: 100.0,
+            gnss: GnssParams {
+                rate_hz: 10.0,
+                latency_s: 0.04,
+                sigma_single_m: 1.8,
+                sigma_dgps_m: 0.7,
+                sigma_rtk_float_m: 0.25,
+                sigma_rtk_fixed_m: 0.02,
+                bias_tau_s: 60.0,
+                speed_sigma_mps: 0.05,
+                reacquire_none_s: 3.0,
+                reacquire_single_s: 6.0,
+                reacquire_float_s: 12.0,
+            },
+            imu: ImuParams {
+                sensor_id: "imu0".into(),
+                rate_hz: 200.0,
+                latency_s: 0.001,
+                accel_noise_mps2: 0.012,
+                accel_bias_mps2: 0.02,
+                accel_bias_walk: 2e-4,
+                accel_lsb_mps2: 0.061e-3 * 9.80665,
+                gyro_noise_radps: 0.0012,
+                gyro_bias_radps: 5e-4,
+                gyro_bias_walk: 2e-5,
+                gyro_lsb_radps: 4.37e-3_f64.to_radians(),
+            },
+            radar: RadarParams {
+                rate_hz: 20.0,
+                latency_s: 0.015,
+                scale_error: 0.004,
+                sigma_base_mps: 0.02,
+                sigma_per_mps: 0.002,
+                min_speed_mps: 0.3,
+                dropout_probability: 0.002,
+                dropout_s: (0.5, 2.0),
+            },
+            odometers: vec![odometer("axle1", 0.846, true), odometer("axle2", 0.852, false)],
+            induction_loop: LoopParams {
+                crossing_spacing_m: 25.0,
+                latency_s: 0.02,
+                installation_sigma_m: 0.03,
+                scale_error: 2e-5,
+                timing_sigma_s: 0.003,
+                reported_variance_m2: 0.01,
+            },
+            balise: BaliseParams { latency_s: 0.03, detection_sigma_m: 0.15, miss_probability: 0.01, reported_variance_m2: 0.04 },
+        }
+    }
+}

@@ -1,0 +1,147 @@
+//! GNSS receiver with RTK: fix type follows sky visibility (tunnels) and the correction link;
+//! position noise and a slowly wandering bias depend on the fix type.
+
+use railfuse_catalog::geodesy::GeodeticOrigin;
+use railfuse_catalog::messages::{FixType, GnssFix};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use super::gauss;
+use crate::simulator::world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GnssParams {
+    pub rate_hz: f64,
+    pub latency_s: f64,
+    /// Horizontal 1σ white noise per fix type: single, DGPS, RTK float, RTK fixed (m).
+    pub sigma_single_m: f64,
+    pub sigma_dgps_m: f64,
+    pub sigma_rtk_float_m: f64,
+    pub sigma_rtk_fixed_m: f64,
+    /// Correlation time of the slowly wandering position bias (single/DGPS), s.
+    pub bias_tau_s: f64,
+    pub speed_sigma_mps: f64,
+    /// After the sky comes back: seconds without a fix, then seconds of single-point fix
+    /// before RTK float, then seconds of float before RTK fixed.
+    pub reacquire_none_s: f64,
+    pub reacquire_single_s: f64,
+    pub reacquire_float_s: f64,
+}
+
+pub struct Gnss {
+    p: GnssParams,
+    origin: GeodeticOrigin,
+    schedule: Schedule,
+    rng: ChaCha8Rng,
+    /// Time the sky became visible (None while in a tunnel).
+    sky_since_ns: Option<u64>,
+    corrections_since_ns: Option<u64>,
+    bias: (f64, f64),
+    satellites: f64,
+}
+
+impl Gnss {
+    pub fn new(p: GnssParams, origin: GeodeticOrigin, start_ns: u64, rng: ChaCha8Rng) -> Self {
+        // At the start the receiver has been running a while: long since fixed.
+        let long_ago = start_ns.saturating_sub(seconds(3600.0));
+        Self {
+            schedule: Schedule::new(start_ns, p.rate_hz),
+            p,
+            origin,
+            rng,
+            sky_since_ns: Some(long_ago),
+            corrections_since_ns: Some(long_ago),
+            bias: (0.0, 0.0),
+            satellites: 17.0,
+        }
+    }
+
+    fn fix_type(&self, t_ns: u64) -> FixType {
+        let p = &self.p;
+        let Some(sky) = self.sky_since_ns else { return FixType::None };
+        let since_sky = (t_ns - sky) as f64 / 1e9;
+        if since_sky < p.reacquire_none_s {
+            return FixType::None;
+        }
+        let Some(corrections) = self.corrections_since_ns else { return FixType::Single };
+        // RTK can start once a single-point fix has settled and corrections arrive.
+        let rtk_start = corrections.max(sky + seconds(p.reacquire_none_s + p.reacquire_single_s));
+        if t_ns < rtk_start {
+            FixType::Single
+        } else if ((t_ns - rtk_start) as f64 / 1e9) < p.reacquire_float_s {
+            FixType::RtkFloat
+        } else {
+            FixType::RtkFixed
+        }
+    }
+
+    fn sigma(&self, fix: FixType) -> (f64, f64) {
+        // (white noise σ, stationary bias σ)
+        match fix {
+            FixType::None => (0.0, 0.0),
+            FixType::Single => (self.p.sigma_single_m, 0.8 * self.p.sigma_single_m),
+            FixType::Dgps => (self.p.sigma_dgps_m, 0.6 * self.p.sigma_dgps_m),
+            FixType::RtkFloat => (self.p.sigma_rtk_float_m, 0.3 * self.p.sigma_rtk_float_m),
+            FixType::RtkFixed => (self.p.sigma_rtk_fixed_m, 0.0),
+        }
+    }
+}
+
+impl SimSensor for Gnss {
+    fn step(&mut self, w: &World, out: &mut Outbox) {
+        match (w.in_tunnel, self.sky_since_ns) {
+            (true, Some(_)) => self.sky_since_ns = None,
+            (false, None) => self.sky_since_ns = Some(w.t_ns),
+            _ => {}
+        }
+        match (w.corrections, self.corrections_since_ns) {
+            (false, Some(_)) => self.corrections_since_ns = None,
+            (true, None) => self.corrections_since_ns = Some(w.t_ns),
+            _ => {}
+        }
+        if !self.schedule.due(w.t_ns) {
+            return;
+        }
+        let dt = self.schedule.period_s();
+        let fix = self.fix_type(w.t_ns);
+        let (sigma, bias_sigma) = self.sigma(fix);
+        // First-order Gauss-Markov bias with stationary σ `bias_sigma`.
+        let phi = (-dt / self.p.bias_tau_s).exp();
+        let q = bias_sigma * (1.0 - phi * phi).sqrt();
+        self.bias = (phi * self.bias.0 + gauss(&mut self.rng, q), phi * self.bias.1 + gauss(&mut self.rng, q));
+        let target_sats = if w.in_tunnel { 0.0 } else { 18.0 };
+        self.satellites += 0.2 * (target_sats - self.satellites) + gauss(&mut self.rng, 0.3);
+        self.satellites = self.satellites.clamp(0.0, 32.0);
+        let satellites = if fix == FixType::None { self.satellites.min(3.0) } else { self.satellites.max(5.0) }.round() as u8;
+        let mut msg = GnssFix {
+            stamp_ns: w.t_ns,
+            fix_type: fix,
+            satellites,
+            hdop: (satellites > 0).then(|| 0.5 + 10.0 / satellites as f64),
+            latitude_deg: None,
+            longitude_deg: None,
+            altitude_m: None,
+            position_covariance_enu_m2: None,
+            speed_mps: None,
+            course_rad: None,
+        };
+        if fix.has_position() {
+            let e = w.east_m + self.bias.0 + gauss(&mut self.rng, sigma);
+            let n = w.north_m + self.bias.1 + gauss(&mut self.rng, sigma);
+            let u = gauss(&mut self.rng, 1.8 * sigma);
+            let (lat, lon, alt) = self.origin.to_geodetic(e, n, u);
+            let var = sigma * sigma + bias_sigma * bias_sigma;
+            msg.latitude_deg = Some(lat);
+            msg.longitude_deg = Some(lon);
+            msg.altitude_m = Some(alt);
+            msg.position_covariance_enu_m2 = Some([var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, 3.24 * var]);
+            msg.speed_mps = Some((w.speed_mps + gauss(&mut self.rng, self.p.speed_sigma_mps)).max(0.0));
+            if w.speed_mps > 0.5 {
+                let c = w.heading_rad + gauss(&mut self.rng, self.p.speed_sigma_mps / w.speed_mps);
+                msg.course_rad = Some(c.rem_euclid(std::f64::consts::TAU));
+            }
+        }
+        let latency = seconds(self.p.latency_s);
+        out.push(w.t_ns + latency, Emit::Gnss(msg));
+    }
+}

@@ -1,0 +1,193 @@
+//! Accuracy against a reference trajectory (the ground-truth channel): position and speed
+//! errors of every fused state, with RMSE, maximum and 95th percentile.
+//!
+//! Streaming: the reference is kept only for a few seconds behind the replay, and the 95th
+//! percentile comes from a log-bucketed histogram (1 % relative resolution), so memory does
+//! not grow with the length of the log.
+
+use std::collections::VecDeque;
+
+use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
+
+use serde::Serialize;
+
+/// Histogram of |error| in buckets growing by 1 % from 1 µ(unit) up to 10⁹.
+#[derive(Debug, Clone)]
+struct LogHistogram {
+    counts: Vec<u64>,
+}
+
+const HIST_MIN: f64 = 1e-6;
+const HIST_RATIO_LN: f64 = 0.009950330853168083; // ln(1.01)
+const HIST_BUCKETS: usize = 3500; // 1e-6 · 1.01^3500 ≈ 1.4e9
+
+impl LogHistogram {
+    fn new() -> Self {
+        Self { counts: vec![0; HIST_BUCKETS + 1] }
+    }
+    fn bucket(x: f64) -> usize {
+        if x <= HIST_MIN {
+            0
+        } else {
+            (((x / HIST_MIN).ln() / HIST_RATIO_LN).floor() as usize + 1).min(HIST_BUCKETS)
+        }
+    }
+    fn upper_edge(bucket: usize) -> f64 {
+        HIST_MIN * (HIST_RATIO_LN * bucket as f64).exp()
+    }
+    fn add(&mut self, x: f64) {
+        self.counts[Self::bucket(x)] += 1;
+    }
+    /// The smallest bucket edge below which a share `q` of the samples lie.
+    fn quantile(&self, q: f64, n: u64) -> f64 {
+        let target = (q * n as f64).ceil().max(1.0) as u64;
+        let mut seen = 0;
+        for (i, c) in self.counts.iter().enumerate() {
+            seen += c;
+            if seen >= target {
+                return Self::upper_edge(i);
+            }
+        }
+        f64::NAN
+    }
+}
+
+/// Streaming statistics of one signed error.
+#[derive(Debug, Clone)]
+pub struct ErrorStats {
+    n: u64,
+    sum: f64,
+    sum_sq: f64,
+    max_abs: f64,
+    hist: LogHistogram,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ErrorSummary {
+    pub samples: u64,
+    pub rmse: f64,
+    pub mean: f64,
+    pub max_abs: f64,
+    /// 95th percentile of |error| (to 1 %).
+    pub p95_abs: f64,
+}
+
+impl Default for ErrorStats {
+    fn default() -> Self {
+        Self { n: 0, sum: 0.0, sum_sq: 0.0, max_abs: 0.0, hist: LogHistogram::new() }
+    }
+}
+
+impl ErrorStats {
+    pub fn add(&mut self, e: f64) {
+        self.n += 1;
+        self.sum += e;
+        self.sum_sq += e * e;
+        self.max_abs = self.max_abs.max(e.abs());
+        self.hist.add(e.abs());
+    }
+
+    pub fn summary(&self) -> Option<ErrorSummary> {
+        (self.n > 0).then(|| ErrorSummary {
+            samples: self.n,
+            rmse: (self.sum_sq / self.n as f64).sqrt(),
+            mean: self.sum / self.n as f64,
+            max_abs: self.max_abs,
+            p95_abs: self.hist.quantile(0.95, self.n),
+        })
+    }
+}
+
+/// Matches estimates to the reference interpolated at their stamps.
+#[derive(Debug, Clone)]
+pub struct AccuracyMeter {
+    reference: ReferenceTrack,
+    /// Estimates newer than the newest reference sample, waiting for it to catch up.
+    waiting: VecDeque<ReferenceSample>,
+    pub position: ErrorStats,
+    pub speed: ErrorStats,
+    /// Estimates that fell outside the reference's time span.
+    pub unmatched: u64,
+}
+
+impl AccuracyMeter {
+    /// `lag_s` must cover how far estimates may lag the replay (the reorder window).
+    pub fn new(lag_s: f64) -> Self {
+        Self {
+            reference: ReferenceTrack::new(lag_s + 2.0),
+            waiting: VecDeque::new(),
+            position: ErrorStats::default(),
+            speed: ErrorStats::default(),
+            unmatched: 0,
+        }
+    }
+
+    pub fn add_reference(&mut self, stamp_ns: u64, chainage_m: f64, speed_mps: f64) {
+        if !self.reference.push(ReferenceSample { stamp_ns, chainage_m, speed_mps }) {
+            return;
+        }
+        while self.waiting.front().is_some_and(|e| e.stamp_ns <= stamp_ns) {
+            let e = self.waiting.pop_front().expect("peeked");
+            self.score(e);
+        }
+    }
+
+    pub fn add_estimate(&mut self, stamp_ns: u64, chainage_m: f64, speed_mps: f64) {
+        let e = ReferenceSample { stamp_ns, chainage_m, speed_mps };
+        match self.reference.newest_ns() {
+            Some(newest) if newest >= stamp_ns => self.score(e),
+            _ => self.waiting.push_back(e),
+        }
+    }
+
+    /// Estimates still waiting at the end of the log had no reference after them.
+    pub fn finish(&mut self) {
+        self.unmatched += self.waiting.len() as u64;
+        self.waiting.clear();
+    }
+
+    fn score(&mut self, e: ReferenceSample) {
+        match self.reference.at(e.stamp_ns) {
+            Some((s, v)) => {
+                self.position.add(e.chainage_m - s);
+                self.speed.add(e.speed_mps - v);
+            }
+            None => self.unmatched += 1,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentile_is_within_one_percent_and_rmse_exact() {
+        let mut s = ErrorStats::default();
+        for i in 1..=1000 {
+            s.add(if i % 2 == 0 { i as f64 / 100.0 } else { -(i as f64) / 100.0 });
+        }
+        let m = s.summary().unwrap();
+        assert!((m.p95_abs - 9.50).abs() / 9.50 < 0.011, "{}", m.p95_abs);
+        assert_eq!(m.max_abs, 10.0);
+        let exact = ((1..=1000).map(|i| (i as f64 / 100.0).powi(2)).sum::<f64>() / 1000.0).sqrt();
+        assert!((m.rmse - exact).abs() < 1e-12);
+    }
+
+    #[test]
+    fn estimates_are_scored_against_the_interpolated_reference_even_when_they_lag() {
+        let mut m = AccuracyMeter::new(0.5);
+        m.add_estimate(1_500_000_000, 15.5, 10.0); // arrives before the reference reaches it
+        for k in 0..=30 {
+            let t = k as u64 * 100_000_000;
+            m.add_reference(t, 10.0 * t as f64 / 1e9, 10.0);
+        }
+        m.add_estimate(2_050_000_000, 20.5, 10.5);
+        m.finish();
+        let p = m.position.summary().unwrap();
+        assert_eq!(p.samples, 2);
+        assert!((p.max_abs - 0.5).abs() < 1e-9, "{p:?}");
+        assert!((m.speed.summary().unwrap().max_abs - 0.5).abs() < 1e-9);
+        assert_eq!(m.unmatched, 0);
+    }
+}

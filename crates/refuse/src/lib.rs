@@ -1,0 +1,23 @@
+//! Offline re-fusion: replay a railfuse log through filter pipelines, write the fused channels
+//! back beside an unchanged copy of every input record, and measure accuracy against a
+//! reference.
+//!
+//! Layout:
+//! - [`model`]: motion (transition) models, e.g. constant acceleration with white jerk;
+//! - [`filter`]: the estimators (Kalman filter, Joseph form);
+//! - [`measurement`]: sensor models, how each channel's messages become measurements;
+//! - [`config`]: the pipeline TOML;
+//! - [`pipeline`]: one configured filter fed in sensor-time order;
+//! - [`accuracy`]: error statistics against ground truth;
+//! - [`replay`]: the `refuse` run, streaming input to output.
+
+pub mod accuracy;
+pub mod config;
+pub mod error;
+pub mod filter;
+pub mod measurement;
+pub mod model;
+pub mod pipeline;
+pub mod replay;
+
+pub use error::{Error, Result};

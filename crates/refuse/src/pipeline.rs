@@ -1,0 +1,188 @@
+//! One configured pipeline: measurements are released to its filter in sensor-time order
+//! (within a bounded reorder window), gated, and turned into fused state and diagnostics.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use nalgebra::{Matrix3, Vector3};
+use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision};
+use serde::Serialize;
+
+use crate::config::{PipelineConfig, Variance};
+use crate::filter::KalmanFilter;
+use crate::measurement::{Measurement, Quantity};
+use crate::model::ConstantAcceleration;
+
+/// What a pipeline did with its measurements.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct PipelineCounts {
+    pub accepted: u64,
+    pub rejected_gate: u64,
+    pub rejected_invalid: u64,
+    pub rejected_late: u64,
+    pub before_initialisation: u64,
+}
+
+/// Output of one processed measurement.
+#[derive(Debug, Clone)]
+pub struct Fused {
+    /// Receive time of the measurement that produced it.
+    pub log_time_ns: u64,
+    /// The new state, when the measurement was used.
+    pub state: Option<FusedState>,
+    pub diagnostics: FusedDiagnostics,
+}
+
+struct Pending {
+    sensor: usize,
+    measurement: Measurement,
+    log_time_ns: u64,
+}
+
+pub struct KalmanPipeline {
+    pub config: PipelineConfig,
+    model: ConstantAcceleration,
+    filter: Option<KalmanFilter<3>>,
+    filter_time_ns: u64,
+    window_ns: u64,
+    /// Min-heap on (sensor stamp, arrival order) of measurements not yet released.
+    order: BinaryHeap<Reverse<(u64, u64)>>,
+    pending: std::collections::HashMap<u64, Pending>,
+    seq: u64,
+    pub counts: PipelineCounts,
+}
+
+impl KalmanPipeline {
+    pub fn new(config: PipelineConfig) -> Self {
+        Self {
+            model: config.motion_model(),
+            window_ns: (config.reorder_window_s * 1e9) as u64,
+            config,
+            filter: None,
+            filter_time_ns: 0,
+            order: BinaryHeap::new(),
+            pending: Default::default(),
+            seq: 0,
+            counts: PipelineCounts::default(),
+        }
+    }
+
+    pub fn name(&self) -> &str {
+        &self.config.name
+    }
+
+    /// Index of the configured sensor reading `topic`.
+    pub fn sensor_for(&self, topic: &str) -> Option<usize> {
+        self.config.sensor.iter().position(|s| s.topic == topic)
+    }
+
+    /// Queues a measurement received at `log_time_ns` and releases every measurement the
+    /// replay is now more than the reorder window past.
+    pub fn push(&mut self, sensor: usize, measurement: Measurement, log_time_ns: u64, out: &mut Vec<Fused>) {
+        self.seq += 1;
+        self.order.push(Reverse((measurement.stamp_ns, self.seq)));
+        self.pending.insert(self.seq, Pending { sensor, measurement, log_time_ns });
+        self.release(log_time_ns.saturating_sub(self.window_ns), out);
+    }
+
+    /// Releases everything still queued (end of the log).
+    pub fn finish(&mut self, out: &mut Vec<Fused>) {
+        self.release(u64::MAX, out);
+    }
+
+    fn release(&mut self, up_to_ns: u64, out: &mut Vec<Fused>) {
+        while let Some(&Reverse((stamp, seq))) = self.order.peek() {
+            if stamp > up_to_ns {
+                break;
+            }
+            self.order.pop();
+            let p = self.pending.remove(&seq).expect("every queued key has its measurement");
+            out.push(self.process(p));
+        }
+    }
+
+    fn process(&mut self, p: Pending) -> Fused {
+        let sensor = &self.config.sensor[p.sensor];
+        let m = p.measurement;
+        let variance = match sensor.variance {
+            Variance::Fixed(v) => Some(v),
+            Variance::FromMessage(_) => m.reported_variance,
+        };
+        let mut diagnostics = FusedDiagnostics {
+            stamp_ns: m.stamp_ns,
+            source: sensor.topic.clone(),
+            measurement: m.value,
+            measurement_variance: variance.unwrap_or(0.0),
+            innovation: None,
+            innovation_variance: None,
+            nis: None,
+            decision: GateDecision::Accepted,
+        };
+        let usable_variance = variance.filter(|r| r.is_finite() && *r > 0.0);
+        let decision = match (usable_variance, &self.filter) {
+            (None, _) => GateDecision::RejectedInvalid,
+            _ if !m.valid || !m.value.is_finite() => GateDecision::RejectedInvalid,
+            (Some(r), None) if m.quantity == Quantity::Chainage => {
+                let init = &self.config.initial;
+                self.filter = Some(KalmanFilter::new(
+                    Vector3::new(m.value, init.speed_mps, 0.0),
+                    Matrix3::from_diagonal(&Vector3::new(r, init.speed_std_mps.powi(2), init.acceleration_std_mps2.powi(2))),
+                ));
+                self.filter_time_ns = m.stamp_ns;
+                GateDecision::Accepted
+            }
+            (Some(_), None) => GateDecision::BeforeInitialisation,
+            (Some(_), Some(_)) if m.stamp_ns < self.filter_time_ns => GateDecision::RejectedLate,
+            (Some(r), Some(filter)) => {
+                // Predict on a copy: a rejected measurement leaves the filter untouched.
+                let mut predicted = filter.clone();
+                let dt = (m.stamp_ns - self.filter_time_ns) as f64 / 1e9;
+                if dt > 0.0 {
+                    predicted.predict(&self.model, dt);
+                }
+                let h = m.quantity.h();
+                let innovation = predicted.innovation(&h, r, m.value);
+                diagnostics.innovation = Some(innovation.residual);
+                diagnostics.innovation_variance = Some(innovation.variance);
+                diagnostics.nis = Some(innovation.nis);
+                if sensor.gate_nis.is_some_and(|g| !(innovation.nis <= g)) {
+                    GateDecision::RejectedGate
+                } else {
+                    predicted.update(&h, r, m.value);
+                    if predicted.estimate.state.iter().all(|x| x.is_finite()) {
+                        self.filter = Some(predicted);
+                        self.filter_time_ns = m.stamp_ns;
+                        GateDecision::Accepted
+                    } else {
+                        GateDecision::RejectedInvalid
+                    }
+                }
+            }
+        };
+        diagnostics.decision = decision;
+        let counter = match decision {
+            GateDecision::Accepted => &mut self.counts.accepted,
+            GateDecision::RejectedGate => &mut self.counts.rejected_gate,
+            GateDecision::RejectedInvalid => &mut self.counts.rejected_invalid,
+            GateDecision::RejectedLate => &mut self.counts.rejected_late,
+            GateDecision::BeforeInitialisation => &mut self.counts.before_initialisation,
+        };
+        *counter += 1;
+        let state = (decision == GateDecision::Accepted).then(|| {
+            let e = &self.filter.as_ref().expect("accepted means initialised").estimate;
+            let mut covariance = [0.0; 9];
+            for (i, c) in covariance.iter_mut().enumerate() {
+                *c = e.covariance[(i / 3, i % 3)];
+            }
+            FusedState {
+                stamp_ns: m.stamp_ns,
+                chainage_m: e.state[0],
+                speed_mps: e.state[1],
+                acceleration_mps2: e.state[2],
+                covariance,
+                source: sensor.topic.clone(),
+            }
+        });
+        Fused { log_time_ns: p.log_time_ns, state, diagnostics }
+    }
+}

@@ -1,0 +1,267 @@
+//! The `refuse` run: stream the input log once, copy every record to the output unchanged,
+//! feed each pipeline the measurements of its channels, write `/fused/<name>/state` and
+//! `/fused/<name>/diagnostics`, store each pipeline's configuration as metadata, and score the
+//! fused states against the reference channel.
+//!
+//! Memory is bounded by the reorder windows and the accuracy meters' short reference buffers,
+//! never by the length of the log.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+
+use railfuse_catalog::log::{read_channels, ChannelId, LogReader, LogRecord, LogWriter};
+use railfuse_catalog::messages::{ChannelMessage, FusedDiagnostics, FusedState, GroundTruth};
+use railfuse_catalog::topics;
+use serde::Serialize;
+
+use crate::accuracy::{AccuracyMeter, ErrorSummary};
+use crate::config::PipelinesConfig;
+use crate::error::{Error, Result};
+use crate::measurement::SensorModel;
+use crate::pipeline::{Fused, KalmanPipeline, PipelineCounts};
+
+pub struct RefuseOptions<'a> {
+    pub input: &'a Path,
+    pub output: &'a Path,
+    pub config: &'a PipelinesConfig,
+    /// Where the configuration came from (a path, or "embedded default"), for the metadata.
+    pub config_source: String,
+    /// Topic of the reference trajectory for the accuracy table.
+    pub reference_topic: String,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct PipelineReport {
+    pub name: String,
+    pub counts: PipelineCounts,
+    pub fused_states: u64,
+    pub position_error_m: Option<ErrorSummary>,
+    pub speed_error_mps: Option<ErrorSummary>,
+    pub unmatched_states: u64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RefuseReport {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub input_messages: u64,
+    pub input_bytes: u64,
+    pub fused_messages: u64,
+    /// Messages whose log time is earlier than the one before them in the file.
+    pub out_of_order_messages: u64,
+    /// The reference topic, when the input has it.
+    pub reference: Option<String>,
+    pub pipelines: Vec<PipelineReport>,
+}
+
+/// What to do with the messages of one input channel.
+#[derive(Default)]
+struct Route {
+    /// Dropped: an earlier run's output of a pipeline being re-run.
+    replaced: bool,
+    reference: Option<ReferenceKind>,
+    /// (pipeline, sensor index) pairs fed by this channel, and how to read it.
+    sensors: Vec<(usize, usize)>,
+    model: Option<SensorModel>,
+}
+
+#[derive(Clone, Copy)]
+enum ReferenceKind {
+    Truth,
+    Fused,
+}
+
+struct Output {
+    state: ChannelId,
+    diagnostics: ChannelId,
+    states: u64,
+}
+
+pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
+    let input = opts.input;
+    let names: BTreeSet<&str> = opts.config.pipeline.iter().map(|p| p.name.as_str()).collect();
+    let is_replaced = |topic: &str| topics::fused_pipeline_of(topic).is_some_and(|n| names.contains(n));
+    let known = read_channels(input)?;
+    if let Some(channels) = &known {
+        for p in &opts.config.pipeline {
+            for s in &p.sensor {
+                match channels.iter().find(|c| c.topic == s.topic) {
+                    None => {
+                        let have: Vec<&str> = channels.iter().map(|c| c.topic.as_str()).filter(|t| !t.starts_with(topics::FUSED_PREFIX)).collect();
+                        return Err(channel_error(input, &p.name, &s.topic, format!("is not in the file (it has {})", have.join(", "))));
+                    }
+                    Some(c) => check_schema(input, &p.name, &s.topic, c.schema_name())?,
+                }
+            }
+        }
+    }
+
+    let mut writer = LogWriter::create(opts.output)?;
+    // Output channels take the highest ids the input does not use, so copied records keep
+    // theirs.
+    let used: BTreeSet<u16> = known.iter().flatten().filter(|c| !is_replaced(&c.topic)).map(|c| c.id).collect();
+    let used_schemas: BTreeSet<u16> = known.iter().flatten().filter_map(|c| c.schema.as_ref().map(|s| s.id)).collect();
+    let mut free = (1..=u16::MAX).rev().filter(|id| !used.contains(id) && !used_schemas.contains(id));
+    let (state_schema, diag_schema) = (free.next().expect("ids to spare"), free.next().expect("ids to spare"));
+    let mut outputs = Vec::new();
+    for p in &opts.config.pipeline {
+        outputs.push(Output {
+            state: writer.add_channel_with_ids::<FusedState>(state_schema, free.next().expect("ids"), &topics::fused_state(&p.name))?,
+            diagnostics: writer.add_channel_with_ids::<FusedDiagnostics>(diag_schema, free.next().expect("ids"), &topics::fused_diagnostics(&p.name))?,
+            states: 0,
+        });
+    }
+
+    let mut pipelines: Vec<KalmanPipeline> = opts.config.pipeline.iter().cloned().map(KalmanPipeline::new).collect();
+    let mut meters: Vec<AccuracyMeter> = pipelines.iter().map(|p| AccuracyMeter::new(p.config.reorder_window_s)).collect();
+    let mut routes: HashMap<u16, Route> = HashMap::new();
+    let mut seen_topics = BTreeSet::new();
+    let mut reference_seen = false;
+    let mut fused_buf: Vec<Fused> = Vec::new();
+    let mut report = RefuseReport {
+        input: input.to_owned(),
+        output: opts.output.to_owned(),
+        input_messages: 0,
+        input_bytes: 0,
+        fused_messages: 0,
+        out_of_order_messages: 0,
+        reference: None,
+        pipelines: Vec::new(),
+    };
+    let mut last_log_time = 0u64;
+
+    let mut reader = LogReader::open(input)?;
+    while let Some(record) = reader.next() {
+        match record? {
+            LogRecord::Schema(s) => writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?,
+            LogRecord::Channel(c) => {
+                let mut route = Route::default();
+                if is_replaced(&c.topic) {
+                    route.replaced = true;
+                } else {
+                    writer.copy_channel(c.id, c.schema.as_ref().map_or(0, |s| s.id), &c.topic, &c.message_encoding, &c.metadata)?;
+                    seen_topics.insert(c.topic.clone());
+                    if c.topic == opts.reference_topic {
+                        route.reference = match c.schema_name() {
+                            n if n == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
+                            n if n == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),
+                            _ => None,
+                        };
+                        reference_seen |= route.reference.is_some();
+                    }
+                    for (pi, p) in pipelines.iter().enumerate() {
+                        if let Some(si) = p.sensor_for(&c.topic) {
+                            check_schema(input, p.name(), &c.topic, c.schema_name())?;
+                            route.sensors.push((pi, si));
+                            route.model = SensorModel::for_schema(c.schema_name());
+                        }
+                    }
+                }
+                routes.insert(c.id, route);
+            }
+            LogRecord::Message(m) => {
+                let route = &routes[&m.channel.id];
+                if route.replaced {
+                    continue;
+                }
+                report.input_messages += 1;
+                if m.log_time_ns < last_log_time {
+                    report.out_of_order_messages += 1;
+                }
+                last_log_time = last_log_time.max(m.log_time_ns);
+                writer.write_raw(m.channel.id, m.sequence, m.log_time_ns, m.publish_time_ns, m.data)?;
+                match route.reference {
+                    Some(ReferenceKind::Truth) => {
+                        let t: GroundTruth = m.decode(input)?;
+                        meters.iter_mut().for_each(|a| a.add_reference(t.stamp_ns, t.chainage_m, t.speed_mps));
+                    }
+                    Some(ReferenceKind::Fused) => {
+                        let t: FusedState = m.decode(input)?;
+                        meters.iter_mut().for_each(|a| a.add_reference(t.stamp_ns, t.chainage_m, t.speed_mps));
+                    }
+                    None => {}
+                }
+                if let Some(model) = route.model {
+                    let measurement = model.decode(&m, input)?;
+                    for &(pi, si) in &route.sensors {
+                        pipelines[pi].push(si, measurement, m.log_time_ns, &mut fused_buf);
+                        emit(&mut writer, &mut outputs[pi], &mut meters[pi], &mut fused_buf, &mut report.fused_messages)?;
+                    }
+                }
+            }
+            LogRecord::Metadata { name, metadata } => {
+                let replaced = name == topics::metadata::PIPELINE && metadata.get("pipeline").is_some_and(|p| names.contains(p.as_str()));
+                if !replaced {
+                    writer.write_metadata(&name, metadata)?;
+                }
+            }
+            LogRecord::Attachment { name, media_type, log_time_ns, create_time_ns, data } => {
+                writer.attach(&name, &media_type, log_time_ns, create_time_ns, data)?
+            }
+        }
+    }
+    report.input_bytes = reader.bytes_read();
+
+    for p in &opts.config.pipeline {
+        for s in &p.sensor {
+            if !seen_topics.contains(&s.topic) {
+                return Err(channel_error(input, &p.name, &s.topic, "is not in the file".into()));
+            }
+        }
+    }
+    for (pi, p) in pipelines.iter_mut().enumerate() {
+        p.finish(&mut fused_buf);
+        emit(&mut writer, &mut outputs[pi], &mut meters[pi], &mut fused_buf, &mut report.fused_messages)?;
+        let metadata = BTreeMap::from([
+            ("pipeline".to_owned(), p.name().to_owned()),
+            ("filter".to_owned(), "kalman".to_owned()),
+            ("config_toml".to_owned(), p.config.to_toml()),
+            ("config_source".to_owned(), opts.config_source.clone()),
+            ("input".to_owned(), input.display().to_string()),
+            ("tool_version".to_owned(), concat!("railfuse ", env!("CARGO_PKG_VERSION")).to_owned()),
+            ("counts".to_owned(), serde_json::to_string(&p.counts).expect("counts serialise")),
+        ]);
+        writer.write_metadata(topics::metadata::PIPELINE, metadata)?;
+    }
+    writer.finish()?;
+
+    report.reference = reference_seen.then(|| opts.reference_topic.clone());
+    for ((p, meter), out) in pipelines.iter().zip(meters.iter_mut()).zip(&outputs) {
+        meter.finish();
+        report.pipelines.push(PipelineReport {
+            name: p.name().to_owned(),
+            counts: p.counts.clone(),
+            fused_states: out.states,
+            position_error_m: meter.position.summary(),
+            speed_error_mps: meter.speed.summary(),
+            unmatched_states: meter.unmatched,
+        });
+    }
+    Ok(report)
+}
+
+fn emit(writer: &mut LogWriter, out: &mut Output, meter: &mut AccuracyMeter, fused: &mut Vec<Fused>, count: &mut u64) -> Result<()> {
+    for f in fused.drain(..) {
+        if let Some(state) = &f.state {
+            writer.write(out.state, f.log_time_ns, state)?;
+            meter.add_estimate(state.stamp_ns, state.chainage_m, state.speed_mps);
+            out.states += 1;
+            *count += 1;
+        }
+        writer.write(out.diagnostics, f.log_time_ns, &f.diagnostics)?;
+        *count += 1;
+    }
+    Ok(())
+}
+
+fn check_schema(input: &Path, pipeline: &str, topic: &str, schema: &str) -> Result<()> {
+    if SensorModel::for_schema(schema).is_some() {
+        return Ok(());
+    }
+    let supported = SensorModel::SUPPORTED.join(", ");
+    Err(channel_error(input, pipeline, topic, format!("has schema '{schema}', which no sensor model reads (supported: {supported})")))
+}
+
+fn channel_error(input: &Path, pipeline: &str, topic: &str, problem: String) -> Error {
+    Error::Channel { input: input.to_owned(), pipeline: pipeline.to_owned(), topic: topic.to_owned(), problem }
+}

@@ -1,0 +1,219 @@
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::messages::*;
+use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
+use railfuse_catalog::topics;
+use rerun::{Color, LineStrips2D, Points2D, RecordingStream, Scalars, SeriesLines, TextLog};
+
+use crate::{entities as ent, Error};
+
+/// Where the recording goes.
+#[derive(Debug, Clone)]
+pub enum Sink {
+    /// An `.rrd` file.
+    Save(PathBuf),
+    /// A running viewer, e.g. `rerun+http://127.0.0.1:9876/proxy`.
+    Connect(String),
+    /// Start a viewer (the `rerun` binary on PATH) and stream to it.
+    Spawn,
+}
+
+#[derive(Debug, Clone, Default)]
+pub struct VizReport {
+    pub messages: u64,
+    pub logged: u64,
+    pub entities: BTreeSet<String>,
+}
+
+// Colours as RGB(A) tuples: rerun's Color constructors are not const.
+const TRUTH_COLOR: (u8, u8, u8) = (40, 40, 40);
+const BAND_COLOR: (u8, u8, u8, u8) = (200, 60, 60, 160);
+/// Pipeline colours, by the order pipelines first appear.
+const PIPELINE_COLORS: [(u8, u8, u8); 4] = [(30, 120, 230), (230, 120, 20), (40, 170, 80), (160, 60, 200)];
+
+fn rgb((r, g, b): (u8, u8, u8)) -> Color {
+    Color::from_rgb(r, g, b)
+}
+
+fn pipeline_color(index: usize) -> Color {
+    rgb(PIPELINE_COLORS[index % PIPELINE_COLORS.len()])
+}
+
+fn band_color() -> Color {
+    let (r, g, b, a) = BAND_COLOR;
+    Color::from_unmultiplied_rgba(r, g, b, a)
+}
+
+fn fix_color(fix: FixType) -> Color {
+    match fix {
+        FixType::None => Color::from_rgb(128, 128, 128),
+        FixType::Single => Color::from_rgb(220, 50, 50),
+        FixType::Dgps => Color::from_rgb(230, 150, 30),
+        FixType::RtkFloat => Color::from_rgb(230, 210, 40),
+        FixType::RtkFixed => Color::from_rgb(40, 170, 80),
+    }
+}
+
+struct Logger<'a> {
+    rec: RecordingStream,
+    path: &'a Path,
+    map: Option<TrackMap>,
+    truth: ReferenceTrack,
+    pipelines: Vec<String>,
+    report: VizReport,
+}
+
+/// Logs the whole file to the sink, streaming.
+pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
+    let mut reader = LogReader::open(path)?;
+    let app = rerun::RecordingStreamBuilder::new("railfuse");
+    let rec = match sink {
+        Sink::Save(p) => app.save(p),
+        Sink::Connect(url) => app.connect_grpc_opts(url.clone()),
+        Sink::Spawn => app.spawn(),
+    }
+    .map_err(|e| Error::Rerun(e.to_string()))?;
+    let mut logger = Logger { rec, path, map: None, truth: ReferenceTrack::new(10.0), pipelines: Vec::new(), report: VizReport::default() };
+    while let Some(record) = reader.next() {
+        if let LogRecord::Message(m) = record? {
+            logger.report.messages += 1;
+            logger.rec.set_timestamp_nanos_since_epoch("log_time", m.log_time_ns as i64);
+            logger.message(&m)?;
+        }
+    }
+    logger.rec.flush_blocking().map_err(|e| Error::Rerun(e.to_string()))?;
+    Ok(logger.report)
+}
+
+impl Logger<'_> {
+    fn log<AS: ?Sized + rerun::AsComponents>(&mut self, entity: &str, data: &AS) -> Result<(), Error> {
+        self.rec.log(entity, data).map_err(|e| Error::Rerun(e.to_string()))?;
+        self.report.logged += 1;
+        if !self.report.entities.contains(entity) {
+            self.report.entities.insert(entity.to_owned());
+        }
+        Ok(())
+    }
+
+    fn log_static<AS: ?Sized + rerun::AsComponents>(&mut self, entity: &str, data: &AS) -> Result<(), Error> {
+        self.rec.log_static(entity, data).map_err(|e| Error::Rerun(e.to_string()))?;
+        self.report.entities.insert(entity.to_owned());
+        Ok(())
+    }
+
+    /// Plan-view point: Rerun's 2-D view grows y downwards, so north is negated to show it up.
+    fn plan(east: f64, north: f64) -> [f32; 2] {
+        [east as f32, -north as f32]
+    }
+
+    fn series_style(&mut self, entity: &str, name: &str, color: Color, width: f32) -> Result<(), Error> {
+        self.log_static(entity, &SeriesLines::new().with_names([name]).with_colors([color]).with_widths([width]))
+    }
+
+    fn message(&mut self, m: &railfuse_catalog::log::LogMessage<'_>) -> Result<(), Error> {
+        let path = self.path;
+        let topic = m.channel.topic.as_str();
+        match m.channel.schema_name() {
+            n if n == TrackMap::SCHEMA_NAME => {
+                let map: TrackMap = m.decode(path)?;
+                let strip: Vec<[f32; 2]> = map.vertices.iter().map(|v| Self::plan(v.east_m, v.north_m)).collect();
+                self.log_static(ent::TRACK, &LineStrips2D::new([strip]).with_colors([Color::from_rgb(150, 150, 150)]).with_radii([2.0]))?;
+                let at = |c: f64| map.locate(c).map(|(e, n, _)| Self::plan(e, n));
+                let balises: Vec<_> = map.balises.iter().filter_map(|b| at(b.chainage_m)).collect();
+                let ids: Vec<_> = map.balises.iter().map(|b| b.balise_id.clone()).collect();
+                self.log_static(ent::BALISES, &Points2D::new(balises).with_labels(ids).with_colors([Color::from_rgb(250, 200, 0)]).with_radii([6.0]))?;
+                let stations: Vec<_> = map.stations.iter().filter_map(|s| at(s.chainage_m)).collect();
+                let names: Vec<_> = map.stations.iter().map(|s| s.name.clone()).collect();
+                self.log_static(ent::STATIONS, &Points2D::new(stations).with_labels(names).with_colors([Color::from_rgb(0, 0, 0)]).with_radii([12.0]))?;
+                self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
+                self.map = Some(map);
+            }
+            n if n == GroundTruth::SCHEMA_NAME => {
+                let t: GroundTruth = m.decode(path)?;
+                self.truth.push(ReferenceSample { stamp_ns: t.stamp_ns, chainage_m: t.chainage_m, speed_mps: t.speed_mps });
+                self.log(ent::TRUTH_POSITION, &Points2D::new([Self::plan(t.east_m, t.north_m)]).with_colors([rgb(TRUTH_COLOR)]).with_radii([10.0]))?;
+                self.log(ent::SPEED_TRUTH, &Scalars::single(t.speed_mps))?;
+            }
+            n if n == GnssFix::SCHEMA_NAME => {
+                let g: GnssFix = m.decode(path)?;
+                if let (Some(map), Some(lat), Some(lon)) = (&self.map, g.latitude_deg, g.longitude_deg) {
+                    let (e, n, _) = map.origin.to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
+                    let label = format!("{:?}", g.fix_type);
+                    self.log(ent::GNSS_POSITION, &Points2D::new([Self::plan(e, n)]).with_colors([fix_color(g.fix_type)]).with_radii([5.0]).with_labels([label]))?;
+                }
+                if let Some(v) = g.speed_mps {
+                    self.log(ent::SPEED_GNSS, &Scalars::single(v))?;
+                }
+            }
+            n if n == RadarSpeed::SCHEMA_NAME => {
+                let r: RadarSpeed = m.decode(path)?;
+                if r.valid {
+                    self.log(ent::SPEED_RADAR, &Scalars::single(r.speed_mps))?;
+                }
+            }
+            n if n == Odometer::SCHEMA_NAME => {
+                let o: Odometer = m.decode(path)?;
+                self.log(&ent::speed_of(topic), &Scalars::single(o.speed_mps))?;
+            }
+            n if n == LoopPosition::SCHEMA_NAME => {
+                let l: LoopPosition = m.decode(path)?;
+                if let Some((s, _)) = self.truth.at(l.stamp_ns) {
+                    self.log(ent::LOOP_CHAINAGE_ERROR, &Scalars::single(l.chainage_m - s))?;
+                }
+            }
+            n if n == BalisePassage::SCHEMA_NAME => {
+                let b: BalisePassage = m.decode(path)?;
+                if let Some((s, _)) = self.truth.at(b.stamp_ns) {
+                    self.log(ent::BALISE_CHAINAGE_ERROR, &Scalars::single(b.chainage_m - s))?;
+                }
+            }
+            n if n == Event::SCHEMA_NAME => {
+                let e: Event = m.decode(path)?;
+                self.log(ent::EVENTS, &TextLog::new(format!("{:?}: {}", e.kind, e.text)))?;
+            }
+            n if n == FusedState::SCHEMA_NAME => {
+                let Some(pipeline) = topics::fused_pipeline_of(topic) else { return Ok(()) };
+                let f: FusedState = m.decode(path)?;
+                self.fused(pipeline, &f)?;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn fused(&mut self, pipeline: &str, f: &FusedState) -> Result<(), Error> {
+        let index = match self.pipelines.iter().position(|p| p == pipeline) {
+            Some(i) => i,
+            None => {
+                self.pipelines.push(pipeline.to_owned());
+                let color = pipeline_color(self.pipelines.len() - 1);
+                for base in [ent::fused_speed(pipeline), ent::chainage_error(pipeline), ent::speed_error(pipeline)] {
+                    self.series_style(&base, pipeline, color, 1.5)?;
+                    self.series_style(&format!("{base}/{}", ent::PLUS_3SIGMA), "+3σ", band_color(), 1.0)?;
+                    self.series_style(&format!("{base}/{}", ent::MINUS_3SIGMA), "−3σ", band_color(), 1.0)?;
+                }
+                self.pipelines.len() - 1
+            }
+        };
+        let color = pipeline_color(index);
+        let (s3, v3) = (3.0 * f.chainage_std_m(), 3.0 * f.speed_std_mps());
+        if let Some((e, n, _)) = self.map.as_ref().and_then(|m| m.locate(f.chainage_m)) {
+            self.log(&ent::fused_position(pipeline), &Points2D::new([Self::plan(e, n)]).with_colors([color]).with_radii([7.0]))?;
+        }
+        self.band(&ent::fused_speed(pipeline), f.speed_mps, v3)?;
+        if let Some((s, v)) = self.truth.at(f.stamp_ns) {
+            self.band(&ent::chainage_error(pipeline), f.chainage_m - s, s3)?;
+            self.band(&ent::speed_error(pipeline), f.speed_mps - v, v3)?;
+        }
+        Ok(())
+    }
+
+    /// A value with its ±3σ band as three series.
+    fn band(&mut self, base: &str, value: f64, three_sigma: f64) -> Result<(), Error> {
+        self.log(base, &Scalars::single(value))?;
+        self.log(&format!("{base}/{}", ent::PLUS_3SIGMA), &Scalars::single(value + three_sigma))?;
+        self.log(&format!("{base}/{}", ent::MINUS_3SIGMA), &Scalars::single(value - three_sigma))
+    }
+}

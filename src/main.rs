@@ -1,0 +1,53 @@
+//! `railfuse`: the command-line front end. A thin layer over the workspace crates: parse the
+//! arguments, call the library, print tables or JSON, and turn every error into one line on
+//! stderr with a non-zero exit.
+
+mod cmd;
+mod table;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(name = "railfuse", version, about = "MCAP log recorder and offline re-fusion toolkit for train speed and position testing")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a test run (truth and every sensor) and write it as an MCAP log.
+    Simulate(cmd::simulate::Args),
+    /// Show what a log holds: channels, rates, gaps, metadata, attachments, fused pipelines.
+    Info(cmd::info::Args),
+    /// Replay a log through the pipelines of a config file and write the fused log.
+    Refuse(cmd::refuse::Args),
+    /// Log a (raw or fused) log to the Rerun viewer or an .rrd file.
+    Viz(cmd::viz::Args),
+    /// The whole path in one go: simulate, re-fuse, print accuracy, write a Rerun recording.
+    Demo(cmd::demo::Args),
+    /// Measure simulate, write and refuse throughput and refuse's peak memory.
+    Bench(cmd::bench::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Simulate(a) => cmd::simulate::run(a),
+        Command::Info(a) => cmd::info::run(a),
+        Command::Refuse(a) => cmd::refuse::run(a),
+        Command::Viz(a) => cmd::viz::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
+        Command::Bench(a) => cmd::bench::run(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line: the chain of causes joined by ": ", the file named at its head.
+            eprintln!("railfuse: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
