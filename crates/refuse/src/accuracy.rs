@@ -93,7 +93,7 @@ impl ErrorStats {
             rmse: (self.sum_sq / self.n as f64).sqrt(),
             mean: self.sum / self.n as f64,
             max_abs: self.max_abs,
-            p95_abs: self.hist.quantile(0.95, self.n),
+            p95_abs: self.hist.quantile(0.95, self.n).min(self.max_abs),
         })
     }
 }

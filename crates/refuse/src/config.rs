@@ -70,8 +70,9 @@ pub struct MotionConfig {
     pub jerk_variance: Option<f64>,
 }
 
-/// The filter starts at its first position measurement: chainage from it, speed and
-/// acceleration from here, with these standard deviations.
+/// The filter starts at its first position measurement: chainage from it; speed from the
+/// latest valid speed measurement before it (else `speed_mps`, `speed_std_mps`); acceleration
+/// zero with `acceleration_std_mps2`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InitialConfig {

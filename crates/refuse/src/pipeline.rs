@@ -26,7 +26,9 @@ pub struct PipelineCounts {
 /// Output of one processed measurement.
 #[derive(Debug, Clone)]
 pub struct Fused {
-    /// Receive time of the measurement that produced it.
+    /// Replay time at which the filter released it: the log time of the message that pushed
+    /// the replay past the reorder window (non-decreasing, so fused channels stay in
+    /// log-time order).
     pub log_time_ns: u64,
     /// The new state, when the measurement was used.
     pub state: Option<FusedState>,
@@ -36,7 +38,6 @@ pub struct Fused {
 struct Pending {
     sensor: usize,
     measurement: Measurement,
-    log_time_ns: u64,
 }
 
 pub struct KalmanPipeline {
@@ -49,6 +50,8 @@ pub struct KalmanPipeline {
     order: BinaryHeap<Reverse<(u64, u64)>>,
     pending: std::collections::HashMap<u64, Pending>,
     seq: u64,
+    /// The latest valid speed measurement before the first position: the initial speed.
+    speed_before_init: Option<(f64, f64)>,
     pub counts: PipelineCounts,
 }
 
@@ -63,6 +66,7 @@ impl KalmanPipeline {
             order: BinaryHeap::new(),
             pending: Default::default(),
             seq: 0,
+            speed_before_init: None,
             counts: PipelineCounts::default(),
         }
     }
@@ -81,27 +85,27 @@ impl KalmanPipeline {
     pub fn push(&mut self, sensor: usize, measurement: Measurement, log_time_ns: u64, out: &mut Vec<Fused>) {
         self.seq += 1;
         self.order.push(Reverse((measurement.stamp_ns, self.seq)));
-        self.pending.insert(self.seq, Pending { sensor, measurement, log_time_ns });
-        self.release(log_time_ns.saturating_sub(self.window_ns), out);
+        self.pending.insert(self.seq, Pending { sensor, measurement });
+        self.release(log_time_ns.saturating_sub(self.window_ns), log_time_ns, out);
     }
 
-    /// Releases everything still queued (end of the log).
-    pub fn finish(&mut self, out: &mut Vec<Fused>) {
-        self.release(u64::MAX, out);
+    /// Releases everything still queued (end of the log, at replay time `log_time_ns`).
+    pub fn finish(&mut self, log_time_ns: u64, out: &mut Vec<Fused>) {
+        self.release(u64::MAX, log_time_ns, out);
     }
 
-    fn release(&mut self, up_to_ns: u64, out: &mut Vec<Fused>) {
+    fn release(&mut self, up_to_ns: u64, log_time_ns: u64, out: &mut Vec<Fused>) {
         while let Some(&Reverse((stamp, seq))) = self.order.peek() {
             if stamp > up_to_ns {
                 break;
             }
             self.order.pop();
             let p = self.pending.remove(&seq).expect("every queued key has its measurement");
-            out.push(self.process(p));
+            out.push(self.process(p, log_time_ns));
         }
     }
 
-    fn process(&mut self, p: Pending) -> Fused {
+    fn process(&mut self, p: Pending, log_time_ns: u64) -> Fused {
         let sensor = &self.config.sensor[p.sensor];
         let m = p.measurement;
         let variance = match sensor.variance {
@@ -124,14 +128,18 @@ impl KalmanPipeline {
             _ if !m.valid || !m.value.is_finite() => GateDecision::RejectedInvalid,
             (Some(r), None) if m.quantity == Quantity::Chainage => {
                 let init = &self.config.initial;
+                let (speed, speed_var) = self.speed_before_init.unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
                 self.filter = Some(KalmanFilter::new(
-                    Vector3::new(m.value, init.speed_mps, 0.0),
-                    Matrix3::from_diagonal(&Vector3::new(r, init.speed_std_mps.powi(2), init.acceleration_std_mps2.powi(2))),
+                    Vector3::new(m.value, speed, 0.0),
+                    Matrix3::from_diagonal(&Vector3::new(r, speed_var, init.acceleration_std_mps2.powi(2))),
                 ));
                 self.filter_time_ns = m.stamp_ns;
                 GateDecision::Accepted
             }
-            (Some(_), None) => GateDecision::BeforeInitialisation,
+            (Some(r), None) => {
+                self.speed_before_init = Some((m.value, r));
+                GateDecision::BeforeInitialisation
+            }
             (Some(_), Some(_)) if m.stamp_ns < self.filter_time_ns => GateDecision::RejectedLate,
             (Some(r), Some(filter)) => {
                 // Predict on a copy: a rejected measurement leaves the filter untouched.
@@ -183,6 +191,6 @@ impl KalmanPipeline {
                 source: sensor.topic.clone(),
             }
         });
-        Fused { log_time_ns: p.log_time_ns, state, diagnostics }
+        Fused { log_time_ns, state, diagnostics }
     }
 }

@@ -210,7 +210,7 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
         }
     }
     for (pi, p) in pipelines.iter_mut().enumerate() {
-        p.finish(&mut fused_buf);
+        p.finish(last_log_time, &mut fused_buf);
         emit(&mut writer, &mut outputs[pi], &mut meters[pi], &mut fused_buf, &mut report.fused_messages)?;
         let metadata = BTreeMap::from([
             ("pipeline".to_owned(), p.name().to_owned()),

@@ -176,6 +176,9 @@ impl Logger<'_> {
             n if n == FusedState::SCHEMA_NAME => {
                 let Some(pipeline) = topics::fused_pipeline_of(topic) else { return Ok(()) };
                 let f: FusedState = m.decode(path)?;
+                // Fused states are released after the reorder window: plot them at the
+                // instant they describe, so they line up with the truth.
+                self.rec.set_timestamp_nanos_since_epoch("log_time", f.stamp_ns as i64);
                 self.fused(pipeline, &f)?;
             }
             _ => {}
