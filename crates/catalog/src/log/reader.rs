@@ -92,11 +92,7 @@ pub struct LogReader {
 impl LogReader {
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_owned();
-        let file = File::open(&path).map_err(|e| Error::io(&path, e))?;
-        let len = file.metadata().map_err(|e| Error::io(&path, e))?.len();
-        if len == 0 {
-            return Err(Error::Empty { path });
-        }
+        let file = open_checked(&path)?;
         let options = LinearReaderOptions::default()
             .with_record_length_limit(super::RECORD_LENGTH_LIMIT)
             .with_validate_chunk_crcs(true);
@@ -280,11 +276,8 @@ fn describe(e: &mcap::McapError) -> String {
 pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
     use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
     use std::io::Seek;
-    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut file = open_checked(path)?;
     let size = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    if size == 0 {
-        return Err(Error::Empty { path: path.to_owned() });
-    }
     let mut options = SummaryReaderOptions::default().with_file_size(size);
     options.record_length_limit = Some(super::RECORD_LENGTH_LIMIT);
     let mut reader = SummaryReader::new_with_options(options);
@@ -318,4 +311,28 @@ pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
         .collect();
     channels.sort_by_key(|c| c.id);
     Ok(Some(channels))
+}
+
+/// Opens a file that must be an MCAP file: not empty, starting with the MCAP magic.
+fn open_checked(path: &Path) -> Result<File> {
+    use std::io::{Seek, SeekFrom};
+    let mut file = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut magic = [0u8; 8];
+    let mut got = 0;
+    while got < magic.len() {
+        match file.read(&mut magic[got..]) {
+            Ok(0) => break,
+            Ok(n) => got += n,
+            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
+            Err(e) => return Err(Error::io(path, e)),
+        }
+    }
+    if got == 0 {
+        return Err(Error::Empty { path: path.to_owned() });
+    }
+    if magic[..got] != mcap::MAGIC[..got] || got < magic.len() {
+        return Err(Error::mcap(path, "it does not start with the MCAP magic bytes: not an MCAP file"));
+    }
+    file.seek(SeekFrom::Start(0)).map_err(|e| Error::io(path, e))?;
+    Ok(file)
 }

@@ -280,16 +280,27 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
         }
         // The jerk w_k acting over (k, k+1].
         x.jerk = gauss(&mut process, p.process_noise_variance.sqrt());
-        for i in 0..truth_per_step {
-            let tau = i as f64 * period / truth_per_step as f64;
-            let (s, v, a) = x.at(tau);
-            write_seed000_truth(&mut log, &JerkStep { s, v, a, jerk: x.jerk }, stamp(k, tau), &origin)?;
-        }
+        // Truth samples and balise passages of this step, written in time order.
+        let mut within: Vec<(f64, Option<usize>)> = (0..truth_per_step).map(|i| (i as f64 * period / truth_per_step as f64, None)).collect();
         while let Some(b) = map.balises.get(next_balise) {
             let Some(tau) = x.passes(b.chainage_m, period) else { break };
-            let t_b = stamp(k, tau);
-            log.write(topics::BALISE, t_b, &BalisePassage { stamp_ns: t_b, balise_id: b.balise_id.clone(), chainage_m: b.chainage_m, variance_m2: Some(p.balise_variance_m2) })?;
+            within.push((tau, Some(next_balise)));
             next_balise += 1;
+        }
+        within.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (tau, balise) in within {
+            let t = stamp(k, tau);
+            match balise {
+                None => {
+                    let (s, v, a) = x.at(tau);
+                    write_seed000_truth(&mut log, &JerkStep { s, v, a, jerk: x.jerk }, t, &origin)?;
+                }
+                Some(i) => {
+                    let b = &map.balises[i];
+                    let msg = BalisePassage { stamp_ns: t, balise_id: b.balise_id.clone(), chainage_m: b.chainage_m, variance_m2: Some(p.balise_variance_m2) };
+                    log.write(topics::BALISE, t, &msg)?;
+                }
+            }
         }
         let (s, v, a) = x.at(period);
         x = JerkStep { s, v, a, jerk: 0.0 };

@@ -1,0 +1,139 @@
+//! End-to-end tests of the `railfuse` binary: what a user runs, on real files.
+
+mod common;
+
+use common::*;
+
+#[test]
+fn simulation_is_deterministic_for_a_seed_and_differs_across_seeds() {
+    let d = tempfile::tempdir().unwrap();
+    let (a, b, c) = (d.path().join("a.mcap"), d.path().join("b.mcap"), d.path().join("c.mcap"));
+    ok(&["simulate", "--scenario", "default", "--seed", "3", "--duration", "40", "-o", s(&a)]);
+    ok(&["simulate", "--scenario", "default", "--seed", "3", "--duration", "40", "-o", s(&b)]);
+    ok(&["simulate", "--scenario", "default", "--seed", "4", "--duration", "40", "-o", s(&c)]);
+    let (a, b, c) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap(), std::fs::read(c).unwrap());
+    assert_eq!(a, b);
+    assert_ne!(a, c);
+}
+
+#[test]
+fn info_reports_channels_rates_gaps_metadata_and_fused_pipelines() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
+    ok(&["simulate", "--seed", "1", "--duration", "120", "-o", s(&raw)]);
+    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+    let topic = |t: &str| info["channels"].as_array().unwrap().iter().find(|c| c["topic"] == t).cloned().unwrap_or_else(|| panic!("{t}"));
+    let imu = topic("/imu");
+    assert!((imu["mean_rate_hz"].as_f64().unwrap() - 200.0).abs() < 1.0, "{imu}");
+    assert_eq!(topic("/gnss/fix")["schema"], "railfuse.GnssFix");
+    assert!((topic("/gnss/fix")["mean_rate_hz"].as_f64().unwrap() - 10.0).abs() < 0.2);
+    assert_eq!(topic("/track/map")["messages"], 1);
+    // Balises lie about 1 km apart: tens of seconds between passages.
+    assert!(topic("/balise")["largest_gap_s"].as_f64().unwrap() > 20.0);
+    let run = info["metadata"].as_array().unwrap().iter().find(|m| m[0] == "railfuse.run").unwrap();
+    assert_eq!(run[1]["scenario"], "default");
+    assert!(run[1]["scenario_parameters"].as_str().unwrap().contains("\"gnss\""));
+    assert_eq!(info["fused_pipelines"].as_array().unwrap().len(), 0);
+
+    ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
+    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
+    assert_eq!(info["fused_pipelines"], serde_json::json!(["kalman"]));
+    let text = String::from_utf8(ok(&["info", s(&fused)]).stdout).unwrap();
+    assert!(text.contains("/fused/kalman/state") && text.contains("fused pipelines: kalman"), "{text}");
+}
+
+#[test]
+fn refuse_copies_every_input_record_and_reports_accuracy() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused, again) = (d.path().join("run.mcap"), d.path().join("f.mcap"), d.path().join("g.mcap"));
+    ok(&["simulate", "--seed", "2", "--duration", "150", "-o", s(&raw)]);
+    let out = ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused), "--json"]);
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let p = &r["refuse"]["pipelines"][0];
+    assert_eq!(r["refuse"]["reference"], "/truth");
+    assert!(p["fused_states"].as_u64().unwrap() > 1000);
+    // The default pipeline on the default run: sub-metre position, sub-0.3 m/s speed.
+    assert!(p["position_error_m"]["rmse"].as_f64().unwrap() < 1.0, "{p}");
+    assert!(p["speed_error_mps"]["rmse"].as_f64().unwrap() < 0.3, "{p}");
+
+    let raw_info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+    let fused_info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
+    for c in raw_info["channels"].as_array().unwrap() {
+        let f = fused_info["channels"].as_array().unwrap().iter().find(|x| x["topic"] == c["topic"]).unwrap();
+        assert_eq!(c, f, "copied channel differs");
+    }
+    // Re-fusing a fused file replaces that pipeline's channels instead of adding more.
+    ok(&["refuse", s(&fused), "-c", s(&sample("kalman.toml")), "-o", s(&again)]);
+    let again_info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&again), "--json"]).stdout).unwrap();
+    let n = |v: &serde_json::Value| v["channels"].as_array().unwrap().len();
+    assert_eq!(n(&again_info), n(&fused_info));
+    let pipelines = again_info["metadata"].as_array().unwrap().iter().filter(|m| m[0] == "railfuse.pipeline").count();
+    assert_eq!(pipelines, 1);
+}
+
+fn assert_one_clear_line(out: &std::process::Output, must_contain: &[&str]) {
+    assert!(!out.status.success());
+    let err = stderr(out);
+    assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
+    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{err}");
+    for m in must_contain {
+        assert!(err.contains(m), "{err:?} lacks {m:?}");
+    }
+}
+
+#[test]
+fn bad_files_get_one_clear_line_naming_the_file() {
+    let d = tempfile::tempdir().unwrap();
+    let raw = d.path().join("run.mcap");
+    ok(&["simulate", "--seed", "1", "--duration", "30", "-o", s(&raw)]);
+    let bytes = std::fs::read(&raw).unwrap();
+    let empty = d.path().join("empty.mcap");
+    std::fs::write(&empty, b"").unwrap();
+    let truncated = d.path().join("truncated.mcap");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    let text = d.path().join("notes.mcap");
+    std::fs::write(&text, b"this is not an MCAP file, just some notes\n").unwrap();
+    let missing = d.path().join("missing.mcap");
+    let cfg = sample("kalman.toml");
+    let out = d.path().join("out.mcap");
+    let rrd = d.path().join("out.rrd");
+    for (file, cause) in [(&empty, "empty"), (&truncated, "truncated"), (&text, "magic"), (&missing, "No such file")] {
+        assert_one_clear_line(&railfuse(&["info", s(file)]), &[s(file), cause]);
+        assert_one_clear_line(&railfuse(&["refuse", s(file), "-c", s(&cfg), "-o", s(&out)]), &[s(file), cause]);
+        assert_one_clear_line(&railfuse(&["viz", s(file), "--save", s(&rrd)]), &[s(file), cause]);
+        assert!(!out.exists(), "a failed refuse left an output behind");
+    }
+}
+
+#[test]
+fn bad_configs_name_the_line_column_or_channel() {
+    let d = tempfile::tempdir().unwrap();
+    let raw = d.path().join("run.mcap");
+    ok(&["simulate", "--scenario", "seed000", "--seed", "1", "-o", s(&raw)]);
+    let out = d.path().join("out.mcap");
+    let good = std::fs::read_to_string(sample("seed000.toml")).unwrap();
+    let write = |name: &str, text: String| {
+        let p = d.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let unknown = write("unknown.toml", good.replacen("reorder_window_s = 0.0", "reorder_windw_s = 0.0", 1));
+    assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&unknown), "-o", s(&out)]), &["unknown.toml", "line 15, column 1", "unknown field `reorder_windw_s`"]);
+    let wrong_type = write("type.toml", good.replacen("variance = 0.01", "variance = true", 1));
+    assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&wrong_type), "-o", s(&out)]), &["type.toml", "line 20, column 12", "a variance"]);
+    // seed000 logs have no odometer: the channel is named.
+    let missing = write("missing.toml", good.replacen("/radar/speed", "/odometer/1", 1));
+    assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&missing), "-o", s(&out)]), &["/odometer/1", "is not in the file", "kf_no_balise"]);
+    let wrong_schema = write("schema.toml", good.replacen("/radar/speed", "/truth", 1));
+    assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&wrong_schema), "-o", s(&out)]), &["/truth", "railfuse.GroundTruth"]);
+    assert!(!out.exists());
+}
+
+#[test]
+fn the_samples_refuse_as_the_readme_says() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("sample.fused.mcap");
+    let r = ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&out)]);
+    let table = String::from_utf8(r.stdout).unwrap();
+    assert!(table.contains("pos RMSE m") && table.contains("kalman"), "{table}");
+}

@@ -1,0 +1,103 @@
+//! Interop: railfuse's outputs checked by clients written by others (the official Python
+//! `mcap` reader with `jsonschema`, the `rerun` CLI, filterpy). `tests/run` installs them.
+
+mod common;
+
+use common::*;
+
+fn python_ok(script: &str, args: &[&str]) -> serde_json::Value {
+    let out = python(script, args);
+    assert!(out.status.success(), "{script} {args:?}: {}{}", stderr(&out), String::from_utf8_lossy(&out.stdout));
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{script}: {e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+fn rerun_ok(args: &[&str]) -> String {
+    let out = rerun(args);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert!(out.status.success(), "rerun {args:?}: {text}");
+    text
+}
+
+#[test]
+fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
+    ok(&["simulate", "--seed", "11", "--duration", "200", "-o", s(&raw)]);
+    ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
+    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+
+    let r = python_ok("check_mcap.py", &[s(&raw)]);
+    assert_eq!(r["messages"], info["messages"]);
+    for t in ["/gnss/fix", "/imu", "/radar/speed", "/odometer/1", "/odometer/2", "/loop/position", "/balise", "/truth", "/events", "/track/map"] {
+        assert!(r["topics"][t].as_u64().unwrap_or(0) > 0, "no {t} read: {r}");
+    }
+    assert_eq!(r["compression"], serde_json::json!(["zstd"]));
+    assert!(r["chunks"].as_u64().unwrap() > 1);
+    assert_eq!(r["metadata"], serde_json::json!(["railfuse.run"]));
+
+    let f = python_ok("check_mcap.py", &[s(&fused)]);
+    assert!(f["topics"]["/fused/kalman/state"].as_u64().unwrap() > 1000);
+    assert_eq!(f["metadata"], serde_json::json!(["railfuse.pipeline", "railfuse.run"]));
+
+    for file in [&raw, &fused] {
+        let text = rerun_ok(&["mcap", "check", s(file)]);
+        assert!(!text.contains("PROBLEM"), "rerun mcap check: {text}");
+        assert!(text.contains("/imu"), "{text}");
+    }
+}
+
+#[test]
+fn the_kalman_pipeline_equals_filterpy_on_the_same_measurements() {
+    let d = tempfile::tempdir().unwrap();
+    for (scenario, config, duration) in [("default", "kalman.toml", "300"), ("seed000", "seed000.toml", "100")] {
+        let (raw, fused) = (d.path().join(format!("{scenario}.mcap")), d.path().join(format!("{scenario}.fused.mcap")));
+        ok(&["simulate", "--scenario", scenario, "--seed", "21", "--duration", duration, "-o", s(&raw)]);
+        ok(&["refuse", s(&raw), "-c", s(&sample(config)), "-o", s(&fused)]);
+        let r = python_ok("filterpy_kalman.py", &[s(&fused), "1e-9"]);
+        assert!(r["updates_compared"].as_u64().unwrap() > 150, "{r}");
+        assert!(r["worst_relative_difference"].as_f64().unwrap() <= 1e-9, "{r}");
+    }
+}
+
+#[test]
+fn seed000_measurements_have_the_variances_source_000_states() {
+    let d = tempfile::tempdir().unwrap();
+    let files: Vec<String> = (0..12)
+        .map(|seed| {
+            let p = d.path().join(format!("s{seed}.mcap"));
+            ok(&["simulate", "--scenario", "seed000", "--seed", &seed.to_string(), "-o", s(&p)]);
+            s(&p).to_owned()
+        })
+        .collect();
+    let args: Vec<&str> = files.iter().map(String::as_str).collect();
+    let r = python_ok("seed000_stats.py", &args);
+    for k in ["loop", "radar", "jerk"] {
+        assert!(r[k]["n"].as_u64().unwrap() >= 1000, "{r}");
+    }
+}
+
+#[test]
+fn rerun_verifies_the_recording_and_shows_the_logged_entities() {
+    let d = tempfile::tempdir().unwrap();
+    let (fused, rrd) = (d.path().join("f.mcap"), d.path().join("run.rrd"));
+    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
+    ok(&["viz", s(&fused), "--save", s(&rrd)]);
+    rerun_ok(&["rrd", "verify", s(&rrd)]);
+    let printed = rerun_ok(&["rrd", "print", "-v", s(&rrd)]);
+    for entity in [
+        "/map/track",
+        "/map/balises",
+        "/map/truth",
+        "/map/gnss",
+        "/map/fused/kalman",
+        "/speed/truth",
+        "/speed/radar",
+        "/speed/odometer_1",
+        "/speed/fused/kalman/plus_3sigma",
+        "/chainage_error/kalman/minus_3sigma",
+        "/speed_error/kalman",
+        "/events",
+    ] {
+        assert!(printed.contains(entity), "rrd print lacks {entity}");
+    }
+}
