@@ -23,20 +23,17 @@ pub fn fused_position(pipeline: &str) -> String {
     format!("map/fused/{pipeline}")
 }
 
-/// A fused pipeline's speed, with `…/plus_3sigma` and `…/minus_3sigma` beside it.
+/// A fused pipeline's speed: three series, the value and its +3σ and −3σ bounds.
 pub fn fused_speed(pipeline: &str) -> String {
     format!("speed/fused/{pipeline}")
 }
 
-/// Fused chainage minus truth, with its ±3σ band.
+/// Fused chainage minus truth, with its ±3σ bounds as two more series.
 pub fn chainage_error(pipeline: &str) -> String {
     format!("chainage_error/{pipeline}")
 }
 
-/// Fused speed minus truth, with its ±3σ band.
+/// Fused speed minus truth, with its ±3σ bounds as two more series.
 pub fn speed_error(pipeline: &str) -> String {
     format!("speed_error/{pipeline}")
 }
-
-pub const PLUS_3SIGMA: &str = "plus_3sigma";
-pub const MINUS_3SIGMA: &str = "minus_3sigma";

@@ -4,7 +4,8 @@
 //! bands.
 //!
 //! Entity layout (see [`entities`]): `map/…` is the 2-D plan view (east right, north up),
-//! `speed/…`, `chainage_error/…` and `speed_error/…` are time series, `events` is a text log.
+//! `speed/…`, `chainage_error/…` and `speed_error/…` are time series (fused ones carry three
+//! series: the value and its ±3σ bounds), `events` is a text log.
 
 pub mod entities;
 mod logger;

@@ -5,7 +5,7 @@ use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::*;
 use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
 use railfuse_catalog::topics;
-use rerun::{Color, LineStrips2D, Points2D, RecordingStream, Scalars, SeriesLines, TextLog};
+use rerun::{Color, LineStrips2D, Points2D, Radius, RecordingStream, Scalars, SeriesLines, TextLog};
 
 use crate::{entities as ent, Error};
 
@@ -28,7 +28,7 @@ pub struct VizReport {
 }
 
 // Colours as RGB(A) tuples: rerun's Color constructors are not const.
-const TRUTH_COLOR: (u8, u8, u8) = (40, 40, 40);
+const TRUTH_COLOR: (u8, u8, u8) = (235, 235, 235);
 const BAND_COLOR: (u8, u8, u8, u8) = (200, 60, 60, 160);
 /// Pipeline colours, by the order pipelines first appear.
 const PIPELINE_COLORS: [(u8, u8, u8); 4] = [(30, 120, 230), (230, 120, 20), (40, 170, 80), (160, 60, 200)];
@@ -75,6 +75,9 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
         Sink::Spawn => app.spawn(),
     }
     .map_err(|e| Error::Rerun(e.to_string()))?;
+    // Our `log_time` timeline is the MCAP log time; the SDK's own wall-clock `log_time` would
+    // overwrite it.
+    rec.set_log_time_enabled(false);
     let mut logger = Logger { rec, path, map: None, truth: ReferenceTrack::new(10.0), pipelines: Vec::new(), report: VizReport::default() };
     while let Some(record) = reader.next() {
         if let LogRecord::Message(m) = record? {
@@ -119,21 +122,21 @@ impl Logger<'_> {
             n if n == TrackMap::SCHEMA_NAME => {
                 let map: TrackMap = m.decode(path)?;
                 let strip: Vec<[f32; 2]> = map.vertices.iter().map(|v| Self::plan(v.east_m, v.north_m)).collect();
-                self.log_static(ent::TRACK, &LineStrips2D::new([strip]).with_colors([Color::from_rgb(150, 150, 150)]).with_radii([2.0]))?;
+                self.log_static(ent::TRACK, &LineStrips2D::new([strip]).with_colors([Color::from_rgb(170, 170, 170)]).with_radii([Radius::new_ui_points(1.5)]))?;
                 let at = |c: f64| map.locate(c).map(|(e, n, _)| Self::plan(e, n));
                 let balises: Vec<_> = map.balises.iter().filter_map(|b| at(b.chainage_m)).collect();
-                let ids: Vec<_> = map.balises.iter().map(|b| b.balise_id.clone()).collect();
-                self.log_static(ent::BALISES, &Points2D::new(balises).with_labels(ids).with_colors([Color::from_rgb(250, 200, 0)]).with_radii([6.0]))?;
+                // Balise ids would crowd the plan view: they show on hover as instance data.
+                self.log_static(ent::BALISES, &Points2D::new(balises).with_colors([Color::from_rgb(250, 200, 0)]).with_radii([Radius::new_ui_points(4.0)]))?;
                 let stations: Vec<_> = map.stations.iter().filter_map(|s| at(s.chainage_m)).collect();
                 let names: Vec<_> = map.stations.iter().map(|s| s.name.clone()).collect();
-                self.log_static(ent::STATIONS, &Points2D::new(stations).with_labels(names).with_colors([Color::from_rgb(0, 0, 0)]).with_radii([12.0]))?;
+                self.log_static(ent::STATIONS, &Points2D::new(stations).with_labels(names).with_colors([Color::from_rgb(255, 255, 255)]).with_radii([Radius::new_ui_points(6.0)]))?;
                 self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
                 self.map = Some(map);
             }
             n if n == GroundTruth::SCHEMA_NAME => {
                 let t: GroundTruth = m.decode(path)?;
                 self.truth.push(ReferenceSample { stamp_ns: t.stamp_ns, chainage_m: t.chainage_m, speed_mps: t.speed_mps });
-                self.log(ent::TRUTH_POSITION, &Points2D::new([Self::plan(t.east_m, t.north_m)]).with_colors([rgb(TRUTH_COLOR)]).with_radii([10.0]))?;
+                self.log(ent::TRUTH_POSITION, &Points2D::new([Self::plan(t.east_m, t.north_m)]).with_colors([rgb(TRUTH_COLOR)]).with_radii([Radius::new_ui_points(7.0)]))?;
                 self.log(ent::SPEED_TRUTH, &Scalars::single(t.speed_mps))?;
             }
             n if n == GnssFix::SCHEMA_NAME => {
@@ -141,7 +144,7 @@ impl Logger<'_> {
                 if let (Some(map), Some(lat), Some(lon)) = (&self.map, g.latitude_deg, g.longitude_deg) {
                     let (e, n, _) = map.origin.to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
                     let label = format!("{:?}", g.fix_type);
-                    self.log(ent::GNSS_POSITION, &Points2D::new([Self::plan(e, n)]).with_colors([fix_color(g.fix_type)]).with_radii([5.0]).with_labels([label]))?;
+                    self.log(ent::GNSS_POSITION, &Points2D::new([Self::plan(e, n)]).with_colors([fix_color(g.fix_type)]).with_radii([Radius::new_ui_points(4.0)]).with_labels([label]))?;
                 }
                 if let Some(v) = g.speed_mps {
                     self.log(ent::SPEED_GNSS, &Scalars::single(v))?;
@@ -193,9 +196,11 @@ impl Logger<'_> {
                 self.pipelines.push(pipeline.to_owned());
                 let color = pipeline_color(self.pipelines.len() - 1);
                 for base in [ent::fused_speed(pipeline), ent::chainage_error(pipeline), ent::speed_error(pipeline)] {
-                    self.series_style(&base, pipeline, color, 1.5)?;
-                    self.series_style(&format!("{base}/{}", ent::PLUS_3SIGMA), "+3σ", band_color(), 1.0)?;
-                    self.series_style(&format!("{base}/{}", ent::MINUS_3SIGMA), "−3σ", band_color(), 1.0)?;
+                    let style = SeriesLines::new()
+                        .with_names([pipeline.to_owned(), format!("{pipeline} +3σ"), format!("{pipeline} −3σ")])
+                        .with_colors([color, band_color(), band_color()])
+                        .with_widths([1.5, 1.0, 1.0]);
+                    self.log_static(&base, &style)?;
                 }
                 self.pipelines.len() - 1
             }
@@ -203,7 +208,7 @@ impl Logger<'_> {
         let color = pipeline_color(index);
         let (s3, v3) = (3.0 * f.chainage_std_m(), 3.0 * f.speed_std_mps());
         if let Some((e, n, _)) = self.map.as_ref().and_then(|m| m.locate(f.chainage_m)) {
-            self.log(&ent::fused_position(pipeline), &Points2D::new([Self::plan(e, n)]).with_colors([color]).with_radii([7.0]))?;
+            self.log(&ent::fused_position(pipeline), &Points2D::new([Self::plan(e, n)]).with_colors([color]).with_radii([Radius::new_ui_points(5.0)]))?;
         }
         self.band(&ent::fused_speed(pipeline), f.speed_mps, v3)?;
         if let Some((s, v)) = self.truth.at(f.stamp_ns) {
@@ -213,10 +218,8 @@ impl Logger<'_> {
         Ok(())
     }
 
-    /// A value with its ±3σ band as three series.
-    fn band(&mut self, base: &str, value: f64, three_sigma: f64) -> Result<(), Error> {
-        self.log(base, &Scalars::single(value))?;
-        self.log(&format!("{base}/{}", ent::PLUS_3SIGMA), &Scalars::single(value + three_sigma))?;
-        self.log(&format!("{base}/{}", ent::MINUS_3SIGMA), &Scalars::single(value - three_sigma))
+    /// A value with its ±3σ band: three series of one entity, so they share one plot.
+    fn band(&mut self, entity: &str, value: f64, three_sigma: f64) -> Result<(), Error> {
+        self.log(entity, &Scalars::new([value, value + three_sigma, value - three_sigma]))
     }
 }
