@@ -100,6 +100,9 @@ fn rerun_verifies_the_recording_and_shows_the_logged_entities() {
     ] {
         assert!(printed.contains(entity), "rrd print lacks {entity}");
     }
-    // Our log_time is the MCAP log time of 2026-06-01 (the simulated run), not the wall clock.
-    assert!(printed.contains("log_time"), "no log_time timeline");
+    // The log_time timeline carries the MCAP log time of the simulated run (2026-06-01), not
+    // the wall clock of the viz run.
+    let data = rerun_ok(&["rrd", "print", "-vvv", s(&rrd)]);
+    assert!(data.contains("index_name: log_time"), "no log_time timeline");
+    assert!(data.contains("2026-06-01T08:01"), "log_time is not the run's time");
 }
