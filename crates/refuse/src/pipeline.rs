@@ -153,7 +153,8 @@ impl KalmanPipeline {
                 diagnostics.innovation = Some(innovation.residual);
                 diagnostics.innovation_variance = Some(innovation.variance);
                 diagnostics.nis = Some(innovation.nis);
-                if sensor.gate_nis.is_some_and(|g| !(innovation.nis <= g)) {
+                // A NaN NIS fails the gate too.
+                if sensor.gate_nis.is_some_and(|g| innovation.nis.is_nan() || innovation.nis > g) {
                     GateDecision::RejectedGate
                 } else {
                     predicted.update(&h, r, m.value);

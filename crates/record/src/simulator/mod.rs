@@ -152,7 +152,7 @@ fn simulate_line(scenario: &Scenario, p: &LineScenario, seed: u64, duration_s: O
     let step_ns: u64 = 1_000_000;
     let dt = step_ns as f64 / 1e9;
     let limit_ns = duration_s.map(|d| start + seconds(d));
-    let mut was_in_tunnel = false;
+    let mut tunnel_name: Option<String> = None;
     let mut had_corrections = true;
     let mut t_ns = start;
     loop {
@@ -164,12 +164,16 @@ fn simulate_line(scenario: &Scenario, p: &LineScenario, seed: u64, duration_s: O
             None => {}
         }
         let (east_m, north_m, heading_rad) = map.locate(driver.s).expect("a built track has vertices");
-        let tunnel = map.in_tunnel(driver.s);
-        if tunnel.is_some() != was_in_tunnel {
-            let name = tunnel.map_or_else(|| "tunnel".to_owned(), |t| t.name.clone());
-            let kind = if tunnel.is_some() { EventKind::TunnelEntry } else { EventKind::TunnelExit };
-            outbox.push(t_ns, event(kind, name));
-            was_in_tunnel = tunnel.is_some();
+        match (map.in_tunnel(driver.s), &tunnel_name) {
+            (Some(t), None) => {
+                outbox.push(t_ns, event(EventKind::TunnelEntry, t.name.clone()));
+                tunnel_name = Some(t.name.clone());
+            }
+            (None, Some(name)) => {
+                outbox.push(t_ns, event(EventKind::TunnelExit, name.clone()));
+                tunnel_name = None;
+            }
+            _ => {}
         }
         let corrections = !p.correction_outages_s.iter().any(|&(a, len)| t >= a && t < a + len);
         if corrections != had_corrections {
@@ -187,7 +191,7 @@ fn simulate_line(scenario: &Scenario, p: &LineScenario, seed: u64, duration_s: O
             north_m,
             heading_rad,
             curvature: track.curvature(driver.s),
-            in_tunnel: was_in_tunnel,
+            in_tunnel: tunnel_name.is_some(),
             corrections,
         };
         for s in &mut sensors {
