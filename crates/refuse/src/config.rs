@@ -244,13 +244,13 @@ gate_nis = 16.0
     #[test]
     fn an_unknown_key_is_named_with_its_line_and_column() {
         let e = err(&GOOD.replace("gate_nis = 16.0", "gate_nsi = 16.0"));
-        assert!(e.starts_with("p.toml: line 15, column 1: unknown field `gate_nsi`"), "{e}");
+        assert!(e.starts_with("p.toml: line 14, column 1: unknown field `gate_nsi`"), "{e}");
     }
 
     #[test]
     fn a_wrong_type_is_named_with_its_line() {
         let e = err(&GOOD.replace("variance = 0.01", "variance = [1]"));
-        assert!(e.contains("line 14") && e.contains("a variance"), "{e}");
+        assert!(e.contains("line 13, column 12") && e.contains("a variance"), "{e}");
     }
 
     #[test]

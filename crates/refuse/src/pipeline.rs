@@ -195,3 +195,59 @@ impl KalmanPipeline {
         Fused { log_time_ns, state, diagnostics }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::PipelinesConfig;
+
+    fn pipeline(gate: &str) -> KalmanPipeline {
+        let text = format!(
+            "[[pipeline]]\nname = \"p\"\nfilter = \"kalman\"\nmotion = {{ model = \"constant_acceleration\", jerk_psd = 0.1 }}\nreorder_window_s = 0.2\n\
+             [[pipeline.sensor]]\ntopic = \"/pos\"\nvariance = 0.01\n{gate}\n[[pipeline.sensor]]\ntopic = \"/spd\"\nvariance = \"message\"\n"
+        );
+        let c = PipelinesConfig::parse(&text, std::path::Path::new("t.toml")).unwrap();
+        KalmanPipeline::new(c.pipeline[0].clone())
+    }
+
+    fn m(stamp_ns: u64, quantity: Quantity, value: f64, var: Option<f64>) -> Measurement {
+        Measurement { stamp_ns, quantity, value, reported_variance: var, valid: true }
+    }
+
+    #[test]
+    fn measurements_are_fused_in_sensor_time_order_within_the_window() {
+        let mut p = pipeline("");
+        let mut out = Vec::new();
+        let s = 1_000_000_000u64;
+        p.push(0, m(s, Quantity::Chainage, 0.0, None), s, &mut out);
+        // A speed measured at 1.10 s arrives after a position measured at 1.15 s.
+        p.push(0, m(s + 150_000_000, Quantity::Chainage, 1.5, None), s + 160_000_000, &mut out);
+        p.push(1, m(s + 100_000_000, Quantity::Speed, 10.0, Some(0.01)), s + 170_000_000, &mut out);
+        p.finish(s + 200_000_000, &mut out);
+        let stamps: Vec<u64> = out.iter().map(|f| f.diagnostics.stamp_ns).collect();
+        assert_eq!(stamps, vec![s, s + 100_000_000, s + 150_000_000]);
+        assert!(out.iter().all(|f| f.diagnostics.decision == GateDecision::Accepted));
+        assert_eq!(p.counts.rejected_late, 0);
+    }
+
+    #[test]
+    fn nan_and_missing_variances_are_rejected_and_never_reach_the_state() {
+        let mut p = pipeline("gate_nis = 9.0");
+        let mut out = Vec::new();
+        p.push(0, m(0, Quantity::Chainage, 0.0, None), 0, &mut out);
+        p.push(0, m(10, Quantity::Chainage, f64::NAN, None), 10, &mut out);
+        p.push(0, m(20, Quantity::Chainage, f64::INFINITY, None), 20, &mut out);
+        p.push(1, m(30, Quantity::Speed, 3.0, None), 30, &mut out); // "message" variance, none given
+        p.push(1, m(40, Quantity::Speed, 0.0, Some(f64::NAN)), 40, &mut out);
+        p.push(0, m(50, Quantity::Chainage, 1e6, None), 50, &mut out); // far outside the gate
+        p.finish(60, &mut out);
+        assert_eq!(p.counts.accepted, 1);
+        assert_eq!(p.counts.rejected_invalid, 4);
+        assert_eq!(p.counts.rejected_gate, 1);
+        for f in &out {
+            if let Some(s) = &f.state {
+                assert!(s.chainage_m.is_finite() && s.covariance.iter().all(|c| c.is_finite()));
+            }
+        }
+    }
+}
