@@ -97,7 +97,7 @@ impl LineScenario {
                 tunnels: vec![(7000.0, 7800.0)],
                 sleeper_spacing_m: 0.6,
                 loop_crossing_spacing_m: Some(25.0),
-                vertex_spacing_m: 5.0,
+                vertex_spacing_m: 10.0,
             },
             driver: DriverParams {
                 max_speed_mps: 33.3,

@@ -45,7 +45,8 @@ pub struct TrackParams {
     pub tunnels: Vec<(f64, f64)>,
     pub sleeper_spacing_m: f64,
     pub loop_crossing_spacing_m: Option<f64>,
-    /// Distance between polyline vertices of the map.
+    /// Distance between polyline vertices along curves (straights have only their ends); the
+    /// chord's sagitta is spacing² / 8R, 1 cm for 10 m on a 1200 m curve.
     pub vertex_spacing_m: f64,
 }
 
@@ -67,7 +68,8 @@ impl Track {
             for seg in &p.pattern {
                 curvature.push((s, seg.curvature()));
                 let len = seg.length_m();
-                let steps = (len / p.vertex_spacing_m).ceil().max(1.0) as usize;
+                // Straights need only their ends; curves a vertex every `vertex_spacing_m`.
+                let steps = if seg.curvature() == 0.0 { 1 } else { (len / p.vertex_spacing_m).ceil().max(1.0) as usize };
                 let ds = len / steps as f64;
                 for _ in 0..steps {
                     // Exact arc (or straight) step: advance along the chord of the arc.
