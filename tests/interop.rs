@@ -106,3 +106,60 @@ fn rerun_verifies_the_recording_and_shows_the_logged_entities() {
     assert!(data.contains("index_name: log_time"), "no log_time timeline");
     assert!(data.contains("2026-06-01T08:01"), "log_time is not the run's time");
 }
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+#[test]
+fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
+    use std::time::{Duration, Instant};
+    let d = tempfile::tempdir().unwrap();
+    let fused = d.path().join("f.mcap");
+    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
+
+    // A real Rerun server on loopback that saves what it receives.
+    let port = free_port();
+    let saved = d.path().join("streamed.rrd");
+    let mut server = std::process::Command::new(client("RAILFUSE_RERUN", "rerun"))
+        .env("RERUN_ANALYTICS", "0")
+        .args(["--port", &port.to_string(), "--save", s(&saved)])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(started.elapsed() < Duration::from_secs(30), "rerun server did not start");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    let url = format!("rerun+http://127.0.0.1:{port}/proxy");
+    let streamed = railfuse(&["viz", s(&fused), "--connect", &url]);
+    // Wait until the server has written what it received (the file stops growing).
+    let mut last = 0;
+    let waited = Instant::now();
+    loop {
+        std::thread::sleep(Duration::from_millis(1000));
+        let size = std::fs::metadata(&saved).map(|m| m.len()).unwrap_or(0);
+        if (size > 0 && size == last) || waited.elapsed() > Duration::from_secs(30) {
+            break;
+        }
+        last = size;
+    }
+    server.kill().unwrap();
+    server.wait().unwrap();
+    assert!(streamed.status.success(), "{}", stderr(&streamed));
+    // The server was stopped mid-stream, so the file has no footer: read what it holds.
+    let printed = rerun_ok(&["rrd", "print", "-v", "--continue-on-error", "true", s(&saved)]);
+    for entity in ["/map/track", "/speed/fused/kalman", "/chainage_error/kalman"] {
+        assert!(printed.contains(entity), "the viewer did not receive {entity}");
+    }
+
+    // No viewer at the address: one clear line at once, no hang.
+    let absent = format!("rerun+http://127.0.0.1:{}/proxy", free_port());
+    let t = Instant::now();
+    let out = railfuse(&["viz", s(&fused), "--connect", &absent]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("no Rerun viewer is listening"), "{}", stderr(&out));
+    assert!(t.elapsed() < Duration::from_secs(10));
+}

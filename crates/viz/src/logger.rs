@@ -65,9 +65,15 @@ struct Logger<'a> {
     report: VizReport,
 }
 
+/// How long to wait for a viewer to take the last of the data.
+const VIEWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
+
 /// Logs the whole file to the sink, streaming.
 pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
     let mut reader = LogReader::open(path)?;
+    if let Sink::Connect(url) = sink {
+        probe_viewer(url)?;
+    }
     let app = rerun::RecordingStreamBuilder::new("railfuse");
     let rec = match sink {
         Sink::Save(p) => app.save(p),
@@ -86,7 +92,18 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
             logger.message(&m)?;
         }
     }
-    logger.rec.flush_blocking().map_err(|e| Error::Rerun(e.to_string()))?;
+    match sink {
+        Sink::Save(_) => logger.rec.flush_blocking().map_err(|e| Error::Rerun(e.to_string()))?,
+        // A viewer that never answers must not hang the command.
+        Sink::Connect(url) => logger
+            .rec
+            .flush_with_timeout(VIEWER_TIMEOUT)
+            .map_err(|e| Error::Rerun(format!("no Rerun viewer took the data at {url} within {} s: {e}", VIEWER_TIMEOUT.as_secs())))?,
+        Sink::Spawn => logger
+            .rec
+            .flush_with_timeout(VIEWER_TIMEOUT)
+            .map_err(|e| Error::Rerun(format!("the spawned Rerun viewer did not take the data within {} s: {e}", VIEWER_TIMEOUT.as_secs())))?,
+    }
     Ok(logger.report)
 }
 
@@ -222,4 +239,21 @@ impl Logger<'_> {
     fn band(&mut self, entity: &str, value: f64, three_sigma: f64) -> Result<(), Error> {
         self.log(entity, &Scalars::new([value, value + three_sigma, value - three_sigma]))
     }
+}
+
+/// Checks that something listens at the viewer URL's host and port before streaming: the SDK
+/// would otherwise queue data and retry for ever against an address where no viewer runs.
+fn probe_viewer(url: &str) -> Result<(), Error> {
+    use std::net::{TcpStream, ToSocketAddrs};
+    let authority = url.split("://").nth(1).and_then(|rest| rest.split('/').next()).filter(|a| a.contains(':'));
+    let Some(authority) = authority else {
+        return Err(Error::Rerun(format!("{url}: expected a viewer URL like rerun+http://127.0.0.1:9876/proxy")));
+    };
+    let addrs = authority.to_socket_addrs().map_err(|e| Error::Rerun(format!("{url}: {e}")))?;
+    for addr in addrs {
+        if TcpStream::connect_timeout(&addr, std::time::Duration::from_secs(3)).is_ok() {
+            return Ok(());
+        }
+    }
+    Err(Error::Rerun(format!("{url}: no Rerun viewer is listening there (start one with `rerun`)")))
 }
