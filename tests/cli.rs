@@ -137,3 +137,13 @@ fn the_samples_refuse_as_the_readme_says() {
     let table = String::from_utf8(r.stdout).unwrap();
     assert!(table.contains("pos RMSE m") && table.contains("kalman"), "{table}");
 }
+
+#[test]
+fn viz_spawn_without_a_viewer_on_path_says_so_in_one_line() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
+        .args(["viz", s(&sample("short-run.mcap")), "--spawn"])
+        .env("PATH", "/nonexistent")
+        .output()
+        .unwrap();
+    assert_one_clear_line(&out, &["Failed to find Rerun Viewer executable", "pip install rerun-sdk==0.36.3"]);
+}

@@ -80,7 +80,13 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
         Sink::Connect(url) => app.connect_grpc_opts(url.clone()),
         Sink::Spawn => app.spawn(),
     }
-    .map_err(|e| Error::Rerun(e.to_string()))?;
+    .map_err(|e| {
+        let first_line = e.to_string().lines().next().unwrap_or_default().trim().to_owned();
+        match sink {
+            Sink::Spawn => Error::Rerun(format!("{first_line} (the viewer comes with `pip install rerun-sdk==0.36.3`)")),
+            _ => Error::Rerun(first_line),
+        }
+    })?;
     // Our `log_time` timeline is the MCAP log time; the SDK's own wall-clock `log_time` would
     // overwrite it.
     rec.set_log_time_enabled(false);
