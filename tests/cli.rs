@@ -147,19 +147,3 @@ fn viz_spawn_without_a_viewer_on_path_says_so_in_one_line() {
         .unwrap();
     assert_one_clear_line(&out, &["Failed to find Rerun Viewer executable", "pip install rerun-sdk==0.36.3"]);
 }
-
-#[test]
-fn a_closed_output_pipe_ends_quietly() {
-    use std::io::Read;
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
-        .args(["info", "--json", s(&sample("short-run.mcap"))])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut first = [0u8; 16];
-    child.stdout.take().unwrap().read_exact(&mut first).unwrap(); // then drop the read end
-    let out = child.wait_with_output().unwrap();
-    let err = stderr(&out);
-    assert!(!err.contains("panicked") && !err.contains("Broken pipe"), "{err}");
-}
