@@ -98,18 +98,12 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
             logger.message(&m)?;
         }
     }
-    match sink {
-        Sink::Save(_) => logger.rec.flush_blocking().map_err(|e| Error::Rerun(e.to_string()))?,
-        // A viewer that never answers must not hang the command.
-        Sink::Connect(url) => logger
-            .rec
-            .flush_with_timeout(VIEWER_TIMEOUT)
-            .map_err(|e| Error::Rerun(format!("no Rerun viewer took the data at {url} within {} s: {e}", VIEWER_TIMEOUT.as_secs())))?,
-        Sink::Spawn => logger
-            .rec
-            .flush_with_timeout(VIEWER_TIMEOUT)
-            .map_err(|e| Error::Rerun(format!("the spawned Rerun viewer did not take the data within {} s: {e}", VIEWER_TIMEOUT.as_secs())))?,
-    }
+    // A viewer that never takes the data must not hang the command; a file always does.
+    let flushed = match sink {
+        Sink::Save(_) => logger.rec.flush_blocking(),
+        Sink::Connect(_) | Sink::Spawn => logger.rec.flush_with_timeout(VIEWER_TIMEOUT),
+    };
+    flushed.map_err(|e| Error::Rerun(format!("the Rerun viewer did not take the data within {} s: {e}", VIEWER_TIMEOUT.as_secs())))?;
     Ok(logger.report)
 }
 
