@@ -28,7 +28,11 @@ impl fmt::Display for Table {
             let mut out = String::new();
             for (i, (c, w)) in cells.iter().zip(&width).enumerate() {
                 // First column left-aligned (names), the rest right-aligned (numbers).
-                if i == 0 { out += &format!("{c:<w$}") } else { out += &format!("  {c:>w$}") }
+                if i == 0 {
+                    out += &format!("{c:<w$}")
+                } else {
+                    out += &format!("  {c:>w$}")
+                }
             }
             writeln!(f, "{}", out.trim_end())
         };

@@ -118,7 +118,10 @@ fn bad_configs_name_the_line_column_or_channel() {
         p
     };
     let unknown = write("unknown.toml", good.replacen("reorder_window_s = 0.0", "reorder_windw_s = 0.0", 1));
-    assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&unknown), "-o", s(&out)]), &["unknown.toml", "line 15, column 1", "unknown field `reorder_windw_s`"]);
+    assert_one_clear_line(
+        &railfuse(&["refuse", s(&raw), "-c", s(&unknown), "-o", s(&out)]),
+        &["unknown.toml", "line 15, column 1", "unknown field `reorder_windw_s`"],
+    );
     let wrong_type = write("type.toml", good.replacen("variance = 0.01", "variance = true", 1));
     assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&wrong_type), "-o", s(&out)]), &["type.toml", "line 20, column 12", "a variance"]);
     // seed000 logs have no odometer: the channel is named.

@@ -77,11 +77,23 @@ pub fn peak_rss_kib() -> Option<u64> {
 /// The accuracy table, as refuse and demo print it.
 pub fn print_accuracy(report: &RefuseReport) {
     match &report.reference {
-        Some(r) => println!("accuracy against {r} (errors = fused − reference, at each fused state):"),
+        Some(r) => {
+            println!("accuracy against {r} (errors = fused − reference, at each fused state):")
+        }
         None => println!("no reference channel in the input: accuracy not computed (counts only)"),
     }
     let mut t = Table::new(&[
-        "pipeline", "states", "pos RMSE m", "pos p95 m", "pos max m", "speed RMSE m/s", "speed p95 m/s", "speed max m/s", "gated", "invalid", "late",
+        "pipeline",
+        "states",
+        "pos RMSE m",
+        "pos p95 m",
+        "pos max m",
+        "speed RMSE m/s",
+        "speed p95 m/s",
+        "speed max m/s",
+        "gated",
+        "invalid",
+        "late",
     ]);
     let f = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{x:.3}"));
     for p in &report.pipelines {

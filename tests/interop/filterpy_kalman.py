@@ -44,19 +44,24 @@ def main(path, tol):
     worst = 0.0
     compared = 0
     for name, cfg in configs.items():
-        accepted = [d for d in diags[name] if d["decision"] == "accepted"]
+        # The filter advances to every measurement that reached the gate, used or not.
+        reached = [d for d in diags[name] if d["decision"] in ("accepted", "rejected_gate")]
         st = states[name]
-        assert len(accepted) == len(st), f"{name}: {len(accepted)} accepted measurements, {len(st)} states"
+        assert sum(d["decision"] == "accepted" for d in reached) == len(st), f"{name}: accepted measurements and states differ"
         kf = KalmanFilter(dim_x=3, dim_z=1)
         kf.x = np.array([[st[0]["chainage_m"]], [st[0]["speed_mps"]], [st[0]["acceleration_mps2"]]])
         kf.P = np.array(st[0]["covariance"]).reshape(3, 3)
         t = st[0]["stamp_ns"]
-        for d, s in zip(accepted[1:], st[1:]):
+        states_left = iter(st[1:])
+        for d in reached[1:]:
             dt = (d["stamp_ns"] - t) / 1e9
             if dt > 0:
                 kf.F, kf.Q = model(cfg["motion"], dt)
                 kf.predict()
             t = d["stamp_ns"]
+            if d["decision"] != "accepted":
+                continue
+            s = next(states_left)
             kf.H = np.array([[1.0, 0.0, 0.0]]) if schema_of[d["source"]] in POSITION_SCHEMAS else np.array([[0.0, 1.0, 0.0]])
             kf.R = np.array([[d["measurement_variance"]]])
             kf.update(np.array([[d["measurement"]]]))

@@ -15,15 +15,8 @@ pub struct GeodeticOrigin {
 impl GeodeticOrigin {
     /// Latitude, longitude (degrees) and altitude (m) of a local `east, north, up` point.
     pub fn to_geodetic(&self, east_m: f64, north_m: f64, up_m: f64) -> (f64, f64, f64) {
-        let (lat, lon, alt) = map_3d::enu2geodetic(
-            east_m,
-            north_m,
-            up_m,
-            self.latitude_deg.to_radians(),
-            self.longitude_deg.to_radians(),
-            self.altitude_m,
-            Ellipsoid::WGS84,
-        );
+        let (lat, lon, alt) =
+            map_3d::enu2geodetic(east_m, north_m, up_m, self.latitude_deg.to_radians(), self.longitude_deg.to_radians(), self.altitude_m, Ellipsoid::WGS84);
         (lat.to_degrees(), lon.to_degrees(), alt)
     }
 

@@ -87,9 +87,7 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
                 c.last_log_time_ns = Some(m.log_time_ns);
             }
             LogRecord::Metadata { name, metadata: m } => metadata.push((name, m)),
-            LogRecord::Attachment { name, media_type, data, .. } => {
-                attachments.push(AttachmentSummary { name, media_type, bytes: data.len() })
-            }
+            LogRecord::Attachment { name, media_type, data, .. } => attachments.push(AttachmentSummary { name, media_type, bytes: data.len() }),
             LogRecord::Schema(_) => {}
         }
     }
@@ -103,8 +101,7 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
     }
     let first = channels.values().filter_map(|c| c.first_log_time_ns).min();
     let last = channels.values().filter_map(|c| c.last_log_time_ns).max();
-    let fused: BTreeSet<String> =
-        channels.values().filter_map(|c| topics::fused_pipeline_of(&c.topic)).map(str::to_owned).collect();
+    let fused: BTreeSet<String> = channels.values().filter_map(|c| topics::fused_pipeline_of(&c.topic)).map(str::to_owned).collect();
     Ok(LogSummary {
         file: path.display().to_string(),
         file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),

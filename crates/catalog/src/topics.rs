@@ -26,6 +26,11 @@ pub fn fused_diagnostics(pipeline: &str) -> String {
     format!("{FUSED_PREFIX}{pipeline}/diagnostics")
 }
 
+/// `/fused/<pipeline>/smoothed`: the RTS-smoothed states of a Kalman pipeline.
+pub fn fused_smoothed(pipeline: &str) -> String {
+    format!("{FUSED_PREFIX}{pipeline}/smoothed")
+}
+
 /// The pipeline name of a fused topic, if it is one.
 pub fn fused_pipeline_of(topic: &str) -> Option<&str> {
     topic.strip_prefix(FUSED_PREFIX)?.split('/').next().filter(|s| !s.is_empty())

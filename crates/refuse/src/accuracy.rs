@@ -1,5 +1,7 @@
 //! Accuracy against a reference trajectory (the ground-truth channel): position and speed
-//! errors of every fused state, with RMSE, maximum and 95th percentile.
+//! errors of every fused state, with RMSE, maximum and 95th percentile, and the filter's
+//! consistency: NEES of `[s, v]` against its own covariance and NIS of its innovations, as the
+//! share of epochs inside the two-sided 95 % χ² interval (ideally 95 %).
 //!
 //! Streaming: the reference is kept only for a few seconds behind the replay, and the 95th
 //! percentile comes from a log-bucketed histogram (1 % relative resolution), so memory does
@@ -7,6 +9,7 @@
 
 use std::collections::VecDeque;
 
+use railfuse_catalog::messages::FusedState;
 use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
 
 use serde::Serialize;
@@ -98,14 +101,73 @@ impl ErrorStats {
     }
 }
 
+/// Two-sided 95 % interval of χ² with 1 and 2 degrees of freedom (2.5 % and 97.5 % points).
+pub const CHI2_95_1DOF: (f64, f64) = (0.000982069, 5.023886);
+pub const CHI2_95_2DOF: (f64, f64) = (0.05063562, 7.377759);
+
+/// Share of a normalised squared error (NEES or NIS) inside its 95 % χ² interval.
+#[derive(Debug, Clone, Default)]
+pub struct Consistency {
+    n: u64,
+    inside: u64,
+    sum: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ConsistencySummary {
+    pub epochs: u64,
+    /// Share of epochs inside the two-sided 95 % χ² interval (0.95 when consistent).
+    pub inside_95: f64,
+    /// Mean value (the degrees of freedom when consistent).
+    pub mean: f64,
+}
+
+impl Consistency {
+    pub fn add(&mut self, value: f64, bounds: (f64, f64)) {
+        if !value.is_finite() {
+            return;
+        }
+        self.n += 1;
+        self.sum += value;
+        if value >= bounds.0 && value <= bounds.1 {
+            self.inside += 1;
+        }
+    }
+
+    pub fn summary(&self) -> Option<ConsistencySummary> {
+        (self.n > 0).then(|| ConsistencySummary { epochs: self.n, inside_95: self.inside as f64 / self.n as f64, mean: self.sum / self.n as f64 })
+    }
+}
+
+/// `eᵀ P⁻¹ e` for the `[s, v]` error of a fused state against its own covariance.
+pub fn nees(state: &FusedState, position_error: f64, speed_error: f64) -> f64 {
+    let (pss, psv, pvv) = (state.covariance[0], state.covariance[1], state.covariance[4]);
+    let det = pss * pvv - psv * psv;
+    if !(det > 0.0) {
+        return f64::NAN;
+    }
+    (pvv * position_error * position_error - 2.0 * psv * position_error * speed_error + pss * speed_error * speed_error) / det
+}
+
+/// An estimate waiting for its reference.
+#[derive(Debug, Clone)]
+struct Estimate {
+    stamp_ns: u64,
+    chainage_m: f64,
+    speed_mps: f64,
+    /// (P_ss, P_sv, P_vv)
+    covariance: (f64, f64, f64),
+}
+
 /// Matches estimates to the reference interpolated at their stamps.
 #[derive(Debug, Clone)]
 pub struct AccuracyMeter {
     reference: ReferenceTrack,
     /// Estimates newer than the newest reference sample, waiting for it to catch up.
-    waiting: VecDeque<ReferenceSample>,
+    waiting: VecDeque<Estimate>,
     pub position: ErrorStats,
     pub speed: ErrorStats,
+    pub nees: Consistency,
     /// Estimates that fell outside the reference's time span.
     pub unmatched: u64,
 }
@@ -118,6 +180,7 @@ impl AccuracyMeter {
             waiting: VecDeque::new(),
             position: ErrorStats::default(),
             speed: ErrorStats::default(),
+            nees: Consistency::default(),
             unmatched: 0,
         }
     }
@@ -132,10 +195,11 @@ impl AccuracyMeter {
         }
     }
 
-    pub fn add_estimate(&mut self, stamp_ns: u64, chainage_m: f64, speed_mps: f64) {
-        let e = ReferenceSample { stamp_ns, chainage_m, speed_mps };
+    pub fn add_estimate(&mut self, s: &FusedState) {
+        let c = &s.covariance;
+        let e = Estimate { stamp_ns: s.stamp_ns, chainage_m: s.chainage_m, speed_mps: s.speed_mps, covariance: (c[0], c[1], c[4]) };
         match self.reference.newest_ns() {
-            Some(newest) if newest >= stamp_ns => self.score(e),
+            Some(newest) if newest >= s.stamp_ns => self.score(e),
             _ => self.waiting.push_back(e),
         }
     }
@@ -146,11 +210,18 @@ impl AccuracyMeter {
         self.waiting.clear();
     }
 
-    fn score(&mut self, e: ReferenceSample) {
+    fn score(&mut self, e: Estimate) {
         match self.reference.at(e.stamp_ns) {
             Some((s, v)) => {
-                self.position.add(e.chainage_m - s);
-                self.speed.add(e.speed_mps - v);
+                let (de, ve) = (e.chainage_m - s, e.speed_mps - v);
+                self.position.add(de);
+                self.speed.add(ve);
+                let (pss, psv, pvv) = e.covariance;
+                let mut cov = [0.0; 9];
+                (cov[0], cov[1], cov[3], cov[4]) = (pss, psv, psv, pvv);
+                let probe =
+                    FusedState { stamp_ns: e.stamp_ns, chainage_m: 0.0, speed_mps: 0.0, acceleration_mps2: 0.0, covariance: cov, source: String::new() };
+                self.nees.add(nees(&probe, de, ve), CHI2_95_2DOF);
             }
             None => self.unmatched += 1,
         }
@@ -177,17 +248,29 @@ mod tests {
     #[test]
     fn estimates_are_scored_against_the_interpolated_reference_even_when_they_lag() {
         let mut m = AccuracyMeter::new(0.5);
-        m.add_estimate(1_500_000_000, 15.5, 10.0); // arrives before the reference reaches it
+        let est = |stamp_ns, chainage_m, speed_mps| FusedState {
+            stamp_ns,
+            chainage_m,
+            speed_mps,
+            acceleration_mps2: 0.0,
+            covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            source: String::new(),
+        };
+        m.add_estimate(&est(1_500_000_000, 15.5, 10.0)); // arrives before the reference reaches it
         for k in 0..=30 {
             let t = k as u64 * 100_000_000;
             m.add_reference(t, 10.0 * t as f64 / 1e9, 10.0);
         }
-        m.add_estimate(2_050_000_000, 20.5, 10.5);
+        m.add_estimate(&est(2_050_000_000, 20.5, 10.5));
         m.finish();
         let p = m.position.summary().unwrap();
         assert_eq!(p.samples, 2);
         assert!((p.max_abs - 0.5).abs() < 1e-9, "{p:?}");
         assert!((m.speed.summary().unwrap().max_abs - 0.5).abs() < 1e-9);
         assert_eq!(m.unmatched, 0);
+        // e = (0.5, 0) and (0, 0.5) against unit covariance: NEES 0.25 each, both inside.
+        let n = m.nees.summary().unwrap();
+        assert_eq!(n.epochs, 2);
+        assert!((n.mean - 0.25).abs() < 1e-9 && n.inside_95 == 1.0, "{n:?}");
     }
 }

@@ -13,12 +13,18 @@
 //! gate_nis = 25.0           # optional innovation gate
 //! ```
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
-use crate::model::{ConstantAcceleration, ProcessNoise};
+use crate::filter::federated::Feedback;
+use crate::filter::particle::Resampling;
+use crate::filter::sharing::{Redistribution, SharingTable, SpeedBand};
+use crate::filter::working_state::DetectorSettings;
+use crate::measurement::Quantity;
+use crate::model::ProcessNoise;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -30,6 +36,26 @@ pub struct PipelinesConfig {
 #[serde(rename_all = "snake_case")]
 pub enum FilterKind {
     Kalman,
+    Particle,
+    FederatedKalman,
+    FederatedParticle,
+}
+
+impl FilterKind {
+    pub fn is_federated(self) -> bool {
+        matches!(self, FilterKind::FederatedKalman | FilterKind::FederatedParticle)
+    }
+    pub fn is_particle(self) -> bool {
+        matches!(self, FilterKind::Particle | FilterKind::FederatedParticle)
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            FilterKind::Kalman => "kalman",
+            FilterKind::Particle => "particle",
+            FilterKind::FederatedKalman => "federated_kalman",
+            FilterKind::FederatedParticle => "federated_particle",
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -45,6 +71,17 @@ pub struct PipelineConfig {
     /// far past them, so sensors with different latencies are fused in the right order.
     #[serde(default = "default_reorder_window_s")]
     pub reorder_window_s: f64,
+    /// Fused states on a regular grid at this rate (predicted to each tick) instead of one
+    /// state per accepted measurement.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub output_rate_hz: Option<f64>,
+    /// Kalman pipelines: also write the fixed-interval RTS smoothed states.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub smoother: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub particle: Option<ParticleConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub federated: Option<FederatedConfig>,
     pub sensor: Vec<SensorConfig>,
 }
 
@@ -52,22 +89,32 @@ fn default_reorder_window_s() -> f64 {
     0.5
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum MotionModelKind {
-    ConstantAcceleration,
+/// The motion model and its noise: exactly one noise parameter, the one the model takes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
+pub enum MotionConfig {
+    /// `[s, v]`, white acceleration of PSD `acceleration_psd` (m²/s³).
+    ConstantVelocity { acceleration_psd: f64 },
+    /// `[s, v, a]`: `jerk_psd` (continuous white jerk, m²/s⁵) or `jerk_variance` (a jerk held
+    /// over each step, m²/s⁶, as sources 000 and 001 write it).
+    ConstantAcceleration {
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        jerk_psd: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        jerk_variance: Option<f64>,
+    },
+    /// `[s, v, a]`, acceleration a Gauss–Markov process.
+    Singer { time_constant_s: f64, acceleration_std_mps2: f64 },
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct MotionConfig {
-    pub model: MotionModelKind,
-    /// Power spectral density of a continuous white jerk, m²/s⁵.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub jerk_psd: Option<f64>,
-    /// Variance of a jerk held constant over each step (sources 000/001), m²/s⁶.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub jerk_variance: Option<f64>,
+impl MotionConfig {
+    /// Dimension of the state.
+    pub fn dimension(&self) -> usize {
+        match self {
+            MotionConfig::ConstantVelocity { .. } => 2,
+            _ => 3,
+        }
+    }
 }
 
 /// The filter starts at its first position measurement: chainage from it; speed from the
@@ -88,8 +135,84 @@ impl Default for InitialConfig {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(untagged, expecting = "a variance (a number, SI units squared) or \"message\"")]
+#[serde(deny_unknown_fields, default)]
+pub struct ParticleConfig {
+    pub particles: usize,
+    pub resampling: Resampling,
+    /// Resample when the effective sample size falls below this share of the particles.
+    pub ess_threshold: f64,
+    /// Roughening constant K after resampling (0: off).
+    pub roughening: f64,
+    pub seed: u64,
+}
+
+impl Default for ParticleConfig {
+    fn default() -> Self {
+        Self { particles: 1000, resampling: Resampling::Systematic, ess_threshold: 0.5, roughening: 0.1, seed: 1 }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FederatedConfig {
+    #[serde(default = "default_feedback")]
+    pub feedback: Feedback,
+    /// Master fusion period; 0 fuses after every accepted measurement.
+    #[serde(default = "default_fusion_period_s")]
+    pub fusion_period_s: f64,
+    #[serde(default = "default_redistribution")]
+    pub redistribution: Redistribution,
+    #[serde(default)]
+    pub detector: DetectorSettings,
+    /// β by speed band, in increasing speed; the last band has no `below_kmh`. Default: source
+    /// 001's table for devices ins/gnss/radar, source 000's for loop/radar, else equal shares.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub band: Vec<BandConfig>,
+}
+
+impl Default for FederatedConfig {
+    fn default() -> Self {
+        Self {
+            feedback: default_feedback(),
+            fusion_period_s: default_fusion_period_s(),
+            redistribution: default_redistribution(),
+            detector: DetectorSettings::default(),
+            band: Vec::new(),
+        }
+    }
+}
+
+fn default_feedback() -> Feedback {
+    Feedback::FusionReset
+}
+fn default_fusion_period_s() -> f64 {
+    1.0
+}
+fn default_redistribution() -> Redistribution {
+    Redistribution::Accuracy
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BandConfig {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub below_kmh: Option<f64>,
+    /// β per device name.
+    pub beta: BTreeMap<String, f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged, expecting = "a variance (a number, SI units squared), \"message\", or a table of those per field")]
 pub enum Variance {
+    Fixed(f64),
+    FromMessage(FromMessage),
+    PerField(BTreeMap<Quantity, VarianceValue>),
+}
+
+/// One field's variance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged, expecting = "a variance (a number, SI units squared) or \"message\"")]
+pub enum VarianceValue {
     Fixed(f64),
     FromMessage(FromMessage),
 }
@@ -100,16 +223,43 @@ pub enum FromMessage {
     Message,
 }
 
+impl Variance {
+    /// The variance setting of one field, if the sensor gives one for it.
+    pub fn of(&self, q: Quantity) -> Option<VarianceValue> {
+        match self {
+            Variance::Fixed(v) => Some(VarianceValue::Fixed(*v)),
+            Variance::FromMessage(m) => Some(VarianceValue::FromMessage(*m)),
+            Variance::PerField(map) => map.get(&q).copied(),
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorConfig {
     pub topic: String,
+    /// Federated filters: the device (sub-filter) this channel feeds, or "master" for
+    /// absolute fixes fused in the master filter. Default: the topic.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<String>,
+    /// Which of the message's quantities to use (default: all its sensor model measures).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fields: Option<Vec<Quantity>>,
     pub variance: Variance,
     /// Reject a measurement whose normalised innovation squared exceeds this (χ², 1 dof:
     /// 6.63 keeps 99 %, 10.83 keeps 99.9 %).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gate_nis: Option<f64>,
 }
+
+impl SensorConfig {
+    pub fn device_name(&self) -> &str {
+        self.device.as_deref().unwrap_or(&self.topic)
+    }
+}
+
+/// The device name reserved for the master filter of a federated pipeline.
+pub const MASTER_DEVICE: &str = "master";
 
 impl PipelinesConfig {
     /// Reads and validates a configuration file.
@@ -135,59 +285,200 @@ impl PipelinesConfig {
     }
 
     fn validate(&self, path: &Path) -> Result<()> {
-        let invalid = |p: &PipelineConfig, message: String| Error::ConfigInvalid { path: path.to_owned(), pipeline: p.name.clone(), message };
         if self.pipeline.is_empty() {
             return Err(Error::ConfigSyntax { path: path.to_owned(), message: "no [[pipeline]] declared".into() });
         }
         for (i, p) in self.pipeline.iter().enumerate() {
-            if p.name.is_empty() || !p.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
-                return Err(invalid(p, "the name may hold only letters, digits, '_' and '-'".into()));
-            }
+            let invalid = |message: String| Error::ConfigInvalid { path: path.to_owned(), pipeline: p.name.clone(), message };
             if self.pipeline[..i].iter().any(|q| q.name == p.name) {
-                return Err(invalid(p, "declared twice".into()));
+                return Err(invalid("declared twice".into()));
             }
-            p.process_noise().map_err(|m| invalid(p, m))?;
-            if !(p.reorder_window_s.is_finite() && p.reorder_window_s >= 0.0) {
-                return Err(invalid(p, format!("reorder_window_s must be ≥ 0, not {}", p.reorder_window_s)));
-            }
-            let init = &p.initial;
-            if !(init.speed_std_mps > 0.0 && init.acceleration_std_mps2 > 0.0 && init.speed_mps.is_finite()) {
-                return Err(invalid(p, "initial standard deviations must be positive".into()));
-            }
-            if p.sensor.is_empty() {
-                return Err(invalid(p, "no [[pipeline.sensor]]: nothing to fuse".into()));
-            }
-            for s in &p.sensor {
-                if let Variance::Fixed(v) = s.variance {
-                    if !(v.is_finite() && v > 0.0) {
-                        return Err(invalid(p, format!("sensor {}: variance must be positive, not {v}", s.topic)));
-                    }
-                }
-                if let Some(g) = s.gate_nis {
-                    if !(g.is_finite() && g > 0.0) {
-                        return Err(invalid(p, format!("sensor {}: gate_nis must be positive, not {g}", s.topic)));
-                    }
-                }
-            }
+            p.check().map_err(invalid)?;
         }
         Ok(())
     }
 }
 
+fn positive(what: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{what} must be positive, not {v}"))
+    }
+}
+
 impl PipelineConfig {
+    /// Checks every value and combination; the message names the offending key.
+    fn check(&self) -> Result<(), String> {
+        if self.name.is_empty() || !self.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+            return Err("the name may hold only letters, digits, '_' and '-'".into());
+        }
+        match &self.motion {
+            MotionConfig::ConstantVelocity { acceleration_psd } => {
+                positive("motion.acceleration_psd", *acceleration_psd)?;
+            }
+            MotionConfig::ConstantAcceleration { .. } => {
+                self.process_noise()?;
+            }
+            MotionConfig::Singer { time_constant_s, acceleration_std_mps2 } => {
+                positive("motion.time_constant_s", *time_constant_s)?;
+                positive("motion.acceleration_std_mps2", *acceleration_std_mps2)?;
+            }
+        }
+        if !(self.reorder_window_s.is_finite() && self.reorder_window_s >= 0.0) {
+            return Err(format!("reorder_window_s must be ≥ 0, not {}", self.reorder_window_s));
+        }
+        if let Some(r) = self.output_rate_hz {
+            positive("output_rate_hz", r)?;
+        }
+        let init = &self.initial;
+        if !(init.speed_std_mps > 0.0 && init.acceleration_std_mps2 > 0.0 && init.speed_mps.is_finite()) {
+            return Err("initial standard deviations must be positive".into());
+        }
+        if self.smoother && self.filter != FilterKind::Kalman {
+            return Err(format!("smoother = true needs filter = \"kalman\" (the RTS smoother is linear), not \"{}\"", self.filter.name()));
+        }
+        match (&self.particle, self.filter.is_particle()) {
+            (Some(_), false) => return Err(format!("a [particle] section, but filter = \"{}\"", self.filter.name())),
+            (Some(pc), true) => {
+                if pc.particles == 0 {
+                    return Err("particle.particles must be at least 1".into());
+                }
+                if !(pc.ess_threshold > 0.0 && pc.ess_threshold <= 1.0) {
+                    return Err(format!("particle.ess_threshold must be in (0, 1], not {}", pc.ess_threshold));
+                }
+                if !(pc.roughening.is_finite() && pc.roughening >= 0.0) {
+                    return Err(format!("particle.roughening must be ≥ 0, not {}", pc.roughening));
+                }
+            }
+            _ => {}
+        }
+        if self.sensor.is_empty() {
+            return Err("no [[pipeline.sensor]]: nothing to fuse".into());
+        }
+        for s in &self.sensor {
+            let values: Vec<VarianceValue> = match &s.variance {
+                Variance::PerField(m) => m.values().copied().collect(),
+                v => v.of(Quantity::Chainage).into_iter().collect(),
+            };
+            for v in values {
+                if let VarianceValue::Fixed(v) = v {
+                    if !(v.is_finite() && v > 0.0) {
+                        return Err(format!("sensor {}: variance must be positive, not {v}", s.topic));
+                    }
+                }
+            }
+            if let Some(g) = s.gate_nis {
+                positive(&format!("sensor {}: gate_nis", s.topic), g)?;
+            }
+            if let Some(fields) = &s.fields {
+                if fields.is_empty() {
+                    return Err(format!("sensor {}: fields is empty", s.topic));
+                }
+                if self.motion.dimension() < 3 && fields.contains(&Quantity::Acceleration) {
+                    return Err(format!("sensor {}: the constant-velocity model has no acceleration to measure", s.topic));
+                }
+            }
+            if let Variance::PerField(m) = &s.variance {
+                for q in s.fields.iter().flatten() {
+                    if !m.contains_key(q) {
+                        return Err(format!("sensor {}: no variance for field {}", s.topic, q.name()));
+                    }
+                }
+            }
+            if s.device.is_some() && !self.filter.is_federated() {
+                return Err(format!("sensor {}: device is for federated filters only", s.topic));
+            }
+        }
+        match (&self.federated, self.filter.is_federated()) {
+            (Some(_), false) => return Err(format!("a [federated] section, but filter = \"{}\"", self.filter.name())),
+            (_, true) => {
+                let f = self.federated.clone().unwrap_or_default();
+                if !(f.fusion_period_s.is_finite() && f.fusion_period_s >= 0.0) {
+                    return Err(format!("federated.fusion_period_s must be ≥ 0, not {}", f.fusion_period_s));
+                }
+                positive("federated.detector.timeout_s", f.detector.timeout_s)?;
+                positive("federated.detector.readmit_gate_nis", f.detector.readmit_gate_nis)?;
+                if self.devices().is_empty() {
+                    return Err("a federated filter needs at least one device besides the master".into());
+                }
+                self.sharing_table()?;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
     pub fn process_noise(&self) -> Result<ProcessNoise, String> {
-        let positive = |what: &str, v: f64| {
-            if v.is_finite() && v > 0.0 { Ok(v) } else { Err(format!("motion.{what} must be positive, not {v}")) }
-        };
-        match (self.motion.jerk_psd, self.motion.jerk_variance) {
-            (Some(q), None) => Ok(ProcessNoise::WhiteJerkPsd(positive("jerk_psd", q)?)),
-            (None, Some(v)) => Ok(ProcessNoise::PiecewiseJerkVariance(positive("jerk_variance", v)?)),
-            _ => Err("motion needs exactly one of jerk_psd or jerk_variance".into()),
+        match self.motion {
+            MotionConfig::ConstantAcceleration { jerk_psd: Some(q), jerk_variance: None } => Ok(ProcessNoise::WhiteJerkPsd(positive("motion.jerk_psd", q)?)),
+            MotionConfig::ConstantAcceleration { jerk_psd: None, jerk_variance: Some(v) } => {
+                Ok(ProcessNoise::PiecewiseJerkVariance(positive("motion.jerk_variance", v)?))
+            }
+            MotionConfig::ConstantAcceleration { .. } => Err("motion needs exactly one of jerk_psd or jerk_variance".into()),
+            _ => Err("only the constant-acceleration model takes jerk noise".into()),
         }
     }
 
-    pub fn motion_model(&self) -> ConstantAcceleration {
-        ConstantAcceleration { noise: self.process_noise().expect("validated on load") }
+    /// The federated devices (sub-filters) in order of first mention, without the master.
+    pub fn devices(&self) -> Vec<String> {
+        let mut names: Vec<String> = Vec::new();
+        for s in &self.sensor {
+            let d = s.device_name();
+            if d != MASTER_DEVICE && !names.iter().any(|n| n == d) {
+                names.push(d.to_owned());
+            }
+        }
+        names
+    }
+
+    /// β by speed band, in device order, from the config or the default for its devices.
+    pub fn sharing_table(&self) -> Result<SharingTable, String> {
+        let devices = self.devices();
+        let bands = self.federated.as_ref().map(|f| f.band.as_slice()).unwrap_or_default();
+        if bands.is_empty() {
+            let names: Vec<&str> = devices.iter().map(String::as_str).collect();
+            return Ok(match names.as_slice() {
+                ["ins", "gnss", "radar"] => SharingTable::source_001(),
+                ["loop", "radar"] => SharingTable::source_000(),
+                _ => SharingTable::even(devices.len()),
+            });
+        }
+        let mut out = Vec::new();
+        let mut last_below = 0.0;
+        for (i, b) in bands.iter().enumerate() {
+            let label = match b.below_kmh {
+                Some(v) => format!("federated.band below {v} km/h"),
+                None => "the last federated.band".to_owned(),
+            };
+            let below = match (b.below_kmh, i + 1 == bands.len()) {
+                (Some(v), false) if v.is_finite() && v > last_below => v,
+                (None, true) => f64::INFINITY,
+                (Some(_), true) => return Err(format!("{label}: the last band covers every higher speed, so it takes no below_kmh")),
+                (None, false) => return Err(format!("federated.band {}: only the last band may leave out below_kmh", i + 1)),
+                (Some(v), false) => return Err(format!("{label}: below_kmh must increase from band to band, not {v} after {last_below}")),
+            };
+            last_below = below;
+            for name in b.beta.keys() {
+                if !devices.contains(name) {
+                    return Err(format!("{label}: β for '{name}', which is not a device (devices: {})", devices.join(", ")));
+                }
+            }
+            let mut beta = Vec::new();
+            for d in &devices {
+                let v = *b.beta.get(d).ok_or_else(|| format!("{label}: no β for device '{d}'"))?;
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(format!("{label}: β for '{d}' must be ≥ 0, not {v}"));
+                }
+                beta.push(v);
+            }
+            let sum: f64 = beta.iter().sum();
+            if (sum - 1.0).abs() > 1e-6 {
+                return Err(format!("{label}: β sums to {sum}, not 1 (information sharing needs Σβ = 1)"));
+            }
+            out.push(SpeedBand { below_mps: below / 3.6, beta });
+        }
+        Ok(SharingTable { bands: out })
     }
 
     /// This pipeline alone, as TOML: what is stored beside its fused channels.

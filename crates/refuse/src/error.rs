@@ -21,4 +21,11 @@ pub enum Error {
     ConfigInvalid { path: PathBuf, pipeline: String, message: String },
     #[error("{input}: pipeline '{pipeline}' reads channel {topic}, which {problem}")]
     Channel { input: PathBuf, pipeline: String, topic: String, problem: String },
+    /// The RTS smoother's spill file (a temporary file) could not be written or read.
+    #[error("pipeline '{pipeline}': smoother temporary file: {source}")]
+    Spill {
+        pipeline: String,
+        #[source]
+        source: std::io::Error,
+    },
 }

@@ -1,5 +1,5 @@
-//! Sensor models: how a message of each channel kind becomes a scalar measurement of the
-//! along-track state `[s, v, a]`.
+//! Sensor models: how a message of each channel kind becomes scalar measurements of the
+//! along-track state `[s, v, a]` (or `[s, v]`).
 //!
 //! | schema | measures | H |
 //! |---|---|---|
@@ -7,28 +7,46 @@
 //! | `railfuse.BalisePassage` | chainage (surveyed, at the passage) | `[1, 0, 0]` |
 //! | `railfuse.RadarSpeed` | speed (invalid samples rejected) | `[0, 1, 0]` |
 //! | `railfuse.Odometer` | speed over its window | `[0, 1, 0]` |
+//! | `railfuse.GnssFix` | chainage (the fix projected on the track map), speed | `[1, 0, 0]`, `[0, 1, 0]` |
+//! | `railfuse.Imu` | along-track acceleration (body x, level track) | `[0, 0, 1]` |
+//!
+//! A GNSS fix without a position (fix type `none`) gives no chainage; its variance along the
+//! track is the receiver's east/north covariance projected on the track direction.
 
 use std::path::Path;
 
-use nalgebra::RowVector3;
+use nalgebra::RowSVector;
 use railfuse_catalog::log::LogMessage;
-use railfuse_catalog::messages::{BalisePassage, ChannelMessage, LoopPosition, Odometer, RadarSpeed};
+use railfuse_catalog::messages::{BalisePassage, ChannelMessage, GnssFix, Imu, LoopPosition, Odometer, RadarSpeed, TrackMap};
+use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Quantity {
     Chainage,
     Speed,
+    Acceleration,
 }
 
 impl Quantity {
-    /// The observation row on `[s, v, a]`.
-    pub fn h(self) -> RowVector3<f64> {
+    pub fn name(self) -> &'static str {
         match self {
-            Quantity::Chainage => RowVector3::new(1.0, 0.0, 0.0),
-            Quantity::Speed => RowVector3::new(0.0, 1.0, 0.0),
+            Quantity::Chainage => "chainage",
+            Quantity::Speed => "speed",
+            Quantity::Acceleration => "acceleration",
         }
+    }
+
+    /// Its component of the state.
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The observation row on an `N`-state, if the state holds this quantity.
+    pub fn h<const N: usize>(self) -> Option<RowSVector<f64, N>> {
+        (self.index() < N).then(|| RowSVector::from_fn(|_, j| if j == self.index() { 1.0 } else { 0.0 }))
     }
 }
 
@@ -44,17 +62,25 @@ pub struct Measurement {
     pub valid: bool,
 }
 
+/// What the sensor models need besides the message: the track map, for GNSS.
+#[derive(Debug, Clone, Default)]
+pub struct SensorContext {
+    pub track: Option<TrackMap>,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SensorModel {
     LoopPosition,
     BalisePosition,
     RadarSpeed,
     OdometerSpeed,
+    GnssFix,
+    ImuAcceleration,
 }
 
 impl SensorModel {
     pub const SUPPORTED: &'static [&'static str] =
-        &[LoopPosition::SCHEMA_NAME, BalisePassage::SCHEMA_NAME, RadarSpeed::SCHEMA_NAME, Odometer::SCHEMA_NAME];
+        &[LoopPosition::SCHEMA_NAME, BalisePassage::SCHEMA_NAME, RadarSpeed::SCHEMA_NAME, Odometer::SCHEMA_NAME, GnssFix::SCHEMA_NAME, Imu::SCHEMA_NAME];
 
     pub fn for_schema(schema: &str) -> Option<Self> {
         Some(match schema {
@@ -62,28 +88,78 @@ impl SensorModel {
             s if s == BalisePassage::SCHEMA_NAME => SensorModel::BalisePosition,
             s if s == RadarSpeed::SCHEMA_NAME => SensorModel::RadarSpeed,
             s if s == Odometer::SCHEMA_NAME => SensorModel::OdometerSpeed,
+            s if s == GnssFix::SCHEMA_NAME => SensorModel::GnssFix,
+            s if s == Imu::SCHEMA_NAME => SensorModel::ImuAcceleration,
             _ => return None,
         })
     }
 
-    pub fn decode(self, msg: &LogMessage<'_>, path: &Path) -> Result<Measurement> {
-        Ok(match self {
+    /// The quantities this model can give.
+    pub fn quantities(self) -> &'static [Quantity] {
+        match self {
+            SensorModel::LoopPosition | SensorModel::BalisePosition => &[Quantity::Chainage],
+            SensorModel::RadarSpeed | SensorModel::OdometerSpeed => &[Quantity::Speed],
+            SensorModel::GnssFix => &[Quantity::Chainage, Quantity::Speed],
+            SensorModel::ImuAcceleration => &[Quantity::Acceleration],
+        }
+    }
+
+    /// Decodes a message into its measurements (at most one per quantity), in `quantities()`
+    /// order.
+    pub fn decode(self, msg: &LogMessage<'_>, path: &Path, ctx: &SensorContext, out: &mut Vec<Measurement>) -> Result<()> {
+        out.clear();
+        let one = |stamp_ns, quantity, value, reported_variance, valid| Measurement { stamp_ns, quantity, value, reported_variance, valid };
+        match self {
             SensorModel::LoopPosition => {
                 let m: LoopPosition = msg.decode(path)?;
-                Measurement { stamp_ns: m.stamp_ns, quantity: Quantity::Chainage, value: m.chainage_m, reported_variance: m.variance_m2, valid: true }
+                out.push(one(m.stamp_ns, Quantity::Chainage, m.chainage_m, m.variance_m2, true));
             }
             SensorModel::BalisePosition => {
                 let m: BalisePassage = msg.decode(path)?;
-                Measurement { stamp_ns: m.stamp_ns, quantity: Quantity::Chainage, value: m.chainage_m, reported_variance: m.variance_m2, valid: true }
+                out.push(one(m.stamp_ns, Quantity::Chainage, m.chainage_m, m.variance_m2, true));
             }
             SensorModel::RadarSpeed => {
                 let m: RadarSpeed = msg.decode(path)?;
-                Measurement { stamp_ns: m.stamp_ns, quantity: Quantity::Speed, value: m.speed_mps, reported_variance: m.speed_variance_m2ps2, valid: m.valid }
+                out.push(one(m.stamp_ns, Quantity::Speed, m.speed_mps, m.speed_variance_m2ps2, m.valid));
             }
             SensorModel::OdometerSpeed => {
                 let m: Odometer = msg.decode(path)?;
-                Measurement { stamp_ns: m.stamp_ns, quantity: Quantity::Speed, value: m.speed_mps, reported_variance: None, valid: true }
+                out.push(one(m.stamp_ns, Quantity::Speed, m.speed_mps, None, true));
             }
-        })
+            SensorModel::ImuAcceleration => {
+                let m: Imu = msg.decode(path)?;
+                out.push(one(m.stamp_ns, Quantity::Acceleration, m.specific_force_mps2[0], None, true));
+            }
+            SensorModel::GnssFix => {
+                let m: GnssFix = msg.decode(path)?;
+                let along = gnss_chainage(&m, ctx.track.as_ref());
+                let (chainage, variance, heading) = along.unwrap_or((f64::NAN, None, None));
+                out.push(one(m.stamp_ns, Quantity::Chainage, chainage, variance, along.is_some()));
+                // Speed over ground is a magnitude: signed by the course against the track.
+                let sign = match (m.course_rad, heading) {
+                    (Some(c), Some(h)) if (c - h).cos() < 0.0 => -1.0,
+                    _ => 1.0,
+                };
+                let speed = m.speed_mps.map(|v| sign * v);
+                out.push(one(m.stamp_ns, Quantity::Speed, speed.unwrap_or(f64::NAN), None, m.fix_type.has_position() && speed.is_some()));
+            }
+        }
+        Ok(())
     }
+}
+
+/// Chainage of a fix on the track map, its variance along the track, and the track heading.
+fn gnss_chainage(m: &GnssFix, track: Option<&TrackMap>) -> Option<(f64, Option<f64>, Option<f64>)> {
+    let track = track?;
+    if !m.fix_type.has_position() {
+        return None;
+    }
+    let (lat, lon) = (m.latitude_deg?, m.longitude_deg?);
+    let (e, n, _) = track.origin.to_enu(lat, lon, m.altitude_m.unwrap_or(track.origin.altitude_m));
+    let (chainage, heading) = track.project(e, n)?;
+    let variance = m.position_covariance_enu_m2.map(|c| {
+        let (ue, un) = (heading.sin(), heading.cos());
+        ue * ue * c[0] + ue * un * (c[1] + c[3]) + un * un * c[4]
+    });
+    Some((chainage, variance, Some(heading)))
 }

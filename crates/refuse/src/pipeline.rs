@@ -1,17 +1,23 @@
-//! One configured pipeline: measurements are released to its filter in sensor-time order
-//! (within a bounded reorder window), gated, and turned into fused state and diagnostics.
+//! One configured pipeline: measurements are released to its estimator in sensor-time order
+//! (within a bounded reorder window), checked, gated, and turned into fused states and
+//! diagnostics. The pipeline is generic over the state dimension: two for the
+//! constant-velocity model, three for the others ([`AnyPipeline`] picks).
 
 use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap};
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{RowSVector, SMatrix, SVector};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision};
 use serde::Serialize;
 
-use crate::config::{PipelineConfig, Variance};
-use crate::filter::KalmanFilter;
+use crate::config::{FilterKind, MotionConfig, PipelineConfig, VarianceValue, MASTER_DEVICE};
+use crate::error::{Error, Result};
+use crate::filter::federated::{Federated, FederatedSettings};
+use crate::filter::particle::ParticleSettings;
+use crate::filter::rts::EpochRecorder;
+use crate::filter::{Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement, StateAndCovariance, MASTER};
 use crate::measurement::{Measurement, Quantity};
-use crate::model::ConstantAcceleration;
+use crate::model::{ConstantAcceleration, ConstantVelocity, Singer, TransitionModel};
 
 /// What a pipeline did with its measurements.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
@@ -20,78 +26,130 @@ pub struct PipelineCounts {
     pub rejected_gate: u64,
     pub rejected_invalid: u64,
     pub rejected_late: u64,
+    pub rejected_device_fault: u64,
     pub before_initialisation: u64,
 }
 
-/// Output of one processed measurement.
+/// Output of one processed measurement or output tick.
 #[derive(Debug, Clone)]
 pub struct Fused {
     /// Replay time at which the filter released it: the log time of the message that pushed
     /// the replay past the reorder window (non-decreasing, so fused channels stay in
     /// log-time order).
     pub log_time_ns: u64,
-    /// The new state, when the measurement was used.
     pub state: Option<FusedState>,
-    pub diagnostics: FusedDiagnostics,
+    pub diagnostics: Option<FusedDiagnostics>,
+}
+
+struct Field<const N: usize> {
+    quantity: Quantity,
+    h: RowSVector<f64, N>,
+    variance: VarianceValue,
+}
+
+struct Sensor<const N: usize> {
+    topic: String,
+    /// Device index for federated estimators ([`MASTER`] for the master filter).
+    device: usize,
+    device_name: Option<String>,
+    fields: Vec<Field<N>>,
+    gate_nis: Option<f64>,
 }
 
 struct Pending {
     sensor: usize,
+    field: usize,
     measurement: Measurement,
 }
 
-pub struct KalmanPipeline {
+pub struct Pipeline<const N: usize> {
     pub config: PipelineConfig,
-    model: ConstantAcceleration,
-    filter: Option<KalmanFilter<3>>,
-    filter_time_ns: u64,
+    sensors: Vec<Sensor<N>>,
+    make_model: fn(&MotionConfig) -> Box<dyn TransitionModel<N>>,
+    estimator: Option<Box<dyn Estimator<N>>>,
+    smoother: Option<EpochRecorder<N>>,
+    time_ns: u64,
     window_ns: u64,
     /// Min-heap on (sensor stamp, arrival order) of measurements not yet released.
     order: BinaryHeap<Reverse<(u64, u64)>>,
-    pending: std::collections::HashMap<u64, Pending>,
+    pending: HashMap<u64, Pending>,
     seq: u64,
     /// The latest valid speed measurement before the first position: the initial speed.
     speed_before_init: Option<(f64, f64)>,
+    output_period_ns: Option<u64>,
+    next_output_ns: u64,
     pub counts: PipelineCounts,
 }
 
-impl KalmanPipeline {
-    pub fn new(config: PipelineConfig) -> Self {
-        Self {
-            model: config.motion_model(),
+impl<const N: usize> Pipeline<N> {
+    fn new(config: PipelineConfig, make_model: fn(&MotionConfig) -> Box<dyn TransitionModel<N>>) -> Result<Self> {
+        let devices = config.devices();
+        let sensors = config
+            .sensor
+            .iter()
+            .map(|s| Sensor {
+                topic: s.topic.clone(),
+                device: match s.device_name() {
+                    MASTER_DEVICE => MASTER,
+                    d => devices.iter().position(|n| n == d).unwrap_or(0),
+                },
+                device_name: config.filter.is_federated().then(|| s.device_name().to_owned()),
+                fields: s
+                    .fields
+                    .clone()
+                    .unwrap_or_else(|| vec![Quantity::Chainage, Quantity::Speed, Quantity::Acceleration])
+                    .into_iter()
+                    .filter_map(|q| Some(Field { quantity: q, h: q.h::<N>()?, variance: s.variance.of(q)? }))
+                    .collect(),
+                gate_nis: s.gate_nis,
+            })
+            .collect();
+        let smoother =
+            if config.smoother { Some(EpochRecorder::new().map_err(|source| Error::Spill { pipeline: config.name.clone(), source })?) } else { None };
+        Ok(Self {
             window_ns: (config.reorder_window_s * 1e9) as u64,
+            output_period_ns: config.output_rate_hz.map(|r| (1e9 / r).round().max(1.0) as u64),
             config,
-            filter: None,
-            filter_time_ns: 0,
+            sensors,
+            make_model,
+            estimator: None,
+            smoother,
+            time_ns: 0,
             order: BinaryHeap::new(),
-            pending: Default::default(),
+            pending: HashMap::new(),
             seq: 0,
             speed_before_init: None,
+            next_output_ns: 0,
             counts: PipelineCounts::default(),
+        })
+    }
+
+    /// Queues the measurements of one message of sensor `sensor`, received at `log_time_ns`,
+    /// and releases every measurement the replay is now more than the reorder window past.
+    pub fn push(&mut self, sensor: usize, measurements: &[Measurement], log_time_ns: u64, out: &mut Vec<Fused>) {
+        for m in measurements {
+            let Some(field) = self.sensors[sensor].fields.iter().position(|f| f.quantity == m.quantity) else {
+                continue;
+            };
+            self.seq += 1;
+            self.order.push(Reverse((m.stamp_ns, self.seq)));
+            self.pending.insert(self.seq, Pending { sensor, field, measurement: *m });
         }
-    }
-
-    pub fn name(&self) -> &str {
-        &self.config.name
-    }
-
-    /// Index of the configured sensor reading `topic`.
-    pub fn sensor_for(&self, topic: &str) -> Option<usize> {
-        self.config.sensor.iter().position(|s| s.topic == topic)
-    }
-
-    /// Queues a measurement received at `log_time_ns` and releases every measurement the
-    /// replay is now more than the reorder window past.
-    pub fn push(&mut self, sensor: usize, measurement: Measurement, log_time_ns: u64, out: &mut Vec<Fused>) {
-        self.seq += 1;
-        self.order.push(Reverse((measurement.stamp_ns, self.seq)));
-        self.pending.insert(self.seq, Pending { sensor, measurement });
         self.release(log_time_ns.saturating_sub(self.window_ns), log_time_ns, out);
     }
 
     /// Releases everything still queued (end of the log, at replay time `log_time_ns`).
     pub fn finish(&mut self, log_time_ns: u64, out: &mut Vec<Fused>) {
         self.release(u64::MAX, log_time_ns, out);
+        if let Some(e) = &mut self.estimator {
+            self.smoother = e.take_smoother();
+        }
+    }
+
+    pub fn device_event(&mut self, device: &str, failed: bool) {
+        if let Some(e) = &mut self.estimator {
+            e.device_event(device, failed);
+        }
     }
 
     fn release(&mut self, up_to_ns: u64, log_time_ns: u64, out: &mut Vec<Fused>) {
@@ -101,16 +159,72 @@ impl KalmanPipeline {
             }
             self.order.pop();
             let p = self.pending.remove(&seq).expect("every queued key has its measurement");
-            out.push(self.process(p, log_time_ns));
+            self.process(p, log_time_ns, out);
         }
     }
 
-    fn process(&mut self, p: Pending, log_time_ns: u64) -> Fused {
-        let sensor = &self.config.sensor[p.sensor];
+    fn initial(&self, chainage: f64, r: f64) -> StateAndCovariance<N> {
+        let init = &self.config.initial;
+        let (speed, speed_var) = self.speed_before_init.unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
+        let mean = [chainage, speed, 0.0];
+        let var = [r, speed_var, init.acceleration_std_mps2.powi(2)];
+        StateAndCovariance { state: SVector::from_fn(|i, _| mean[i]), covariance: SMatrix::from_fn(|i, j| if i == j { var[i] } else { 0.0 }) }
+    }
+
+    fn build(&mut self, init: &StateAndCovariance<N>, t0: u64) -> Box<dyn Estimator<N>> {
+        let model = (self.make_model)(&self.config.motion);
+        let c = &self.config;
+        let particles = |seed_offset: u64| {
+            let p = c.particle.clone().unwrap_or_default();
+            ParticleSettings {
+                particles: p.particles,
+                resampling: p.resampling,
+                ess_threshold: p.ess_threshold,
+                roughening: p.roughening,
+                seed: p.seed.wrapping_add(seed_offset),
+            }
+        };
+        let federated = || {
+            let f = c.federated.clone().unwrap_or_default();
+            FederatedSettings {
+                feedback: f.feedback,
+                fusion_period_ns: (f.fusion_period_s * 1e9).round() as u64,
+                sharing: c.sharing_table().expect("validated on load"),
+                redistribution: f.redistribution,
+                detector: f.detector,
+            }
+        };
+        match c.filter {
+            FilterKind::Kalman => Box::new(Centralised::new(KalmanFilter::new(init.state, init.covariance), model, t0, self.smoother.take())),
+            FilterKind::Particle => Box::new(Centralised::new(ParticleFilter::new(particles(0), init), model, t0, None)),
+            FilterKind::FederatedKalman => Box::new(Federated::new(federated(), model, c.devices(), init, t0, |_, s| KalmanFilter::new(s.state, s.covariance))),
+            FilterKind::FederatedParticle => {
+                // Each local particle filter has its own random stream.
+                Box::new(Federated::new(federated(), model, c.devices(), init, t0, |i, s| ParticleFilter::new(particles(i as u64 + 1), s)))
+            }
+        }
+    }
+
+    /// Output ticks strictly before `t_ns`: the estimate predicted to each.
+    fn ticks_before(&mut self, t_ns: u64, log_time_ns: u64, out: &mut Vec<Fused>) {
+        let (Some(period), Some(e)) = (self.output_period_ns, &mut self.estimator) else {
+            return;
+        };
+        while self.next_output_ns < t_ns {
+            e.advance_to(self.next_output_ns);
+            let state = fused_state(self.next_output_ns, &e.estimate(), "output_tick");
+            out.push(Fused { log_time_ns, state: Some(state), diagnostics: None });
+            self.next_output_ns += period;
+        }
+    }
+
+    fn process(&mut self, p: Pending, log_time_ns: u64, out: &mut Vec<Fused>) {
+        let sensor = &self.sensors[p.sensor];
+        let field = &sensor.fields[p.field];
         let m = p.measurement;
-        let variance = match sensor.variance {
-            Variance::Fixed(v) => Some(v),
-            Variance::FromMessage(_) => m.reported_variance,
+        let variance = match field.variance {
+            VarianceValue::Fixed(v) => Some(v),
+            VarianceValue::FromMessage(_) => m.reported_variance,
         };
         let mut diagnostics = FusedDiagnostics {
             stamp_ns: m.stamp_ns,
@@ -121,50 +235,62 @@ impl KalmanPipeline {
             innovation_variance: None,
             nis: None,
             decision: GateDecision::Accepted,
+            device: sensor.device_name.clone(),
+            effective_sample_size: None,
+            resampled: None,
+            sharing: None,
         };
+        let (h, device, gate_nis, source) = (field.h, sensor.device, sensor.gate_nis, sensor.topic.clone());
         let usable_variance = variance.filter(|r| r.is_finite() && *r > 0.0);
-        let decision = match (usable_variance, &self.filter) {
+        let mut state = None;
+        let decision = match (usable_variance, self.estimator.is_some()) {
             (None, _) => GateDecision::RejectedInvalid,
             _ if !m.valid || !m.value.is_finite() => GateDecision::RejectedInvalid,
-            (Some(r), None) if m.quantity == Quantity::Chainage => {
-                let init = &self.config.initial;
-                let (speed, speed_var) = self.speed_before_init.unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
-                self.filter = Some(KalmanFilter::new(
-                    Vector3::new(m.value, speed, 0.0),
-                    Matrix3::from_diagonal(&Vector3::new(r, speed_var, init.acceleration_std_mps2.powi(2))),
-                ));
-                self.filter_time_ns = m.stamp_ns;
+            (Some(r), false) if m.quantity == Quantity::Chainage => {
+                let init = self.initial(m.value, r);
+                let estimator = self.build(&init, m.stamp_ns);
+                self.estimator = Some(estimator);
+                self.time_ns = m.stamp_ns;
+                if let Some(period) = self.output_period_ns {
+                    // Ticks on whole multiples of the period, for comparable outputs.
+                    self.next_output_ns = m.stamp_ns.div_ceil(period) * period;
+                } else {
+                    state = Some(fused_state(m.stamp_ns, &init, &source));
+                }
                 GateDecision::Accepted
             }
-            (Some(r), None) => {
-                self.speed_before_init = Some((m.value, r));
+            (Some(r), false) => {
+                if m.quantity == Quantity::Speed {
+                    self.speed_before_init = Some((m.value, r));
+                }
                 GateDecision::BeforeInitialisation
             }
-            (Some(_), Some(_)) if m.stamp_ns < self.filter_time_ns => GateDecision::RejectedLate,
-            (Some(r), Some(filter)) => {
-                // Predict on a copy: a rejected measurement leaves the filter untouched.
-                let mut predicted = filter.clone();
-                let dt = (m.stamp_ns - self.filter_time_ns) as f64 / 1e9;
-                if dt > 0.0 {
-                    predicted.predict(&self.model, dt);
+            (Some(_), true) if m.stamp_ns < self.time_ns => GateDecision::RejectedLate,
+            (Some(r), true) => {
+                self.ticks_before(m.stamp_ns, log_time_ns, out);
+                let e = self.estimator.as_mut().expect("initialised");
+                e.advance_to(m.stamp_ns);
+                self.time_ns = m.stamp_ns;
+                let outcome = e.process(&ScalarMeasurement { device, h, r, z: m.value, gate_nis });
+                if let Some(i) = outcome.innovation() {
+                    diagnostics.innovation = Some(i.residual);
+                    diagnostics.innovation_variance = Some(i.variance);
+                    diagnostics.nis = Some(i.nis);
                 }
-                let h = m.quantity.h();
-                let innovation = predicted.innovation(&h, r, m.value);
-                diagnostics.innovation = Some(innovation.residual);
-                diagnostics.innovation_variance = Some(innovation.variance);
-                diagnostics.nis = Some(innovation.nis);
-                // A NaN NIS fails the gate too.
-                if sensor.gate_nis.is_some_and(|g| innovation.nis.is_nan() || innovation.nis > g) {
-                    GateDecision::RejectedGate
-                } else {
-                    predicted.update(&h, r, m.value);
-                    if predicted.estimate.state.iter().all(|x| x.is_finite()) {
-                        self.filter = Some(predicted);
-                        self.filter_time_ns = m.stamp_ns;
+                let extra = e.diagnostics();
+                diagnostics.effective_sample_size = extra.effective_sample_size;
+                diagnostics.resampled = extra.resampled;
+                diagnostics.sharing = extra.sharing;
+                match outcome {
+                    Outcome::Accepted(_) => {
+                        if self.output_period_ns.is_none() {
+                            state = Some(fused_state(m.stamp_ns, &e.estimate(), &source));
+                        }
                         GateDecision::Accepted
-                    } else {
-                        GateDecision::RejectedInvalid
                     }
+                    Outcome::RejectedGate(_) => GateDecision::RejectedGate,
+                    Outcome::RejectedNumerics(_) => GateDecision::RejectedInvalid,
+                    Outcome::RejectedDeviceFault(_) => GateDecision::RejectedDeviceFault,
                 }
             }
         };
@@ -174,25 +300,110 @@ impl KalmanPipeline {
             GateDecision::RejectedGate => &mut self.counts.rejected_gate,
             GateDecision::RejectedInvalid => &mut self.counts.rejected_invalid,
             GateDecision::RejectedLate => &mut self.counts.rejected_late,
+            GateDecision::RejectedDeviceFault => &mut self.counts.rejected_device_fault,
             GateDecision::BeforeInitialisation => &mut self.counts.before_initialisation,
         };
         *counter += 1;
-        let state = (decision == GateDecision::Accepted).then(|| {
-            let e = &self.filter.as_ref().expect("accepted means initialised").estimate;
-            let mut covariance = [0.0; 9];
-            for (i, c) in covariance.iter_mut().enumerate() {
-                *c = e.covariance[(i / 3, i % 3)];
-            }
-            FusedState {
-                stamp_ns: m.stamp_ns,
-                chainage_m: e.state[0],
-                speed_mps: e.state[1],
-                acceleration_mps2: e.state[2],
-                covariance,
-                source: sensor.topic.clone(),
-            }
-        });
-        Fused { log_time_ns, state, diagnostics }
+        out.push(Fused { log_time_ns, state, diagnostics: Some(diagnostics) });
+    }
+
+    /// The smoothed states, once `finish` has run (Kalman pipelines with `smoother = true`).
+    pub fn smoothed(&mut self) -> Option<std::io::Result<Box<dyn Iterator<Item = std::io::Result<FusedState>>>>> {
+        let recorder = self.smoother.take()?;
+        if recorder.epochs() == 0 {
+            return None;
+        }
+        Some(recorder.smooth().map(|epochs| -> Box<dyn Iterator<Item = std::io::Result<FusedState>>> {
+            Box::new(epochs.map(|e| e.map(|e| fused_state(e.stamp_ns, &e.estimate, "rts_smoother"))))
+        }))
+    }
+}
+
+/// A fused state from an `N`-state estimate (acceleration 0 with no variance when `N` = 2).
+pub fn fused_state<const N: usize>(stamp_ns: u64, e: &StateAndCovariance<N>, source: &str) -> FusedState {
+    let x = |i: usize| if i < N { e.state[i] } else { 0.0 };
+    let mut covariance = [0.0; 9];
+    for (k, c) in covariance.iter_mut().enumerate() {
+        let (i, j) = (k / 3, k % 3);
+        if i < N && j < N {
+            *c = e.covariance[(i, j)];
+        }
+    }
+    FusedState { stamp_ns, chainage_m: x(0), speed_mps: x(1), acceleration_mps2: x(2), covariance, source: source.to_owned() }
+}
+
+fn model_2(m: &MotionConfig) -> Box<dyn TransitionModel<2>> {
+    match *m {
+        MotionConfig::ConstantVelocity { acceleration_psd } => Box::new(ConstantVelocity { acceleration_psd }),
+        _ => unreachable!("AnyPipeline picks two states for the constant-velocity model only"),
+    }
+}
+
+fn model_3(m: &MotionConfig) -> Box<dyn TransitionModel<3>> {
+    match *m {
+        MotionConfig::ConstantAcceleration { jerk_psd: Some(q), .. } => Box::new(ConstantAcceleration { noise: crate::model::ProcessNoise::WhiteJerkPsd(q) }),
+        MotionConfig::ConstantAcceleration { jerk_variance: Some(v), .. } => {
+            Box::new(ConstantAcceleration { noise: crate::model::ProcessNoise::PiecewiseJerkVariance(v) })
+        }
+        MotionConfig::Singer { time_constant_s, acceleration_std_mps2 } => Box::new(Singer { time_constant_s, acceleration_std_mps2 }),
+        _ => unreachable!("validated on load: a three-state model"),
+    }
+}
+
+/// A pipeline of either state dimension.
+pub enum AnyPipeline {
+    Two(Pipeline<2>),
+    Three(Pipeline<3>),
+}
+
+macro_rules! each {
+    ($self:expr, $p:ident => $e:expr) => {
+        match $self {
+            AnyPipeline::Two($p) => $e,
+            AnyPipeline::Three($p) => $e,
+        }
+    };
+}
+
+impl AnyPipeline {
+    pub fn new(config: PipelineConfig) -> Result<Self> {
+        Ok(match config.motion.dimension() {
+            2 => AnyPipeline::Two(Pipeline::new(config, model_2)?),
+            _ => AnyPipeline::Three(Pipeline::new(config, model_3)?),
+        })
+    }
+
+    pub fn config(&self) -> &PipelineConfig {
+        each!(self, p => &p.config)
+    }
+
+    pub fn name(&self) -> &str {
+        &self.config().name
+    }
+
+    pub fn counts(&self) -> &PipelineCounts {
+        each!(self, p => &p.counts)
+    }
+
+    /// Index of the configured sensor reading `topic`.
+    pub fn sensor_for(&self, topic: &str) -> Option<usize> {
+        self.config().sensor.iter().position(|s| s.topic == topic)
+    }
+
+    pub fn push(&mut self, sensor: usize, measurements: &[Measurement], log_time_ns: u64, out: &mut Vec<Fused>) {
+        each!(self, p => p.push(sensor, measurements, log_time_ns, out))
+    }
+
+    pub fn finish(&mut self, log_time_ns: u64, out: &mut Vec<Fused>) {
+        each!(self, p => p.finish(log_time_ns, out))
+    }
+
+    pub fn device_event(&mut self, device: &str, failed: bool) {
+        each!(self, p => p.device_event(device, failed))
+    }
+
+    pub fn smoothed(&mut self) -> Option<std::io::Result<Box<dyn Iterator<Item = std::io::Result<FusedState>>>>> {
+        each!(self, p => p.smoothed())
     }
 }
 
@@ -201,17 +412,17 @@ mod tests {
     use super::*;
     use crate::config::PipelinesConfig;
 
-    fn pipeline(gate: &str) -> KalmanPipeline {
+    fn pipeline(gate: &str) -> AnyPipeline {
         let text = format!(
             "[[pipeline]]\nname = \"p\"\nfilter = \"kalman\"\nmotion = {{ model = \"constant_acceleration\", jerk_psd = 0.1 }}\nreorder_window_s = 0.2\n\
              [[pipeline.sensor]]\ntopic = \"/pos\"\nvariance = 0.01\n{gate}\n[[pipeline.sensor]]\ntopic = \"/spd\"\nvariance = \"message\"\n"
         );
         let c = PipelinesConfig::parse(&text, std::path::Path::new("t.toml")).unwrap();
-        KalmanPipeline::new(c.pipeline[0].clone())
+        AnyPipeline::new(c.pipeline[0].clone()).unwrap()
     }
 
-    fn m(stamp_ns: u64, quantity: Quantity, value: f64, var: Option<f64>) -> Measurement {
-        Measurement { stamp_ns, quantity, value, reported_variance: var, valid: true }
+    fn m(stamp_ns: u64, quantity: Quantity, value: f64, var: Option<f64>) -> [Measurement; 1] {
+        [Measurement { stamp_ns, quantity, value, reported_variance: var, valid: true }]
     }
 
     #[test]
@@ -219,31 +430,32 @@ mod tests {
         let mut p = pipeline("");
         let mut out = Vec::new();
         let s = 1_000_000_000u64;
-        p.push(0, m(s, Quantity::Chainage, 0.0, None), s, &mut out);
+        p.push(0, &m(s, Quantity::Chainage, 0.0, None), s, &mut out);
         // A speed measured at 1.10 s arrives after a position measured at 1.15 s.
-        p.push(0, m(s + 150_000_000, Quantity::Chainage, 1.5, None), s + 160_000_000, &mut out);
-        p.push(1, m(s + 100_000_000, Quantity::Speed, 10.0, Some(0.01)), s + 170_000_000, &mut out);
+        p.push(0, &m(s + 150_000_000, Quantity::Chainage, 1.5, None), s + 160_000_000, &mut out);
+        p.push(1, &m(s + 100_000_000, Quantity::Speed, 10.0, Some(0.01)), s + 170_000_000, &mut out);
         p.finish(s + 200_000_000, &mut out);
-        let stamps: Vec<u64> = out.iter().map(|f| f.diagnostics.stamp_ns).collect();
+        let diags: Vec<FusedDiagnostics> = out.iter().filter_map(|f| f.diagnostics.clone()).collect();
+        let stamps: Vec<u64> = diags.iter().map(|d| d.stamp_ns).collect();
         assert_eq!(stamps, vec![s, s + 100_000_000, s + 150_000_000]);
-        assert!(out.iter().all(|f| f.diagnostics.decision == GateDecision::Accepted));
-        assert_eq!(p.counts.rejected_late, 0);
+        assert!(diags.iter().all(|d| d.decision == GateDecision::Accepted));
+        assert_eq!(p.counts().rejected_late, 0);
     }
 
     #[test]
     fn nan_and_missing_variances_are_rejected_and_never_reach_the_state() {
         let mut p = pipeline("gate_nis = 9.0");
         let mut out = Vec::new();
-        p.push(0, m(0, Quantity::Chainage, 0.0, None), 0, &mut out);
-        p.push(0, m(10, Quantity::Chainage, f64::NAN, None), 10, &mut out);
-        p.push(0, m(20, Quantity::Chainage, f64::INFINITY, None), 20, &mut out);
-        p.push(1, m(30, Quantity::Speed, 3.0, None), 30, &mut out); // "message" variance, none given
-        p.push(1, m(40, Quantity::Speed, 0.0, Some(f64::NAN)), 40, &mut out);
-        p.push(0, m(50, Quantity::Chainage, 1e6, None), 50, &mut out); // far outside the gate
+        p.push(0, &m(0, Quantity::Chainage, 0.0, None), 0, &mut out);
+        p.push(0, &m(10, Quantity::Chainage, f64::NAN, None), 10, &mut out);
+        p.push(0, &m(20, Quantity::Chainage, f64::INFINITY, None), 20, &mut out);
+        p.push(1, &m(30, Quantity::Speed, 3.0, None), 30, &mut out); // "message" variance, none given
+        p.push(1, &m(40, Quantity::Speed, 0.0, Some(f64::NAN)), 40, &mut out);
+        p.push(0, &m(50, Quantity::Chainage, 1e6, None), 50, &mut out); // far outside the gate
         p.finish(60, &mut out);
-        assert_eq!(p.counts.accepted, 1);
-        assert_eq!(p.counts.rejected_invalid, 4);
-        assert_eq!(p.counts.rejected_gate, 1);
+        assert_eq!(p.counts().accepted, 1);
+        assert_eq!(p.counts().rejected_invalid, 4);
+        assert_eq!(p.counts().rejected_gate, 1);
         for f in &out {
             if let Some(s) = &f.state {
                 assert!(s.chainage_m.is_finite() && s.covariance.iter().all(|c| c.is_finite()));

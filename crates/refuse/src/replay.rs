@@ -10,15 +10,15 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use railfuse_catalog::log::{read_channels, ChannelId, LogReader, LogRecord, LogWriter};
-use railfuse_catalog::messages::{ChannelMessage, FusedDiagnostics, FusedState, GroundTruth};
+use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GroundTruth, TrackMap};
 use railfuse_catalog::topics;
 use serde::Serialize;
 
 use crate::accuracy::{AccuracyMeter, ErrorSummary};
 use crate::config::PipelinesConfig;
 use crate::error::{Error, Result};
-use crate::measurement::SensorModel;
-use crate::pipeline::{Fused, KalmanPipeline, PipelineCounts};
+use crate::measurement::{SensorContext, SensorModel};
+use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 
 pub struct RefuseOptions<'a> {
     pub input: &'a Path,
@@ -60,9 +60,17 @@ struct Route {
     /// Dropped: an earlier run's output of a pipeline being re-run.
     replaced: bool,
     reference: Option<ReferenceKind>,
+    /// The track map (for GNSS map matching) or the events channel (device fault reports).
+    context: Option<ContextKind>,
     /// (pipeline, sensor index) pairs fed by this channel, and how to read it.
     sensors: Vec<(usize, usize)>,
     model: Option<SensorModel>,
+}
+
+#[derive(Clone, Copy)]
+enum ContextKind {
+    TrackMap,
+    Events,
 }
 
 #[derive(Clone, Copy)]
@@ -74,6 +82,7 @@ enum ReferenceKind {
 struct Output {
     state: ChannelId,
     diagnostics: ChannelId,
+    smoothed: Option<ChannelId>,
     states: u64,
 }
 
@@ -90,7 +99,7 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                         let have: Vec<&str> = channels.iter().map(|c| c.topic.as_str()).filter(|t| !t.starts_with(topics::FUSED_PREFIX)).collect();
                         return Err(channel_error(input, &p.name, &s.topic, format!("is not in the file (it has {})", have.join(", "))));
                     }
-                    Some(c) => check_schema(input, &p.name, &s.topic, c.schema_name())?,
+                    Some(c) => check_sensor(input, p, s, c.schema_name())?,
                 }
             }
         }
@@ -108,12 +117,18 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
         outputs.push(Output {
             state: writer.add_channel_with_ids::<FusedState>(state_schema, free.next().expect("ids"), &topics::fused_state(&p.name))?,
             diagnostics: writer.add_channel_with_ids::<FusedDiagnostics>(diag_schema, free.next().expect("ids"), &topics::fused_diagnostics(&p.name))?,
+            smoothed: match p.smoother {
+                true => Some(writer.add_channel_with_ids::<FusedState>(state_schema, free.next().expect("ids"), &topics::fused_smoothed(&p.name))?),
+                false => None,
+            },
             states: 0,
         });
     }
 
-    let mut pipelines: Vec<KalmanPipeline> = opts.config.pipeline.iter().cloned().map(KalmanPipeline::new).collect();
-    let mut meters: Vec<AccuracyMeter> = pipelines.iter().map(|p| AccuracyMeter::new(p.config.reorder_window_s)).collect();
+    let mut pipelines: Vec<AnyPipeline> = opts.config.pipeline.iter().cloned().map(AnyPipeline::new).collect::<Result<_>>()?;
+    let mut context = SensorContext::default();
+    let mut measurements = Vec::new();
+    let mut meters: Vec<AccuracyMeter> = pipelines.iter().map(|p| AccuracyMeter::new(p.config().reorder_window_s)).collect();
     let mut routes: HashMap<u16, Route> = HashMap::new();
     let mut seen_topics = BTreeSet::new();
     let mut reference_seen = false;
@@ -149,9 +164,14 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                         };
                         reference_seen |= route.reference.is_some();
                     }
+                    route.context = match c.schema_name() {
+                        n if n == TrackMap::SCHEMA_NAME => Some(ContextKind::TrackMap),
+                        n if n == Event::SCHEMA_NAME => Some(ContextKind::Events),
+                        _ => None,
+                    };
                     for (pi, p) in pipelines.iter().enumerate() {
                         if let Some(si) = p.sensor_for(&c.topic) {
-                            check_schema(input, p.name(), &c.topic, c.schema_name())?;
+                            check_sensor(input, p.config(), &p.config().sensor[si], c.schema_name())?;
                             route.sensors.push((pi, si));
                             route.model = SensorModel::for_schema(c.schema_name());
                         }
@@ -181,10 +201,25 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                     }
                     None => {}
                 }
+                match route.context {
+                    Some(ContextKind::TrackMap) => context.track = Some(m.decode(input)?),
+                    Some(ContextKind::Events) => {
+                        let e: Event = m.decode(input)?;
+                        let failed = match e.kind {
+                            EventKind::DeviceFault => Some(true),
+                            EventKind::DeviceRecovered => Some(false),
+                            _ => None,
+                        };
+                        if let Some(failed) = failed {
+                            pipelines.iter_mut().for_each(|p| p.device_event(&e.text, failed));
+                        }
+                    }
+                    None => {}
+                }
                 if let Some(model) = route.model {
-                    let measurement = model.decode(&m, input)?;
+                    model.decode(&m, input, &context, &mut measurements)?;
                     for &(pi, si) in &route.sensors {
-                        pipelines[pi].push(si, measurement, m.log_time_ns, &mut fused_buf);
+                        pipelines[pi].push(si, &measurements, m.log_time_ns, &mut fused_buf);
                         emit(&mut writer, &mut outputs[pi], &mut meters[pi], &mut fused_buf, &mut report.fused_messages)?;
                     }
                 }
@@ -212,14 +247,22 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
     for (pi, p) in pipelines.iter_mut().enumerate() {
         p.finish(last_log_time, &mut fused_buf);
         emit(&mut writer, &mut outputs[pi], &mut meters[pi], &mut fused_buf, &mut report.fused_messages)?;
+        if let (Some(channel), Some(smoothed)) = (outputs[pi].smoothed, p.smoothed()) {
+            let spill = |source| Error::Spill { pipeline: p.name().to_owned(), source };
+            for state in smoothed.map_err(spill)? {
+                let state = state.map_err(spill)?;
+                writer.write(channel, state.stamp_ns, &state)?;
+                report.fused_messages += 1;
+            }
+        }
         let metadata = BTreeMap::from([
             ("pipeline".to_owned(), p.name().to_owned()),
-            ("filter".to_owned(), "kalman".to_owned()),
-            ("config_toml".to_owned(), p.config.to_toml()),
+            ("filter".to_owned(), p.config().filter.name().to_owned()),
+            ("config_toml".to_owned(), p.config().to_toml()),
             ("config_source".to_owned(), opts.config_source.clone()),
             ("input".to_owned(), input.display().to_string()),
             ("tool_version".to_owned(), concat!("railfuse ", env!("CARGO_PKG_VERSION")).to_owned()),
-            ("counts".to_owned(), serde_json::to_string(&p.counts).expect("counts serialise")),
+            ("counts".to_owned(), serde_json::to_string(p.counts()).expect("counts serialise")),
         ]);
         writer.write_metadata(topics::metadata::PIPELINE, metadata)?;
     }
@@ -230,7 +273,7 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
         meter.finish();
         report.pipelines.push(PipelineReport {
             name: p.name().to_owned(),
-            counts: p.counts.clone(),
+            counts: p.counts().clone(),
             fused_states: out.states,
             position_error_m: meter.position.summary(),
             speed_error_mps: meter.speed.summary(),
@@ -244,22 +287,43 @@ fn emit(writer: &mut LogWriter, out: &mut Output, meter: &mut AccuracyMeter, fus
     for f in fused.drain(..) {
         if let Some(state) = &f.state {
             writer.write(out.state, f.log_time_ns, state)?;
-            meter.add_estimate(state.stamp_ns, state.chainage_m, state.speed_mps);
+            meter.add_estimate(state);
             out.states += 1;
             *count += 1;
         }
-        writer.write(out.diagnostics, f.log_time_ns, &f.diagnostics)?;
-        *count += 1;
+        if let Some(d) = &f.diagnostics {
+            writer.write(out.diagnostics, f.log_time_ns, d)?;
+            *count += 1;
+        }
     }
     Ok(())
 }
 
-fn check_schema(input: &Path, pipeline: &str, topic: &str, schema: &str) -> Result<()> {
-    if SensorModel::for_schema(schema).is_some() {
-        return Ok(());
+/// The channel's schema has a sensor model, and that model gives the fields the sensor asks for.
+fn check_sensor(input: &Path, p: &crate::config::PipelineConfig, s: &crate::config::SensorConfig, schema: &str) -> Result<()> {
+    let Some(model) = SensorModel::for_schema(schema) else {
+        let supported = SensorModel::SUPPORTED.join(", ");
+        return Err(channel_error(input, &p.name, &s.topic, format!("has schema '{schema}', which no sensor model reads (supported: {supported})")));
+    };
+    let gives: Vec<&str> = model.quantities().iter().map(|q| q.name()).collect();
+    let wanted = s.fields.clone().unwrap_or_else(|| model.quantities().to_vec());
+    for q in &wanted {
+        if !model.quantities().contains(q) {
+            return Err(channel_error(input, &p.name, &s.topic, format!("gives {} but not {}", gives.join(" and "), q.name())));
+        }
+        if q.index() >= p.motion.dimension() {
+            return Err(channel_error(
+                input,
+                &p.name,
+                &s.topic,
+                format!("gives {}, which the {}-state motion model does not hold: set fields", q.name(), p.motion.dimension()),
+            ));
+        }
+        if s.variance.of(*q).is_none() {
+            return Err(channel_error(input, &p.name, &s.topic, format!("gives {}, and the sensor's variance table has no entry for it", q.name())));
+        }
     }
-    let supported = SensorModel::SUPPORTED.join(", ");
-    Err(channel_error(input, pipeline, topic, format!("has schema '{schema}', which no sensor model reads (supported: {supported})")))
+    Ok(())
 }
 
 fn channel_error(input: &Path, pipeline: &str, topic: &str, problem: String) -> Error {

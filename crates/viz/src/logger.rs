@@ -139,21 +139,30 @@ impl Logger<'_> {
             n if n == TrackMap::SCHEMA_NAME => {
                 let map: TrackMap = m.decode(path)?;
                 let strip: Vec<[f32; 2]> = map.vertices.iter().map(|v| Self::plan(v.east_m, v.north_m)).collect();
-                self.log_static(ent::TRACK, &LineStrips2D::new([strip]).with_colors([Color::from_rgb(170, 170, 170)]).with_radii([Radius::new_ui_points(1.5)]))?;
+                self.log_static(
+                    ent::TRACK,
+                    &LineStrips2D::new([strip]).with_colors([Color::from_rgb(170, 170, 170)]).with_radii([Radius::new_ui_points(1.5)]),
+                )?;
                 let at = |c: f64| map.locate(c).map(|(e, n, _)| Self::plan(e, n));
                 let balises: Vec<_> = map.balises.iter().filter_map(|b| at(b.chainage_m)).collect();
                 // Balise ids would crowd the plan view: they show on hover as instance data.
                 self.log_static(ent::BALISES, &Points2D::new(balises).with_colors([Color::from_rgb(250, 200, 0)]).with_radii([Radius::new_ui_points(4.0)]))?;
                 let stations: Vec<_> = map.stations.iter().filter_map(|s| at(s.chainage_m)).collect();
                 let names: Vec<_> = map.stations.iter().map(|s| s.name.clone()).collect();
-                self.log_static(ent::STATIONS, &Points2D::new(stations).with_labels(names).with_colors([Color::from_rgb(255, 255, 255)]).with_radii([Radius::new_ui_points(6.0)]))?;
+                self.log_static(
+                    ent::STATIONS,
+                    &Points2D::new(stations).with_labels(names).with_colors([Color::from_rgb(255, 255, 255)]).with_radii([Radius::new_ui_points(6.0)]),
+                )?;
                 self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
                 self.map = Some(map);
             }
             n if n == GroundTruth::SCHEMA_NAME => {
                 let t: GroundTruth = m.decode(path)?;
                 self.truth.push(ReferenceSample { stamp_ns: t.stamp_ns, chainage_m: t.chainage_m, speed_mps: t.speed_mps });
-                self.log(ent::TRUTH_POSITION, &Points2D::new([Self::plan(t.east_m, t.north_m)]).with_colors([rgb(TRUTH_COLOR)]).with_radii([Radius::new_ui_points(7.0)]))?;
+                self.log(
+                    ent::TRUTH_POSITION,
+                    &Points2D::new([Self::plan(t.east_m, t.north_m)]).with_colors([rgb(TRUTH_COLOR)]).with_radii([Radius::new_ui_points(7.0)]),
+                )?;
                 self.log(ent::SPEED_TRUTH, &Scalars::single(t.speed_mps))?;
             }
             n if n == GnssFix::SCHEMA_NAME => {
@@ -161,7 +170,10 @@ impl Logger<'_> {
                 if let (Some(map), Some(lat), Some(lon)) = (&self.map, g.latitude_deg, g.longitude_deg) {
                     let (e, n, _) = map.origin.to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
                     let label = format!("{:?}", g.fix_type);
-                    self.log(ent::GNSS_POSITION, &Points2D::new([Self::plan(e, n)]).with_colors([fix_color(g.fix_type)]).with_radii([Radius::new_ui_points(4.0)]).with_labels([label]))?;
+                    self.log(
+                        ent::GNSS_POSITION,
+                        &Points2D::new([Self::plan(e, n)]).with_colors([fix_color(g.fix_type)]).with_radii([Radius::new_ui_points(4.0)]).with_labels([label]),
+                    )?;
                 }
                 if let Some(v) = g.speed_mps {
                     self.log(ent::SPEED_GNSS, &Scalars::single(v))?;
@@ -194,7 +206,9 @@ impl Logger<'_> {
                 self.log(ent::EVENTS, &TextLog::new(format!("{:?}: {}", e.kind, e.text)))?;
             }
             n if n == FusedState::SCHEMA_NAME => {
-                let Some(pipeline) = topics::fused_pipeline_of(topic) else { return Ok(()) };
+                let Some(pipeline) = topics::fused_pipeline_of(topic) else {
+                    return Ok(());
+                };
                 let f: FusedState = m.decode(path)?;
                 // Fused states are released after the reorder window: plot them at the
                 // instant they describe, so they line up with the truth.

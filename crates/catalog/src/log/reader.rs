@@ -93,9 +93,7 @@ impl LogReader {
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_owned();
         let file = open_checked(&path)?;
-        let options = LinearReaderOptions::default()
-            .with_record_length_limit(super::RECORD_LENGTH_LIMIT)
-            .with_validate_chunk_crcs(true);
+        let options = LinearReaderOptions::default().with_record_length_limit(super::RECORD_LENGTH_LIMIT).with_validate_chunk_crcs(true);
         Ok(Self {
             path,
             file,
@@ -192,12 +190,7 @@ impl LogReader {
                 if self.schemas.contains_key(&header.id) {
                     return Ok(false);
                 }
-                let info = Arc::new(SchemaInfo {
-                    id: header.id,
-                    name: header.name.clone(),
-                    encoding: header.encoding.clone(),
-                    data: data.to_vec(),
-                });
+                let info = Arc::new(SchemaInfo { id: header.id, name: header.name.clone(), encoding: header.encoding.clone(), data: data.to_vec() });
                 self.schemas.insert(header.id, info);
                 true
             }
@@ -208,9 +201,12 @@ impl LogReader {
                 let schema = if c.schema_id == 0 {
                     None
                 } else {
-                    Some(self.schemas.get(&c.schema_id).cloned().ok_or_else(|| {
-                        Error::mcap(&self.path, format!("channel {} names unknown schema {}", c.topic, c.schema_id))
-                    })?)
+                    Some(
+                        self.schemas
+                            .get(&c.schema_id)
+                            .cloned()
+                            .ok_or_else(|| Error::mcap(&self.path, format!("channel {} names unknown schema {}", c.topic, c.schema_id)))?,
+                    )
                 };
                 let info = Arc::new(ChannelInfo {
                     id: c.id,
@@ -224,10 +220,7 @@ impl LogReader {
             }
             Record::Message { header, .. } => {
                 if !self.channels.contains_key(&header.channel_id) {
-                    return Err(Error::mcap(
-                        &self.path,
-                        format!("message at log time {} on unknown channel {}", header.log_time, header.channel_id),
-                    ));
+                    return Err(Error::mcap(&self.path, format!("message at log time {} on unknown channel {}", header.log_time, header.channel_id)));
                 }
                 true
             }
@@ -293,7 +286,9 @@ pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
             }
         }
     }
-    let Some(summary) = reader.finish() else { return Ok(None) };
+    let Some(summary) = reader.finish() else {
+        return Ok(None);
+    };
     let mut channels: Vec<_> = summary
         .channels
         .values()
@@ -303,9 +298,7 @@ pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
                 topic: c.topic.clone(),
                 message_encoding: c.message_encoding.clone(),
                 metadata: c.metadata.clone(),
-                schema: c.schema.as_ref().map(|s| {
-                    Arc::new(SchemaInfo { id: s.id, name: s.name.clone(), encoding: s.encoding.clone(), data: s.data.to_vec() })
-                }),
+                schema: c.schema.as_ref().map(|s| Arc::new(SchemaInfo { id: s.id, name: s.name.clone(), encoding: s.encoding.clone(), data: s.data.to_vec() })),
             })
         })
         .collect();

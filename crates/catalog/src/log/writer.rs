@@ -59,14 +59,7 @@ impl LogWriter {
             .chunk_size(Some(options.chunk_size))
             .create(BufWriter::with_capacity(1 << 16, file))
             .map_err(|e| Error::write(&partial, e))?;
-        Ok(Self {
-            path,
-            partial,
-            inner: Some(inner),
-            schemas: HashMap::new(),
-            sequences: HashMap::new(),
-            buf: Vec::with_capacity(1024),
-        })
+        Ok(Self { path, partial, inner: Some(inner), schemas: HashMap::new(), sequences: HashMap::new(), buf: Vec::with_capacity(1024) })
     }
 
     pub fn path(&self) -> &Path {
@@ -83,18 +76,12 @@ impl LogWriter {
             Some(&id) => id,
             None => {
                 let data = M::schema_bytes();
-                let id = self
-                    .inner()
-                    .add_schema(M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)
-                    .map_err(|e| Error::write(&self.partial, e))?;
+                let id = self.inner().add_schema(M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data).map_err(|e| Error::write(&self.partial, e))?;
                 self.schemas.insert(M::SCHEMA_NAME, id);
                 id
             }
         };
-        let id = self
-            .inner()
-            .add_channel(schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())
-            .map_err(|e| Error::write(&self.partial, e))?;
+        let id = self.inner().add_channel(schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new()).map_err(|e| Error::write(&self.partial, e))?;
         Ok(ChannelId(id))
     }
 
@@ -102,9 +89,7 @@ impl LogWriter {
     /// beside copied input records, whose ids must stay as they were).
     pub fn add_channel_with_ids<M: ChannelMessage>(&mut self, schema_id: u16, channel_id: u16, topic: &str) -> Result<ChannelId> {
         let data = M::schema_bytes();
-        self.inner()
-            .add_schema_with_id(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)
-            .map_err(|e| Error::write(&self.partial, e))?;
+        self.inner().add_schema_with_id(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data).map_err(|e| Error::write(&self.partial, e))?;
         self.inner()
             .add_channel_with_id(channel_id, schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())
             .map_err(|e| Error::write(&self.partial, e))?;
@@ -142,9 +127,7 @@ impl LogWriter {
 
     /// Copies a channel record keeping its id.
     pub fn copy_channel(&mut self, id: u16, schema_id: u16, topic: &str, encoding: &str, metadata: &BTreeMap<String, String>) -> Result<()> {
-        self.inner()
-            .add_channel_with_id(id, schema_id, topic, encoding, metadata)
-            .map_err(|e| Error::write(&self.partial, e))?;
+        self.inner().add_channel_with_id(id, schema_id, topic, encoding, metadata).map_err(|e| Error::write(&self.partial, e))?;
         Ok(())
     }
 

@@ -11,8 +11,12 @@ pub enum EventKind {
     TunnelEntry,
     TunnelExit,
     OperatorNote,
+    /// The simulator made a device fail (a marker for evaluation; filters do not see it).
     FaultInjected,
     FaultCleared,
+    /// A device reported its own failure (text: device name); federated detectors honour it.
+    DeviceFault,
+    DeviceRecovered,
 }
 
 /// Something that happened during the run, worth a mark on the timeline.

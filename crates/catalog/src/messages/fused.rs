@@ -37,6 +37,8 @@ pub enum GateDecision {
     RejectedLate,
     /// Arrived before the filter had its first position: not used.
     BeforeInitialisation,
+    /// Its device is out of a federated fusion (failed): not used.
+    RejectedDeviceFault,
 }
 
 /// What one measurement did to one pipeline.
@@ -57,5 +59,28 @@ pub struct FusedDiagnostics {
     #[serde(default)]
     pub nis: Option<f64>,
     pub decision: GateDecision,
+    /// Federated filters: the device (sub-filter) the measurement belongs to.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub device: Option<String>,
+    /// Particle filters: effective sample size after the update.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub effective_sample_size: Option<f64>,
+    /// Particle filters: whether the update resampled.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resampled: Option<bool>,
+    /// Federated filters: information-sharing coefficient β and health of every device.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sharing: Option<Vec<DeviceShare>>,
+}
+
+/// The share and health of one device of a federated filter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct DeviceShare {
+    pub device: String,
+    /// Information-sharing coefficient β (0 while failed).
+    pub beta: f64,
+    /// Why the device is out of the fusion (timeout, stuck, gate_failures, reported), if it is.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fault: Option<String>,
 }
 super::channel_message!(FusedDiagnostics, "railfuse.FusedDiagnostics");

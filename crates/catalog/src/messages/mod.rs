@@ -16,7 +16,7 @@ mod track_map;
 pub use balise::BalisePassage;
 pub use eddy_current::EddyCurrentBlock;
 pub use events::{Event, EventKind};
-pub use fused::{FusedDiagnostics, FusedState, GateDecision};
+pub use fused::{DeviceShare, FusedDiagnostics, FusedState, GateDecision};
 pub use gnss::{FixType, GnssFix};
 pub use ground_truth::GroundTruth;
 pub use imu::Imu;

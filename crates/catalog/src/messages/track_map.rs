@@ -67,13 +67,60 @@ impl TrackMap {
         Some((a.east_m + f * de, a.north_m + f * dn, de.atan2(dn)))
     }
 
+    /// Chainage and track heading of the point of the centre line nearest to (east, north):
+    /// map matching of a position fix. Clamped to the ends of the line.
+    pub fn project(&self, east_m: f64, north_m: f64) -> Option<(f64, f64)> {
+        let mut best: Option<(f64, f64, f64)> = None;
+        for w in self.vertices.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
+            let len2 = de * de + dn * dn;
+            let f = if len2 > 0.0 { (((east_m - a.east_m) * de + (north_m - a.north_m) * dn) / len2).clamp(0.0, 1.0) } else { 0.0 };
+            let (pe, pn) = (a.east_m + f * de, a.north_m + f * dn);
+            let d2 = (east_m - pe).powi(2) + (north_m - pn).powi(2);
+            if best.is_none_or(|(bd, _, _)| d2 < bd) {
+                best = Some((d2, a.chainage_m + f * (b.chainage_m - a.chainage_m), de.atan2(dn)));
+            }
+        }
+        best.map(|(_, s, h)| (s, h))
+    }
+
     pub fn length_m(&self) -> f64 {
         self.vertices.last().map_or(0.0, |v| v.chainage_m)
     }
 
     pub fn in_tunnel(&self, chainage_m: f64) -> Option<&Tunnel> {
-        self.tunnels
-            .iter()
-            .find(|t| (t.start_chainage_m..=t.end_chainage_m).contains(&chainage_m))
+        self.tunnels.iter().find(|t| (t.start_chainage_m..=t.end_chainage_m).contains(&chainage_m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn projection_inverts_locate_on_a_bent_line() {
+        let origin = GeodeticOrigin { latitude_deg: 44.6, longitude_deg: 10.9, altitude_m: 30.0 };
+        let vertices = vec![
+            TrackVertex { chainage_m: 0.0, east_m: 0.0, north_m: 0.0 },
+            TrackVertex { chainage_m: 100.0, east_m: 100.0, north_m: 0.0 },
+            TrackVertex { chainage_m: 200.0, east_m: 100.0, north_m: 100.0 },
+        ];
+        let map = TrackMap {
+            stamp_ns: 0,
+            name: "t".into(),
+            origin,
+            vertices,
+            balises: vec![],
+            tunnels: vec![],
+            stations: vec![],
+            sleeper_spacing_m: 0.6,
+            loop_crossing_spacing_m: None,
+        };
+        for s in [5.0, 99.0, 150.0, 199.0] {
+            let (e, n, h) = map.locate(s).unwrap();
+            let (s2, h2) = map.project(e + 0.5 * h.cos(), n - 0.5 * h.sin()).unwrap();
+            assert!((s2 - s).abs() < 1e-9 && (h2 - h).abs() < 1e-12, "{s}: {s2}");
+        }
     }
 }

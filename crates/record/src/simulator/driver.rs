@@ -19,7 +19,9 @@ pub struct DriverParams {
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Phase {
-    Dwell { until_s: f64 },
+    Dwell {
+        until_s: f64,
+    },
     Running,
     /// Stopped at the final station: the run is over.
     Finished,

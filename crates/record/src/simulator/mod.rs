@@ -245,13 +245,8 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
         stamp_ns: start,
         name: "maglev guideway (source 000 simulation)".into(),
         origin,
-        vertices: vec![
-            TrackVertex { chainage_m: 0.0, east_m: 0.0, north_m: 0.0 },
-            TrackVertex { chainage_m: length, east_m: length, north_m: 0.0 },
-        ],
-        balises: (1..=n_balises)
-            .map(|k| TrackBalise { balise_id: format!("BG{k:04}"), chainage_m: k as f64 * p.balise_spacing_m })
-            .collect(),
+        vertices: vec![TrackVertex { chainage_m: 0.0, east_m: 0.0, north_m: 0.0 }, TrackVertex { chainage_m: length, east_m: length, north_m: 0.0 }],
+        balises: (1..=n_balises).map(|k| TrackBalise { balise_id: format!("BG{k:04}"), chainage_m: k as f64 * p.balise_spacing_m }).collect(),
         tunnels: vec![],
         stations: vec![],
         sleeper_spacing_m: 1.032,
@@ -287,7 +282,9 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
         // Truth samples and balise passages of this step, written in time order.
         let mut within: Vec<(f64, Option<usize>)> = (0..truth_per_step).map(|i| (i as f64 * period / truth_per_step as f64, None)).collect();
         while let Some(b) = map.balises.get(next_balise) {
-            let Some(tau) = x.passes(b.chainage_m, period) else { break };
+            let Some(tau) = x.passes(b.chainage_m, period) else {
+                break;
+            };
             within.push((tau, Some(next_balise)));
             next_balise += 1;
         }

@@ -65,11 +65,7 @@ impl JerkStep {
     /// `[s, v, a]` a time `tau` into the step.
     pub fn at(&self, tau: f64) -> (f64, f64, f64) {
         let j = self.jerk;
-        (
-            self.s + self.v * tau + self.a * tau * tau / 2.0 + j * tau.powi(3) / 6.0,
-            self.v + self.a * tau + j * tau * tau / 2.0,
-            self.a + j * tau,
-        )
+        (self.s + self.v * tau + self.a * tau * tau / 2.0 + j * tau.powi(3) / 6.0, self.v + self.a * tau + j * tau * tau / 2.0, self.a + j * tau)
     }
 
     /// Time into the step at which chainage `b` is passed (the train moves forward).
@@ -80,7 +76,11 @@ impl JerkStep {
         let (mut lo, mut hi) = (0.0, period);
         for _ in 0..60 {
             let mid = (lo + hi) / 2.0;
-            if self.at(mid).0 < b { lo = mid } else { hi = mid }
+            if self.at(mid).0 < b {
+                lo = mid
+            } else {
+                hi = mid
+            }
         }
         Some((lo + hi) / 2.0)
     }

@@ -10,9 +10,14 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Segment {
-    Straight { length_m: f64 },
+    Straight {
+        length_m: f64,
+    },
     /// A circular curve; positive angle turns right (clockwise seen from above).
-    Curve { radius_m: f64, angle_deg: f64 },
+    Curve {
+        radius_m: f64,
+        angle_deg: f64,
+    },
 }
 
 impl Segment {
@@ -87,9 +92,7 @@ impl Track {
                 }
             }
         }
-        let stations = (0..stations.max(2))
-            .map(|k| Station { name: format!("S{k}"), chainage_m: k as f64 * p.station_spacing_m })
-            .collect();
+        let stations = (0..stations.max(2)).map(|k| Station { name: format!("S{k}"), chainage_m: k as f64 * p.station_spacing_m }).collect();
         let mut balises = Vec::new();
         let mut b = p.balise_spacing_m / 2.0;
         while b < s - 50.0 {
@@ -123,7 +126,11 @@ impl Track {
     /// Curvature (1/m, positive turning right) at a chainage.
     pub fn curvature(&self, chainage_m: f64) -> f64 {
         let i = self.curvature.partition_point(|&(s, _)| s <= chainage_m);
-        if i == 0 { 0.0 } else { self.curvature[i - 1].1 }
+        if i == 0 {
+            0.0
+        } else {
+            self.curvature[i - 1].1
+        }
     }
 }
 

@@ -14,24 +14,8 @@
 
 use nalgebra::{RowSVector, SMatrix, SVector};
 
+use super::{symmetric, Innovation, LocalFilter, StateAndCovariance};
 use crate::model::TransitionModel;
-
-#[derive(Debug, Clone, PartialEq)]
-pub struct StateAndCovariance<const N: usize> {
-    pub state: SVector<f64, N>,
-    pub covariance: SMatrix<f64, N, N>,
-}
-
-/// A scalar innovation and its statistics.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Innovation {
-    /// ν = z − H x⁻
-    pub residual: f64,
-    /// S = H P⁻ Hᵀ + R
-    pub variance: f64,
-    /// Normalised innovation squared ν² / S (χ² with one degree of freedom when consistent).
-    pub nis: f64,
-}
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct KalmanFilter<const N: usize> {
@@ -43,19 +27,20 @@ impl<const N: usize> KalmanFilter<N> {
         Self { estimate: StateAndCovariance { state, covariance } }
     }
 
-    pub fn predict(&mut self, model: &impl TransitionModel<N>, dt: f64) {
-        let f = model.transition(dt);
+    pub fn predict(&mut self, model: &(impl TransitionModel<N> + ?Sized), dt: f64) {
+        self.predict_scaled(model.transition(dt), model.process_noise(dt));
+    }
+
+    fn predict_scaled(&mut self, f: SMatrix<f64, N, N>, q: SMatrix<f64, N, N>) {
         let e = &mut self.estimate;
         e.state = f * e.state;
-        e.covariance = symmetric(f * e.covariance * f.transpose() + model.process_noise(dt));
+        e.covariance = symmetric(f * e.covariance * f.transpose() + q);
     }
 
     /// The innovation `z` would produce, without changing the estimate (for gating).
     pub fn innovation(&self, h: &RowSVector<f64, N>, r: f64, z: f64) -> Innovation {
         let e = &self.estimate;
-        let residual = z - (h * e.state)[0];
-        let variance = (h * e.covariance * h.transpose())[0] + r;
-        Innovation { residual, variance, nis: residual * residual / variance }
+        Innovation::new(z - (h * e.state)[0], (h * e.covariance * h.transpose())[0] + r)
     }
 
     /// Joseph-form update with a scalar measurement; returns the innovation it used.
@@ -70,8 +55,32 @@ impl<const N: usize> KalmanFilter<N> {
     }
 }
 
-fn symmetric<const N: usize>(p: SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
-    (p + p.transpose()) * 0.5
+impl<const N: usize> LocalFilter<N> for KalmanFilter<N> {
+    fn predict(&mut self, model: &dyn TransitionModel<N>, dt: f64, q_scale: f64) {
+        self.predict_scaled(model.transition(dt), model.process_noise(dt) * q_scale);
+    }
+
+    fn innovation(&self, h: &RowSVector<f64, N>, r: f64, z: f64) -> Innovation {
+        KalmanFilter::innovation(self, h, r, z)
+    }
+
+    fn update(&mut self, h: &RowSVector<f64, N>, r: f64, z: f64) -> bool {
+        let before = self.estimate.clone();
+        KalmanFilter::update(self, h, r, z);
+        if !self.estimate.is_finite() {
+            self.estimate = before;
+            return false;
+        }
+        true
+    }
+
+    fn estimate(&self) -> StateAndCovariance<N> {
+        self.estimate.clone()
+    }
+
+    fn reset(&mut self, to: &StateAndCovariance<N>) {
+        self.estimate = to.clone();
+    }
 }
 
 #[cfg(test)]

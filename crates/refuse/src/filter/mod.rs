@@ -1,5 +1,149 @@
 //! Estimators. The state and its covariance always travel together ([`StateAndCovariance`]).
+//!
+//! Two layers:
+//! - a [`LocalFilter`] is one Bayesian filter on one motion model: the Kalman filter
+//!   ([`kalman`]) or the particle filter ([`particle`]);
+//! - an [`Estimator`] is what a pipeline runs: one local filter fed by every sensor
+//!   ([`Centralised`]), or one local filter per device with a master filter
+//!   ([`federated`]). Estimators own their time and advance themselves to each measurement.
+//!
+//! [`rts`] smooths a Kalman pipeline's output backwards over the whole run.
 
-mod kalman;
+mod centralised;
+pub mod federated;
+pub mod kalman;
+pub mod particle;
+pub mod rts;
+pub mod sharing;
+pub mod working_state;
 
-pub use kalman::{Innovation, KalmanFilter, StateAndCovariance};
+pub use centralised::Centralised;
+pub use kalman::KalmanFilter;
+pub use particle::ParticleFilter;
+
+use nalgebra::{RowSVector, SMatrix, SVector};
+pub use railfuse_catalog::messages::DeviceShare;
+
+use crate::model::TransitionModel;
+
+/// A Gaussian estimate: the state and its covariance, kept together.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateAndCovariance<const N: usize> {
+    pub state: SVector<f64, N>,
+    pub covariance: SMatrix<f64, N, N>,
+}
+
+impl<const N: usize> StateAndCovariance<N> {
+    pub fn is_finite(&self) -> bool {
+        self.state.iter().chain(self.covariance.iter()).all(|x| x.is_finite())
+    }
+}
+
+/// A scalar innovation and its statistics.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Innovation {
+    /// ν = z − H x⁻
+    pub residual: f64,
+    /// S = H P⁻ Hᵀ + R
+    pub variance: f64,
+    /// Normalised innovation squared ν² / S (χ² with one degree of freedom when consistent).
+    pub nis: f64,
+}
+
+impl Innovation {
+    pub fn new(residual: f64, variance: f64) -> Self {
+        Self { residual, variance, nis: residual * residual / variance }
+    }
+
+    /// True when the innovation passes the NIS gate (a NaN NIS never passes).
+    pub fn passes(&self, gate_nis: Option<f64>) -> bool {
+        match gate_nis {
+            None => !self.nis.is_nan(),
+            Some(g) => self.nis <= g,
+        }
+    }
+}
+
+/// One scalar measurement `z = H x + v`, `v ~ N(0, r)`, of one device.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScalarMeasurement<const N: usize> {
+    /// Index of the device (sub-filter) it belongs to; [`MASTER`] for the master filter.
+    pub device: usize,
+    pub h: RowSVector<f64, N>,
+    pub r: f64,
+    pub z: f64,
+    pub gate_nis: Option<f64>,
+}
+
+/// The device index of measurements that update the master filter of a federated estimator
+/// (a balise: an absolute fix that every sub-filter should learn from at once).
+pub const MASTER: usize = usize::MAX;
+
+/// What an estimator did with a measurement.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Outcome {
+    Accepted(Innovation),
+    RejectedGate(Innovation),
+    /// The update would have made the estimate non-finite: not used.
+    RejectedNumerics(Innovation),
+    /// Its device is failed (out of the fusion); the innovation is against the fused estimate.
+    RejectedDeviceFault(Option<Innovation>),
+}
+
+impl Outcome {
+    pub fn innovation(&self) -> Option<Innovation> {
+        match *self {
+            Outcome::Accepted(i) | Outcome::RejectedGate(i) | Outcome::RejectedNumerics(i) => Some(i),
+            Outcome::RejectedDeviceFault(i) => i,
+        }
+    }
+}
+
+/// Estimator-specific diagnostics attached to each processed measurement.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EstimatorDiagnostics {
+    /// Effective sample size after the update (particle filters).
+    pub effective_sample_size: Option<f64>,
+    /// Whether the update triggered resampling (particle filters).
+    pub resampled: Option<bool>,
+    /// β and health per device (federated filters).
+    pub sharing: Option<Vec<DeviceShare>>,
+}
+
+/// One Bayesian filter on one motion model.
+pub trait LocalFilter<const N: usize> {
+    /// Time update over `dt` seconds, with the process noise scaled by `q_scale` (federated
+    /// information sharing divides `Q` by β).
+    fn predict(&mut self, model: &dyn TransitionModel<N>, dt: f64, q_scale: f64);
+    /// The innovation `z` would produce, without using it.
+    fn innovation(&self, h: &RowSVector<f64, N>, r: f64, z: f64) -> Innovation;
+    /// Measurement update; false (and the filter unchanged) when the result is not finite.
+    fn update(&mut self, h: &RowSVector<f64, N>, r: f64, z: f64) -> bool;
+    /// The filter's Gaussian estimate (mean and covariance of the particles for a particle
+    /// filter).
+    fn estimate(&self) -> StateAndCovariance<N>;
+    /// Replace the estimate (federated feedback).
+    fn reset(&mut self, to: &StateAndCovariance<N>);
+    fn diagnostics(&self, _out: &mut EstimatorDiagnostics) {}
+}
+
+/// What a pipeline runs: consumes measurements in time order and gives the fused estimate.
+pub trait Estimator<const N: usize> {
+    /// Advances to `t_ns` (never backwards).
+    fn advance_to(&mut self, t_ns: u64);
+    /// Gates and uses one measurement taken at the current time.
+    fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome;
+    fn estimate(&self) -> StateAndCovariance<N>;
+    fn diagnostics(&self) -> EstimatorDiagnostics;
+    /// A fault or recovery a device reported itself (an event in the log).
+    fn device_event(&mut self, _device: &str, _failed: bool) {}
+    /// The recorded forward pass, for the RTS smoother (Kalman pipelines that asked for it).
+    fn take_smoother(&mut self) -> Option<rts::EpochRecorder<N>> {
+        None
+    }
+}
+
+/// Symmetrises a covariance after arithmetic that may have broken its symmetry by rounding.
+pub fn symmetric<const N: usize>(p: SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
+    (p + p.transpose()) * 0.5
+}

@@ -1,9 +1,19 @@
 //! Motion models: how the along-track state moves between two measurements `dt` apart.
 //! Every model computes its matrices from the actual `dt` of the log, never from a nominal rate.
+//!
+//! | model | state | driving noise |
+//! |---|---|---|
+//! | [`ConstantVelocity`] | `[s, v]` | white acceleration |
+//! | [`ConstantAcceleration`] | `[s, v, a]` | white jerk, or a jerk held over each step |
+//! | [`Singer`] | `[s, v, a]` | acceleration as a first-order Gauss–Markov process |
 
 mod constant_acceleration;
+mod constant_velocity;
+mod singer;
 
 pub use constant_acceleration::{ConstantAcceleration, ProcessNoise};
+pub use constant_velocity::ConstantVelocity;
+pub use singer::Singer;
 
 use nalgebra::SMatrix;
 
@@ -11,4 +21,13 @@ use nalgebra::SMatrix;
 pub trait TransitionModel<const N: usize> {
     fn transition(&self, dt: f64) -> SMatrix<f64, N, N>;
     fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N>;
+}
+
+impl<const N: usize, M: TransitionModel<N> + ?Sized> TransitionModel<N> for Box<M> {
+    fn transition(&self, dt: f64) -> SMatrix<f64, N, N> {
+        (**self).transition(dt)
+    }
+    fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
+        (**self).process_noise(dt)
+    }
 }

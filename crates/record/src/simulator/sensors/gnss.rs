@@ -58,12 +58,16 @@ impl Gnss {
 
     fn fix_type(&self, t_ns: u64) -> FixType {
         let p = &self.p;
-        let Some(sky) = self.sky_since_ns else { return FixType::None };
+        let Some(sky) = self.sky_since_ns else {
+            return FixType::None;
+        };
         let since_sky = (t_ns - sky) as f64 / 1e9;
         if since_sky < p.reacquire_none_s {
             return FixType::None;
         }
-        let Some(corrections) = self.corrections_since_ns else { return FixType::Single };
+        let Some(corrections) = self.corrections_since_ns else {
+            return FixType::Single;
+        };
         // RTK can start once a single-point fix has settled and corrections arrive.
         let rtk_start = corrections.max(sky + seconds(p.reacquire_none_s + p.reacquire_single_s));
         if t_ns < rtk_start {

@@ -59,12 +59,9 @@ impl SimSensor for ImuSensor {
         // clockwise, which is a negative rate about the up axis.
         let truth_f = [w.acceleration_mps2, -w.speed_mps * w.speed_mps * w.curvature, GRAVITY_MPS2];
         let truth_w = [0.0, 0.0, -w.speed_mps * w.curvature];
-        let specific_force_mps2 = std::array::from_fn(|i| {
-            quantise(truth_f[i] + self.accel_bias[i] + gauss(&mut self.rng, p.accel_noise_mps2), p.accel_lsb_mps2)
-        });
-        let angular_rate_radps = std::array::from_fn(|i| {
-            quantise(truth_w[i] + self.gyro_bias[i] + gauss(&mut self.rng, p.gyro_noise_radps), p.gyro_lsb_radps)
-        });
+        let specific_force_mps2 =
+            std::array::from_fn(|i| quantise(truth_f[i] + self.accel_bias[i] + gauss(&mut self.rng, p.accel_noise_mps2), p.accel_lsb_mps2));
+        let angular_rate_radps = std::array::from_fn(|i| quantise(truth_w[i] + self.gyro_bias[i] + gauss(&mut self.rng, p.gyro_noise_radps), p.gyro_lsb_radps));
         let msg = Imu { stamp_ns: w.t_ns, sensor_id: p.sensor_id.clone(), specific_force_mps2, angular_rate_radps };
         out.push(w.t_ns + seconds(p.latency_s), Emit::Imu(msg));
     }

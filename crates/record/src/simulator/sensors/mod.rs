@@ -27,5 +27,9 @@ pub fn gauss(rng: &mut impl rand::Rng, sigma: f64) -> f64 {
 
 /// Rounds to the sensor's least significant bit.
 pub fn quantise(x: f64, lsb: f64) -> f64 {
-    if lsb > 0.0 { (x / lsb).round() * lsb } else { x }
+    if lsb > 0.0 {
+        (x / lsb).round() * lsb
+    } else {
+        x
+    }
 }

@@ -49,16 +49,7 @@ pub struct OdometerSensor {
 
 impl OdometerSensor {
     pub fn new(p: OdometerParams, index: usize, start_ns: u64, rng: ChaCha8Rng) -> Self {
-        Self {
-            schedule: Schedule::new(start_ns, p.rate_hz),
-            p,
-            index,
-            rng,
-            wheel_distance_m: 0.0,
-            history: VecDeque::new(),
-            last_pulses: 0,
-            episode: (0.0, 0),
-        }
+        Self { schedule: Schedule::new(start_ns, p.rate_hz), p, index, rng, wheel_distance_m: 0.0, history: VecDeque::new(), last_pulses: 0, episode: (0.0, 0) }
     }
 }
 

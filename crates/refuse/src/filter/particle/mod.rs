@@ -1,0 +1,269 @@
+//! The bootstrap particle filter: particles drawn through the motion model (the transition
+//! prior as importance density), weighted by the measurement likelihood, resampled when the
+//! effective sample size
+//!
+//! ```text
+//! N_eff = 1 / Σ wᵢ²
+//! ```
+//!
+//! falls below a share of the particle count, and roughened after resampling against sample
+//! impoverishment (Gordon, Salmond & Smith 1993): each component j gets Gaussian jitter of
+//! standard deviation `K · E_j · N^(−1/d)`, `E_j` the particles' spread in that component.
+//! Weights are kept as logarithms during the update so that a very precise measurement (a
+//! balise) cannot underflow them all to zero. Seeded: the same seed gives the same run.
+
+mod resampling;
+
+pub use resampling::Resampling;
+
+use nalgebra::{RowSVector, SMatrix, SVector};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::{symmetric, EstimatorDiagnostics, Innovation, LocalFilter, StateAndCovariance};
+use crate::model::TransitionModel;
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParticleSettings {
+    pub particles: usize,
+    pub resampling: Resampling,
+    /// Resample when N_eff < threshold · N.
+    pub ess_threshold: f64,
+    /// Roughening constant K (0 turns roughening off).
+    pub roughening: f64,
+    pub seed: u64,
+}
+
+#[derive(Debug, Clone)]
+pub struct ParticleFilter<const N: usize> {
+    settings: ParticleSettings,
+    particles: Vec<SVector<f64, N>>,
+    /// Normalised weights.
+    weights: Vec<f64>,
+    rng: ChaCha8Rng,
+    last_ess: f64,
+    last_resampled: bool,
+    scratch: Vec<usize>,
+}
+
+impl<const N: usize> ParticleFilter<N> {
+    /// Draws the particles from the Gaussian prior `initial`.
+    pub fn new(settings: ParticleSettings, initial: &StateAndCovariance<N>) -> Self {
+        let mut pf = Self {
+            particles: Vec::with_capacity(settings.particles),
+            weights: Vec::with_capacity(settings.particles),
+            rng: ChaCha8Rng::seed_from_u64(settings.seed),
+            last_ess: settings.particles as f64,
+            last_resampled: false,
+            scratch: Vec::new(),
+            settings,
+        };
+        pf.reset(initial);
+        pf
+    }
+
+    pub fn particles(&self) -> &[SVector<f64, N>] {
+        &self.particles
+    }
+
+    pub fn effective_sample_size(&self) -> f64 {
+        1.0 / self.weights.iter().map(|w| w * w).sum::<f64>()
+    }
+
+    fn gaussian(&mut self) -> SVector<f64, N> {
+        SVector::from_fn(|_, _| StandardNormal.sample(&mut self.rng))
+    }
+
+    fn resample(&mut self) {
+        let mut idx = std::mem::take(&mut self.scratch);
+        self.settings.resampling.resample(&self.weights, &mut self.rng, &mut idx);
+        let survivors: Vec<SVector<f64, N>> = idx.iter().map(|&i| self.particles[i]).collect();
+        self.particles = survivors;
+        self.scratch = idx;
+        let n = self.particles.len();
+        self.weights.iter_mut().for_each(|w| *w = 1.0 / n as f64);
+        if self.settings.roughening > 0.0 {
+            let mut lo = SVector::<f64, N>::repeat(f64::INFINITY);
+            let mut hi = SVector::<f64, N>::repeat(f64::NEG_INFINITY);
+            for p in &self.particles {
+                lo = lo.inf(p);
+                hi = hi.sup(p);
+            }
+            let sigma = (hi - lo) * self.settings.roughening * (n as f64).powf(-1.0 / N as f64);
+            for i in 0..n {
+                let jitter = self.gaussian().component_mul(&sigma);
+                self.particles[i] += jitter;
+            }
+        }
+    }
+}
+
+/// A square root `L` of a positive semi-definite `Q` (`L Lᵀ = Q`): Cholesky that passes over
+/// zero pivots, so that rank-deficient noise (a jerk held over the step is rank one) is
+/// handled exactly instead of failing.
+pub fn sqrt_psd<const N: usize>(q: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
+    let mut l = SMatrix::<f64, N, N>::zeros();
+    let scale = q.diagonal().amax().max(f64::MIN_POSITIVE);
+    for j in 0..N {
+        let d = q[(j, j)] - (0..j).map(|k| l[(j, k)] * l[(j, k)]).sum::<f64>();
+        if d <= 1e-13 * scale {
+            continue;
+        }
+        let djj = d.sqrt();
+        l[(j, j)] = djj;
+        for i in j + 1..N {
+            l[(i, j)] = (q[(i, j)] - (0..j).map(|k| l[(i, k)] * l[(j, k)]).sum::<f64>()) / djj;
+        }
+    }
+    l
+}
+
+impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
+    fn predict(&mut self, model: &dyn TransitionModel<N>, dt: f64, q_scale: f64) {
+        let f = model.transition(dt);
+        let l = sqrt_psd(&(model.process_noise(dt) * q_scale));
+        for i in 0..self.particles.len() {
+            let w = l * self.gaussian();
+            self.particles[i] = f * self.particles[i] + w;
+        }
+    }
+
+    fn innovation(&self, h: &RowSVector<f64, N>, r: f64, z: f64) -> Innovation {
+        let mean: f64 = self.particles.iter().zip(&self.weights).map(|(p, w)| w * (h * p)[0]).sum();
+        let var: f64 = self.particles.iter().zip(&self.weights).map(|(p, w)| w * ((h * p)[0] - mean).powi(2)).sum();
+        Innovation::new(z - mean, var + r)
+    }
+
+    fn update(&mut self, h: &RowSVector<f64, N>, r: f64, z: f64) -> bool {
+        let log_lik: Vec<f64> = self.particles.iter().map(|p| -0.5 * (z - (h * p)[0]).powi(2) / r).collect();
+        let max = log_lik.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if !max.is_finite() {
+            return false;
+        }
+        let mut total = 0.0;
+        for (w, l) in self.weights.iter_mut().zip(&log_lik) {
+            *w *= (l - max).exp();
+            total += *w;
+        }
+        if !(total > 0.0 && total.is_finite()) {
+            // Every particle was too far from z for its prior weight: the measurement is
+            // inconsistent with the cloud; keep the cloud and weight by likelihood alone.
+            for (w, l) in self.weights.iter_mut().zip(&log_lik) {
+                *w = (l - max).exp();
+            }
+            total = self.weights.iter().sum();
+        }
+        self.weights.iter_mut().for_each(|w| *w /= total);
+        self.last_ess = self.effective_sample_size();
+        self.last_resampled = self.last_ess < self.settings.ess_threshold * self.particles.len() as f64;
+        if self.last_resampled {
+            self.resample();
+        }
+        true
+    }
+
+    fn estimate(&self) -> StateAndCovariance<N> {
+        let mut mean = SVector::<f64, N>::zeros();
+        for (p, w) in self.particles.iter().zip(&self.weights) {
+            mean += p * *w;
+        }
+        let mut cov = SMatrix::<f64, N, N>::zeros();
+        for (p, w) in self.particles.iter().zip(&self.weights) {
+            let d = p - mean;
+            cov += d * d.transpose() * *w;
+        }
+        StateAndCovariance { state: mean, covariance: symmetric(cov) }
+    }
+
+    fn reset(&mut self, to: &StateAndCovariance<N>) {
+        let l = sqrt_psd(&to.covariance);
+        let n = self.settings.particles;
+        self.particles.clear();
+        for _ in 0..n {
+            let p = to.state + l * self.gaussian();
+            self.particles.push(p);
+        }
+        self.weights = vec![1.0 / n as f64; n];
+    }
+
+    fn diagnostics(&self, out: &mut EstimatorDiagnostics) {
+        out.effective_sample_size = Some(self.last_ess);
+        out.resampled = Some(self.last_resampled);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::filter::KalmanFilter;
+    use crate::model::ConstantVelocity;
+    use nalgebra::{Matrix2, RowVector2, Vector2};
+
+    fn run(particles: usize, seed: u64) -> (StateAndCovariance<2>, StateAndCovariance<2>) {
+        let model = ConstantVelocity { acceleration_psd: 0.05 };
+        let init = StateAndCovariance { state: Vector2::new(0.0, 10.0), covariance: Matrix2::new(4.0, 0.0, 0.0, 1.0) };
+        let settings = ParticleSettings { particles, resampling: Resampling::Systematic, ess_threshold: 0.5, roughening: 0.0, seed };
+        let mut pf = ParticleFilter::new(settings, &init);
+        let mut kf = KalmanFilter::new(init.state, init.covariance);
+        for k in 1..=40 {
+            let dt = 0.5;
+            LocalFilter::predict(&mut pf, &model, dt, 1.0);
+            kf.predict(&model, dt);
+            let t = k as f64 * dt;
+            let (h, r, z) = if k % 2 == 0 {
+                (RowVector2::new(1.0, 0.0), 1.0, 10.0 * t + ((k * 37) % 5) as f64 * 0.3 - 0.6)
+            } else {
+                (RowVector2::new(0.0, 1.0), 0.04, 10.0 + ((k * 11) % 3) as f64 * 0.1 - 0.1)
+            };
+            LocalFilter::update(&mut pf, &h, r, z);
+            kf.update(&h, r, z);
+        }
+        (pf.estimate(), kf.estimate)
+    }
+
+    /// On a linear-Gaussian problem the particle filter tends to the Kalman filter: with 20 000
+    /// particles its mean is within 0.05 σ and its variance within 10 % of the Kalman
+    /// filter's, and the error shrinks as the particle count grows.
+    #[test]
+    fn particle_mean_and_variance_approach_the_kalman_filter_as_particles_grow() {
+        let gap = |n: usize| {
+            let mut worst_mean = 0.0f64;
+            let mut worst_var = 0.0f64;
+            for seed in 0..4 {
+                let (pf, kf) = run(n, seed);
+                for i in 0..2 {
+                    let sd = kf.covariance[(i, i)].sqrt();
+                    worst_mean = worst_mean.max((pf.state[i] - kf.state[i]).abs() / sd);
+                    worst_var = worst_var.max((pf.covariance[(i, i)] / kf.covariance[(i, i)] - 1.0).abs());
+                }
+            }
+            (worst_mean, worst_var)
+        };
+        let (m_small, v_small) = gap(200);
+        let (m_big, v_big) = gap(20_000);
+        assert!(m_big < 0.05 && v_big < 0.10, "20 000 particles: mean gap {m_big} σ, variance gap {v_big}");
+        assert!(m_big < m_small && v_big < v_small, "no convergence: {m_small}/{v_small} → {m_big}/{v_big}");
+    }
+
+    #[test]
+    fn square_root_of_rank_one_noise_is_exact() {
+        let g = nalgebra::Vector3::new(1.0 / 6.0, 0.5, 1.0);
+        let q = g * g.transpose() * 0.001;
+        let l = sqrt_psd(&q);
+        assert!((l * l.transpose() - q).abs().max() < 1e-15);
+        let full = nalgebra::Matrix3::new(4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 2.0);
+        let l = sqrt_psd(&full);
+        assert!((l * l.transpose() - full).abs().max() < 1e-12);
+    }
+
+    #[test]
+    fn the_same_seed_gives_the_same_run_and_a_far_measurement_never_makes_nan() {
+        assert_eq!(run(500, 3).0, run(500, 3).0);
+        let init = StateAndCovariance { state: Vector2::new(0.0, 10.0), covariance: Matrix2::identity() };
+        let settings = ParticleSettings { particles: 100, resampling: Resampling::Residual, ess_threshold: 0.5, roughening: 0.2, seed: 1 };
+        let mut pf = ParticleFilter::new(settings, &init);
+        assert!(LocalFilter::update(&mut pf, &RowVector2::new(1.0, 0.0), 1e-4, 1e6));
+        assert!(pf.estimate().is_finite());
+    }
+}
