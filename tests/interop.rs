@@ -47,7 +47,7 @@ fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
 }
 
 #[test]
-fn the_kalman_pipeline_equals_filterpy_on_the_same_measurements() {
+fn the_kalman_pipeline_and_its_rts_smoother_equal_filterpy_on_the_same_measurements() {
     let d = tempfile::tempdir().unwrap();
     for (scenario, config, duration) in [("default", "kalman.toml", "300"), ("seed000", "seed000.toml", "100")] {
         let (raw, fused) = (d.path().join(format!("{scenario}.mcap")), d.path().join(format!("{scenario}.fused.mcap")));
@@ -55,6 +55,10 @@ fn the_kalman_pipeline_equals_filterpy_on_the_same_measurements() {
         ok(&["refuse", s(&raw), "-c", s(&sample(config)), "-o", s(&fused)]);
         let r = python_ok("filterpy_kalman.py", &[s(&fused), "1e-9"]);
         assert!(r["updates_compared"].as_u64().unwrap() > 150, "{r}");
+        if scenario == "seed000" {
+            // kf_balise has the RTS smoother: every epoch compared with filterpy's rts_smoother.
+            assert!(r["smoothed_compared"].as_u64().unwrap() > 100, "{r}");
+        }
         assert!(r["worst_relative_difference"].as_f64().unwrap() <= 1e-9, "{r}");
     }
 }

@@ -29,7 +29,7 @@ pub fn run(a: Args) -> Result<()> {
         let raw = a.dir.join(format!("bench-{d:.0}s.mcap"));
         let fused = a.dir.join(format!("bench-{d:.0}s.fused.mcap"));
         let started = Instant::now();
-        let sim = railfuse_record::simulate(&railfuse_record::Scenario::preset("default").expect("preset"), 1, Some(d), &raw)?;
+        let sim = railfuse_record::simulate(&railfuse_record::Scenario::preset("default").expect("preset"), 1, Some(d), &[], &raw)?;
         let sim_rate = sim.messages as f64 / started.elapsed().as_secs_f64();
         // Refuse in a child process, so its peak memory is its own.
         let out = Command::new(&exe).args(["refuse", "--json", "-c"]).arg(&config).arg("-o").arg(&fused).arg(&raw).output()?;

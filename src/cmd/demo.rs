@@ -20,7 +20,7 @@ pub fn run(a: Args) -> Result<()> {
     let dir = &a.output_dir;
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the output folder", dir.display()))?;
     let (raw, fused, rrd, config_path) = (dir.join("run.mcap"), dir.join("run.fused.mcap"), dir.join("run.rrd"), dir.join("pipelines.toml"));
-    super::simulate::simulate_to("default", a.seed, None, &raw)?;
+    super::simulate::simulate_to("default", a.seed, None, &[], &raw)?;
     std::fs::write(&config_path, DEFAULT_PIPELINES).with_context(|| format!("{}: cannot write", config_path.display()))?;
     let config = PipelinesConfig::parse(DEFAULT_PIPELINES, &embedded_path("samples/kalman.toml"))?;
     let (report, _) = refuse_with(&raw, &fused, &config, "embedded samples/kalman.toml".into(), railfuse_catalog::topics::GROUND_TRUTH)?;

@@ -2,12 +2,13 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Result};
+use railfuse_record::simulator::FaultSpec;
 use railfuse_record::{simulate, Scenario, SimulationReport};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scenario preset: `default` (a mixed line run with every sensor) or `seed000` (source
-    /// 000's maglev simulation).
+    /// Scenario preset: `default` (a mixed line run with every sensor), `seed000` (source
+    /// 000's maglev simulation) or `seed001` (source 001's: INS, BeiDou, Doppler radar, 500 s).
     #[arg(long, default_value = "default")]
     pub scenario: String,
     /// Seed of every random draw: the same seed gives the same file.
@@ -16,6 +17,11 @@ pub struct Args {
     /// Length of the run in seconds (default: the preset's whole run).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Make a device fail for a window: DEVICE:MODE:START:END with DEVICE one of gnss, imu,
+    /// radar, odometer1, odometer2, loop, balise; MODE dropout, stuck or bias=VALUE (SI units);
+    /// START and END in seconds from the start. Repeatable.
+    #[arg(long = "fault", value_name = "DEVICE:MODE:START:END")]
+    pub faults: Vec<FaultSpec>,
     /// Output MCAP file.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -25,7 +31,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let report = simulate_to(&a.scenario, a.seed, a.duration, &a.output)?;
+    let report = simulate_to(&a.scenario, a.seed, a.duration, &a.faults, &a.output)?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     }
@@ -33,7 +39,7 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 /// Simulates and prints a one-paragraph summary to stderr; shared with `demo` and `bench`.
-pub fn simulate_to(scenario: &str, seed: u64, duration: Option<f64>, output: &std::path::Path) -> Result<SimulationReport> {
+pub fn simulate_to(scenario: &str, seed: u64, duration: Option<f64>, faults: &[FaultSpec], output: &std::path::Path) -> Result<SimulationReport> {
     let Some(preset) = Scenario::preset(scenario) else {
         bail!("unknown scenario '{scenario}' (presets: {})", Scenario::NAMES.join(", "));
     };
@@ -42,8 +48,23 @@ pub fn simulate_to(scenario: &str, seed: u64, duration: Option<f64>, output: &st
             bail!("--duration must be a positive number of seconds, not {d}");
         }
     }
+    if !faults.is_empty() && preset.line().is_none() {
+        bail!("--fault: scenario '{scenario}' is source 000's bare simulation with no device models to break; use default or seed001");
+    }
+    for f in faults {
+        let has = match f.device.as_str() {
+            "loop" => preset.line().is_some_and(|p| p.induction_loop.is_some()),
+            "balise" => preset.line().is_some_and(|p| p.balise.is_some()),
+            "odometer1" => preset.line().is_some_and(|p| !p.odometers.is_empty()),
+            "odometer2" => preset.line().is_some_and(|p| p.odometers.len() > 1),
+            _ => true,
+        };
+        if !has {
+            bail!("--fault: scenario '{scenario}' has no {} to fail", f.device);
+        }
+    }
     let started = Instant::now();
-    let report = simulate(&preset, seed, duration, output)?;
+    let report = simulate(&preset, seed, duration, faults, output)?;
     let wall = started.elapsed().as_secs_f64();
     eprintln!(
         "simulated '{}' seed {}: {:.1} s of run, {:.2} km of track, {} messages in {:.2} s ({:.0} msg/s) -> {}",

@@ -398,7 +398,7 @@ impl PipelineConfig {
                     return Err(format!("federated.fusion_period_s must be ≥ 0, not {}", f.fusion_period_s));
                 }
                 positive("federated.detector.timeout_s", f.detector.timeout_s)?;
-                positive("federated.detector.readmit_gate_nis", f.detector.readmit_gate_nis)?;
+                positive("federated.detector.max_exclusion_s", f.detector.max_exclusion_s)?;
                 if self.devices().is_empty() {
                     return Err("a federated filter needs at least one device besides the master".into());
                 }

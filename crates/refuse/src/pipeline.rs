@@ -242,6 +242,9 @@ impl<const N: usize> Pipeline<N> {
         };
         let (h, device, gate_nis, source) = (field.h, sensor.device, sensor.gate_nis, sensor.topic.clone());
         let usable_variance = variance.filter(|r| r.is_finite() && *r > 0.0);
+        if let Some(e) = &mut self.estimator {
+            e.heard_from(device, m.stamp_ns);
+        }
         let mut state = None;
         let decision = match (usable_variance, self.estimator.is_some()) {
             (None, _) => GateDecision::RejectedInvalid,

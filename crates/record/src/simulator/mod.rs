@@ -2,6 +2,7 @@
 //! log. Deterministic for a seed: the same scenario, seed and duration give the same file.
 
 mod driver;
+pub mod faults;
 mod scenario;
 pub mod seed000;
 pub mod sensors;
@@ -17,10 +18,12 @@ use railfuse_catalog::messages::*;
 use railfuse_catalog::topics;
 
 pub use driver::DriverParams;
+pub use faults::{FaultMode, FaultSpec};
 pub use scenario::{LineScenario, Scenario, SIMULATED_START_NS};
 pub use track::{Segment, TrackParams};
 
 use driver::{Driver, DriverEvent, Phase};
+use faults::FaultInjector;
 use seed000::{JerkStep, Seed000Params};
 use sensors::{balise::BaliseReader, gnss::Gnss, imu::ImuSensor, induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream};
 use track::Track;
@@ -42,10 +45,13 @@ struct SimLog {
     writer: LogWriter,
     channels: BTreeMap<&'static str, ChannelId>,
     report: SimulationReport,
+    faults: FaultInjector,
+    fault_specs: Vec<FaultSpec>,
+    fault_events: Vec<Event>,
 }
 
 impl SimLog {
-    fn create(path: &Path, scenario: &Scenario, seed: u64) -> railfuse_catalog::Result<Self> {
+    fn create(path: &Path, scenario: &Scenario, seed: u64, faults: &[FaultSpec]) -> railfuse_catalog::Result<Self> {
         let mut writer = LogWriter::create(path)?;
         let mut channels = BTreeMap::new();
         macro_rules! channel {
@@ -56,17 +62,30 @@ impl SimLog {
         channel!(TrackMap, topics::TRACK_MAP);
         channel!(GroundTruth, topics::GROUND_TRUTH);
         channel!(Event, topics::EVENTS);
-        channel!(LoopPosition, topics::LOOP_POSITION);
-        channel!(RadarSpeed, topics::RADAR_SPEED);
-        channel!(BalisePassage, topics::BALISE);
-        if let Scenario::Default(_) = scenario {
-            channel!(GnssFix, topics::GNSS_FIX);
-            channel!(Imu, topics::IMU);
-            channel!(Odometer, topics::ODOMETER_1);
-            channel!(Odometer, topics::ODOMETER_2);
+        match scenario.line() {
+            None => {
+                channel!(LoopPosition, topics::LOOP_POSITION);
+                channel!(RadarSpeed, topics::RADAR_SPEED);
+                channel!(BalisePassage, topics::BALISE);
+            }
+            Some(p) => {
+                if p.induction_loop.is_some() {
+                    channel!(LoopPosition, topics::LOOP_POSITION);
+                }
+                channel!(RadarSpeed, topics::RADAR_SPEED);
+                if p.balise.is_some() {
+                    channel!(BalisePassage, topics::BALISE);
+                }
+                channel!(GnssFix, topics::GNSS_FIX);
+                channel!(Imu, topics::IMU);
+                for topic in [topics::ODOMETER_1, topics::ODOMETER_2].into_iter().take(p.odometers.len()) {
+                    channel!(Odometer, topic);
+                }
+            }
         }
         let report = SimulationReport { scenario: scenario.name().into(), seed, ..Default::default() };
-        Ok(Self { writer, channels, report })
+        let faults = FaultInjector::new(faults, SIMULATED_START_NS);
+        Ok(Self { writer, channels, report, faults, fault_specs: Vec::new(), fault_events: Vec::new() })
     }
 
     fn write<M: ChannelMessage>(&mut self, topic: &'static str, log_time_ns: u64, msg: &M) -> railfuse_catalog::Result<()> {
@@ -77,6 +96,11 @@ impl SimLog {
     }
 
     fn write_emit(&mut self, log_time_ns: u64, emit: Emit) -> railfuse_catalog::Result<()> {
+        let emit = self.faults.apply(log_time_ns, emit, &mut self.fault_events);
+        for e in std::mem::take(&mut self.fault_events) {
+            self.write(topics::EVENTS, log_time_ns, &e)?;
+        }
+        let Some(emit) = emit else { return Ok(()) };
         match emit {
             Emit::Gnss(m) => self.write(topics::GNSS_FIX, log_time_ns, &m),
             Emit::Imu(m) => self.write(topics::IMU, log_time_ns, &m),
@@ -92,7 +116,7 @@ impl SimLog {
 
     fn finish(mut self, scenario: &Scenario, track: &TrackMap, duration_s: f64) -> railfuse_catalog::Result<SimulationReport> {
         let train = match scenario {
-            Scenario::Default(p) => p.train.clone(),
+            Scenario::Default(p) | Scenario::Seed001(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
         };
         let run = BTreeMap::from([
@@ -104,6 +128,7 @@ impl SimLog {
             ("duration_s".into(), format!("{duration_s:.3}")),
             ("start_time_ns".into(), SIMULATED_START_NS.to_string()),
             ("scenario_parameters".into(), serde_json::to_string(scenario).expect("parameters serialise")),
+            ("faults".into(), serde_json::to_string(&self.fault_specs).expect("faults serialise")),
             ("tool_version".into(), crate::TOOL_VERSION.into()),
             ("source".into(), "simulated".into()),
         ]);
@@ -117,14 +142,24 @@ impl SimLog {
 
 /// Simulates a run and writes it to `out`. `duration_s` cuts the run short or, for the line
 /// scenario, makes the route long enough (more stations) to fill it.
-pub fn simulate(scenario: &Scenario, seed: u64, duration_s: Option<f64>, out: &Path) -> railfuse_catalog::Result<SimulationReport> {
+///
+/// `faults` make devices fail for windows of the run (line scenarios only: source 000's
+/// simulation has no device models to break; the caller checks).
+pub fn simulate(scenario: &Scenario, seed: u64, duration_s: Option<f64>, faults: &[FaultSpec], out: &Path) -> railfuse_catalog::Result<SimulationReport> {
     match scenario {
-        Scenario::Default(p) => simulate_line(scenario, p, seed, duration_s, out),
+        Scenario::Default(p) | Scenario::Seed001(p) => simulate_line(scenario, p, seed, duration_s, faults, out),
         Scenario::Seed000(p) => simulate_seed000(scenario, p, seed, duration_s, out),
     }
 }
 
-fn simulate_line(scenario: &Scenario, p: &LineScenario, seed: u64, duration_s: Option<f64>, out: &Path) -> railfuse_catalog::Result<SimulationReport> {
+fn simulate_line(
+    scenario: &Scenario,
+    p: &LineScenario,
+    seed: u64,
+    duration_s: Option<f64>,
+    faults: &[FaultSpec],
+    out: &Path,
+) -> railfuse_catalog::Result<SimulationReport> {
     let start = SIMULATED_START_NS;
     // About 260 s per 5.7 km leg with its dwell: add stations until the duration is covered.
     let stations = match duration_s {
@@ -133,7 +168,8 @@ fn simulate_line(scenario: &Scenario, p: &LineScenario, seed: u64, duration_s: O
     };
     let track = Track::build(&p.track, stations, start, &mut rng_stream(seed, 0));
     let map = &track.map;
-    let mut log = SimLog::create(out, scenario, seed)?;
+    let mut log = SimLog::create(out, scenario, seed, faults)?;
+    log.fault_specs = faults.to_vec();
     log.write(topics::TRACK_MAP, start, map)?;
 
     let mut driver = Driver::new(p.driver.clone(), map.stations.iter().map(|s| s.chainage_m).collect());
@@ -141,9 +177,13 @@ fn simulate_line(scenario: &Scenario, p: &LineScenario, seed: u64, duration_s: O
         Box::new(Gnss::new(p.gnss.clone(), map.origin, start, rng_stream(seed, 1))),
         Box::new(ImuSensor::new(p.imu.clone(), start, rng_stream(seed, 2))),
         Box::new(Radar::new(p.radar.clone(), start, rng_stream(seed, 3))),
-        Box::new(InductionLoop::new(p.induction_loop.clone(), rng_stream(seed, 4))),
-        Box::new(BaliseReader::new(p.balise.clone(), map.balises.clone(), rng_stream(seed, 5))),
     ];
+    if let Some(l) = &p.induction_loop {
+        sensors.push(Box::new(InductionLoop::new(l.clone(), rng_stream(seed, 4))));
+    }
+    if let Some(b) = &p.balise {
+        sensors.push(Box::new(BaliseReader::new(b.clone(), map.balises.clone(), rng_stream(seed, 5))));
+    }
     for (i, o) in p.odometers.iter().take(2).enumerate() {
         sensors.push(Box::new(OdometerSensor::new(o.clone(), i, start, rng_stream(seed, 10 + i as u64))));
     }
@@ -252,7 +292,7 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
         sleeper_spacing_m: 1.032,
         loop_crossing_spacing_m: None,
     };
-    let mut log = SimLog::create(out, scenario, seed)?;
+    let mut log = SimLog::create(out, scenario, seed, &[])?;
     log.write(topics::TRACK_MAP, start, &map)?;
     let mut process = rng_stream(seed, 0);
     let mut loop_rng = rng_stream(seed, 1);

@@ -27,8 +27,10 @@ pub struct LineScenario {
     pub imu: ImuParams,
     pub radar: RadarParams,
     pub odometers: Vec<OdometerParams>,
-    pub induction_loop: LoopParams,
-    pub balise: BaliseParams,
+    /// None: the line has no cross-induction loop.
+    pub induction_loop: Option<LoopParams>,
+    /// None: no balise reader on the train.
+    pub balise: Option<BaliseParams>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -36,15 +38,17 @@ pub struct LineScenario {
 pub enum Scenario {
     Default(Box<LineScenario>),
     Seed000(Seed000Params),
+    Seed001(Box<LineScenario>),
 }
 
 impl Scenario {
-    pub const NAMES: &'static [&'static str] = &["default", "seed000"];
+    pub const NAMES: &'static [&'static str] = &["default", "seed000", "seed001"];
 
     pub fn preset(name: &str) -> Option<Scenario> {
         match name {
             "default" => Some(Scenario::Default(Box::new(LineScenario::default_run()))),
             "seed000" => Some(Scenario::Seed000(Seed000Params::source())),
+            "seed001" => Some(Scenario::Seed001(Box::new(LineScenario::seed001()))),
             _ => None,
         }
     }
@@ -53,6 +57,15 @@ impl Scenario {
         match self {
             Scenario::Default(_) => "default",
             Scenario::Seed000(_) => "seed000",
+            Scenario::Seed001(_) => "seed001",
+        }
+    }
+
+    /// The line-run parameters, for the presets that are line runs.
+    pub fn line(&self) -> Option<&LineScenario> {
+        match self {
+            Scenario::Default(p) | Scenario::Seed001(p) => Some(p),
+            Scenario::Seed000(_) => None,
         }
     }
 }
@@ -148,15 +161,71 @@ impl LineScenario {
                 dropout_s: (0.5, 2.0),
             },
             odometers: vec![odometer("axle1", 0.846, true), odometer("axle2", 0.852, false)],
-            induction_loop: LoopParams {
+            induction_loop: Some(LoopParams {
                 crossing_spacing_m: 25.0,
                 latency_s: 0.02,
                 installation_sigma_m: 0.03,
                 scale_error: 2e-5,
                 timing_sigma_s: 0.003,
                 reported_variance_m2: 0.01,
+            }),
+            balise: Some(BaliseParams { latency_s: 0.03, detection_sigma_m: 0.15, miss_probability: 0.01, reported_variance_m2: 0.04 }),
+        }
+    }
+
+    /// Source 001's experiment: a maglev with a strapdown INS, a BeiDou receiver (no
+    /// corrections: single-point fixes) and a Doppler radar, on a straight guideway, about
+    /// 500 s from standstill through all three β speed bands (to 432 km/h) and back to a stop.
+    ///
+    /// The source gives no noise figures ("several noise standard deviations"); these are
+    /// typical of the devices it names: BeiDou single point 2.5 m σ with a slow bias, speed
+    /// 0.1 m/s; radar 50 Hz, 0.05 m/s + 0.2 % of speed, 0.3 % scale error; a navigation-grade
+    /// MEMS INS at 100 Hz, 0.02 m/s² noise, 5 mm/s² turn-on bias.
+    pub fn seed001() -> Self {
+        let base = Self::default_run();
+        LineScenario {
+            train: "maglev (source 001 simulation)".into(),
+            track: TrackParams {
+                name: "maglev guideway (source 001 simulation)".into(),
+                origin: GeodeticOrigin { latitude_deg: 31.19, longitude_deg: 121.34, altitude_m: 5.0 },
+                heading_deg: 90.0,
+                pattern: vec![Segment::Straight { length_m: 60_000.0 }],
+                station_spacing_m: 43_000.0,
+                balise_spacing_m: 1000.0,
+                balise_jitter_m: 0.0,
+                tunnels: vec![],
+                sleeper_spacing_m: 1.032,
+                loop_crossing_spacing_m: None,
+                vertex_spacing_m: 10.0,
             },
-            balise: BaliseParams { latency_s: 0.03, detection_sigma_m: 0.15, miss_probability: 0.01, reported_variance_m2: 0.04 },
+            driver: DriverParams {
+                max_speed_mps: 120.0,
+                acceleration_mps2: 1.0,
+                power_limit_speed_mps: 60.0,
+                braking_mps2: 0.9,
+                jerk_mps3: 0.5,
+                dwell_s: 10.0,
+                initial_dwell_s: 5.0,
+            },
+            stations: 2,
+            // No differential corrections at all: BeiDou single-point fixes.
+            correction_outages_s: vec![(0.0, 1e9)],
+            truth_rate_hz: 100.0,
+            gnss: GnssParams { sigma_single_m: 2.5, speed_sigma_mps: 0.1, ..base.gnss },
+            imu: ImuParams { sensor_id: "ins0".into(), rate_hz: 100.0, accel_noise_mps2: 0.02, accel_bias_mps2: 0.005, accel_bias_walk: 2e-5, ..base.imu },
+            radar: RadarParams {
+                rate_hz: 50.0,
+                latency_s: 0.01,
+                scale_error: 0.003,
+                sigma_base_mps: 0.05,
+                sigma_per_mps: 0.002,
+                min_speed_mps: 0.3,
+                dropout_probability: 0.0,
+                dropout_s: (0.5, 2.0),
+            },
+            odometers: vec![],
+            induction_loop: None,
+            balise: None,
         }
     }
 }

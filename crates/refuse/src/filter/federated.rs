@@ -48,6 +48,12 @@ struct Device<const N: usize, F> {
     name: String,
     filter: F,
     health: WorkingState,
+    /// Master fusions left during which a cold-restarted device is spared the consistency
+    /// test, so that it can pull back an estimate the others let drift.
+    grace: u32,
+    /// While failed: the squared disagreement with the fused estimate per state component
+    /// (how far a cold restart must widen its covariance).
+    disagreement: SVector<f64, N>,
 }
 
 pub struct Federated<const N: usize, F: LocalFilter<N>> {
@@ -78,7 +84,7 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             .enumerate()
             .map(|(i, name)| {
                 let share = share_of(initial, beta[i], settings.feedback);
-                Device { name, filter: make(i, &share), health: WorkingState::new(settings.detector, time_ns) }
+                Device { name, filter: make(i, &share), health: WorkingState::new(settings.detector, time_ns), grace: 0, disagreement: SVector::zeros() }
             })
             .collect();
         let next_fusion_ns = time_ns + settings.fusion_period_ns;
@@ -116,17 +122,90 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         fused.is_finite().then_some(fused)
     }
 
-    /// Master fusion, then (under fusion-reset) feedback with β for the current speed.
+    /// The consistency test at a master fusion: with three or more healthy devices, the one
+    /// whose estimate differs most from the information fusion of the others,
+    /// `d = x_i − x_{−i}`, `d' (P_i + P_{−i})⁻¹ d`, is failed when that exceeds the bound.
+    /// (Sub-filters share the last reset, so `P_i + P_{−i}` overstates the difference's
+    /// covariance: the test is conservative.)
+    fn consistency_test(&mut self) -> bool {
+        let bound = self.settings.detector.consistency_chi2;
+        let healthy: Vec<usize> = (0..self.devices.len()).filter(|&i| self.devices[i].health.healthy() && self.devices[i].grace == 0).collect();
+        if bound <= 0.0 || healthy.len() < 3 {
+            return false;
+        }
+        let estimates: Vec<StateAndCovariance<N>> = healthy.iter().map(|&i| self.devices[i].filter.estimate()).collect();
+        let infos: Vec<Option<SMatrix<f64, N, N>>> = estimates.iter().map(|e| inverse_spd(&e.covariance)).collect();
+        let mut worst: Option<(usize, f64)> = None;
+        for (k, &i) in healthy.iter().enumerate() {
+            let mut info = SMatrix::<f64, N, N>::zeros();
+            let mut info_state = SVector::<f64, N>::zeros();
+            for (j, (e, inv)) in estimates.iter().zip(&infos).enumerate() {
+                if let (true, Some(inv)) = (j != k, inv) {
+                    info += inv;
+                    info_state += inv * e.state;
+                }
+            }
+            let Some(p_others) = inverse_spd(&info) else { continue };
+            let d = estimates[k].state - p_others * info_state;
+            let Some(s_inv) = inverse_spd(&(estimates[k].covariance + p_others)) else { continue };
+            let stat = (d.transpose() * s_inv * d)[0];
+            if stat.is_finite() && worst.is_none_or(|(_, w)| stat > w) {
+                worst = Some((i, stat));
+            }
+        }
+        let culprit = worst.filter(|&(_, stat)| stat > bound).map(|(i, _)| i);
+        let mut failed = false;
+        for &i in &healthy {
+            failed |= self.devices[i].health.on_consistency(culprit == Some(i));
+        }
+        failed
+    }
+
+    /// Master fusion, then (under fusion-reset) feedback with β for the current speed. Also
+    /// where wrong devices are caught (consistency test) and where they prove themselves
+    /// again (their shadow sub-filters against the fused estimate).
     fn fuse_and_feed_back(&mut self) {
+        self.consistency_test();
         if let Some(fused) = self.fuse() {
             self.master.estimate = fused;
         }
-        self.beta = self.settings.sharing.shares(self.speed(), &self.healthy(), self.settings.redistribution);
-        if self.settings.feedback == Feedback::FusionReset {
-            for (d, &b) in self.devices.iter_mut().zip(&self.beta) {
-                if b > 0.0 {
-                    d.filter.reset(&share_of(&self.master.estimate, b, Feedback::FusionReset));
+        let bound = self.settings.detector.consistency_chi2;
+        let master = self.master.estimate.clone();
+        for d in &mut self.devices {
+            d.health.check_exclusion(self.time_ns);
+        }
+        for d in self.devices.iter_mut().filter(|d| d.health.must_prove_agreement()) {
+            let e = d.filter.estimate();
+            let agrees = match inverse_spd(&(e.covariance + master.covariance)) {
+                Some(s_inv) => {
+                    let diff = e.state - master.state;
+                    (diff.transpose() * s_inv * diff)[0] <= bound.max(f64::MIN_POSITIVE)
                 }
+                None => false,
+            };
+            // Rejoining after agreeing: the reset below brings it in with its share.
+            d.health.on_readmission_test(agrees);
+        }
+        self.beta = self.settings.sharing.shares(self.speed(), &self.healthy(), self.settings.redistribution);
+        let nominal = self.settings.sharing.at(self.speed()).to_vec();
+        for ((d, &b), &b0) in self.devices.iter_mut().zip(&self.beta).zip(&nominal) {
+            d.grace = d.grace.saturating_sub(1);
+            if self.settings.feedback == Feedback::FusionReset && b > 0.0 {
+                let mut share = share_of(&self.master.estimate, b, Feedback::FusionReset);
+                if d.grace > 0 {
+                    // Still re-converging after a cold restart: keep the covariance wide by
+                    // what the device still disagrees, so the reset does not undo the restart.
+                    for k in 0..N {
+                        share.covariance[(k, k)] += d.disagreement[k];
+                    }
+                } else {
+                    d.disagreement = SVector::zeros();
+                }
+                d.filter.reset(&share);
+            } else if d.health.must_prove_agreement() {
+                // The shadow restarts from the fused estimate each cycle, so that what it shows
+                // at the next fusion is its disagreement over one cycle only.
+                d.filter.reset(&share_of(&self.master.estimate, if b0 > 0.0 { b0 } else { 1.0 }, Feedback::FusionReset));
             }
         }
     }
@@ -144,8 +223,8 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         self.time_ns = t_ns;
     }
 
-    /// A device's health changed: new shares now, and a rejoining device restarts from the
-    /// fused estimate.
+    /// A device's health changed: new shares now. A device back from silence restarts cold:
+    /// from the fused estimate with its covariance widened by the disagreement it showed.
     fn health_changed(&mut self, rejoined: Option<usize>) {
         if let Some(fused) = self.fuse() {
             self.master.estimate = fused;
@@ -153,8 +232,13 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         self.beta = self.settings.sharing.shares(self.speed(), &self.healthy(), self.settings.redistribution);
         if let Some(i) = rejoined {
             let b = self.beta[i];
-            let share = share_of(&self.master.estimate, if b > 0.0 { b } else { 1.0 }, self.settings.feedback);
-            self.devices[i].filter.reset(&share);
+            let mut share = share_of(&self.master.estimate, if b > 0.0 { b } else { 1.0 }, self.settings.feedback);
+            let d = &mut self.devices[i];
+            for k in 0..N {
+                share.covariance[(k, k)] += d.disagreement[k];
+            }
+            d.filter.reset(&share);
+            d.grace = 2 * self.settings.detector.consistency_fusions;
         }
     }
 }
@@ -225,17 +309,29 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
         if !self.devices[i].health.healthy() {
             let fused = KalmanFilter { estimate: self.estimate() };
             let innovation = fused.innovation(&m.h, m.r, m.z);
-            let gate = self.devices[i].health.readmit_gate(m.gate_nis);
-            let agrees = innovation.nis <= gate && !self.devices[i].health.is_stuck(quantity);
-            if self.devices[i].health.on_readmission_test(agrees) {
-                self.health_changed(Some(i));
+            let d = &mut self.devices[i];
+            if d.health.must_prove_agreement() {
+                // Shadow update, ungated: the next fusion sees where the device pulls.
+                d.filter.update(&m.h, m.r, m.z);
+            } else {
+                d.disagreement[quantity] = innovation.residual * innovation.residual;
+                if d.health.on_readmission_test(!d.health.is_stuck(quantity)) {
+                    self.health_changed(Some(i));
+                }
             }
             return Outcome::RejectedDeviceFault(Some(innovation));
+        }
+        if self.devices[i].grace > 0 {
+            // How far the fused estimate still is from this device (not its own sub-filter,
+            // which follows the device): what the next reset must leave room for.
+            let fused = KalmanFilter { estimate: self.estimate() };
+            let nu = fused.innovation(&m.h, m.r, m.z).residual;
+            self.devices[i].disagreement[quantity] = (nu * nu - m.r).max(0.0);
         }
         let d = &mut self.devices[i];
         let innovation = d.filter.innovation(&m.h, m.r, m.z);
         let passed = innovation.passes(m.gate_nis);
-        let failed_now = d.health.on_gate(passed);
+        let failed_now = d.health.on_gate(quantity, passed);
         let outcome = if !passed {
             Outcome::RejectedGate(innovation)
         } else if d.filter.update(&m.h, m.r, m.z) {
@@ -276,6 +372,12 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
         out
     }
 
+    fn heard_from(&mut self, device: usize, t_ns: u64) {
+        if let Some(d) = self.devices.get_mut(device) {
+            d.health.heard(t_ns);
+        }
+    }
+
     fn device_event(&mut self, device: &str, failed: bool) {
         if !self.settings.detector.fault_events {
             return;
@@ -300,6 +402,7 @@ mod tests {
         detector.timeout_s = 1e9;
         detector.stuck_messages = u32::MAX;
         detector.gate_failures = u32::MAX;
+        detector.consistency_chi2 = 0.0;
         FederatedSettings { feedback, fusion_period_ns: 0, sharing: SharingTable::source_001(), redistribution: Redistribution::Even, detector }
     }
 

@@ -135,6 +135,9 @@ pub trait Estimator<const N: usize> {
     fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome;
     fn estimate(&self) -> StateAndCovariance<N>;
     fn diagnostics(&self) -> EstimatorDiagnostics;
+    /// A message of `device` arrived at `t_ns`, usable or not: the device is alive (a radar
+    /// flags its samples invalid at standstill but keeps talking).
+    fn heard_from(&mut self, _device: usize, _t_ns: u64) {}
     /// A fault or recovery a device reported itself (an event in the log).
     fn device_event(&mut self, _device: &str, _failed: bool) {}
     /// The recorded forward pass, for the RTS smoother (Kalman pipelines that asked for it).

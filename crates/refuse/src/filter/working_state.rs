@@ -6,12 +6,28 @@
 //! - its output repeats the very same value `stuck_messages` times while the train moves
 //!   (a frozen sensor: real noise never repeats exactly),
 //! - `gate_failures` of its measurements in a row fail their innovation gate (a bias jump,
-//!   a multipath trap), or
+//!   a multipath trap),
+//! - at a master fusion, its estimate is the one that disagrees most with the fusion of the
+//!   other devices, beyond the χ² bound `consistency_chi2` (needs three healthy devices to
+//!   say which one is wrong: this is what catches a biased INS, whose own innovations stay
+//!   small because it alone observes the acceleration), or
 //! - the log holds an explicit fault event naming it (the device reported itself).
 //!
-//! A failed device rejoins after `readmit_after` consecutive measurements that agree with
-//! the fused estimate (pass the gate against it) and are not stuck; a reported fault only
-//! clears on the matching recovery event.
+//! How a failed device rejoins depends on why it failed:
+//! - silent or frozen (timeout, stuck) or recovered after a reported fault: it did not lie,
+//!   so it is back after `readmit_after` consecutive live, changing messages — and restarts
+//!   cold, with its covariance widened to the disagreement it shows, because the others have
+//!   been dead-reckoning meanwhile and may be the ones that drifted;
+//! - wrong (gate failures, inconsistent): it must prove itself: its sub-filter keeps running
+//!   in the shadow (reset to the fused estimate at each fusion, updated ungated) and it rejoins
+//!   after `readmit_after` consecutive master fusions at which it agrees with the fused
+//!   estimate;
+//! - a reported fault waits for its recovery event, then is on probation like a silent one.
+//!
+//! A wrong device that cannot prove agreement within `max_exclusion_s` is put on probation
+//! too: when it is the only device observing a quantity (GNSS, the only absolute position
+//! here), the others have only been dead-reckoning it and nothing can say who is right — an
+//! exclusion for ever would lock the fused estimate onto their drift.
 
 use serde::{Deserialize, Serialize};
 
@@ -24,13 +40,28 @@ pub struct DetectorSettings {
     pub readmit_after: u32,
     /// Honour fault/recovery events in the log's `/events` channel.
     pub fault_events: bool,
-    /// The gate for re-admission tests when the sensor has none (χ², 1 dof, 99 %).
-    pub readmit_gate_nis: f64,
+    /// Bound of the fusion-time consistency test (χ² with the state's dimension; 0 turns the
+    /// test off). Default: 3 degrees of freedom at 99.99 %.
+    pub consistency_chi2: f64,
+    /// Fusions in a row a device must be the one beyond the bound before it is failed: real
+    /// sensors carry slow biases their variances do not describe, a real fault persists.
+    pub consistency_fusions: u32,
+    /// Longest exclusion of a device that keeps disagreeing before it is given a cold restart.
+    pub max_exclusion_s: f64,
 }
 
 impl Default for DetectorSettings {
     fn default() -> Self {
-        Self { timeout_s: 2.0, stuck_messages: 10, gate_failures: 5, readmit_after: 5, fault_events: true, readmit_gate_nis: 6.63 }
+        Self {
+            timeout_s: 2.0,
+            stuck_messages: 10,
+            gate_failures: 5,
+            readmit_after: 5,
+            fault_events: true,
+            consistency_chi2: 21.11,
+            consistency_fusions: 5,
+            max_exclusion_s: 60.0,
+        }
     }
 }
 
@@ -39,7 +70,10 @@ pub enum Fault {
     Timeout,
     Stuck,
     GateFailures,
+    Inconsistent,
     Reported,
+    /// Recovered after a reported fault, waiting for live messages.
+    Probation,
 }
 
 impl Fault {
@@ -48,7 +82,9 @@ impl Fault {
             Fault::Timeout => "timeout",
             Fault::Stuck => "stuck",
             Fault::GateFailures => "gate_failures",
+            Fault::Inconsistent => "inconsistent",
             Fault::Reported => "reported",
+            Fault::Probation => "probation",
         }
     }
 }
@@ -61,13 +97,27 @@ pub struct WorkingState {
     /// Last value and its repeat count per measured quantity (chainage, speed, acceleration).
     last_value: [f64; 3],
     repeats: [u32; 3],
-    gate_run: u32,
+    /// Gate failures in a row per quantity (a GNSS fix's chainage can fail while its speed
+    /// passes).
+    gate_run: [u32; 3],
     good_run: u32,
+    inconsistent_run: u32,
+    failed_since_ns: u64,
 }
 
 impl WorkingState {
     pub fn new(settings: DetectorSettings, start_ns: u64) -> Self {
-        Self { settings, fault: None, last_message_ns: start_ns, last_value: [f64::NAN; 3], repeats: [0; 3], gate_run: 0, good_run: 0 }
+        Self {
+            settings,
+            fault: None,
+            last_message_ns: start_ns,
+            last_value: [f64::NAN; 3],
+            repeats: [0; 3],
+            gate_run: [0; 3],
+            good_run: 0,
+            inconsistent_run: 0,
+            failed_since_ns: 0,
+        }
     }
 
     pub fn fault(&self) -> Option<Fault> {
@@ -110,10 +160,27 @@ impl WorkingState {
     }
 
     /// Records a gate result of a healthy device; true when it failed the device.
-    pub fn on_gate(&mut self, passed: bool) -> bool {
-        self.gate_run = if passed { 0 } else { self.gate_run + 1 };
-        if self.fault.is_none() && self.gate_run >= self.settings.gate_failures {
+    pub fn on_gate(&mut self, quantity: usize, passed: bool) -> bool {
+        let run = &mut self.gate_run[quantity.min(2)];
+        *run = if passed { 0 } else { *run + 1 };
+        if self.fault.is_none() && *run >= self.settings.gate_failures {
             self.fail(Fault::GateFailures);
+            return true;
+        }
+        false
+    }
+
+    /// Marks the device alive at `t_ns` (any message, usable or not).
+    pub fn heard(&mut self, t_ns: u64) {
+        self.last_message_ns = self.last_message_ns.max(t_ns);
+    }
+
+    /// The result of a fusion-time consistency test for this device (true: it was the one in
+    /// disagreement beyond the bound); true when that failed the device.
+    pub fn on_consistency(&mut self, inconsistent: bool) -> bool {
+        self.inconsistent_run = if inconsistent { self.inconsistent_run + 1 } else { 0 };
+        if self.fault.is_none() && self.inconsistent_run >= self.settings.consistency_fusions.max(1) {
+            self.fail(Fault::Inconsistent);
             return true;
         }
         false
@@ -121,13 +188,14 @@ impl WorkingState {
 
     /// Records a re-admission test of a failed device; true when it rejoins.
     pub fn on_readmission_test(&mut self, agrees: bool) -> bool {
-        if self.fault == Some(Fault::Reported) || self.fault.is_none() {
+        if matches!(self.fault, None | Some(Fault::Reported)) {
             return false;
         }
         self.good_run = if agrees { self.good_run + 1 } else { 0 };
         if self.good_run >= self.settings.readmit_after {
             self.fault = None;
-            self.gate_run = 0;
+            self.gate_run = [0; 3];
+            self.inconsistent_run = 0;
             self.repeats = [0; 3];
             return true;
         }
@@ -142,8 +210,7 @@ impl WorkingState {
                 true
             }
             (false, Some(Fault::Reported)) => {
-                // Back on probation, like any other failed device.
-                self.fault = Some(Fault::GateFailures);
+                self.fault = Some(Fault::Probation);
                 self.good_run = 0;
                 false
             }
@@ -151,13 +218,28 @@ impl WorkingState {
         }
     }
 
-    pub fn readmit_gate(&self, sensor_gate: Option<f64>) -> f64 {
-        sensor_gate.unwrap_or(self.settings.readmit_gate_nis)
+    /// True when the device rejoins by proving agreement at master fusions (it was wrong),
+    /// false when live messages suffice (it was silent, frozen or reported).
+    pub fn must_prove_agreement(&self) -> bool {
+        matches!(self.fault, Some(Fault::GateFailures | Fault::Inconsistent))
     }
 
     fn fail(&mut self, f: Fault) {
         self.fault = Some(f);
         self.good_run = 0;
+        self.failed_since_ns = self.last_message_ns;
+    }
+
+    /// A wrong device excluded longer than `max_exclusion_s` goes on probation (cold restart
+    /// once it talks); true when that happened.
+    pub fn check_exclusion(&mut self, now_ns: u64) -> bool {
+        let excluded = now_ns.saturating_sub(self.failed_since_ns) as f64 / 1e9;
+        if self.must_prove_agreement() && excluded > self.settings.max_exclusion_s {
+            self.fault = Some(Fault::Probation);
+            self.good_run = 0;
+            return true;
+        }
+        false
     }
 }
 
@@ -172,6 +254,7 @@ mod tests {
         assert!(!w.check_timeout(1_900_000_000));
         assert!(w.check_timeout(2_100_000_000));
         assert_eq!(w.fault(), Some(Fault::Timeout));
+        assert!(!w.must_prove_agreement(), "a silent device needs only live messages");
         for k in 0..4 {
             w.on_message(3_000_000_000 + k, 1, k as f64, true);
             assert!(!w.on_readmission_test(true));
@@ -183,8 +266,9 @@ mod tests {
         assert_eq!(stuck.iter().position(|&b| b), Some(9));
         let mut w = WorkingState::new(s, 0);
         assert!(!(0..9).any(|k| w.on_message(k, 1, 0.0, false)), "a standing train's zeros are not stuck");
-        assert!(!(0..4).any(|_| w.on_gate(false)));
-        assert!(w.on_gate(false));
+        assert!(!(0..4).any(|_| w.on_gate(0, false) | w.on_gate(1, true)), "failures of one quantity count in a row");
+        assert!(w.on_gate(0, false));
+        assert!(w.must_prove_agreement(), "a device that failed its gates must agree again");
         assert!(w.report(true) && w.fault() == Some(Fault::Reported));
         assert!(!(0..10).any(|_| w.on_readmission_test(true)), "a reported fault waits for its recovery event");
         w.report(false);

@@ -1,0 +1,244 @@
+//! Fault injection: make one device fail for a window of the run, as a working-state detector
+//! must see it — it goes silent (`dropout`), freezes its last output (`stuck`), or its output
+//! jumps by a constant (`bias=B`, in the quantity's SI unit: m for GNSS position along the
+//! direction of travel, m/s for radar and odometer speed, m/s² for IMU specific force, m for
+//! loop position). The log gets `fault_injected` / `fault_cleared` events at the window's
+//! edges: markers for evaluation, not signals for the filters.
+//!
+//! Written on the command line as `DEVICE:MODE:START:END` (seconds from the start of the run),
+//! e.g. `radar:dropout:200:260`, `gnss:bias=30:150:250`, `imu:stuck:100:160`.
+
+use railfuse_catalog::messages::{Event, EventKind};
+use serde::{Deserialize, Serialize};
+
+use super::world::{seconds, Emit};
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultMode {
+    Dropout,
+    Stuck,
+    Bias(f64),
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FaultSpec {
+    /// gnss, imu, radar, odometer1, odometer2, loop or balise.
+    pub device: String,
+    pub mode: FaultMode,
+    pub start_s: f64,
+    pub end_s: f64,
+}
+
+pub const DEVICES: &[&str] = &["gnss", "imu", "radar", "odometer1", "odometer2", "loop", "balise"];
+
+impl std::str::FromStr for FaultSpec {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let parts: Vec<&str> = s.split(':').collect();
+        let [device, mode, start, end] = parts[..] else {
+            return Err(format!("'{s}': a fault is DEVICE:MODE:START:END, e.g. radar:dropout:200:260"));
+        };
+        if !DEVICES.contains(&device) {
+            return Err(format!("'{s}': unknown device '{device}' (devices: {})", DEVICES.join(", ")));
+        }
+        let mode = match mode {
+            "dropout" => FaultMode::Dropout,
+            "stuck" => FaultMode::Stuck,
+            m => match m.strip_prefix("bias=").map(str::parse::<f64>) {
+                Some(Ok(b)) if b.is_finite() => FaultMode::Bias(b),
+                _ => return Err(format!("'{s}': unknown mode '{m}' (dropout, stuck, bias=VALUE)")),
+            },
+        };
+        let time = |t: &str| t.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0);
+        let (Some(start_s), Some(end_s)) = (time(start), time(end)) else {
+            return Err(format!("'{s}': START and END are seconds from the start of the run"));
+        };
+        if end_s <= start_s {
+            return Err(format!("'{s}': the window ends before it starts"));
+        }
+        Ok(FaultSpec { device: device.to_owned(), mode, start_s, end_s })
+    }
+}
+
+/// Which device a simulated message comes from.
+fn device_of(e: &Emit) -> Option<&'static str> {
+    Some(match e {
+        Emit::Gnss(_) => "gnss",
+        Emit::Imu(_) => "imu",
+        Emit::Radar(_) => "radar",
+        Emit::Odometer(0, _) => "odometer1",
+        Emit::Odometer(_, _) => "odometer2",
+        Emit::Loop(_) => "loop",
+        Emit::Balise(_) => "balise",
+        Emit::Truth(_) | Emit::Event(_) => return None,
+    })
+}
+
+struct Active {
+    spec: FaultSpec,
+    start_ns: u64,
+    end_ns: u64,
+    /// The device's last message before the window (what a stuck device keeps sending).
+    frozen: Option<Emit>,
+    started: bool,
+    cleared: bool,
+}
+
+/// Applies the faults to the stream of simulated messages, in log-time order.
+pub struct FaultInjector {
+    faults: Vec<Active>,
+}
+
+impl FaultInjector {
+    pub fn new(specs: &[FaultSpec], start_ns: u64) -> Self {
+        let faults = specs
+            .iter()
+            .map(|s| Active {
+                spec: s.clone(),
+                start_ns: start_ns + seconds(s.start_s),
+                end_ns: start_ns + seconds(s.end_s),
+                frozen: None,
+                started: false,
+                cleared: false,
+            })
+            .collect();
+        Self { faults }
+    }
+
+    /// Events due at `log_time_ns` (window edges), then the message as the faulty device
+    /// sends it (None: dropped).
+    pub fn apply(&mut self, log_time_ns: u64, emit: Emit, events: &mut Vec<Event>) -> Option<Emit> {
+        for f in &mut self.faults {
+            let text = |what: &str| format!("{}: {} {}", f.spec.device, describe(f.spec.mode), what);
+            if !f.started && log_time_ns >= f.start_ns {
+                f.started = true;
+                events.push(Event { stamp_ns: f.start_ns, kind: EventKind::FaultInjected, text: text("starts") });
+            }
+            if f.started && !f.cleared && log_time_ns >= f.end_ns {
+                f.cleared = true;
+                events.push(Event { stamp_ns: f.end_ns, kind: EventKind::FaultCleared, text: text("ends") });
+            }
+        }
+        let Some(device) = device_of(&emit) else { return Some(emit) };
+        let mut emit = Some(emit);
+        for f in self.faults.iter_mut().filter(|f| f.spec.device == device) {
+            let Some(e) = emit.take() else { break };
+            let inside = log_time_ns >= f.start_ns && log_time_ns < f.end_ns;
+            emit = match (inside, f.spec.mode) {
+                (false, _) => {
+                    if log_time_ns < f.start_ns {
+                        f.frozen = Some(e.clone());
+                    }
+                    Some(e)
+                }
+                (true, FaultMode::Dropout) => None,
+                (true, FaultMode::Stuck) => Some(match &f.frozen {
+                    Some(frozen) => restamped(frozen.clone(), stamp_of(&e)),
+                    None => e,
+                }),
+                (true, FaultMode::Bias(b)) => Some(biased(e, b)),
+            };
+        }
+        emit
+    }
+}
+
+fn describe(m: FaultMode) -> String {
+    match m {
+        FaultMode::Dropout => "dropout".into(),
+        FaultMode::Stuck => "stuck".into(),
+        FaultMode::Bias(b) => format!("bias {b}"),
+    }
+}
+
+fn stamp_of(e: &Emit) -> u64 {
+    match e {
+        Emit::Gnss(m) => m.stamp_ns,
+        Emit::Imu(m) => m.stamp_ns,
+        Emit::Radar(m) => m.stamp_ns,
+        Emit::Odometer(_, m) => m.stamp_ns,
+        Emit::Loop(m) => m.stamp_ns,
+        Emit::Balise(m) => m.stamp_ns,
+        Emit::Truth(m) => m.stamp_ns,
+        Emit::Event(m) => m.stamp_ns,
+    }
+}
+
+fn restamped(mut e: Emit, t: u64) -> Emit {
+    match &mut e {
+        Emit::Gnss(m) => m.stamp_ns = t,
+        Emit::Imu(m) => m.stamp_ns = t,
+        Emit::Radar(m) => m.stamp_ns = t,
+        Emit::Odometer(_, m) => m.stamp_ns = t,
+        Emit::Loop(m) => m.stamp_ns = t,
+        Emit::Balise(m) => m.stamp_ns = t,
+        Emit::Truth(m) => m.stamp_ns = t,
+        Emit::Event(m) => m.stamp_ns = t,
+    }
+    e
+}
+
+fn biased(mut e: Emit, b: f64) -> Emit {
+    const M_PER_DEG: f64 = 111_320.0;
+    match &mut e {
+        Emit::Gnss(m) => {
+            if let (Some(lat), Some(lon)) = (m.latitude_deg, m.longitude_deg) {
+                let course = m.course_rad.unwrap_or(0.0);
+                m.latitude_deg = Some(lat + b * course.cos() / M_PER_DEG);
+                m.longitude_deg = Some(lon + b * course.sin() / (M_PER_DEG * lat.to_radians().cos()));
+            }
+        }
+        Emit::Imu(m) => m.specific_force_mps2[0] += b,
+        Emit::Radar(m) => m.speed_mps += b,
+        Emit::Odometer(_, m) => m.speed_mps += b,
+        Emit::Loop(m) => m.chainage_m += b,
+        Emit::Balise(m) => m.chainage_m += b,
+        Emit::Truth(_) | Emit::Event(_) => {}
+    }
+    e
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use railfuse_catalog::messages::RadarSpeed;
+
+    fn radar(t: u64, v: f64) -> Emit {
+        Emit::Radar(RadarSpeed { stamp_ns: t, speed_mps: v, quality: 1.0, valid: true, speed_variance_m2ps2: None })
+    }
+
+    #[test]
+    fn specs_parse_and_bad_ones_say_why() {
+        let f: FaultSpec = "gnss:bias=30:150:250".parse().unwrap();
+        assert_eq!(f.mode, FaultMode::Bias(30.0));
+        assert!("radar:melt:1:2".parse::<FaultSpec>().unwrap_err().contains("unknown mode"));
+        assert!("warp:dropout:1:2".parse::<FaultSpec>().unwrap_err().contains("unknown device"));
+        assert!("radar:dropout:5:2".parse::<FaultSpec>().unwrap_err().contains("ends before"));
+    }
+
+    #[test]
+    fn dropout_stuck_and_bias_change_only_their_window() {
+        let sec = 1_000_000_000;
+        for (mode, expect) in [
+            (FaultMode::Dropout, vec![Some(1.0), None, None, Some(4.0)]),
+            (FaultMode::Stuck, vec![Some(1.0), Some(1.0), Some(1.0), Some(4.0)]),
+            (FaultMode::Bias(0.5), vec![Some(1.0), Some(2.5), Some(3.5), Some(4.0)]),
+        ] {
+            let mut inj = FaultInjector::new(&[FaultSpec { device: "radar".into(), mode, start_s: 2.0, end_s: 4.0 }], 0);
+            let mut events = Vec::new();
+            let got: Vec<Option<f64>> = (1..=4)
+                .map(|k| match inj.apply(k * sec, radar(k * sec, k as f64), &mut events) {
+                    Some(Emit::Radar(m)) => {
+                        assert_eq!(m.stamp_ns, k * sec);
+                        Some(m.speed_mps)
+                    }
+                    _ => None,
+                })
+                .collect();
+            assert_eq!(got, expect, "{mode:?}");
+            assert_eq!(events.iter().map(|e| e.kind).collect::<Vec<_>>(), vec![EventKind::FaultInjected, EventKind::FaultCleared]);
+        }
+    }
+}
