@@ -24,6 +24,8 @@ enum Command {
     Info(cmd::info::Args),
     /// Replay a log through the pipelines of a config file and write the fused log.
     Refuse(cmd::refuse::Args),
+    /// Accuracy of a fused log's pipelines against a reference, whole run and marked windows.
+    Eval(cmd::eval::Args),
     /// Log a (raw or fused) log to the Rerun viewer or an .rrd file.
     Viz(cmd::viz::Args),
     /// The whole path in one go: simulate, re-fuse, print accuracy, write a Rerun recording.
@@ -45,6 +47,7 @@ fn main() -> ExitCode {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Info(a) => cmd::info::run(a),
         Command::Refuse(a) => cmd::refuse::run(a),
+        Command::Eval(a) => cmd::eval::run(a),
         Command::Viz(a) => cmd::viz::run(a),
         Command::Demo(a) => cmd::demo::run(a),
         Command::Bench(a) => cmd::bench::run(a),

@@ -49,9 +49,12 @@ fn refuse_copies_every_input_record_and_reports_accuracy() {
     ok(&["simulate", "--seed", "2", "--duration", "150", "-o", s(&raw)]);
     let out = ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused), "--json"]);
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let p = &r["refuse"]["pipelines"][0];
-    assert_eq!(r["refuse"]["reference"], "/truth");
-    assert!(p["fused_states"].as_u64().unwrap() > 1000);
+    let p = &r["eval"]["pipelines"][0];
+    assert_eq!(r["eval"]["reference"], "/truth");
+    assert_eq!(p["states"], r["refuse"]["pipelines"][0]["fused_states"]);
+    assert!(p["states"].as_u64().unwrap() > 1000);
+    // The Kalman filter's innovations are consistent: NIS inside its 95 % bounds ≈ 95 %.
+    assert!((0.85..=0.99).contains(&p["nis"]["inside_95"].as_f64().unwrap()), "{p}");
     // The default pipeline on the default run: sub-metre position, sub-0.3 m/s speed.
     assert!(p["position_error_m"]["rmse"].as_f64().unwrap() < 1.0, "{p}");
     assert!(p["speed_error_mps"]["rmse"].as_f64().unwrap() < 0.3, "{p}");

@@ -4,7 +4,7 @@ use anyhow::{Context, Result};
 use railfuse_refuse::config::{embedded_path, PipelinesConfig};
 use railfuse_viz::{visualize, Sink};
 
-use super::refuse::{print_accuracy, refuse_with};
+use super::refuse::refuse_and_evaluate;
 use super::DEFAULT_PIPELINES;
 
 #[derive(clap::Args)]
@@ -23,8 +23,7 @@ pub fn run(a: Args) -> Result<()> {
     super::simulate::simulate_to("default", a.seed, None, &[], &raw)?;
     std::fs::write(&config_path, DEFAULT_PIPELINES).with_context(|| format!("{}: cannot write", config_path.display()))?;
     let config = PipelinesConfig::parse(DEFAULT_PIPELINES, &embedded_path("samples/kalman.toml"))?;
-    let (report, _) = refuse_with(&raw, &fused, &config, "embedded samples/kalman.toml".into(), railfuse_catalog::topics::GROUND_TRUTH)?;
-    print_accuracy(&report);
+    refuse_and_evaluate(&raw, &fused, &config, "embedded samples/kalman.toml".into(), railfuse_catalog::topics::GROUND_TRUTH)?;
     let viz = visualize(&fused, &Sink::Save(rrd.clone()))?;
     eprintln!("logged {} messages as {} Rerun entities -> {}", viz.logged, viz.entities.len(), rrd.display());
     println!("\noutputs in {}:", dir.display());

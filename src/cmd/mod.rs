@@ -1,5 +1,6 @@
 pub mod bench;
 pub mod demo;
+pub mod eval;
 pub mod info;
 pub mod refuse;
 pub mod simulate;

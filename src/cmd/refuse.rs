@@ -4,9 +4,10 @@ use std::time::Instant;
 use anyhow::Result;
 use railfuse_catalog::topics;
 use railfuse_refuse::config::PipelinesConfig;
+use railfuse_refuse::eval::{evaluate, EvalReport};
 use railfuse_refuse::replay::{refuse, RefuseOptions, RefuseReport};
 
-use crate::table::Table;
+use super::eval::print_eval;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -30,11 +31,13 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let config = PipelinesConfig::load(&a.config)?;
     let source = a.config.display().to_string();
-    let (report, stats) = refuse_with(&a.input, &a.output, &config, source, &a.reference)?;
+    let (report, stats) = refuse_with(&a.input, &a.output, &config, source)?;
+    let eval = evaluate(&a.output, &a.reference)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "refuse": report, "run": stats }))?);
+        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "refuse": report, "eval": eval, "run": stats }))?);
     } else {
-        print_accuracy(&report);
+        print_eval(&eval);
+        print_counts(&report);
     }
     Ok(())
 }
@@ -47,9 +50,9 @@ pub struct RunStats {
     pub peak_rss_kib: Option<u64>,
 }
 
-pub fn refuse_with(input: &Path, output: &Path, config: &PipelinesConfig, source: String, reference: &str) -> Result<(RefuseReport, RunStats)> {
+pub fn refuse_with(input: &Path, output: &Path, config: &PipelinesConfig, source: String) -> Result<(RefuseReport, RunStats)> {
     let started = Instant::now();
-    let report = refuse(&RefuseOptions { input, output, config, config_source: source, reference_topic: reference.to_owned() })?;
+    let report = refuse(&RefuseOptions { input, output, config, config_source: source })?;
     let elapsed_s = started.elapsed().as_secs_f64();
     let stats = RunStats { elapsed_s, input_messages_per_s: report.input_messages as f64 / elapsed_s, peak_rss_kib: peak_rss_kib() };
     eprintln!(
@@ -74,43 +77,21 @@ pub fn peak_rss_kib() -> Option<u64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-/// The accuracy table, as refuse and demo print it.
-pub fn print_accuracy(report: &RefuseReport) {
-    match &report.reference {
-        Some(r) => {
-            println!("accuracy against {r} (errors = fused − reference, at each fused state):")
-        }
-        None => println!("no reference channel in the input: accuracy not computed (counts only)"),
-    }
-    let mut t = Table::new(&[
-        "pipeline",
-        "states",
-        "pos RMSE m",
-        "pos p95 m",
-        "pos max m",
-        "speed RMSE m/s",
-        "speed p95 m/s",
-        "speed max m/s",
-        "gated",
-        "invalid",
-        "late",
-    ]);
-    let f = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{x:.3}"));
+/// What each pipeline did with its measurements (the gate counts are in the accuracy table).
+pub fn print_counts(report: &RefuseReport) {
     for p in &report.pipelines {
-        let (pos, spd) = (p.position_error_m.as_ref(), p.speed_error_mps.as_ref());
-        t.row(vec![
-            p.name.clone(),
-            p.fused_states.to_string(),
-            f(pos.map(|e| e.rmse)),
-            f(pos.map(|e| e.p95_abs)),
-            f(pos.map(|e| e.max_abs)),
-            f(spd.map(|e| e.rmse)),
-            f(spd.map(|e| e.p95_abs)),
-            f(spd.map(|e| e.max_abs)),
-            p.counts.rejected_gate.to_string(),
-            p.counts.rejected_invalid.to_string(),
-            p.counts.rejected_late.to_string(),
-        ]);
+        let c = &p.counts;
+        println!(
+            "{}: {} accepted, {} gated, {} invalid, {} late, {} from failed devices, {} before initialisation",
+            p.name, c.accepted, c.rejected_gate, c.rejected_invalid, c.rejected_late, c.rejected_device_fault, c.before_initialisation
+        );
     }
-    print!("{t}");
+}
+
+/// Re-fuses and prints the accuracy table of the result (demo).
+pub fn refuse_and_evaluate(input: &Path, output: &Path, config: &PipelinesConfig, source: String, reference: &str) -> Result<(RefuseReport, EvalReport)> {
+    let (report, _) = refuse_with(input, output, config, source)?;
+    let eval = evaluate(output, reference)?;
+    print_eval(&eval);
+    Ok((report, eval))
 }

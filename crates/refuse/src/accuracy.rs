@@ -62,6 +62,8 @@ pub struct ErrorStats {
     sum: f64,
     sum_sq: f64,
     max_abs: f64,
+    min: f64,
+    max: f64,
     hist: LogHistogram,
 }
 
@@ -73,11 +75,14 @@ pub struct ErrorSummary {
     pub max_abs: f64,
     /// 95th percentile of |error| (to 1 %).
     pub p95_abs: f64,
+    /// The signed envelope: most negative and most positive error.
+    pub min: f64,
+    pub max: f64,
 }
 
 impl Default for ErrorStats {
     fn default() -> Self {
-        Self { n: 0, sum: 0.0, sum_sq: 0.0, max_abs: 0.0, hist: LogHistogram::new() }
+        Self { n: 0, sum: 0.0, sum_sq: 0.0, max_abs: 0.0, min: f64::INFINITY, max: f64::NEG_INFINITY, hist: LogHistogram::new() }
     }
 }
 
@@ -87,6 +92,8 @@ impl ErrorStats {
         self.sum += e;
         self.sum_sq += e * e;
         self.max_abs = self.max_abs.max(e.abs());
+        self.min = self.min.min(e);
+        self.max = self.max.max(e);
         self.hist.add(e.abs());
     }
 
@@ -97,6 +104,8 @@ impl ErrorStats {
             mean: self.sum / self.n as f64,
             max_abs: self.max_abs,
             p95_abs: self.hist.quantile(0.95, self.n).min(self.max_abs),
+            min: self.min,
+            max: self.max,
         })
     }
 }
@@ -159,6 +168,30 @@ struct Estimate {
     covariance: (f64, f64, f64),
 }
 
+/// A marked stretch of the run (an injected fault, a tunnel, a correction outage): errors
+/// inside it are also reported on their own.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Span {
+    pub label: String,
+    pub start_ns: u64,
+    /// None while still open.
+    pub end_ns: Option<u64>,
+}
+
+impl Span {
+    pub fn contains(&self, t_ns: u64) -> bool {
+        t_ns >= self.start_ns && self.end_ns.is_none_or(|e| t_ns < e)
+    }
+}
+
+/// Errors inside the spans of one label.
+#[derive(Debug, Clone)]
+pub struct WindowStats {
+    pub label: String,
+    pub position: ErrorStats,
+    pub speed: ErrorStats,
+}
+
 /// Matches estimates to the reference interpolated at their stamps.
 #[derive(Debug, Clone)]
 pub struct AccuracyMeter {
@@ -170,6 +203,7 @@ pub struct AccuracyMeter {
     pub nees: Consistency,
     /// Estimates that fell outside the reference's time span.
     pub unmatched: u64,
+    pub windows: Vec<WindowStats>,
 }
 
 impl AccuracyMeter {
@@ -182,24 +216,30 @@ impl AccuracyMeter {
             speed: ErrorStats::default(),
             nees: Consistency::default(),
             unmatched: 0,
+            windows: Vec::new(),
         }
     }
 
-    pub fn add_reference(&mut self, stamp_ns: u64, chainage_m: f64, speed_mps: f64) {
+    pub fn add_reference(&mut self, stamp_ns: u64, chainage_m: f64, speed_mps: f64, spans: &[Span]) {
         if !self.reference.push(ReferenceSample { stamp_ns, chainage_m, speed_mps }) {
             return;
         }
         while self.waiting.front().is_some_and(|e| e.stamp_ns <= stamp_ns) {
             let e = self.waiting.pop_front().expect("peeked");
-            self.score(e);
+            self.score(e, spans);
         }
     }
 
-    pub fn add_estimate(&mut self, s: &FusedState) {
+    /// The newest reference stamp seen.
+    pub fn reference_newest_ns(&self) -> Option<u64> {
+        self.reference.newest_ns()
+    }
+
+    pub fn add_estimate(&mut self, s: &FusedState, spans: &[Span]) {
         let c = &s.covariance;
         let e = Estimate { stamp_ns: s.stamp_ns, chainage_m: s.chainage_m, speed_mps: s.speed_mps, covariance: (c[0], c[1], c[4]) };
         match self.reference.newest_ns() {
-            Some(newest) if newest >= s.stamp_ns => self.score(e),
+            Some(newest) if newest >= s.stamp_ns => self.score(e, spans),
             _ => self.waiting.push_back(e),
         }
     }
@@ -210,12 +250,26 @@ impl AccuracyMeter {
         self.waiting.clear();
     }
 
-    fn score(&mut self, e: Estimate) {
+    fn score(&mut self, e: Estimate, spans: &[Span]) {
         match self.reference.at(e.stamp_ns) {
             Some((s, v)) => {
                 let (de, ve) = (e.chainage_m - s, e.speed_mps - v);
                 self.position.add(de);
                 self.speed.add(ve);
+                for span in spans.iter().filter(|w| w.contains(e.stamp_ns)) {
+                    let i = match self.windows.iter().position(|w| w.label == span.label) {
+                        Some(i) => i,
+                        None => {
+                            self.windows.push(WindowStats { label: span.label.clone(), position: ErrorStats::default(), speed: ErrorStats::default() });
+                            self.windows.len() - 1
+                        }
+                    };
+                    // A stamp inside two spans of one label counts once.
+                    if spans.iter().find(|w| w.label == span.label && w.contains(e.stamp_ns)).map(|w| w.start_ns) == Some(span.start_ns) {
+                        self.windows[i].position.add(de);
+                        self.windows[i].speed.add(ve);
+                    }
+                }
                 let (pss, psv, pvv) = e.covariance;
                 let mut cov = [0.0; 9];
                 (cov[0], cov[1], cov[3], cov[4]) = (pss, psv, psv, pvv);
@@ -241,6 +295,7 @@ mod tests {
         let m = s.summary().unwrap();
         assert!((m.p95_abs - 9.50).abs() / 9.50 < 0.011, "{}", m.p95_abs);
         assert_eq!(m.max_abs, 10.0);
+        assert_eq!((m.min, m.max), (-9.99, 10.0));
         let exact = ((1..=1000).map(|i| (i as f64 / 100.0).powi(2)).sum::<f64>() / 1000.0).sqrt();
         assert!((m.rmse - exact).abs() < 1e-12);
     }
@@ -256,12 +311,13 @@ mod tests {
             covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
             source: String::new(),
         };
-        m.add_estimate(&est(1_500_000_000, 15.5, 10.0)); // arrives before the reference reaches it
+        let spans = [Span { label: "tunnel".into(), start_ns: 2_000_000_000, end_ns: Some(2_500_000_000) }];
+        m.add_estimate(&est(1_500_000_000, 15.5, 10.0), &spans); // arrives before the reference reaches it
         for k in 0..=30 {
             let t = k as u64 * 100_000_000;
-            m.add_reference(t, 10.0 * t as f64 / 1e9, 10.0);
+            m.add_reference(t, 10.0 * t as f64 / 1e9, 10.0, &spans);
         }
-        m.add_estimate(&est(2_050_000_000, 20.5, 10.5));
+        m.add_estimate(&est(2_050_000_000, 20.5, 10.5), &spans);
         m.finish();
         let p = m.position.summary().unwrap();
         assert_eq!(p.samples, 2);
@@ -272,5 +328,9 @@ mod tests {
         let n = m.nees.summary().unwrap();
         assert_eq!(n.epochs, 2);
         assert!((n.mean - 0.25).abs() < 1e-9 && n.inside_95 == 1.0, "{n:?}");
+        // Only the second estimate is in the tunnel.
+        assert_eq!(m.windows.len(), 1);
+        assert_eq!(m.windows[0].speed.summary().unwrap().samples, 1);
+        assert_eq!(m.windows[0].position.summary().unwrap().max_abs, 0.0);
     }
 }

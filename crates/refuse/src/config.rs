@@ -398,7 +398,13 @@ impl PipelineConfig {
                     return Err(format!("federated.fusion_period_s must be ≥ 0, not {}", f.fusion_period_s));
                 }
                 positive("federated.detector.timeout_s", f.detector.timeout_s)?;
-                positive("federated.detector.max_exclusion_s", f.detector.max_exclusion_s)?;
+                positive("federated.detector.agreement_chi2", f.detector.agreement_chi2)?;
+                if !(f.detector.max_exclusion_s.is_finite() && f.detector.max_exclusion_s >= 0.0) {
+                    return Err(format!("federated.detector.max_exclusion_s must be ≥ 0, not {}", f.detector.max_exclusion_s));
+                }
+                if !(f.detector.consistency_chi2.is_finite() && f.detector.consistency_chi2 >= 0.0) {
+                    return Err(format!("federated.detector.consistency_chi2 must be ≥ 0, not {}", f.detector.consistency_chi2));
+                }
                 if self.devices().is_empty() {
                     return Err("a federated filter needs at least one device besides the master".into());
                 }
@@ -474,7 +480,7 @@ impl PipelineConfig {
             }
             let sum: f64 = beta.iter().sum();
             if (sum - 1.0).abs() > 1e-6 {
-                return Err(format!("{label}: β sums to {sum}, not 1 (information sharing needs Σβ = 1)"));
+                return Err(format!("{label}: β sums to {}, not 1 (information sharing needs Σβ = 1)", (sum * 1e6).round() / 1e6));
             }
             out.push(SpeedBand { below_mps: below / 3.6, beta });
         }
@@ -550,5 +556,68 @@ gate_nis = 16.0
         assert!(err(&GOOD.replace("jerk_psd = 0.05", "jerk_psd = 0.05, jerk_variance = 1.0")).contains("exactly one"));
         assert!(err(&GOOD.replace("filter = \"kalman\"", "filter = \"magic\"")).contains("unknown variant `magic`"));
         assert!(err(&GOOD.replace("name = \"kf\"", "name = \"a/b\"")).contains("letters, digits"));
+    }
+
+    const FEDERATED: &str = r#"
+[[pipeline]]
+name = "fkf"
+filter = "federated_kalman"
+motion = { model = "singer", time_constant_s = 20.0, acceleration_std_mps2 = 0.3 }
+
+[pipeline.federated]
+feedback = "fusion_reset"
+fusion_period_s = 1.0
+
+[[pipeline.federated.band]]
+below_kmh = 50.0
+beta = { ins = 0.6, gnss = 0.3, radar = 0.1 }
+
+[[pipeline.federated.band]]
+beta = { ins = 0.4, gnss = 0.4, radar = 0.2 }
+
+[[pipeline.sensor]]
+topic = "/imu"
+device = "ins"
+fields = ["acceleration"]
+variance = 0.001
+
+[[pipeline.sensor]]
+topic = "/gnss/fix"
+device = "gnss"
+variance = { chainage = "message", speed = 0.01 }
+
+[[pipeline.sensor]]
+topic = "/radar/speed"
+device = "radar"
+variance = "message"
+"#;
+
+    #[test]
+    fn federated_bands_parse_into_the_device_order() {
+        let c = PipelinesConfig::parse(FEDERATED, Path::new("f.toml")).unwrap();
+        let t = c.pipeline[0].sharing_table().unwrap();
+        assert_eq!(t.at(10.0), &[0.6, 0.3, 0.1]);
+        assert_eq!(t.at(100.0), &[0.4, 0.4, 0.2]);
+        assert_eq!(c.pipeline[0].devices(), vec!["ins", "gnss", "radar"]);
+    }
+
+    #[test]
+    fn bad_federated_and_particle_configs_say_what_is_wrong() {
+        let e = PipelinesConfig::parse(&FEDERATED.replace("gnss = 0.3, radar = 0.1", "gnss = 0.3, radar = 0.2"), Path::new("f.toml")).unwrap_err().to_string();
+        assert!(e.contains("pipeline 'fkf': federated.band below 50 km/h: β sums to 1.1, not 1"), "{e}");
+        let e = PipelinesConfig::parse(&FEDERATED.replace("ins = 0.4, gnss", "odo = 0.4, gnss"), Path::new("f.toml")).unwrap_err().to_string();
+        assert!(e.contains("β for 'odo', which is not a device"), "{e}");
+        let e = PipelinesConfig::parse(&FEDERATED.replace("federated_kalman", "federated_kalmann"), Path::new("f.toml")).unwrap_err().to_string();
+        assert!(e.contains("line 4") && e.contains("unknown variant `federated_kalmann`"), "{e}");
+        let particle = GOOD.replace("filter = \"kalman\"", "filter = \"particle\"\nparticle = { particles = 0 }");
+        assert!(err(&particle).contains("particle.particles must be at least 1"));
+        assert!(err(&GOOD.replace("variance = 0.01", "variance = -0.01")).contains("variance must be positive, not -0.01"));
+        assert!(
+            err(&GOOD.replace("filter = \"kalman\"", "filter = \"kalman\"\nsmoother = true\noutput_rate_hz = 0.0")).contains("output_rate_hz must be positive")
+        );
+        let e = err(&GOOD.replace("filter = \"kalman\"", "filter = \"particle\"\nsmoother = true"));
+        assert!(e.contains("smoother = true needs filter = \"kalman\""), "{e}");
+        let e = err(&GOOD.replace("jerk_psd = 0.05", "acceleration_psd = 0.05"));
+        assert!(e.contains("unknown field `acceleration_psd`"), "{e}");
     }
 }

@@ -8,12 +8,14 @@
 //! - [`measurement`]: sensor models, how each channel's messages become measurements;
 //! - [`config`]: the pipeline TOML;
 //! - [`pipeline`]: one configured filter fed in sensor-time order;
-//! - [`accuracy`]: error statistics against ground truth;
+//! - [`accuracy`]: error and consistency statistics against a reference;
+//! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
 //! - [`replay`]: the `refuse` run, streaming input to output.
 
 pub mod accuracy;
 pub mod config;
 pub mod error;
+pub mod eval;
 pub mod filter;
 pub mod measurement;
 pub mod model;

@@ -149,7 +149,7 @@ impl SensorModel {
 }
 
 /// Chainage of a fix on the track map, its variance along the track, and the track heading.
-fn gnss_chainage(m: &GnssFix, track: Option<&TrackMap>) -> Option<(f64, Option<f64>, Option<f64>)> {
+pub(crate) fn gnss_chainage(m: &GnssFix, track: Option<&TrackMap>) -> Option<(f64, Option<f64>, Option<f64>)> {
     let track = track?;
     if !m.fix_type.has_position() {
         return None;

@@ -1,20 +1,19 @@
 //! The `refuse` run: stream the input log once, copy every record to the output unchanged,
-//! feed each pipeline the measurements of its channels, write `/fused/<name>/state` and
-//! `/fused/<name>/diagnostics`, store each pipeline's configuration as metadata, and score the
-//! fused states against the reference channel.
+//! feed each pipeline the measurements of its channels, write `/fused/<name>/state`,
+//! `/fused/<name>/diagnostics` (and `/fused/<name>/smoothed` where asked), and store each
+//! pipeline's configuration as metadata. Scoring the result is [`crate::eval`]'s job.
 //!
-//! Memory is bounded by the reorder windows and the accuracy meters' short reference buffers,
-//! never by the length of the log.
+//! Memory is bounded by the reorder windows, never by the length of the log (the smoother
+//! spills to a temporary file).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use railfuse_catalog::log::{read_channels, ChannelId, LogReader, LogRecord, LogWriter};
-use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GroundTruth, TrackMap};
+use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, TrackMap};
 use railfuse_catalog::topics;
 use serde::Serialize;
 
-use crate::accuracy::{AccuracyMeter, ErrorSummary};
 use crate::config::PipelinesConfig;
 use crate::error::{Error, Result};
 use crate::measurement::{SensorContext, SensorModel};
@@ -26,8 +25,6 @@ pub struct RefuseOptions<'a> {
     pub config: &'a PipelinesConfig,
     /// Where the configuration came from (a path, or "embedded default"), for the metadata.
     pub config_source: String,
-    /// Topic of the reference trajectory for the accuracy table.
-    pub reference_topic: String,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -35,9 +32,7 @@ pub struct PipelineReport {
     pub name: String,
     pub counts: PipelineCounts,
     pub fused_states: u64,
-    pub position_error_m: Option<ErrorSummary>,
-    pub speed_error_mps: Option<ErrorSummary>,
-    pub unmatched_states: u64,
+    pub smoothed_states: u64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -49,8 +44,6 @@ pub struct RefuseReport {
     pub fused_messages: u64,
     /// Messages whose log time is earlier than the one before them in the file.
     pub out_of_order_messages: u64,
-    /// The reference topic, when the input has it.
-    pub reference: Option<String>,
     pub pipelines: Vec<PipelineReport>,
 }
 
@@ -59,7 +52,6 @@ pub struct RefuseReport {
 struct Route {
     /// Dropped: an earlier run's output of a pipeline being re-run.
     replaced: bool,
-    reference: Option<ReferenceKind>,
     /// The track map (for GNSS map matching) or the events channel (device fault reports).
     context: Option<ContextKind>,
     /// (pipeline, sensor index) pairs fed by this channel, and how to read it.
@@ -73,17 +65,12 @@ enum ContextKind {
     Events,
 }
 
-#[derive(Clone, Copy)]
-enum ReferenceKind {
-    Truth,
-    Fused,
-}
-
 struct Output {
     state: ChannelId,
     diagnostics: ChannelId,
     smoothed: Option<ChannelId>,
     states: u64,
+    smoothed_states: u64,
 }
 
 pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
@@ -122,16 +109,15 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                 false => None,
             },
             states: 0,
+            smoothed_states: 0,
         });
     }
 
     let mut pipelines: Vec<AnyPipeline> = opts.config.pipeline.iter().cloned().map(AnyPipeline::new).collect::<Result<_>>()?;
     let mut context = SensorContext::default();
     let mut measurements = Vec::new();
-    let mut meters: Vec<AccuracyMeter> = pipelines.iter().map(|p| AccuracyMeter::new(p.config().reorder_window_s)).collect();
     let mut routes: HashMap<u16, Route> = HashMap::new();
     let mut seen_topics = BTreeSet::new();
-    let mut reference_seen = false;
     let mut fused_buf: Vec<Fused> = Vec::new();
     let mut report = RefuseReport {
         input: input.to_owned(),
@@ -140,7 +126,6 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
         input_bytes: 0,
         fused_messages: 0,
         out_of_order_messages: 0,
-        reference: None,
         pipelines: Vec::new(),
     };
     let mut last_log_time = 0u64;
@@ -156,14 +141,6 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                 } else {
                     writer.copy_channel(c.id, c.schema.as_ref().map_or(0, |s| s.id), &c.topic, &c.message_encoding, &c.metadata)?;
                     seen_topics.insert(c.topic.clone());
-                    if c.topic == opts.reference_topic {
-                        route.reference = match c.schema_name() {
-                            n if n == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
-                            n if n == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),
-                            _ => None,
-                        };
-                        reference_seen |= route.reference.is_some();
-                    }
                     route.context = match c.schema_name() {
                         n if n == TrackMap::SCHEMA_NAME => Some(ContextKind::TrackMap),
                         n if n == Event::SCHEMA_NAME => Some(ContextKind::Events),
@@ -190,17 +167,6 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                 }
                 last_log_time = last_log_time.max(m.log_time_ns);
                 writer.write_raw(m.channel.id, m.sequence, m.log_time_ns, m.publish_time_ns, m.data)?;
-                match route.reference {
-                    Some(ReferenceKind::Truth) => {
-                        let t: GroundTruth = m.decode(input)?;
-                        meters.iter_mut().for_each(|a| a.add_reference(t.stamp_ns, t.chainage_m, t.speed_mps));
-                    }
-                    Some(ReferenceKind::Fused) => {
-                        let t: FusedState = m.decode(input)?;
-                        meters.iter_mut().for_each(|a| a.add_reference(t.stamp_ns, t.chainage_m, t.speed_mps));
-                    }
-                    None => {}
-                }
                 match route.context {
                     Some(ContextKind::TrackMap) => context.track = Some(m.decode(input)?),
                     Some(ContextKind::Events) => {
@@ -220,7 +186,7 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                     model.decode(&m, input, &context, &mut measurements)?;
                     for &(pi, si) in &route.sensors {
                         pipelines[pi].push(si, &measurements, m.log_time_ns, &mut fused_buf);
-                        emit(&mut writer, &mut outputs[pi], &mut meters[pi], &mut fused_buf, &mut report.fused_messages)?;
+                        emit(&mut writer, &mut outputs[pi], &mut fused_buf, &mut report.fused_messages)?;
                     }
                 }
             }
@@ -246,13 +212,14 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
     }
     for (pi, p) in pipelines.iter_mut().enumerate() {
         p.finish(last_log_time, &mut fused_buf);
-        emit(&mut writer, &mut outputs[pi], &mut meters[pi], &mut fused_buf, &mut report.fused_messages)?;
+        emit(&mut writer, &mut outputs[pi], &mut fused_buf, &mut report.fused_messages)?;
         if let (Some(channel), Some(smoothed)) = (outputs[pi].smoothed, p.smoothed()) {
             let spill = |source| Error::Spill { pipeline: p.name().to_owned(), source };
             for state in smoothed.map_err(spill)? {
                 let state = state.map_err(spill)?;
                 writer.write(channel, state.stamp_ns, &state)?;
                 report.fused_messages += 1;
+                outputs[pi].smoothed_states += 1;
             }
         }
         let metadata = BTreeMap::from([
@@ -268,26 +235,21 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
     }
     writer.finish()?;
 
-    report.reference = reference_seen.then(|| opts.reference_topic.clone());
-    for ((p, meter), out) in pipelines.iter().zip(meters.iter_mut()).zip(&outputs) {
-        meter.finish();
+    for (p, out) in pipelines.iter().zip(&outputs) {
         report.pipelines.push(PipelineReport {
             name: p.name().to_owned(),
             counts: p.counts().clone(),
             fused_states: out.states,
-            position_error_m: meter.position.summary(),
-            speed_error_mps: meter.speed.summary(),
-            unmatched_states: meter.unmatched,
+            smoothed_states: out.smoothed_states,
         });
     }
     Ok(report)
 }
 
-fn emit(writer: &mut LogWriter, out: &mut Output, meter: &mut AccuracyMeter, fused: &mut Vec<Fused>, count: &mut u64) -> Result<()> {
+fn emit(writer: &mut LogWriter, out: &mut Output, fused: &mut Vec<Fused>, count: &mut u64) -> Result<()> {
     for f in fused.drain(..) {
         if let Some(state) = &f.state {
             writer.write(out.state, f.log_time_ns, state)?;
-            meter.add_estimate(state);
             out.states += 1;
             *count += 1;
         }

@@ -169,7 +169,7 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         if let Some(fused) = self.fuse() {
             self.master.estimate = fused;
         }
-        let bound = self.settings.detector.consistency_chi2;
+        let bound = self.settings.detector.agreement_chi2;
         let master = self.master.estimate.clone();
         for d in &mut self.devices {
             d.health.check_exclusion(self.time_ns);
@@ -179,7 +179,7 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             let agrees = match inverse_spd(&(e.covariance + master.covariance)) {
                 Some(s_inv) => {
                     let diff = e.state - master.state;
-                    (diff.transpose() * s_inv * diff)[0] <= bound.max(f64::MIN_POSITIVE)
+                    (diff.transpose() * s_inv * diff)[0] <= bound
                 }
                 None => false,
             };

@@ -24,10 +24,10 @@
 //!   estimate;
 //! - a reported fault waits for its recovery event, then is on probation like a silent one.
 //!
-//! A wrong device that cannot prove agreement within `max_exclusion_s` is put on probation
-//! too: when it is the only device observing a quantity (GNSS, the only absolute position
-//! here), the others have only been dead-reckoning it and nothing can say who is right — an
-//! exclusion for ever would lock the fused estimate onto their drift.
+//! A wrong device that is the only one observing a quantity (GNSS, the only absolute
+//! position) may never agree again once the others have dead-reckoned past the bound: nothing
+//! can say who is right. `max_exclusion_s` then forces a cold restart after that long; it is
+//! off by default because a restart while the fault lasts lets the fault back in.
 
 use serde::{Deserialize, Serialize};
 
@@ -40,13 +40,19 @@ pub struct DetectorSettings {
     pub readmit_after: u32,
     /// Honour fault/recovery events in the log's `/events` channel.
     pub fault_events: bool,
-    /// Bound of the fusion-time consistency test (χ² with the state's dimension; 0 turns the
-    /// test off). Default: 3 degrees of freedom at 99.99 %.
+    /// Bound of the fusion-time consistency test (χ² with the state's dimension, e.g. 21.1
+    /// for three states at 99.99 %); 0, the default, turns the test off: a sub-filter's
+    /// estimate averages many samples, so an unmodelled systematic error (a radar's 0.3 %
+    /// scale factor) makes it fire in normal running unless the bound is set to the data.
     pub consistency_chi2: f64,
     /// Fusions in a row a device must be the one beyond the bound before it is failed: real
     /// sensors carry slow biases their variances do not describe, a real fault persists.
     pub consistency_fusions: u32,
-    /// Longest exclusion of a device that keeps disagreeing before it is given a cold restart.
+    /// Bound of the agreement test a wrong device passes to rejoin: its shadow estimate
+    /// against the fused one, χ² with the state's dimension (16.3: three states at 99.9 %).
+    pub agreement_chi2: f64,
+    /// Longest exclusion of a device that keeps disagreeing before it is given a cold restart
+    /// anyway; 0, the default, never: a restart while the fault lasts lets it back in.
     pub max_exclusion_s: f64,
 }
 
@@ -58,9 +64,10 @@ impl Default for DetectorSettings {
             gate_failures: 5,
             readmit_after: 5,
             fault_events: true,
-            consistency_chi2: 21.11,
+            consistency_chi2: 0.0,
             consistency_fusions: 5,
-            max_exclusion_s: 60.0,
+            agreement_chi2: 16.27,
+            max_exclusion_s: 0.0,
         }
     }
 }
@@ -234,7 +241,7 @@ impl WorkingState {
     /// once it talks); true when that happened.
     pub fn check_exclusion(&mut self, now_ns: u64) -> bool {
         let excluded = now_ns.saturating_sub(self.failed_since_ns) as f64 / 1e9;
-        if self.must_prove_agreement() && excluded > self.settings.max_exclusion_s {
+        if self.settings.max_exclusion_s > 0.0 && self.must_prove_agreement() && excluded > self.settings.max_exclusion_s {
             self.fault = Some(Fault::Probation);
             self.good_run = 0;
             return true;

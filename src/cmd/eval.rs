@@ -1,0 +1,80 @@
+use std::path::PathBuf;
+
+use anyhow::Result;
+use railfuse_catalog::topics;
+use railfuse_refuse::accuracy::{ConsistencySummary, ErrorSummary};
+use railfuse_refuse::eval::{evaluate, EvalReport};
+
+use crate::table::Table;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// A fused MCAP log (the output of `railfuse refuse`).
+    pub input: PathBuf,
+    /// The reference: the ground-truth channel, another pipeline's state
+    /// (`/fused/<name>/state`) or a GNSS fix channel (an RTK receiver).
+    #[arg(long, default_value = topics::GROUND_TRUTH)]
+    pub reference: String,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let report = evaluate(&a.input, &a.reference)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_eval(&report);
+    }
+    Ok(())
+}
+
+/// The accuracy table, as eval, refuse and demo print it: one row per pipeline (and per
+/// smoothed channel), then one row per marked window it crossed.
+pub fn print_eval(report: &EvalReport) {
+    match &report.reference {
+        Some(r) => println!("accuracy against {r} (errors = fused − reference, at each fused state):"),
+        None => println!("no usable reference channel: errors not computed (NIS and counts only)"),
+    }
+    let mut t = Table::new(&[
+        "pipeline",
+        "filter",
+        "states",
+        "pos RMSE m",
+        "pos p95 m",
+        "pos max m",
+        "speed RMSE m/s",
+        "speed p95 m/s",
+        "speed max m/s",
+        "NEES in 95%",
+        "NIS in 95%",
+        "gated",
+    ]);
+    let f = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{x:.3}"));
+    let share = |c: Option<&ConsistencySummary>| c.map_or("-".to_owned(), |c| format!("{:.1}%", 100.0 * c.inside_95));
+    let errors = |pos: Option<&ErrorSummary>, spd: Option<&ErrorSummary>| {
+        vec![
+            f(pos.map(|e| e.rmse)),
+            f(pos.map(|e| e.p95_abs)),
+            f(pos.map(|e| e.max_abs)),
+            f(spd.map(|e| e.rmse)),
+            f(spd.map(|e| e.p95_abs)),
+            f(spd.map(|e| e.max_abs)),
+        ]
+    };
+    for p in &report.pipelines {
+        let mut row = vec![p.name.clone(), p.filter.clone().unwrap_or_else(|| "-".into()), p.states.to_string()];
+        row.extend(errors(p.position_error_m.as_ref(), p.speed_error_mps.as_ref()));
+        row.extend([share(p.nees.as_ref()), share(p.nis.as_ref()), p.gated.to_string()]);
+        t.row(row);
+        for w in &p.windows {
+            let n = w.position_error_m.as_ref().map_or(0, |e| e.samples);
+            let mut row = vec![format!("  in {}", w.label), String::new(), n.to_string()];
+            row.extend(errors(w.position_error_m.as_ref(), w.speed_error_mps.as_ref()));
+            row.extend([String::new(), String::new(), String::new()]);
+            t.row(row);
+        }
+    }
+    print!("{t}");
+}

@@ -1,0 +1,85 @@
+//! Source 001's federated Kalman filter end to end, on the `seed001` preset with a device
+//! killed mid-run: its β goes to the others, it comes back when it recovers, and the fused
+//! error stays within the source's targets (position < 10 m, speed < 1 km/h).
+
+mod common;
+
+use common::*;
+use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::messages::FusedDiagnostics;
+
+const START_NS: u64 = 1_780_300_800 * 1_000_000_000;
+
+/// (time s, β per device, fault per device) of every diagnostics message of `pipeline`.
+fn sharing(path: &std::path::Path, pipeline: &str) -> Vec<(f64, Vec<(String, f64, Option<String>)>)> {
+    let topic = format!("/fused/{pipeline}/diagnostics");
+    let mut out = Vec::new();
+    let mut r = LogReader::open(path).unwrap();
+    while let Some(rec) = r.next() {
+        let LogRecord::Message(m) = rec.unwrap() else { continue };
+        if m.channel.topic != topic {
+            continue;
+        }
+        let d: FusedDiagnostics = m.decode(path).unwrap();
+        if let Some(sh) = d.sharing {
+            out.push(((d.stamp_ns - START_NS) as f64 / 1e9, sh.into_iter().map(|s| (s.device, s.beta, s.fault)).collect()));
+        }
+    }
+    out
+}
+
+#[test]
+fn a_killed_device_gives_its_share_to_the_others_and_the_error_stays_within_the_source_targets() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
+    ok(&["simulate", "--scenario", "seed001", "--seed", "4", "--fault", "radar:dropout:200:300", "-o", s(&raw)]);
+    let out = ok(&["refuse", s(&raw), "-c", s(&sample("seed001.toml")), "-o", s(&fused), "--json"]);
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+
+    let rows = sharing(&fused, "fkf");
+    assert!(rows.len() > 10_000, "{} diagnostics with sharing", rows.len());
+    let radar = |row: &Vec<(String, f64, Option<String>)>| row.iter().find(|(n, _, _)| n == "radar").cloned().unwrap();
+    for (t, row) in &rows {
+        let sum: f64 = row.iter().map(|(_, b, _)| b).sum();
+        assert!((sum - 1.0).abs() < 1e-9, "at {t:.2} s β sums to {sum}: {row:?}");
+        let (_, beta, fault) = radar(row);
+        if (202.0..299.0).contains(t) {
+            assert_eq!((beta, fault.as_deref()), (0.0, Some("timeout")), "at {t:.2} s the dead radar still has a share");
+        }
+        if (20.0..199.0).contains(t) || (305.0..480.0).contains(t) {
+            assert!(beta > 0.0 && fault.is_none(), "at {t:.2} s the working radar is out: {row:?}");
+        }
+    }
+    // While the radar is dead its share goes to the INS and GNSS in proportion to their own
+    // (redistribution = "accuracy"): at cruise (> 150 km/h) 0.4/0.4/0.2 becomes 0.5/0.5/0.
+    let (_, row) = rows.iter().find(|(t, _)| *t > 250.0).unwrap();
+    assert!(row.iter().filter(|(n, _, _)| n != "radar").all(|(_, b, _)| (b - 0.5).abs() < 1e-9), "{row:?}");
+
+    let fkf = r["eval"]["pipelines"].as_array().unwrap().iter().find(|p| p["name"] == "fkf").unwrap();
+    let pos = fkf["position_error_m"]["max_abs"].as_f64().unwrap();
+    let speed = fkf["speed_error_mps"]["max_abs"].as_f64().unwrap();
+    assert!(pos < 10.0 && speed < 1.0 / 3.6, "fkf with the radar dead 100 s: max position error {pos} m, speed {speed} m/s");
+    // Output refresh ≥ 50 Hz over the 500 s run.
+    assert!(fkf["states"].as_u64().unwrap() >= 50 * 495, "{fkf}");
+    let window = fkf["windows"].as_array().unwrap().iter().find(|w| w["label"] == "fault radar: dropout").expect("the fault window is evaluated");
+    assert!(window["position_error_m"]["samples"].as_u64().unwrap() >= 4900, "{window}");
+}
+
+#[test]
+fn a_biased_ins_is_caught_and_kept_out_until_it_agrees_again() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
+    ok(&["simulate", "--scenario", "seed001", "--seed", "2", "--fault", "imu:bias=0.5:200:300", "-o", s(&raw)]);
+    let out = ok(&["refuse", s(&raw), "-c", s(&sample("seed001.toml")), "-o", s(&fused), "--json"]);
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = sharing(&fused, "fkf");
+    let ins_out = |t0: f64, t1: f64| rows.iter().filter(|(t, _)| (t0..t1).contains(t)).all(|(_, row)| row[0].1 == 0.0 && row[0].2.is_some());
+    assert!(ins_out(201.0, 299.0), "the biased INS kept a share");
+    assert!(rows.iter().any(|(t, row)| *t > 300.0 && *t < 320.0 && row[0].1 > 0.0), "the INS never came back");
+    let pos = |name: &str| {
+        let p = r["eval"]["pipelines"].as_array().unwrap().iter().find(|p| p["name"] == name).unwrap();
+        p["position_error_m"]["max_abs"].as_f64().unwrap()
+    };
+    // The centralised filter, which has no detector, is dragged hundreds of metres away.
+    assert!(pos("fkf") < 10.0 && pos("kf") > 100.0, "fkf {} m, kf {} m", pos("fkf"), pos("kf"));
+}
