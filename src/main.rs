@@ -30,6 +30,8 @@ enum Command {
     Viz(cmd::viz::Args),
     /// The whole path in one go: simulate, re-fuse, print accuracy, write a Rerun recording.
     Demo(cmd::demo::Args),
+    /// Re-run sources 000 and 001's experiments over several seeds and write the results table.
+    Results(cmd::results::Args),
     /// Measure simulate, write and refuse throughput and refuse's peak memory.
     Bench(cmd::bench::Args),
 }
@@ -50,6 +52,7 @@ fn main() -> ExitCode {
         Command::Eval(a) => cmd::eval::run(a),
         Command::Viz(a) => cmd::viz::run(a),
         Command::Demo(a) => cmd::demo::run(a),
+        Command::Results(a) => cmd::results::run(a),
         Command::Bench(a) => cmd::bench::run(a),
     };
     match result {

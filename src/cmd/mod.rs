@@ -3,8 +3,15 @@ pub mod demo;
 pub mod eval;
 pub mod info;
 pub mod refuse;
+pub mod results;
 pub mod simulate;
 pub mod viz;
 
 /// The pipeline configuration used when none is given: `samples/kalman.toml`.
 pub const DEFAULT_PIPELINES: &str = include_str!("../../samples/kalman.toml");
+
+/// Source 000's experiment: `samples/seed000.toml`.
+pub const SEED000_PIPELINES: &str = include_str!("../../samples/seed000.toml");
+
+/// Source 001's experiment: `samples/seed001.toml`.
+pub const SEED001_PIPELINES: &str = include_str!("../../samples/seed001.toml");

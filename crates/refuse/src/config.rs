@@ -119,18 +119,19 @@ impl MotionConfig {
 
 /// The filter starts at its first position measurement: chainage from it; speed from the
 /// latest valid speed measurement before it (else `speed_mps`, `speed_std_mps`); acceleration
-/// zero with `acceleration_std_mps2`.
+/// `acceleration_mps2` (default 0) with `acceleration_std_mps2`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InitialConfig {
     pub speed_mps: f64,
     pub speed_std_mps: f64,
+    pub acceleration_mps2: f64,
     pub acceleration_std_mps2: f64,
 }
 
 impl Default for InitialConfig {
     fn default() -> Self {
-        Self { speed_mps: 0.0, speed_std_mps: 5.0, acceleration_std_mps2: 1.0 }
+        Self { speed_mps: 0.0, speed_std_mps: 5.0, acceleration_mps2: 0.0, acceleration_std_mps2: 1.0 }
     }
 }
 
@@ -332,7 +333,7 @@ impl PipelineConfig {
             positive("output_rate_hz", r)?;
         }
         let init = &self.initial;
-        if !(init.speed_std_mps > 0.0 && init.acceleration_std_mps2 > 0.0 && init.speed_mps.is_finite()) {
+        if !(init.speed_std_mps > 0.0 && init.acceleration_std_mps2 > 0.0 && init.speed_mps.is_finite() && init.acceleration_mps2.is_finite()) {
             return Err("initial standard deviations must be positive".into());
         }
         if self.smoother && self.filter != FilterKind::Kalman {

@@ -166,7 +166,7 @@ impl<const N: usize> Pipeline<N> {
     fn initial(&self, chainage: f64, r: f64) -> StateAndCovariance<N> {
         let init = &self.config.initial;
         let (speed, speed_var) = self.speed_before_init.unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
-        let mean = [chainage, speed, 0.0];
+        let mean = [chainage, speed, init.acceleration_mps2];
         let var = [r, speed_var, init.acceleration_std_mps2.powi(2)];
         StateAndCovariance { state: SVector::from_fn(|i, _| mean[i]), covariance: SMatrix::from_fn(|i, j| if i == j { var[i] } else { 0.0 }) }
     }
