@@ -10,8 +10,11 @@ use railfuse_catalog::messages::FusedDiagnostics;
 
 const START_NS: u64 = 1_780_300_800 * 1_000_000_000;
 
-/// (time s, β per device, fault per device) of every diagnostics message of `pipeline`.
-fn sharing(path: &std::path::Path, pipeline: &str) -> Vec<(f64, Vec<(String, f64, Option<String>)>)> {
+/// β and fault of each device at one diagnostics message.
+type Shares = Vec<(String, f64, Option<String>)>;
+
+/// (time s, β and fault per device) of every diagnostics message of `pipeline`.
+fn sharing(path: &std::path::Path, pipeline: &str) -> Vec<(f64, Shares)> {
     let topic = format!("/fused/{pipeline}/diagnostics");
     let mut out = Vec::new();
     let mut r = LogReader::open(path).unwrap();
@@ -38,7 +41,7 @@ fn a_killed_device_gives_its_share_to_the_others_and_the_error_stays_within_the_
 
     let rows = sharing(&fused, "fkf");
     assert!(rows.len() > 10_000, "{} diagnostics with sharing", rows.len());
-    let radar = |row: &Vec<(String, f64, Option<String>)>| row.iter().find(|(n, _, _)| n == "radar").cloned().unwrap();
+    let radar = |row: &Shares| row.iter().find(|(n, _, _)| n == "radar").cloned().unwrap();
     for (t, row) in &rows {
         let sum: f64 = row.iter().map(|(_, b, _)| b).sum();
         assert!((sum - 1.0).abs() < 1e-9, "at {t:.2} s β sums to {sum}: {row:?}");

@@ -64,6 +64,9 @@ pub fn refuse_with(input: &Path, output: &Path, config: &PipelinesConfig, source
         report.fused_messages,
         output.display()
     );
+    if let Some(first) = &report.first_undecodable {
+        eprintln!("warning: {} sensor messages did not decode and were skipped; the first: {first}", report.undecodable_messages);
+    }
     if report.out_of_order_messages > 0 {
         eprintln!("note: {} messages are earlier in log time than the one before them in the file", report.out_of_order_messages);
     }

@@ -163,7 +163,10 @@ pub fn run(a: Args) -> Result<()> {
     writeln!(md, "## Source 001 — federated Kalman filter, INS + BeiDou + Doppler radar\n")?;
     writeln!(md, "500 s maglev run to 432 km/h and back, master fusion every 1 s, β by speed band (the source's table).")?;
     writeln!(md, "The source's targets: output ≥ 50 Hz, position error < 10 m, speed error < 1 km/h (0.278 m/s).\n")?;
-    writeln!(md, "| case | pipeline | output Hz (min) | max \\|position error\\| (m) | pos RMSE (m) | max \\|speed error\\| (km/h) | speed RMSE (km/h) | verdict |")?;
+    writeln!(
+        md,
+        "| case | pipeline | output Hz (min) | max \\|position error\\| (m) | pos RMSE (m) | max \\|speed error\\| (km/h) | speed RMSE (km/h) | verdict |"
+    )?;
     writeln!(md, "|---|---|---|---|---|---|---|---|")?;
     for ((tag, _), envs) in cases.iter().zip(&env001) {
         for (name, e) in names001.iter().zip(envs) {

@@ -152,7 +152,7 @@ impl Consistency {
 pub fn nees(state: &FusedState, position_error: f64, speed_error: f64) -> f64 {
     let (pss, psv, pvv) = (state.covariance[0], state.covariance[1], state.covariance[4]);
     let det = pss * pvv - psv * psv;
-    if !(det > 0.0) {
+    if det.is_nan() || det <= 0.0 {
         return f64::NAN;
     }
     (pvv * position_error * position_error - 2.0 * psv * position_error * speed_error + pss * speed_error * speed_error) / det

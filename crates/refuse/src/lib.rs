@@ -3,11 +3,13 @@
 //! reference.
 //!
 //! Layout:
-//! - [`model`]: motion (transition) models, e.g. constant acceleration with white jerk;
-//! - [`filter`]: the estimators (Kalman filter, Joseph form);
+//! - [`model`]: motion (transition) models: constant velocity, constant acceleration, Singer;
+//! - [`filter`]: the estimators: Kalman filter (Joseph form) and RTS smoother, particle
+//!   filter, federated filters with information-sharing coefficients β and a working-state
+//!   detector per device;
 //! - [`measurement`]: sensor models, how each channel's messages become measurements;
 //! - [`config`]: the pipeline TOML;
-//! - [`pipeline`]: one configured filter fed in sensor-time order;
+//! - [`pipeline`]: one configured estimator fed in sensor-time order;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
 //! - [`replay`]: the `refuse` run, streaming input to output.

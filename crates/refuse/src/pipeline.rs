@@ -229,8 +229,8 @@ impl<const N: usize> Pipeline<N> {
         let mut diagnostics = FusedDiagnostics {
             stamp_ns: m.stamp_ns,
             source: sensor.topic.clone(),
-            measurement: m.value,
-            measurement_variance: variance.unwrap_or(0.0),
+            measurement: m.value.is_finite().then_some(m.value),
+            measurement_variance: variance.filter(|v| v.is_finite()),
             innovation: None,
             innovation_variance: None,
             nis: None,
@@ -463,6 +463,10 @@ mod tests {
             if let Some(s) = &f.state {
                 assert!(s.chainage_m.is_finite() && s.covariance.iter().all(|c| c.is_finite()));
             }
+            // Every output survives JSON (which has no NaN) both ways.
+            let d = f.diagnostics.as_ref().unwrap();
+            let back: FusedDiagnostics = serde_json::from_str(&serde_json::to_string(d).unwrap()).unwrap();
+            assert_eq!(back.decision, d.decision);
         }
     }
 }

@@ -44,6 +44,10 @@ pub struct RefuseReport {
     pub fused_messages: u64,
     /// Messages whose log time is earlier than the one before them in the file.
     pub out_of_order_messages: u64,
+    /// Sensor messages the pipelines read that did not decode: skipped (copied unchanged).
+    pub undecodable_messages: u64,
+    /// The first of them, with the reason.
+    pub first_undecodable: Option<String>,
     pub pipelines: Vec<PipelineReport>,
 }
 
@@ -126,6 +130,8 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
         input_bytes: 0,
         fused_messages: 0,
         out_of_order_messages: 0,
+        undecodable_messages: 0,
+        first_undecodable: None,
         pipelines: Vec::new(),
     };
     let mut last_log_time = 0u64;
@@ -183,7 +189,13 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                     None => {}
                 }
                 if let Some(model) = route.model {
-                    model.decode(&m, input, &context, &mut measurements)?;
+                    // A sensor message that does not decode (a null where a number belongs) is
+                    // skipped and counted: one bad message must not cost the whole replay.
+                    if let Err(e) = model.decode(&m, input, &context, &mut measurements) {
+                        report.undecodable_messages += 1;
+                        report.first_undecodable.get_or_insert_with(|| e.to_string());
+                        continue;
+                    }
                     for &(pi, si) in &route.sensors {
                         pipelines[pi].push(si, &measurements, m.log_time_ns, &mut fused_buf);
                         emit(&mut writer, &mut outputs[pi], &mut fused_buf, &mut report.fused_messages)?;

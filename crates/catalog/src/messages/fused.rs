@@ -47,8 +47,12 @@ pub struct FusedDiagnostics {
     pub stamp_ns: u64,
     /// Topic of the measurement.
     pub source: String,
-    pub measurement: f64,
-    pub measurement_variance: f64,
+    /// The measured value; absent when it was not a finite number (JSON has no NaN).
+    #[serde(default)]
+    pub measurement: Option<f64>,
+    /// The variance R used for it; absent when there was none usable.
+    #[serde(default)]
+    pub measurement_variance: Option<f64>,
     /// z − H x⁻ (absent when the measurement never reached the update).
     #[serde(default)]
     pub innovation: Option<f64>,

@@ -398,11 +398,7 @@ mod tests {
     use nalgebra::{Matrix3, RowVector3, Vector3};
 
     fn settings(feedback: Feedback) -> FederatedSettings {
-        let mut detector = DetectorSettings::default();
-        detector.timeout_s = 1e9;
-        detector.stuck_messages = u32::MAX;
-        detector.gate_failures = u32::MAX;
-        detector.consistency_chi2 = 0.0;
+        let detector = DetectorSettings { timeout_s: 1e9, stuck_messages: u32::MAX, gate_failures: u32::MAX, consistency_chi2: 0.0, ..Default::default() };
         FederatedSettings { feedback, fusion_period_ns: 0, sharing: SharingTable::source_001(), redistribution: Redistribution::Even, detector }
     }
 
