@@ -37,3 +37,8 @@ pub fn chainage_error(pipeline: &str) -> String {
 pub fn speed_error(pipeline: &str) -> String {
     format!("speed_error/{pipeline}")
 }
+
+/// A federated pipeline's information-sharing coefficients β, one series per device.
+pub fn sharing(pipeline: &str) -> String {
+    format!("sharing/{pipeline}")
+}

@@ -62,6 +62,8 @@ struct Logger<'a> {
     map: Option<TrackMap>,
     truth: ReferenceTrack,
     pipelines: Vec<String>,
+    /// The last β per federated pipeline, to log the weights only when they change.
+    shares: std::collections::HashMap<String, Vec<f64>>,
     report: VizReport,
 }
 
@@ -90,7 +92,8 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
     // Our `log_time` timeline is the MCAP log time; the SDK's own wall-clock `log_time` would
     // overwrite it.
     rec.set_log_time_enabled(false);
-    let mut logger = Logger { rec, path, map: None, truth: ReferenceTrack::new(10.0), pipelines: Vec::new(), report: VizReport::default() };
+    let mut logger =
+        Logger { rec, path, map: None, truth: ReferenceTrack::new(10.0), pipelines: Vec::new(), shares: Default::default(), report: VizReport::default() };
     while let Some(record) = reader.next() {
         if let LogRecord::Message(m) = record? {
             logger.report.messages += 1;
@@ -209,11 +212,36 @@ impl Logger<'_> {
                 let Some(pipeline) = topics::fused_pipeline_of(topic) else {
                     return Ok(());
                 };
+                // A pipeline's RTS-smoothed states are a series of their own.
+                let series = if topic.ends_with("/smoothed") { format!("{pipeline}/smoothed") } else { pipeline.to_owned() };
                 let f: FusedState = m.decode(path)?;
                 // Fused states are released after the reorder window: plot them at the
                 // instant they describe, so they line up with the truth.
                 self.rec.set_timestamp_nanos_since_epoch("log_time", f.stamp_ns as i64);
-                self.fused(pipeline, &f)?;
+                self.fused(&series, &f)?;
+            }
+            n if n == FusedDiagnostics::SCHEMA_NAME => {
+                let Some(pipeline) = topics::fused_pipeline_of(topic) else {
+                    return Ok(());
+                };
+                let d: FusedDiagnostics = m.decode(path)?;
+                let Some(sharing) = d.sharing else { return Ok(()) };
+                let beta: Vec<f64> = sharing.iter().map(|s| s.beta).collect();
+                if self.shares.get(pipeline) == Some(&beta) {
+                    return Ok(());
+                }
+                let entity = ent::sharing(pipeline);
+                if !self.shares.contains_key(pipeline) {
+                    let names: Vec<String> = sharing.iter().map(|s| format!("β {}", s.device)).collect();
+                    let colors: Vec<Color> = (0..names.len()).map(pipeline_color).collect();
+                    self.log_static(&entity, &SeriesLines::new().with_names(names).with_colors(colors))?;
+                }
+                self.rec.set_timestamp_nanos_since_epoch("log_time", d.stamp_ns as i64);
+                self.log(&entity, &Scalars::new(beta.clone()))?;
+                for s in sharing.iter().filter(|s| s.fault.is_some()) {
+                    self.log(ent::EVENTS, &TextLog::new(format!("{pipeline}: {} out ({})", s.device, s.fault.as_deref().unwrap_or_default())))?;
+                }
+                self.shares.insert(pipeline.to_owned(), beta);
             }
             _ => {}
         }
