@@ -86,3 +86,17 @@ fn a_biased_ins_is_caught_and_kept_out_until_it_agrees_again() {
     // The centralised filter, which has no detector, is dragged hundreds of metres away.
     assert!(pos("fkf") < 10.0 && pos("kf") > 100.0, "fkf {} m, kf {} m", pos("fkf"), pos("kf"));
 }
+
+#[test]
+fn a_device_that_reports_its_own_fault_is_taken_out_and_back_by_its_events() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
+    // A 0.05 m/s radar bias is below what the gates see; only the radar's own report says so.
+    ok(&["simulate", "--scenario", "seed001", "--seed", "5", "--fault", "radar:bias=0.05:150:250:reported", "-o", s(&raw)]);
+    ok(&["refuse", s(&raw), "-c", s(&sample("seed001.toml")), "-o", s(&fused)]);
+    let rows = sharing(&fused, "fkf");
+    let radar_fault =
+        |t0: f64, t1: f64| rows.iter().filter(|(t, _)| (t0..t1).contains(t)).map(|(_, row)| row[2].2.clone()).collect::<std::collections::BTreeSet<_>>();
+    assert_eq!(radar_fault(151.0, 249.0), [Some("reported".to_owned())].into(), "the radar's report was not honoured");
+    assert_eq!(radar_fault(270.0, 480.0), [None].into(), "the radar did not come back after its recovery report");
+}

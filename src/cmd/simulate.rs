@@ -19,8 +19,9 @@ pub struct Args {
     pub duration: Option<f64>,
     /// Make a device fail for a window: DEVICE:MODE:START:END with DEVICE one of gnss, imu,
     /// radar, odometer1, odometer2, loop, balise; MODE dropout, stuck or bias=VALUE (SI units);
-    /// START and END in seconds from the start. Repeatable.
-    #[arg(long = "fault", value_name = "DEVICE:MODE:START:END")]
+    /// START and END in seconds from the start; `:reported` adds the device's own fault and
+    /// recovery events. Repeatable.
+    #[arg(long = "fault", value_name = "DEVICE:MODE:START:END[:reported]")]
     pub faults: Vec<FaultSpec>,
     /// Output MCAP file.
     #[arg(short, long)]

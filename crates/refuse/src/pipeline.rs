@@ -146,7 +146,9 @@ impl<const N: usize> Pipeline<N> {
         }
     }
 
-    pub fn device_event(&mut self, device: &str, failed: bool) {
+    /// A device's own fault report; `name` is its device name or one of its topics.
+    pub fn device_event(&mut self, name: &str, failed: bool) {
+        let device = self.config.sensor.iter().find(|s| s.topic == name).map_or(name, |s| s.device_name());
         if let Some(e) = &mut self.estimator {
             e.device_event(device, failed);
         }

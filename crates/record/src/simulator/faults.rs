@@ -5,8 +5,10 @@
 //! loop position). The log gets `fault_injected` / `fault_cleared` events at the window's
 //! edges: markers for evaluation, not signals for the filters.
 //!
-//! Written on the command line as `DEVICE:MODE:START:END` (seconds from the start of the run),
-//! e.g. `radar:dropout:200:260`, `gnss:bias=30:150:250`, `imu:stuck:100:160`.
+//! Written on the command line as `DEVICE:MODE:START:END[:reported]` (seconds from the start of
+//! the run), e.g. `radar:dropout:200:260`, `gnss:bias=30:150:250`, `imu:stuck:100:160`. With
+//! `:reported` the device also says so itself: `device_fault` / `device_recovered` events
+//! naming its topic, which federated detectors honour.
 
 use railfuse_catalog::messages::{Event, EventKind};
 use serde::{Deserialize, Serialize};
@@ -28,6 +30,9 @@ pub struct FaultSpec {
     pub mode: FaultMode,
     pub start_s: f64,
     pub end_s: f64,
+    /// The device reports its fault and recovery in the log.
+    #[serde(default)]
+    pub reported: bool,
 }
 
 pub const DEVICES: &[&str] = &["gnss", "imu", "radar", "odometer1", "odometer2", "loop", "balise"];
@@ -37,8 +42,10 @@ impl std::str::FromStr for FaultSpec {
 
     fn from_str(s: &str) -> Result<Self, String> {
         let parts: Vec<&str> = s.split(':').collect();
-        let [device, mode, start, end] = parts[..] else {
-            return Err(format!("'{s}': a fault is DEVICE:MODE:START:END, e.g. radar:dropout:200:260"));
+        let (device, mode, start, end, reported) = match parts[..] {
+            [d, m, a, b] => (d, m, a, b, false),
+            [d, m, a, b, "reported"] => (d, m, a, b, true),
+            _ => return Err(format!("'{s}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260")),
         };
         if !DEVICES.contains(&device) {
             return Err(format!("'{s}': unknown device '{device}' (devices: {})", DEVICES.join(", ")));
@@ -58,7 +65,21 @@ impl std::str::FromStr for FaultSpec {
         if end_s <= start_s {
             return Err(format!("'{s}': the window ends before it starts"));
         }
-        Ok(FaultSpec { device: device.to_owned(), mode, start_s, end_s })
+        Ok(FaultSpec { device: device.to_owned(), mode, start_s, end_s, reported })
+    }
+}
+
+/// The topic a device publishes on (what its own fault reports name).
+fn topic_of(device: &str) -> &'static str {
+    use railfuse_catalog::topics;
+    match device {
+        "gnss" => topics::GNSS_FIX,
+        "imu" => topics::IMU,
+        "radar" => topics::RADAR_SPEED,
+        "odometer1" => topics::ODOMETER_1,
+        "odometer2" => topics::ODOMETER_2,
+        "loop" => topics::LOOP_POSITION,
+        _ => topics::BALISE,
     }
 }
 
@@ -115,10 +136,16 @@ impl FaultInjector {
             if !f.started && log_time_ns >= f.start_ns {
                 f.started = true;
                 events.push(Event { stamp_ns: f.start_ns, kind: EventKind::FaultInjected, text: text("starts") });
+                if f.spec.reported {
+                    events.push(Event { stamp_ns: f.start_ns, kind: EventKind::DeviceFault, text: topic_of(&f.spec.device).to_owned() });
+                }
             }
             if f.started && !f.cleared && log_time_ns >= f.end_ns {
                 f.cleared = true;
                 events.push(Event { stamp_ns: f.end_ns, kind: EventKind::FaultCleared, text: text("ends") });
+                if f.spec.reported {
+                    events.push(Event { stamp_ns: f.end_ns, kind: EventKind::DeviceRecovered, text: topic_of(&f.spec.device).to_owned() });
+                }
             }
         }
         let Some(device) = device_of(&emit) else { return Some(emit) };
@@ -216,6 +243,7 @@ mod tests {
         assert!("radar:melt:1:2".parse::<FaultSpec>().unwrap_err().contains("unknown mode"));
         assert!("warp:dropout:1:2".parse::<FaultSpec>().unwrap_err().contains("unknown device"));
         assert!("radar:dropout:5:2".parse::<FaultSpec>().unwrap_err().contains("ends before"));
+        assert!("radar:stuck:1:2:reported".parse::<FaultSpec>().unwrap().reported);
     }
 
     #[test]
@@ -226,7 +254,7 @@ mod tests {
             (FaultMode::Stuck, vec![Some(1.0), Some(1.0), Some(1.0), Some(4.0)]),
             (FaultMode::Bias(0.5), vec![Some(1.0), Some(2.5), Some(3.5), Some(4.0)]),
         ] {
-            let mut inj = FaultInjector::new(&[FaultSpec { device: "radar".into(), mode, start_s: 2.0, end_s: 4.0 }], 0);
+            let mut inj = FaultInjector::new(&[FaultSpec { device: "radar".into(), mode, start_s: 2.0, end_s: 4.0, reported: false }], 0);
             let mut events = Vec::new();
             let got: Vec<Option<f64>> = (1..=4)
                 .map(|k| match inj.apply(k * sec, radar(k * sec, k as f64), &mut events) {
