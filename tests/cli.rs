@@ -146,6 +146,14 @@ fn the_samples_refuse_as_the_readme_says() {
     let r = ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&out)]);
     let table = String::from_utf8(r.stdout).unwrap();
     assert!(table.contains("pos RMSE m") && table.contains("kalman"), "{table}");
+    // The motion models and the particle filter side by side, each under a metre.
+    let r = ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("models.toml")), "-o", s(&out), "--json"]);
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
+    let names: Vec<&str> = v["eval"]["pipelines"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["cv", "ca", "singer", "pf"]);
+    for p in v["eval"]["pipelines"].as_array().unwrap() {
+        assert!(p["position_error_m"]["rmse"].as_f64().unwrap() < 1.0, "{p}");
+    }
 }
 
 #[test]
