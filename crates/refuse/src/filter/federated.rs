@@ -451,6 +451,7 @@ mod tests {
                 worst = worst.max((x - y).abs() / x.abs().max(1.0));
             }
         }
+        eprintln!("federated (fusion-reset) vs centralised: worst relative difference {worst:e}");
         assert!(worst < 1e-6, "federated (fusion-reset) differs from centralised by {worst}");
     }
 
@@ -462,6 +463,7 @@ mod tests {
         let f = run(&mut federated(Feedback::NoReset));
         let gap = c.iter().zip(&f).map(|(a, b)| (a.state[0] - b.state[0]).abs()).fold(0.0, f64::max);
         // It double-counts the common prior and process noise: a visible, not a rounding, gap.
+        eprintln!("federated (no reset) vs centralised: largest chainage gap {gap:.4} m");
         assert!(gap > 1e-3, "no-reset gap {gap}");
         let pc = c.last().unwrap().covariance[(0, 0)];
         let pf = f.last().unwrap().covariance[(0, 0)];
