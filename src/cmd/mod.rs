@@ -2,6 +2,7 @@ pub mod bench;
 pub mod demo;
 pub mod eval;
 pub mod info;
+pub mod recover;
 pub mod refuse;
 pub mod results;
 pub mod simulate;

@@ -6,9 +6,11 @@
 //! complete.
 
 mod reader;
+mod recover;
 mod writer;
 
 pub use reader::{read_channels, ChannelInfo, LogMessage, LogReader, LogRecord, SchemaInfo};
+pub use recover::{recover, RecoverReport};
 pub use writer::{ChannelId, LogWriter, WriterOptions};
 
 /// MCAP profile name railfuse writes (no ROS semantics: plain JSON channels).
