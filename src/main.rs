@@ -24,6 +24,8 @@ enum Command {
     Info(cmd::info::Args),
     /// Replay a log through the pipelines of a config file and write the fused log.
     Refuse(cmd::refuse::Args),
+    /// Convert an existing log (the ETH-PBL railway dataset) into railfuse channels.
+    Import(cmd::import::Args),
     /// Salvage every intact record of a damaged log (crash, power cut) into a complete log.
     Recover(cmd::recover::Args),
     /// Accuracy of a fused log's pipelines against a reference, whole run and marked windows.
@@ -53,6 +55,7 @@ fn main() -> ExitCode {
         Command::Refuse(a) => cmd::refuse::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Recover(a) => cmd::recover::run(a),
+        Command::Import(a) => cmd::import::run(a),
         Command::Viz(a) => cmd::viz::run(a),
         Command::Demo(a) => cmd::demo::run(a),
         Command::Results(a) => cmd::results::run(a),

@@ -245,3 +245,57 @@ fn eval_scores_against_truth_another_pipeline_or_a_gnss_receiver() {
     let table = String::from_utf8(ok(&["eval", s(&fused)]).stdout).unwrap();
     assert!(table.contains("NEES in 95%") && table.contains("in no RTK corrections"), "{table}");
 }
+
+/// The three real ETH-PBL samples import; their NAV-PVT values are those SOURCE.md decodes,
+/// a NAV-PVT without a fix arrives as a fix that says so (no position), and the IMU is in SI
+/// units (a node lying on the cab floor of a standing train feels 1 g up).
+#[test]
+fn the_eth_railway_samples_import_with_the_documented_values() {
+    use railfuse_catalog::log::{LogReader, LogRecord};
+    use railfuse_catalog::messages::{FixType, GnssFix, Imu};
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/eth-pbl-railway");
+    let d = tempfile::tempdir().unwrap();
+    let read = |name: &str| -> (Vec<GnssFix>, Vec<Imu>, serde_json::Value) {
+        let out = d.path().join(format!("{name}.mcap"));
+        let report = ok(&["import", s(&data.join(format!("{name}.csv"))), "-o", s(&out), "--json"]);
+        let report: serde_json::Value = serde_json::from_slice(&report.stdout).unwrap();
+        let (mut fixes, mut imu) = (Vec::new(), Vec::new());
+        let mut r = LogReader::open(&out).unwrap();
+        while let Some(rec) = r.next() {
+            if let LogRecord::Message(m) = rec.unwrap() {
+                match m.channel.topic.as_str() {
+                    "/gnss/fix" => fixes.push(m.decode(&out).unwrap()),
+                    "/imu" => imu.push(m.decode(&out).unwrap()),
+                    _ => {}
+                }
+            }
+        }
+        (fixes, imu, report)
+    };
+    let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 5e-8);
+
+    let (fixes, imu, report) = read("20221020_1030_R90117_Modena_SN1_sample");
+    assert_eq!(fixes.len(), 2, "{report}");
+    for f in &fixes {
+        assert_eq!((f.fix_type, f.satellites, f.latitude_deg, f.longitude_deg), (FixType::None, 0, None, None));
+    }
+    assert_eq!(imu.len(), 1997);
+    let (fixes, _, report) = read("20221020_1030_R90117_Modena_SN2_sample");
+    assert_eq!(fixes.len(), 1, "{report}");
+    assert!(fixes[0].fix_type.has_position() && fixes[0].satellites == 29);
+    assert!(close(fixes[0].latitude_deg, 44.6551106) && close(fixes[0].longitude_deg, 10.9297304), "{:?}", fixes[0]);
+    let h = fixes[0].position_covariance_enu_m2.unwrap();
+    assert!((h[0] + h[4]).sqrt() < 1.5, "NAV-COV horizontal σ {h:?}");
+    assert_eq!(report["skipped"]["NMEA sentence type not used (GSV, GLL, …)"], 4);
+    let (fixes, imu, _) = read("20221019_1252_R90120_Formigine_SN1_sample");
+    assert!(fixes[0].satellites == 28 && close(fixes[0].latitude_deg, 44.5775211) && close(fixes[0].longitude_deg, 10.8457549), "{:?}", fixes[0]);
+    // UTC from the receiver: 2022-10-19, the run's date.
+    assert_eq!(fixes[0].stamp_ns / 86_400_000_000_000, 19_284);
+    let g = imu.iter().map(|m| m.specific_force_mps2[2]).sum::<f64>() / imu.len() as f64;
+    assert!((g - 9.81).abs() < 0.3, "mean z specific force {g} m/s²");
+    let rate = imu.iter().map(|m| m.angular_rate_radps[2].abs()).fold(0.0, f64::max);
+    assert!(rate < 0.1, "a standing train does not turn: {rate} rad/s");
+    // IMU about 1.6 kHz on the node clock.
+    let span = (imu.last().unwrap().stamp_ns - imu[0].stamp_ns) as f64 / 1e9;
+    assert!((1300.0..2000.0).contains(&(imu.len() as f64 / span)), "{} Hz", imu.len() as f64 / span);
+}

@@ -1,6 +1,7 @@
 pub mod bench;
 pub mod demo;
 pub mod eval;
+pub mod import;
 pub mod info;
 pub mod recover;
 pub mod refuse;

@@ -7,6 +7,8 @@
 //!
 //! This crate knows nothing of filters or Rerun: it depends only on the channel catalogue.
 
+pub mod decode;
+pub mod import;
 pub mod simulator;
 
 pub use simulator::{simulate, Scenario, SimulationReport};

@@ -1,0 +1,231 @@
+//! NMEA 0183 sentences: `$<talker><type>,<fields>*<hh>` with the XOR checksum of everything
+//! between `$` and `*`. GGA, RMC, VTG, GSA and GST are decoded and assembled into fixes: one
+//! fix per GGA, with the date, speed and course of the latest RMC/VTG and the covariance of
+//! the latest GST. Other sentence types are recognised and skipped.
+
+use railfuse_catalog::messages::{FixType, GnssFix};
+
+use super::time::unix_ns;
+
+/// Longest sentence accepted (the standard says 82 characters; receivers exceed it a little).
+pub const MAX_SENTENCE: usize = 256;
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum NmeaError {
+    NotASentence,
+    TooLong(usize),
+    Checksum { expected: u8, found: u8 },
+    BadField { sentence: String, field: usize },
+}
+
+impl std::fmt::Display for NmeaError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            NmeaError::NotASentence => write!(f, "not an NMEA sentence ($…*hh)"),
+            NmeaError::TooLong(n) => write!(f, "NMEA sentence of {n} bytes exceeds the {MAX_SENTENCE}-byte limit"),
+            NmeaError::Checksum { expected, found } => write!(f, "NMEA checksum {found:02X} where the sentence gives {expected:02X}"),
+            NmeaError::BadField { sentence, field } => write!(f, "NMEA {sentence}: field {field} does not parse"),
+        }
+    }
+}
+
+/// A checked sentence: its type (without talker) and fields.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sentence<'a> {
+    pub talker: &'a str,
+    pub kind: &'a str,
+    pub fields: Vec<&'a str>,
+}
+
+pub fn parse(line: &str) -> Result<Sentence<'_>, NmeaError> {
+    let line = line.trim_end_matches(['\r', '\n']);
+    if line.len() > MAX_SENTENCE {
+        return Err(NmeaError::TooLong(line.len()));
+    }
+    let body = line.strip_prefix('$').ok_or(NmeaError::NotASentence)?;
+    let (data, hex) = body.rsplit_once('*').ok_or(NmeaError::NotASentence)?;
+    let expected = u8::from_str_radix(hex, 16).map_err(|_| NmeaError::NotASentence)?;
+    let found = data.bytes().fold(0u8, |a, b| a ^ b);
+    if expected != found {
+        return Err(NmeaError::Checksum { expected, found });
+    }
+    let mut fields = data.split(',');
+    let head = fields.next().unwrap_or_default();
+    if head.len() < 5 || !head.is_ascii() {
+        return Err(NmeaError::NotASentence);
+    }
+    let (talker, kind) = head.split_at(head.len() - 3);
+    Ok(Sentence { talker, kind, fields: fields.collect() })
+}
+
+/// What a sentence did to the assembler.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Decoded {
+    /// A fix (from GGA); `stamp_ns` is None while no RMC has given the date.
+    Fix(GnssFix),
+    /// Used to complete the next fix (RMC, VTG, GSA, GST).
+    Context,
+    /// A sentence type railfuse does not use (GSV, GLL, TXT, …).
+    Skipped,
+}
+
+/// Assembles fixes from a stream of sentences of one receiver.
+#[derive(Debug, Default, Clone)]
+pub struct FixAssembler {
+    date: Option<(i64, u32, u32)>,
+    speed_mps: Option<f64>,
+    course_rad: Option<f64>,
+    /// (σ lat, σ lon, σ alt) in metres from GST.
+    sigmas: Option<(f64, f64, f64)>,
+    no_fix_mode: bool,
+}
+
+fn num(s: &Sentence<'_>, i: usize) -> Result<Option<f64>, NmeaError> {
+    match s.fields.get(i).copied().unwrap_or("") {
+        "" => Ok(None),
+        t => t.parse::<f64>().map(Some).map_err(|_| NmeaError::BadField { sentence: s.kind.to_owned(), field: i + 1 }),
+    }
+}
+
+/// `ddmm.mmmm` + hemisphere → signed degrees.
+fn angle(s: &Sentence<'_>, i: usize, deg_digits: usize) -> Result<Option<f64>, NmeaError> {
+    let (v, hemi) = (s.fields.get(i).copied().unwrap_or(""), s.fields.get(i + 1).copied().unwrap_or(""));
+    if v.is_empty() {
+        return Ok(None);
+    }
+    let bad = || NmeaError::BadField { sentence: s.kind.to_owned(), field: i + 1 };
+    if v.len() < deg_digits + 2 {
+        return Err(bad());
+    }
+    let d: f64 = v[..deg_digits].parse().map_err(|_| bad())?;
+    let m: f64 = v[deg_digits..].parse().map_err(|_| bad())?;
+    let x = d + m / 60.0;
+    Ok(Some(if matches!(hemi, "S" | "W") { -x } else { x }))
+}
+
+/// `hhmmss.ss` → (h, m, s, ns).
+fn time_of_day(s: &Sentence<'_>, i: usize) -> Result<Option<(u32, u32, u32, i64)>, NmeaError> {
+    let t = s.fields.get(i).copied().unwrap_or("");
+    if t.is_empty() {
+        return Ok(None);
+    }
+    let bad = || NmeaError::BadField { sentence: s.kind.to_owned(), field: i + 1 };
+    if t.len() < 6 {
+        return Err(bad());
+    }
+    let h = t[..2].parse().map_err(|_| bad())?;
+    let m = t[2..4].parse().map_err(|_| bad())?;
+    let sec: f64 = t[4..].parse().map_err(|_| bad())?;
+    Ok(Some((h, m, sec.trunc() as u32, (sec.fract() * 1e9).round() as i64)))
+}
+
+impl FixAssembler {
+    pub fn feed(&mut self, s: &Sentence<'_>) -> Result<Decoded, NmeaError> {
+        match s.kind {
+            "GGA" => {
+                let tod = time_of_day(s, 0)?;
+                let (lat, lon) = (angle(s, 1, 2)?, angle(s, 3, 3)?);
+                let quality = num(s, 5)?.unwrap_or(0.0) as u8;
+                let fix_type = match quality {
+                    1 => FixType::Single,
+                    2 | 3 => FixType::Dgps,
+                    4 => FixType::RtkFixed,
+                    5 => FixType::RtkFloat,
+                    _ => FixType::None,
+                };
+                let fix_type = if self.no_fix_mode { FixType::None } else { fix_type };
+                let has = fix_type.has_position() && lat.is_some() && lon.is_some();
+                let altitude = match (num(s, 8)?, num(s, 10)?) {
+                    (Some(msl), sep) => Some(msl + sep.unwrap_or(0.0)),
+                    _ => None,
+                };
+                let stamp = match (self.date, tod) {
+                    (Some((y, mo, d)), Some((h, mi, se, ns))) => unix_ns(y, mo, d, h, mi, se, ns),
+                    _ => None,
+                };
+                Ok(Decoded::Fix(GnssFix {
+                    stamp_ns: stamp.unwrap_or(0),
+                    fix_type: if has { fix_type } else { FixType::None },
+                    satellites: num(s, 6)?.unwrap_or(0.0).clamp(0.0, 255.0) as u8,
+                    hdop: num(s, 7)?,
+                    latitude_deg: lat.filter(|_| has),
+                    longitude_deg: lon.filter(|_| has),
+                    altitude_m: altitude.filter(|_| has),
+                    position_covariance_enu_m2: self.sigmas.filter(|_| has).map(|(sn, se, su)| [se * se, 0.0, 0.0, 0.0, sn * sn, 0.0, 0.0, 0.0, su * su]),
+                    speed_mps: self.speed_mps.filter(|_| has),
+                    course_rad: self.course_rad.filter(|_| has),
+                }))
+            }
+            "RMC" => {
+                let date = s.fields.get(8).copied().unwrap_or("");
+                if date.len() == 6 {
+                    let p = |r: std::ops::Range<usize>| date[r].parse::<u32>().ok();
+                    if let (Some(d), Some(m), Some(y)) = (p(0..2), p(2..4), p(4..6)) {
+                        self.date = Some((2000 + y as i64, m, d));
+                    }
+                }
+                let valid = s.fields.get(1).copied() == Some("A");
+                self.speed_mps = num(s, 6)?.filter(|_| valid).map(|kn| kn * 1852.0 / 3600.0);
+                self.course_rad = num(s, 7)?.filter(|_| valid).map(f64::to_radians);
+                Ok(Decoded::Context)
+            }
+            "VTG" => {
+                if let Some(kmh) = num(s, 6)? {
+                    self.speed_mps = Some(kmh / 3.6);
+                }
+                if let Some(c) = num(s, 0)? {
+                    self.course_rad = Some(c.to_radians());
+                }
+                Ok(Decoded::Context)
+            }
+            "GSA" => {
+                self.no_fix_mode = num(s, 1)? == Some(1.0);
+                Ok(Decoded::Context)
+            }
+            "GST" => {
+                if let (Some(a), Some(b), Some(c)) = (num(s, 5)?, num(s, 6)?, num(s, 7)?) {
+                    self.sigmas = Some((a, b, c));
+                }
+                Ok(Decoded::Context)
+            }
+            _ => Ok(Decoded::Skipped),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fix_is_assembled_from_rmc_gst_and_gga() {
+        let mut a = FixAssembler::default();
+        for line in [
+            "$GNRMC,083559.00,A,4439.30664,N,01055.78382,E,0.074,,201022,,,R,V*0F",
+            "$GNGST,083559.00,0.45,0.020,0.015,77.4,0.018,0.017,0.031*45",
+        ] {
+            let s = parse(line).unwrap_or_else(|e| panic!("{line}: {e}"));
+            assert_eq!(a.feed(&s).unwrap(), Decoded::Context);
+        }
+        let gga = "$GNGGA,083559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*5B";
+        let Decoded::Fix(f) = a.feed(&parse(gga).unwrap()).unwrap() else { panic!() };
+        assert_eq!(f.fix_type, FixType::RtkFixed);
+        assert_eq!(f.stamp_ns, 1_666_254_959 * 1_000_000_000);
+        assert!((f.latitude_deg.unwrap() - 44.655110666).abs() < 1e-8);
+        assert!((f.longitude_deg.unwrap() - 10.929730333).abs() < 1e-8);
+        assert!((f.altitude_m.unwrap() - 79.3).abs() < 1e-9);
+        assert!((f.position_covariance_enu_m2.unwrap()[4] - 0.018f64.powi(2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_checksums_and_junk_are_errors_not_panics() {
+        assert!(matches!(parse("$GNGGA,1*00"), Err(NmeaError::Checksum { .. })));
+        assert_eq!(parse("hello"), Err(NmeaError::NotASentence));
+        assert_eq!(parse(&format!("${}*00", "A".repeat(300))), Err(NmeaError::TooLong(305)));
+        let s = parse("$GBGSV,2,1,07,06,25,044,42,09,38,057,44,12,49,295,46,16,19,038,37,B*04").unwrap();
+        assert_eq!((s.talker, s.kind), ("GB", "GSV"));
+        assert_eq!(FixAssembler::default().feed(&s).unwrap(), Decoded::Skipped);
+        let bad_field = parse("$GNGGA,08x559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*10");
+        assert!(FixAssembler::default().feed(&bad_field.unwrap()).is_err());
+    }
+}

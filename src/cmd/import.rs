@@ -1,0 +1,43 @@
+use std::path::PathBuf;
+
+use anyhow::Result;
+use railfuse_record::import::{eth, ImportReport};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The log to convert.
+    pub input: PathBuf,
+    /// The railfuse MCAP log to write.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Input format: `eth` (ETH-PBL railway node CSV: raw IMU, UBX frames as hex, NMEA,
+    /// correction-link and station events).
+    #[arg(long, default_value = "eth")]
+    pub format: String,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let report: ImportReport = match a.format.as_str() {
+        "eth" => eth::import(&a.input, &a.output)?,
+        other => anyhow::bail!("--format {other}: unknown (formats: eth)"),
+    };
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    println!("imported {} lines of {} as {} messages -> {}", report.lines, report.input.display(), report.messages, report.output.display());
+    for (topic, n) in &report.per_topic {
+        println!("  {topic:<14} {n}");
+    }
+    println!("time base: {}", report.time_base);
+    for (why, n) in &report.skipped {
+        println!("not used: {n} × {why}");
+    }
+    for p in &report.first_problems {
+        println!("  {p}");
+    }
+    Ok(())
+}
