@@ -3,6 +3,7 @@ pub mod demo;
 pub mod eval;
 pub mod import;
 pub mod info;
+pub mod record;
 pub mod recover;
 pub mod refuse;
 pub mod results;

@@ -12,6 +12,7 @@ pub const EDDY_CURRENT: &str = "/eddy_current/block";
 pub const TRACK_MAP: &str = "/track/map";
 pub const GROUND_TRUTH: &str = "/truth";
 pub const EVENTS: &str = "/events";
+pub const RECORDER_DIAGNOSTICS: &str = "/recorder/diagnostics";
 
 /// Prefix of every fused channel.
 pub const FUSED_PREFIX: &str = "/fused/";

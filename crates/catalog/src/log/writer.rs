@@ -119,6 +119,12 @@ impl LogWriter {
         self.inner().write_to_known_channel(&header, data).map_err(|e| Error::write(&self.partial, e))
     }
 
+    /// Closes the current chunk and pushes it to the file: everything written so far survives
+    /// a crash from here on (the recorder calls this about once a second).
+    pub fn flush_chunk(&mut self) -> Result<()> {
+        self.inner().flush().map_err(|e| Error::write(&self.partial, e))
+    }
+
     /// Copies a schema record keeping its id.
     pub fn copy_schema(&mut self, id: u16, name: &str, encoding: &str, data: &[u8]) -> Result<()> {
         self.inner().add_schema_with_id(id, name, encoding, data).map_err(|e| Error::write(&self.partial, e))?;

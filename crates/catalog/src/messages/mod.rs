@@ -11,6 +11,7 @@ mod imu;
 mod induction_loop;
 mod odometer;
 mod radar;
+mod recorder;
 mod track_map;
 
 pub use balise::BalisePassage;
@@ -23,6 +24,7 @@ pub use imu::Imu;
 pub use induction_loop::LoopPosition;
 pub use odometer::Odometer;
 pub use radar::RadarSpeed;
+pub use recorder::{RecorderDiagnostics, SourceStats};
 pub use track_map::{Station, TrackBalise, TrackMap, TrackVertex, Tunnel};
 
 use serde::{de::DeserializeOwned, Serialize};

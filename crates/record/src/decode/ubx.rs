@@ -204,7 +204,7 @@ impl NavCov {
 pub fn hex_into(text: &str, out: &mut Vec<u8>) -> bool {
     out.clear();
     let b = text.as_bytes();
-    if b.len() % 2 != 0 {
+    if !b.len().is_multiple_of(2) {
         return false;
     }
     for pair in b.chunks_exact(2) {

@@ -1,0 +1,206 @@
+//! `railfuse record`: capture live sources into a crash-safe MCAP log.
+//!
+//! Each source runs in its own thread with its own bounded queue ([`sources`]); the writer
+//! (this module) drains them round-robin, stamps nothing itself (log time is each message's
+//! receive time, publish time its sensor time), closes a chunk at least every
+//! `chunk_interval` so that a crash loses at most that much (`railfuse recover` salvages the
+//! rest), writes its own health on `/recorder/diagnostics`, and finishes the file cleanly when
+//! told to stop (SIGINT/SIGTERM in the CLI), when a duration is up or when every source has
+//! ended. A write error (a full disk) stops the recording: what was written is kept.
+
+pub mod message;
+mod serial;
+pub mod sources;
+pub mod stream;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, TryRecvError};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use railfuse_catalog::log::LogWriter;
+use railfuse_catalog::messages::{RecorderDiagnostics, SourceStats};
+use railfuse_catalog::topics;
+use serde::Serialize;
+
+use message::{Item, ItemWriter};
+pub use sources::SourceSpec;
+pub use stream::StreamFormat;
+
+/// Called with the live figures (the CLI's status display).
+pub type StatusHook = Box<dyn FnMut(&Status)>;
+
+pub struct RecordOptions {
+    pub output: PathBuf,
+    pub sources: Vec<SourceSpec>,
+    /// Close a chunk at least this often (bounds what a crash can lose).
+    pub chunk_interval: Duration,
+    /// Stop after this long.
+    pub duration: Option<Duration>,
+    /// Per-source queue length.
+    pub queue: usize,
+    /// Run metadata (run, train, operator, route, notes, sensor configuration).
+    pub metadata: BTreeMap<String, String>,
+    /// Called about once a second with the live figures (the CLI's status display).
+    pub status: Option<StatusHook>,
+}
+
+/// Live figures for the status display.
+#[derive(Debug, Clone, Serialize)]
+pub struct Status {
+    pub elapsed_s: f64,
+    pub messages: u64,
+    pub per_topic: BTreeMap<String, u64>,
+    pub bytes_written: u64,
+    pub sources: Vec<SourceStats>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordReport {
+    pub output: PathBuf,
+    pub duration_s: f64,
+    pub messages: u64,
+    pub per_topic: BTreeMap<String, u64>,
+    pub sources: Vec<SourceStats>,
+    /// Why the recording ended.
+    pub stopped_by: String,
+    /// The write error that ended it, if one did (the file keeps every closed chunk).
+    pub write_error: Option<String>,
+}
+
+fn file_size(path: &Path) -> u64 {
+    let mut partial = path.as_os_str().to_owned();
+    partial.push(".partial");
+    std::fs::metadata(&partial).or_else(|_| std::fs::metadata(path)).map_or(0, |m| m.len())
+}
+
+/// Records until `stop` is set, the duration is up, or every source has ended.
+pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalog::Result<RecordReport> {
+    let mut writer = ItemWriter::new(LogWriter::create(&opts.output)?);
+    let diag = writer.writer.add_channel::<RecorderDiagnostics>(topics::RECORDER_DIAGNOSTICS)?;
+    let mut metadata = opts.metadata.clone();
+    metadata.insert("sources".into(), opts.sources.iter().map(|s| s.to_string()).collect::<Vec<_>>().join("; "));
+    metadata.insert("tool_version".into(), crate::TOOL_VERSION.into());
+    metadata.insert("source".into(), "recorded".into());
+    writer.writer.write_metadata(topics::metadata::RUN, metadata)?;
+
+    let source_stop = Arc::new(AtomicBool::new(false));
+    let mut queues: Vec<Receiver<Item>> = Vec::new();
+    let mut stats: Vec<sources::Stats> = Vec::new();
+    let mut threads = Vec::new();
+    for spec in &opts.sources {
+        let (tx, rx) = sync_channel(opts.queue.max(1));
+        let s = Arc::new(Mutex::new(SourceStats { name: spec.to_string(), ..Default::default() }));
+        let (spec, st, stop) = (spec.clone(), s.clone(), source_stop.clone());
+        threads.push(std::thread::spawn(move || sources::run(spec, tx, st, stop)));
+        queues.push(rx);
+        stats.push(s);
+    }
+    let mut written = vec![0u64; queues.len()];
+    let mut open = vec![true; queues.len()];
+    let started = Instant::now();
+    let mut last_flush = Instant::now();
+    let mut last_status = Instant::now();
+    let (mut messages, mut per_topic) = (0u64, BTreeMap::<String, u64>::new());
+    let mut write_error: Option<String> = None;
+    let stopped_by;
+    'run: loop {
+        let mut busy = false;
+        for (i, q) in queues.iter().enumerate() {
+            // Bounded turns keep one flooding source from starving the others.
+            for _ in 0..1024 {
+                match q.try_recv() {
+                    Ok(item) => {
+                        busy = true;
+                        if let Err(e) = writer.write(&item) {
+                            write_error = Some(e.to_string());
+                            stopped_by = "write error".to_owned();
+                            break 'run;
+                        }
+                        written[i] += 1;
+                        messages += 1;
+                        *per_topic.entry(item.topic).or_insert(0) += 1;
+                    }
+                    Err(TryRecvError::Empty) => break,
+                    Err(TryRecvError::Disconnected) => {
+                        open[i] = false;
+                        break;
+                    }
+                }
+            }
+        }
+        let snapshot =
+            || -> Vec<SourceStats> { stats.iter().zip(&written).map(|(s, &w)| SourceStats { written: w, ..s.lock().expect("stats").clone() }).collect() };
+        if last_flush.elapsed() >= opts.chunk_interval {
+            let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: snapshot(), bytes_written: file_size(&opts.output) };
+            let r = writer.writer.write(diag, d.stamp_ns, &d).and_then(|()| writer.writer.flush_chunk());
+            if let Err(e) = r {
+                write_error = Some(e.to_string());
+                stopped_by = "write error".to_owned();
+                break 'run;
+            }
+            last_flush = Instant::now();
+        }
+        if let Some(status) = opts.status.as_mut() {
+            if last_status.elapsed() >= Duration::from_secs(1) {
+                status(&Status {
+                    elapsed_s: started.elapsed().as_secs_f64(),
+                    messages,
+                    per_topic: per_topic.clone(),
+                    bytes_written: file_size(&opts.output),
+                    sources: snapshot(),
+                });
+                last_status = Instant::now();
+            }
+        }
+        if stop.load(Ordering::Relaxed) {
+            stopped_by = "signal".to_owned();
+            break;
+        }
+        if opts.duration.is_some_and(|d| started.elapsed() >= d) {
+            stopped_by = "duration".to_owned();
+            break;
+        }
+        if !open.iter().any(|&o| o) {
+            stopped_by = "every source ended".to_owned();
+            break;
+        }
+        if !busy {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+    source_stop.store(true, Ordering::Relaxed);
+    // Let the sources notice the stop, then write what they still queued (unless the disk is
+    // the problem).
+    for t in threads {
+        let _ = t.join();
+    }
+    if write_error.is_none() {
+        for (i, q) in queues.iter().enumerate() {
+            while let Ok(item) = q.try_recv() {
+                if let Err(e) = writer.write(&item) {
+                    write_error = Some(e.to_string());
+                    break;
+                }
+                written[i] += 1;
+                messages += 1;
+                *per_topic.entry(item.topic).or_insert(0) += 1;
+            }
+        }
+    }
+    drop(queues);
+    let sources: Vec<SourceStats> = stats.iter().zip(&written).map(|(s, &w)| SourceStats { written: w, ..s.lock().expect("stats").clone() }).collect();
+    let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: sources.clone(), bytes_written: file_size(&opts.output) };
+    if write_error.is_none() {
+        if let Err(e) = writer.writer.write(diag, d.stamp_ns, &d) {
+            write_error = Some(e.to_string());
+        }
+    }
+    let finished = writer.writer.finish();
+    if let (Err(e), None) = (&finished, &write_error) {
+        write_error = Some(e.to_string());
+    }
+    Ok(RecordReport { output: opts.output, duration_s: started.elapsed().as_secs_f64(), messages, per_topic, sources, stopped_by, write_error })
+}

@@ -1,0 +1,306 @@
+//! The recorder's sources, one thread each, each with its own bounded queue: a slow or dead
+//! source never stalls another, and when the writer falls behind a source drops (and counts)
+//! rather than grows without bound.
+
+use std::io::Read;
+use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::messages::*;
+
+use super::message::{Item, Message};
+use super::stream::{StreamDecoder, StreamFormat};
+
+/// Where messages come from.
+#[derive(Debug, Clone)]
+pub enum SourceSpec {
+    /// JSON lines in UDP datagrams.
+    Udp {
+        addr: SocketAddr,
+    },
+    /// A TCP listener; each connection a stream of the given format.
+    TcpListen {
+        addr: SocketAddr,
+        format: StreamFormat,
+    },
+    /// A TCP connection to a receiver or gateway, retried with backoff when it drops.
+    TcpClient {
+        addr: String,
+        format: StreamFormat,
+    },
+    Stdin {
+        format: StreamFormat,
+    },
+    File {
+        path: PathBuf,
+        format: StreamFormat,
+    },
+    /// A serial device (a real tty, configured with termios).
+    Serial {
+        path: PathBuf,
+        baud: u32,
+        format: StreamFormat,
+    },
+    /// The embedded simulator, played out in real time (or `speed` times faster).
+    Simulated {
+        scenario: String,
+        seed: u64,
+        speed: f64,
+        duration_s: Option<f64>,
+    },
+}
+
+impl std::fmt::Display for SourceSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SourceSpec::Udp { addr } => write!(f, "udp {addr} (json)"),
+            SourceSpec::TcpListen { addr, format } => write!(f, "tcp listen {addr} ({format:?})"),
+            SourceSpec::TcpClient { addr, format } => write!(f, "tcp {addr} ({format:?})"),
+            SourceSpec::Stdin { format } => write!(f, "stdin ({format:?})"),
+            SourceSpec::File { path, format } => write!(f, "file {} ({format:?})", path.display()),
+            SourceSpec::Serial { path, baud, format } => write!(f, "serial {} {baud} baud ({format:?})", path.display()),
+            SourceSpec::Simulated { scenario, seed, speed, .. } => write!(f, "simulator {scenario} seed {seed} ×{speed}"),
+        }
+    }
+}
+
+pub type Stats = Arc<Mutex<SourceStats>>;
+
+pub fn now_ns() -> u64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+}
+
+/// Queues decoded items; false when the recorder has gone.
+fn send(tx: &SyncSender<Item>, stats: &Stats, items: &mut Vec<Item>) -> bool {
+    for item in items.drain(..) {
+        match tx.try_send(item) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) => stats.lock().expect("stats").dropped += 1,
+            Err(TrySendError::Disconnected(_)) => return false,
+        }
+    }
+    true
+}
+
+/// Pumps a byte stream through a decoder until it ends, fails or the recorder stops. A tty
+/// in raw mode returns 0 bytes when its read times out: for it (`timeouts_read_empty`) an
+/// empty read is a quiet line, not the end.
+fn pump_with(
+    mut r: impl Read,
+    format: StreamFormat,
+    tx: &SyncSender<Item>,
+    stats: &Stats,
+    stop: &AtomicBool,
+    timeouts_read_empty: bool,
+) -> std::io::Result<()> {
+    let mut d = StreamDecoder::new(format);
+    let mut buf = vec![0u8; 64 << 10];
+    let mut items = Vec::new();
+    loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(());
+        }
+        match r.read(&mut buf) {
+            Ok(0) if timeouts_read_empty => {}
+            Ok(0) => {
+                d.finish(now_ns(), &mut stats.lock().expect("stats"), &mut items);
+                send(tx, stats, &mut items);
+                return Ok(());
+            }
+            Ok(n) => {
+                d.feed(&buf[..n], now_ns(), &mut stats.lock().expect("stats"), &mut items);
+                if !send(tx, stats, &mut items) {
+                    return Ok(());
+                }
+            }
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted) => {}
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+fn pump(r: impl Read, format: StreamFormat, tx: &SyncSender<Item>, stats: &Stats, stop: &AtomicBool) -> std::io::Result<()> {
+    pump_with(r, format, tx, stats, stop, false)
+}
+
+fn set_error(stats: &Stats, e: impl std::fmt::Display) {
+    stats.lock().expect("stats").last_error = Some(e.to_string());
+}
+
+/// Runs one source until it ends or `stop` is set.
+pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<AtomicBool>) {
+    let tick = Duration::from_millis(200);
+    stats.lock().expect("stats").connected = true;
+    match spec {
+        SourceSpec::Udp { addr } => {
+            let sock = match UdpSocket::bind(addr).and_then(|s| s.set_read_timeout(Some(tick)).map(|()| s)) {
+                Ok(s) => s,
+                Err(e) => return set_error(&stats, format!("cannot bind {addr}: {e}")),
+            };
+            let mut buf = vec![0u8; 65_536];
+            let mut items = Vec::new();
+            while !stop.load(Ordering::Relaxed) {
+                match sock.recv(&mut buf) {
+                    Ok(n) => {
+                        // Each datagram holds whole lines; a fresh decoder per datagram keeps a
+                        // torn one from corrupting the next.
+                        let mut d = StreamDecoder::new(StreamFormat::JsonLines);
+                        let t = now_ns();
+                        let mut s = stats.lock().expect("stats");
+                        if n == buf.len() {
+                            s.oversized += 1;
+                            continue;
+                        }
+                        d.feed(&buf[..n], t, &mut s, &mut items);
+                        d.finish(t, &mut s, &mut items);
+                        drop(s);
+                        if !send(&tx, &stats, &mut items) {
+                            return;
+                        }
+                    }
+                    Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+                    Err(e) => set_error(&stats, e),
+                }
+            }
+        }
+        SourceSpec::TcpListen { addr, format } => {
+            let listener = match TcpListener::bind(addr).and_then(|l| l.set_nonblocking(true).map(|()| l)) {
+                Ok(l) => l,
+                Err(e) => return set_error(&stats, format!("cannot bind {addr}: {e}")),
+            };
+            std::thread::scope(|scope| {
+                while !stop.load(Ordering::Relaxed) {
+                    match listener.accept() {
+                        Ok((conn, _)) => {
+                            let (tx, stats, stop) = (tx.clone(), stats.clone(), stop.clone());
+                            scope.spawn(move || {
+                                let _ = conn.set_nonblocking(false);
+                                let _ = conn.set_read_timeout(Some(tick));
+                                if let Err(e) = pump(conn, format, &tx, &stats, &stop) {
+                                    set_error(&stats, e);
+                                }
+                            });
+                        }
+                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(20)),
+                        Err(e) => set_error(&stats, e),
+                    }
+                }
+            });
+        }
+        SourceSpec::TcpClient { addr, format } => {
+            let mut backoff = Duration::from_millis(250);
+            let mut first = true;
+            while !stop.load(Ordering::Relaxed) {
+                match TcpStream::connect(&addr) {
+                    Ok(conn) => {
+                        if !first {
+                            stats.lock().expect("stats").reconnects += 1;
+                        }
+                        first = false;
+                        backoff = Duration::from_millis(250);
+                        stats.lock().expect("stats").connected = true;
+                        let _ = conn.set_read_timeout(Some(tick));
+                        if let Err(e) = pump(conn, format, &tx, &stats, &stop) {
+                            set_error(&stats, e);
+                        }
+                    }
+                    Err(e) => set_error(&stats, format!("cannot connect to {addr}: {e}")),
+                }
+                stats.lock().expect("stats").connected = false;
+                let until = Instant::now() + backoff;
+                while Instant::now() < until && !stop.load(Ordering::Relaxed) {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                backoff = (backoff * 2).min(Duration::from_secs(8));
+            }
+        }
+        SourceSpec::Stdin { format } => {
+            if let Err(e) = pump(std::io::stdin().lock(), format, &tx, &stats, &stop) {
+                set_error(&stats, e);
+            }
+        }
+        SourceSpec::File { path, format } => match std::fs::File::open(&path) {
+            Ok(f) => {
+                if let Err(e) = pump(f, format, &tx, &stats, &stop) {
+                    set_error(&stats, e);
+                }
+            }
+            Err(e) => set_error(&stats, format!("{}: {e}", path.display())),
+        },
+        SourceSpec::Serial { path, baud, format } => match super::serial::open(&path, baud) {
+            Ok(f) => {
+                if let Err(e) = pump_with(f, format, &tx, &stats, &stop, true) {
+                    set_error(&stats, e);
+                }
+            }
+            Err(e) => set_error(&stats, format!("{}: {e}", path.display())),
+        },
+        SourceSpec::Simulated { scenario, seed, speed, duration_s } => {
+            if let Err(e) = simulated(&scenario, seed, speed, duration_s, &tx, &stats, &stop) {
+                set_error(&stats, e);
+            }
+        }
+    }
+    stats.lock().expect("stats").connected = false;
+}
+
+/// The simulator as a live source: the run is simulated ahead into a temporary file (a
+/// fraction of a second of work per minute of run) and played out at the pace of its log
+/// times, stamped with the live clock.
+fn simulated(scenario: &str, seed: u64, speed: f64, duration_s: Option<f64>, tx: &SyncSender<Item>, stats: &Stats, stop: &AtomicBool) -> Result<(), String> {
+    let preset = crate::Scenario::preset(scenario).ok_or_else(|| format!("unknown scenario '{scenario}'"))?;
+    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let path = dir.path().join("sim.mcap");
+    crate::simulate(&preset, seed, duration_s, &[], &path).map_err(|e| e.to_string())?;
+    let mut reader = LogReader::open(&path).map_err(|e| e.to_string())?;
+    let (wall0, mut sim0, live0) = (Instant::now(), None, now_ns());
+    let mut items = Vec::with_capacity(1);
+    while let Some(rec) = reader.next() {
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        let LogRecord::Message(m) = rec.map_err(|e| e.to_string())? else { continue };
+        let t0 = *sim0.get_or_insert(m.log_time_ns);
+        let offset = m.log_time_ns.saturating_sub(t0);
+        let due = wall0 + Duration::from_nanos((offset as f64 / speed) as u64);
+        while Instant::now() < due && !stop.load(Ordering::Relaxed) {
+            std::thread::sleep((due - Instant::now()).min(Duration::from_millis(50)));
+        }
+        // Shift the run onto the live clock: sensor and log times keep their spacing.
+        let shift = |t: u64| live0 + ((t.saturating_sub(t0)) as f64 / speed) as u64;
+        let schema = m.channel.schema_name();
+        let p: &std::path::Path = &path;
+        let message = match schema {
+            s if s == GnssFix::SCHEMA_NAME => Message::Gnss(restamp(m.decode::<GnssFix>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == Imu::SCHEMA_NAME => Message::Imu(restamp(m.decode::<Imu>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == RadarSpeed::SCHEMA_NAME => Message::Radar(restamp(m.decode::<RadarSpeed>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == Odometer::SCHEMA_NAME => Message::Odometer(restamp(m.decode::<Odometer>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == LoopPosition::SCHEMA_NAME => Message::Loop(restamp(m.decode::<LoopPosition>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == BalisePassage::SCHEMA_NAME => Message::Balise(restamp(m.decode::<BalisePassage>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == Event::SCHEMA_NAME => Message::Event(restamp(m.decode::<Event>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == GroundTruth::SCHEMA_NAME => Message::Truth(restamp(m.decode::<GroundTruth>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == TrackMap::SCHEMA_NAME => Message::Map(restamp(m.decode::<TrackMap>(p).map_err(|e| e.to_string())?, shift)),
+            _ => continue,
+        };
+        stats.lock().expect("stats").received += 1;
+        items.push(Item { topic: m.channel.topic.clone(), log_time_ns: shift(m.log_time_ns), message });
+        if !send(tx, stats, &mut items) {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// Moves a message's sensor time onto the live clock.
+fn restamp<M: ChannelMessage + serde::Serialize + serde::de::DeserializeOwned>(m: M, shift: impl Fn(u64) -> u64) -> M {
+    let mut v = serde_json::to_value(&m).expect("a message serialises");
+    if let Some(t) = v.get("stamp_ns").and_then(|t| t.as_u64()) {
+        v["stamp_ns"] = serde_json::Value::from(shift(t));
+    }
+    serde_json::from_value(v).unwrap_or(m)
+}

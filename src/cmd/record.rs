@@ -1,0 +1,222 @@
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::net::{IpAddr, SocketAddr};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use railfuse_record::recorder::{record, RecordOptions, SourceSpec, Status, StreamFormat};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// The MCAP log to write (`<name>.partial` until it is finished).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Listen for JSON lines on this UDP port. Repeatable.
+    #[arg(long, value_name = "PORT")]
+    pub udp: Vec<u16>,
+    /// Listen on this TCP port for streams: PORT[:json|nmea|ubx] (default json). Repeatable.
+    #[arg(long, value_name = "PORT[:FORMAT]")]
+    pub tcp: Vec<String>,
+    /// Connect to a receiver or gateway: HOST:PORT[:json|nmea|ubx]; reconnects with backoff.
+    #[arg(long = "tcp-client", value_name = "HOST:PORT[:FORMAT]")]
+    pub tcp_client: Vec<String>,
+    /// A serial device: DEVICE:BAUD[:nmea|ubx|json] (default nmea). Repeatable.
+    #[arg(long, value_name = "DEVICE:BAUD[:FORMAT]")]
+    pub serial: Vec<String>,
+    /// A file of NMEA, UBX or JSON lines: PATH[:FORMAT] (default by extension). Repeatable.
+    #[arg(long, value_name = "PATH[:FORMAT]")]
+    pub file: Vec<String>,
+    /// Read standard input in this format (json, nmea, ubx).
+    #[arg(long, value_name = "FORMAT")]
+    pub stdin: Option<String>,
+    /// Record the embedded simulator in real time (the default when no source is given).
+    #[arg(long, value_name = "SCENARIO")]
+    pub simulate: Option<String>,
+    /// Simulator: seed, and how many times faster than real time.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Address the network listeners bind to (127.0.0.1 unless you open them up).
+    #[arg(long, default_value = "127.0.0.1")]
+    pub bind: IpAddr,
+    /// Stop after this many seconds (default: at Ctrl-C / SIGTERM, or when every source ends).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Close a chunk at least this often: what a crash can lose, at most.
+    #[arg(long, default_value_t = 1.0)]
+    pub chunk_interval: f64,
+    /// Messages each source may queue before it drops (and counts) new ones.
+    #[arg(long, default_value_t = 65_536)]
+    pub queue: usize,
+    /// Run metadata KEY=VALUE (run, train, operator, route, notes, …). Repeatable.
+    #[arg(long = "meta", value_name = "KEY=VALUE")]
+    pub meta: Vec<String>,
+    /// Print the final report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+static SIGNALLED: AtomicBool = AtomicBool::new(false);
+
+extern "C" fn on_signal(_: libc::c_int) {
+    SIGNALLED.store(true, Ordering::SeqCst);
+}
+
+fn format_or(text: Option<&str>, default: StreamFormat) -> Result<StreamFormat> {
+    text.map_or(Ok(default), |t| t.parse().map_err(anyhow::Error::msg))
+}
+
+fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
+    let mut out = Vec::new();
+    for &port in &a.udp {
+        out.push(SourceSpec::Udp { addr: SocketAddr::new(a.bind, port) });
+    }
+    for t in &a.tcp {
+        let (port, fmt) = t.split_once(':').map_or((t.as_str(), None), |(p, f)| (p, Some(f)));
+        let port: u16 = port.parse().with_context(|| format!("--tcp {t}: not a port"))?;
+        out.push(SourceSpec::TcpListen { addr: SocketAddr::new(a.bind, port), format: format_or(fmt, StreamFormat::JsonLines)? });
+    }
+    for t in &a.tcp_client {
+        let parts: Vec<&str> = t.rsplitn(2, ':').collect();
+        let (addr, fmt) = match parts[..] {
+            [f, rest] if f.parse::<StreamFormat>().is_ok() => (rest.to_owned(), Some(f)),
+            _ => (t.clone(), None),
+        };
+        out.push(SourceSpec::TcpClient { addr, format: format_or(fmt, StreamFormat::JsonLines)? });
+    }
+    for t in &a.serial {
+        let parts: Vec<&str> = t.split(':').collect();
+        let (dev, baud, fmt) = match parts[..] {
+            [d, b] => (d, b, None),
+            [d, b, f] => (d, b, Some(f)),
+            _ => bail!("--serial {t}: DEVICE:BAUD[:FORMAT]"),
+        };
+        let baud: u32 = baud.parse().with_context(|| format!("--serial {t}: baud rate"))?;
+        out.push(SourceSpec::Serial { path: dev.into(), baud, format: format_or(fmt, StreamFormat::Nmea)? });
+    }
+    for t in &a.file {
+        let (path, fmt) = match t.rsplit_once(':') {
+            Some((p, f)) if f.parse::<StreamFormat>().is_ok() => (p, Some(f)),
+            _ => (t.as_str(), None),
+        };
+        let by_ext = match std::path::Path::new(path).extension().and_then(|e| e.to_str()) {
+            Some("ubx") => StreamFormat::Ubx,
+            Some("nmea") | Some("txt") => StreamFormat::Nmea,
+            _ => StreamFormat::JsonLines,
+        };
+        out.push(SourceSpec::File { path: path.into(), format: format_or(fmt, by_ext)? });
+    }
+    if let Some(f) = &a.stdin {
+        out.push(SourceSpec::Stdin { format: f.parse().map_err(anyhow::Error::msg)? });
+    }
+    if a.simulate.is_some() || out.is_empty() {
+        if !(a.speed.is_finite() && a.speed > 0.0) {
+            bail!("--speed must be positive, not {}", a.speed);
+        }
+        let scenario = a.simulate.clone().unwrap_or_else(|| "default".into());
+        if railfuse_record::Scenario::preset(&scenario).is_none() {
+            bail!("--simulate {scenario}: unknown scenario (presets: {})", railfuse_record::Scenario::NAMES.join(", "));
+        }
+        out.push(SourceSpec::Simulated { scenario, seed: a.seed, speed: a.speed, duration_s: None });
+    }
+    Ok(out)
+}
+
+fn status_line(s: &Status) -> String {
+    let dropped: u64 = s.sources.iter().map(|x| x.dropped).sum();
+    let bad: u64 = s.sources.iter().map(|x| x.malformed + x.checksum_failures + x.oversized).sum();
+    let rates: Vec<String> = s.per_topic.iter().map(|(t, n)| format!("{t} {:.0}/s", *n as f64 / s.elapsed_s.max(1e-9))).collect();
+    format!(
+        "{:>7.1} s  {} msgs  {:.1} MiB  dropped {dropped}  bad {bad}  {}",
+        s.elapsed_s,
+        s.messages,
+        s.bytes_written as f64 / (1 << 20) as f64,
+        rates.join("  ")
+    )
+}
+
+pub fn run(a: Args) -> Result<()> {
+    let specs = sources(&a)?;
+    let mut metadata = BTreeMap::new();
+    for m in &a.meta {
+        let (k, v) = m.split_once('=').with_context(|| format!("--meta {m}: KEY=VALUE"))?;
+        metadata.insert(k.trim().to_owned(), v.to_owned());
+    }
+    if !(a.chunk_interval.is_finite() && a.chunk_interval > 0.0) {
+        bail!("--chunk-interval must be positive, not {}", a.chunk_interval);
+    }
+    // SAFETY: installing async-signal-safe handlers (an atomic store) before threads start.
+    unsafe {
+        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let bridge = stop.clone();
+    std::thread::spawn(move || loop {
+        if SIGNALLED.load(Ordering::SeqCst) {
+            bridge.store(true, Ordering::SeqCst);
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    });
+    let terminal = std::io::stderr().is_terminal();
+    let mut since_plain = 0u32;
+    let status: Box<dyn FnMut(&Status)> = Box::new(move |s: &Status| {
+        if terminal {
+            eprint!("\r\x1b[2K{}", status_line(s));
+        } else {
+            // Not a terminal: a plain line every 10 s.
+            since_plain += 1;
+            if since_plain >= 10 {
+                since_plain = 0;
+                eprintln!("{}", status_line(s));
+            }
+        }
+    });
+    for s in &specs {
+        eprintln!("recording {s}");
+    }
+    let opts = RecordOptions {
+        output: a.output.clone(),
+        sources: specs,
+        chunk_interval: Duration::from_secs_f64(a.chunk_interval),
+        duration: a.duration.map(Duration::from_secs_f64),
+        queue: a.queue,
+        metadata,
+        status: Some(status),
+    };
+    let report = record(opts, stop)?;
+    if terminal {
+        eprintln!();
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!("recorded {} messages in {:.1} s -> {} (stopped: {})", report.messages, report.duration_s, report.output.display(), report.stopped_by);
+        for s in &report.sources {
+            println!(
+                "  {}: {} received, {} written, {} dropped, {} malformed, {} checksum failures, {} oversized, {} reconnects{}",
+                s.name,
+                s.received,
+                s.written,
+                s.dropped,
+                s.malformed,
+                s.checksum_failures,
+                s.oversized,
+                s.reconnects,
+                s.last_error.as_ref().map_or(String::new(), |e| format!(" (last error: {e})"))
+            );
+        }
+    }
+    if let Some(e) = &report.write_error {
+        bail!(
+            "recording stopped by a write error (every closed chunk is kept; `railfuse recover {}.partial` salvages them if the file was not finished): {e}",
+            report.output.display()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,216 @@
+//! `railfuse record` over real byte paths: UDP and TCP on loopback, standard input, NMEA and UBX
+//! files, garbage on every one of them; clean stop on SIGTERM; SIGKILL then `recover`.
+
+mod common;
+
+use std::io::Write;
+use std::net::{TcpStream, UdpSocket};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::*;
+use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::messages::{GnssFix, RadarSpeed};
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn spawn(args: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_railfuse")).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()
+}
+
+/// Speeds of every /radar/speed message, in file order, and the recorder's own diagnostics.
+fn radar_speeds(path: &std::path::Path) -> (Vec<f64>, usize) {
+    let (mut v, mut diags) = (Vec::new(), 0);
+    let mut r = LogReader::open(path).unwrap();
+    while let Some(rec) = r.next() {
+        if let LogRecord::Message(m) = rec.unwrap() {
+            match m.channel.topic.as_str() {
+                "/radar/speed" => v.push(m.decode::<RadarSpeed>(path).unwrap().speed_mps),
+                "/recorder/diagnostics" => diags += 1,
+                _ => {}
+            }
+        }
+    }
+    (v, diags)
+}
+
+fn line(k: usize) -> String {
+    format!(r#"{{"topic":"/radar/speed","stamp_ns":{},"speed_mps":{k},"quality":1.0,"valid":true}}"#, 1_000 + k)
+}
+
+fn stop(child: Child) -> serde_json::Value {
+    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn wait_listening(port: u16) {
+    let t = Instant::now();
+    while TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(t.elapsed() < Duration::from_secs(20), "the recorder never listened on {port}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+#[test]
+fn udp_and_tcp_json_lines_arrive_once_in_order_and_garbage_is_counted() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("net.mcap");
+    let (udp, tcp) = (free_port(), free_port());
+    let child = spawn(&["record", "-o", s(&out), "--udp", &udp.to_string(), "--tcp", &tcp.to_string(), "--json"]);
+    wait_listening(tcp);
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
+    for k in 0..2000 {
+        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp)).unwrap();
+        if k % 200 == 0 {
+            sock.send_to(b"\x00\x01 binary noise \xff", ("127.0.0.1", udp)).unwrap();
+            conn.write_all(b"{\"topic\": 42}\n").unwrap();
+            conn.write_all(&vec![b'x'; 70_000]).unwrap();
+            conn.write_all(b"\n").unwrap();
+        }
+        conn.write_all(format!("{}\n", line(10_000 + k)).as_bytes()).unwrap();
+        if k % 100 == 0 {
+            std::thread::sleep(Duration::from_millis(2)); // a UDP sender paces itself
+        }
+    }
+    drop(conn);
+    std::thread::sleep(Duration::from_millis(500));
+    let r = stop(child);
+    assert_eq!(r["stopped_by"], "signal");
+    let (v, diags) = radar_speeds(&out);
+    let udp_got: Vec<f64> = v.iter().copied().filter(|x| *x < 10_000.0).collect();
+    let tcp_got: Vec<f64> = v.iter().copied().filter(|x| *x >= 10_000.0).collect();
+    assert_eq!(tcp_got, (0..2000).map(|k| (10_000 + k) as f64).collect::<Vec<_>>(), "TCP: every line once, in order");
+    assert_eq!(udp_got, (0..2000).map(|k| k as f64).collect::<Vec<_>>(), "UDP on loopback: every datagram once, in order");
+    let src = r["sources"].as_array().unwrap();
+    assert_eq!(src[0]["malformed"], 10, "{r}");
+    assert_eq!((src[1]["malformed"].as_u64(), src[1]["oversized"].as_u64()), (Some(10), Some(10)), "{r}");
+    assert!(diags >= 1);
+}
+
+#[test]
+fn nmea_and_ubx_files_and_stdin_record_their_fixes_and_count_bad_checksums() {
+    let d = tempfile::tempdir().unwrap();
+    let nmea = d.path().join("rx.nmea");
+    let mut text = String::new();
+    for k in 0..50 {
+        let body = format!("GNRMC,0835{:02}.00,A,4439.30664,N,01055.78382,E,10.0,90.0,201022,,,R,V", k % 60);
+        let gga = format!("GNGGA,0835{:02}.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000", k % 60);
+        for b in [body, gga] {
+            let cs = b.bytes().fold(0u8, |a, x| a ^ x);
+            text += &format!("${b}*{cs:02X}\r\n");
+        }
+        text += "$GNGGA,083500.00,4439.3,N,01055.7,E,1,05,1.0,3.0,M,4.0,M,,*00\r\n"; // wrong checksum
+        text += "\u{1}\u{2}garbage\r\n";
+    }
+    std::fs::write(&nmea, &text).unwrap();
+    let ubx = d.path().join("rx.ubx");
+    let hexes = std::fs::read_to_string(sample("eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv")).unwrap();
+    let mut bytes = Vec::new();
+    for l in hexes.lines().filter(|l| l.contains(",U,")) {
+        let h = l.rsplit(',').next().unwrap();
+        bytes.extend((0..h.len()).step_by(2).map(|i| u8::from_str_radix(&h[i..i + 2], 16).unwrap()));
+        bytes.extend_from_slice(b"\xb5\x62\x01\x07\x04\x00junk"); // a torn frame with a bad checksum
+    }
+    std::fs::write(&ubx, &bytes).unwrap();
+    let out = d.path().join("files.mcap");
+    let mut child = spawn(&["record", "-o", s(&out), "--file", &format!("{}:nmea", s(&nmea)), "--file", s(&ubx), "--stdin", "json", "--json"]);
+    let mut stdin = child.stdin.take().unwrap();
+    for k in 0..100 {
+        writeln!(stdin, "{}", line(k)).unwrap();
+    }
+    drop(stdin); // end of input: with the files read too, every source has ended
+    let out_json = child.wait_with_output().unwrap();
+    assert!(out_json.status.success(), "{}", String::from_utf8_lossy(&out_json.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&out_json.stdout).unwrap();
+    assert_eq!(r["stopped_by"], "every source ended", "{r}");
+    let src = r["sources"].as_array().unwrap();
+    assert_eq!((src[0]["written"].as_u64(), src[0]["checksum_failures"].as_u64(), src[0]["malformed"].as_u64()), (Some(50), Some(50), Some(50)), "{r}");
+    assert_eq!(src[1]["written"], 1, "one NAV-PVT (+ its NAV-COV) in the sample: {r}");
+    assert!(src[1]["checksum_failures"].as_u64().unwrap() >= 1, "{r}");
+    assert_eq!(src[2]["written"], 100);
+    let mut fixes = Vec::new();
+    let mut rd = LogReader::open(&out).unwrap();
+    while let Some(rec) = rd.next() {
+        if let LogRecord::Message(m) = rec.unwrap() {
+            if m.channel.topic == "/gnss/fix" {
+                fixes.push(m.decode::<GnssFix>(&out).unwrap());
+            }
+        }
+    }
+    assert_eq!(fixes.len(), 51);
+    // GNSS time is the sensor time: 2022-10-20 08:35 UTC for the NMEA fixes.
+    assert!(fixes.iter().filter(|f| f.satellites == 12).all(|f| f.stamp_ns / 1_000_000_000 / 3600 == 1_666_254_900 / 3600), "{:?}", fixes[0]);
+    assert!(fixes.iter().any(|f| f.satellites == 29 && (f.latitude_deg.unwrap() - 44.6551106).abs() < 1e-7));
+}
+
+#[test]
+fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets_the_rest() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("killed.mcap");
+    let partial = d.path().join("killed.mcap.partial");
+    let tcp = free_port();
+    let mut child = spawn(&["record", "-o", s(&out), "--tcp", &tcp.to_string(), "--chunk-interval", "0.2"]);
+    wait_listening(tcp);
+    let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
+    for k in 0..3000 {
+        conn.write_all(format!("{}\n", line(k)).as_bytes()).unwrap();
+    }
+    conn.flush().unwrap();
+    std::thread::sleep(Duration::from_millis(1500)); // several chunk intervals
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    assert!(!out.exists() && partial.exists());
+    let fixed = d.path().join("fixed.mcap");
+    let r: serde_json::Value = serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout).unwrap();
+    let (v, _) = radar_speeds(&fixed);
+    assert_eq!(v, (0..3000).map(|k| k as f64).collect::<Vec<_>>(), "everything sent before the last closed chunk: {r}");
+}
+
+#[test]
+fn nmea_over_a_pseudo_terminal_at_a_set_baud_arrives_with_its_values() {
+    let (mut master, mut slave) = (0, 0);
+    let mut name = [0 as libc::c_char; 128];
+    // SAFETY: openpty fills the two descriptors and the name buffer it is given.
+    let rc = unsafe { libc::openpty(&mut master, &mut slave, name.as_mut_ptr(), std::ptr::null(), std::ptr::null()) };
+    assert_eq!(rc, 0, "openpty failed");
+    let tty = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }.to_str().unwrap().to_owned();
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("serial.mcap");
+    let child = spawn(&["record", "-o", s(&out), "--serial", &format!("{tty}:115200:nmea"), "--json"]);
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: `master` is the open master side of the pair; the File owns it from here.
+    let mut m = unsafe { <std::fs::File as std::os::fd::FromRawFd>::from_raw_fd(master) };
+    for k in 0..20 {
+        for body in [
+            format!("GNRMC,0900{k:02}.00,A,4439.30664,N,01055.78382,E,20.0,45.0,201022,,,R,V"),
+            format!("GNGGA,0900{k:02}.00,4439.30664,N,01055.78382,E,4,1{},0.58,35.2,M,44.1,M,1.0,0000", k % 10),
+        ] {
+            let cs = body.bytes().fold(0u8, |a, x| a ^ x);
+            m.write_all(format!("${body}*{cs:02X}\r\n").as_bytes()).unwrap();
+        }
+        m.write_all(b"$GNGGA,bad*00\r\n").unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let r = stop(child);
+    unsafe { libc::close(slave) };
+    let src = &r["sources"][0];
+    assert_eq!((src["written"].as_u64(), src["checksum_failures"].as_u64()), (Some(20), Some(20)), "{r}");
+    let mut fixes = Vec::new();
+    let mut rd = LogReader::open(&out).unwrap();
+    while let Some(rec) = rd.next() {
+        if let LogRecord::Message(m) = rec.unwrap() {
+            if m.channel.topic == "/gnss/fix" {
+                fixes.push(m.decode::<GnssFix>(&out).unwrap());
+            }
+        }
+    }
+    let sats: Vec<u8> = fixes.iter().map(|f| f.satellites).collect();
+    assert_eq!(sats, (0..20).map(|k| 10 + (k % 10) as u8).collect::<Vec<_>>(), "in order, once each");
+    assert!((fixes[0].speed_mps.unwrap() - 20.0 * 1852.0 / 3600.0).abs() < 1e-9);
+}
