@@ -36,6 +36,19 @@ fn radar_speeds(path: &std::path::Path) -> (Vec<f64>, usize) {
     (v, diags)
 }
 
+fn gnss_fixes(path: &std::path::Path) -> Vec<GnssFix> {
+    let mut fixes = Vec::new();
+    let mut rd = LogReader::open(path).unwrap();
+    while let Some(rec) = rd.next() {
+        if let LogRecord::Message(m) = rec.unwrap() {
+            if m.channel.topic == "/gnss/fix" {
+                fixes.push(m.decode::<GnssFix>(path).unwrap());
+            }
+        }
+    }
+    fixes
+}
+
 fn line(k: usize) -> String {
     format!(r#"{{"topic":"/radar/speed","stamp_ns":{},"speed_mps":{k},"quality":1.0,"valid":true}}"#, 1_000 + k)
 }
@@ -133,15 +146,7 @@ fn nmea_and_ubx_files_and_stdin_record_their_fixes_and_count_bad_checksums() {
     assert_eq!(src[1]["written"], 1, "one NAV-PVT (+ its NAV-COV) in the sample: {r}");
     assert!(src[1]["checksum_failures"].as_u64().unwrap() >= 1, "{r}");
     assert_eq!(src[2]["written"], 100);
-    let mut fixes = Vec::new();
-    let mut rd = LogReader::open(&out).unwrap();
-    while let Some(rec) = rd.next() {
-        if let LogRecord::Message(m) = rec.unwrap() {
-            if m.channel.topic == "/gnss/fix" {
-                fixes.push(m.decode::<GnssFix>(&out).unwrap());
-            }
-        }
-    }
+    let fixes = gnss_fixes(&out);
     assert_eq!(fixes.len(), 51);
     // GNSS time is the sensor time: 2022-10-20 08:35 UTC for the NMEA fixes.
     assert!(fixes.iter().filter(|f| f.satellites == 12).all(|f| f.stamp_ns / 1_000_000_000 / 3600 == 1_666_254_900 / 3600), "{:?}", fixes[0]);
@@ -201,15 +206,7 @@ fn nmea_over_a_pseudo_terminal_at_a_set_baud_arrives_with_its_values() {
     unsafe { libc::close(slave) };
     let src = &r["sources"][0];
     assert_eq!((src["written"].as_u64(), src["checksum_failures"].as_u64()), (Some(20), Some(20)), "{r}");
-    let mut fixes = Vec::new();
-    let mut rd = LogReader::open(&out).unwrap();
-    while let Some(rec) = rd.next() {
-        if let LogRecord::Message(m) = rec.unwrap() {
-            if m.channel.topic == "/gnss/fix" {
-                fixes.push(m.decode::<GnssFix>(&out).unwrap());
-            }
-        }
-    }
+    let fixes = gnss_fixes(&out);
     let sats: Vec<u8> = fixes.iter().map(|f| f.satellites).collect();
     assert_eq!(sats, (0..20).map(|k| 10 + (k % 10) as u8).collect::<Vec<_>>(), "in order, once each");
     assert!((fixes[0].speed_mps.unwrap() - 20.0 * 1852.0 / 3600.0).abs() < 1e-9);
