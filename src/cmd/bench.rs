@@ -17,9 +17,16 @@ pub struct Args {
     /// Folder for the benchmark files.
     #[arg(long, default_value = "target/bench")]
     pub dir: PathBuf,
+    /// Measure the recorder instead: UDP ingest rate and CPU/memory at a field load held for
+    /// this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    pub record: Option<f64>,
 }
 
 pub fn run(a: Args) -> Result<()> {
+    if let Some(secs) = a.record {
+        return super::bench_record::run(&a.dir, secs);
+    }
     std::fs::create_dir_all(&a.dir).with_context(|| format!("{}: cannot create", a.dir.display()))?;
     let config = a.dir.join("kalman.toml");
     std::fs::write(&config, DEFAULT_PIPELINES)?;

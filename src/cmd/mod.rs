@@ -1,4 +1,5 @@
 pub mod bench;
+pub mod bench_record;
 pub mod demo;
 pub mod eval;
 pub mod import;
