@@ -114,15 +114,15 @@ pub fn run(dir: &Path, field_secs: f64) -> Result<()> {
                     t + j * 500_000
                 ));
             }
-            if k % 100 == 0 {
+            if k.is_multiple_of(100) {
                 lines.push(format!(
                     r#"{{"topic":"/gnss/fix","stamp_ns":{t},"fix_type":"rtk_fixed","satellites":18,"latitude_deg":44.6,"longitude_deg":10.9,"speed_mps":20.0}}"#
                 ));
             }
-            if k % 20 == 0 {
+            if k.is_multiple_of(20) {
                 lines.push(radar_line(t));
             }
-            if k % 10 == 0 {
+            if k.is_multiple_of(10) {
                 for o in ["/odometer/1", "/odometer/2"] {
                     lines.push(format!(r#"{{"topic":"{o}","stamp_ns":{t},"sensor_id":"axle","pulse_count":{k},"pulses_per_revolution":200,"wheel_diameter_m":0.85,"distance_increment_m":0.2,"speed_mps":20.0}}"#));
                 }
