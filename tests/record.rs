@@ -49,6 +49,35 @@ fn gnss_fixes(path: &std::path::Path) -> Vec<GnssFix> {
     fixes
 }
 
+/// A receiver's NMEA capture (50 RTK fixes, 50 sentences with a wrong checksum, 50 lines of
+/// garbage) and a UBX capture (the real frames of an ETH sample with torn frames between).
+fn captures(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let d = dir;
+    let nmea = d.join("rx.nmea");
+    let mut text = String::new();
+    for k in 0..50 {
+        let body = format!("GNRMC,0835{:02}.00,A,4439.30664,N,01055.78382,E,10.0,90.0,201022,,,R,V", k % 60);
+        let gga = format!("GNGGA,0835{:02}.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000", k % 60);
+        for b in [body, gga] {
+            let cs = b.bytes().fold(0u8, |a, x| a ^ x);
+            text += &format!("${b}*{cs:02X}\r\n");
+        }
+        text += "$GNGGA,083500.00,4439.3,N,01055.7,E,1,05,1.0,3.0,M,4.0,M,,*00\r\n"; // wrong checksum
+        text += "\u{1}\u{2}garbage\r\n";
+    }
+    std::fs::write(&nmea, &text).unwrap();
+    let ubx = d.join("rx.ubx");
+    let hexes = std::fs::read_to_string(sample("eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv")).unwrap();
+    let mut bytes = Vec::new();
+    for l in hexes.lines().filter(|l| l.contains(",U,")) {
+        let h = l.rsplit(',').next().unwrap();
+        bytes.extend((0..h.len()).step_by(2).map(|i| u8::from_str_radix(&h[i..i + 2], 16).unwrap()));
+        bytes.extend_from_slice(b"\xb5\x62\x01\x07\x04\x00junk"); // a torn frame with a bad checksum
+    }
+    std::fs::write(&ubx, &bytes).unwrap();
+    (nmea, ubx)
+}
+
 fn line(k: usize) -> String {
     format!(r#"{{"topic":"/radar/speed","stamp_ns":{},"speed_mps":{k},"quality":1.0,"valid":true}}"#, 1_000 + k)
 }
@@ -108,28 +137,7 @@ fn udp_and_tcp_json_lines_arrive_once_in_order_and_garbage_is_counted() {
 #[test]
 fn nmea_and_ubx_files_and_stdin_record_their_fixes_and_count_bad_checksums() {
     let d = tempfile::tempdir().unwrap();
-    let nmea = d.path().join("rx.nmea");
-    let mut text = String::new();
-    for k in 0..50 {
-        let body = format!("GNRMC,0835{:02}.00,A,4439.30664,N,01055.78382,E,10.0,90.0,201022,,,R,V", k % 60);
-        let gga = format!("GNGGA,0835{:02}.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000", k % 60);
-        for b in [body, gga] {
-            let cs = b.bytes().fold(0u8, |a, x| a ^ x);
-            text += &format!("${b}*{cs:02X}\r\n");
-        }
-        text += "$GNGGA,083500.00,4439.3,N,01055.7,E,1,05,1.0,3.0,M,4.0,M,,*00\r\n"; // wrong checksum
-        text += "\u{1}\u{2}garbage\r\n";
-    }
-    std::fs::write(&nmea, &text).unwrap();
-    let ubx = d.path().join("rx.ubx");
-    let hexes = std::fs::read_to_string(sample("eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv")).unwrap();
-    let mut bytes = Vec::new();
-    for l in hexes.lines().filter(|l| l.contains(",U,")) {
-        let h = l.rsplit(',').next().unwrap();
-        bytes.extend((0..h.len()).step_by(2).map(|i| u8::from_str_radix(&h[i..i + 2], 16).unwrap()));
-        bytes.extend_from_slice(b"\xb5\x62\x01\x07\x04\x00junk"); // a torn frame with a bad checksum
-    }
-    std::fs::write(&ubx, &bytes).unwrap();
+    let (nmea, ubx) = captures(d.path());
     let out = d.path().join("files.mcap");
     let mut child = spawn(&["record", "-o", s(&out), "--file", &format!("{}:nmea", s(&nmea)), "--file", s(&ubx), "--stdin", "json", "--json"]);
     let mut stdin = child.stdin.take().unwrap();
@@ -210,4 +218,18 @@ fn nmea_over_a_pseudo_terminal_at_a_set_baud_arrives_with_its_values() {
     let sats: Vec<u8> = fixes.iter().map(|f| f.satellites).collect();
     assert_eq!(sats, (0..20).map(|k| 10 + (k % 10) as u8).collect::<Vec<_>>(), "in order, once each");
     assert!((fixes[0].speed_mps.unwrap() - 20.0 * 1852.0 / 3600.0).abs() < 1e-9);
+}
+
+#[test]
+fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
+    let d = tempfile::tempdir().unwrap();
+    let (nmea, ubx) = captures(d.path());
+    let (a, b) = (d.path().join("a.mcap"), d.path().join("b.mcap"));
+    let r: serde_json::Value = serde_json::from_slice(&ok(&["import", "--format", "nmea", s(&nmea), "-o", s(&a), "--json"]).stdout).unwrap();
+    assert_eq!((r["messages"].as_u64(), r["skipped"]["checksum failures"].as_u64(), r["skipped"]["malformed"].as_u64()), (Some(50), Some(50), Some(50)), "{r}");
+    let fixes = gnss_fixes(&a);
+    assert!(fixes.iter().all(|f| f.fix_type == railfuse_catalog::messages::FixType::RtkFixed && f.satellites == 12));
+    let r: serde_json::Value = serde_json::from_slice(&ok(&["import", "--format", "ubx", s(&ubx), "-o", s(&b), "--json"]).stdout).unwrap();
+    assert_eq!(r["messages"], 1, "{r}");
+    assert_eq!(gnss_fixes(&b)[0].satellites, 29);
 }

@@ -1,7 +1,8 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use railfuse_record::import::{eth, ImportReport};
+use railfuse_record::import::{eth, gnss_file, ImportReport};
+use railfuse_record::recorder::StreamFormat;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -11,7 +12,7 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Input format: `eth` (ETH-PBL railway node CSV: raw IMU, UBX frames as hex, NMEA,
-    /// correction-link and station events).
+    /// correction-link and station events), `nmea` or `ubx` (a GNSS receiver's capture).
     #[arg(long, default_value = "eth")]
     pub format: String,
     /// Print the report as JSON.
@@ -22,7 +23,9 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let report: ImportReport = match a.format.as_str() {
         "eth" => eth::import(&a.input, &a.output)?,
-        other => anyhow::bail!("--format {other}: unknown (formats: eth)"),
+        "nmea" => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea)?,
+        "ubx" => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx)?,
+        other => anyhow::bail!("--format {other}: unknown (formats: eth, nmea, ubx)"),
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

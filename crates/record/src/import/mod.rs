@@ -1,9 +1,11 @@
 //! Importers: existing logs of other tools into railfuse channels.
 //!
 //! - [`eth`]: the ETH-PBL railway dataset (on-board node CSV: raw IMU, UBX frames as hex,
-//!   NMEA sentences, correction-link and station events).
+//!   NMEA sentences, correction-link and station events);
+//! - [`gnss_file`]: NMEA and UBX captures of a receiver.
 
 pub mod eth;
+pub mod gnss_file;
 
 use std::collections::BTreeMap;
 use std::io::BufRead;

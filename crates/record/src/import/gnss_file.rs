@@ -1,0 +1,64 @@
+//! NMEA 0183 and u-blox UBX files (a receiver's output captured to disk) into `/gnss/fix`,
+//! through the recorder's own stream decoders: same checksums, same bounds, same counting of
+//! what does not decode. GNSS time is the sensor time and, with no receive time in a file, the
+//! log time too.
+
+use std::io::Read;
+use std::path::Path;
+
+use railfuse_catalog::log::LogWriter;
+use railfuse_catalog::messages::{GnssFix, SourceStats};
+use railfuse_catalog::{topics, Error, Result};
+
+use super::ImportReport;
+use crate::recorder::message::Message;
+use crate::recorder::stream::{StreamDecoder, StreamFormat};
+
+pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<ImportReport> {
+    let mut report = ImportReport {
+        input: input.to_owned(),
+        output: output.to_owned(),
+        format: format!("{format:?}").to_lowercase(),
+        time_base: "GNSS time of each solution (UTC)".into(),
+        ..Default::default()
+    };
+    let io = |source| Error::Io { path: input.to_owned(), source };
+    let mut file = std::fs::File::open(input).map_err(io)?;
+    let mut writer = LogWriter::create(output)?;
+    let channel = writer.add_channel::<GnssFix>(topics::GNSS_FIX)?;
+    let mut decoder = StreamDecoder::new(format);
+    let mut stats = SourceStats::default();
+    let (mut buf, mut items) = (vec![0u8; 64 << 10], Vec::new());
+    let mut last_stamp = 0u64;
+    let mut eof = false;
+    while !eof {
+        let n = file.read(&mut buf).map_err(io)?;
+        if n == 0 {
+            eof = true;
+            decoder.finish(0, &mut stats, &mut items);
+        } else {
+            decoder.feed(&buf[..n], 0, &mut stats, &mut items);
+        }
+        for item in items.drain(..) {
+            let Message::Gnss(mut fix) = item.message else { continue };
+            // A solution before the first date (NMEA GGA before any RMC) has no UTC yet.
+            if fix.stamp_ns == 0 {
+                fix.stamp_ns = last_stamp;
+            }
+            last_stamp = fix.stamp_ns;
+            writer.write(channel, fix.stamp_ns, &fix)?;
+            report.messages += 1;
+            *report.per_topic.entry(topics::GNSS_FIX.to_owned()).or_insert(0) += 1;
+        }
+    }
+    for (what, n) in [("checksum failures", stats.checksum_failures), ("malformed", stats.malformed), ("oversized", stats.oversized)] {
+        if n > 0 {
+            report.skipped.insert(what.to_owned(), n);
+        }
+    }
+    if let Some(e) = stats.last_error {
+        report.first_problems.push(e);
+    }
+    writer.finish()?;
+    Ok(report)
+}
