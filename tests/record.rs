@@ -233,3 +233,41 @@ fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
     assert_eq!(r["messages"], 1, "{r}");
     assert_eq!(gnss_fixes(&b)[0].satellites, 29);
 }
+
+#[test]
+fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("run.mcap");
+    let meta = d.path().join("run.toml");
+    std::fs::write(&meta, "train = \"ETR103\"\noperator = \"test bench\"\nnotes = \"split test\"\n").unwrap();
+    let o = ok(&[
+        "record",
+        "-o",
+        s(&out),
+        "--speed",
+        "40",
+        "--duration",
+        "3.5",
+        "--split-every",
+        "1",
+        "--meta-file",
+        s(&meta),
+        "--meta",
+        "operator=override",
+        "--json",
+    ]);
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let files: Vec<std::path::PathBuf> = r["files"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().into()).collect();
+    assert!(files.len() >= 3, "{r}");
+    assert_eq!(files[0].file_name().unwrap(), "run-001.mcap");
+    let mut total = 0u64;
+    for f in &files {
+        let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(f), "--json"]).stdout).unwrap();
+        let run = info["metadata"].as_array().unwrap().iter().find(|m| m[0] == "railfuse.run").unwrap().clone();
+        let text = run.to_string();
+        assert!(text.contains("ETR103") && text.contains("override") && text.contains("\"part\""), "{text}");
+        total +=
+            info["channels"].as_array().unwrap().iter().filter(|c| c["topic"] != "/recorder/diagnostics").map(|c| c["messages"].as_u64().unwrap()).sum::<u64>();
+    }
+    assert_eq!(total, r["messages"].as_u64().unwrap(), "every message in exactly one part");
+}

@@ -46,6 +46,15 @@ pub struct Args {
     /// Stop after this many seconds (default: at Ctrl-C / SIGTERM, or when every source ends).
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Start a new numbered file (`run-001.mcap`, `run-002.mcap`, …) past this many MiB.
+    #[arg(long, value_name = "MIB")]
+    pub split_size: Option<f64>,
+    /// … or every this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    pub split_every: Option<f64>,
+    /// Run metadata from a TOML file of KEY = "value" lines (flags override it).
+    #[arg(long, value_name = "FILE")]
+    pub meta_file: Option<PathBuf>,
     /// Close a chunk at least this often: what a crash can lose, at most.
     #[arg(long, default_value_t = 1.0)]
     pub chunk_interval: f64,
@@ -142,9 +151,21 @@ fn status_line(s: &Status) -> String {
 pub fn run(a: Args) -> Result<()> {
     let specs = sources(&a)?;
     let mut metadata = BTreeMap::new();
+    if let Some(f) = &a.meta_file {
+        let text = std::fs::read_to_string(f).with_context(|| format!("{}", f.display()))?;
+        let table: toml::Table = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", f.display(), e.message()))?;
+        for (k, v) in table {
+            metadata.insert(k, v.as_str().map_or_else(|| v.to_string(), str::to_owned));
+        }
+    }
     for m in &a.meta {
         let (k, v) = m.split_once('=').with_context(|| format!("--meta {m}: KEY=VALUE"))?;
         metadata.insert(k.trim().to_owned(), v.to_owned());
+    }
+    for (what, v) in [("--split-size", a.split_size), ("--split-every", a.split_every)] {
+        if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+            bail!("{what} must be positive");
+        }
     }
     if !(a.chunk_interval.is_finite() && a.chunk_interval > 0.0) {
         bail!("--chunk-interval must be positive, not {}", a.chunk_interval);
@@ -185,6 +206,8 @@ pub fn run(a: Args) -> Result<()> {
         sources: specs,
         chunk_interval: Duration::from_secs_f64(a.chunk_interval),
         duration: a.duration.map(Duration::from_secs_f64),
+        split_bytes: a.split_size.map(|m| (m * (1 << 20) as f64) as u64),
+        split_every: a.split_every.map(Duration::from_secs_f64),
         queue: a.queue,
         metadata,
         status: Some(status),
@@ -196,7 +219,8 @@ pub fn run(a: Args) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        println!("recorded {} messages in {:.1} s -> {} (stopped: {})", report.messages, report.duration_s, report.output.display(), report.stopped_by);
+        let files: Vec<String> = report.files.iter().map(|f| f.display().to_string()).collect();
+        println!("recorded {} messages in {:.1} s -> {} (stopped: {})", report.messages, report.duration_s, files.join(", "), report.stopped_by);
         for s in &report.sources {
             println!(
                 "  {}: {} received, {} written, {} dropped, {} malformed, {} checksum failures, {} oversized, {} reconnects{}",

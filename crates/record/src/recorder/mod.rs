@@ -39,6 +39,10 @@ pub struct RecordOptions {
     pub chunk_interval: Duration,
     /// Stop after this long.
     pub duration: Option<Duration>,
+    /// Start a new numbered file (`<stem>-001.mcap`, `-002`, …) past this many bytes …
+    pub split_bytes: Option<u64>,
+    /// … or this much time.
+    pub split_every: Option<Duration>,
     /// Per-source queue length.
     pub queue: usize,
     /// Run metadata (run, train, operator, route, notes, sensor configuration).
@@ -68,6 +72,30 @@ pub struct RecordReport {
     pub stopped_by: String,
     /// The write error that ended it, if one did (the file keeps every closed chunk).
     pub write_error: Option<String>,
+    /// Every file written, in order (one unless splitting).
+    pub files: Vec<PathBuf>,
+}
+
+/// The path of part `n` (1-based) when splitting: `run.mcap` → `run-001.mcap`.
+pub fn part_path(output: &Path, n: u32) -> PathBuf {
+    let stem = output.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
+    let ext = output.extension().and_then(|s| s.to_str()).unwrap_or("mcap");
+    output.with_file_name(format!("{stem}-{n:03}.{ext}"))
+}
+
+/// Opens one output file with the recorder's channel and the run metadata.
+fn open_part(path: &Path, opts: &RecordOptions, part: Option<u32>) -> railfuse_catalog::Result<(ItemWriter, railfuse_catalog::log::ChannelId)> {
+    let mut writer = ItemWriter::new(LogWriter::create(path)?);
+    let diag = writer.writer.add_channel::<RecorderDiagnostics>(topics::RECORDER_DIAGNOSTICS)?;
+    let mut metadata = opts.metadata.clone();
+    metadata.insert("sources".into(), opts.sources.iter().map(|s| s.to_string()).collect::<Vec<_>>().join("; "));
+    metadata.insert("tool_version".into(), crate::TOOL_VERSION.into());
+    metadata.insert("source".into(), "recorded".into());
+    if let Some(n) = part {
+        metadata.insert("part".into(), n.to_string());
+    }
+    writer.writer.write_metadata(topics::metadata::RUN, metadata)?;
+    Ok((writer, diag))
 }
 
 fn file_size(path: &Path) -> u64 {
@@ -78,13 +106,12 @@ fn file_size(path: &Path) -> u64 {
 
 /// Records until `stop` is set, the duration is up, or every source has ended.
 pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalog::Result<RecordReport> {
-    let mut writer = ItemWriter::new(LogWriter::create(&opts.output)?);
-    let diag = writer.writer.add_channel::<RecorderDiagnostics>(topics::RECORDER_DIAGNOSTICS)?;
-    let mut metadata = opts.metadata.clone();
-    metadata.insert("sources".into(), opts.sources.iter().map(|s| s.to_string()).collect::<Vec<_>>().join("; "));
-    metadata.insert("tool_version".into(), crate::TOOL_VERSION.into());
-    metadata.insert("source".into(), "recorded".into());
-    writer.writer.write_metadata(topics::metadata::RUN, metadata)?;
+    let splitting = opts.split_bytes.is_some() || opts.split_every.is_some();
+    let mut part = 1u32;
+    let mut current = if splitting { part_path(&opts.output, part) } else { opts.output.clone() };
+    let (mut writer, mut diag) = open_part(&current, &opts, splitting.then_some(part))?;
+    let mut files = vec![current.clone()];
+    let mut part_started = Instant::now();
 
     let source_stop = Arc::new(AtomicBool::new(false));
     let mut queues: Vec<Receiver<Item>> = Vec::new();
@@ -134,7 +161,7 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
         let snapshot =
             || -> Vec<SourceStats> { stats.iter().zip(&written).map(|(s, &w)| SourceStats { written: w, ..s.lock().expect("stats").clone() }).collect() };
         if last_flush.elapsed() >= opts.chunk_interval {
-            let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: snapshot(), bytes_written: file_size(&opts.output) };
+            let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: snapshot(), bytes_written: file_size(&current) };
             let r = writer.writer.write(diag, d.stamp_ns, &d).and_then(|()| writer.writer.flush_chunk());
             if let Err(e) = r {
                 write_error = Some(e.to_string());
@@ -142,6 +169,28 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
                 break 'run;
             }
             last_flush = Instant::now();
+            let full = opts.split_bytes.is_some_and(|b| d.bytes_written >= b) || opts.split_every.is_some_and(|t| part_started.elapsed() >= t);
+            if full {
+                part += 1;
+                let next = part_path(&opts.output, part);
+                let r = std::mem::replace(
+                    &mut writer,
+                    open_part(&next, &opts, Some(part)).map(|(w, c)| {
+                        diag = c;
+                        w
+                    })?,
+                )
+                .writer
+                .finish();
+                if let Err(e) = r {
+                    write_error = Some(e.to_string());
+                    stopped_by = "write error".to_owned();
+                    break 'run;
+                }
+                current = next;
+                files.push(current.clone());
+                part_started = Instant::now();
+            }
         }
         if let Some(status) = opts.status.as_mut() {
             if last_status.elapsed() >= Duration::from_secs(1) {
@@ -149,7 +198,7 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
                     elapsed_s: started.elapsed().as_secs_f64(),
                     messages,
                     per_topic: per_topic.clone(),
-                    bytes_written: file_size(&opts.output),
+                    bytes_written: file_size(&current),
                     sources: snapshot(),
                 });
                 last_status = Instant::now();
@@ -192,7 +241,7 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
     }
     drop(queues);
     let sources: Vec<SourceStats> = stats.iter().zip(&written).map(|(s, &w)| SourceStats { written: w, ..s.lock().expect("stats").clone() }).collect();
-    let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: sources.clone(), bytes_written: file_size(&opts.output) };
+    let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: sources.clone(), bytes_written: file_size(&current) };
     if write_error.is_none() {
         if let Err(e) = writer.writer.write(diag, d.stamp_ns, &d) {
             write_error = Some(e.to_string());
@@ -202,5 +251,5 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
     if let (Err(e), None) = (&finished, &write_error) {
         write_error = Some(e.to_string());
     }
-    Ok(RecordReport { output: opts.output, duration_s: started.elapsed().as_secs_f64(), messages, per_topic, sources, stopped_by, write_error })
+    Ok(RecordReport { output: opts.output, duration_s: started.elapsed().as_secs_f64(), messages, per_topic, sources, stopped_by, write_error, files })
 }
