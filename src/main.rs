@@ -26,7 +26,7 @@ enum Command {
     Refuse(cmd::refuse::Args),
     /// Record live sources (UDP/TCP JSON lines, NMEA/UBX serial, files, stdin, the simulator)
     /// into a crash-safe MCAP log.
-    Record(cmd::record::Args),
+    Record(Box<cmd::record::Args>),
     /// Convert an existing log (the ETH-PBL railway dataset) into railfuse channels.
     Import(cmd::import::Args),
     /// Salvage every intact record of a damaged log (crash, power cut) into a complete log.
@@ -59,7 +59,7 @@ fn main() -> ExitCode {
         Command::Eval(a) => cmd::eval::run(a),
         Command::Recover(a) => cmd::recover::run(a),
         Command::Import(a) => cmd::import::run(a),
-        Command::Record(a) => cmd::record::run(a),
+        Command::Record(a) => cmd::record::run(*a),
         Command::Viz(a) => cmd::viz::run(a),
         Command::Demo(a) => cmd::demo::run(a),
         Command::Results(a) => cmd::results::run(a),
