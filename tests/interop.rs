@@ -115,17 +115,12 @@ fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
-#[test]
-fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
+/// A real Rerun server on loopback that saves what it receives: (process, URL, file).
+fn rerun_server(dir: &std::path::Path) -> (std::process::Child, String, std::path::PathBuf) {
     use std::time::{Duration, Instant};
-    let d = tempfile::tempdir().unwrap();
-    let fused = d.path().join("f.mcap");
-    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
-
-    // A real Rerun server on loopback that saves what it receives.
     let port = free_port();
-    let saved = d.path().join("streamed.rrd");
-    let mut server = std::process::Command::new(client("RAILFUSE_RERUN", "rerun"))
+    let saved = dir.join(format!("streamed-{port}.rrd"));
+    let server = std::process::Command::new(client("RAILFUSE_RERUN", "rerun"))
         .env("RERUN_ANALYTICS", "0")
         .args(["--port", &port.to_string(), "--save", s(&saved)])
         .stdout(std::process::Stdio::null())
@@ -137,14 +132,17 @@ fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
         assert!(started.elapsed() < Duration::from_secs(30), "rerun server did not start");
         std::thread::sleep(Duration::from_millis(200));
     }
-    let url = format!("rerun+http://127.0.0.1:{port}/proxy");
-    let streamed = railfuse(&["viz", s(&fused), "--connect", &url]);
-    // Wait until the server has written what it received (the file stops growing).
+    (server, format!("rerun+http://127.0.0.1:{port}/proxy"), saved)
+}
+
+/// Waits until the server has written what it received (the file stops growing), then stops it.
+fn stop_when_saved(mut server: std::process::Child, saved: &std::path::Path) {
+    use std::time::{Duration, Instant};
     let mut last = 0;
     let waited = Instant::now();
     loop {
         std::thread::sleep(Duration::from_millis(1000));
-        let size = std::fs::metadata(&saved).map(|m| m.len()).unwrap_or(0);
+        let size = std::fs::metadata(saved).map(|m| m.len()).unwrap_or(0);
         if (size > 0 && size == last) || waited.elapsed() > Duration::from_secs(30) {
             break;
         }
@@ -152,6 +150,33 @@ fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
     }
     server.kill().unwrap();
     server.wait().unwrap();
+}
+
+#[test]
+fn record_viz_streams_the_incoming_channels_to_a_running_viewer() {
+    let d = tempfile::tempdir().unwrap();
+    let (server, url, saved) = rerun_server(d.path());
+    let out = d.path().join("live.mcap");
+    let o = ok(&["record", "-o", s(&out), "--speed", "40", "--duration", "3", "--viz", &url, "--json"]);
+    stop_when_saved(server, &saved);
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(r["messages"].as_u64().unwrap() > 1000, "{r}");
+    let printed = rerun_ok(&["rrd", "print", "-v", "--continue-on-error", "true", s(&saved)]);
+    for entity in ["/map/track", "/map/truth", "/speed/truth", "/speed/radar"] {
+        assert!(printed.contains(entity), "the viewer did not receive {entity}");
+    }
+}
+
+#[test]
+fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
+    use std::time::{Duration, Instant};
+    let d = tempfile::tempdir().unwrap();
+    let fused = d.path().join("f.mcap");
+    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
+
+    let (server, url, saved) = rerun_server(d.path());
+    let streamed = railfuse(&["viz", s(&fused), "--connect", &url]);
+    stop_when_saved(server, &saved);
     assert!(streamed.status.success(), "{}", stderr(&streamed));
     // The server was stopped mid-stream, so the file has no footer: read what it holds.
     let printed = rerun_ok(&["rrd", "print", "-v", "--continue-on-error", "true", s(&saved)]);

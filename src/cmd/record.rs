@@ -64,6 +64,10 @@ pub struct Args {
     /// Run metadata KEY=VALUE (run, train, operator, route, notes, …). Repeatable.
     #[arg(long = "meta", value_name = "KEY=VALUE")]
     pub meta: Vec<String>,
+    /// Stream the incoming channels to a Rerun viewer while recording: `spawn` starts one,
+    /// or a viewer URL (e.g. rerun+http://127.0.0.1:9876/proxy).
+    #[arg(long, value_name = "spawn|URL")]
+    pub viz: Option<String>,
     /// Print the final report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -201,6 +205,25 @@ pub fn run(a: Args) -> Result<()> {
     for s in &specs {
         eprintln!("recording {s}");
     }
+    let tap: Option<railfuse_record::recorder::TapHook> = match &a.viz {
+        None => None,
+        Some(target) => {
+            let sink = if target == "spawn" { railfuse_viz::Sink::Spawn } else { railfuse_viz::Sink::Connect(target.clone()) };
+            let mut live = railfuse_viz::LiveViz::open(&sink)?;
+            let mut failed = false;
+            Some(Box::new(move |item: &railfuse_record::recorder::message::Item| {
+                if failed {
+                    return;
+                }
+                let (schema, json) = item.message.schema_and_json();
+                // A viewer that goes away must not stop the recording: say so once.
+                if let Err(e) = live.message(&item.topic, schema, item.log_time_ns, &json) {
+                    eprintln!("\nviewer: {e}; recording continues without it");
+                    failed = true;
+                }
+            }))
+        }
+    };
     let opts = RecordOptions {
         output: a.output.clone(),
         sources: specs,
@@ -211,6 +234,7 @@ pub fn run(a: Args) -> Result<()> {
         queue: a.queue,
         metadata,
         status: Some(status),
+        tap,
     };
     let report = record(opts, stop)?;
     if terminal {

@@ -10,7 +10,7 @@
 pub mod entities;
 mod logger;
 
-pub use logger::{visualize, Sink, VizReport};
+pub use logger::{visualize, LiveViz, Sink, VizReport};
 
 #[derive(Debug, thiserror::Error)]
 pub enum Error {

@@ -56,9 +56,10 @@ fn fix_color(fix: FixType) -> Color {
     }
 }
 
-struct Logger<'a> {
+struct Logger {
     rec: RecordingStream,
-    path: &'a Path,
+    /// The file the messages come from, for error messages (shared: cheap to lend).
+    path: std::sync::Arc<Path>,
     map: Option<TrackMap>,
     truth: ReferenceTrack,
     pipelines: Vec<String>,
@@ -70,9 +71,8 @@ struct Logger<'a> {
 /// How long to wait for a viewer to take the last of the data.
 const VIEWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
 
-/// Logs the whole file to the sink, streaming.
-pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
-    let mut reader = LogReader::open(path)?;
+/// Opens the Rerun recording stream for a sink (checking first that a viewer listens).
+fn open_stream(sink: &Sink) -> Result<RecordingStream, Error> {
     if let Sink::Connect(url) = sink {
         probe_viewer(url)?;
     }
@@ -92,8 +92,48 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
     // Our `log_time` timeline is the MCAP log time; the SDK's own wall-clock `log_time` would
     // overwrite it.
     rec.set_log_time_enabled(false);
-    let mut logger =
-        Logger { rec, path, map: None, truth: ReferenceTrack::new(10.0), pipelines: Vec::new(), shares: Default::default(), report: VizReport::default() };
+    Ok(rec)
+}
+
+/// Streams messages to Rerun as they are recorded (`railfuse record --viz`): the same entity
+/// layout as `railfuse viz`, fed one message at a time.
+pub struct LiveViz {
+    logger: Logger,
+    channels: std::collections::HashMap<(String, String), std::sync::Arc<railfuse_catalog::log::ChannelInfo>>,
+}
+
+impl LiveViz {
+    pub fn open(sink: &Sink) -> Result<Self, Error> {
+        Ok(Self { logger: Logger::new(open_stream(sink)?, PathBuf::from("<live>")), channels: Default::default() })
+    }
+
+    /// Logs one message given as its topic, schema name, log time and JSON payload.
+    pub fn message(&mut self, topic: &str, schema: &str, log_time_ns: u64, json: &[u8]) -> Result<(), Error> {
+        let n = self.channels.len() as u16;
+        let channel = self.channels.entry((topic.to_owned(), schema.to_owned())).or_insert_with(|| {
+            std::sync::Arc::new(railfuse_catalog::log::ChannelInfo {
+                id: n,
+                topic: topic.to_owned(),
+                message_encoding: "json".into(),
+                metadata: Default::default(),
+                schema: Some(std::sync::Arc::new(railfuse_catalog::log::SchemaInfo {
+                    id: n,
+                    name: schema.to_owned(),
+                    encoding: "jsonschema".into(),
+                    data: Vec::new(),
+                })),
+            })
+        });
+        let m = railfuse_catalog::log::LogMessage { channel, sequence: 0, log_time_ns, publish_time_ns: log_time_ns, data: json };
+        self.logger.rec.set_timestamp_nanos_since_epoch("log_time", log_time_ns as i64);
+        self.logger.message(&m)
+    }
+}
+
+/// Logs the whole file to the sink, streaming.
+pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
+    let mut reader = LogReader::open(path)?;
+    let mut logger = Logger::new(open_stream(sink)?, path.to_owned());
     while let Some(record) = reader.next() {
         if let LogRecord::Message(m) = record? {
             logger.report.messages += 1;
@@ -110,7 +150,19 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
     Ok(logger.report)
 }
 
-impl Logger<'_> {
+impl Logger {
+    fn new(rec: RecordingStream, path: PathBuf) -> Self {
+        Logger {
+            rec,
+            path: path.into(),
+            map: None,
+            truth: ReferenceTrack::new(10.0),
+            pipelines: Vec::new(),
+            shares: Default::default(),
+            report: VizReport::default(),
+        }
+    }
+
     fn log<AS: ?Sized + rerun::AsComponents>(&mut self, entity: &str, data: &AS) -> Result<(), Error> {
         self.rec.log(entity, data).map_err(|e| Error::Rerun(e.to_string()))?;
         self.report.logged += 1;
@@ -136,7 +188,7 @@ impl Logger<'_> {
     }
 
     fn message(&mut self, m: &railfuse_catalog::log::LogMessage<'_>) -> Result<(), Error> {
-        let path = self.path;
+        let path = &*self.path.clone();
         let topic = m.channel.topic.as_str();
         match m.channel.schema_name() {
             n if n == TrackMap::SCHEMA_NAME => {

@@ -31,6 +31,27 @@ pub enum Message {
     Map(TrackMap),
 }
 
+impl Message {
+    /// Its schema name and JSON payload (for live viewers).
+    pub fn schema_and_json(&self) -> (&'static str, Vec<u8>) {
+        fn j<M: ChannelMessage + serde::Serialize>(m: &M) -> (&'static str, Vec<u8>) {
+            (M::SCHEMA_NAME, serde_json::to_vec(m).expect("a message serialises"))
+        }
+        match self {
+            Message::Gnss(m) => j(m),
+            Message::Imu(m) => j(m),
+            Message::Radar(m) => j(m),
+            Message::Odometer(m) => j(m),
+            Message::Loop(m) => j(m),
+            Message::Balise(m) => j(m),
+            Message::Eddy(m) => j(m),
+            Message::Event(m) => j(m),
+            Message::Truth(m) => j(m),
+            Message::Map(m) => j(m),
+        }
+    }
+}
+
 /// A message ready to write: topic, receive time, message.
 #[derive(Debug, Clone)]
 pub struct Item {

@@ -49,7 +49,12 @@ pub struct RecordOptions {
     pub metadata: BTreeMap<String, String>,
     /// Called about once a second with the live figures (the CLI's status display).
     pub status: Option<StatusHook>,
+    /// Called with every message written (a live viewer); must not block.
+    pub tap: Option<TapHook>,
 }
+
+/// Called with every message written.
+pub type TapHook = Box<dyn FnMut(&Item)>;
 
 /// Live figures for the status display.
 #[derive(Debug, Clone, Serialize)]
@@ -148,6 +153,9 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
                         }
                         written[i] += 1;
                         messages += 1;
+                        if let Some(tap) = opts.tap.as_mut() {
+                            tap(&item);
+                        }
                         *per_topic.entry(item.topic).or_insert(0) += 1;
                     }
                     Err(TryRecvError::Empty) => break,
