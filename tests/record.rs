@@ -182,22 +182,37 @@ fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets
     let r: serde_json::Value = serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout).unwrap();
     let (v, _) = radar_speeds(&fixed);
     assert_eq!(v, (0..3000).map(|k| k as f64).collect::<Vec<_>>(), "everything sent before the last closed chunk: {r}");
+    // The official Python reader reads the salvage and validates every message.
+    let py = python("check_mcap.py", &[s(&fixed)]);
+    assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+    let py: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    assert_eq!(py["topics"]["/radar/speed"], 3000, "{py}");
 }
 
-#[test]
-fn nmea_over_a_pseudo_terminal_at_a_set_baud_arrives_with_its_values() {
+/// A pseudo-terminal pair: (master side, slave fd, slave device path).
+fn pty() -> (std::fs::File, i32, String) {
     let (mut master, mut slave) = (0, 0);
     let mut name = [0 as libc::c_char; 128];
     // SAFETY: openpty fills the two descriptors and the name buffer it is given.
     let rc = unsafe { libc::openpty(&mut master, &mut slave, name.as_mut_ptr(), std::ptr::null(), std::ptr::null()) };
     assert_eq!(rc, 0, "openpty failed");
     let tty = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }.to_str().unwrap().to_owned();
+    // SAFETY: `master` is the open master side of the pair; the File owns it from here.
+    (unsafe { <std::fs::File as std::os::fd::FromRawFd>::from_raw_fd(master) }, slave, tty)
+}
+
+#[test]
+fn nmea_and_ubx_over_pseudo_terminals_at_set_bauds_arrive_with_their_values() {
+    let (mut m, slave, tty) = pty();
+    let (mut mu, slave_u, tty_u) = pty();
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("serial.mcap");
-    let child = spawn(&["record", "-o", s(&out), "--serial", &format!("{tty}:115200:nmea"), "--json"]);
+    let (_, ubx) = captures(d.path());
+    let child = spawn(&["record", "-o", s(&out), "--serial", &format!("{tty}:115200:nmea"), "--serial", &format!("{tty_u}:460800:ubx=/gnss/rx2"), "--json"]);
     std::thread::sleep(Duration::from_millis(500));
-    // SAFETY: `master` is the open master side of the pair; the File owns it from here.
-    let mut m = unsafe { <std::fs::File as std::os::fd::FromRawFd>::from_raw_fd(master) };
+    for chunk in std::fs::read(&ubx).unwrap().chunks(7) {
+        mu.write_all(chunk).unwrap();
+    }
     for k in 0..20 {
         for body in [
             format!("GNRMC,0900{k:02}.00,A,4439.30664,N,01055.78382,E,20.0,45.0,201022,,,R,V"),
@@ -212,8 +227,12 @@ fn nmea_over_a_pseudo_terminal_at_a_set_baud_arrives_with_its_values() {
     std::thread::sleep(Duration::from_millis(500));
     let r = stop(child);
     unsafe { libc::close(slave) };
+    unsafe { libc::close(slave_u) };
     let src = &r["sources"][0];
     assert_eq!((src["written"].as_u64(), src["checksum_failures"].as_u64()), (Some(20), Some(20)), "{r}");
+    // The UBX receiver, mapped to its own channel: the sample's NAV-PVT with 29 satellites.
+    assert_eq!(r["sources"][1]["written"], 1, "{r}");
+    assert_eq!(r["per_topic"]["/gnss/rx2"], 1, "{r}");
     let fixes = gnss_fixes(&out);
     let sats: Vec<u8> = fixes.iter().map(|f| f.satellites).collect();
     assert_eq!(sats, (0..20).map(|k| 10 + (k % 10) as u8).collect::<Vec<_>>(), "in order, once each");

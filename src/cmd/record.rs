@@ -18,6 +18,7 @@ pub struct Args {
     #[arg(long, value_name = "PORT")]
     pub udp: Vec<u16>,
     /// Listen on this TCP port for streams: PORT[:json|nmea|ubx] (default json). Repeatable.
+    /// Any FORMAT may be written FORMAT=/topic to send a receiver's fixes to their own channel.
     #[arg(long, value_name = "PORT[:FORMAT]")]
     pub tcp: Vec<String>,
     /// Connect to a receiver or gateway: HOST:PORT[:json|nmea|ubx]; reconnects with backoff.
@@ -79,8 +80,21 @@ extern "C" fn on_signal(_: libc::c_int) {
     SIGNALLED.store(true, Ordering::SeqCst);
 }
 
-fn format_or(text: Option<&str>, default: StreamFormat) -> Result<StreamFormat> {
-    text.map_or(Ok(default), |t| t.parse().map_err(anyhow::Error::msg))
+/// `FORMAT[=TOPIC]`: the stream format and, optionally, the channel its GNSS fixes go to
+/// (a second receiver on `/gnss/rx2`).
+fn format_or(text: Option<&str>, default: StreamFormat) -> Result<(StreamFormat, Option<String>)> {
+    let Some(t) = text else { return Ok((default, None)) };
+    let (f, topic) = match t.split_once('=') {
+        Some((f, topic)) if topic.starts_with('/') => (f, Some(topic.to_owned())),
+        Some((_, topic)) => bail!("{t}: the channel must start with '/', not '{topic}'"),
+        None => (t, None),
+    };
+    let format = if f.is_empty() { default } else { f.parse().map_err(anyhow::Error::msg)? };
+    Ok((format, topic))
+}
+
+fn is_format(t: &str) -> bool {
+    t.split_once('=').map_or(t, |(f, _)| f).parse::<StreamFormat>().is_ok()
 }
 
 fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
@@ -91,15 +105,17 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
     for t in &a.tcp {
         let (port, fmt) = t.split_once(':').map_or((t.as_str(), None), |(p, f)| (p, Some(f)));
         let port: u16 = port.parse().with_context(|| format!("--tcp {t}: not a port"))?;
-        out.push(SourceSpec::TcpListen { addr: SocketAddr::new(a.bind, port), format: format_or(fmt, StreamFormat::JsonLines)? });
+        let (format, topic) = format_or(fmt, StreamFormat::JsonLines)?;
+        out.push(SourceSpec::TcpListen { addr: SocketAddr::new(a.bind, port), format, topic });
     }
     for t in &a.tcp_client {
         let parts: Vec<&str> = t.rsplitn(2, ':').collect();
         let (addr, fmt) = match parts[..] {
-            [f, rest] if f.parse::<StreamFormat>().is_ok() => (rest.to_owned(), Some(f)),
+            [f, rest] if is_format(f) => (rest.to_owned(), Some(f)),
             _ => (t.clone(), None),
         };
-        out.push(SourceSpec::TcpClient { addr, format: format_or(fmt, StreamFormat::JsonLines)? });
+        let (format, topic) = format_or(fmt, StreamFormat::JsonLines)?;
+        out.push(SourceSpec::TcpClient { addr, format, topic });
     }
     for t in &a.serial {
         let parts: Vec<&str> = t.split(':').collect();
@@ -109,11 +125,12 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
             _ => bail!("--serial {t}: DEVICE:BAUD[:FORMAT]"),
         };
         let baud: u32 = baud.parse().with_context(|| format!("--serial {t}: baud rate"))?;
-        out.push(SourceSpec::Serial { path: dev.into(), baud, format: format_or(fmt, StreamFormat::Nmea)? });
+        let (format, topic) = format_or(fmt, StreamFormat::Nmea)?;
+        out.push(SourceSpec::Serial { path: dev.into(), baud, format, topic });
     }
     for t in &a.file {
         let (path, fmt) = match t.rsplit_once(':') {
-            Some((p, f)) if f.parse::<StreamFormat>().is_ok() => (p, Some(f)),
+            Some((p, f)) if is_format(f) => (p, Some(f)),
             _ => (t.as_str(), None),
         };
         let by_ext = match std::path::Path::new(path).extension().and_then(|e| e.to_str()) {
@@ -121,10 +138,12 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
             Some("nmea") | Some("txt") => StreamFormat::Nmea,
             _ => StreamFormat::JsonLines,
         };
-        out.push(SourceSpec::File { path: path.into(), format: format_or(fmt, by_ext)? });
+        let (format, topic) = format_or(fmt, by_ext)?;
+        out.push(SourceSpec::File { path: path.into(), format, topic });
     }
     if let Some(f) = &a.stdin {
-        out.push(SourceSpec::Stdin { format: f.parse().map_err(anyhow::Error::msg)? });
+        let (format, topic) = format_or(Some(f), StreamFormat::JsonLines)?;
+        out.push(SourceSpec::Stdin { format, topic });
     }
     if a.simulate.is_some() || out.is_empty() {
         if !(a.speed.is_finite() && a.speed > 0.0) {

@@ -27,24 +27,30 @@ pub enum SourceSpec {
     TcpListen {
         addr: SocketAddr,
         format: StreamFormat,
+        topic: Option<String>,
     },
     /// A TCP connection to a receiver or gateway, retried with backoff when it drops.
     TcpClient {
         addr: String,
         format: StreamFormat,
+        topic: Option<String>,
     },
     Stdin {
         format: StreamFormat,
+        topic: Option<String>,
     },
     File {
         path: PathBuf,
         format: StreamFormat,
+        topic: Option<String>,
     },
-    /// A serial device (a real tty, configured with termios).
+    /// A serial device (a real tty, configured with termios), reopened with backoff when it
+    /// goes away (a USB receiver unplugged).
     Serial {
         path: PathBuf,
         baud: u32,
         format: StreamFormat,
+        topic: Option<String>,
     },
     /// The embedded simulator, played out in real time (or `speed` times faster).
     Simulated {
@@ -55,15 +61,19 @@ pub enum SourceSpec {
     },
 }
 
+fn to(topic: &Option<String>) -> String {
+    topic.as_ref().map_or(String::new(), |t| format!(" → {t}"))
+}
+
 impl std::fmt::Display for SourceSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             SourceSpec::Udp { addr } => write!(f, "udp {addr} (json)"),
-            SourceSpec::TcpListen { addr, format } => write!(f, "tcp listen {addr} ({format:?})"),
-            SourceSpec::TcpClient { addr, format } => write!(f, "tcp {addr} ({format:?})"),
-            SourceSpec::Stdin { format } => write!(f, "stdin ({format:?})"),
-            SourceSpec::File { path, format } => write!(f, "file {} ({format:?})", path.display()),
-            SourceSpec::Serial { path, baud, format } => write!(f, "serial {} {baud} baud ({format:?})", path.display()),
+            SourceSpec::TcpListen { addr, format, topic } => write!(f, "tcp listen {addr} ({format:?}{})", to(topic)),
+            SourceSpec::TcpClient { addr, format, topic } => write!(f, "tcp {addr} ({format:?}{})", to(topic)),
+            SourceSpec::Stdin { format, topic } => write!(f, "stdin ({format:?}{})", to(topic)),
+            SourceSpec::File { path, format, topic } => write!(f, "file {} ({format:?}{})", path.display(), to(topic)),
+            SourceSpec::Serial { path, baud, format, topic } => write!(f, "serial {} {baud} baud ({format:?}{})", path.display(), to(topic)),
             SourceSpec::Simulated { scenario, seed, speed, .. } => write!(f, "simulator {scenario} seed {seed} ×{speed}"),
         }
     }
@@ -77,7 +87,15 @@ pub fn now_ns() -> u64 {
 
 /// Queues decoded items; false when the recorder has gone.
 fn send(tx: &SyncSender<Item>, stats: &Stats, items: &mut Vec<Item>) -> bool {
-    for item in items.drain(..) {
+    send_as(tx, stats, items, None)
+}
+
+/// Queues decoded items, GNSS fixes on `gnss_topic` when the source is mapped to one.
+fn send_as(tx: &SyncSender<Item>, stats: &Stats, items: &mut Vec<Item>, gnss_topic: Option<&str>) -> bool {
+    for mut item in items.drain(..) {
+        if let (Some(t), Message::Gnss(_)) = (gnss_topic, &item.message) {
+            item.topic = t.to_owned();
+        }
         match tx.try_send(item) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => stats.lock().expect("stats").dropped += 1,
@@ -93,6 +111,7 @@ fn send(tx: &SyncSender<Item>, stats: &Stats, items: &mut Vec<Item>) -> bool {
 fn pump_with(
     mut r: impl Read,
     format: StreamFormat,
+    topic: Option<&str>,
     tx: &SyncSender<Item>,
     stats: &Stats,
     stop: &AtomicBool,
@@ -109,12 +128,12 @@ fn pump_with(
             Ok(0) if timeouts_read_empty => {}
             Ok(0) => {
                 d.finish(now_ns(), &mut stats.lock().expect("stats"), &mut items);
-                send(tx, stats, &mut items);
+                send_as(tx, stats, &mut items, topic);
                 return Ok(());
             }
             Ok(n) => {
                 d.feed(&buf[..n], now_ns(), &mut stats.lock().expect("stats"), &mut items);
-                if !send(tx, stats, &mut items) {
+                if !send_as(tx, stats, &mut items, topic) {
                     return Ok(());
                 }
             }
@@ -124,8 +143,8 @@ fn pump_with(
     }
 }
 
-fn pump(r: impl Read, format: StreamFormat, tx: &SyncSender<Item>, stats: &Stats, stop: &AtomicBool) -> std::io::Result<()> {
-    pump_with(r, format, tx, stats, stop, false)
+fn pump(r: impl Read, format: StreamFormat, topic: Option<&str>, tx: &SyncSender<Item>, stats: &Stats, stop: &AtomicBool) -> std::io::Result<()> {
+    pump_with(r, format, topic, tx, stats, stop, false)
 }
 
 fn set_error(stats: &Stats, e: impl std::fmt::Display) {
@@ -168,7 +187,7 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                 }
             }
         }
-        SourceSpec::TcpListen { addr, format } => {
+        SourceSpec::TcpListen { addr, format, topic } => {
             let listener = match TcpListener::bind(addr).and_then(|l| l.set_nonblocking(true).map(|()| l)) {
                 Ok(l) => l,
                 Err(e) => return set_error(&stats, format!("cannot bind {addr}: {e}")),
@@ -177,11 +196,11 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                 while !stop.load(Ordering::Relaxed) {
                     match listener.accept() {
                         Ok((conn, _)) => {
-                            let (tx, stats, stop) = (tx.clone(), stats.clone(), stop.clone());
+                            let (tx, stats, stop, topic) = (tx.clone(), stats.clone(), stop.clone(), topic.clone());
                             scope.spawn(move || {
                                 let _ = conn.set_nonblocking(false);
                                 let _ = conn.set_read_timeout(Some(tick));
-                                if let Err(e) = pump(conn, format, &tx, &stats, &stop) {
+                                if let Err(e) = pump(conn, format, topic.as_deref(), &tx, &stats, &stop) {
                                     set_error(&stats, e);
                                 }
                             });
@@ -192,7 +211,7 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                 }
             });
         }
-        SourceSpec::TcpClient { addr, format } => {
+        SourceSpec::TcpClient { addr, format, topic } => {
             let mut backoff = Duration::from_millis(250);
             let mut first = true;
             while !stop.load(Ordering::Relaxed) {
@@ -205,7 +224,7 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                         backoff = Duration::from_millis(250);
                         stats.lock().expect("stats").connected = true;
                         let _ = conn.set_read_timeout(Some(tick));
-                        if let Err(e) = pump(conn, format, &tx, &stats, &stop) {
+                        if let Err(e) = pump(conn, format, topic.as_deref(), &tx, &stats, &stop) {
                             set_error(&stats, e);
                         }
                     }
@@ -219,27 +238,45 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                 backoff = (backoff * 2).min(Duration::from_secs(8));
             }
         }
-        SourceSpec::Stdin { format } => {
-            if let Err(e) = pump(std::io::stdin().lock(), format, &tx, &stats, &stop) {
+        SourceSpec::Stdin { format, topic } => {
+            if let Err(e) = pump(std::io::stdin().lock(), format, topic.as_deref(), &tx, &stats, &stop) {
                 set_error(&stats, e);
             }
         }
-        SourceSpec::File { path, format } => match std::fs::File::open(&path) {
+        SourceSpec::File { path, format, topic } => match std::fs::File::open(&path) {
             Ok(f) => {
-                if let Err(e) = pump(f, format, &tx, &stats, &stop) {
+                if let Err(e) = pump(f, format, topic.as_deref(), &tx, &stats, &stop) {
                     set_error(&stats, e);
                 }
             }
             Err(e) => set_error(&stats, format!("{}: {e}", path.display())),
         },
-        SourceSpec::Serial { path, baud, format } => match super::serial::open(&path, baud) {
-            Ok(f) => {
-                if let Err(e) = pump_with(f, format, &tx, &stats, &stop, true) {
-                    set_error(&stats, e);
+        SourceSpec::Serial { path, baud, format, topic } => {
+            let mut backoff = Duration::from_millis(250);
+            let mut first = true;
+            while !stop.load(Ordering::Relaxed) {
+                match super::serial::open(&path, baud) {
+                    Ok(f) => {
+                        if !first {
+                            stats.lock().expect("stats").reconnects += 1;
+                        }
+                        backoff = Duration::from_millis(250);
+                        stats.lock().expect("stats").connected = true;
+                        if let Err(e) = pump_with(f, format, topic.as_deref(), &tx, &stats, &stop, true) {
+                            set_error(&stats, format!("{}: {e}", path.display()));
+                        }
+                    }
+                    Err(e) => set_error(&stats, format!("{}: {e}", path.display())),
                 }
+                first = false;
+                stats.lock().expect("stats").connected = false;
+                let until = Instant::now() + backoff;
+                while Instant::now() < until && !stop.load(Ordering::Relaxed) {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                backoff = (backoff * 2).min(Duration::from_secs(8));
             }
-            Err(e) => set_error(&stats, format!("{}: {e}", path.display())),
-        },
+        }
         SourceSpec::Simulated { scenario, seed, speed, duration_s } => {
             if let Err(e) = simulated(&scenario, seed, speed, duration_s, &tx, &stats, &stop) {
                 set_error(&stats, e);
