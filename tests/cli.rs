@@ -299,3 +299,33 @@ fn the_eth_railway_samples_import_with_the_documented_values() {
     let span = (imu.last().unwrap().stamp_ns - imu[0].stamp_ns) as f64 / 1e9;
     assert!((1300.0..2000.0).contains(&(imu.len() as f64 / span)), "{} Hz", imu.len() as f64 / span);
 }
+
+#[test]
+fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
+    let d = tempfile::tempdir().unwrap();
+    let (csv, map, out) = (d.path().join("logger.csv"), d.path().join("map.toml"), d.path().join("logger.mcap"));
+    let mut text = String::from("t;v_radar;pos;note\n");
+    for k in 0..100 {
+        let pos = if k % 10 == 0 { format!("{}", k as f64 * 2.5) } else { String::new() };
+        text += &format!("{};{};{pos};ok\n", k as f64 * 0.1, 25.0 + k as f64 * 0.01);
+    }
+    text += "oops;1;2;x\n7.0;fast;;x\n";
+    std::fs::write(&csv, text).unwrap();
+    std::fs::write(
+        &map,
+        "time_column = \"t\"\ntime_unit = \"s\"\ntime_offset_ns = 1780300800000000000\ndelimiter = \";\"\n\
+         [[channel]]\ntopic = \"/radar/speed\"\nfields = { speed_mps = \"v_radar\" }\nconstants = { quality = 1.0, valid = true }\n\
+         [[channel]]\ntopic = \"/loop/position\"\nfields = { chainage_m = \"pos\" }\n",
+    )
+    .unwrap();
+    let r: serde_json::Value = serde_json::from_slice(&ok(&["import", "--format", "csv", "--map", s(&map), s(&csv), "-o", s(&out), "--json"]).stdout).unwrap();
+    assert_eq!((r["per_topic"]["/radar/speed"].as_u64(), r["per_topic"]["/loop/position"].as_u64()), (Some(100), Some(10)), "{r}");
+    let problems = r["first_problems"].to_string();
+    assert!(problems.contains("line 102: bad time") && problems.contains("line 103: row does not make a valid message"), "{problems}");
+    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&out), "--json"]).stdout).unwrap();
+    assert_eq!(info["channels"].as_array().unwrap().len(), 2);
+    // A mapping naming a column the file does not have is refused, naming both.
+    std::fs::write(&map, "time_column = \"t\"\ndelimiter = \";\"\n[[channel]]\ntopic = \"/radar/speed\"\nfields = { speed_mps = \"v\" }\n").unwrap();
+    let bad = railfuse(&["import", "--format", "csv", "--map", s(&map), s(&csv), "-o", s(&out)]);
+    assert!(!bad.status.success() && stderr(&bad).contains("column 'v' is not in"), "{}", stderr(&bad));
+}

@@ -1,7 +1,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use railfuse_record::import::{eth, gnss_file, ImportReport};
+use railfuse_record::import::{csv_map, eth, gnss_file, ImportReport};
 use railfuse_record::recorder::StreamFormat;
 
 #[derive(clap::Args)]
@@ -12,9 +12,13 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Input format: `eth` (ETH-PBL railway node CSV: raw IMU, UBX frames as hex, NMEA,
-    /// correction-link and station events), `nmea` or `ubx` (a GNSS receiver's capture).
+    /// correction-link and station events), `nmea` or `ubx` (a GNSS receiver's capture), `csv`
+    /// (any table, with `--map`).
     #[arg(long, default_value = "eth")]
     pub format: String,
+    /// The column mapping of a CSV import (TOML; see `railfuse import --help` and the README).
+    #[arg(long, value_name = "MAPPING.toml")]
+    pub map: Option<PathBuf>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -25,7 +29,11 @@ pub fn run(a: Args) -> Result<()> {
         "eth" => eth::import(&a.input, &a.output)?,
         "nmea" => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea)?,
         "ubx" => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx)?,
-        other => anyhow::bail!("--format {other}: unknown (formats: eth, nmea, ubx)"),
+        "csv" => {
+            let Some(map) = &a.map else { anyhow::bail!("--format csv needs --map MAPPING.toml (the column of each message field)") };
+            csv_map::import(&a.input, map, &a.output)?
+        }
+        other => anyhow::bail!("--format {other}: unknown (formats: eth, nmea, ubx, csv)"),
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

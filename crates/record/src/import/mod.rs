@@ -2,8 +2,10 @@
 //!
 //! - [`eth`]: the ETH-PBL railway dataset (on-board node CSV: raw IMU, UBX frames as hex,
 //!   NMEA sentences, correction-link and station events);
-//! - [`gnss_file`]: NMEA and UBX captures of a receiver.
+//! - [`gnss_file`]: NMEA and UBX captures of a receiver;
+//! - [`csv_map`]: CSV tables with a column mapping.
 
+pub mod csv_map;
 pub mod eth;
 pub mod gnss_file;
 
@@ -31,7 +33,7 @@ pub struct ImportReport {
 }
 
 impl ImportReport {
-    fn skip(&mut self, line: u64, reason: &str, detail: impl std::fmt::Display) {
+    pub(crate) fn skip(&mut self, line: u64, reason: &str, detail: impl std::fmt::Display) {
         *self.skipped.entry(reason.to_owned()).or_insert(0) += 1;
         if self.first_problems.len() < 10 {
             self.first_problems.push(format!("line {line}: {reason}: {detail}"));

@@ -79,7 +79,12 @@ fn type_of_topic(topic: &str) -> Option<&'static str> {
 
 /// Parses one JSON line; the error says what is wrong with it.
 pub fn parse_json_line(line: &str, receive_ns: u64) -> Result<Item, String> {
-    let mut v: serde_json::Map<String, Value> = serde_json::from_str(line).map_err(|e| format!("not a JSON object: {e}"))?;
+    let v: serde_json::Map<String, Value> = serde_json::from_str(line).map_err(|e| format!("not a JSON object: {e}"))?;
+    from_object(v, receive_ns)
+}
+
+/// A message from a JSON object holding `topic`, optionally `type`, and the message's fields.
+pub fn from_object(mut v: serde_json::Map<String, Value>, receive_ns: u64) -> Result<Item, String> {
     let topic = match v.remove("topic") {
         Some(Value::String(t)) if t.starts_with('/') && t.len() <= 256 => t,
         Some(_) => return Err("\"topic\" must be a string starting with '/'".into()),
