@@ -290,3 +290,16 @@ fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
     }
     assert_eq!(total, r["messages"].as_u64().unwrap(), "every message in exactly one part");
 }
+
+#[test]
+fn a_full_disk_stops_the_recorder_with_one_line_that_says_so() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("full.mcap");
+    // Every write to the recording's file fails as on a full disk.
+    std::os::unix::fs::symlink("/dev/full", d.path().join("full.mcap.partial")).unwrap();
+    let o = railfuse(&["record", "-o", s(&out), "--speed", "20", "--duration", "2"]);
+    assert!(!o.status.success());
+    let err = stderr(&o);
+    assert!(err.contains("No space left on device") && err.contains("full.mcap.partial"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}

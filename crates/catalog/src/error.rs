@@ -34,8 +34,18 @@ impl Error {
     pub(crate) fn mcap(path: &std::path::Path, e: impl std::fmt::Display) -> Self {
         Error::Mcap { path: path.to_owned(), cause: e.to_string() }
     }
-    pub(crate) fn write(path: &std::path::Path, e: impl std::fmt::Display) -> Self {
-        Error::Write { path: path.to_owned(), cause: e.to_string() }
+    /// A write error with its chain of causes ("… : No space left on device").
+    pub(crate) fn write(path: &std::path::Path, e: impl std::error::Error) -> Self {
+        let mut cause = e.to_string();
+        let mut source = e.source();
+        while let Some(s) = source {
+            let text = s.to_string();
+            if !cause.contains(&text) {
+                cause = format!("{cause}: {text}");
+            }
+            source = s.source();
+        }
+        Error::Write { path: path.to_owned(), cause }
     }
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
         Error::Io { path: path.to_owned(), source }
