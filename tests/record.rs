@@ -303,3 +303,26 @@ fn a_full_disk_stops_the_recorder_with_one_line_that_says_so() {
     assert!(err.contains("No space left on device") && err.contains("full.mcap.partial"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn sources_come_from_a_toml_file_too() {
+    let d = tempfile::tempdir().unwrap();
+    let (nmea, _) = captures(d.path());
+    let udp = free_port();
+    let cfg = d.path().join("sources.toml");
+    std::fs::write(&cfg, format!("[[source]]\nudp = {udp}\n\n[[source]]\nfile = \"{}\"\nformat = \"nmea\"\ntopic = \"/gnss/rx2\"\n", s(&nmea))).unwrap();
+    let out = d.path().join("cfg.mcap");
+    let child = spawn(&["record", "-o", s(&out), "--sources", s(&cfg), "--duration", "2", "--json"]);
+    std::thread::sleep(Duration::from_millis(700));
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    for k in 0..10 {
+        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp)).unwrap();
+    }
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((r["per_topic"]["/gnss/rx2"].as_u64(), r["per_topic"]["/radar/speed"].as_u64()), (Some(50), Some(10)), "{r}");
+    std::fs::write(&cfg, "[[source]]\nudp = 1\ntcp = 2\n").unwrap();
+    let bad = railfuse(&["record", "-o", s(&out), "--sources", s(&cfg)]);
+    assert!(!bad.status.success() && stderr(&bad).contains("give exactly one of"), "{}", stderr(&bad));
+}

@@ -53,6 +53,11 @@ pub struct Args {
     /// … or every this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub split_every: Option<f64>,
+    /// Sources from a TOML file of `[[source]]` tables (added to those given by flags), e.g.
+    /// `udp = 5600`, or `serial = "/dev/ttyACM0"` with `baud = 115200`, `format = "ubx"`,
+    /// `topic = "/gnss/rx2"`.
+    #[arg(long, value_name = "FILE")]
+    pub sources: Option<PathBuf>,
     /// Run metadata from a TOML file of KEY = "value" lines (flags override it).
     #[arg(long, value_name = "FILE")]
     pub meta_file: Option<PathBuf>,
@@ -94,7 +99,67 @@ fn format_or(text: Option<&str>, default: StreamFormat) -> Result<(StreamFormat,
 }
 
 fn is_format(t: &str) -> bool {
-    t.split_once('=').map_or(t, |(f, _)| f).parse::<StreamFormat>().is_ok()
+    match t.split_once('=') {
+        Some((f, topic)) => (f.is_empty() || f.parse::<StreamFormat>().is_ok()) && topic.starts_with('/'),
+        None => t.parse::<StreamFormat>().is_ok(),
+    }
+}
+
+/// One `[[source]]` of a sources file: exactly one of the kinds, with its options.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SourceEntry {
+    udp: Option<u16>,
+    tcp: Option<u16>,
+    tcp_client: Option<String>,
+    serial: Option<String>,
+    baud: Option<u32>,
+    file: Option<String>,
+    stdin: Option<bool>,
+    simulate: Option<String>,
+    format: Option<String>,
+    topic: Option<String>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SourcesFile {
+    source: Vec<SourceEntry>,
+}
+
+/// Adds a sources file's entries to the flags, in their flag spelling (one parser for both).
+fn add_sources_file(a: &mut Args, path: &std::path::Path) -> Result<()> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+    let file: SourcesFile = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))?;
+    for (i, e) in file.source.into_iter().enumerate() {
+        let fmt = match (&e.format, &e.topic) {
+            (Some(f), Some(t)) => format!(":{f}={t}"),
+            (Some(f), None) => format!(":{f}"),
+            (None, Some(t)) => format!(":={t}"),
+            (None, None) => String::new(),
+        };
+        let kinds = [e.udp.is_some(), e.tcp.is_some(), e.tcp_client.is_some(), e.serial.is_some(), e.file.is_some(), e.stdin.is_some(), e.simulate.is_some()];
+        if kinds.iter().filter(|k| **k).count() != 1 {
+            bail!("{}: source {}: give exactly one of udp, tcp, tcp_client, serial, file, stdin, simulate", path.display(), i + 1);
+        }
+        if let Some(p) = e.udp {
+            a.udp.push(p);
+        } else if let Some(p) = e.tcp {
+            a.tcp.push(format!("{p}{fmt}"));
+        } else if let Some(addr) = e.tcp_client {
+            a.tcp_client.push(format!("{addr}{fmt}"));
+        } else if let Some(dev) = e.serial {
+            let baud = e.baud.with_context(|| format!("{}: source {}: serial needs baud", path.display(), i + 1))?;
+            a.serial.push(format!("{dev}:{baud}{fmt}"));
+        } else if let Some(f) = e.file {
+            a.file.push(format!("{f}{fmt}"));
+        } else if e.stdin == Some(true) {
+            a.stdin = Some(fmt.trim_start_matches(':').to_owned()).filter(|f| !f.is_empty()).or(Some("json".into()));
+        } else if let Some(s) = e.simulate {
+            a.simulate = Some(s);
+        }
+    }
+    Ok(())
 }
 
 fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
@@ -171,7 +236,10 @@ fn status_line(s: &Status) -> String {
     )
 }
 
-pub fn run(a: Args) -> Result<()> {
+pub fn run(mut a: Args) -> Result<()> {
+    if let Some(f) = a.sources.clone() {
+        add_sources_file(&mut a, &f)?;
+    }
     let specs = sources(&a)?;
     let mut metadata = BTreeMap::new();
     if let Some(f) = &a.meta_file {
