@@ -21,11 +21,15 @@ pub struct Args {
     /// this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub record: Option<f64>,
+    /// With --record: play the field load this many times faster (10 for an hour of field
+    /// data in six minutes, to see whether memory grows with the amount recorded).
+    #[arg(long, default_value_t = 1.0)]
+    pub record_speedup: f64,
 }
 
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
-        return super::bench_record::run(&a.dir, secs);
+        return super::bench_record::run(&a.dir, secs, a.record_speedup);
     }
     std::fs::create_dir_all(&a.dir).with_context(|| format!("{}: cannot create", a.dir.display()))?;
     let config = a.dir.join("kalman.toml");

@@ -68,7 +68,7 @@ fn send_at(sock: &UdpSocket, port: u16, rate: f64, secs: f64, mut line: impl FnM
     Ok(sent)
 }
 
-pub fn run(dir: &Path, field_secs: f64) -> Result<()> {
+pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let sock = UdpSocket::bind("127.0.0.1:0")?;
     sock.set_write_timeout(Some(Duration::from_secs(1)))?;
@@ -91,7 +91,7 @@ pub fn run(dir: &Path, field_secs: f64) -> Result<()> {
     }
     println!("highest rate with zero loss: {best:.0} msg/s");
 
-    println!("\nfield load for {field_secs:.0} s: IMU 1.6 kHz, GNSS 10 Hz, radar 50 Hz, 2 odometers 100 Hz, eddy-current 10 kHz (100 blocks/s of 100 samples × 2 sensors)");
+    println!("\nfield load ×{speedup} for {field_secs:.0} s (= {:.0} s of field data): IMU 1.6 kHz, GNSS 10 Hz, radar 50 Hz, 2 odometers 100 Hz, eddy-current 10 kHz (100 blocks/s of 100 samples × 2 sensors)", field_secs * speedup);
     let port = std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port();
     let c = start(dir, "field", port)?;
     let pid = c.child.id();
@@ -104,7 +104,7 @@ pub fn run(dir: &Path, field_secs: f64) -> Result<()> {
     let mut rss_mid = rss0;
     // 1 ms slices: 1.6 IMU, and the slower ones on their periods.
     while t0.elapsed().as_secs_f64() < field_secs {
-        let ms = (t0.elapsed().as_secs_f64() * 1000.0) as u64;
+        let ms = (t0.elapsed().as_secs_f64() * 1000.0 * speedup) as u64;
         while k < ms {
             let t = 1_780_300_800_000_000_000 + k * 1_000_000;
             let mut lines = Vec::new();
