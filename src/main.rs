@@ -68,9 +68,25 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // One line: the chain of causes joined by ": ", the file named at its head.
-            eprintln!("railfuse: error: {e:#}");
+            eprintln!("railfuse: error: {}", one_line(&e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// One line: the chain of causes joined by ": ", the file named at its head; a cause an outer
+/// message already quotes (`{path}: {source}`) is not said twice.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
 }

@@ -305,6 +305,71 @@ fn a_full_disk_stops_the_recorder_with_one_line_that_says_so() {
 }
 
 #[test]
+fn a_disk_filling_mid_recording_keeps_every_closed_chunk() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("filling.mcap");
+    let partial = d.path().join("filling.mcap.partial");
+    let udp = free_port();
+    // A file-size limit makes the disk "fill" after 48 KiB: writes then fail (EFBIG) part-way
+    // through a chunk, as they do with ENOSPC on a real disk.
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_railfuse"));
+    cmd.args(["record", "-o", s(&out), "--udp", &udp.to_string(), "--chunk-interval", "0.2"]).stdout(Stdio::piped()).stderr(Stdio::piped());
+    // SAFETY: only async-signal-safe calls between fork and exec.
+    unsafe {
+        std::os::unix::process::CommandExt::pre_exec(&mut cmd, || {
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            let lim = libc::rlimit { rlim_cur: 48 * 1024, rlim_max: 48 * 1024 };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &lim) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        })
+    };
+    let mut child = cmd.spawn().unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let t = Instant::now();
+    let mut k = 0;
+    while child.try_wait().unwrap().is_none() {
+        assert!(t.elapsed() < Duration::from_secs(60), "the recorder never hit the size limit after {k} messages");
+        for _ in 0..50 {
+            let _ = sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp));
+            k += 1;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("File too large") && err.contains("recover") && !err.contains("panicked"), "{err}");
+    assert!(!out.exists() && partial.exists());
+    let fixed = d.path().join("fixed.mcap");
+    let r: serde_json::Value = serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout).unwrap();
+    let (v, diags) = radar_speeds(&fixed);
+    // What was written before the disk filled is all there, in order, with nothing missing.
+    assert!(v.len() >= 500 && diags >= 1, "{} messages, {diags} diagnostics: {r}", v.len());
+    assert_eq!(v, (0..v.len()).map(|k| k as f64).collect::<Vec<_>>(), "{r}");
+}
+
+#[test]
+fn a_source_that_cannot_start_is_said_at_once_and_fails_the_run_but_not_the_others() {
+    let d = tempfile::tempdir().unwrap();
+    let (nmea, _) = captures(d.path());
+    // The port is taken: that UDP source cannot bind.
+    let taken = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port().to_string();
+    let out = d.path().join("some.mcap");
+    let missing = d.path().join("missing.nmea");
+    let o = railfuse(&["record", "-o", s(&out), "--udp", &port, "--file", s(&missing), "--file", &format!("{}:nmea", s(&nmea)), "--json"]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("warning: source failed") && err.contains("Address already in use") && err.contains("missing.nmea: No such file"), "{err}");
+    assert!(err.contains("2 of 3 sources failed") && !err.contains("panicked"), "{err}");
+    // The healthy source recorded everything, into a finished file.
+    assert_eq!(gnss_fixes(&out).len(), 50);
+}
+
+#[test]
 fn sources_come_from_a_toml_file_too() {
     let d = tempfile::tempdir().unwrap();
     let (nmea, _) = captures(d.path());

@@ -277,7 +277,14 @@ pub fn run(mut a: Args) -> Result<()> {
     });
     let terminal = std::io::stderr().is_terminal();
     let mut since_plain = 0u32;
+    let mut warned = 0;
     let status: Box<dyn FnMut(&Status)> = Box::new(move |s: &Status| {
+        // A source that fails for good is said at once, on its own line: the run goes on with
+        // the others, but the engineer should not find out at the end of a three-hour run.
+        for f in &s.failed_sources[warned..] {
+            eprintln!("{}warning: source failed: {f}", if terminal { "\r\x1b[2K" } else { "" });
+        }
+        warned = s.failed_sources.len();
         if terminal {
             eprint!("\r\x1b[2K{}", status_line(s));
         } else {
@@ -327,10 +334,10 @@ pub fn run(mut a: Args) -> Result<()> {
     if terminal {
         eprintln!();
     }
+    let files: Vec<String> = report.files.iter().map(|f| f.display().to_string()).collect();
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        let files: Vec<String> = report.files.iter().map(|f| f.display().to_string()).collect();
         println!("recorded {} messages in {:.1} s -> {} (stopped: {})", report.messages, report.duration_s, files.join(", "), report.stopped_by);
         for s in &report.sources {
             println!(
@@ -351,6 +358,15 @@ pub fn run(mut a: Args) -> Result<()> {
         bail!(
             "recording stopped by a write error (every closed chunk is kept; `railfuse recover {}.partial` salvages them if the file was not finished): {e}",
             report.output.display()
+        );
+    }
+    if !report.failed_sources.is_empty() {
+        bail!(
+            "{} of {} sources failed: {}; everything received is in {}",
+            report.failed_sources.len(),
+            report.sources.len(),
+            report.failed_sources.join("; "),
+            files.join(", ")
         );
     }
     Ok(())

@@ -64,6 +64,8 @@ pub struct Status {
     pub per_topic: BTreeMap<String, u64>,
     pub bytes_written: u64,
     pub sources: Vec<SourceStats>,
+    /// Sources that ended for good with an error ("<source>: <cause>"), in the order they did.
+    pub failed_sources: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -77,8 +79,17 @@ pub struct RecordReport {
     pub stopped_by: String,
     /// The write error that ended it, if one did (the file keeps every closed chunk).
     pub write_error: Option<String>,
+    /// Sources that ended for good with an error ("<source>: <cause>"); the others kept recording.
+    pub failed_sources: Vec<String>,
     /// Every file written, in order (one unless splitting).
     pub files: Vec<PathBuf>,
+}
+
+/// Joins a source's thread; an error that ended it goes on the list as "<source>: <cause>".
+fn join_source(name: String, handle: std::thread::JoinHandle<Result<(), String>>, failed: &mut Vec<String>) {
+    if let Err(e) = handle.join().unwrap_or_else(|_| Err("the source's thread panicked".to_owned())) {
+        failed.push(format!("{name}: {e}"));
+    }
 }
 
 /// The path of part `n` (1-based) when splitting: `run.mcap` → `run-001.mcap`.
@@ -126,7 +137,8 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
         let (tx, rx) = sync_channel(opts.queue.max(1));
         let s = Arc::new(Mutex::new(SourceStats { name: spec.to_string(), ..Default::default() }));
         let (spec, st, stop) = (spec.clone(), s.clone(), source_stop.clone());
-        threads.push(std::thread::spawn(move || sources::run(spec, tx, st, stop)));
+        let name = spec.to_string();
+        threads.push(Some((name, std::thread::spawn(move || sources::run(spec, tx, st, stop)))));
         queues.push(rx);
         stats.push(s);
     }
@@ -135,8 +147,10 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
     let started = Instant::now();
     let mut last_flush = Instant::now();
     let mut last_status = Instant::now();
+    let mut reported_failures = 0;
     let (mut messages, mut per_topic) = (0u64, BTreeMap::<String, u64>::new());
     let mut write_error: Option<String> = None;
+    let mut failed_sources = Vec::new();
     let stopped_by;
     'run: loop {
         let mut busy = false;
@@ -200,14 +214,20 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
                 part_started = Instant::now();
             }
         }
+        for slot in threads.iter_mut().filter(|t| t.as_ref().is_some_and(|(_, h)| h.is_finished())) {
+            let (name, handle) = slot.take().expect("finished source");
+            join_source(name, handle, &mut failed_sources);
+        }
         if let Some(status) = opts.status.as_mut() {
-            if last_status.elapsed() >= Duration::from_secs(1) {
+            if last_status.elapsed() >= Duration::from_secs(1) || failed_sources.len() > reported_failures {
+                reported_failures = failed_sources.len();
                 status(&Status {
                     elapsed_s: started.elapsed().as_secs_f64(),
                     messages,
                     per_topic: per_topic.clone(),
                     bytes_written: file_size(&current),
                     sources: snapshot(),
+                    failed_sources: failed_sources.clone(),
                 });
                 last_status = Instant::now();
             }
@@ -231,8 +251,8 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
     source_stop.store(true, Ordering::Relaxed);
     // Let the sources notice the stop, then write what they still queued (unless the disk is
     // the problem).
-    for t in threads {
-        let _ = t.join();
+    for (name, handle) in threads.into_iter().flatten() {
+        join_source(name, handle, &mut failed_sources);
     }
     if write_error.is_none() {
         for (i, q) in queues.iter().enumerate() {
@@ -259,5 +279,15 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
     if let (Err(e), None) = (&finished, &write_error) {
         write_error = Some(e.to_string());
     }
-    Ok(RecordReport { output: opts.output, duration_s: started.elapsed().as_secs_f64(), messages, per_topic, sources, stopped_by, write_error, files })
+    Ok(RecordReport {
+        output: opts.output,
+        duration_s: started.elapsed().as_secs_f64(),
+        messages,
+        per_topic,
+        sources,
+        stopped_by,
+        write_error,
+        failed_sources,
+        files,
+    })
 }

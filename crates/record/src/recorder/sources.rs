@@ -151,15 +151,27 @@ fn set_error(stats: &Stats, e: impl std::fmt::Display) {
     stats.lock().expect("stats").last_error = Some(e.to_string());
 }
 
-/// Runs one source until it ends or `stop` is set.
-pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<AtomicBool>) {
+/// Runs one source until it ends or `stop` is set. An error that ends the source for good (a
+/// port that cannot be bound, a file that cannot be read) is returned as well as counted;
+/// sources that reconnect (serial, TCP client) only count theirs.
+pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<AtomicBool>) -> Result<(), String> {
+    let result = run_until_end(spec, tx, &stats, stop);
+    let mut s = stats.lock().expect("stats");
+    s.connected = false;
+    if let Err(e) = &result {
+        s.last_error = Some(e.clone());
+    }
+    result
+}
+
+fn run_until_end(spec: SourceSpec, tx: SyncSender<Item>, stats: &Stats, stop: Arc<AtomicBool>) -> Result<(), String> {
     let tick = Duration::from_millis(200);
     stats.lock().expect("stats").connected = true;
     match spec {
         SourceSpec::Udp { addr } => {
             let sock = match UdpSocket::bind(addr).and_then(|s| s.set_read_timeout(Some(tick)).map(|()| s)) {
                 Ok(s) => s,
-                Err(e) => return set_error(&stats, format!("cannot bind {addr}: {e}")),
+                Err(e) => return Err(format!("cannot bind {addr}: {e}")),
             };
             let mut buf = vec![0u8; 65_536];
             let mut items = Vec::new();
@@ -178,19 +190,19 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                         d.feed(&buf[..n], t, &mut s, &mut items);
                         d.finish(t, &mut s, &mut items);
                         drop(s);
-                        if !send(&tx, &stats, &mut items) {
-                            return;
+                        if !send(&tx, stats, &mut items) {
+                            return Ok(());
                         }
                     }
                     Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
-                    Err(e) => set_error(&stats, e),
+                    Err(e) => set_error(stats, e),
                 }
             }
         }
         SourceSpec::TcpListen { addr, format, topic } => {
             let listener = match TcpListener::bind(addr).and_then(|l| l.set_nonblocking(true).map(|()| l)) {
                 Ok(l) => l,
-                Err(e) => return set_error(&stats, format!("cannot bind {addr}: {e}")),
+                Err(e) => return Err(format!("cannot bind {addr}: {e}")),
             };
             std::thread::scope(|scope| {
                 while !stop.load(Ordering::Relaxed) {
@@ -206,7 +218,7 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                             });
                         }
                         Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(20)),
-                        Err(e) => set_error(&stats, e),
+                        Err(e) => set_error(stats, e),
                     }
                 }
             });
@@ -224,11 +236,11 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                         backoff = Duration::from_millis(250);
                         stats.lock().expect("stats").connected = true;
                         let _ = conn.set_read_timeout(Some(tick));
-                        if let Err(e) = pump(conn, format, topic.as_deref(), &tx, &stats, &stop) {
-                            set_error(&stats, e);
+                        if let Err(e) = pump(conn, format, topic.as_deref(), &tx, stats, &stop) {
+                            set_error(stats, e);
                         }
                     }
-                    Err(e) => set_error(&stats, format!("cannot connect to {addr}: {e}")),
+                    Err(e) => set_error(stats, format!("cannot connect to {addr}: {e}")),
                 }
                 stats.lock().expect("stats").connected = false;
                 let until = Instant::now() + backoff;
@@ -239,18 +251,12 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
             }
         }
         SourceSpec::Stdin { format, topic } => {
-            if let Err(e) = pump(std::io::stdin().lock(), format, topic.as_deref(), &tx, &stats, &stop) {
-                set_error(&stats, e);
-            }
+            pump(std::io::stdin().lock(), format, topic.as_deref(), &tx, stats, &stop).map_err(|e| format!("standard input: {e}"))?;
         }
-        SourceSpec::File { path, format, topic } => match std::fs::File::open(&path) {
-            Ok(f) => {
-                if let Err(e) = pump(f, format, topic.as_deref(), &tx, &stats, &stop) {
-                    set_error(&stats, e);
-                }
-            }
-            Err(e) => set_error(&stats, format!("{}: {e}", path.display())),
-        },
+        SourceSpec::File { path, format, topic } => {
+            let f = std::fs::File::open(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+            pump(f, format, topic.as_deref(), &tx, stats, &stop).map_err(|e| format!("{}: {e}", path.display()))?;
+        }
         SourceSpec::Serial { path, baud, format, topic } => {
             let mut backoff = Duration::from_millis(250);
             let mut first = true;
@@ -262,11 +268,11 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
                         }
                         backoff = Duration::from_millis(250);
                         stats.lock().expect("stats").connected = true;
-                        if let Err(e) = pump_with(f, format, topic.as_deref(), &tx, &stats, &stop, true) {
-                            set_error(&stats, format!("{}: {e}", path.display()));
+                        if let Err(e) = pump_with(f, format, topic.as_deref(), &tx, stats, &stop, true) {
+                            set_error(stats, format!("{}: {e}", path.display()));
                         }
                     }
-                    Err(e) => set_error(&stats, format!("{}: {e}", path.display())),
+                    Err(e) => set_error(stats, format!("{}: {e}", path.display())),
                 }
                 first = false;
                 stats.lock().expect("stats").connected = false;
@@ -278,12 +284,10 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
             }
         }
         SourceSpec::Simulated { scenario, seed, speed, duration_s } => {
-            if let Err(e) = simulated(&scenario, seed, speed, duration_s, &tx, &stats, &stop) {
-                set_error(&stats, e);
-            }
+            simulated(&scenario, seed, speed, duration_s, &tx, stats, &stop)?;
         }
     }
-    stats.lock().expect("stats").connected = false;
+    Ok(())
 }
 
 /// The simulator as a live source: the run is simulated ahead into a temporary file (a
