@@ -83,8 +83,9 @@ fn a_biased_ins_is_caught_and_kept_out_until_it_agrees_again() {
         let p = r["eval"]["pipelines"].as_array().unwrap().iter().find(|p| p["name"] == name).unwrap();
         p["position_error_m"]["max_abs"].as_f64().unwrap()
     };
-    // The centralised filter, which has no detector, is dragged hundreds of metres away.
-    assert!(pos("fkf") < 10.0 && pos("kf") > 100.0, "fkf {} m, kf {} m", pos("fkf"), pos("kf"));
+    // The centralised filter has no detector and fuses the biased INS: only its gate-lockout
+    // recovery keeps it from running away (without it, 13 km), and it ends up worse than fkf.
+    assert!(pos("fkf") < 10.0 && pos("kf") > pos("fkf"), "fkf {} m, kf {} m", pos("fkf"), pos("kf"));
 }
 
 #[test]

@@ -85,8 +85,11 @@ pub fn print_counts(report: &RefuseReport) {
     for p in &report.pipelines {
         let c = &p.counts;
         println!(
-            "{}: {} accepted, {} gated, {} invalid, {} late, {} from failed devices, {} before initialisation",
-            p.name, c.accepted, c.rejected_gate, c.rejected_invalid, c.rejected_late, c.rejected_device_fault, c.before_initialisation
+            "{}: {} accepted, {} after a gate lockout, {} gated, {} invalid, {} late, {} from failed devices, {} before initialisation",
+            p.name,
+            c.accepted,
+            c.accepted_after_lockout,
+            c.rejected_gate, c.rejected_invalid, c.rejected_late, c.rejected_device_fault, c.before_initialisation
         );
     }
 }

@@ -75,6 +75,13 @@ pub struct PipelineConfig {
     /// state per accepted measurement.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub output_rate_hz: Option<f64>,
+    /// Kalman and particle pipelines: after this many gate rejections in a row of one
+    /// quantity (chainage, speed or acceleration), the filter has locked itself out (its
+    /// estimate, not the sensors, is wrong: a hard stop its motion model did not expect). The
+    /// next one widens that component's variance until the measurement fits (NIS = 1) and is
+    /// used. 0 turns this off. Federated pipelines have their detector's `gate_failures`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gate_lockout: Option<u32>,
     /// Kalman pipelines: also write the fixed-interval RTS smoothed states.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub smoother: bool,
@@ -84,6 +91,10 @@ pub struct PipelineConfig {
     pub federated: Option<FederatedConfig>,
     pub sensor: Vec<SensorConfig>,
 }
+
+/// Gate rejections in a row of one quantity after which a centralised filter takes itself to
+/// be locked out.
+pub const DEFAULT_GATE_LOCKOUT: u32 = 5;
 
 fn default_reorder_window_s() -> f64 {
     0.5
@@ -335,6 +346,9 @@ impl PipelineConfig {
         let init = &self.initial;
         if !(init.speed_std_mps > 0.0 && init.acceleration_std_mps2 > 0.0 && init.speed_mps.is_finite() && init.acceleration_mps2.is_finite()) {
             return Err("initial standard deviations must be positive".into());
+        }
+        if self.gate_lockout.is_some() && self.filter.is_federated() {
+            return Err("gate_lockout is for kalman and particle pipelines; a federated pipeline's devices have [federated] detector.gate_failures".into());
         }
         if self.smoother && self.filter != FilterKind::Kalman {
             return Err(format!("smoother = true needs filter = \"kalman\" (the RTS smoother is linear), not \"{}\"", self.filter.name()));
@@ -620,5 +634,9 @@ variance = "message"
         assert!(e.contains("smoother = true needs filter = \"kalman\""), "{e}");
         let e = err(&GOOD.replace("jerk_psd = 0.05", "acceleration_psd = 0.05"));
         assert!(e.contains("unknown field `acceleration_psd`"), "{e}");
+        let e = PipelinesConfig::parse(&FEDERATED.replace("filter = \"federated_kalman\"", "filter = \"federated_kalman\"\ngate_lockout = 5"), Path::new("f.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("gate_lockout is for kalman and particle pipelines"), "{e}");
     }
 }

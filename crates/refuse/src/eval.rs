@@ -45,6 +45,8 @@ pub struct PipelineEval {
     /// NIS of the measurements that reached the gate.
     pub nis: Option<ConsistencySummary>,
     pub gated: u64,
+    /// Measurements used after a gate lockout (the filter's variance widened first).
+    pub lockout_recoveries: u64,
     pub device_fault_rejections: u64,
     /// States outside the reference's time span.
     pub unmatched_states: u64,
@@ -92,6 +94,7 @@ struct Scored {
     states: u64,
     nis: Consistency,
     gated: u64,
+    lockouts: u64,
     device_fault: u64,
 }
 
@@ -107,6 +110,7 @@ impl Scored {
             states: 0,
             nis: Consistency::default(),
             gated: 0,
+            lockouts: 0,
             device_fault: 0,
         }
     }
@@ -222,6 +226,10 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
                         match d.decision {
                             GateDecision::Accepted => {}
                             GateDecision::RejectedGate => scored[i].gated += 1,
+                            GateDecision::AcceptedAfterLockout => {
+                                scored[i].lockouts += 1;
+                                continue;
+                            }
                             GateDecision::RejectedDeviceFault => scored[i].device_fault += 1,
                             _ => continue,
                         }
@@ -271,6 +279,7 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
                 nees: s.meter.nees.summary(),
                 nis: s.nis.summary(),
                 gated: s.gated,
+                lockout_recoveries: s.lockouts,
                 device_fault_rejections: s.device_fault,
                 unmatched_states: s.meter.unmatched,
                 windows: s

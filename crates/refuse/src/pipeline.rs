@@ -23,6 +23,8 @@ use crate::model::{ConstantAcceleration, ConstantVelocity, Singer, TransitionMod
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
 pub struct PipelineCounts {
     pub accepted: u64,
+    /// Used after a gate lockout (the filter's variance widened first).
+    pub accepted_after_lockout: u64,
     pub rejected_gate: u64,
     pub rejected_invalid: u64,
     pub rejected_late: u64,
@@ -186,6 +188,7 @@ impl<const N: usize> Pipeline<N> {
                 seed: p.seed.wrapping_add(seed_offset),
             }
         };
+        let lockout = c.gate_lockout.unwrap_or(crate::config::DEFAULT_GATE_LOCKOUT);
         let federated = || {
             let f = c.federated.clone().unwrap_or_default();
             FederatedSettings {
@@ -197,8 +200,10 @@ impl<const N: usize> Pipeline<N> {
             }
         };
         match c.filter {
-            FilterKind::Kalman => Box::new(Centralised::new(KalmanFilter::new(init.state, init.covariance), model, t0, self.smoother.take())),
-            FilterKind::Particle => Box::new(Centralised::new(ParticleFilter::new(particles(0), init), model, t0, None)),
+            FilterKind::Kalman => {
+                Box::new(Centralised::new(KalmanFilter::new(init.state, init.covariance), model, t0, self.smoother.take()).with_gate_lockout(lockout))
+            }
+            FilterKind::Particle => Box::new(Centralised::new(ParticleFilter::new(particles(0), init), model, t0, None).with_gate_lockout(lockout)),
             FilterKind::FederatedKalman => Box::new(Federated::new(federated(), model, c.devices(), init, t0, |_, s| KalmanFilter::new(s.state, s.covariance))),
             FilterKind::FederatedParticle => {
                 // Each local particle filter has its own random stream.
@@ -293,6 +298,12 @@ impl<const N: usize> Pipeline<N> {
                         }
                         GateDecision::Accepted
                     }
+                    Outcome::AcceptedAfterLockout(_) => {
+                        if self.output_period_ns.is_none() {
+                            state = Some(fused_state(m.stamp_ns, &e.estimate(), &source));
+                        }
+                        GateDecision::AcceptedAfterLockout
+                    }
                     Outcome::RejectedGate(_) => GateDecision::RejectedGate,
                     Outcome::RejectedNumerics(_) => GateDecision::RejectedInvalid,
                     Outcome::RejectedDeviceFault(_) => GateDecision::RejectedDeviceFault,
@@ -302,6 +313,7 @@ impl<const N: usize> Pipeline<N> {
         diagnostics.decision = decision;
         let counter = match decision {
             GateDecision::Accepted => &mut self.counts.accepted,
+            GateDecision::AcceptedAfterLockout => &mut self.counts.accepted_after_lockout,
             GateDecision::RejectedGate => &mut self.counts.rejected_gate,
             GateDecision::RejectedInvalid => &mut self.counts.rejected_invalid,
             GateDecision::RejectedLate => &mut self.counts.rejected_late,

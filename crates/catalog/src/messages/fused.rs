@@ -29,6 +29,9 @@ impl FusedState {
 pub enum GateDecision {
     /// Used in the update.
     Accepted,
+    /// Used after a run of gate rejections of its quantity showed the filter, not the sensors,
+    /// to be wrong: the estimate's variance was widened first (gate-lockout recovery).
+    AcceptedAfterLockout,
     /// NIS above the pipeline's gate: not used.
     RejectedGate,
     /// NaN, infinite or flagged invalid by the sensor: not used.

@@ -83,6 +83,9 @@ pub const MASTER: usize = usize::MAX;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Outcome {
     Accepted(Innovation),
+    /// Used after a run of gate rejections of its quantity, with that component's variance
+    /// widened first; the innovation is the one before widening.
+    AcceptedAfterLockout(Innovation),
     RejectedGate(Innovation),
     /// The update would have made the estimate non-finite: not used.
     RejectedNumerics(Innovation),
@@ -93,7 +96,7 @@ pub enum Outcome {
 impl Outcome {
     pub fn innovation(&self) -> Option<Innovation> {
         match *self {
-            Outcome::Accepted(i) | Outcome::RejectedGate(i) | Outcome::RejectedNumerics(i) => Some(i),
+            Outcome::Accepted(i) | Outcome::AcceptedAfterLockout(i) | Outcome::RejectedGate(i) | Outcome::RejectedNumerics(i) => Some(i),
             Outcome::RejectedDeviceFault(i) => i,
         }
     }

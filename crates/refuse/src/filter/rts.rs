@@ -57,6 +57,14 @@ impl<const N: usize> EpochRecorder<N> {
         self.open = Some((stamp_ns, prior, transition.unwrap_or_else(SMatrix::identity)));
     }
 
+    /// Adds `variance` to component `k` of the open epoch's prediction (process noise the
+    /// estimator added inside the step: gate-lockout recovery).
+    pub fn widen_prediction(&mut self, k: usize, variance: f64) {
+        if let Some((_, prior, _)) = &mut self.open {
+            prior.covariance[(k, k)] += variance;
+        }
+    }
+
     /// Closes the open epoch with its filtered estimate.
     pub fn end_epoch(&mut self, posterior: StateAndCovariance<N>) {
         let Some((stamp, prior, f)) = self.open.take() else {
