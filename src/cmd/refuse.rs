@@ -89,7 +89,11 @@ pub fn print_counts(report: &RefuseReport) {
             p.name,
             c.accepted,
             c.accepted_after_lockout,
-            c.rejected_gate, c.rejected_invalid, c.rejected_late, c.rejected_device_fault, c.before_initialisation
+            c.rejected_gate,
+            c.rejected_invalid,
+            c.rejected_late,
+            c.rejected_device_fault,
+            c.before_initialisation
         );
     }
 }

@@ -188,7 +188,8 @@ pub fn run(a: Args) -> Result<()> {
     }
     writeln!(md)?;
     writeln!(md, "`fkf` is source 001's federated filter; `kf` the centralised Kalman filter on the same sensors (no fault")?;
-    writeln!(md, "detector); `kf/smoothed` its RTS-smoothed states (offline only, so not an output-rate contender).")?;
+    writeln!(md, "detector, only gate-lockout recovery, which brings it through the stops and keeps a biased INS from dragging")?;
+    writeln!(md, "it kilometres away); `kf/smoothed` its RTS-smoothed states (offline only, so not an output-rate contender).")?;
     std::fs::write(&a.output, &md).with_context(|| format!("{}: cannot write", a.output.display()))?;
     print!("{md}");
     eprintln!("-> {}", a.output.display());

@@ -634,9 +634,10 @@ variance = "message"
         assert!(e.contains("smoother = true needs filter = \"kalman\""), "{e}");
         let e = err(&GOOD.replace("jerk_psd = 0.05", "acceleration_psd = 0.05"));
         assert!(e.contains("unknown field `acceleration_psd`"), "{e}");
-        let e = PipelinesConfig::parse(&FEDERATED.replace("filter = \"federated_kalman\"", "filter = \"federated_kalman\"\ngate_lockout = 5"), Path::new("f.toml"))
-            .unwrap_err()
-            .to_string();
+        let e =
+            PipelinesConfig::parse(&FEDERATED.replace("filter = \"federated_kalman\"", "filter = \"federated_kalman\"\ngate_lockout = 5"), Path::new("f.toml"))
+                .unwrap_err()
+                .to_string();
         assert!(e.contains("gate_lockout is for kalman and particle pipelines"), "{e}");
     }
 }

@@ -124,7 +124,7 @@ mod tests {
             outcomes.push(c.process(&ScalarMeasurement { device: 0, h: RowVector3::new(0.0, 0.0, 1.0), r: 0.0009, z: a, gate_nis: Some(25.0) }));
             if k % 10 == 0 {
                 // The speed sensor's outcomes are not kept: the lockout run below is the accelerometer's.
-            c.process(&ScalarMeasurement { device: 0, h: RowVector3::new(0.0, 1.0, 0.0), r: 0.01, z: v, gate_nis: Some(16.0) });
+                c.process(&ScalarMeasurement { device: 0, h: RowVector3::new(0.0, 1.0, 0.0), r: 0.01, z: v, gate_nis: Some(16.0) });
             }
             if t >= 2.0 {
                 worst = worst.max((c.estimate().state[1] - v).abs());
