@@ -273,8 +273,15 @@ impl AccuracyMeter {
                 let (pss, psv, pvv) = e.covariance;
                 let mut cov = [0.0; 9];
                 (cov[0], cov[1], cov[3], cov[4]) = (pss, psv, psv, pvv);
-                let probe =
-                    FusedState { stamp_ns: e.stamp_ns, chainage_m: 0.0, speed_mps: 0.0, acceleration_mps2: 0.0, covariance: cov, source: String::new() };
+                let probe = FusedState {
+                    stamp_ns: e.stamp_ns,
+                    chainage_m: 0.0,
+                    speed_mps: 0.0,
+                    acceleration_mps2: 0.0,
+                    covariance: cov,
+                    source: String::new(),
+                    sensor_states: Vec::new(),
+                };
                 self.nees.add(nees(&probe, de, ve), CHI2_95_2DOF);
             }
             None => self.unmatched += 1,
@@ -310,6 +317,7 @@ mod tests {
             acceleration_mps2: 0.0,
             covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
             source: String::new(),
+            sensor_states: Vec::new(),
         };
         let spans = [Span { label: "tunnel".into(), start_ns: 2_000_000_000, end_ns: Some(2_500_000_000) }];
         m.add_estimate(&est(1_500_000_000, 15.5, 10.0), &spans); // arrives before the reference reaches it

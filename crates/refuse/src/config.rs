@@ -24,7 +24,7 @@ use crate::filter::particle::Resampling;
 use crate::filter::sharing::{Redistribution, SharingTable, SpeedBand};
 use crate::filter::working_state::DetectorSettings;
 use crate::measurement::Quantity;
-use crate::model::ProcessNoise;
+use crate::model::{ProcessNoise, SensorState};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -262,13 +262,62 @@ pub struct SensorConfig {
     /// 6.63 keeps 99 %, 10.83 keeps 99.9 %).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gate_nis: Option<f64>,
+    /// Estimate this sensor's along-track position bias as a state (a GNSS receiver's slowly
+    /// wandering error, which white measurement noise cannot describe).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub chainage_bias: Option<ChainageBiasConfig>,
+    /// Estimate this sensor's acceleration bias as a state (an accelerometer's bias).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub acceleration_bias: Option<AccelerationBiasConfig>,
+    /// Estimate this sensor's speed scale factor as a state (Doppler radar, worn wheels).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_factor: Option<ScaleFactorConfig>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChainageBiasConfig {
+    /// Stationary standard deviation, m.
+    pub std_m: f64,
+    /// Correlation time, s.
+    pub time_constant_s: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AccelerationBiasConfig {
+    /// Stationary standard deviation, m/s².
+    pub std_mps2: f64,
+    /// Correlation time, s.
+    pub time_constant_s: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScaleFactorConfig {
+    /// Prior standard deviation (0.005 = 0.5 %).
+    pub std: f64,
+    /// Random-walk intensity, 1/s (0: a constant scale factor).
+    #[serde(default)]
+    pub walk_per_s: f64,
 }
 
 impl SensorConfig {
     pub fn device_name(&self) -> &str {
         self.device.as_deref().unwrap_or(&self.topic)
     }
+
+    /// The calibration states this sensor adds to the pipeline's state, in state order.
+    pub fn sensor_states(&self) -> impl Iterator<Item = SensorState> + '_ {
+        let bias = self.chainage_bias.map(|b| SensorState::ChainageBias { std_m: b.std_m, time_constant_s: b.time_constant_s });
+        let accel = self.acceleration_bias.map(|b| SensorState::AccelerationBias { std_mps2: b.std_mps2, time_constant_s: b.time_constant_s });
+        let scale = self.scale_factor.map(|k| SensorState::ScaleFactor { std: k.std, walk_per_s: k.walk_per_s });
+        bias.into_iter().chain(accel).chain(scale)
+    }
 }
+
+/// The most state components a pipeline may have (motion and sensor states together).
+pub const MAX_STATES: usize = 6;
 
 /// The device name reserved for the master filter of a federated pipeline.
 pub const MASTER_DEVICE: &str = "master";
@@ -350,6 +399,13 @@ impl PipelineConfig {
         if self.gate_lockout.is_some() && self.filter.is_federated() {
             return Err("gate_lockout is for kalman and particle pipelines; a federated pipeline's devices have [federated] detector.gate_failures".into());
         }
+        if self.dimension() > MAX_STATES {
+            return Err(format!(
+                "{} motion states and {} sensor states: at most {MAX_STATES} state components in all",
+                self.motion.dimension(),
+                self.sensor_states().len()
+            ));
+        }
         if self.smoother && self.filter != FilterKind::Kalman {
             return Err(format!("smoother = true needs filter = \"kalman\" (the RTS smoother is linear), not \"{}\"", self.filter.name()));
         }
@@ -404,6 +460,29 @@ impl PipelineConfig {
             if s.device.is_some() && !self.filter.is_federated() {
                 return Err(format!("sensor {}: device is for federated filters only", s.topic));
             }
+            if let Some(b) = s.chainage_bias {
+                positive(&format!("sensor {}: chainage_bias.std_m", s.topic), b.std_m)?;
+                positive(&format!("sensor {}: chainage_bias.time_constant_s", s.topic), b.time_constant_s)?;
+                if s.fields.as_ref().is_some_and(|f| !f.contains(&Quantity::Chainage)) {
+                    return Err(format!("sensor {}: chainage_bias, but chainage is not among its fields", s.topic));
+                }
+            }
+            if let Some(b) = s.acceleration_bias {
+                positive(&format!("sensor {}: acceleration_bias.std_mps2", s.topic), b.std_mps2)?;
+                positive(&format!("sensor {}: acceleration_bias.time_constant_s", s.topic), b.time_constant_s)?;
+                if self.motion.dimension() < 3 || s.fields.as_ref().is_some_and(|f| !f.contains(&Quantity::Acceleration)) {
+                    return Err(format!("sensor {}: acceleration_bias, but no acceleration is measured", s.topic));
+                }
+            }
+            if let Some(k) = s.scale_factor {
+                positive(&format!("sensor {}: scale_factor.std", s.topic), k.std)?;
+                if !(k.walk_per_s.is_finite() && k.walk_per_s >= 0.0) {
+                    return Err(format!("sensor {}: scale_factor.walk_per_s must be ≥ 0, not {}", s.topic, k.walk_per_s));
+                }
+                if s.fields.as_ref().is_some_and(|f| !f.contains(&Quantity::Speed)) {
+                    return Err(format!("sensor {}: scale_factor, but speed is not among its fields", s.topic));
+                }
+            }
         }
         match (&self.federated, self.filter.is_federated()) {
             (Some(_), false) => return Err(format!("a [federated] section, but filter = \"{}\"", self.filter.name())),
@@ -439,6 +518,17 @@ impl PipelineConfig {
             MotionConfig::ConstantAcceleration { .. } => Err("motion needs exactly one of jerk_psd or jerk_variance".into()),
             _ => Err("only the constant-acceleration model takes jerk noise".into()),
         }
+    }
+
+    /// Every sensor's calibration states, in state order after the motion states, with the
+    /// index of the sensor that owns each.
+    pub fn sensor_states(&self) -> Vec<(usize, SensorState)> {
+        self.sensor.iter().enumerate().flat_map(|(i, s)| s.sensor_states().map(move |st| (i, st))).collect()
+    }
+
+    /// Motion states plus sensor states.
+    pub fn dimension(&self) -> usize {
+        self.motion.dimension() + self.sensor_states().len()
     }
 
     /// The federated devices (sub-filters) in order of first mention, without the master.

@@ -1,23 +1,28 @@
 //! One configured pipeline: measurements are released to its estimator in sensor-time order
 //! (within a bounded reorder window), checked, gated, and turned into fused states and
-//! diagnostics. The pipeline is generic over the state dimension: two for the
-//! constant-velocity model, three for the others ([`AnyPipeline`] picks).
+//! diagnostics. The pipeline is generic over the state dimension: the motion states (two for
+//! the constant-velocity model, three for the others) followed by the sensor states it
+//! estimates ([`AnyPipeline`] picks, up to [`MAX_STATES`]).
+//!
+//! A speed sensor with a scale-factor state measures `z = (1 + k) v`: its row is linearised at
+//! the estimate of the moment (`H = [0, 1 + k̂, …, v̂]`, offset `−v̂ k̂`), an extended Kalman
+//! filter step.
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
 use nalgebra::{RowSVector, SMatrix, SVector};
-use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision};
+use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 use serde::Serialize;
 
-use crate::config::{FilterKind, MotionConfig, PipelineConfig, VarianceValue, MASTER_DEVICE};
+use crate::config::{FilterKind, MotionConfig, PipelineConfig, VarianceValue, MASTER_DEVICE, MAX_STATES};
 use crate::error::{Error, Result};
 use crate::filter::federated::{Federated, FederatedSettings};
 use crate::filter::particle::ParticleSettings;
 use crate::filter::rts::EpochRecorder;
 use crate::filter::{Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement, StateAndCovariance, MASTER};
 use crate::measurement::{Measurement, Quantity};
-use crate::model::{ConstantAcceleration, ConstantVelocity, Singer, TransitionModel};
+use crate::model::{ConstantAcceleration, ConstantVelocity, SensorState, Singer, TransitionModel, WithSensorStates};
 
 /// What a pipeline did with its measurements.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
@@ -47,6 +52,16 @@ struct Field<const N: usize> {
     quantity: Quantity,
     h: RowSVector<f64, N>,
     variance: VarianceValue,
+    /// The state holding this speed sensor's scale factor, if the pipeline estimates one.
+    scale_state: Option<usize>,
+}
+
+/// What each state component is: the motion states, then one per sensor state.
+#[derive(Debug, Clone)]
+pub struct StateLayout {
+    pub motion: usize,
+    /// Topic and kind of each sensor state, in state order after the motion states.
+    pub sensor: Vec<(String, &'static str)>,
 }
 
 struct Sensor<const N: usize> {
@@ -67,7 +82,8 @@ struct Pending {
 pub struct Pipeline<const N: usize> {
     pub config: PipelineConfig,
     sensors: Vec<Sensor<N>>,
-    make_model: fn(&MotionConfig) -> Box<dyn TransitionModel<N>>,
+    make_model: fn(&PipelineConfig) -> Box<dyn TransitionModel<N>>,
+    layout: StateLayout,
     estimator: Option<Box<dyn Estimator<N>>>,
     smoother: Option<EpochRecorder<N>>,
     time_ns: u64,
@@ -84,12 +100,40 @@ pub struct Pipeline<const N: usize> {
 }
 
 impl<const N: usize> Pipeline<N> {
-    fn new(config: PipelineConfig, make_model: fn(&MotionConfig) -> Box<dyn TransitionModel<N>>) -> Result<Self> {
+    fn new(config: PipelineConfig, make_model: fn(&PipelineConfig) -> Box<dyn TransitionModel<N>>) -> Result<Self> {
         let devices = config.devices();
+        let motion = config.motion.dimension();
+        let states = config.sensor_states();
+        let layout = StateLayout { motion, sensor: states.iter().map(|(i, s)| (config.sensor[*i].topic.clone(), s.kind())).collect() };
+        // The state index of sensor `i`'s state of one kind.
+        let state_of = |i: usize, kind: &str| states.iter().position(|(j, s)| *j == i && s.kind() == kind).map(|p| motion + p);
+        let field = |i: usize, q: Quantity, variance: VarianceValue| {
+            if q.index() >= motion {
+                return None;
+            }
+            let mut h = q.h::<N>()?;
+            let mut scale_state = None;
+            match q {
+                Quantity::Chainage => {
+                    if let Some(b) = state_of(i, "chainage_bias") {
+                        h[b] = 1.0;
+                    }
+                }
+
+                Quantity::Speed => scale_state = state_of(i, "scale_factor"),
+                Quantity::Acceleration => {
+                    if let Some(b) = state_of(i, "acceleration_bias") {
+                        h[b] = 1.0;
+                    }
+                }
+            }
+            Some(Field { quantity: q, h, variance, scale_state })
+        };
         let sensors = config
             .sensor
             .iter()
-            .map(|s| Sensor {
+            .enumerate()
+            .map(|(i, s)| Sensor {
                 topic: s.topic.clone(),
                 device: match s.device_name() {
                     MASTER_DEVICE => MASTER,
@@ -101,7 +145,7 @@ impl<const N: usize> Pipeline<N> {
                     .clone()
                     .unwrap_or_else(|| vec![Quantity::Chainage, Quantity::Speed, Quantity::Acceleration])
                     .into_iter()
-                    .filter_map(|q| Some(Field { quantity: q, h: q.h::<N>()?, variance: s.variance.of(q)? }))
+                    .filter_map(|q| field(i, q, s.variance.of(q)?))
                     .collect(),
                 gate_nis: s.gate_nis,
             })
@@ -114,6 +158,7 @@ impl<const N: usize> Pipeline<N> {
             config,
             sensors,
             make_model,
+            layout,
             estimator: None,
             smoother,
             time_ns: 0,
@@ -170,13 +215,15 @@ impl<const N: usize> Pipeline<N> {
     fn initial(&self, chainage: f64, r: f64) -> StateAndCovariance<N> {
         let init = &self.config.initial;
         let (speed, speed_var) = self.speed_before_init.unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
-        let mean = [chainage, speed, init.acceleration_mps2];
-        let var = [r, speed_var, init.acceleration_std_mps2.powi(2)];
-        StateAndCovariance { state: SVector::from_fn(|i, _| mean[i]), covariance: SMatrix::from_fn(|i, j| if i == j { var[i] } else { 0.0 }) }
+        let (motion, states) = (self.layout.motion, self.config.sensor_states());
+        // Motion states from the first fix; sensor states at zero with their prior spread.
+        let mean = |i: usize| if i < motion { [chainage, speed, init.acceleration_mps2][i] } else { 0.0 };
+        let var = |i: usize| if i < motion { [r, speed_var, init.acceleration_std_mps2.powi(2)][i] } else { states[i - motion].1.std().powi(2) };
+        StateAndCovariance { state: SVector::from_fn(|i, _| mean(i)), covariance: SMatrix::from_fn(|i, j| if i == j { var(i) } else { 0.0 }) }
     }
 
     fn build(&mut self, init: &StateAndCovariance<N>, t0: u64) -> Box<dyn Estimator<N>> {
-        let model = (self.make_model)(&self.config.motion);
+        let model = (self.make_model)(&self.config);
         let c = &self.config;
         let particles = |seed_offset: u64| {
             let p = c.particle.clone().unwrap_or_default();
@@ -219,7 +266,7 @@ impl<const N: usize> Pipeline<N> {
         };
         while self.next_output_ns < t_ns {
             e.advance_to(self.next_output_ns);
-            let state = fused_state(self.next_output_ns, &e.estimate(), "output_tick");
+            let state = fused_state(&self.layout, self.next_output_ns, &e.estimate(), "output_tick");
             out.push(Fused { log_time_ns, state: Some(state), diagnostics: None });
             self.next_output_ns += period;
         }
@@ -247,7 +294,7 @@ impl<const N: usize> Pipeline<N> {
             resampled: None,
             sharing: None,
         };
-        let (h, device, gate_nis, source) = (field.h, sensor.device, sensor.gate_nis, sensor.topic.clone());
+        let (h, scale_state, device, gate_nis, source) = (field.h, field.scale_state, sensor.device, sensor.gate_nis, sensor.topic.clone());
         let usable_variance = variance.filter(|r| r.is_finite() && *r > 0.0);
         if let Some(e) = &mut self.estimator {
             e.heard_from(device, m.stamp_ns);
@@ -265,7 +312,7 @@ impl<const N: usize> Pipeline<N> {
                     // Ticks on whole multiples of the period, for comparable outputs.
                     self.next_output_ns = m.stamp_ns.div_ceil(period) * period;
                 } else {
-                    state = Some(fused_state(m.stamp_ns, &init, &source));
+                    state = Some(fused_state(&self.layout, m.stamp_ns, &init, &source));
                 }
                 GateDecision::Accepted
             }
@@ -281,7 +328,13 @@ impl<const N: usize> Pipeline<N> {
                 let e = self.estimator.as_mut().expect("initialised");
                 e.advance_to(m.stamp_ns);
                 self.time_ns = m.stamp_ns;
-                let outcome = e.process(&ScalarMeasurement { device, h, r, z: m.value, gate_nis });
+                let (mut h, mut offset) = (h, 0.0);
+                if let Some(j) = scale_state {
+                    let x = e.estimate().state;
+                    let (v, k) = (x[1], x[j]);
+                    (h[1], h[j], offset) = (1.0 + k, v, -v * k);
+                }
+                let outcome = e.process(&ScalarMeasurement { device, quantity: m.quantity.index(), h, offset, r, z: m.value, gate_nis });
                 if let Some(i) = outcome.innovation() {
                     diagnostics.innovation = Some(i.residual);
                     diagnostics.innovation_variance = Some(i.variance);
@@ -294,13 +347,13 @@ impl<const N: usize> Pipeline<N> {
                 match outcome {
                     Outcome::Accepted(_) => {
                         if self.output_period_ns.is_none() {
-                            state = Some(fused_state(m.stamp_ns, &e.estimate(), &source));
+                            state = Some(fused_state(&self.layout, m.stamp_ns, &e.estimate(), &source));
                         }
                         GateDecision::Accepted
                     }
                     Outcome::AcceptedAfterLockout(_) => {
                         if self.output_period_ns.is_none() {
-                            state = Some(fused_state(m.stamp_ns, &e.estimate(), &source));
+                            state = Some(fused_state(&self.layout, m.stamp_ns, &e.estimate(), &source));
                         }
                         GateDecision::AcceptedAfterLockout
                     }
@@ -330,33 +383,47 @@ impl<const N: usize> Pipeline<N> {
         if recorder.epochs() == 0 {
             return None;
         }
-        Some(recorder.smooth().map(|epochs| -> Box<dyn Iterator<Item = std::io::Result<FusedState>>> {
-            Box::new(epochs.map(|e| e.map(|e| fused_state(e.stamp_ns, &e.estimate, "rts_smoother"))))
+        let layout = self.layout.clone();
+        Some(recorder.smooth().map(move |epochs| -> Box<dyn Iterator<Item = std::io::Result<FusedState>>> {
+            Box::new(epochs.map(move |e| e.map(|e| fused_state(&layout, e.stamp_ns, &e.estimate, "rts_smoother"))))
         }))
     }
 }
 
-/// A fused state from an `N`-state estimate (acceleration 0 with no variance when `N` = 2).
-pub fn fused_state<const N: usize>(stamp_ns: u64, e: &StateAndCovariance<N>, source: &str) -> FusedState {
-    let x = |i: usize| if i < N { e.state[i] } else { 0.0 };
+/// A fused state from an `N`-state estimate (acceleration 0 with no variance for the
+/// two-state constant-velocity model), with its sensor states.
+pub fn fused_state<const N: usize>(layout: &StateLayout, stamp_ns: u64, e: &StateAndCovariance<N>, source: &str) -> FusedState {
+    let motion = layout.motion;
+    let x = |i: usize| if i < motion { e.state[i] } else { 0.0 };
     let mut covariance = [0.0; 9];
     for (k, c) in covariance.iter_mut().enumerate() {
         let (i, j) = (k / 3, k % 3);
-        if i < N && j < N {
+        if i < motion && j < motion {
             *c = e.covariance[(i, j)];
         }
     }
-    FusedState { stamp_ns, chainage_m: x(0), speed_mps: x(1), acceleration_mps2: x(2), covariance, source: source.to_owned() }
+    let sensor_states = layout
+        .sensor
+        .iter()
+        .enumerate()
+        .map(|(k, (topic, kind))| SensorStateEstimate {
+            topic: topic.clone(),
+            kind: (*kind).to_owned(),
+            value: e.state[motion + k],
+            std: e.covariance[(motion + k, motion + k)].max(0.0).sqrt(),
+        })
+        .collect();
+    FusedState { stamp_ns, chainage_m: x(0), speed_mps: x(1), acceleration_mps2: x(2), covariance, source: source.to_owned(), sensor_states }
 }
 
-fn model_2(m: &MotionConfig) -> Box<dyn TransitionModel<2>> {
+fn motion_2(m: &MotionConfig) -> Box<dyn TransitionModel<2>> {
     match *m {
         MotionConfig::ConstantVelocity { acceleration_psd } => Box::new(ConstantVelocity { acceleration_psd }),
         _ => unreachable!("AnyPipeline picks two states for the constant-velocity model only"),
     }
 }
 
-fn model_3(m: &MotionConfig) -> Box<dyn TransitionModel<3>> {
+fn motion_3(m: &MotionConfig) -> Box<dyn TransitionModel<3>> {
     match *m {
         MotionConfig::ConstantAcceleration { jerk_psd: Some(q), .. } => Box::new(ConstantAcceleration { noise: crate::model::ProcessNoise::WhiteJerkPsd(q) }),
         MotionConfig::ConstantAcceleration { jerk_variance: Some(v), .. } => {
@@ -367,10 +434,39 @@ fn model_3(m: &MotionConfig) -> Box<dyn TransitionModel<3>> {
     }
 }
 
-/// A pipeline of either state dimension.
+/// The `B` motion states of `c` with its sensor states appended: `N` in all.
+fn with_sensor_states<const B: usize, const N: usize>(motion: Box<dyn TransitionModel<B>>, c: &PipelineConfig) -> Box<dyn TransitionModel<N>> {
+    Box::new(WithSensorStates::<B, N> { motion, states: c.sensor_states().into_iter().map(|(_, s): (usize, SensorState)| s).collect() })
+}
+
+/// The full model of an `N`-state pipeline: its motion model (two or three states) and its
+/// sensor states.
+fn model<const N: usize>(c: &PipelineConfig) -> Box<dyn TransitionModel<N>> {
+    match c.motion.dimension() {
+        2 => with_sensor_states::<2, N>(motion_2(&c.motion), c),
+        _ => with_sensor_states::<3, N>(motion_3(&c.motion), c),
+    }
+}
+
+/// The motion model alone, when there are no sensor states (no block-diagonal wrapper).
+fn model_2(c: &PipelineConfig) -> Box<dyn TransitionModel<2>> {
+    motion_2(&c.motion)
+}
+
+fn model_3(c: &PipelineConfig) -> Box<dyn TransitionModel<3>> {
+    match c.motion.dimension() {
+        3 => motion_3(&c.motion),
+        _ => model::<3>(c),
+    }
+}
+
+/// A pipeline of any state dimension up to [`MAX_STATES`].
 pub enum AnyPipeline {
     Two(Pipeline<2>),
     Three(Pipeline<3>),
+    Four(Pipeline<4>),
+    Five(Pipeline<5>),
+    Six(Pipeline<6>),
 }
 
 macro_rules! each {
@@ -378,15 +474,22 @@ macro_rules! each {
         match $self {
             AnyPipeline::Two($p) => $e,
             AnyPipeline::Three($p) => $e,
+            AnyPipeline::Four($p) => $e,
+            AnyPipeline::Five($p) => $e,
+            AnyPipeline::Six($p) => $e,
         }
     };
 }
 
 impl AnyPipeline {
     pub fn new(config: PipelineConfig) -> Result<Self> {
-        Ok(match config.motion.dimension() {
+        const _: () = assert!(MAX_STATES == 6, "AnyPipeline has a variant per dimension");
+        Ok(match config.dimension() {
             2 => AnyPipeline::Two(Pipeline::new(config, model_2)?),
-            _ => AnyPipeline::Three(Pipeline::new(config, model_3)?),
+            3 => AnyPipeline::Three(Pipeline::new(config, model_3)?),
+            4 => AnyPipeline::Four(Pipeline::new(config, model::<4>)?),
+            5 => AnyPipeline::Five(Pipeline::new(config, model::<5>)?),
+            _ => AnyPipeline::Six(Pipeline::new(config, model::<6>)?),
         })
     }
 

@@ -12,8 +12,25 @@ pub struct FusedState {
     pub covariance: [f64; 9],
     /// Topic of the measurement that produced this state.
     pub source: String,
+    /// Sensor calibration states the pipeline estimates beside the motion (a GNSS position
+    /// bias, a speed sensor's scale factor); absent when it estimates none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sensor_states: Vec<SensorStateEstimate>,
 }
 super::channel_message!(FusedState, "railfuse.FusedState");
+
+/// One estimated sensor calibration state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SensorStateEstimate {
+    /// The sensor's topic.
+    pub topic: String,
+    /// `chainage_bias` (m, measured minus true) or `scale_factor` (dimensionless: 0.003 reads
+    /// 0.3 % high).
+    pub kind: String,
+    pub value: f64,
+    /// Its standard deviation.
+    pub std: f64,
+}
 
 impl FusedState {
     pub fn chainage_std_m(&self) -> f64 {

@@ -17,7 +17,7 @@ mod track_map;
 pub use balise::BalisePassage;
 pub use eddy_current::EddyCurrentBlock;
 pub use events::{Event, EventKind};
-pub use fused::{DeviceShare, FusedDiagnostics, FusedState, GateDecision};
+pub use fused::{DeviceShare, FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 pub use gnss::{FixType, GnssFix};
 pub use ground_truth::GroundTruth;
 pub use imu::Imu;

@@ -56,9 +56,9 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Centralised<N, F> {
     }
 
     fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome {
-        let innovation = self.filter.innovation(&m.h, m.r, m.z);
-        // The component this measurement observes (sensor rows have one non-zero entry).
-        let k = m.h.iamax_full().1;
+        let z = m.z - m.offset;
+        let innovation = self.filter.innovation(&m.h, m.r, z);
+        let k = m.quantity;
         if !innovation.passes(m.gate_nis) {
             if self.lockout_after == 0 || !innovation.nis.is_finite() || self.rejections[k] + 1 < self.lockout_after {
                 self.rejections[k] += 1;
@@ -74,10 +74,10 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Centralised<N, F> {
                 r.widen_prediction(k, extra);
             }
             self.rejections[k] = 0;
-            return if self.filter.update(&m.h, m.r, m.z) { Outcome::AcceptedAfterLockout(innovation) } else { Outcome::RejectedNumerics(innovation) };
+            return if self.filter.update(&m.h, m.r, z) { Outcome::AcceptedAfterLockout(innovation) } else { Outcome::RejectedNumerics(innovation) };
         }
         self.rejections[k] = 0;
-        if self.filter.update(&m.h, m.r, m.z) {
+        if self.filter.update(&m.h, m.r, z) {
             Outcome::Accepted(innovation)
         } else {
             Outcome::RejectedNumerics(innovation)
@@ -121,10 +121,18 @@ mod tests {
             let t = k as f64 * 0.01;
             let (v, a) = if t < 2.0 { (1.8 - 0.9 * t, -0.9) } else { (0.0, 0.0) };
             c.advance_to(k * 10_000_000);
-            outcomes.push(c.process(&ScalarMeasurement { device: 0, h: RowVector3::new(0.0, 0.0, 1.0), r: 0.0009, z: a, gate_nis: Some(25.0) }));
+            outcomes.push(c.process(&ScalarMeasurement {
+                device: 0,
+                quantity: 2,
+                h: RowVector3::new(0.0, 0.0, 1.0),
+                offset: 0.0,
+                r: 0.0009,
+                z: a,
+                gate_nis: Some(25.0),
+            }));
             if k % 10 == 0 {
                 // The speed sensor's outcomes are not kept: the lockout run below is the accelerometer's.
-                c.process(&ScalarMeasurement { device: 0, h: RowVector3::new(0.0, 1.0, 0.0), r: 0.01, z: v, gate_nis: Some(16.0) });
+                c.process(&ScalarMeasurement { device: 0, quantity: 1, h: RowVector3::new(0.0, 1.0, 0.0), offset: 0.0, r: 0.01, z: v, gate_nis: Some(16.0) });
             }
             if t >= 2.0 {
                 worst = worst.max((c.estimate().state[1] - v).abs());

@@ -20,7 +20,7 @@
 //! fused estimate again. With every device failed the master coasts: the last fused estimate
 //! is propagated with the motion model, `x(k) = Φ(k, j) x_g(j)`.
 
-use nalgebra::{RowSVector, SMatrix, SVector};
+use nalgebra::{SMatrix, SVector};
 
 use super::sharing::{Redistribution, SharingTable};
 use super::working_state::{DetectorSettings, WorkingState};
@@ -254,11 +254,6 @@ fn inverse_spd<const N: usize>(p: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N,
     p.cholesky().map(|c| c.inverse())
 }
 
-/// Index of the state component a measurement row observes (for the stuck detector).
-fn quantity_of<const N: usize>(h: &RowSVector<f64, N>) -> usize {
-    h.iter().enumerate().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())).map_or(0, |(i, _)| i)
-}
-
 impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
     fn advance_to(&mut self, t_ns: u64) {
         if self.settings.fusion_period_ns > 0 {
@@ -279,13 +274,14 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
     }
 
     fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome {
+        let z = m.z - m.offset;
         if m.device == MASTER {
             let mut master = KalmanFilter { estimate: self.estimate() };
-            let innovation = master.innovation(&m.h, m.r, m.z);
+            let innovation = master.innovation(&m.h, m.r, z);
             if !innovation.passes(m.gate_nis) {
                 return Outcome::RejectedGate(innovation);
             }
-            if !LocalFilter::update(&mut master, &m.h, m.r, m.z) {
+            if !LocalFilter::update(&mut master, &m.h, m.r, z) {
                 return Outcome::RejectedNumerics(innovation);
             }
             // An absolute fix in the master is shared back at once, whatever the feedback mode:
@@ -300,7 +296,7 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
             return Outcome::Accepted(innovation);
         }
         let moving = self.speed().abs() > 1.0;
-        let quantity = quantity_of(&m.h);
+        let quantity = m.quantity;
         let i = m.device;
         if self.devices[i].health.on_message(self.time_ns, quantity, m.z, moving) {
             self.health_changed(None);
@@ -308,11 +304,11 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
         }
         if !self.devices[i].health.healthy() {
             let fused = KalmanFilter { estimate: self.estimate() };
-            let innovation = fused.innovation(&m.h, m.r, m.z);
+            let innovation = fused.innovation(&m.h, m.r, z);
             let d = &mut self.devices[i];
             if d.health.must_prove_agreement() {
                 // Shadow update, ungated: the next fusion sees where the device pulls.
-                d.filter.update(&m.h, m.r, m.z);
+                d.filter.update(&m.h, m.r, z);
             } else {
                 d.disagreement[quantity] = innovation.residual * innovation.residual;
                 if d.health.on_readmission_test(!d.health.is_stuck(quantity)) {
@@ -325,16 +321,16 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
             // How far the fused estimate still is from this device (not its own sub-filter,
             // which follows the device): what the next reset must leave room for.
             let fused = KalmanFilter { estimate: self.estimate() };
-            let nu = fused.innovation(&m.h, m.r, m.z).residual;
+            let nu = fused.innovation(&m.h, m.r, z).residual;
             self.devices[i].disagreement[quantity] = (nu * nu - m.r).max(0.0);
         }
         let d = &mut self.devices[i];
-        let innovation = d.filter.innovation(&m.h, m.r, m.z);
+        let innovation = d.filter.innovation(&m.h, m.r, z);
         let passed = innovation.passes(m.gate_nis);
         let failed_now = d.health.on_gate(quantity, passed);
         let outcome = if !passed {
             Outcome::RejectedGate(innovation)
-        } else if d.filter.update(&m.h, m.r, m.z) {
+        } else if d.filter.update(&m.h, m.r, z) {
             Outcome::Accepted(innovation)
         } else {
             Outcome::RejectedNumerics(innovation)
@@ -419,7 +415,8 @@ mod tests {
                 _ => (2, RowVector3::new(0.0, 1.0, 0.0), 0.01, v + 0.1 * noise),
             };
             estimator.advance_to(t);
-            let o = estimator.process(&ScalarMeasurement { device, h, r, z, gate_nis: None });
+            let quantity = h.iamax_full().1;
+            let o = estimator.process(&ScalarMeasurement { device, quantity, h, offset: 0.0, r, z, gate_nis: None });
             assert!(matches!(o, Outcome::Accepted(_)), "{o:?}");
             out.push(estimator.estimate());
         }

@@ -64,12 +64,21 @@ impl Innovation {
     }
 }
 
-/// One scalar measurement `z = H x + v`, `v ~ N(0, r)`, of one device.
+/// One scalar measurement `z = H x + offset + v`, `v ~ N(0, r)`, of one device.
+///
+/// A non-linear sensor model `z = h(x) + v` (a speed sensor's unknown scale factor:
+/// `z = (1 + k) v`) comes linearised at the current estimate `x̂`: `H = ∂h/∂x (x̂)` and
+/// `offset = h(x̂) − H x̂`, so that the innovation `z − offset − H x̂ = z − h(x̂)` (an extended
+/// Kalman filter step). Linear sensors have `offset = 0`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ScalarMeasurement<const N: usize> {
     /// Index of the device (sub-filter) it belongs to; [`MASTER`] for the master filter.
     pub device: usize,
+    /// The state component it measures (0 chainage, 1 speed, 2 acceleration): gate-lockout and
+    /// stuck-output bookkeeping.
+    pub quantity: usize,
     pub h: RowSVector<f64, N>,
+    pub offset: f64,
     pub r: f64,
     pub z: f64,
     pub gate_nis: Option<f64>,
