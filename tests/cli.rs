@@ -136,6 +136,15 @@ fn bad_configs_name_the_line_column_or_channel() {
     assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&missing), "-o", s(&out)]), &["/odometer/1", "is not in the file", "kf_no_balise"]);
     let wrong_schema = write("schema.toml", good.replacen("/radar/speed", "/truth", 1));
     assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&wrong_schema), "-o", s(&out)]), &["/truth", "railfuse.GroundTruth"]);
+    // A radar gives speed only: a position bias for it could never be observed.
+    let unobservable = write(
+        "state.toml",
+        good.replacen("\"/radar/speed\"\nvariance = 0.01\n", "\"/radar/speed\"\nvariance = 0.01\nchainage_bias = { std_m = 1.0, time_constant_s = 60.0 }\n", 1),
+    );
+    assert_one_clear_line(
+        &railfuse(&["refuse", s(&raw), "-c", s(&unobservable), "-o", s(&out)]),
+        &["/radar/speed", "has a chainage_bias state but gives no chainage to observe it"],
+    );
     assert!(!out.exists());
 }
 

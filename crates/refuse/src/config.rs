@@ -730,4 +730,27 @@ variance = "message"
                 .to_string();
         assert!(e.contains("gate_lockout is for kalman and particle pipelines"), "{e}");
     }
+
+    #[test]
+    fn sensor_states_parse_count_and_refuse_bad_values() {
+        let with = |loop_extra: &str, radar_extra: &str| {
+            GOOD.replace("variance = \"message\"\n", &format!("variance = \"message\"\n{loop_extra}\n"))
+                .replace("gate_nis = 16.0\n", &format!("gate_nis = 16.0\n{radar_extra}\n"))
+        };
+        let good = with("chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }", "scale_factor = { std = 0.01 }");
+        let c = PipelinesConfig::parse(&good, Path::new("p.toml")).unwrap();
+        assert_eq!(c.pipeline[0].dimension(), 5);
+        let kinds: Vec<_> = c.pipeline[0].sensor_states().iter().map(|(i, s)| (*i, s.kind())).collect();
+        assert_eq!(kinds, [(0, "chainage_bias"), (1, "scale_factor")]);
+        assert!(err(&with("chainage_bias = { std_m = -2.0, time_constant_s = 60.0 }", "")).contains("chainage_bias.std_m must be positive"));
+        assert!(err(&with("", "scale_factor = { std = 0.01, walk_per_s = -1.0 }")).contains("walk_per_s must be ≥ 0"));
+        assert!(err(&with("", "fields = [\"speed\"]\nchainage_bias = { std_m = 2.0, time_constant_s = 60.0 }")).contains("chainage is not among its fields"));
+        let e = err(&with("", "fields = [\"speed\"]\nacceleration_bias = { std_mps2 = 0.01, time_constant_s = 60.0 }"));
+        assert!(e.contains("acceleration_bias, but no acceleration"), "{e}");
+        let e = err(&with(
+            "chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }\nscale_factor = { std = 0.01 }",
+            "chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }\nscale_factor = { std = 0.01 }",
+        ));
+        assert!(e.contains("3 motion states and 4 sensor states: at most 6"), "{e}");
+    }
 }

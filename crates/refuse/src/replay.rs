@@ -16,7 +16,8 @@ use serde::Serialize;
 
 use crate::config::PipelinesConfig;
 use crate::error::{Error, Result};
-use crate::measurement::{SensorContext, SensorModel};
+use crate::measurement::{Quantity, SensorContext, SensorModel};
+use crate::model::SensorState;
 use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 
 pub struct RefuseOptions<'a> {
@@ -295,6 +296,16 @@ fn check_sensor(input: &Path, p: &crate::config::PipelineConfig, s: &crate::conf
         }
         if s.variance.of(*q).is_none() {
             return Err(channel_error(input, &p.name, &s.topic, format!("gives {}, and the sensor's variance table has no entry for it", q.name())));
+        }
+    }
+    for state in s.sensor_states() {
+        let q = match state {
+            SensorState::ChainageBias { .. } => Quantity::Chainage,
+            SensorState::AccelerationBias { .. } => Quantity::Acceleration,
+            SensorState::ScaleFactor { .. } => Quantity::Speed,
+        };
+        if !wanted.contains(&q) {
+            return Err(channel_error(input, &p.name, &s.topic, format!("has a {} state but gives no {} to observe it", state.kind(), q.name())));
         }
     }
     Ok(())
