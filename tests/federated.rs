@@ -5,8 +5,7 @@
 mod common;
 
 use common::*;
-use railfuse_catalog::log::{LogReader, LogRecord};
-use railfuse_catalog::messages::FusedDiagnostics;
+use railfuse_catalog::messages::{FusedDiagnostics, FusedState};
 
 const START_NS: u64 = 1_780_300_800 * 1_000_000_000;
 
@@ -15,20 +14,13 @@ type Shares = Vec<(String, f64, Option<String>)>;
 
 /// (time s, β and fault per device) of every diagnostics message of `pipeline`.
 fn sharing(path: &std::path::Path, pipeline: &str) -> Vec<(f64, Shares)> {
-    let topic = format!("/fused/{pipeline}/diagnostics");
-    let mut out = Vec::new();
-    let mut r = LogReader::open(path).unwrap();
-    while let Some(rec) = r.next() {
-        let LogRecord::Message(m) = rec.unwrap() else { continue };
-        if m.channel.topic != topic {
-            continue;
-        }
-        let d: FusedDiagnostics = m.decode(path).unwrap();
-        if let Some(sh) = d.sharing {
-            out.push(((d.stamp_ns - START_NS) as f64 / 1e9, sh.into_iter().map(|s| (s.device, s.beta, s.fault)).collect()));
-        }
-    }
-    out
+    messages::<FusedDiagnostics>(path, &format!("/fused/{pipeline}/diagnostics"))
+        .into_iter()
+        .filter_map(|d| {
+            let t = (d.stamp_ns - START_NS) as f64 / 1e9;
+            d.sharing.map(|sh| (t, sh.into_iter().map(|s| (s.device, s.beta, s.fault)).collect()))
+        })
+        .collect()
 }
 
 #[test]
@@ -103,17 +95,8 @@ fn a_device_that_reports_its_own_fault_is_taken_out_and_back_by_its_events() {
 }
 
 /// The last fused state of `pipeline`.
-fn last_state(path: &std::path::Path, pipeline: &str) -> railfuse_catalog::messages::FusedState {
-    let topic = format!("/fused/{pipeline}/state");
-    let (mut r, mut last) = (LogReader::open(path).unwrap(), None);
-    while let Some(rec) = r.next() {
-        if let LogRecord::Message(m) = rec.unwrap() {
-            if m.channel.topic == topic {
-                last = Some(m.decode(path).unwrap());
-            }
-        }
-    }
-    last.expect("fused states")
+fn last_state(path: &std::path::Path, pipeline: &str) -> FusedState {
+    messages::<FusedState>(path, &format!("/fused/{pipeline}/state")).pop().expect("fused states")
 }
 
 #[test]

@@ -48,3 +48,17 @@ pub fn python(script: &str, args: &[&str]) -> Output {
 pub fn rerun(args: &[&str]) -> Output {
     Command::new(client("RAILFUSE_RERUN", "rerun")).env("RERUN_ANALYTICS", "0").args(args).output().expect("rerun runs")
 }
+
+/// Every message on `topic` of a log, decoded, in file order.
+pub fn messages<M: railfuse_catalog::messages::ChannelMessage>(path: &Path, topic: &str) -> Vec<M> {
+    let mut out = Vec::new();
+    let mut r = railfuse_catalog::log::LogReader::open(path).unwrap();
+    while let Some(rec) = r.next() {
+        if let railfuse_catalog::log::LogRecord::Message(m) = rec.unwrap() {
+            if m.channel.topic == topic {
+                out.push(m.decode(path).unwrap());
+            }
+        }
+    }
+    out
+}
