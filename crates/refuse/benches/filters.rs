@@ -101,19 +101,30 @@ fn kalman(c: &mut Criterion) {
     g.finish();
 }
 
+/// Pipeline `name` of a config file, alone.
+fn named(text: &str, name: &str) -> PipelinesConfig {
+    let mut c = PipelinesConfig::parse(text, Path::new("bench.toml")).unwrap();
+    c.pipeline.retain(|p| p.name == name);
+    c
+}
+
+/// Source 001's federated filter (3 states), and federated and centralised filters with three
+/// sensor states (6 states, one of them an EKF row).
 fn federated(c: &mut Criterion) {
     let toml = include_str!("../../../samples/seed001.toml");
     let (stream, _) = stream("seed001", None, &config(toml, 1));
     let mut out = Vec::new();
-    let mut g = c.benchmark_group("federated_kalman_replay");
+    let mut g = c.benchmark_group("seed001_replay");
     g.sample_size(10);
     g.throughput(Throughput::Elements(stream.len() as u64));
-    g.bench_function("seed001_500s", |b| {
-        b.iter(|| {
-            let mut p: Vec<AnyPipeline> = config(toml, 1).pipeline.into_iter().map(|c| AnyPipeline::new(c).unwrap()).collect();
-            replay(&mut p, &stream, &mut out)
-        })
-    });
+    for name in ["fkf", "fkf_cal", "kf_cal"] {
+        g.bench_function(name, |b| {
+            b.iter(|| {
+                let mut p: Vec<AnyPipeline> = named(toml, name).pipeline.into_iter().map(|c| AnyPipeline::new(c).unwrap()).collect();
+                replay(&mut p, &stream, &mut out)
+            })
+        });
+    }
     g.finish();
 }
 
