@@ -23,6 +23,7 @@ pub enum Sink {
 #[derive(Debug, Clone, Default)]
 pub struct VizReport {
     pub messages: u64,
+    /// Records logged to Rerun (a message can give several: a value and its bounds, a map point).
     pub logged: u64,
     pub entities: BTreeSet<String>,
 }
@@ -65,6 +66,8 @@ struct Logger {
     pipelines: Vec<String>,
     /// The last β per federated pipeline, to log the weights only when they change.
     shares: std::collections::HashMap<String, Vec<f64>>,
+    /// Sensor-state entities whose series style is logged.
+    sensor_states: std::collections::HashSet<String>,
     report: VizReport,
 }
 
@@ -159,6 +162,7 @@ impl Logger {
             truth: ReferenceTrack::new(10.0),
             pipelines: Vec::new(),
             shares: Default::default(),
+            sensor_states: Default::default(),
             report: VizReport::default(),
         }
     }
@@ -325,6 +329,19 @@ impl Logger {
         if let Some((s, v)) = self.truth.at(f.stamp_ns) {
             self.band(&ent::chainage_error(pipeline), f.chainage_m - s, s3)?;
             self.band(&ent::speed_error(pipeline), f.speed_mps - v, v3)?;
+        }
+        for st in &f.sensor_states {
+            let entity = ent::sensor_state(pipeline, &st.topic, &st.kind);
+            if self.sensor_states.insert(entity.clone()) {
+                let name = format!("{} {}", st.topic, st.kind);
+                let style = SeriesLines::new().with_names([name.clone(), format!("{name} +3σ"), format!("{name} −3σ")]).with_colors([
+                    color,
+                    band_color(),
+                    band_color(),
+                ]);
+                self.log_static(&entity, &style)?;
+            }
+            self.band(&entity, st.value, 3.0 * st.std)?;
         }
         Ok(())
     }
