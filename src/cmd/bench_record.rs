@@ -75,7 +75,8 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     println!("UDP ingest (JSON lines, one message per datagram, 3 s per rate):");
     println!("{:>12} {:>10} {:>10} {:>8}", "rate msg/s", "sent", "written", "lost");
     let mut best = 0.0;
-    for rate in [5_000.0, 10_000.0, 20_000.0, 40_000.0, 80_000.0, 160_000.0] {
+    // Doubling to 80 000, then finer steps to find where loss begins.
+    for rate in [5_000.0, 10_000.0, 20_000.0, 40_000.0, 80_000.0, 100_000.0, 120_000.0, 140_000.0, 160_000.0] {
         let port = std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port();
         let c = start(dir, "ingest", port)?;
         let sent = send_at(&sock, port, rate, 3.0, radar_line)?;
