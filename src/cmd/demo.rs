@@ -25,7 +25,7 @@ pub fn run(a: Args) -> Result<()> {
     let config = PipelinesConfig::parse(DEFAULT_PIPELINES, &embedded_path("samples/kalman.toml"))?;
     refuse_and_evaluate(&raw, &fused, &config, "embedded samples/kalman.toml".into(), railfuse_catalog::topics::GROUND_TRUTH)?;
     let viz = visualize(&fused, &Sink::Save(rrd.clone()))?;
-    eprintln!("logged {} messages as {} Rerun entities -> {}", viz.logged, viz.entities.len(), rrd.display());
+    eprintln!("logged {} records on {} Rerun entities -> {}", viz.logged, viz.entities.len(), rrd.display());
     println!("\noutputs in {}:", dir.display());
     for (p, what) in [(&raw, "simulated raw log"), (&config_path, "pipeline config used"), (&fused, "raw log + fused channels"), (&rrd, "Rerun recording")] {
         println!("  {:<40} {what}", p.display());
