@@ -330,7 +330,7 @@ impl<const N: usize> Pipeline<N> {
                 self.time_ns = m.stamp_ns;
                 let (mut h, mut offset) = (h, 0.0);
                 if let Some(j) = scale_state {
-                    let x = e.estimate().state;
+                    let x = e.linearisation_point(device);
                     let (v, k) = (x[1], x[j]);
                     (h[1], h[j], offset) = (1.0 + k, v, -v * k);
                 }

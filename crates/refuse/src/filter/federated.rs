@@ -347,6 +347,14 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
         self.fuse().unwrap_or_else(|| self.master.estimate.clone())
     }
 
+    fn linearisation_point(&self, device: usize) -> SVector<f64, N> {
+        match self.devices.get(device) {
+            // A healthy device updates its own sub-filter; it is also far cheaper than a fusion.
+            Some(d) if d.health.healthy() => d.filter.estimate().state,
+            _ => self.estimate().state,
+        }
+    }
+
     fn diagnostics(&self) -> EstimatorDiagnostics {
         let mut out = EstimatorDiagnostics::default();
         // Particle sub-filters: the smallest effective sample size among them.

@@ -146,6 +146,11 @@ pub trait Estimator<const N: usize> {
     /// Gates and uses one measurement taken at the current time.
     fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome;
     fn estimate(&self) -> StateAndCovariance<N>;
+    /// The state a non-linear measurement of `device` is linearised at: the estimate that
+    /// measurement will update (a federated filter's device sub-filter; else the estimate).
+    fn linearisation_point(&self, _device: usize) -> SVector<f64, N> {
+        self.estimate().state
+    }
     fn diagnostics(&self) -> EstimatorDiagnostics;
     /// A message of `device` arrived at `t_ns`, usable or not: the device is alive (a radar
     /// flags its samples invalid at standstill but keeps talking).
