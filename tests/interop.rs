@@ -111,6 +111,28 @@ fn rerun_verifies_the_recording_and_shows_the_logged_entities() {
     assert!(data.contains("2026-06-01T08:01"), "log_time is not the run's time");
 }
 
+#[test]
+fn sensor_states_reach_the_fused_file_and_the_viewer() {
+    let d = tempfile::tempdir().unwrap();
+    let (config, fused, rrd) = (d.path().join("sf.toml"), d.path().join("sf.mcap"), d.path().join("sf.rrd"));
+    std::fs::write(
+        &config,
+        "[[pipeline]]\nname = \"sf\"\nfilter = \"kalman\"\nmotion = { model = \"constant_acceleration\", jerk_psd = 0.2 }\n\n\
+         [[pipeline.sensor]]\ntopic = \"/loop/position\"\nvariance = \"message\"\n\n\
+         [[pipeline.sensor]]\ntopic = \"/radar/speed\"\nvariance = 0.01\nscale_factor = { std = 0.01 }\n",
+    )
+    .unwrap();
+    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&config), "-o", s(&fused)]);
+    // Every fused state, with its sensor state, fits the schema stored in the file.
+    let py = python("check_mcap.py", &[s(&fused)]);
+    assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+    let py: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    assert!(py["topics"]["/fused/sf/state"].as_u64().unwrap() > 100, "{py}");
+    ok(&["viz", s(&fused), "--save", s(&rrd)]);
+    rerun_ok(&["rrd", "verify", s(&rrd)]);
+    assert!(rerun_ok(&["rrd", "print", "-v", s(&rrd)]).contains("/sensor_states/sf/radar_speed/scale_factor"));
+}
+
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
