@@ -166,6 +166,26 @@ fn the_samples_refuse_as_the_readme_says() {
 }
 
 #[test]
+fn sensor_states_shrink_the_default_runs_errors_and_make_its_covariance_honest() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused, cfg) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"), d.path().join("both.toml"));
+    ok(&["simulate", "--seed", "2", "-o", s(&raw)]);
+    // Both samples side by side, as `railfuse demo` runs them.
+    let text = [sample("kalman.toml"), sample("sensor-states.toml")].map(|p| std::fs::read_to_string(p).unwrap()).join("\n");
+    std::fs::write(&cfg, text).unwrap();
+    let r: serde_json::Value = serde_json::from_slice(&ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]).stdout).unwrap();
+    let p = |name: &str| r["eval"]["pipelines"].as_array().unwrap().iter().find(|p| p["name"] == name).unwrap().clone();
+    let (plain, cal) = (p("kalman"), p("kalman_cal"));
+    let f = |p: &serde_json::Value, path: [&str; 2]| p[path[0]][path[1]].as_f64().unwrap();
+    for path in [["position_error_m", "rmse"], ["position_error_m", "max_abs"], ["speed_error_mps", "rmse"]] {
+        assert!(f(&cal, path) < 0.8 * f(&plain, path), "{path:?}: kalman_cal {} vs kalman {}", f(&cal, path), f(&plain, path));
+    }
+    // White-noise sensor models leave the covariance far too small; with the two errors
+    // modelled the NEES lies inside its 95 % interval most of the time.
+    assert!(f(&plain, ["nees", "inside_95"]) < 0.5 && f(&cal, ["nees", "inside_95"]) > 0.8, "{plain} {cal}");
+}
+
+#[test]
 fn viz_spawn_without_a_viewer_on_path_says_so_in_one_line() {
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
         .args(["viz", s(&sample("short-run.mcap")), "--spawn"])

@@ -7,6 +7,9 @@ use railfuse_viz::{visualize, Sink};
 use super::refuse::refuse_and_evaluate;
 use super::DEFAULT_PIPELINES;
 
+/// Run beside the default pipeline in the demo: the same sensors with sensor states.
+const SENSOR_STATES_PIPELINES: &str = include_str!("../../samples/sensor-states.toml");
+
 #[derive(clap::Args)]
 pub struct Args {
     /// Folder for the outputs (created if missing).
@@ -21,9 +24,12 @@ pub fn run(a: Args) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the output folder", dir.display()))?;
     let (raw, fused, rrd, config_path) = (dir.join("run.mcap"), dir.join("run.fused.mcap"), dir.join("run.rrd"), dir.join("pipelines.toml"));
     super::simulate::simulate_to("default", a.seed, None, &[], &raw)?;
-    std::fs::write(&config_path, DEFAULT_PIPELINES).with_context(|| format!("{}: cannot write", config_path.display()))?;
-    let config = PipelinesConfig::parse(DEFAULT_PIPELINES, &embedded_path("samples/kalman.toml"))?;
-    refuse_and_evaluate(&raw, &fused, &config, "embedded samples/kalman.toml".into(), railfuse_catalog::topics::GROUND_TRUTH)?;
+    // The default pipeline and the same with sensor states, side by side, as one config.
+    let text = format!("{DEFAULT_PIPELINES}\n{SENSOR_STATES_PIPELINES}");
+    std::fs::write(&config_path, &text).with_context(|| format!("{}: cannot write", config_path.display()))?;
+    let config = PipelinesConfig::parse(&text, &embedded_path("samples/kalman.toml + samples/sensor-states.toml"))?;
+    let source = "embedded samples/kalman.toml + samples/sensor-states.toml".into();
+    refuse_and_evaluate(&raw, &fused, &config, source, railfuse_catalog::topics::GROUND_TRUTH)?;
     let viz = visualize(&fused, &Sink::Save(rrd.clone()))?;
     eprintln!("logged {} records on {} Rerun entities -> {}", viz.logged, viz.entities.len(), rrd.display());
     println!("\noutputs in {}:", dir.display());
