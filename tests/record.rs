@@ -37,16 +37,7 @@ fn radar_speeds(path: &std::path::Path) -> (Vec<f64>, usize) {
 }
 
 fn gnss_fixes(path: &std::path::Path) -> Vec<GnssFix> {
-    let mut fixes = Vec::new();
-    let mut rd = LogReader::open(path).unwrap();
-    while let Some(rec) = rd.next() {
-        if let LogRecord::Message(m) = rec.unwrap() {
-            if m.channel.topic == "/gnss/fix" {
-                fixes.push(m.decode::<GnssFix>(path).unwrap());
-            }
-        }
-    }
-    fixes
+    messages(path, "/gnss/fix")
 }
 
 /// A receiver's NMEA capture (50 RTK fixes, 50 sentences with a wrong checksum, 50 lines of

@@ -105,26 +105,18 @@ impl<const N: usize> Pipeline<N> {
         let motion = config.motion.dimension();
         let states = config.sensor_states();
         let layout = StateLayout { motion, sensor: states.iter().map(|(i, s)| (config.sensor[*i].topic.clone(), s.kind())).collect() };
-        // The state index of sensor `i`'s state of one kind.
-        let state_of = |i: usize, kind: &str| states.iter().position(|(j, s)| *j == i && s.kind() == kind).map(|p| motion + p);
         let field = |i: usize, q: Quantity, variance: VarianceValue| {
             if q.index() >= motion {
                 return None;
             }
             let mut h = q.h::<N>()?;
             let mut scale_state = None;
-            match q {
-                Quantity::Chainage => {
-                    if let Some(b) = state_of(i, "chainage_bias") {
-                        h[b] = 1.0;
-                    }
-                }
-
-                Quantity::Speed => scale_state = state_of(i, "scale_factor"),
-                Quantity::Acceleration => {
-                    if let Some(b) = state_of(i, "acceleration_bias") {
-                        h[b] = 1.0;
-                    }
+            // Sensor `i`'s state on this quantity: a bias adds to the row, a scale factor makes
+            // it non-linear (linearised at each update).
+            if let Some(p) = states.iter().position(|(j, s)| *j == i && s.quantity() == q) {
+                match states[p].1 {
+                    SensorState::ScaleFactor { .. } => scale_state = Some(motion + p),
+                    SensorState::ChainageBias { .. } | SensorState::AccelerationBias { .. } => h[motion + p] = 1.0,
                 }
             }
             Some(Field { quantity: q, h, variance, scale_state })

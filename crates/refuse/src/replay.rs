@@ -16,8 +16,7 @@ use serde::Serialize;
 
 use crate::config::PipelinesConfig;
 use crate::error::{Error, Result};
-use crate::measurement::{Quantity, SensorContext, SensorModel};
-use crate::model::SensorState;
+use crate::measurement::{SensorContext, SensorModel};
 use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 
 pub struct RefuseOptions<'a> {
@@ -299,11 +298,7 @@ fn check_sensor(input: &Path, p: &crate::config::PipelineConfig, s: &crate::conf
         }
     }
     for state in s.sensor_states() {
-        let q = match state {
-            SensorState::ChainageBias { .. } => Quantity::Chainage,
-            SensorState::AccelerationBias { .. } => Quantity::Acceleration,
-            SensorState::ScaleFactor { .. } => Quantity::Speed,
-        };
+        let q = state.quantity();
         if !wanted.contains(&q) {
             return Err(channel_error(input, &p.name, &s.topic, format!("has a {} state but gives no {} to observe it", state.kind(), q.name())));
         }

@@ -15,6 +15,7 @@
 use nalgebra::SMatrix;
 
 use super::TransitionModel;
+use crate::measurement::Quantity;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SensorState {
@@ -34,6 +35,15 @@ impl SensorState {
             SensorState::ChainageBias { .. } => "chainage_bias",
             SensorState::AccelerationBias { .. } => "acceleration_bias",
             SensorState::ScaleFactor { .. } => "scale_factor",
+        }
+    }
+
+    /// The quantity of its sensor's measurement that it enters.
+    pub fn quantity(&self) -> Quantity {
+        match self {
+            SensorState::ChainageBias { .. } => Quantity::Chainage,
+            SensorState::AccelerationBias { .. } => Quantity::Acceleration,
+            SensorState::ScaleFactor { .. } => Quantity::Speed,
         }
     }
 
