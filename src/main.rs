@@ -10,7 +10,11 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "railfuse", version, about = "MCAP log recorder and offline re-fusion toolkit for train speed and position testing")]
+#[command(
+    name = "railfuse",
+    version,
+    about = "MCAP log recorder and offline re-fusion toolkit for train speed and position testing"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,

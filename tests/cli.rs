@@ -7,11 +7,49 @@ use common::*;
 #[test]
 fn simulation_is_deterministic_for_a_seed_and_differs_across_seeds() {
     let d = tempfile::tempdir().unwrap();
-    let (a, b, c) = (d.path().join("a.mcap"), d.path().join("b.mcap"), d.path().join("c.mcap"));
-    ok(&["simulate", "--scenario", "default", "--seed", "3", "--duration", "40", "-o", s(&a)]);
-    ok(&["simulate", "--scenario", "default", "--seed", "3", "--duration", "40", "-o", s(&b)]);
-    ok(&["simulate", "--scenario", "default", "--seed", "4", "--duration", "40", "-o", s(&c)]);
-    let (a, b, c) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap(), std::fs::read(c).unwrap());
+    let (a, b, c) = (
+        d.path().join("a.mcap"),
+        d.path().join("b.mcap"),
+        d.path().join("c.mcap"),
+    );
+    ok(&[
+        "simulate",
+        "--scenario",
+        "default",
+        "--seed",
+        "3",
+        "--duration",
+        "40",
+        "-o",
+        s(&a),
+    ]);
+    ok(&[
+        "simulate",
+        "--scenario",
+        "default",
+        "--seed",
+        "3",
+        "--duration",
+        "40",
+        "-o",
+        s(&b),
+    ]);
+    ok(&[
+        "simulate",
+        "--scenario",
+        "default",
+        "--seed",
+        "4",
+        "--duration",
+        "40",
+        "-o",
+        s(&c),
+    ]);
+    let (a, b, c) = (
+        std::fs::read(a).unwrap(),
+        std::fs::read(b).unwrap(),
+        std::fs::read(c).unwrap(),
+    );
     assert_eq!(a, b);
     assert_ne!(a, c);
 }
@@ -20,57 +58,139 @@ fn simulation_is_deterministic_for_a_seed_and_differs_across_seeds() {
 fn info_reports_channels_rates_gaps_metadata_and_fused_pipelines() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
-    ok(&["simulate", "--seed", "1", "--duration", "120", "-o", s(&raw)]);
-    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
-    let topic = |t: &str| info["channels"].as_array().unwrap().iter().find(|c| c["topic"] == t).cloned().unwrap_or_else(|| panic!("{t}"));
+    ok(&[
+        "simulate",
+        "--seed",
+        "1",
+        "--duration",
+        "120",
+        "-o",
+        s(&raw),
+    ]);
+    let info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+    let topic = |t: &str| {
+        info["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["topic"] == t)
+            .cloned()
+            .unwrap_or_else(|| panic!("{t}"))
+    };
     let imu = topic("/imu");
-    assert!((imu["mean_rate_hz"].as_f64().unwrap() - 200.0).abs() < 1.0, "{imu}");
+    assert!(
+        (imu["mean_rate_hz"].as_f64().unwrap() - 200.0).abs() < 1.0,
+        "{imu}"
+    );
     assert_eq!(topic("/gnss/fix")["schema"], "railfuse.GnssFix");
     assert!((topic("/gnss/fix")["mean_rate_hz"].as_f64().unwrap() - 10.0).abs() < 0.2);
     assert_eq!(topic("/track/map")["messages"], 1);
     // Balises lie about 1 km apart: tens of seconds between passages.
     assert!(topic("/balise")["largest_gap_s"].as_f64().unwrap() > 20.0);
-    let run = info["metadata"].as_array().unwrap().iter().find(|m| m[0] == "railfuse.run").unwrap();
+    let run = info["metadata"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m[0] == "railfuse.run")
+        .unwrap();
     assert_eq!(run[1]["scenario"], "default");
-    assert!(run[1]["scenario_parameters"].as_str().unwrap().contains("\"gnss\""));
+    assert!(run[1]["scenario_parameters"]
+        .as_str()
+        .unwrap()
+        .contains("\"gnss\""));
     assert_eq!(info["fused_pipelines"].as_array().unwrap().len(), 0);
 
-    ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
-    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
+    ok(&[
+        "refuse",
+        s(&raw),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+    ]);
+    let info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
     assert_eq!(info["fused_pipelines"], serde_json::json!(["kalman"]));
     let text = String::from_utf8(ok(&["info", s(&fused)]).stdout).unwrap();
-    assert!(text.contains("/fused/kalman/state") && text.contains("fused pipelines: kalman"), "{text}");
+    assert!(
+        text.contains("/fused/kalman/state") && text.contains("fused pipelines: kalman"),
+        "{text}"
+    );
 }
 
 #[test]
 fn refuse_copies_every_input_record_and_reports_accuracy() {
     let d = tempfile::tempdir().unwrap();
-    let (raw, fused, again) = (d.path().join("run.mcap"), d.path().join("f.mcap"), d.path().join("g.mcap"));
-    ok(&["simulate", "--seed", "2", "--duration", "150", "-o", s(&raw)]);
-    let out = ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused), "--json"]);
+    let (raw, fused, again) = (
+        d.path().join("run.mcap"),
+        d.path().join("f.mcap"),
+        d.path().join("g.mcap"),
+    );
+    ok(&[
+        "simulate",
+        "--seed",
+        "2",
+        "--duration",
+        "150",
+        "-o",
+        s(&raw),
+    ]);
+    let out = ok(&[
+        "refuse",
+        s(&raw),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+        "--json",
+    ]);
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let p = &r["eval"]["pipelines"][0];
     assert_eq!(r["eval"]["reference"], "/truth");
     assert_eq!(p["states"], r["refuse"]["pipelines"][0]["fused_states"]);
     assert!(p["states"].as_u64().unwrap() > 1000);
     // The Kalman filter's innovations are consistent: NIS inside its 95 % bounds ≈ 95 %.
-    assert!((0.85..=0.99).contains(&p["nis"]["inside_95"].as_f64().unwrap()), "{p}");
+    assert!(
+        (0.85..=0.99).contains(&p["nis"]["inside_95"].as_f64().unwrap()),
+        "{p}"
+    );
     // The default pipeline on the default run: sub-metre position, sub-0.3 m/s speed.
     assert!(p["position_error_m"]["rmse"].as_f64().unwrap() < 1.0, "{p}");
     assert!(p["speed_error_mps"]["rmse"].as_f64().unwrap() < 0.3, "{p}");
 
-    let raw_info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
-    let fused_info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
+    let raw_info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+    let fused_info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
     for c in raw_info["channels"].as_array().unwrap() {
-        let f = fused_info["channels"].as_array().unwrap().iter().find(|x| x["topic"] == c["topic"]).unwrap();
+        let f = fused_info["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["topic"] == c["topic"])
+            .unwrap();
         assert_eq!(c, f, "copied channel differs");
     }
     // Re-fusing a fused file replaces that pipeline's channels instead of adding more.
-    ok(&["refuse", s(&fused), "-c", s(&sample("kalman.toml")), "-o", s(&again)]);
-    let again_info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&again), "--json"]).stdout).unwrap();
+    ok(&[
+        "refuse",
+        s(&fused),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&again),
+    ]);
+    let again_info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&again), "--json"]).stdout).unwrap();
     let n = |v: &serde_json::Value| v["channels"].as_array().unwrap().len();
     assert_eq!(n(&again_info), n(&fused_info));
-    let pipelines = again_info["metadata"].as_array().unwrap().iter().filter(|m| m[0] == "railfuse.pipeline").count();
+    let pipelines = again_info["metadata"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|m| m[0] == "railfuse.pipeline")
+        .count();
     assert_eq!(pipelines, 1);
 }
 
@@ -78,7 +198,10 @@ fn assert_one_clear_line(out: &std::process::Output, must_contain: &[&str]) {
     assert!(!out.status.success());
     let err = stderr(out);
     assert_eq!(err.trim_end().lines().count(), 1, "not one line: {err}");
-    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
+        "{err}"
+    );
     for m in must_contain {
         assert!(err.contains(m), "{err:?} lacks {m:?}");
     }
@@ -100,10 +223,21 @@ fn bad_files_get_one_clear_line_naming_the_file() {
     let cfg = sample("kalman.toml");
     let out = d.path().join("out.mcap");
     let rrd = d.path().join("out.rrd");
-    for (file, cause) in [(&empty, "empty"), (&truncated, "truncated"), (&text, "magic"), (&missing, "No such file")] {
+    for (file, cause) in [
+        (&empty, "empty"),
+        (&truncated, "truncated"),
+        (&text, "magic"),
+        (&missing, "No such file"),
+    ] {
         assert_one_clear_line(&railfuse(&["info", s(file)]), &[s(file), cause]);
-        assert_one_clear_line(&railfuse(&["refuse", s(file), "-c", s(&cfg), "-o", s(&out)]), &[s(file), cause]);
-        assert_one_clear_line(&railfuse(&["viz", s(file), "--save", s(&rrd)]), &[s(file), cause]);
+        assert_one_clear_line(
+            &railfuse(&["refuse", s(file), "-c", s(&cfg), "-o", s(&out)]),
+            &[s(file), cause],
+        );
+        assert_one_clear_line(
+            &railfuse(&["viz", s(file), "--save", s(&rrd)]),
+            &[s(file), cause],
+        );
         assert!(!out.exists(), "a failed refuse left an output behind");
     }
 }
@@ -112,7 +246,15 @@ fn bad_files_get_one_clear_line_naming_the_file() {
 fn bad_configs_name_the_line_column_or_channel() {
     let d = tempfile::tempdir().unwrap();
     let raw = d.path().join("run.mcap");
-    ok(&["simulate", "--scenario", "seed000", "--seed", "1", "-o", s(&raw)]);
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed000",
+        "--seed",
+        "1",
+        "-o",
+        s(&raw),
+    ]);
     let out = d.path().join("out.mcap");
     let good = std::fs::read_to_string(sample("seed000.toml")).unwrap();
     let write = |name: &str, text: String| {
@@ -120,22 +262,50 @@ fn bad_configs_name_the_line_column_or_channel() {
         std::fs::write(&p, text).unwrap();
         p
     };
-    let line_of = |text: &str| format!("line {}, column", good.lines().position(|l| l.starts_with(text)).unwrap() + 1);
-    let unknown = write("unknown.toml", good.replacen("reorder_window_s = 0.0", "reorder_windw_s = 0.0", 1));
+    let line_of = |text: &str| {
+        format!(
+            "line {}, column",
+            good.lines().position(|l| l.starts_with(text)).unwrap() + 1
+        )
+    };
+    let unknown = write(
+        "unknown.toml",
+        good.replacen("reorder_window_s = 0.0", "reorder_windw_s = 0.0", 1),
+    );
     assert_one_clear_line(
         &railfuse(&["refuse", s(&raw), "-c", s(&unknown), "-o", s(&out)]),
-        &["unknown.toml", &(line_of("reorder_window_s") + " 1"), "unknown field `reorder_windw_s`"],
+        &[
+            "unknown.toml",
+            &(line_of("reorder_window_s") + " 1"),
+            "unknown field `reorder_windw_s`",
+        ],
     );
-    let wrong_type = write("type.toml", good.replacen("variance = 0.01", "variance = true", 1));
+    let wrong_type = write(
+        "type.toml",
+        good.replacen("variance = 0.01", "variance = true", 1),
+    );
     assert_one_clear_line(
         &railfuse(&["refuse", s(&raw), "-c", s(&wrong_type), "-o", s(&out)]),
-        &["type.toml", &(line_of("variance = 0.01") + " 12"), "a variance"],
+        &[
+            "type.toml",
+            &(line_of("variance = 0.01") + " 12"),
+            "a variance",
+        ],
     );
     // seed000 logs have no odometer: the channel is named.
-    let missing = write("missing.toml", good.replacen("/radar/speed", "/odometer/1", 1));
-    assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&missing), "-o", s(&out)]), &["/odometer/1", "is not in the file", "kf_no_balise"]);
+    let missing = write(
+        "missing.toml",
+        good.replacen("/radar/speed", "/odometer/1", 1),
+    );
+    assert_one_clear_line(
+        &railfuse(&["refuse", s(&raw), "-c", s(&missing), "-o", s(&out)]),
+        &["/odometer/1", "is not in the file", "kf_no_balise"],
+    );
     let wrong_schema = write("schema.toml", good.replacen("/radar/speed", "/truth", 1));
-    assert_one_clear_line(&railfuse(&["refuse", s(&raw), "-c", s(&wrong_schema), "-o", s(&out)]), &["/truth", "railfuse.GroundTruth"]);
+    assert_one_clear_line(
+        &railfuse(&["refuse", s(&raw), "-c", s(&wrong_schema), "-o", s(&out)]),
+        &["/truth", "railfuse.GroundTruth"],
+    );
     // A radar gives speed only: a position bias for it could never be observed.
     let unobservable = write(
         "state.toml",
@@ -143,7 +313,10 @@ fn bad_configs_name_the_line_column_or_channel() {
     );
     assert_one_clear_line(
         &railfuse(&["refuse", s(&raw), "-c", s(&unobservable), "-o", s(&out)]),
-        &["/radar/speed", "has a chainage_bias state but gives no chainage to observe it"],
+        &[
+            "/radar/speed",
+            "has a chainage_bias state but gives no chainage to observe it",
+        ],
     );
     assert!(!out.exists());
 }
@@ -152,13 +325,36 @@ fn bad_configs_name_the_line_column_or_channel() {
 fn the_samples_refuse_as_the_readme_says() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("sample.fused.mcap");
-    let r = ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&out)]);
+    let r = ok(&[
+        "refuse",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&out),
+    ]);
     let table = String::from_utf8(r.stdout).unwrap();
-    assert!(table.contains("pos RMSE m") && table.contains("kalman"), "{table}");
+    assert!(
+        table.contains("pos RMSE m") && table.contains("kalman"),
+        "{table}"
+    );
     // The motion models and the particle filter side by side, each under a metre.
-    let r = ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("models.toml")), "-o", s(&out), "--json"]);
+    let r = ok(&[
+        "refuse",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("models.toml")),
+        "-o",
+        s(&out),
+        "--json",
+    ]);
     let v: serde_json::Value = serde_json::from_slice(&r.stdout).unwrap();
-    let names: Vec<&str> = v["eval"]["pipelines"].as_array().unwrap().iter().map(|p| p["name"].as_str().unwrap()).collect();
+    let names: Vec<&str> = v["eval"]["pipelines"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
     assert_eq!(names, ["cv", "ca", "singer", "pf"]);
     for p in v["eval"]["pipelines"].as_array().unwrap() {
         assert!(p["position_error_m"]["rmse"].as_f64().unwrap() < 1.0, "{p}");
@@ -168,21 +364,50 @@ fn the_samples_refuse_as_the_readme_says() {
 #[test]
 fn sensor_states_shrink_the_default_runs_errors_and_make_its_covariance_honest() {
     let d = tempfile::tempdir().unwrap();
-    let (raw, fused, cfg) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"), d.path().join("both.toml"));
+    let (raw, fused, cfg) = (
+        d.path().join("run.mcap"),
+        d.path().join("run.fused.mcap"),
+        d.path().join("both.toml"),
+    );
     ok(&["simulate", "--seed", "2", "-o", s(&raw)]);
     // Both samples side by side, as `railfuse demo` runs them.
-    let text = [sample("kalman.toml"), sample("sensor-states.toml")].map(|p| std::fs::read_to_string(p).unwrap()).join("\n");
+    let text = [sample("kalman.toml"), sample("sensor-states.toml")]
+        .map(|p| std::fs::read_to_string(p).unwrap())
+        .join("\n");
     std::fs::write(&cfg, text).unwrap();
-    let r: serde_json::Value = serde_json::from_slice(&ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]).stdout).unwrap();
-    let p = |name: &str| r["eval"]["pipelines"].as_array().unwrap().iter().find(|p| p["name"] == name).unwrap().clone();
+    let r: serde_json::Value = serde_json::from_slice(
+        &ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]).stdout,
+    )
+    .unwrap();
+    let p = |name: &str| {
+        r["eval"]["pipelines"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap()
+            .clone()
+    };
     let (plain, cal) = (p("kalman"), p("kalman_cal"));
     let f = |p: &serde_json::Value, path: [&str; 2]| p[path[0]][path[1]].as_f64().unwrap();
-    for path in [["position_error_m", "rmse"], ["position_error_m", "max_abs"], ["speed_error_mps", "rmse"]] {
-        assert!(f(&cal, path) < 0.8 * f(&plain, path), "{path:?}: kalman_cal {} vs kalman {}", f(&cal, path), f(&plain, path));
+    for path in [
+        ["position_error_m", "rmse"],
+        ["position_error_m", "max_abs"],
+        ["speed_error_mps", "rmse"],
+    ] {
+        assert!(
+            f(&cal, path) < 0.8 * f(&plain, path),
+            "{path:?}: kalman_cal {} vs kalman {}",
+            f(&cal, path),
+            f(&plain, path)
+        );
     }
     // White-noise sensor models leave the covariance far too small; with the two errors
     // modelled the NEES lies inside its 95 % interval most of the time.
-    assert!(f(&plain, ["nees", "inside_95"]) < 0.5 && f(&cal, ["nees", "inside_95"]) > 0.8, "{plain} {cal}");
+    assert!(
+        f(&plain, ["nees", "inside_95"]) < 0.5 && f(&cal, ["nees", "inside_95"]) > 0.8,
+        "{plain} {cal}"
+    );
 }
 
 #[test]
@@ -192,7 +417,13 @@ fn viz_spawn_without_a_viewer_on_path_says_so_in_one_line() {
         .env("PATH", "/nonexistent")
         .output()
         .unwrap();
-    assert_one_clear_line(&out, &["Failed to find Rerun Viewer executable", "pip install rerun-sdk==0.36.3"]);
+    assert_one_clear_line(
+        &out,
+        &[
+            "Failed to find Rerun Viewer executable",
+            "pip install rerun-sdk==0.36.3",
+        ],
+    );
 }
 
 /// A log written by some other recorder, with a null where a speed belongs and a radar value
@@ -203,7 +434,10 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
     use railfuse_catalog::log::LogWriter;
     use railfuse_catalog::messages::{LoopPosition, RadarSpeed};
     let d = tempfile::tempdir().unwrap();
-    let (raw, fused) = (d.path().join("other.mcap"), d.path().join("other.fused.mcap"));
+    let (raw, fused) = (
+        d.path().join("other.mcap"),
+        d.path().join("other.fused.mcap"),
+    );
     let mut w = LogWriter::create(&raw).unwrap();
     let lp = w.add_channel::<LoopPosition>("/loop/position").unwrap();
     let radar = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();
@@ -211,7 +445,17 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
     for k in 0..200u64 {
         let t = 1_000_000_000 + k * 100_000_000;
         if k % 2 == 0 {
-            w.write(lp, t, &LoopPosition { stamp_ns: t, chainage_m: k as f64, crossing: None, variance_m2: Some(0.01) }).unwrap();
+            w.write(
+                lp,
+                t,
+                &LoopPosition {
+                    stamp_ns: t,
+                    chainage_m: k as f64,
+                    crossing: None,
+                    variance_m2: Some(0.01),
+                },
+            )
+            .unwrap();
         }
         let json = match k {
             50 => {
@@ -222,7 +466,9 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
                 bad += 1;
                 format!(r#"{{"stamp_ns":{t},"speed_mps":1e400,"quality":1.0,"valid":true}}"#)
             }
-            _ => format!(r#"{{"stamp_ns":{t},"speed_mps":10.0,"quality":1.0,"valid":true,"speed_variance_m2ps2":0.01}}"#),
+            _ => format!(
+                r#"{{"stamp_ns":{t},"speed_mps":10.0,"quality":1.0,"valid":true,"speed_variance_m2ps2":0.01}}"#
+            ),
         };
         w.write_raw(radar.0, 0, t, t, json.as_bytes()).unwrap();
     }
@@ -237,7 +483,11 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
     let out = ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]);
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(r["refuse"]["undecodable_messages"], bad, "{r}");
-    assert!(stderr(&out).contains("2 sensor messages did not decode and were skipped"), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("2 sensor messages did not decode and were skipped"),
+        "{}",
+        stderr(&out)
+    );
     // Every fused message decodes with finite numbers.
     let mut reader = railfuse_catalog::log::LogReader::open(&fused).unwrap();
     let mut states = 0;
@@ -245,7 +495,11 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
         if let railfuse_catalog::log::LogRecord::Message(m) = rec.unwrap() {
             if m.channel.topic == "/fused/kf/state" {
                 let st: railfuse_catalog::messages::FusedState = m.decode(&fused).unwrap();
-                assert!(st.chainage_m.is_finite() && st.speed_mps.is_finite() && st.covariance.iter().all(|c| c.is_finite()));
+                assert!(
+                    st.chainage_m.is_finite()
+                        && st.speed_mps.is_finite()
+                        && st.covariance.iter().all(|c| c.is_finite())
+                );
                 states += 1;
             }
         }
@@ -257,22 +511,61 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
 fn eval_scores_against_truth_another_pipeline_or_a_gnss_receiver() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
-    ok(&["simulate", "--seed", "3", "--duration", "200", "-o", s(&raw)]);
-    ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
-    let eval = |reference: &str| -> serde_json::Value { serde_json::from_slice(&ok(&["eval", s(&fused), "--reference", reference, "--json"]).stdout).unwrap() };
+    ok(&[
+        "simulate",
+        "--seed",
+        "3",
+        "--duration",
+        "200",
+        "-o",
+        s(&raw),
+    ]);
+    ok(&[
+        "refuse",
+        s(&raw),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+    ]);
+    let eval = |reference: &str| -> serde_json::Value {
+        serde_json::from_slice(&ok(&["eval", s(&fused), "--reference", reference, "--json"]).stdout)
+            .unwrap()
+    };
     let truth = eval("/truth");
     let kalman = &truth["pipelines"][0];
-    assert!(kalman["position_error_m"]["rmse"].as_f64().unwrap() < 1.0, "{kalman}");
+    assert!(
+        kalman["position_error_m"]["rmse"].as_f64().unwrap() < 1.0,
+        "{kalman}"
+    );
     // The default run's correction-link outage (120–165 s) is a marked window.
-    let w = kalman["windows"].as_array().unwrap().iter().find(|w| w["label"] == "no RTK corrections").expect("the outage window");
-    assert!(w["position_error_m"]["samples"].as_u64().unwrap() > 100, "{w}");
+    let w = kalman["windows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["label"] == "no RTK corrections")
+        .expect("the outage window");
+    assert!(
+        w["position_error_m"]["samples"].as_u64().unwrap() > 100,
+        "{w}"
+    );
     // Against the RTK receiver, matched on the track map: metres at worst (single fixes in the
     // outage), far from the kilometres a wrong projection would give.
     let gnss = eval("/gnss/fix");
     assert_eq!(gnss["reference"], "/gnss/fix");
-    assert!(gnss["pipelines"][0]["position_error_m"]["rmse"].as_f64().unwrap() < 3.0, "{}", gnss["pipelines"][0]);
+    assert!(
+        gnss["pipelines"][0]["position_error_m"]["rmse"]
+            .as_f64()
+            .unwrap()
+            < 3.0,
+        "{}",
+        gnss["pipelines"][0]
+    );
     let table = String::from_utf8(ok(&["eval", s(&fused)]).stdout).unwrap();
-    assert!(table.contains("NEES in 95%") && table.contains("in no RTK corrections"), "{table}");
+    assert!(
+        table.contains("NEES in 95%") && table.contains("in no RTK corrections"),
+        "{table}"
+    );
 }
 
 /// The three real ETH-PBL samples import; their NAV-PVT values are those SOURCE.md decodes,
@@ -286,7 +579,13 @@ fn the_eth_railway_samples_import_with_the_documented_values() {
     let d = tempfile::tempdir().unwrap();
     let read = |name: &str| -> (Vec<GnssFix>, Vec<Imu>, serde_json::Value) {
         let out = d.path().join(format!("{name}.mcap"));
-        let report = ok(&["import", s(&data.join(format!("{name}.csv"))), "-o", s(&out), "--json"]);
+        let report = ok(&[
+            "import",
+            s(&data.join(format!("{name}.csv"))),
+            "-o",
+            s(&out),
+            "--json",
+        ]);
         let report: serde_json::Value = serde_json::from_slice(&report.stdout).unwrap();
         let (mut fixes, mut imu) = (Vec::new(), Vec::new());
         let mut r = LogReader::open(&out).unwrap();
@@ -306,36 +605,67 @@ fn the_eth_railway_samples_import_with_the_documented_values() {
     let (fixes, imu, report) = read("20221020_1030_R90117_Modena_SN1_sample");
     assert_eq!(fixes.len(), 2, "{report}");
     for f in &fixes {
-        assert_eq!((f.fix_type, f.satellites, f.latitude_deg, f.longitude_deg), (FixType::None, 0, None, None));
+        assert_eq!(
+            (f.fix_type, f.satellites, f.latitude_deg, f.longitude_deg),
+            (FixType::None, 0, None, None)
+        );
     }
     assert_eq!(imu.len(), 1997);
     let (fixes, _, report) = read("20221020_1030_R90117_Modena_SN2_sample");
     assert_eq!(fixes.len(), 1, "{report}");
     assert!(fixes[0].fix_type.has_position() && fixes[0].satellites == 29);
-    assert!(close(fixes[0].latitude_deg, 44.6551106) && close(fixes[0].longitude_deg, 10.9297304), "{:?}", fixes[0]);
+    assert!(
+        close(fixes[0].latitude_deg, 44.6551106) && close(fixes[0].longitude_deg, 10.9297304),
+        "{:?}",
+        fixes[0]
+    );
     let h = fixes[0].position_covariance_enu_m2.unwrap();
     assert!((h[0] + h[4]).sqrt() < 1.5, "NAV-COV horizontal σ {h:?}");
-    assert_eq!(report["skipped"]["NMEA sentence type not used (GSV, GLL, …)"], 4);
+    assert_eq!(
+        report["skipped"]["NMEA sentence type not used (GSV, GLL, …)"],
+        4
+    );
     let (fixes, imu, _) = read("20221019_1252_R90120_Formigine_SN1_sample");
-    assert!(fixes[0].satellites == 28 && close(fixes[0].latitude_deg, 44.5775211) && close(fixes[0].longitude_deg, 10.8457549), "{:?}", fixes[0]);
+    assert!(
+        fixes[0].satellites == 28
+            && close(fixes[0].latitude_deg, 44.5775211)
+            && close(fixes[0].longitude_deg, 10.8457549),
+        "{:?}",
+        fixes[0]
+    );
     // UTC from the receiver: 2022-10-19, the run's date.
     assert_eq!(fixes[0].stamp_ns / 86_400_000_000_000, 19_284);
     let g = imu.iter().map(|m| m.specific_force_mps2[2]).sum::<f64>() / imu.len() as f64;
     assert!((g - 9.81).abs() < 0.3, "mean z specific force {g} m/s²");
-    let rate = imu.iter().map(|m| m.angular_rate_radps[2].abs()).fold(0.0, f64::max);
+    let rate = imu
+        .iter()
+        .map(|m| m.angular_rate_radps[2].abs())
+        .fold(0.0, f64::max);
     assert!(rate < 0.1, "a standing train does not turn: {rate} rad/s");
     // IMU about 1.6 kHz on the node clock.
     let span = (imu.last().unwrap().stamp_ns - imu[0].stamp_ns) as f64 / 1e9;
-    assert!((1300.0..2000.0).contains(&(imu.len() as f64 / span)), "{} Hz", imu.len() as f64 / span);
+    assert!(
+        (1300.0..2000.0).contains(&(imu.len() as f64 / span)),
+        "{} Hz",
+        imu.len() as f64 / span
+    );
 }
 
 #[test]
 fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
     let d = tempfile::tempdir().unwrap();
-    let (csv, map, out) = (d.path().join("logger.csv"), d.path().join("map.toml"), d.path().join("logger.mcap"));
+    let (csv, map, out) = (
+        d.path().join("logger.csv"),
+        d.path().join("map.toml"),
+        d.path().join("logger.mcap"),
+    );
     let mut text = String::from("t;v_radar;pos;note\n");
     for k in 0..100 {
-        let pos = if k % 10 == 0 { format!("{}", k as f64 * 2.5) } else { String::new() };
+        let pos = if k % 10 == 0 {
+            format!("{}", k as f64 * 2.5)
+        } else {
+            String::new()
+        };
         text += &format!("{};{};{pos};ok\n", k as f64 * 0.1, 25.0 + k as f64 * 0.01);
     }
     text += "oops;1;2;x\n7.0;fast;;x\n";
@@ -347,14 +677,53 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
          [[channel]]\ntopic = \"/loop/position\"\nfields = { chainage_m = \"pos\" }\n",
     )
     .unwrap();
-    let r: serde_json::Value = serde_json::from_slice(&ok(&["import", "--format", "csv", "--map", s(&map), s(&csv), "-o", s(&out), "--json"]).stdout).unwrap();
-    assert_eq!((r["per_topic"]["/radar/speed"].as_u64(), r["per_topic"]["/loop/position"].as_u64()), (Some(100), Some(10)), "{r}");
+    let r: serde_json::Value = serde_json::from_slice(
+        &ok(&[
+            "import",
+            "--format",
+            "csv",
+            "--map",
+            s(&map),
+            s(&csv),
+            "-o",
+            s(&out),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(
+        (
+            r["per_topic"]["/radar/speed"].as_u64(),
+            r["per_topic"]["/loop/position"].as_u64()
+        ),
+        (Some(100), Some(10)),
+        "{r}"
+    );
     let problems = r["first_problems"].to_string();
-    assert!(problems.contains("line 102: bad time") && problems.contains("line 103: row does not make a valid message"), "{problems}");
-    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&out), "--json"]).stdout).unwrap();
+    assert!(
+        problems.contains("line 102: bad time")
+            && problems.contains("line 103: row does not make a valid message"),
+        "{problems}"
+    );
+    let info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&out), "--json"]).stdout).unwrap();
     assert_eq!(info["channels"].as_array().unwrap().len(), 2);
     // A mapping naming a column the file does not have is refused, naming both.
     std::fs::write(&map, "time_column = \"t\"\ndelimiter = \";\"\n[[channel]]\ntopic = \"/radar/speed\"\nfields = { speed_mps = \"v\" }\n").unwrap();
-    let bad = railfuse(&["import", "--format", "csv", "--map", s(&map), s(&csv), "-o", s(&out)]);
-    assert!(!bad.status.success() && stderr(&bad).contains("column 'v' is not in"), "{}", stderr(&bad));
+    let bad = railfuse(&[
+        "import",
+        "--format",
+        "csv",
+        "--map",
+        s(&map),
+        s(&csv),
+        "-o",
+        s(&out),
+    ]);
+    assert!(
+        !bad.status.success() && stderr(&bad).contains("column 'v' is not in"),
+        "{}",
+        stderr(&bad)
+    );
 }

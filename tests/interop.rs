@@ -7,8 +7,14 @@ use common::*;
 
 fn python_ok(script: &str, args: &[&str]) -> serde_json::Value {
     let out = python(script, args);
-    assert!(out.status.success(), "{script} {args:?}: {}{}", stderr(&out), String::from_utf8_lossy(&out.stdout));
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{script}: {e}: {}", String::from_utf8_lossy(&out.stdout)))
+    assert!(
+        out.status.success(),
+        "{script} {args:?}: {}{}",
+        stderr(&out),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{script}: {e}: {}", String::from_utf8_lossy(&out.stdout)))
 }
 
 fn rerun_ok(args: &[&str]) -> String {
@@ -22,13 +28,40 @@ fn rerun_ok(args: &[&str]) -> String {
 fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
-    ok(&["simulate", "--seed", "11", "--duration", "200", "-o", s(&raw)]);
-    ok(&["refuse", s(&raw), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
-    let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+    ok(&[
+        "simulate",
+        "--seed",
+        "11",
+        "--duration",
+        "200",
+        "-o",
+        s(&raw),
+    ]);
+    ok(&[
+        "refuse",
+        s(&raw),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+    ]);
+    let info: serde_json::Value =
+        serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
 
     let r = python_ok("check_mcap.py", &[s(&raw)]);
     assert_eq!(r["messages"], info["messages"]);
-    for t in ["/gnss/fix", "/imu", "/radar/speed", "/odometer/1", "/odometer/2", "/loop/position", "/balise", "/truth", "/events", "/track/map"] {
+    for t in [
+        "/gnss/fix",
+        "/imu",
+        "/radar/speed",
+        "/odometer/1",
+        "/odometer/2",
+        "/loop/position",
+        "/balise",
+        "/truth",
+        "/events",
+        "/track/map",
+    ] {
         assert!(r["topics"][t].as_u64().unwrap_or(0) > 0, "no {t} read: {r}");
     }
     assert_eq!(r["compression"], serde_json::json!(["zstd"]));
@@ -37,7 +70,10 @@ fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
 
     let f = python_ok("check_mcap.py", &[s(&fused)]);
     assert!(f["topics"]["/fused/kalman/state"].as_u64().unwrap() > 1000);
-    assert_eq!(f["metadata"], serde_json::json!(["railfuse.pipeline", "railfuse.run"]));
+    assert_eq!(
+        f["metadata"],
+        serde_json::json!(["railfuse.pipeline", "railfuse.run"])
+    );
 
     for file in [&raw, &fused] {
         let text = rerun_ok(&["mcap", "check", s(file)]);
@@ -49,9 +85,25 @@ fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
 #[test]
 fn the_kalman_pipeline_and_its_rts_smoother_equal_filterpy_on_the_same_measurements() {
     let d = tempfile::tempdir().unwrap();
-    for (scenario, config, duration) in [("default", "kalman.toml", "300"), ("seed000", "seed000.toml", "100")] {
-        let (raw, fused) = (d.path().join(format!("{scenario}.mcap")), d.path().join(format!("{scenario}.fused.mcap")));
-        ok(&["simulate", "--scenario", scenario, "--seed", "21", "--duration", duration, "-o", s(&raw)]);
+    for (scenario, config, duration) in [
+        ("default", "kalman.toml", "300"),
+        ("seed000", "seed000.toml", "100"),
+    ] {
+        let (raw, fused) = (
+            d.path().join(format!("{scenario}.mcap")),
+            d.path().join(format!("{scenario}.fused.mcap")),
+        );
+        ok(&[
+            "simulate",
+            "--scenario",
+            scenario,
+            "--seed",
+            "21",
+            "--duration",
+            duration,
+            "-o",
+            s(&raw),
+        ]);
         ok(&["refuse", s(&raw), "-c", s(&sample(config)), "-o", s(&fused)]);
         let r = python_ok("filterpy_kalman.py", &[s(&fused), "1e-9"]);
         assert!(r["updates_compared"].as_u64().unwrap() > 150, "{r}");
@@ -59,7 +111,10 @@ fn the_kalman_pipeline_and_its_rts_smoother_equal_filterpy_on_the_same_measureme
             // kf_balise has the RTS smoother: every epoch compared with filterpy's rts_smoother.
             assert!(r["smoothed_compared"].as_u64().unwrap() > 100, "{r}");
         }
-        assert!(r["worst_relative_difference"].as_f64().unwrap() <= 1e-9, "{r}");
+        assert!(
+            r["worst_relative_difference"].as_f64().unwrap() <= 1e-9,
+            "{r}"
+        );
     }
 }
 
@@ -69,7 +124,15 @@ fn seed000_measurements_have_the_variances_source_000_states() {
     let files: Vec<String> = (0..12)
         .map(|seed| {
             let p = d.path().join(format!("s{seed}.mcap"));
-            ok(&["simulate", "--scenario", "seed000", "--seed", &seed.to_string(), "-o", s(&p)]);
+            ok(&[
+                "simulate",
+                "--scenario",
+                "seed000",
+                "--seed",
+                &seed.to_string(),
+                "-o",
+                s(&p),
+            ]);
             s(&p).to_owned()
         })
         .collect();
@@ -84,7 +147,14 @@ fn seed000_measurements_have_the_variances_source_000_states() {
 fn rerun_verifies_the_recording_and_shows_the_logged_entities() {
     let d = tempfile::tempdir().unwrap();
     let (fused, rrd) = (d.path().join("f.mcap"), d.path().join("run.rrd"));
-    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
+    ok(&[
+        "refuse",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+    ]);
     ok(&["viz", s(&fused), "--save", s(&rrd)]);
     rerun_ok(&["rrd", "verify", s(&rrd)]);
     let printed = rerun_ok(&["rrd", "print", "-v", s(&rrd)]);
@@ -107,14 +177,24 @@ fn rerun_verifies_the_recording_and_shows_the_logged_entities() {
     // The log_time timeline carries the MCAP log time of the simulated run (2026-06-01), not
     // the wall clock of the viz run.
     let data = rerun_ok(&["rrd", "print", "-vvv", s(&rrd)]);
-    assert!(data.contains("index_name: log_time"), "no log_time timeline");
-    assert!(data.contains("2026-06-01T08:01"), "log_time is not the run's time");
+    assert!(
+        data.contains("index_name: log_time"),
+        "no log_time timeline"
+    );
+    assert!(
+        data.contains("2026-06-01T08:01"),
+        "log_time is not the run's time"
+    );
 }
 
 #[test]
 fn sensor_states_reach_the_fused_file_and_the_viewer() {
     let d = tempfile::tempdir().unwrap();
-    let (config, fused, rrd) = (d.path().join("sf.toml"), d.path().join("sf.mcap"), d.path().join("sf.rrd"));
+    let (config, fused, rrd) = (
+        d.path().join("sf.toml"),
+        d.path().join("sf.mcap"),
+        d.path().join("sf.rrd"),
+    );
     std::fs::write(
         &config,
         "[[pipeline]]\nname = \"sf\"\nfilter = \"kalman\"\nmotion = { model = \"constant_acceleration\", jerk_psd = 0.2 }\n\n\
@@ -122,19 +202,38 @@ fn sensor_states_reach_the_fused_file_and_the_viewer() {
          [[pipeline.sensor]]\ntopic = \"/radar/speed\"\nvariance = 0.01\nscale_factor = { std = 0.01 }\n",
     )
     .unwrap();
-    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&config), "-o", s(&fused)]);
+    ok(&[
+        "refuse",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&config),
+        "-o",
+        s(&fused),
+    ]);
     // Every fused state, with its sensor state, fits the schema stored in the file.
     let py = python("check_mcap.py", &[s(&fused)]);
-    assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
     let py: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
-    assert!(py["topics"]["/fused/sf/state"].as_u64().unwrap() > 100, "{py}");
+    assert!(
+        py["topics"]["/fused/sf/state"].as_u64().unwrap() > 100,
+        "{py}"
+    );
     ok(&["viz", s(&fused), "--save", s(&rrd)]);
     rerun_ok(&["rrd", "verify", s(&rrd)]);
-    assert!(rerun_ok(&["rrd", "print", "-v", s(&rrd)]).contains("/sensor_states/sf/radar_speed/scale_factor"));
+    assert!(rerun_ok(&["rrd", "print", "-v", s(&rrd)])
+        .contains("/sensor_states/sf/radar_speed/scale_factor"));
 }
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
 
 /// A real Rerun server on loopback that saves what it receives: (process, URL, file).
@@ -151,10 +250,17 @@ fn rerun_server(dir: &std::path::Path) -> (std::process::Child, String, std::pat
         .unwrap();
     let started = Instant::now();
     while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(started.elapsed() < Duration::from_secs(30), "rerun server did not start");
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "rerun server did not start"
+        );
         std::thread::sleep(Duration::from_millis(200));
     }
-    (server, format!("rerun+http://127.0.0.1:{port}/proxy"), saved)
+    (
+        server,
+        format!("rerun+http://127.0.0.1:{port}/proxy"),
+        saved,
+    )
 }
 
 /// Waits until the server has written what it received (the file stops growing), then stops it.
@@ -179,13 +285,34 @@ fn record_viz_streams_the_incoming_channels_to_a_running_viewer() {
     let d = tempfile::tempdir().unwrap();
     let (server, url, saved) = rerun_server(d.path());
     let out = d.path().join("live.mcap");
-    let o = ok(&["record", "-o", s(&out), "--speed", "40", "--duration", "3", "--viz", &url, "--json"]);
+    let o = ok(&[
+        "record",
+        "-o",
+        s(&out),
+        "--speed",
+        "40",
+        "--duration",
+        "3",
+        "--viz",
+        &url,
+        "--json",
+    ]);
     stop_when_saved(server, &saved);
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(r["messages"].as_u64().unwrap() > 1000, "{r}");
-    let printed = rerun_ok(&["rrd", "print", "-v", "--continue-on-error", "true", s(&saved)]);
+    let printed = rerun_ok(&[
+        "rrd",
+        "print",
+        "-v",
+        "--continue-on-error",
+        "true",
+        s(&saved),
+    ]);
     for entity in ["/map/track", "/map/truth", "/speed/truth", "/speed/radar"] {
-        assert!(printed.contains(entity), "the viewer did not receive {entity}");
+        assert!(
+            printed.contains(entity),
+            "the viewer did not receive {entity}"
+        );
     }
 }
 
@@ -194,16 +321,37 @@ fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
     use std::time::{Duration, Instant};
     let d = tempfile::tempdir().unwrap();
     let fused = d.path().join("f.mcap");
-    ok(&["refuse", s(&sample("short-run.mcap")), "-c", s(&sample("kalman.toml")), "-o", s(&fused)]);
+    ok(&[
+        "refuse",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+    ]);
 
     let (server, url, saved) = rerun_server(d.path());
     let streamed = railfuse(&["viz", s(&fused), "--connect", &url]);
     stop_when_saved(server, &saved);
     assert!(streamed.status.success(), "{}", stderr(&streamed));
     // The server was stopped mid-stream, so the file has no footer: read what it holds.
-    let printed = rerun_ok(&["rrd", "print", "-v", "--continue-on-error", "true", s(&saved)]);
-    for entity in ["/map/track", "/speed/fused/kalman", "/chainage_error/kalman"] {
-        assert!(printed.contains(entity), "the viewer did not receive {entity}");
+    let printed = rerun_ok(&[
+        "rrd",
+        "print",
+        "-v",
+        "--continue-on-error",
+        "true",
+        s(&saved),
+    ]);
+    for entity in [
+        "/map/track",
+        "/speed/fused/kalman",
+        "/chainage_error/kalman",
+    ] {
+        assert!(
+            printed.contains(entity),
+            "the viewer did not receive {entity}"
+        );
     }
 
     // No viewer at the address: one clear line at once, no hang.
@@ -211,7 +359,11 @@ fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
     let t = Instant::now();
     let out = railfuse(&["viz", s(&fused), "--connect", &absent]);
     assert!(!out.status.success());
-    assert!(stderr(&out).contains("no Rerun viewer is listening"), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("no Rerun viewer is listening"),
+        "{}",
+        stderr(&out)
+    );
     assert!(t.elapsed() < Duration::from_secs(10));
 }
 
@@ -224,20 +376,39 @@ fn a_log_killed_mid_write_is_recovered_and_the_python_reader_reads_it() {
     let (out, fixed) = (d.path().join("long.mcap"), d.path().join("fixed.mcap"));
     let partial = d.path().join("long.mcap.partial");
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
-        .args(["simulate", "--seed", "9", "--duration", "36000", "-o", s(&out)])
+        .args([
+            "simulate",
+            "--seed",
+            "9",
+            "--duration",
+            "36000",
+            "-o",
+            s(&out),
+        ])
         .stderr(std::process::Stdio::null())
         .spawn()
         .unwrap();
     let started = std::time::Instant::now();
     while std::fs::metadata(&partial).map_or(0, |m| m.len()) < 4 << 20 {
-        assert!(started.elapsed().as_secs() < 120, "the simulator wrote nothing");
+        assert!(
+            started.elapsed().as_secs() < 120,
+            "the simulator wrote nothing"
+        );
         std::thread::sleep(std::time::Duration::from_millis(20));
     }
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
-    assert!(!out.exists(), "a killed run must not leave a file that looks complete");
-    let r: serde_json::Value = serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout).unwrap();
-    assert!(r["stopped_by"].as_str().unwrap().contains("truncated"), "{r}");
+    assert!(
+        !out.exists(),
+        "a killed run must not leave a file that looks complete"
+    );
+    let r: serde_json::Value =
+        serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout)
+            .unwrap();
+    assert!(
+        r["stopped_by"].as_str().unwrap().contains("truncated"),
+        "{r}"
+    );
     let messages = r["messages"].as_u64().unwrap();
     assert!(messages > 50_000, "{r}");
     let py = python_ok("check_mcap.py", &[s(&fixed)]);

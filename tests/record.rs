@@ -13,11 +13,21 @@ use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::{GnssFix, RadarSpeed};
 
 fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
 
 fn spawn(args: &[&str]) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_railfuse")).args(args).stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_railfuse"))
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
 }
 
 /// Speeds of every /radar/speed message, in file order, and the recorder's own diagnostics.
@@ -47,8 +57,14 @@ fn captures(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
     let nmea = d.join("rx.nmea");
     let mut text = String::new();
     for k in 0..50 {
-        let body = format!("GNRMC,0835{:02}.00,A,4439.30664,N,01055.78382,E,10.0,90.0,201022,,,R,V", k % 60);
-        let gga = format!("GNGGA,0835{:02}.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000", k % 60);
+        let body = format!(
+            "GNRMC,0835{:02}.00,A,4439.30664,N,01055.78382,E,10.0,90.0,201022,,,R,V",
+            k % 60
+        );
+        let gga = format!(
+            "GNGGA,0835{:02}.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000",
+            k % 60
+        );
         for b in [body, gga] {
             let cs = b.bytes().fold(0u8, |a, x| a ^ x);
             text += &format!("${b}*{cs:02X}\r\n");
@@ -58,11 +74,18 @@ fn captures(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
     }
     std::fs::write(&nmea, &text).unwrap();
     let ubx = d.join("rx.ubx");
-    let hexes = std::fs::read_to_string(sample("eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv")).unwrap();
+    let hexes = std::fs::read_to_string(sample(
+        "eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv",
+    ))
+    .unwrap();
     let mut bytes = Vec::new();
     for l in hexes.lines().filter(|l| l.contains(",U,")) {
         let h = l.rsplit(',').next().unwrap();
-        bytes.extend((0..h.len()).step_by(2).map(|i| u8::from_str_radix(&h[i..i + 2], 16).unwrap()));
+        bytes.extend(
+            (0..h.len())
+                .step_by(2)
+                .map(|i| u8::from_str_radix(&h[i..i + 2], 16).unwrap()),
+        );
         bytes.extend_from_slice(b"\xb5\x62\x01\x07\x04\x00junk"); // a torn frame with a bad checksum
     }
     std::fs::write(&ubx, &bytes).unwrap();
@@ -70,20 +93,30 @@ fn captures(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
 }
 
 fn line(k: usize) -> String {
-    format!(r#"{{"topic":"/radar/speed","stamp_ns":{},"speed_mps":{k},"quality":1.0,"valid":true}}"#, 1_000 + k)
+    format!(
+        r#"{{"topic":"/radar/speed","stamp_ns":{},"speed_mps":{k},"quality":1.0,"valid":true}}"#,
+        1_000 + k
+    )
 }
 
 fn stop(child: Child) -> serde_json::Value {
     unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
     let out = child.wait_with_output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
 fn wait_listening(port: u16) {
     let t = Instant::now();
     while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(t.elapsed() < Duration::from_secs(20), "the recorder never listened on {port}");
+        assert!(
+            t.elapsed() < Duration::from_secs(20),
+            "the recorder never listened on {port}"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
 }
@@ -93,19 +126,31 @@ fn udp_and_tcp_json_lines_arrive_once_in_order_and_garbage_is_counted() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("net.mcap");
     let (udp, tcp) = (free_port(), free_port());
-    let child = spawn(&["record", "-o", s(&out), "--udp", &udp.to_string(), "--tcp", &tcp.to_string(), "--json"]);
+    let child = spawn(&[
+        "record",
+        "-o",
+        s(&out),
+        "--udp",
+        &udp.to_string(),
+        "--tcp",
+        &tcp.to_string(),
+        "--json",
+    ]);
     wait_listening(tcp);
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
     for k in 0..2000 {
-        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp)).unwrap();
+        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp))
+            .unwrap();
         if k % 200 == 0 {
-            sock.send_to(b"\x00\x01 binary noise \xff", ("127.0.0.1", udp)).unwrap();
+            sock.send_to(b"\x00\x01 binary noise \xff", ("127.0.0.1", udp))
+                .unwrap();
             conn.write_all(b"{\"topic\": 42}\n").unwrap();
             conn.write_all(&vec![b'x'; 70_000]).unwrap();
             conn.write_all(b"\n").unwrap();
         }
-        conn.write_all(format!("{}\n", line(10_000 + k)).as_bytes()).unwrap();
+        conn.write_all(format!("{}\n", line(10_000 + k)).as_bytes())
+            .unwrap();
         if k % 100 == 0 {
             std::thread::sleep(Duration::from_millis(2)); // a UDP sender paces itself
         }
@@ -117,11 +162,23 @@ fn udp_and_tcp_json_lines_arrive_once_in_order_and_garbage_is_counted() {
     let (v, diags) = radar_speeds(&out);
     let udp_got: Vec<f64> = v.iter().copied().filter(|x| *x < 10_000.0).collect();
     let tcp_got: Vec<f64> = v.iter().copied().filter(|x| *x >= 10_000.0).collect();
-    assert_eq!(tcp_got, (0..2000).map(|k| (10_000 + k) as f64).collect::<Vec<_>>(), "TCP: every line once, in order");
-    assert_eq!(udp_got, (0..2000).map(|k| k as f64).collect::<Vec<_>>(), "UDP on loopback: every datagram once, in order");
+    assert_eq!(
+        tcp_got,
+        (0..2000).map(|k| (10_000 + k) as f64).collect::<Vec<_>>(),
+        "TCP: every line once, in order"
+    );
+    assert_eq!(
+        udp_got,
+        (0..2000).map(|k| k as f64).collect::<Vec<_>>(),
+        "UDP on loopback: every datagram once, in order"
+    );
     let src = r["sources"].as_array().unwrap();
     assert_eq!(src[0]["malformed"], 10, "{r}");
-    assert_eq!((src[1]["malformed"].as_u64(), src[1]["oversized"].as_u64()), (Some(10), Some(10)), "{r}");
+    assert_eq!(
+        (src[1]["malformed"].as_u64(), src[1]["oversized"].as_u64()),
+        (Some(10), Some(10)),
+        "{r}"
+    );
     assert!(diags >= 1);
 }
 
@@ -130,26 +187,61 @@ fn nmea_and_ubx_files_and_stdin_record_their_fixes_and_count_bad_checksums() {
     let d = tempfile::tempdir().unwrap();
     let (nmea, ubx) = captures(d.path());
     let out = d.path().join("files.mcap");
-    let mut child = spawn(&["record", "-o", s(&out), "--file", &format!("{}:nmea", s(&nmea)), "--file", s(&ubx), "--stdin", "json", "--json"]);
+    let mut child = spawn(&[
+        "record",
+        "-o",
+        s(&out),
+        "--file",
+        &format!("{}:nmea", s(&nmea)),
+        "--file",
+        s(&ubx),
+        "--stdin",
+        "json",
+        "--json",
+    ]);
     let mut stdin = child.stdin.take().unwrap();
     for k in 0..100 {
         writeln!(stdin, "{}", line(k)).unwrap();
     }
     drop(stdin); // end of input: with the files read too, every source has ended
     let out_json = child.wait_with_output().unwrap();
-    assert!(out_json.status.success(), "{}", String::from_utf8_lossy(&out_json.stderr));
+    assert!(
+        out_json.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out_json.stderr)
+    );
     let r: serde_json::Value = serde_json::from_slice(&out_json.stdout).unwrap();
     assert_eq!(r["stopped_by"], "every source ended", "{r}");
     let src = r["sources"].as_array().unwrap();
-    assert_eq!((src[0]["written"].as_u64(), src[0]["checksum_failures"].as_u64(), src[0]["malformed"].as_u64()), (Some(50), Some(50), Some(50)), "{r}");
-    assert_eq!(src[1]["written"], 1, "one NAV-PVT (+ its NAV-COV) in the sample: {r}");
+    assert_eq!(
+        (
+            src[0]["written"].as_u64(),
+            src[0]["checksum_failures"].as_u64(),
+            src[0]["malformed"].as_u64()
+        ),
+        (Some(50), Some(50), Some(50)),
+        "{r}"
+    );
+    assert_eq!(
+        src[1]["written"], 1,
+        "one NAV-PVT (+ its NAV-COV) in the sample: {r}"
+    );
     assert!(src[1]["checksum_failures"].as_u64().unwrap() >= 1, "{r}");
     assert_eq!(src[2]["written"], 100);
     let fixes = gnss_fixes(&out);
     assert_eq!(fixes.len(), 51);
     // GNSS time is the sensor time: 2022-10-20 08:35 UTC for the NMEA fixes.
-    assert!(fixes.iter().filter(|f| f.satellites == 12).all(|f| f.stamp_ns / 1_000_000_000 / 3600 == 1_666_254_900 / 3600), "{:?}", fixes[0]);
-    assert!(fixes.iter().any(|f| f.satellites == 29 && (f.latitude_deg.unwrap() - 44.6551106).abs() < 1e-7));
+    assert!(
+        fixes
+            .iter()
+            .filter(|f| f.satellites == 12)
+            .all(|f| f.stamp_ns / 1_000_000_000 / 3600 == 1_666_254_900 / 3600),
+        "{:?}",
+        fixes[0]
+    );
+    assert!(fixes
+        .iter()
+        .any(|f| f.satellites == 29 && (f.latitude_deg.unwrap() - 44.6551106).abs() < 1e-7));
 }
 
 #[test]
@@ -158,7 +250,15 @@ fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets
     let out = d.path().join("killed.mcap");
     let partial = d.path().join("killed.mcap.partial");
     let tcp = free_port();
-    let mut child = spawn(&["record", "-o", s(&out), "--tcp", &tcp.to_string(), "--chunk-interval", "0.2"]);
+    let mut child = spawn(&[
+        "record",
+        "-o",
+        s(&out),
+        "--tcp",
+        &tcp.to_string(),
+        "--chunk-interval",
+        "0.2",
+    ]);
     wait_listening(tcp);
     let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
     for k in 0..3000 {
@@ -170,12 +270,22 @@ fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets
     child.wait().unwrap();
     assert!(!out.exists() && partial.exists());
     let fixed = d.path().join("fixed.mcap");
-    let r: serde_json::Value = serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout).unwrap();
+    let r: serde_json::Value =
+        serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout)
+            .unwrap();
     let (v, _) = radar_speeds(&fixed);
-    assert_eq!(v, (0..3000).map(|k| k as f64).collect::<Vec<_>>(), "everything sent before the last closed chunk: {r}");
+    assert_eq!(
+        v,
+        (0..3000).map(|k| k as f64).collect::<Vec<_>>(),
+        "everything sent before the last closed chunk: {r}"
+    );
     // The official Python reader reads the salvage and validates every message.
     let py = python("check_mcap.py", &[s(&fixed)]);
-    assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
     let py: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
     assert_eq!(py["topics"]["/radar/speed"], 3000, "{py}");
 }
@@ -185,11 +295,26 @@ fn pty() -> (std::fs::File, i32, String) {
     let (mut master, mut slave) = (0, 0);
     let mut name = [0 as libc::c_char; 128];
     // SAFETY: openpty fills the two descriptors and the name buffer it is given.
-    let rc = unsafe { libc::openpty(&mut master, &mut slave, name.as_mut_ptr(), std::ptr::null(), std::ptr::null()) };
+    let rc = unsafe {
+        libc::openpty(
+            &mut master,
+            &mut slave,
+            name.as_mut_ptr(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
     assert_eq!(rc, 0, "openpty failed");
-    let tty = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }.to_str().unwrap().to_owned();
+    let tty = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
+        .to_str()
+        .unwrap()
+        .to_owned();
     // SAFETY: `master` is the open master side of the pair; the File owns it from here.
-    (unsafe { <std::fs::File as std::os::fd::FromRawFd>::from_raw_fd(master) }, slave, tty)
+    (
+        unsafe { <std::fs::File as std::os::fd::FromRawFd>::from_raw_fd(master) },
+        slave,
+        tty,
+    )
 }
 
 #[test]
@@ -199,7 +324,16 @@ fn nmea_and_ubx_over_pseudo_terminals_at_set_bauds_arrive_with_their_values() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("serial.mcap");
     let (_, ubx) = captures(d.path());
-    let child = spawn(&["record", "-o", s(&out), "--serial", &format!("{tty}:115200:nmea"), "--serial", &format!("{tty_u}:460800:ubx=/gnss/rx2"), "--json"]);
+    let child = spawn(&[
+        "record",
+        "-o",
+        s(&out),
+        "--serial",
+        &format!("{tty}:115200:nmea"),
+        "--serial",
+        &format!("{tty_u}:460800:ubx=/gnss/rx2"),
+        "--json",
+    ]);
     std::thread::sleep(Duration::from_millis(500));
     for chunk in std::fs::read(&ubx).unwrap().chunks(7) {
         mu.write_all(chunk).unwrap();
@@ -207,10 +341,14 @@ fn nmea_and_ubx_over_pseudo_terminals_at_set_bauds_arrive_with_their_values() {
     for k in 0..20 {
         for body in [
             format!("GNRMC,0900{k:02}.00,A,4439.30664,N,01055.78382,E,20.0,45.0,201022,,,R,V"),
-            format!("GNGGA,0900{k:02}.00,4439.30664,N,01055.78382,E,4,1{},0.58,35.2,M,44.1,M,1.0,0000", k % 10),
+            format!(
+                "GNGGA,0900{k:02}.00,4439.30664,N,01055.78382,E,4,1{},0.58,35.2,M,44.1,M,1.0,0000",
+                k % 10
+            ),
         ] {
             let cs = body.bytes().fold(0u8, |a, x| a ^ x);
-            m.write_all(format!("${body}*{cs:02X}\r\n").as_bytes()).unwrap();
+            m.write_all(format!("${body}*{cs:02X}\r\n").as_bytes())
+                .unwrap();
         }
         m.write_all(b"$GNGGA,bad*00\r\n").unwrap();
         std::thread::sleep(Duration::from_millis(20));
@@ -220,13 +358,21 @@ fn nmea_and_ubx_over_pseudo_terminals_at_set_bauds_arrive_with_their_values() {
     unsafe { libc::close(slave) };
     unsafe { libc::close(slave_u) };
     let src = &r["sources"][0];
-    assert_eq!((src["written"].as_u64(), src["checksum_failures"].as_u64()), (Some(20), Some(20)), "{r}");
+    assert_eq!(
+        (src["written"].as_u64(), src["checksum_failures"].as_u64()),
+        (Some(20), Some(20)),
+        "{r}"
+    );
     // The UBX receiver, mapped to its own channel: the sample's NAV-PVT with 29 satellites.
     assert_eq!(r["sources"][1]["written"], 1, "{r}");
     assert_eq!(r["per_topic"]["/gnss/rx2"], 1, "{r}");
     let fixes = gnss_fixes(&out);
     let sats: Vec<u8> = fixes.iter().map(|f| f.satellites).collect();
-    assert_eq!(sats, (0..20).map(|k| 10 + (k % 10) as u8).collect::<Vec<_>>(), "in order, once each");
+    assert_eq!(
+        sats,
+        (0..20).map(|k| 10 + (k % 10) as u8).collect::<Vec<_>>(),
+        "in order, once each"
+    );
     assert!((fixes[0].speed_mps.unwrap() - 20.0 * 1852.0 / 3600.0).abs() < 1e-9);
 }
 
@@ -235,11 +381,36 @@ fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
     let d = tempfile::tempdir().unwrap();
     let (nmea, ubx) = captures(d.path());
     let (a, b) = (d.path().join("a.mcap"), d.path().join("b.mcap"));
-    let r: serde_json::Value = serde_json::from_slice(&ok(&["import", "--format", "nmea", s(&nmea), "-o", s(&a), "--json"]).stdout).unwrap();
-    assert_eq!((r["messages"].as_u64(), r["skipped"]["checksum failures"].as_u64(), r["skipped"]["malformed"].as_u64()), (Some(50), Some(50), Some(50)), "{r}");
+    let r: serde_json::Value = serde_json::from_slice(
+        &ok(&[
+            "import",
+            "--format",
+            "nmea",
+            s(&nmea),
+            "-o",
+            s(&a),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(
+        (
+            r["messages"].as_u64(),
+            r["skipped"]["checksum failures"].as_u64(),
+            r["skipped"]["malformed"].as_u64()
+        ),
+        (Some(50), Some(50), Some(50)),
+        "{r}"
+    );
     let fixes = gnss_fixes(&a);
-    assert!(fixes.iter().all(|f| f.fix_type == railfuse_catalog::messages::FixType::RtkFixed && f.satellites == 12));
-    let r: serde_json::Value = serde_json::from_slice(&ok(&["import", "--format", "ubx", s(&ubx), "-o", s(&b), "--json"]).stdout).unwrap();
+    assert!(fixes.iter().all(
+        |f| f.fix_type == railfuse_catalog::messages::FixType::RtkFixed && f.satellites == 12
+    ));
+    let r: serde_json::Value = serde_json::from_slice(
+        &ok(&["import", "--format", "ubx", s(&ubx), "-o", s(&b), "--json"]).stdout,
+    )
+    .unwrap();
     assert_eq!(r["messages"], 1, "{r}");
     assert_eq!(gnss_fixes(&b)[0].satellites, 29);
 }
@@ -249,7 +420,11 @@ fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("run.mcap");
     let meta = d.path().join("run.toml");
-    std::fs::write(&meta, "train = \"ETR103\"\noperator = \"test bench\"\nnotes = \"split test\"\n").unwrap();
+    std::fs::write(
+        &meta,
+        "train = \"ETR103\"\noperator = \"test bench\"\nnotes = \"split test\"\n",
+    )
+    .unwrap();
     let o = ok(&[
         "record",
         "-o",
@@ -267,19 +442,43 @@ fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
         "--json",
     ]);
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let files: Vec<std::path::PathBuf> = r["files"].as_array().unwrap().iter().map(|f| f.as_str().unwrap().into()).collect();
+    let files: Vec<std::path::PathBuf> = r["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap().into())
+        .collect();
     assert!(files.len() >= 3, "{r}");
     assert_eq!(files[0].file_name().unwrap(), "run-001.mcap");
     let mut total = 0u64;
     for f in &files {
-        let info: serde_json::Value = serde_json::from_slice(&ok(&["info", s(f), "--json"]).stdout).unwrap();
-        let run = info["metadata"].as_array().unwrap().iter().find(|m| m[0] == "railfuse.run").unwrap().clone();
+        let info: serde_json::Value =
+            serde_json::from_slice(&ok(&["info", s(f), "--json"]).stdout).unwrap();
+        let run = info["metadata"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|m| m[0] == "railfuse.run")
+            .unwrap()
+            .clone();
         let text = run.to_string();
-        assert!(text.contains("ETR103") && text.contains("override") && text.contains("\"part\""), "{text}");
-        total +=
-            info["channels"].as_array().unwrap().iter().filter(|c| c["topic"] != "/recorder/diagnostics").map(|c| c["messages"].as_u64().unwrap()).sum::<u64>();
+        assert!(
+            text.contains("ETR103") && text.contains("override") && text.contains("\"part\""),
+            "{text}"
+        );
+        total += info["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| c["topic"] != "/recorder/diagnostics")
+            .map(|c| c["messages"].as_u64().unwrap())
+            .sum::<u64>();
     }
-    assert_eq!(total, r["messages"].as_u64().unwrap(), "every message in exactly one part");
+    assert_eq!(
+        total,
+        r["messages"].as_u64().unwrap(),
+        "every message in exactly one part"
+    );
 }
 
 #[test]
@@ -291,7 +490,10 @@ fn a_full_disk_stops_the_recorder_with_one_line_that_says_so() {
     let o = railfuse(&["record", "-o", s(&out), "--speed", "20", "--duration", "2"]);
     assert!(!o.status.success());
     let err = stderr(&o);
-    assert!(err.contains("No space left on device") && err.contains("full.mcap.partial"), "{err}");
+    assert!(
+        err.contains("No space left on device") && err.contains("full.mcap.partial"),
+        "{err}"
+    );
     assert!(!err.contains("panicked"), "{err}");
 }
 
@@ -304,12 +506,25 @@ fn a_disk_filling_mid_recording_keeps_every_closed_chunk() {
     // A file-size limit makes the disk "fill" after 48 KiB: writes then fail (EFBIG) part-way
     // through a chunk, as they do with ENOSPC on a real disk.
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_railfuse"));
-    cmd.args(["record", "-o", s(&out), "--udp", &udp.to_string(), "--chunk-interval", "0.2"]).stdout(Stdio::piped()).stderr(Stdio::piped());
+    cmd.args([
+        "record",
+        "-o",
+        s(&out),
+        "--udp",
+        &udp.to_string(),
+        "--chunk-interval",
+        "0.2",
+    ])
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
     // SAFETY: only async-signal-safe calls between fork and exec.
     unsafe {
         std::os::unix::process::CommandExt::pre_exec(&mut cmd, || {
             libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
-            let lim = libc::rlimit { rlim_cur: 48 * 1024, rlim_max: 48 * 1024 };
+            let lim = libc::rlimit {
+                rlim_cur: 48 * 1024,
+                rlim_max: 48 * 1024,
+            };
             if libc::setrlimit(libc::RLIMIT_FSIZE, &lim) != 0 {
                 return Err(std::io::Error::last_os_error());
             }
@@ -322,7 +537,10 @@ fn a_disk_filling_mid_recording_keeps_every_closed_chunk() {
     let t = Instant::now();
     let mut k = 0;
     while child.try_wait().unwrap().is_none() {
-        assert!(t.elapsed() < Duration::from_secs(60), "the recorder never hit the size limit after {k} messages");
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "the recorder never hit the size limit after {k} messages"
+        );
         for _ in 0..50 {
             let _ = sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp));
             k += 1;
@@ -332,13 +550,22 @@ fn a_disk_filling_mid_recording_keeps_every_closed_chunk() {
     let o = child.wait_with_output().unwrap();
     let err = stderr(&o);
     assert!(!o.status.success(), "{err}");
-    assert!(err.contains("File too large") && err.contains("recover") && !err.contains("panicked"), "{err}");
+    assert!(
+        err.contains("File too large") && err.contains("recover") && !err.contains("panicked"),
+        "{err}"
+    );
     assert!(!out.exists() && partial.exists());
     let fixed = d.path().join("fixed.mcap");
-    let r: serde_json::Value = serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout).unwrap();
+    let r: serde_json::Value =
+        serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout)
+            .unwrap();
     let (v, diags) = radar_speeds(&fixed);
     // What was written before the disk filled is all there, in order, with nothing missing.
-    assert!(v.len() >= 500 && diags >= 1, "{} messages, {diags} diagnostics: {r}", v.len());
+    assert!(
+        v.len() >= 500 && diags >= 1,
+        "{} messages, {diags} diagnostics: {r}",
+        v.len()
+    );
     assert_eq!(v, (0..v.len()).map(|k| k as f64).collect::<Vec<_>>(), "{r}");
 }
 
@@ -351,11 +578,30 @@ fn a_source_that_cannot_start_is_said_at_once_and_fails_the_run_but_not_the_othe
     let port = taken.local_addr().unwrap().port().to_string();
     let out = d.path().join("some.mcap");
     let missing = d.path().join("missing.nmea");
-    let o = railfuse(&["record", "-o", s(&out), "--udp", &port, "--file", s(&missing), "--file", &format!("{}:nmea", s(&nmea)), "--json"]);
+    let o = railfuse(&[
+        "record",
+        "-o",
+        s(&out),
+        "--udp",
+        &port,
+        "--file",
+        s(&missing),
+        "--file",
+        &format!("{}:nmea", s(&nmea)),
+        "--json",
+    ]);
     let err = stderr(&o);
     assert!(!o.status.success(), "{err}");
-    assert!(err.contains("warning: source failed") && err.contains("Address already in use") && err.contains("missing.nmea: No such file"), "{err}");
-    assert!(err.contains("2 of 3 sources failed") && !err.contains("panicked"), "{err}");
+    assert!(
+        err.contains("warning: source failed")
+            && err.contains("Address already in use")
+            && err.contains("missing.nmea: No such file"),
+        "{err}"
+    );
+    assert!(
+        err.contains("2 of 3 sources failed") && !err.contains("panicked"),
+        "{err}"
+    );
     // The healthy source recorded everything, into a finished file.
     assert_eq!(gnss_fixes(&out).len(), 50);
 }
@@ -368,17 +614,38 @@ fn sources_come_from_a_toml_file_too() {
     let cfg = d.path().join("sources.toml");
     std::fs::write(&cfg, format!("[[source]]\nudp = {udp}\n\n[[source]]\nfile = \"{}\"\nformat = \"nmea\"\ntopic = \"/gnss/rx2\"\n", s(&nmea))).unwrap();
     let out = d.path().join("cfg.mcap");
-    let child = spawn(&["record", "-o", s(&out), "--sources", s(&cfg), "--duration", "2", "--json"]);
+    let child = spawn(&[
+        "record",
+        "-o",
+        s(&out),
+        "--sources",
+        s(&cfg),
+        "--duration",
+        "2",
+        "--json",
+    ]);
     std::thread::sleep(Duration::from_millis(700));
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     for k in 0..10 {
-        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp)).unwrap();
+        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp))
+            .unwrap();
     }
     let o = child.wait_with_output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert_eq!((r["per_topic"]["/gnss/rx2"].as_u64(), r["per_topic"]["/radar/speed"].as_u64()), (Some(50), Some(10)), "{r}");
+    assert_eq!(
+        (
+            r["per_topic"]["/gnss/rx2"].as_u64(),
+            r["per_topic"]["/radar/speed"].as_u64()
+        ),
+        (Some(50), Some(10)),
+        "{r}"
+    );
     std::fs::write(&cfg, "[[source]]\nudp = 1\ntcp = 2\n").unwrap();
     let bad = railfuse(&["record", "-o", s(&out), "--sources", s(&cfg)]);
-    assert!(!bad.status.success() && stderr(&bad).contains("give exactly one of"), "{}", stderr(&bad));
+    assert!(
+        !bad.status.success() && stderr(&bad).contains("give exactly one of"),
+        "{}",
+        stderr(&bad)
+    );
 }

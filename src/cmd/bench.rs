@@ -31,19 +31,35 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
         return super::bench_record::run(&a.dir, secs, a.record_speedup);
     }
-    std::fs::create_dir_all(&a.dir).with_context(|| format!("{}: cannot create", a.dir.display()))?;
+    std::fs::create_dir_all(&a.dir)
+        .with_context(|| format!("{}: cannot create", a.dir.display()))?;
     let config = a.dir.join("kalman.toml");
     std::fs::write(&config, DEFAULT_PIPELINES)?;
     let exe = std::env::current_exe()?;
-    println!("{:>10} {:>10} {:>10} {:>14} {:>14} {:>14} {:>12}", "run s", "messages", "MiB", "simulate msg/s", "refuse msg/s", "refuse MB/s", "refuse RSS");
+    println!(
+        "{:>10} {:>10} {:>10} {:>14} {:>14} {:>14} {:>12}",
+        "run s", "messages", "MiB", "simulate msg/s", "refuse msg/s", "refuse MB/s", "refuse RSS"
+    );
     for d in a.durations {
         let raw = a.dir.join(format!("bench-{d:.0}s.mcap"));
         let fused = a.dir.join(format!("bench-{d:.0}s.fused.mcap"));
         let started = Instant::now();
-        let sim = railfuse_record::simulate(&railfuse_record::Scenario::preset("default").expect("preset"), 1, Some(d), &[], &raw)?;
+        let sim = railfuse_record::simulate(
+            &railfuse_record::Scenario::preset("default").expect("preset"),
+            1,
+            Some(d),
+            &[],
+            &raw,
+        )?;
         let sim_rate = sim.messages as f64 / started.elapsed().as_secs_f64();
         // Refuse in a child process, so its peak memory is its own.
-        let out = Command::new(&exe).args(["refuse", "--json", "-c"]).arg(&config).arg("-o").arg(&fused).arg(&raw).output()?;
+        let out = Command::new(&exe)
+            .args(["refuse", "--json", "-c"])
+            .arg(&config)
+            .arg("-o")
+            .arg(&fused)
+            .arg(&raw)
+            .output()?;
         if !out.status.success() {
             bail!("refuse failed: {}", String::from_utf8_lossy(&out.stderr));
         }

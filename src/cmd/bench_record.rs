@@ -18,9 +18,16 @@ use anyhow::{bail, Context, Result};
 fn proc_stat(pid: u32) -> Option<(f64, u64)> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     let fields: Vec<&str> = stat.rsplit_once(')')?.1.split_whitespace().collect();
-    let ticks = (fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?) / 100.0;
+    let ticks =
+        (fields.get(11)?.parse::<f64>().ok()? + fields.get(12)?.parse::<f64>().ok()?) / 100.0;
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let rss = status.lines().find(|l| l.starts_with("VmRSS:"))?.split_whitespace().nth(1)?.parse().ok()?;
+    let rss = status
+        .lines()
+        .find(|l| l.starts_with("VmRSS:"))?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()?;
     Some((ticks, rss))
 }
 
@@ -32,8 +39,12 @@ struct Child {
 fn start(dir: &Path, name: &str, port: u16) -> Result<Child> {
     let out = dir.join(format!("{name}.mcap"));
     let exe = std::env::current_exe()?;
-    let child =
-        Command::new(exe).args(["record", "--json", "--udp", &port.to_string(), "-o"]).arg(&out).stdout(Stdio::piped()).stderr(Stdio::null()).spawn()?;
+    let child = Command::new(exe)
+        .args(["record", "--json", "--udp", &port.to_string(), "-o"])
+        .arg(&out)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()?;
     std::thread::sleep(Duration::from_millis(300));
     Ok(Child { child, out })
 }
@@ -50,11 +61,20 @@ fn finish(c: Child) -> Result<serde_json::Value> {
 }
 
 fn radar_line(k: u64) -> String {
-    format!(r#"{{"topic":"/radar/speed","stamp_ns":{k},"speed_mps":{}.5,"quality":1.0,"valid":true}}"#, k % 100)
+    format!(
+        r#"{{"topic":"/radar/speed","stamp_ns":{k},"speed_mps":{}.5,"quality":1.0,"valid":true}}"#,
+        k % 100
+    )
 }
 
 /// Sends `rate` datagrams/s for `secs`, paced in 1 ms slices; returns how many it sent.
-fn send_at(sock: &UdpSocket, port: u16, rate: f64, secs: f64, mut line: impl FnMut(u64) -> String) -> Result<u64> {
+fn send_at(
+    sock: &UdpSocket,
+    port: u16,
+    rate: f64,
+    secs: f64,
+    mut line: impl FnMut(u64) -> String,
+) -> Result<u64> {
     let start = Instant::now();
     let mut sent = 0u64;
     while start.elapsed().as_secs_f64() < secs {
@@ -73,17 +93,27 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     let sock = UdpSocket::bind("127.0.0.1:0")?;
     sock.set_write_timeout(Some(Duration::from_secs(1)))?;
     println!("UDP ingest (JSON lines, one message per datagram, 3 s per rate):");
-    println!("{:>12} {:>10} {:>10} {:>8}", "rate msg/s", "sent", "written", "lost");
+    println!(
+        "{:>12} {:>10} {:>10} {:>8}",
+        "rate msg/s", "sent", "written", "lost"
+    );
     let mut best = 0.0;
     // Doubling to 80 000, then finer steps to find where loss begins.
-    for rate in [5_000.0, 10_000.0, 20_000.0, 40_000.0, 80_000.0, 100_000.0, 120_000.0, 140_000.0, 160_000.0] {
-        let port = std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port();
+    for rate in [
+        5_000.0, 10_000.0, 20_000.0, 40_000.0, 80_000.0, 100_000.0, 120_000.0, 140_000.0, 160_000.0,
+    ] {
+        let port = std::net::UdpSocket::bind("127.0.0.1:0")?
+            .local_addr()?
+            .port();
         let c = start(dir, "ingest", port)?;
         let sent = send_at(&sock, port, rate, 3.0, radar_line)?;
         std::thread::sleep(Duration::from_millis(500));
         let r = finish(c)?;
         let written = r["per_topic"]["/radar/speed"].as_u64().unwrap_or(0);
-        println!("{rate:>12.0} {sent:>10} {written:>10} {:>8}", sent.saturating_sub(written));
+        println!(
+            "{rate:>12.0} {sent:>10} {written:>10} {:>8}",
+            sent.saturating_sub(written)
+        );
         if written >= sent {
             best = rate;
         } else {
@@ -93,10 +123,14 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     println!("highest rate with zero loss: {best:.0} msg/s");
 
     println!("\nfield load ×{speedup} for {field_secs:.0} s (= {:.0} s of field data): IMU 1.6 kHz, GNSS 10 Hz, radar 50 Hz, 2 odometers 100 Hz, eddy-current 10 kHz (100 blocks/s of 100 samples × 2 sensors)", field_secs * speedup);
-    let port = std::net::UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port();
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")?
+        .local_addr()?
+        .port();
     let c = start(dir, "field", port)?;
     let pid = c.child.id();
-    let samples: Vec<String> = (0..100).map(|i| format!("{:.4}", (i as f64 * 0.3).sin())).collect();
+    let samples: Vec<String> = (0..100)
+        .map(|i| format!("{:.4}", (i as f64 * 0.3).sin()))
+        .collect();
     let block = samples.join(",");
     let (cpu0, rss0) = proc_stat(pid).context("no /proc")?;
     let t0 = Instant::now();
@@ -147,7 +181,10 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     std::thread::sleep(Duration::from_millis(300));
     let r = finish(c)?;
     let written = r["messages"].as_u64().unwrap_or(0);
-    println!("sent {sent} messages ({:.0}/s), written {written} (+ the recorder's own diagnostics)", sent as f64 / wall);
+    println!(
+        "sent {sent} messages ({:.0}/s), written {written} (+ the recorder's own diagnostics)",
+        sent as f64 / wall
+    );
     println!(
         "recorder CPU {:.2} % of one core; resident memory {rss0} KiB at start, {rss_mid} KiB midway, {rss1} KiB at the end",
         100.0 * (cpu1 - cpu0) / wall

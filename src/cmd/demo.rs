@@ -21,19 +21,45 @@ pub struct Args {
 
 pub fn run(a: Args) -> Result<()> {
     let dir = &a.output_dir;
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create the output folder", dir.display()))?;
-    let (raw, fused, rrd, config_path) = (dir.join("run.mcap"), dir.join("run.fused.mcap"), dir.join("run.rrd"), dir.join("pipelines.toml"));
+    std::fs::create_dir_all(dir)
+        .with_context(|| format!("{}: cannot create the output folder", dir.display()))?;
+    let (raw, fused, rrd, config_path) = (
+        dir.join("run.mcap"),
+        dir.join("run.fused.mcap"),
+        dir.join("run.rrd"),
+        dir.join("pipelines.toml"),
+    );
     super::simulate::simulate_to("default", a.seed, None, &[], &raw)?;
     // The default pipeline and the same with sensor states, side by side, as one config.
     let text = format!("{DEFAULT_PIPELINES}\n{SENSOR_STATES_PIPELINES}");
-    std::fs::write(&config_path, &text).with_context(|| format!("{}: cannot write", config_path.display()))?;
-    let config = PipelinesConfig::parse(&text, &embedded_path("samples/kalman.toml + samples/sensor-states.toml"))?;
+    std::fs::write(&config_path, &text)
+        .with_context(|| format!("{}: cannot write", config_path.display()))?;
+    let config = PipelinesConfig::parse(
+        &text,
+        &embedded_path("samples/kalman.toml + samples/sensor-states.toml"),
+    )?;
     let source = "embedded samples/kalman.toml + samples/sensor-states.toml".into();
-    refuse_and_evaluate(&raw, &fused, &config, source, railfuse_catalog::topics::GROUND_TRUTH)?;
+    refuse_and_evaluate(
+        &raw,
+        &fused,
+        &config,
+        source,
+        railfuse_catalog::topics::GROUND_TRUTH,
+    )?;
     let viz = visualize(&fused, &Sink::Save(rrd.clone()))?;
-    eprintln!("logged {} records on {} Rerun entities -> {}", viz.logged, viz.entities.len(), rrd.display());
+    eprintln!(
+        "logged {} records on {} Rerun entities -> {}",
+        viz.logged,
+        viz.entities.len(),
+        rrd.display()
+    );
     println!("\noutputs in {}:", dir.display());
-    for (p, what) in [(&raw, "simulated raw log"), (&config_path, "pipeline config used"), (&fused, "raw log + fused channels"), (&rrd, "Rerun recording")] {
+    for (p, what) in [
+        (&raw, "simulated raw log"),
+        (&config_path, "pipeline config used"),
+        (&fused, "raw log + fused channels"),
+        (&rrd, "Rerun recording"),
+    ] {
         println!("  {:<40} {what}", p.display());
     }
     println!("open the recording with: rerun {}", rrd.display());

@@ -34,7 +34,9 @@ pub fn run(a: Args) -> Result<()> {
 /// smoothed channel), then one row per marked window it crossed.
 pub fn print_eval(report: &EvalReport) {
     match &report.reference {
-        Some(r) => println!("accuracy against {r} (errors = fused − reference, at each fused state):"),
+        Some(r) => {
+            println!("accuracy against {r} (errors = fused − reference, at each fused state):")
+        }
         None => println!("no usable reference channel: errors not computed (NIS and counts only)"),
     }
     let mut t = Table::new(&[
@@ -52,7 +54,9 @@ pub fn print_eval(report: &EvalReport) {
         "gated",
     ]);
     let f = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{x:.3}"));
-    let share = |c: Option<&ConsistencySummary>| c.map_or("-".to_owned(), |c| format!("{:.1}%", 100.0 * c.inside_95));
+    let share = |c: Option<&ConsistencySummary>| {
+        c.map_or("-".to_owned(), |c| format!("{:.1}%", 100.0 * c.inside_95))
+    };
     let errors = |pos: Option<&ErrorSummary>, spd: Option<&ErrorSummary>| {
         vec![
             f(pos.map(|e| e.rmse)),
@@ -64,14 +68,28 @@ pub fn print_eval(report: &EvalReport) {
         ]
     };
     for p in &report.pipelines {
-        let mut row = vec![p.name.clone(), p.filter.clone().unwrap_or_else(|| "-".into()), p.states.to_string()];
-        row.extend(errors(p.position_error_m.as_ref(), p.speed_error_mps.as_ref()));
-        row.extend([share(p.nees.as_ref()), share(p.nis.as_ref()), p.gated.to_string()]);
+        let mut row = vec![
+            p.name.clone(),
+            p.filter.clone().unwrap_or_else(|| "-".into()),
+            p.states.to_string(),
+        ];
+        row.extend(errors(
+            p.position_error_m.as_ref(),
+            p.speed_error_mps.as_ref(),
+        ));
+        row.extend([
+            share(p.nees.as_ref()),
+            share(p.nis.as_ref()),
+            p.gated.to_string(),
+        ]);
         t.row(row);
         for w in &p.windows {
             let n = w.position_error_m.as_ref().map_or(0, |e| e.samples);
             let mut row = vec![format!("  in {}", w.label), String::new(), n.to_string()];
-            row.extend(errors(w.position_error_m.as_ref(), w.speed_error_mps.as_ref()));
+            row.extend(errors(
+                w.position_error_m.as_ref(),
+                w.speed_error_mps.as_ref(),
+            ));
             row.extend([String::new(), String::new(), String::new()]);
             t.row(row);
         }

@@ -30,7 +30,11 @@ pub fn run(a: Args) -> Result<()> {
         "nmea" => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea)?,
         "ubx" => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx)?,
         "csv" => {
-            let Some(map) = &a.map else { anyhow::bail!("--format csv needs --map MAPPING.toml (the column of each message field)") };
+            let Some(map) = &a.map else {
+                anyhow::bail!(
+                    "--format csv needs --map MAPPING.toml (the column of each message field)"
+                )
+            };
             csv_map::import(&a.input, map, &a.output)?
         }
         other => anyhow::bail!("--format {other}: unknown (formats: eth, nmea, ubx, csv)"),
@@ -39,7 +43,13 @@ pub fn run(a: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
-    println!("imported {} lines of {} as {} messages -> {}", report.lines, report.input.display(), report.messages, report.output.display());
+    println!(
+        "imported {} lines of {} as {} messages -> {}",
+        report.lines,
+        report.input.display(),
+        report.messages,
+        report.output.display()
+    );
     for (topic, n) in &report.per_topic {
         println!("  {topic:<14} {n}");
     }

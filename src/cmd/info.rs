@@ -20,8 +20,22 @@ pub fn run(a: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&s)?);
         return Ok(());
     }
-    println!("{}: {} messages over {:.1} s, {:.1} MiB", s.file, s.messages, s.duration_s, s.file_bytes as f64 / (1 << 20) as f64);
-    let mut t = Table::new(&["topic", "schema", "messages", "rate Hz", "first s", "last s", "largest gap s"]);
+    println!(
+        "{}: {} messages over {:.1} s, {:.1} MiB",
+        s.file,
+        s.messages,
+        s.duration_s,
+        s.file_bytes as f64 / (1 << 20) as f64
+    );
+    let mut t = Table::new(&[
+        "topic",
+        "schema",
+        "messages",
+        "rate Hz",
+        "first s",
+        "last s",
+        "largest gap s",
+    ]);
     let t0 = s.first_log_time_ns.unwrap_or(0);
     let rel = |t: Option<u64>| t.map_or("-".into(), |t| format!("{:.3}", (t - t0) as f64 / 1e9));
     for c in &s.channels {
@@ -39,12 +53,19 @@ pub fn run(a: Args) -> Result<()> {
     for (name, m) in &s.metadata {
         println!("metadata {name}:");
         for (k, v) in m {
-            let v = if v.len() > 100 { format!("{}… ({} bytes)", &v[..v.floor_char_boundary(100)], v.len()) } else { v.clone() };
+            let v = if v.len() > 100 {
+                format!("{}… ({} bytes)", &v[..v.floor_char_boundary(100)], v.len())
+            } else {
+                v.clone()
+            };
             println!("  {k} = {}", v.replace('\n', " "));
         }
     }
     for at in &s.attachments {
-        println!("attachment {} ({}, {} bytes)", at.name, at.media_type, at.bytes);
+        println!(
+            "attachment {} ({}, {} bytes)",
+            at.name, at.media_type, at.bytes
+        );
     }
     if s.fused_pipelines.is_empty() {
         println!("fused pipelines: none");

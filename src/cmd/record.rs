@@ -88,19 +88,27 @@ extern "C" fn on_signal(_: libc::c_int) {
 /// `FORMAT[=TOPIC]`: the stream format and, optionally, the channel its GNSS fixes go to
 /// (a second receiver on `/gnss/rx2`).
 fn format_or(text: Option<&str>, default: StreamFormat) -> Result<(StreamFormat, Option<String>)> {
-    let Some(t) = text else { return Ok((default, None)) };
+    let Some(t) = text else {
+        return Ok((default, None));
+    };
     let (f, topic) = match t.split_once('=') {
         Some((f, topic)) if topic.starts_with('/') => (f, Some(topic.to_owned())),
         Some((_, topic)) => bail!("{t}: the channel must start with '/', not '{topic}'"),
         None => (t, None),
     };
-    let format = if f.is_empty() { default } else { f.parse().map_err(anyhow::Error::msg)? };
+    let format = if f.is_empty() {
+        default
+    } else {
+        f.parse().map_err(anyhow::Error::msg)?
+    };
     Ok((format, topic))
 }
 
 fn is_format(t: &str) -> bool {
     match t.split_once('=') {
-        Some((f, topic)) => (f.is_empty() || f.parse::<StreamFormat>().is_ok()) && topic.starts_with('/'),
+        Some((f, topic)) => {
+            (f.is_empty() || f.parse::<StreamFormat>().is_ok()) && topic.starts_with('/')
+        }
         None => t.parse::<StreamFormat>().is_ok(),
     }
 }
@@ -130,7 +138,8 @@ struct SourcesFile {
 /// Adds a sources file's entries to the flags, in their flag spelling (one parser for both).
 fn add_sources_file(a: &mut Args, path: &std::path::Path) -> Result<()> {
     let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    let file: SourcesFile = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))?;
+    let file: SourcesFile = toml::from_str(&text)
+        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))?;
     for (i, e) in file.source.into_iter().enumerate() {
         let fmt = match (&e.format, &e.topic) {
             (Some(f), Some(t)) => format!(":{f}={t}"),
@@ -138,7 +147,15 @@ fn add_sources_file(a: &mut Args, path: &std::path::Path) -> Result<()> {
             (None, Some(t)) => format!(":={t}"),
             (None, None) => String::new(),
         };
-        let kinds = [e.udp.is_some(), e.tcp.is_some(), e.tcp_client.is_some(), e.serial.is_some(), e.file.is_some(), e.stdin.is_some(), e.simulate.is_some()];
+        let kinds = [
+            e.udp.is_some(),
+            e.tcp.is_some(),
+            e.tcp_client.is_some(),
+            e.serial.is_some(),
+            e.file.is_some(),
+            e.stdin.is_some(),
+            e.simulate.is_some(),
+        ];
         if kinds.iter().filter(|k| **k).count() != 1 {
             bail!("{}: source {}: give exactly one of udp, tcp, tcp_client, serial, file, stdin, simulate", path.display(), i + 1);
         }
@@ -149,12 +166,16 @@ fn add_sources_file(a: &mut Args, path: &std::path::Path) -> Result<()> {
         } else if let Some(addr) = e.tcp_client {
             a.tcp_client.push(format!("{addr}{fmt}"));
         } else if let Some(dev) = e.serial {
-            let baud = e.baud.with_context(|| format!("{}: source {}: serial needs baud", path.display(), i + 1))?;
+            let baud = e.baud.with_context(|| {
+                format!("{}: source {}: serial needs baud", path.display(), i + 1)
+            })?;
             a.serial.push(format!("{dev}:{baud}{fmt}"));
         } else if let Some(f) = e.file {
             a.file.push(format!("{f}{fmt}"));
         } else if e.stdin == Some(true) {
-            a.stdin = Some(fmt.trim_start_matches(':').to_owned()).filter(|f| !f.is_empty()).or(Some("json".into()));
+            a.stdin = Some(fmt.trim_start_matches(':').to_owned())
+                .filter(|f| !f.is_empty())
+                .or(Some("json".into()));
         } else if let Some(s) = e.simulate {
             a.simulate = Some(s);
         }
@@ -165,13 +186,23 @@ fn add_sources_file(a: &mut Args, path: &std::path::Path) -> Result<()> {
 fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
     let mut out = Vec::new();
     for &port in &a.udp {
-        out.push(SourceSpec::Udp { addr: SocketAddr::new(a.bind, port) });
+        out.push(SourceSpec::Udp {
+            addr: SocketAddr::new(a.bind, port),
+        });
     }
     for t in &a.tcp {
-        let (port, fmt) = t.split_once(':').map_or((t.as_str(), None), |(p, f)| (p, Some(f)));
-        let port: u16 = port.parse().with_context(|| format!("--tcp {t}: not a port"))?;
+        let (port, fmt) = t
+            .split_once(':')
+            .map_or((t.as_str(), None), |(p, f)| (p, Some(f)));
+        let port: u16 = port
+            .parse()
+            .with_context(|| format!("--tcp {t}: not a port"))?;
         let (format, topic) = format_or(fmt, StreamFormat::JsonLines)?;
-        out.push(SourceSpec::TcpListen { addr: SocketAddr::new(a.bind, port), format, topic });
+        out.push(SourceSpec::TcpListen {
+            addr: SocketAddr::new(a.bind, port),
+            format,
+            topic,
+        });
     }
     for t in &a.tcp_client {
         let parts: Vec<&str> = t.rsplitn(2, ':').collect();
@@ -180,7 +211,11 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
             _ => (t.clone(), None),
         };
         let (format, topic) = format_or(fmt, StreamFormat::JsonLines)?;
-        out.push(SourceSpec::TcpClient { addr, format, topic });
+        out.push(SourceSpec::TcpClient {
+            addr,
+            format,
+            topic,
+        });
     }
     for t in &a.serial {
         let parts: Vec<&str> = t.split(':').collect();
@@ -189,22 +224,36 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
             [d, b, f] => (d, b, Some(f)),
             _ => bail!("--serial {t}: DEVICE:BAUD[:FORMAT]"),
         };
-        let baud: u32 = baud.parse().with_context(|| format!("--serial {t}: baud rate"))?;
+        let baud: u32 = baud
+            .parse()
+            .with_context(|| format!("--serial {t}: baud rate"))?;
         let (format, topic) = format_or(fmt, StreamFormat::Nmea)?;
-        out.push(SourceSpec::Serial { path: dev.into(), baud, format, topic });
+        out.push(SourceSpec::Serial {
+            path: dev.into(),
+            baud,
+            format,
+            topic,
+        });
     }
     for t in &a.file {
         let (path, fmt) = match t.rsplit_once(':') {
             Some((p, f)) if is_format(f) => (p, Some(f)),
             _ => (t.as_str(), None),
         };
-        let by_ext = match std::path::Path::new(path).extension().and_then(|e| e.to_str()) {
+        let by_ext = match std::path::Path::new(path)
+            .extension()
+            .and_then(|e| e.to_str())
+        {
             Some("ubx") => StreamFormat::Ubx,
             Some("nmea") | Some("txt") => StreamFormat::Nmea,
             _ => StreamFormat::JsonLines,
         };
         let (format, topic) = format_or(fmt, by_ext)?;
-        out.push(SourceSpec::File { path: path.into(), format, topic });
+        out.push(SourceSpec::File {
+            path: path.into(),
+            format,
+            topic,
+        });
     }
     if let Some(f) = &a.stdin {
         let (format, topic) = format_or(Some(f), StreamFormat::JsonLines)?;
@@ -216,17 +265,33 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
         }
         let scenario = a.simulate.clone().unwrap_or_else(|| "default".into());
         if railfuse_record::Scenario::preset(&scenario).is_none() {
-            bail!("--simulate {scenario}: unknown scenario (presets: {})", railfuse_record::Scenario::NAMES.join(", "));
+            bail!(
+                "--simulate {scenario}: unknown scenario (presets: {})",
+                railfuse_record::Scenario::NAMES.join(", ")
+            );
         }
-        out.push(SourceSpec::Simulated { scenario, seed: a.seed, speed: a.speed, duration_s: None });
+        out.push(SourceSpec::Simulated {
+            scenario,
+            seed: a.seed,
+            speed: a.speed,
+            duration_s: None,
+        });
     }
     Ok(out)
 }
 
 fn status_line(s: &Status) -> String {
     let dropped: u64 = s.sources.iter().map(|x| x.dropped).sum();
-    let bad: u64 = s.sources.iter().map(|x| x.malformed + x.checksum_failures + x.oversized).sum();
-    let rates: Vec<String> = s.per_topic.iter().map(|(t, n)| format!("{t} {:.0}/s", *n as f64 / s.elapsed_s.max(1e-9))).collect();
+    let bad: u64 = s
+        .sources
+        .iter()
+        .map(|x| x.malformed + x.checksum_failures + x.oversized)
+        .sum();
+    let rates: Vec<String> = s
+        .per_topic
+        .iter()
+        .map(|(t, n)| format!("{t} {:.0}/s", *n as f64 / s.elapsed_s.max(1e-9)))
+        .collect();
     format!(
         "{:>7.1} s  {} msgs  {:.1} MiB  dropped {dropped}  bad {bad}  {}",
         s.elapsed_s,
@@ -244,22 +309,31 @@ pub fn run(mut a: Args) -> Result<()> {
     let mut metadata = BTreeMap::new();
     if let Some(f) = &a.meta_file {
         let text = std::fs::read_to_string(f).with_context(|| format!("{}", f.display()))?;
-        let table: toml::Table = toml::from_str(&text).map_err(|e| anyhow::anyhow!("{}: {}", f.display(), e.message()))?;
+        let table: toml::Table = toml::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {}", f.display(), e.message()))?;
         for (k, v) in table {
             metadata.insert(k, v.as_str().map_or_else(|| v.to_string(), str::to_owned));
         }
     }
     for m in &a.meta {
-        let (k, v) = m.split_once('=').with_context(|| format!("--meta {m}: KEY=VALUE"))?;
+        let (k, v) = m
+            .split_once('=')
+            .with_context(|| format!("--meta {m}: KEY=VALUE"))?;
         metadata.insert(k.trim().to_owned(), v.to_owned());
     }
-    for (what, v) in [("--split-size", a.split_size), ("--split-every", a.split_every)] {
+    for (what, v) in [
+        ("--split-size", a.split_size),
+        ("--split-every", a.split_every),
+    ] {
         if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
             bail!("{what} must be positive");
         }
     }
     if !(a.chunk_interval.is_finite() && a.chunk_interval > 0.0) {
-        bail!("--chunk-interval must be positive, not {}", a.chunk_interval);
+        bail!(
+            "--chunk-interval must be positive, not {}",
+            a.chunk_interval
+        );
     }
     // SAFETY: installing async-signal-safe handlers (an atomic store) before threads start.
     unsafe {
@@ -282,7 +356,10 @@ pub fn run(mut a: Args) -> Result<()> {
         // A source that fails for good is said at once, on its own line: the run goes on with
         // the others, but the engineer should not find out at the end of a three-hour run.
         for f in &s.failed_sources[warned..] {
-            eprintln!("{}warning: source failed: {f}", if terminal { "\r\x1b[2K" } else { "" });
+            eprintln!(
+                "{}warning: source failed: {f}",
+                if terminal { "\r\x1b[2K" } else { "" }
+            );
         }
         warned = s.failed_sources.len();
         if terminal {
@@ -302,20 +379,26 @@ pub fn run(mut a: Args) -> Result<()> {
     let tap: Option<railfuse_record::recorder::TapHook> = match &a.viz {
         None => None,
         Some(target) => {
-            let sink = if target == "spawn" { railfuse_viz::Sink::Spawn } else { railfuse_viz::Sink::Connect(target.clone()) };
+            let sink = if target == "spawn" {
+                railfuse_viz::Sink::Spawn
+            } else {
+                railfuse_viz::Sink::Connect(target.clone())
+            };
             let mut live = railfuse_viz::LiveViz::open(&sink)?;
             let mut failed = false;
-            Some(Box::new(move |item: &railfuse_record::recorder::message::Item| {
-                if failed {
-                    return;
-                }
-                let (schema, json) = item.message.schema_and_json();
-                // A viewer that goes away must not stop the recording: say so once.
-                if let Err(e) = live.message(&item.topic, schema, item.log_time_ns, &json) {
-                    eprintln!("\nviewer: {e}; recording continues without it");
-                    failed = true;
-                }
-            }))
+            Some(Box::new(
+                move |item: &railfuse_record::recorder::message::Item| {
+                    if failed {
+                        return;
+                    }
+                    let (schema, json) = item.message.schema_and_json();
+                    // A viewer that goes away must not stop the recording: say so once.
+                    if let Err(e) = live.message(&item.topic, schema, item.log_time_ns, &json) {
+                        eprintln!("\nviewer: {e}; recording continues without it");
+                        failed = true;
+                    }
+                },
+            ))
         }
     };
     let opts = RecordOptions {
@@ -334,11 +417,21 @@ pub fn run(mut a: Args) -> Result<()> {
     if terminal {
         eprintln!();
     }
-    let files: Vec<String> = report.files.iter().map(|f| f.display().to_string()).collect();
+    let files: Vec<String> = report
+        .files
+        .iter()
+        .map(|f| f.display().to_string())
+        .collect();
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        println!("recorded {} messages in {:.1} s -> {} (stopped: {})", report.messages, report.duration_s, files.join(", "), report.stopped_by);
+        println!(
+            "recorded {} messages in {:.1} s -> {} (stopped: {})",
+            report.messages,
+            report.duration_s,
+            files.join(", "),
+            report.stopped_by
+        );
         for s in &report.sources {
             println!(
                 "  {}: {} received, {} written, {} dropped, {} malformed, {} checksum failures, {} oversized, {} reconnects{}",

@@ -36,11 +36,16 @@ pub fn run(a: Args) -> Result<()> {
         println!("  {topic:<28} {n}");
     }
     match &r.stopped_by {
-        Some(why) => println!("lost: everything after the last complete chunk; reading stopped at: {why}"),
+        Some(why) => {
+            println!("lost: everything after the last complete chunk; reading stopped at: {why}")
+        }
         None => println!("the file was complete: nothing lost"),
     }
     if r.orphan_messages > 0 {
-        println!("skipped {} messages whose channel record was lost", r.orphan_messages);
+        println!(
+            "skipped {} messages whose channel record was lost",
+            r.orphan_messages
+        );
     }
     Ok(())
 }

@@ -34,7 +34,12 @@ pub fn run(a: Args) -> Result<()> {
     let (report, stats) = refuse_with(&a.input, &a.output, &config, source)?;
     let eval = evaluate(&a.output, &a.reference)?;
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&serde_json::json!({ "refuse": report, "eval": eval, "run": stats }))?);
+        println!(
+            "{}",
+            serde_json::to_string_pretty(
+                &serde_json::json!({ "refuse": report, "eval": eval, "run": stats })
+            )?
+        );
     } else {
         print_eval(&eval);
         print_counts(&report);
@@ -50,11 +55,25 @@ pub struct RunStats {
     pub peak_rss_kib: Option<u64>,
 }
 
-pub fn refuse_with(input: &Path, output: &Path, config: &PipelinesConfig, source: String) -> Result<(RefuseReport, RunStats)> {
+pub fn refuse_with(
+    input: &Path,
+    output: &Path,
+    config: &PipelinesConfig,
+    source: String,
+) -> Result<(RefuseReport, RunStats)> {
     let started = Instant::now();
-    let report = refuse(&RefuseOptions { input, output, config, config_source: source })?;
+    let report = refuse(&RefuseOptions {
+        input,
+        output,
+        config,
+        config_source: source,
+    })?;
     let elapsed_s = started.elapsed().as_secs_f64();
-    let stats = RunStats { elapsed_s, input_messages_per_s: report.input_messages as f64 / elapsed_s, peak_rss_kib: peak_rss_kib() };
+    let stats = RunStats {
+        elapsed_s,
+        input_messages_per_s: report.input_messages as f64 / elapsed_s,
+        peak_rss_kib: peak_rss_kib(),
+    };
     eprintln!(
         "re-fused {} messages of {} in {:.2} s ({:.0} msg/s), wrote {} fused messages -> {}",
         report.input_messages,
@@ -65,10 +84,16 @@ pub fn refuse_with(input: &Path, output: &Path, config: &PipelinesConfig, source
         output.display()
     );
     if let Some(first) = &report.first_undecodable {
-        eprintln!("warning: {} sensor messages did not decode and were skipped; the first: {first}", report.undecodable_messages);
+        eprintln!(
+            "warning: {} sensor messages did not decode and were skipped; the first: {first}",
+            report.undecodable_messages
+        );
     }
     if report.out_of_order_messages > 0 {
-        eprintln!("note: {} messages are earlier in log time than the one before them in the file", report.out_of_order_messages);
+        eprintln!(
+            "note: {} messages are earlier in log time than the one before them in the file",
+            report.out_of_order_messages
+        );
     }
     Ok((report, stats))
 }
@@ -99,7 +124,13 @@ pub fn print_counts(report: &RefuseReport) {
 }
 
 /// Re-fuses and prints the accuracy table of the result (demo).
-pub fn refuse_and_evaluate(input: &Path, output: &Path, config: &PipelinesConfig, source: String, reference: &str) -> Result<(RefuseReport, EvalReport)> {
+pub fn refuse_and_evaluate(
+    input: &Path,
+    output: &Path,
+    config: &PipelinesConfig,
+    source: String,
+    reference: &str,
+) -> Result<(RefuseReport, EvalReport)> {
     let (report, _) = refuse_with(input, output, config, source)?;
     let eval = evaluate(output, reference)?;
     print_eval(&eval);

@@ -45,10 +45,18 @@ struct Envelope {
 
 impl Envelope {
     fn add(&mut self, p: &PipelineEval, duration_s: f64) {
-        let (Some(pos), Some(spd)) = (&p.position_error_m, &p.speed_error_mps) else { return };
+        let (Some(pos), Some(spd)) = (&p.position_error_m, &p.speed_error_mps) else {
+            return;
+        };
         let rate = p.states as f64 / duration_s;
         if self.runs == 0 {
-            (self.pos_min, self.pos_max, self.speed_min, self.speed_max, self.min_rate_hz) = (pos.min, pos.max, spd.min, spd.max, rate);
+            (
+                self.pos_min,
+                self.pos_max,
+                self.speed_min,
+                self.speed_max,
+                self.min_rate_hz,
+            ) = (pos.min, pos.max, spd.min, spd.max, rate);
         }
         self.runs += 1;
         self.pos_min = self.pos_min.min(pos.min);
@@ -70,12 +78,24 @@ impl Envelope {
 
 /// Simulates, re-fuses and evaluates one run; the evaluation of every pipeline and the run's
 /// duration.
-fn run_one(dir: &Path, scenario: &str, seed: u64, faults: &[FaultSpec], config: &PipelinesConfig, tag: &str) -> Result<(Vec<PipelineEval>, f64)> {
+fn run_one(
+    dir: &Path,
+    scenario: &str,
+    seed: u64,
+    faults: &[FaultSpec],
+    config: &PipelinesConfig,
+    tag: &str,
+) -> Result<(Vec<PipelineEval>, f64)> {
     let raw = dir.join(format!("{scenario}-{tag}-seed{seed}.mcap"));
     let fused = dir.join(format!("{scenario}-{tag}-seed{seed}.fused.mcap"));
     let preset = Scenario::preset(scenario).expect("a built-in preset");
     let sim = simulate(&preset, seed, None, faults, &raw)?;
-    refuse(&RefuseOptions { input: &raw, output: &fused, config, config_source: format!("samples/{scenario}.toml") })?;
+    refuse(&RefuseOptions {
+        input: &raw,
+        output: &fused,
+        config,
+        config_source: format!("samples/{scenario}.toml"),
+    })?;
     let eval = evaluate(&fused, topics::GROUND_TRUTH)?;
     std::fs::remove_file(&raw).ok();
     std::fs::remove_file(&fused).ok();
@@ -91,7 +111,8 @@ fn verdict(ok: bool, close: bool) -> &'static str {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    std::fs::create_dir_all(&a.dir).with_context(|| format!("{}: cannot create", a.dir.display()))?;
+    std::fs::create_dir_all(&a.dir)
+        .with_context(|| format!("{}: cannot create", a.dir.display()))?;
     let c000 = PipelinesConfig::parse(SEED000_PIPELINES, &embedded_path("samples/seed000.toml"))?;
     let c001 = PipelinesConfig::parse(SEED001_PIPELINES, &embedded_path("samples/seed001.toml"))?;
     let seeds = a.seeds.max(1);
@@ -113,16 +134,31 @@ pub fn run(a: Args) -> Result<()> {
     // dead for 100 s mid-run.
     let cases: Vec<(&str, Vec<FaultSpec>)> = vec![
         ("no fault", vec![]),
-        ("radar dead 200–300 s", vec!["radar:dropout:200:300".parse().map_err(anyhow::Error::msg)?]),
-        ("INS dead 200–300 s", vec!["imu:dropout:200:300".parse().map_err(anyhow::Error::msg)?]),
-        ("INS biased +0.5 m/s² 200–300 s", vec!["imu:bias=0.5:200:300".parse().map_err(anyhow::Error::msg)?]),
-        ("GNSS dead 200–300 s", vec!["gnss:dropout:200:300".parse().map_err(anyhow::Error::msg)?]),
+        (
+            "radar dead 200–300 s",
+            vec!["radar:dropout:200:300"
+                .parse()
+                .map_err(anyhow::Error::msg)?],
+        ),
+        (
+            "INS dead 200–300 s",
+            vec!["imu:dropout:200:300".parse().map_err(anyhow::Error::msg)?],
+        ),
+        (
+            "INS biased +0.5 m/s² 200–300 s",
+            vec!["imu:bias=0.5:200:300".parse().map_err(anyhow::Error::msg)?],
+        ),
+        (
+            "GNSS dead 200–300 s",
+            vec!["gnss:dropout:200:300".parse().map_err(anyhow::Error::msg)?],
+        ),
     ];
     let names001 = ["fkf", "fkf_cal", "kf", "kf_cal", "kf/smoothed"];
     let mut env001 = vec![[Envelope::default(); 5]; cases.len()];
     for (ci, (tag, faults)) in cases.iter().enumerate() {
         for seed in 0..seeds {
-            let (evals, duration) = run_one(&a.dir, "seed001", seed, faults, &c001, &format!("case{ci}"))?;
+            let (evals, duration) =
+                run_one(&a.dir, "seed001", seed, faults, &c001, &format!("case{ci}"))?;
             for (e, name) in env001[ci].iter_mut().zip(names001) {
                 if let Some(p) = evals.iter().find(|p| p.name == name) {
                     e.add(p, duration);
@@ -139,7 +175,10 @@ pub fn run(a: Args) -> Result<()> {
     writeln!(md, "`samples/seed000.toml` and `samples/seed001.toml`. Errors are fused − truth at every fused state; an")?;
     writeln!(md, "envelope is the most negative and most positive error over all seeds; RMSE is the mean over seeds.\n")?;
 
-    writeln!(md, "## Source 000 — federated particle filter for maglev positioning\n")?;
+    writeln!(
+        md,
+        "## Source 000 — federated particle filter for maglev positioning\n"
+    )?;
     writeln!(md, "Start 20 m/s, 1 m/s², T = 1 s, 100 s, jerk variance 0.001, loop and radar variance 0.01, balise every 1 km.\n")?;
     writeln!(md, "| pipeline | source reports | railfuse position envelope (m) | pos RMSE (m) | railfuse speed envelope (m/s) | speed RMSE (m/s) | verdict |")?;
     writeln!(md, "|---|---|---|---|---|---|---|")?;
@@ -148,7 +187,10 @@ pub fn run(a: Args) -> Result<()> {
         let (claim, ok) = if balise {
             ("position within 1 m after each balise", e.pos_abs() < 1.0)
         } else {
-            ("position ±10 m, speed −0.3…+0.4 m/s", e.pos_abs() < 10.0 && e.speed_min > -0.3 && e.speed_max < 0.4)
+            (
+                "position ±10 m, speed −0.3…+0.4 m/s",
+                e.pos_abs() < 10.0 && e.speed_min > -0.3 && e.speed_max < 0.4,
+            )
         };
         writeln!(
             md,
@@ -163,7 +205,10 @@ pub fn run(a: Args) -> Result<()> {
         )?;
     }
     writeln!(md)?;
-    writeln!(md, "## Source 001 — federated Kalman filter, INS + BeiDou + Doppler radar\n")?;
+    writeln!(
+        md,
+        "## Source 001 — federated Kalman filter, INS + BeiDou + Doppler radar\n"
+    )?;
     writeln!(md, "500 s maglev run to 432 km/h and back, master fusion every 1 s, β by speed band (the source's table).")?;
     writeln!(md, "The source's targets: output ≥ 50 Hz, position error < 10 m, speed error < 1 km/h (0.278 m/s).\n")?;
     writeln!(
@@ -176,7 +221,9 @@ pub fn run(a: Args) -> Result<()> {
             if e.runs == 0 {
                 continue;
             }
-            let ok = e.pos_abs() < 10.0 && e.speed_abs() < 1.0 / 3.6 && (name.ends_with("smoothed") || e.min_rate_hz >= 49.9);
+            let ok = e.pos_abs() < 10.0
+                && e.speed_abs() < 1.0 / 3.6
+                && (name.ends_with("smoothed") || e.min_rate_hz >= 49.9);
             writeln!(
                 md,
                 "| {tag} | `{name}` | {:.1} | {:.2} | {:.2} | {:.3} | {:.3} | {:.0} % | {} |",
@@ -198,7 +245,8 @@ pub fn run(a: Args) -> Result<()> {
     writeln!(md, "(Gauss–Markov, 2 m, 60 s), the accelerometer's bias and the radar's scale factor, estimated beside the")?;
     writeln!(md, "motion. The source's method treats these errors as white noise; that is what bounds `fkf` and `kf` at")?;
     writeln!(md, "metres and makes them overconfident (NEES far outside its 95 % interval), and what `*_cal` removes.")?;
-    std::fs::write(&a.output, &md).with_context(|| format!("{}: cannot write", a.output.display()))?;
+    std::fs::write(&a.output, &md)
+        .with_context(|| format!("{}: cannot write", a.output.display()))?;
     print!("{md}");
     eprintln!("-> {}", a.output.display());
     Ok(())

@@ -40,9 +40,18 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 /// Simulates and prints a one-paragraph summary to stderr; shared with `demo` and `bench`.
-pub fn simulate_to(scenario: &str, seed: u64, duration: Option<f64>, faults: &[FaultSpec], output: &std::path::Path) -> Result<SimulationReport> {
+pub fn simulate_to(
+    scenario: &str,
+    seed: u64,
+    duration: Option<f64>,
+    faults: &[FaultSpec],
+    output: &std::path::Path,
+) -> Result<SimulationReport> {
     let Some(preset) = Scenario::preset(scenario) else {
-        bail!("unknown scenario '{scenario}' (presets: {})", Scenario::NAMES.join(", "));
+        bail!(
+            "unknown scenario '{scenario}' (presets: {})",
+            Scenario::NAMES.join(", ")
+        );
     };
     if let Some(d) = duration {
         if !(d.is_finite() && d > 0.0) {

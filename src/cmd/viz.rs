@@ -31,6 +31,11 @@ pub fn run(a: Args) -> Result<()> {
         Sink::Connect(u) => u.clone(),
         Sink::Spawn => "a spawned viewer".into(),
     };
-    eprintln!("read {} messages, logged {} records on {} entities -> {target}", report.messages, report.logged, report.entities.len());
+    eprintln!(
+        "read {} messages, logged {} records on {} entities -> {target}",
+        report.messages,
+        report.logged,
+        report.entities.len()
+    );
     Ok(())
 }

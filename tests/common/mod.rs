@@ -7,12 +7,19 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 pub fn railfuse(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_railfuse")).args(args).output().expect("the railfuse binary runs")
+    Command::new(env!("CARGO_BIN_EXE_railfuse"))
+        .args(args)
+        .output()
+        .expect("the railfuse binary runs")
 }
 
 pub fn ok(args: &[&str]) -> Output {
     let out = railfuse(args);
-    assert!(out.status.success(), "railfuse {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "railfuse {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     out
 }
 
@@ -21,7 +28,9 @@ pub fn stderr(out: &Output) -> String {
 }
 
 pub fn sample(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("samples").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("samples")
+        .join(name)
 }
 
 pub fn s(p: &Path) -> &str {
@@ -34,19 +43,35 @@ pub fn client(var: &str, venv_name: &str) -> PathBuf {
     if let Ok(p) = std::env::var(var) {
         return PathBuf::from(p);
     }
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv-interop/bin").join(venv_name);
-    assert!(p.exists(), "{var} is not set and {} is missing: run the tests with `tests/run`, which installs it", p.display());
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(".venv-interop/bin")
+        .join(venv_name);
+    assert!(
+        p.exists(),
+        "{var} is not set and {} is missing: run the tests with `tests/run`, which installs it",
+        p.display()
+    );
     p
 }
 
 pub fn python(script: &str, args: &[&str]) -> Output {
     let py = client("RAILFUSE_PYTHON", "python");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/interop").join(script);
-    Command::new(py).arg(script).args(args).output().expect("python runs")
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/interop")
+        .join(script);
+    Command::new(py)
+        .arg(script)
+        .args(args)
+        .output()
+        .expect("python runs")
 }
 
 pub fn rerun(args: &[&str]) -> Output {
-    Command::new(client("RAILFUSE_RERUN", "rerun")).env("RERUN_ANALYTICS", "0").args(args).output().expect("rerun runs")
+    Command::new(client("RAILFUSE_RERUN", "rerun"))
+        .env("RERUN_ANALYTICS", "0")
+        .args(args)
+        .output()
+        .expect("rerun runs")
 }
 
 /// Every message on `topic` of a log, decoded, in file order.

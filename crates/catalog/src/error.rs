@@ -32,7 +32,10 @@ pub enum Error {
 
 impl Error {
     pub(crate) fn mcap(path: &std::path::Path, e: impl std::fmt::Display) -> Self {
-        Error::Mcap { path: path.to_owned(), cause: e.to_string() }
+        Error::Mcap {
+            path: path.to_owned(),
+            cause: e.to_string(),
+        }
     }
     /// A write error with its chain of causes ("… : No space left on device").
     pub(crate) fn write(path: &std::path::Path, e: impl std::error::Error) -> Self {
@@ -45,9 +48,15 @@ impl Error {
             }
             source = s.source();
         }
-        Error::Write { path: path.to_owned(), cause }
+        Error::Write {
+            path: path.to_owned(),
+            cause,
+        }
     }
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
-        Error::Io { path: path.to_owned(), source }
+        Error::Io {
+            path: path.to_owned(),
+            source,
+        }
     }
 }

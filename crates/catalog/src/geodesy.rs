@@ -15,13 +15,25 @@ pub struct GeodeticOrigin {
 impl GeodeticOrigin {
     /// Latitude, longitude (degrees) and altitude (m) of a local `east, north, up` point.
     pub fn to_geodetic(&self, east_m: f64, north_m: f64, up_m: f64) -> (f64, f64, f64) {
-        let (lat, lon, alt) =
-            map_3d::enu2geodetic(east_m, north_m, up_m, self.latitude_deg.to_radians(), self.longitude_deg.to_radians(), self.altitude_m, Ellipsoid::WGS84);
+        let (lat, lon, alt) = map_3d::enu2geodetic(
+            east_m,
+            north_m,
+            up_m,
+            self.latitude_deg.to_radians(),
+            self.longitude_deg.to_radians(),
+            self.altitude_m,
+            Ellipsoid::WGS84,
+        );
         (lat.to_degrees(), lon.to_degrees(), alt)
     }
 
     /// Local `east, north, up` (m) of a geodetic point given in degrees and metres.
-    pub fn to_enu(&self, latitude_deg: f64, longitude_deg: f64, altitude_m: f64) -> (f64, f64, f64) {
+    pub fn to_enu(
+        &self,
+        latitude_deg: f64,
+        longitude_deg: f64,
+        altitude_m: f64,
+    ) -> (f64, f64, f64) {
         map_3d::geodetic2enu(
             latitude_deg.to_radians(),
             longitude_deg.to_radians(),
@@ -40,7 +52,11 @@ mod tests {
 
     #[test]
     fn enu_round_trip_is_exact_to_a_millimetre_over_tens_of_kilometres() {
-        let o = GeodeticOrigin { latitude_deg: 44.6551, longitude_deg: 10.9297, altitude_m: 40.0 };
+        let o = GeodeticOrigin {
+            latitude_deg: 44.6551,
+            longitude_deg: 10.9297,
+            altitude_m: 40.0,
+        };
         for &(e, n) in &[(0.0, 0.0), (1234.5, -987.0), (25_000.0, 18_000.0)] {
             let (lat, lon, alt) = o.to_geodetic(e, n, 0.0);
             let (e2, n2, u2) = o.to_enu(lat, lon, alt);

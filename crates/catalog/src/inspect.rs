@@ -74,7 +74,9 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
             }
             LogRecord::Message(m) => {
                 messages += 1;
-                let c = channels.get_mut(&m.channel.id).expect("the reader checks channel ids");
+                let c = channels
+                    .get_mut(&m.channel.id)
+                    .expect("the reader checks channel ids");
                 c.messages += 1;
                 if let Some(last) = c.last_log_time_ns {
                     let gap = seconds_between(last, m.log_time_ns);
@@ -87,7 +89,16 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
                 c.last_log_time_ns = Some(m.log_time_ns);
             }
             LogRecord::Metadata { name, metadata: m } => metadata.push((name, m)),
-            LogRecord::Attachment { name, media_type, data, .. } => attachments.push(AttachmentSummary { name, media_type, bytes: data.len() }),
+            LogRecord::Attachment {
+                name,
+                media_type,
+                data,
+                ..
+            } => attachments.push(AttachmentSummary {
+                name,
+                media_type,
+                bytes: data.len(),
+            }),
             LogRecord::Schema(_) => {}
         }
     }
@@ -101,7 +112,11 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
     }
     let first = channels.values().filter_map(|c| c.first_log_time_ns).min();
     let last = channels.values().filter_map(|c| c.last_log_time_ns).max();
-    let fused: BTreeSet<String> = channels.values().filter_map(|c| topics::fused_pipeline_of(&c.topic)).map(str::to_owned).collect();
+    let fused: BTreeSet<String> = channels
+        .values()
+        .filter_map(|c| topics::fused_pipeline_of(&c.topic))
+        .map(str::to_owned)
+        .collect();
     Ok(LogSummary {
         file: path.display().to_string(),
         file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),

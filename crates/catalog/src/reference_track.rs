@@ -19,12 +19,19 @@ pub struct ReferenceTrack {
 
 impl ReferenceTrack {
     pub fn new(retain_s: f64) -> Self {
-        Self { samples: VecDeque::new(), retain_ns: (retain_s * 1e9) as u64 }
+        Self {
+            samples: VecDeque::new(),
+            retain_ns: (retain_s * 1e9) as u64,
+        }
     }
 
     /// Adds a sample; samples must move forward in time (others are ignored).
     pub fn push(&mut self, sample: ReferenceSample) -> bool {
-        if self.samples.back().is_some_and(|r| sample.stamp_ns <= r.stamp_ns) {
+        if self
+            .samples
+            .back()
+            .is_some_and(|r| sample.stamp_ns <= r.stamp_ns)
+        {
             return false;
         }
         self.samples.push_back(sample);
@@ -48,7 +55,14 @@ impl ReferenceTrack {
         let i = self.samples.partition_point(|r| r.stamp_ns < stamp_ns);
         let b = self.samples[i];
         let a = if i == 0 { b } else { self.samples[i - 1] };
-        let f = if b.stamp_ns > a.stamp_ns { (stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64 } else { 0.0 };
-        Some((a.chainage_m + f * (b.chainage_m - a.chainage_m), a.speed_mps + f * (b.speed_mps - a.speed_mps)))
+        let f = if b.stamp_ns > a.stamp_ns {
+            (stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64
+        } else {
+            0.0
+        };
+        Some((
+            a.chainage_m + f * (b.chainage_m - a.chainage_m),
+            a.speed_mps + f * (b.speed_mps - a.speed_mps),
+        ))
     }
 }

@@ -34,7 +34,11 @@ pub fn fused_smoothed(pipeline: &str) -> String {
 
 /// The pipeline name of a fused topic, if it is one.
 pub fn fused_pipeline_of(topic: &str) -> Option<&str> {
-    topic.strip_prefix(FUSED_PREFIX)?.split('/').next().filter(|s| !s.is_empty())
+    topic
+        .strip_prefix(FUSED_PREFIX)?
+        .split('/')
+        .next()
+        .filter(|s| !s.is_empty())
 }
 
 /// Metadata record names railfuse writes.

@@ -31,26 +31,44 @@ struct Replayed {
 }
 
 /// Simulates `scenario` and decodes every message a pipeline of `config` reads.
-fn stream(scenario: &str, duration: Option<f64>, config: &PipelinesConfig) -> (Vec<Replayed>, Vec<String>) {
+fn stream(
+    scenario: &str,
+    duration: Option<f64>,
+    config: &PipelinesConfig,
+) -> (Vec<Replayed>, Vec<String>) {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");
     let preset = railfuse_record::Scenario::preset(scenario).unwrap();
     railfuse_record::simulate(&preset, 1, duration, &[], &path).unwrap();
-    let topics: Vec<String> = config.pipeline[0].sensor.iter().map(|s| s.topic.clone()).collect();
+    let topics: Vec<String> = config.pipeline[0]
+        .sensor
+        .iter()
+        .map(|s| s.topic.clone())
+        .collect();
     let mut ctx = SensorContext::default();
     let mut out = Vec::new();
     let mut reader = LogReader::open(&path).unwrap();
     while let Some(r) = reader.next() {
-        let LogRecord::Message(m) = r.unwrap() else { continue };
+        let LogRecord::Message(m) = r.unwrap() else {
+            continue;
+        };
         if m.channel.schema_name() == TrackMap::SCHEMA_NAME {
             ctx.track = Some(m.decode(Path::new("bench")).unwrap());
             continue;
         }
-        let Some(topic) = topics.iter().position(|t| *t == m.channel.topic) else { continue };
+        let Some(topic) = topics.iter().position(|t| *t == m.channel.topic) else {
+            continue;
+        };
         let model = SensorModel::for_schema(m.channel.schema_name()).unwrap();
         let mut measurements = Vec::new();
-        model.decode(&m, Path::new("bench"), &ctx, &mut measurements).unwrap();
-        out.push(Replayed { topic, log_time_ns: m.log_time_ns, measurements });
+        model
+            .decode(&m, Path::new("bench"), &ctx, &mut measurements)
+            .unwrap();
+        out.push(Replayed {
+            topic,
+            log_time_ns: m.log_time_ns,
+            measurements,
+        });
     }
     (out, topics)
 }
@@ -70,7 +88,12 @@ fn replay(pipelines: &mut [AnyPipeline], stream: &[Replayed], out: &mut Vec<Fuse
 fn config(text: &str, copies: usize) -> PipelinesConfig {
     let mut c = PipelinesConfig::parse(text, Path::new("bench.toml")).unwrap();
     let first = c.pipeline[0].clone();
-    c.pipeline = (0..copies).map(|i| railfuse_refuse::config::PipelineConfig { name: format!("p{i}"), ..first.clone() }).collect();
+    c.pipeline = (0..copies)
+        .map(|i| railfuse_refuse::config::PipelineConfig {
+            name: format!("p{i}"),
+            ..first.clone()
+        })
+        .collect();
     c
 }
 
@@ -82,7 +105,11 @@ fn kalman(c: &mut Criterion) {
     g.throughput(Throughput::Elements(stream.len() as u64));
     g.bench_function("default_run_600s", |b| {
         b.iter(|| {
-            let mut p: Vec<AnyPipeline> = config(kalman_toml, 1).pipeline.into_iter().map(|c| AnyPipeline::new(c).unwrap()).collect();
+            let mut p: Vec<AnyPipeline> = config(kalman_toml, 1)
+                .pipeline
+                .into_iter()
+                .map(|c| AnyPipeline::new(c).unwrap())
+                .collect();
             replay(&mut p, &stream, &mut out)
         })
     });
@@ -93,7 +120,11 @@ fn kalman(c: &mut Criterion) {
     for n in [1usize, 2, 4, 8] {
         g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, &n| {
             b.iter(|| {
-                let mut p: Vec<AnyPipeline> = config(kalman_toml, n).pipeline.into_iter().map(|c| AnyPipeline::new(c).unwrap()).collect();
+                let mut p: Vec<AnyPipeline> = config(kalman_toml, n)
+                    .pipeline
+                    .into_iter()
+                    .map(|c| AnyPipeline::new(c).unwrap())
+                    .collect();
                 replay(&mut p, &stream, &mut out)
             })
         });
@@ -120,7 +151,11 @@ fn federated(c: &mut Criterion) {
     for name in ["fkf", "fkf_cal", "kf_cal"] {
         g.bench_function(name, |b| {
             b.iter(|| {
-                let mut p: Vec<AnyPipeline> = named(toml, name).pipeline.into_iter().map(|c| AnyPipeline::new(c).unwrap()).collect();
+                let mut p: Vec<AnyPipeline> = named(toml, name)
+                    .pipeline
+                    .into_iter()
+                    .map(|c| AnyPipeline::new(c).unwrap())
+                    .collect();
                 replay(&mut p, &stream, &mut out)
             })
         });
@@ -129,20 +164,39 @@ fn federated(c: &mut Criterion) {
 }
 
 fn particle(c: &mut Criterion) {
-    let model = ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(0.05) };
-    let init = StateAndCovariance { state: Vector3::new(0.0, 20.0, 0.0), covariance: Matrix3::from_diagonal(&Vector3::new(1.0, 0.25, 0.1)) };
+    let model = ConstantAcceleration {
+        noise: ProcessNoise::WhiteJerkPsd(0.05),
+    };
+    let init = StateAndCovariance {
+        state: Vector3::new(0.0, 20.0, 0.0),
+        covariance: Matrix3::from_diagonal(&Vector3::new(1.0, 0.25, 0.1)),
+    };
     let mut g = c.benchmark_group("particle_update");
     for n in [1_000usize, 10_000] {
         g.throughput(Throughput::Elements(n as u64));
         g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, &n| {
-            let settings = ParticleSettings { particles: n, resampling: Resampling::Systematic, ess_threshold: 0.5, roughening: 0.1, seed: 1 };
+            let settings = ParticleSettings {
+                particles: n,
+                resampling: Resampling::Systematic,
+                ess_threshold: 0.5,
+                roughening: 0.1,
+                seed: 1,
+            };
             let mut pf = ParticleFilter::new(settings, &init);
             let mut k = 0u64;
             b.iter(|| {
                 k += 1;
                 pf.predict(&model, 0.05, 1.0);
-                let h = if k.is_multiple_of(2) { RowVector3::new(1.0, 0.0, 0.0) } else { RowVector3::new(0.0, 1.0, 0.0) };
-                let z = if k.is_multiple_of(2) { 20.0 * 0.05 * k as f64 } else { 20.0 };
+                let h = if k.is_multiple_of(2) {
+                    RowVector3::new(1.0, 0.0, 0.0)
+                } else {
+                    RowVector3::new(0.0, 1.0, 0.0)
+                };
+                let z = if k.is_multiple_of(2) {
+                    20.0 * 0.05 * k as f64
+                } else {
+                    20.0
+                };
                 pf.update(&h, 0.04, z)
             })
         });

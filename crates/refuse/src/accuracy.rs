@@ -26,7 +26,9 @@ const HIST_BUCKETS: usize = 3500; // 1e-6 · 1.01^3500 ≈ 1.4e9
 
 impl LogHistogram {
     fn new() -> Self {
-        Self { counts: vec![0; HIST_BUCKETS + 1] }
+        Self {
+            counts: vec![0; HIST_BUCKETS + 1],
+        }
     }
     fn bucket(x: f64) -> usize {
         if x <= HIST_MIN {
@@ -82,7 +84,15 @@ pub struct ErrorSummary {
 
 impl Default for ErrorStats {
     fn default() -> Self {
-        Self { n: 0, sum: 0.0, sum_sq: 0.0, max_abs: 0.0, min: f64::INFINITY, max: f64::NEG_INFINITY, hist: LogHistogram::new() }
+        Self {
+            n: 0,
+            sum: 0.0,
+            sum_sq: 0.0,
+            max_abs: 0.0,
+            min: f64::INFINITY,
+            max: f64::NEG_INFINITY,
+            hist: LogHistogram::new(),
+        }
     }
 }
 
@@ -144,18 +154,28 @@ impl Consistency {
     }
 
     pub fn summary(&self) -> Option<ConsistencySummary> {
-        (self.n > 0).then(|| ConsistencySummary { epochs: self.n, inside_95: self.inside as f64 / self.n as f64, mean: self.sum / self.n as f64 })
+        (self.n > 0).then(|| ConsistencySummary {
+            epochs: self.n,
+            inside_95: self.inside as f64 / self.n as f64,
+            mean: self.sum / self.n as f64,
+        })
     }
 }
 
 /// `eᵀ P⁻¹ e` for the `[s, v]` error of a fused state against its own covariance.
 pub fn nees(state: &FusedState, position_error: f64, speed_error: f64) -> f64 {
-    let (pss, psv, pvv) = (state.covariance[0], state.covariance[1], state.covariance[4]);
+    let (pss, psv, pvv) = (
+        state.covariance[0],
+        state.covariance[1],
+        state.covariance[4],
+    );
     let det = pss * pvv - psv * psv;
     if det.is_nan() || det <= 0.0 {
         return f64::NAN;
     }
-    (pvv * position_error * position_error - 2.0 * psv * position_error * speed_error + pss * speed_error * speed_error) / det
+    (pvv * position_error * position_error - 2.0 * psv * position_error * speed_error
+        + pss * speed_error * speed_error)
+        / det
 }
 
 /// An estimate waiting for its reference.
@@ -220,8 +240,18 @@ impl AccuracyMeter {
         }
     }
 
-    pub fn add_reference(&mut self, stamp_ns: u64, chainage_m: f64, speed_mps: f64, spans: &[Span]) {
-        if !self.reference.push(ReferenceSample { stamp_ns, chainage_m, speed_mps }) {
+    pub fn add_reference(
+        &mut self,
+        stamp_ns: u64,
+        chainage_m: f64,
+        speed_mps: f64,
+        spans: &[Span],
+    ) {
+        if !self.reference.push(ReferenceSample {
+            stamp_ns,
+            chainage_m,
+            speed_mps,
+        }) {
             return;
         }
         while self.waiting.front().is_some_and(|e| e.stamp_ns <= stamp_ns) {
@@ -237,7 +267,12 @@ impl AccuracyMeter {
 
     pub fn add_estimate(&mut self, s: &FusedState, spans: &[Span]) {
         let c = &s.covariance;
-        let e = Estimate { stamp_ns: s.stamp_ns, chainage_m: s.chainage_m, speed_mps: s.speed_mps, covariance: (c[0], c[1], c[4]) };
+        let e = Estimate {
+            stamp_ns: s.stamp_ns,
+            chainage_m: s.chainage_m,
+            speed_mps: s.speed_mps,
+            covariance: (c[0], c[1], c[4]),
+        };
         match self.reference.newest_ns() {
             Some(newest) if newest >= s.stamp_ns => self.score(e, spans),
             _ => self.waiting.push_back(e),
@@ -260,12 +295,21 @@ impl AccuracyMeter {
                     let i = match self.windows.iter().position(|w| w.label == span.label) {
                         Some(i) => i,
                         None => {
-                            self.windows.push(WindowStats { label: span.label.clone(), position: ErrorStats::default(), speed: ErrorStats::default() });
+                            self.windows.push(WindowStats {
+                                label: span.label.clone(),
+                                position: ErrorStats::default(),
+                                speed: ErrorStats::default(),
+                            });
                             self.windows.len() - 1
                         }
                     };
                     // A stamp inside two spans of one label counts once.
-                    if spans.iter().find(|w| w.label == span.label && w.contains(e.stamp_ns)).map(|w| w.start_ns) == Some(span.start_ns) {
+                    if spans
+                        .iter()
+                        .find(|w| w.label == span.label && w.contains(e.stamp_ns))
+                        .map(|w| w.start_ns)
+                        == Some(span.start_ns)
+                    {
                         self.windows[i].position.add(de);
                         self.windows[i].speed.add(ve);
                     }
@@ -297,7 +341,11 @@ mod tests {
     fn percentile_is_within_one_percent_and_rmse_exact() {
         let mut s = ErrorStats::default();
         for i in 1..=1000 {
-            s.add(if i % 2 == 0 { i as f64 / 100.0 } else { -(i as f64) / 100.0 });
+            s.add(if i % 2 == 0 {
+                i as f64 / 100.0
+            } else {
+                -(i as f64) / 100.0
+            });
         }
         let m = s.summary().unwrap();
         assert!((m.p95_abs - 9.50).abs() / 9.50 < 0.011, "{}", m.p95_abs);
@@ -319,7 +367,11 @@ mod tests {
             source: String::new(),
             sensor_states: Vec::new(),
         };
-        let spans = [Span { label: "tunnel".into(), start_ns: 2_000_000_000, end_ns: Some(2_500_000_000) }];
+        let spans = [Span {
+            label: "tunnel".into(),
+            start_ns: 2_000_000_000,
+            end_ns: Some(2_500_000_000),
+        }];
         m.add_estimate(&est(1_500_000_000, 15.5, 10.0), &spans); // arrives before the reference reaches it
         for k in 0..=30 {
             let t = k as u64 * 100_000_000;

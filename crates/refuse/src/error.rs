@@ -18,9 +18,18 @@ pub enum Error {
     #[error("{path}: {message}")]
     ConfigSyntax { path: PathBuf, message: String },
     #[error("{path}: pipeline '{pipeline}': {message}")]
-    ConfigInvalid { path: PathBuf, pipeline: String, message: String },
+    ConfigInvalid {
+        path: PathBuf,
+        pipeline: String,
+        message: String,
+    },
     #[error("{input}: pipeline '{pipeline}' reads channel {topic}, which {problem}")]
-    Channel { input: PathBuf, pipeline: String, topic: String, problem: String },
+    Channel {
+        input: PathBuf,
+        pipeline: String,
+        topic: String,
+        problem: String,
+    },
     /// The RTS smoother's spill file (a temporary file) could not be written or read.
     #[error("pipeline '{pipeline}': smoother temporary file: {source}")]
     Spill {

@@ -16,11 +16,16 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use railfuse_catalog::log::{LogReader, LogRecord};
-use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision, GnssFix, GroundTruth, TrackMap};
+use railfuse_catalog::messages::{
+    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision, GnssFix,
+    GroundTruth, TrackMap,
+};
 use railfuse_catalog::topics;
 use serde::Serialize;
 
-use crate::accuracy::{AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, Span, CHI2_95_1DOF};
+use crate::accuracy::{
+    AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, Span, CHI2_95_1DOF,
+};
 use crate::error::Result;
 use crate::measurement::gnss_chainage;
 
@@ -117,7 +122,12 @@ impl Scored {
 }
 
 /// A reference sample from a reference message, if it gives one.
-fn reference_sample(kind: ReferenceKind, m: &railfuse_catalog::log::LogMessage<'_>, path: &Path, map: Option<&TrackMap>) -> Result<Option<(u64, f64, f64)>> {
+fn reference_sample(
+    kind: ReferenceKind,
+    m: &railfuse_catalog::log::LogMessage<'_>,
+    path: &Path,
+    map: Option<&TrackMap>,
+) -> Result<Option<(u64, f64, f64)>> {
     Ok(match kind {
         ReferenceKind::Truth => {
             let t: GroundTruth = m.decode(path)?;
@@ -162,7 +172,10 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
     let mut reference: Option<ReferenceKind> = None;
     let mut smoothed_channels = false;
     let mut first_ns: Option<u64> = None;
-    let index_of = |scored: &mut Vec<Scored>, name: String, pipeline: &str| match scored.iter().position(|s| s.name == name) {
+    let index_of = |scored: &mut Vec<Scored>, name: String, pipeline: &str| match scored
+        .iter()
+        .position(|s| s.name == name)
+    {
         Some(i) => i,
         None => {
             scored.push(Scored::new(name, pipeline.to_owned()));
@@ -186,12 +199,20 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
                     kind.map(Role::Reference)
                 } else if let Some(p) = topics::fused_pipeline_of(&c.topic) {
                     match c.topic.rsplit('/').next() {
-                        Some("state") if schema == FusedState::SCHEMA_NAME => Some(Role::State(index_of(&mut scored, p.to_owned(), p))),
+                        Some("state") if schema == FusedState::SCHEMA_NAME => {
+                            Some(Role::State(index_of(&mut scored, p.to_owned(), p)))
+                        }
                         Some("smoothed") if schema == FusedState::SCHEMA_NAME => {
                             smoothed_channels = true;
-                            Some(Role::Smoothed(index_of(&mut scored, format!("{p}/smoothed"), p)))
+                            Some(Role::Smoothed(index_of(
+                                &mut scored,
+                                format!("{p}/smoothed"),
+                                p,
+                            )))
                         }
-                        Some("diagnostics") if schema == FusedDiagnostics::SCHEMA_NAME => Some(Role::Diagnostics(index_of(&mut scored, p.to_owned(), p))),
+                        Some("diagnostics") if schema == FusedDiagnostics::SCHEMA_NAME => {
+                            Some(Role::Diagnostics(index_of(&mut scored, p.to_owned(), p)))
+                        }
                         _ => None,
                     }
                 } else if schema == TrackMap::SCHEMA_NAME {
@@ -233,7 +254,9 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
                             GateDecision::RejectedDeviceFault => scored[i].device_fault += 1,
                             _ => continue,
                         }
-                        if let (Some(nis), GateDecision::Accepted | GateDecision::RejectedGate) = (d.nis, d.decision) {
+                        if let (Some(nis), GateDecision::Accepted | GateDecision::RejectedGate) =
+                            (d.nis, d.decision)
+                        {
                             scored[i].nis.add(nis, CHI2_95_1DOF);
                         }
                     }
@@ -242,8 +265,16 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
                         let e: Event = m.decode(input)?;
                         if let Some((label, opens)) = window_of(&e) {
                             if opens {
-                                spans.push(Span { label, start_ns: e.stamp_ns, end_ns: None });
-                            } else if let Some(s) = spans.iter_mut().rev().find(|s| s.label == label && s.end_ns.is_none()) {
+                                spans.push(Span {
+                                    label,
+                                    start_ns: e.stamp_ns,
+                                    end_ns: None,
+                                });
+                            } else if let Some(s) = spans
+                                .iter_mut()
+                                .rev()
+                                .find(|s| s.label == label && s.end_ns.is_none())
+                            {
                                 s.end_ns = Some(e.stamp_ns);
                             }
                         }
@@ -286,7 +317,11 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
                     .meter
                     .windows
                     .iter()
-                    .map(|w| WindowEval { label: w.label.clone(), position_error_m: w.position.summary(), speed_error_mps: w.speed.summary() })
+                    .map(|w| WindowEval {
+                        label: w.label.clone(),
+                        position_error_m: w.position.summary(),
+                        speed_error_mps: w.speed.summary(),
+                    })
                     .collect(),
             }
         })
@@ -295,28 +330,56 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
     Ok(EvalReport {
         input: input.to_owned(),
         reference: reference.map(|_| reference_topic.to_owned()),
-        windows: spans.iter().map(|s| SpanReport { label: s.label.clone(), start_s: secs(s.start_ns), end_s: s.end_ns.map(secs) }).collect(),
+        windows: spans
+            .iter()
+            .map(|s| SpanReport {
+                label: s.label.clone(),
+                start_s: secs(s.start_ns),
+                end_s: s.end_ns.map(secs),
+            })
+            .collect(),
         pipelines,
     })
 }
 
 /// Later passes for smoothed states, one per smoothed channel: one reader walks its states,
 /// another the reference, in step.
-fn score_smoothed(input: &Path, roles: &BTreeMap<u16, Role>, scored: &mut [Scored], spans: &[Span]) -> Result<()> {
-    let channels: Vec<(u16, usize)> = roles.iter().filter_map(|(&id, r)| if let Role::Smoothed(i) = r { Some((id, *i)) } else { None }).collect();
+fn score_smoothed(
+    input: &Path,
+    roles: &BTreeMap<u16, Role>,
+    scored: &mut [Scored],
+    spans: &[Span],
+) -> Result<()> {
+    let channels: Vec<(u16, usize)> = roles
+        .iter()
+        .filter_map(|(&id, r)| {
+            if let Role::Smoothed(i) = r {
+                Some((id, *i))
+            } else {
+                None
+            }
+        })
+        .collect();
     for (channel, i) in channels {
         let mut estimates = LogReader::open(input)?;
         let mut refs = LogReader::open(input)?;
         let mut map: Option<TrackMap> = None;
         let mut refs_done = false;
         while let Some(record) = estimates.next() {
-            let LogRecord::Message(m) = record? else { continue };
+            let LogRecord::Message(m) = record? else {
+                continue;
+            };
             if m.channel.id != channel {
                 continue;
             }
             let st: FusedState = m.decode(input)?;
             // Feed the reference until it has passed this state's stamp.
-            while !refs_done && scored[i].meter.reference_newest_ns().is_none_or(|n| n < st.stamp_ns) {
+            while !refs_done
+                && scored[i]
+                    .meter
+                    .reference_newest_ns()
+                    .is_none_or(|n| n < st.stamp_ns)
+            {
                 let Some(r) = refs.next() else {
                     refs_done = true;
                     break;

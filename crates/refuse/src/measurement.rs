@@ -17,7 +17,9 @@ use std::path::Path;
 
 use nalgebra::RowSVector;
 use railfuse_catalog::log::LogMessage;
-use railfuse_catalog::messages::{BalisePassage, ChannelMessage, GnssFix, Imu, LoopPosition, Odometer, RadarSpeed, TrackMap};
+use railfuse_catalog::messages::{
+    BalisePassage, ChannelMessage, GnssFix, Imu, LoopPosition, Odometer, RadarSpeed, TrackMap,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
@@ -46,7 +48,8 @@ impl Quantity {
 
     /// The observation row on an `N`-state, if the state holds this quantity.
     pub fn h<const N: usize>(self) -> Option<RowSVector<f64, N>> {
-        (self.index() < N).then(|| RowSVector::from_fn(|_, j| if j == self.index() { 1.0 } else { 0.0 }))
+        (self.index() < N)
+            .then(|| RowSVector::from_fn(|_, j| if j == self.index() { 1.0 } else { 0.0 }))
     }
 }
 
@@ -79,8 +82,14 @@ pub enum SensorModel {
 }
 
 impl SensorModel {
-    pub const SUPPORTED: &'static [&'static str] =
-        &[LoopPosition::SCHEMA_NAME, BalisePassage::SCHEMA_NAME, RadarSpeed::SCHEMA_NAME, Odometer::SCHEMA_NAME, GnssFix::SCHEMA_NAME, Imu::SCHEMA_NAME];
+    pub const SUPPORTED: &'static [&'static str] = &[
+        LoopPosition::SCHEMA_NAME,
+        BalisePassage::SCHEMA_NAME,
+        RadarSpeed::SCHEMA_NAME,
+        Odometer::SCHEMA_NAME,
+        GnssFix::SCHEMA_NAME,
+        Imu::SCHEMA_NAME,
+    ];
 
     pub fn for_schema(schema: &str) -> Option<Self> {
         Some(match schema {
@@ -106,21 +115,51 @@ impl SensorModel {
 
     /// Decodes a message into its measurements (at most one per quantity), in `quantities()`
     /// order.
-    pub fn decode(self, msg: &LogMessage<'_>, path: &Path, ctx: &SensorContext, out: &mut Vec<Measurement>) -> Result<()> {
+    pub fn decode(
+        self,
+        msg: &LogMessage<'_>,
+        path: &Path,
+        ctx: &SensorContext,
+        out: &mut Vec<Measurement>,
+    ) -> Result<()> {
         out.clear();
-        let one = |stamp_ns, quantity, value, reported_variance, valid| Measurement { stamp_ns, quantity, value, reported_variance, valid };
+        let one = |stamp_ns, quantity, value, reported_variance, valid| Measurement {
+            stamp_ns,
+            quantity,
+            value,
+            reported_variance,
+            valid,
+        };
         match self {
             SensorModel::LoopPosition => {
                 let m: LoopPosition = msg.decode(path)?;
-                out.push(one(m.stamp_ns, Quantity::Chainage, m.chainage_m, m.variance_m2, true));
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Chainage,
+                    m.chainage_m,
+                    m.variance_m2,
+                    true,
+                ));
             }
             SensorModel::BalisePosition => {
                 let m: BalisePassage = msg.decode(path)?;
-                out.push(one(m.stamp_ns, Quantity::Chainage, m.chainage_m, m.variance_m2, true));
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Chainage,
+                    m.chainage_m,
+                    m.variance_m2,
+                    true,
+                ));
             }
             SensorModel::RadarSpeed => {
                 let m: RadarSpeed = msg.decode(path)?;
-                out.push(one(m.stamp_ns, Quantity::Speed, m.speed_mps, m.speed_variance_m2ps2, m.valid));
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Speed,
+                    m.speed_mps,
+                    m.speed_variance_m2ps2,
+                    m.valid,
+                ));
             }
             SensorModel::OdometerSpeed => {
                 let m: Odometer = msg.decode(path)?;
@@ -128,20 +167,38 @@ impl SensorModel {
             }
             SensorModel::ImuAcceleration => {
                 let m: Imu = msg.decode(path)?;
-                out.push(one(m.stamp_ns, Quantity::Acceleration, m.specific_force_mps2[0], None, true));
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Acceleration,
+                    m.specific_force_mps2[0],
+                    None,
+                    true,
+                ));
             }
             SensorModel::GnssFix => {
                 let m: GnssFix = msg.decode(path)?;
                 let along = gnss_chainage(&m, ctx.track.as_ref());
                 let (chainage, variance, heading) = along.unwrap_or((f64::NAN, None, None));
-                out.push(one(m.stamp_ns, Quantity::Chainage, chainage, variance, along.is_some()));
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Chainage,
+                    chainage,
+                    variance,
+                    along.is_some(),
+                ));
                 // Speed over ground is a magnitude: signed by the course against the track.
                 let sign = match (m.course_rad, heading) {
                     (Some(c), Some(h)) if (c - h).cos() < 0.0 => -1.0,
                     _ => 1.0,
                 };
                 let speed = m.speed_mps.map(|v| sign * v);
-                out.push(one(m.stamp_ns, Quantity::Speed, speed.unwrap_or(f64::NAN), None, m.fix_type.has_position() && speed.is_some()));
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Speed,
+                    speed.unwrap_or(f64::NAN),
+                    None,
+                    m.fix_type.has_position() && speed.is_some(),
+                ));
             }
         }
         Ok(())
@@ -149,13 +206,18 @@ impl SensorModel {
 }
 
 /// Chainage of a fix on the track map, its variance along the track, and the track heading.
-pub(crate) fn gnss_chainage(m: &GnssFix, track: Option<&TrackMap>) -> Option<(f64, Option<f64>, Option<f64>)> {
+pub(crate) fn gnss_chainage(
+    m: &GnssFix,
+    track: Option<&TrackMap>,
+) -> Option<(f64, Option<f64>, Option<f64>)> {
     let track = track?;
     if !m.fix_type.has_position() {
         return None;
     }
     let (lat, lon) = (m.latitude_deg?, m.longitude_deg?);
-    let (e, n, _) = track.origin.to_enu(lat, lon, m.altitude_m.unwrap_or(track.origin.altitude_m));
+    let (e, n, _) = track
+        .origin
+        .to_enu(lat, lon, m.altitude_m.unwrap_or(track.origin.altitude_m));
     let (chainage, heading) = track.project(e, n)?;
     let variance = m.position_covariance_enu_m2.map(|c| {
         let (ue, un) = (heading.sin(), heading.cos());

@@ -15,14 +15,21 @@ use nalgebra::{RowSVector, SMatrix, SVector};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 use serde::Serialize;
 
-use crate::config::{FilterKind, MotionConfig, PipelineConfig, VarianceValue, MASTER_DEVICE, MAX_STATES};
+use crate::config::{
+    FilterKind, MotionConfig, PipelineConfig, VarianceValue, MASTER_DEVICE, MAX_STATES,
+};
 use crate::error::{Error, Result};
 use crate::filter::federated::{Federated, FederatedSettings};
 use crate::filter::particle::ParticleSettings;
 use crate::filter::rts::EpochRecorder;
-use crate::filter::{Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement, StateAndCovariance, MASTER};
+use crate::filter::{
+    Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
+    StateAndCovariance, MASTER,
+};
 use crate::measurement::{Measurement, Quantity};
-use crate::model::{ConstantAcceleration, ConstantVelocity, SensorState, Singer, TransitionModel, WithSensorStates};
+use crate::model::{
+    ConstantAcceleration, ConstantVelocity, SensorState, Singer, TransitionModel, WithSensorStates,
+};
 
 /// What a pipeline did with its measurements.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
@@ -100,11 +107,20 @@ pub struct Pipeline<const N: usize> {
 }
 
 impl<const N: usize> Pipeline<N> {
-    fn new(config: PipelineConfig, make_model: fn(&PipelineConfig) -> Box<dyn TransitionModel<N>>) -> Result<Self> {
+    fn new(
+        config: PipelineConfig,
+        make_model: fn(&PipelineConfig) -> Box<dyn TransitionModel<N>>,
+    ) -> Result<Self> {
         let devices = config.devices();
         let motion = config.motion.dimension();
         let states = config.sensor_states();
-        let layout = StateLayout { motion, sensor: states.iter().map(|(i, s)| (config.sensor[*i].topic.clone(), s.kind())).collect() };
+        let layout = StateLayout {
+            motion,
+            sensor: states
+                .iter()
+                .map(|(i, s)| (config.sensor[*i].topic.clone(), s.kind()))
+                .collect(),
+        };
         let field = |i: usize, q: Quantity, variance: VarianceValue| {
             if q.index() >= motion {
                 return None;
@@ -113,13 +129,23 @@ impl<const N: usize> Pipeline<N> {
             let mut scale_state = None;
             // Sensor `i`'s state on this quantity: a bias adds to the row, a scale factor makes
             // it non-linear (linearised at each update).
-            if let Some(p) = states.iter().position(|(j, s)| *j == i && s.quantity() == q) {
+            if let Some(p) = states
+                .iter()
+                .position(|(j, s)| *j == i && s.quantity() == q)
+            {
                 match states[p].1 {
                     SensorState::ScaleFactor { .. } => scale_state = Some(motion + p),
-                    SensorState::ChainageBias { .. } | SensorState::AccelerationBias { .. } => h[motion + p] = 1.0,
+                    SensorState::ChainageBias { .. } | SensorState::AccelerationBias { .. } => {
+                        h[motion + p] = 1.0
+                    }
                 }
             }
-            Some(Field { quantity: q, h, variance, scale_state })
+            Some(Field {
+                quantity: q,
+                h,
+                variance,
+                scale_state,
+            })
         };
         let sensors = config
             .sensor
@@ -131,22 +157,35 @@ impl<const N: usize> Pipeline<N> {
                     MASTER_DEVICE => MASTER,
                     d => devices.iter().position(|n| n == d).unwrap_or(0),
                 },
-                device_name: config.filter.is_federated().then(|| s.device_name().to_owned()),
+                device_name: config
+                    .filter
+                    .is_federated()
+                    .then(|| s.device_name().to_owned()),
                 fields: s
                     .fields
                     .clone()
-                    .unwrap_or_else(|| vec![Quantity::Chainage, Quantity::Speed, Quantity::Acceleration])
+                    .unwrap_or_else(|| {
+                        vec![Quantity::Chainage, Quantity::Speed, Quantity::Acceleration]
+                    })
                     .into_iter()
                     .filter_map(|q| field(i, q, s.variance.of(q)?))
                     .collect(),
                 gate_nis: s.gate_nis,
             })
             .collect();
-        let smoother =
-            if config.smoother { Some(EpochRecorder::new().map_err(|source| Error::Spill { pipeline: config.name.clone(), source })?) } else { None };
+        let smoother = if config.smoother {
+            Some(EpochRecorder::new().map_err(|source| Error::Spill {
+                pipeline: config.name.clone(),
+                source,
+            })?)
+        } else {
+            None
+        };
         Ok(Self {
             window_ns: (config.reorder_window_s * 1e9) as u64,
-            output_period_ns: config.output_rate_hz.map(|r| (1e9 / r).round().max(1.0) as u64),
+            output_period_ns: config
+                .output_rate_hz
+                .map(|r| (1e9 / r).round().max(1.0) as u64),
             config,
             sensors,
             make_model,
@@ -165,14 +204,31 @@ impl<const N: usize> Pipeline<N> {
 
     /// Queues the measurements of one message of sensor `sensor`, received at `log_time_ns`,
     /// and releases every measurement the replay is now more than the reorder window past.
-    pub fn push(&mut self, sensor: usize, measurements: &[Measurement], log_time_ns: u64, out: &mut Vec<Fused>) {
+    pub fn push(
+        &mut self,
+        sensor: usize,
+        measurements: &[Measurement],
+        log_time_ns: u64,
+        out: &mut Vec<Fused>,
+    ) {
         for m in measurements {
-            let Some(field) = self.sensors[sensor].fields.iter().position(|f| f.quantity == m.quantity) else {
+            let Some(field) = self.sensors[sensor]
+                .fields
+                .iter()
+                .position(|f| f.quantity == m.quantity)
+            else {
                 continue;
             };
             self.seq += 1;
             self.order.push(Reverse((m.stamp_ns, self.seq)));
-            self.pending.insert(self.seq, Pending { sensor, field, measurement: *m });
+            self.pending.insert(
+                self.seq,
+                Pending {
+                    sensor,
+                    field,
+                    measurement: *m,
+                },
+            );
         }
         self.release(log_time_ns.saturating_sub(self.window_ns), log_time_ns, out);
     }
@@ -187,7 +243,12 @@ impl<const N: usize> Pipeline<N> {
 
     /// A device's own fault report; `name` is its device name or one of its topics.
     pub fn device_event(&mut self, name: &str, failed: bool) {
-        let device = self.config.sensor.iter().find(|s| s.topic == name).map_or(name, |s| s.device_name());
+        let device = self
+            .config
+            .sensor
+            .iter()
+            .find(|s| s.topic == name)
+            .map_or(name, |s| s.device_name());
         if let Some(e) = &mut self.estimator {
             e.device_event(device, failed);
         }
@@ -199,19 +260,39 @@ impl<const N: usize> Pipeline<N> {
                 break;
             }
             self.order.pop();
-            let p = self.pending.remove(&seq).expect("every queued key has its measurement");
+            let p = self
+                .pending
+                .remove(&seq)
+                .expect("every queued key has its measurement");
             self.process(p, log_time_ns, out);
         }
     }
 
     fn initial(&self, chainage: f64, r: f64) -> StateAndCovariance<N> {
         let init = &self.config.initial;
-        let (speed, speed_var) = self.speed_before_init.unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
+        let (speed, speed_var) = self
+            .speed_before_init
+            .unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
         let (motion, states) = (self.layout.motion, self.config.sensor_states());
         // Motion states from the first fix; sensor states at zero with their prior spread.
-        let mean = |i: usize| if i < motion { [chainage, speed, init.acceleration_mps2][i] } else { 0.0 };
-        let var = |i: usize| if i < motion { [r, speed_var, init.acceleration_std_mps2.powi(2)][i] } else { states[i - motion].1.std().powi(2) };
-        StateAndCovariance { state: SVector::from_fn(|i, _| mean(i)), covariance: SMatrix::from_fn(|i, j| if i == j { var(i) } else { 0.0 }) }
+        let mean = |i: usize| {
+            if i < motion {
+                [chainage, speed, init.acceleration_mps2][i]
+            } else {
+                0.0
+            }
+        };
+        let var = |i: usize| {
+            if i < motion {
+                [r, speed_var, init.acceleration_std_mps2.powi(2)][i]
+            } else {
+                states[i - motion].1.std().powi(2)
+            }
+        };
+        StateAndCovariance {
+            state: SVector::from_fn(|i, _| mean(i)),
+            covariance: SMatrix::from_fn(|i, j| if i == j { var(i) } else { 0.0 }),
+        }
     }
 
     fn build(&mut self, init: &StateAndCovariance<N>, t0: u64) -> Box<dyn Estimator<N>> {
@@ -227,7 +308,9 @@ impl<const N: usize> Pipeline<N> {
                 seed: p.seed.wrapping_add(seed_offset),
             }
         };
-        let lockout = c.gate_lockout.unwrap_or(crate::config::DEFAULT_GATE_LOCKOUT);
+        let lockout = c
+            .gate_lockout
+            .unwrap_or(crate::config::DEFAULT_GATE_LOCKOUT);
         let federated = || {
             let f = c.federated.clone().unwrap_or_default();
             FederatedSettings {
@@ -239,14 +322,37 @@ impl<const N: usize> Pipeline<N> {
             }
         };
         match c.filter {
-            FilterKind::Kalman => {
-                Box::new(Centralised::new(KalmanFilter::new(init.state, init.covariance), model, t0, self.smoother.take()).with_gate_lockout(lockout))
-            }
-            FilterKind::Particle => Box::new(Centralised::new(ParticleFilter::new(particles(0), init), model, t0, None).with_gate_lockout(lockout)),
-            FilterKind::FederatedKalman => Box::new(Federated::new(federated(), model, c.devices(), init, t0, |_, s| KalmanFilter::new(s.state, s.covariance))),
+            FilterKind::Kalman => Box::new(
+                Centralised::new(
+                    KalmanFilter::new(init.state, init.covariance),
+                    model,
+                    t0,
+                    self.smoother.take(),
+                )
+                .with_gate_lockout(lockout),
+            ),
+            FilterKind::Particle => Box::new(
+                Centralised::new(ParticleFilter::new(particles(0), init), model, t0, None)
+                    .with_gate_lockout(lockout),
+            ),
+            FilterKind::FederatedKalman => Box::new(Federated::new(
+                federated(),
+                model,
+                c.devices(),
+                init,
+                t0,
+                |_, s| KalmanFilter::new(s.state, s.covariance),
+            )),
             FilterKind::FederatedParticle => {
                 // Each local particle filter has its own random stream.
-                Box::new(Federated::new(federated(), model, c.devices(), init, t0, |i, s| ParticleFilter::new(particles(i as u64 + 1), s)))
+                Box::new(Federated::new(
+                    federated(),
+                    model,
+                    c.devices(),
+                    init,
+                    t0,
+                    |i, s| ParticleFilter::new(particles(i as u64 + 1), s),
+                ))
             }
         }
     }
@@ -258,8 +364,17 @@ impl<const N: usize> Pipeline<N> {
         };
         while self.next_output_ns < t_ns {
             e.advance_to(self.next_output_ns);
-            let state = fused_state(&self.layout, self.next_output_ns, &e.estimate(), "output_tick");
-            out.push(Fused { log_time_ns, state: Some(state), diagnostics: None });
+            let state = fused_state(
+                &self.layout,
+                self.next_output_ns,
+                &e.estimate(),
+                "output_tick",
+            );
+            out.push(Fused {
+                log_time_ns,
+                state: Some(state),
+                diagnostics: None,
+            });
             self.next_output_ns += period;
         }
     }
@@ -286,7 +401,13 @@ impl<const N: usize> Pipeline<N> {
             resampled: None,
             sharing: None,
         };
-        let (h, scale_state, device, gate_nis, source) = (field.h, field.scale_state, sensor.device, sensor.gate_nis, sensor.topic.clone());
+        let (h, scale_state, device, gate_nis, source) = (
+            field.h,
+            field.scale_state,
+            sensor.device,
+            sensor.gate_nis,
+            sensor.topic.clone(),
+        );
         let usable_variance = variance.filter(|r| r.is_finite() && *r > 0.0);
         if let Some(e) = &mut self.estimator {
             e.heard_from(device, m.stamp_ns);
@@ -326,7 +447,15 @@ impl<const N: usize> Pipeline<N> {
                     let (v, k) = (x[1], x[j]);
                     (h[1], h[j], offset) = (1.0 + k, v, -v * k);
                 }
-                let outcome = e.process(&ScalarMeasurement { device, quantity: m.quantity.index(), h, offset, r, z: m.value, gate_nis });
+                let outcome = e.process(&ScalarMeasurement {
+                    device,
+                    quantity: m.quantity.index(),
+                    h,
+                    offset,
+                    r,
+                    z: m.value,
+                    gate_nis,
+                });
                 if let Some(i) = outcome.innovation() {
                     diagnostics.innovation = Some(i.residual);
                     diagnostics.innovation_variance = Some(i.variance);
@@ -339,13 +468,23 @@ impl<const N: usize> Pipeline<N> {
                 match outcome {
                     Outcome::Accepted(_) => {
                         if self.output_period_ns.is_none() {
-                            state = Some(fused_state(&self.layout, m.stamp_ns, &e.estimate(), &source));
+                            state = Some(fused_state(
+                                &self.layout,
+                                m.stamp_ns,
+                                &e.estimate(),
+                                &source,
+                            ));
                         }
                         GateDecision::Accepted
                     }
                     Outcome::AcceptedAfterLockout(_) => {
                         if self.output_period_ns.is_none() {
-                            state = Some(fused_state(&self.layout, m.stamp_ns, &e.estimate(), &source));
+                            state = Some(fused_state(
+                                &self.layout,
+                                m.stamp_ns,
+                                &e.estimate(),
+                                &source,
+                            ));
                         }
                         GateDecision::AcceptedAfterLockout
                     }
@@ -366,25 +505,40 @@ impl<const N: usize> Pipeline<N> {
             GateDecision::BeforeInitialisation => &mut self.counts.before_initialisation,
         };
         *counter += 1;
-        out.push(Fused { log_time_ns, state, diagnostics: Some(diagnostics) });
+        out.push(Fused {
+            log_time_ns,
+            state,
+            diagnostics: Some(diagnostics),
+        });
     }
 
     /// The smoothed states, once `finish` has run (Kalman pipelines with `smoother = true`).
-    pub fn smoothed(&mut self) -> Option<std::io::Result<Box<dyn Iterator<Item = std::io::Result<FusedState>>>>> {
+    pub fn smoothed(
+        &mut self,
+    ) -> Option<std::io::Result<Box<dyn Iterator<Item = std::io::Result<FusedState>>>>> {
         let recorder = self.smoother.take()?;
         if recorder.epochs() == 0 {
             return None;
         }
         let layout = self.layout.clone();
-        Some(recorder.smooth().map(move |epochs| -> Box<dyn Iterator<Item = std::io::Result<FusedState>>> {
-            Box::new(epochs.map(move |e| e.map(|e| fused_state(&layout, e.stamp_ns, &e.estimate, "rts_smoother"))))
-        }))
+        Some(recorder.smooth().map(
+            move |epochs| -> Box<dyn Iterator<Item = std::io::Result<FusedState>>> {
+                Box::new(epochs.map(move |e| {
+                    e.map(|e| fused_state(&layout, e.stamp_ns, &e.estimate, "rts_smoother"))
+                }))
+            },
+        ))
     }
 }
 
 /// A fused state from an `N`-state estimate (acceleration 0 with no variance for the
 /// two-state constant-velocity model), with its sensor states.
-pub fn fused_state<const N: usize>(layout: &StateLayout, stamp_ns: u64, e: &StateAndCovariance<N>, source: &str) -> FusedState {
+pub fn fused_state<const N: usize>(
+    layout: &StateLayout,
+    stamp_ns: u64,
+    e: &StateAndCovariance<N>,
+    source: &str,
+) -> FusedState {
     let motion = layout.motion;
     let x = |i: usize| if i < motion { e.state[i] } else { 0.0 };
     let mut covariance = [0.0; 9];
@@ -405,30 +559,63 @@ pub fn fused_state<const N: usize>(layout: &StateLayout, stamp_ns: u64, e: &Stat
             std: e.covariance[(motion + k, motion + k)].max(0.0).sqrt(),
         })
         .collect();
-    FusedState { stamp_ns, chainage_m: x(0), speed_mps: x(1), acceleration_mps2: x(2), covariance, source: source.to_owned(), sensor_states }
+    FusedState {
+        stamp_ns,
+        chainage_m: x(0),
+        speed_mps: x(1),
+        acceleration_mps2: x(2),
+        covariance,
+        source: source.to_owned(),
+        sensor_states,
+    }
 }
 
 fn motion_2(m: &MotionConfig) -> Box<dyn TransitionModel<2>> {
     match *m {
-        MotionConfig::ConstantVelocity { acceleration_psd } => Box::new(ConstantVelocity { acceleration_psd }),
+        MotionConfig::ConstantVelocity { acceleration_psd } => {
+            Box::new(ConstantVelocity { acceleration_psd })
+        }
         _ => unreachable!("AnyPipeline picks two states for the constant-velocity model only"),
     }
 }
 
 fn motion_3(m: &MotionConfig) -> Box<dyn TransitionModel<3>> {
     match *m {
-        MotionConfig::ConstantAcceleration { jerk_psd: Some(q), .. } => Box::new(ConstantAcceleration { noise: crate::model::ProcessNoise::WhiteJerkPsd(q) }),
-        MotionConfig::ConstantAcceleration { jerk_variance: Some(v), .. } => {
-            Box::new(ConstantAcceleration { noise: crate::model::ProcessNoise::PiecewiseJerkVariance(v) })
-        }
-        MotionConfig::Singer { time_constant_s, acceleration_std_mps2 } => Box::new(Singer { time_constant_s, acceleration_std_mps2 }),
+        MotionConfig::ConstantAcceleration {
+            jerk_psd: Some(q), ..
+        } => Box::new(ConstantAcceleration {
+            noise: crate::model::ProcessNoise::WhiteJerkPsd(q),
+        }),
+        MotionConfig::ConstantAcceleration {
+            jerk_variance: Some(v),
+            ..
+        } => Box::new(ConstantAcceleration {
+            noise: crate::model::ProcessNoise::PiecewiseJerkVariance(v),
+        }),
+        MotionConfig::Singer {
+            time_constant_s,
+            acceleration_std_mps2,
+        } => Box::new(Singer {
+            time_constant_s,
+            acceleration_std_mps2,
+        }),
         _ => unreachable!("validated on load: a three-state model"),
     }
 }
 
 /// The `B` motion states of `c` with its sensor states appended: `N` in all.
-fn with_sensor_states<const B: usize, const N: usize>(motion: Box<dyn TransitionModel<B>>, c: &PipelineConfig) -> Box<dyn TransitionModel<N>> {
-    Box::new(WithSensorStates::<B, N> { motion, states: c.sensor_states().into_iter().map(|(_, s): (usize, SensorState)| s).collect() })
+fn with_sensor_states<const B: usize, const N: usize>(
+    motion: Box<dyn TransitionModel<B>>,
+    c: &PipelineConfig,
+) -> Box<dyn TransitionModel<N>> {
+    Box::new(WithSensorStates::<B, N> {
+        motion,
+        states: c
+            .sensor_states()
+            .into_iter()
+            .map(|(_, s): (usize, SensorState)| s)
+            .collect(),
+    })
 }
 
 /// The full model of an `N`-state pipeline: its motion model (two or three states) and its
@@ -502,7 +689,13 @@ impl AnyPipeline {
         self.config().sensor.iter().position(|s| s.topic == topic)
     }
 
-    pub fn push(&mut self, sensor: usize, measurements: &[Measurement], log_time_ns: u64, out: &mut Vec<Fused>) {
+    pub fn push(
+        &mut self,
+        sensor: usize,
+        measurements: &[Measurement],
+        log_time_ns: u64,
+        out: &mut Vec<Fused>,
+    ) {
         each!(self, p => p.push(sensor, measurements, log_time_ns, out))
     }
 
@@ -514,7 +707,9 @@ impl AnyPipeline {
         each!(self, p => p.device_event(device, failed))
     }
 
-    pub fn smoothed(&mut self) -> Option<std::io::Result<Box<dyn Iterator<Item = std::io::Result<FusedState>>>>> {
+    pub fn smoothed(
+        &mut self,
+    ) -> Option<std::io::Result<Box<dyn Iterator<Item = std::io::Result<FusedState>>>>> {
         each!(self, p => p.smoothed())
     }
 }
@@ -534,7 +729,13 @@ mod tests {
     }
 
     fn m(stamp_ns: u64, quantity: Quantity, value: f64, var: Option<f64>) -> [Measurement; 1] {
-        [Measurement { stamp_ns, quantity, value, reported_variance: var, valid: true }]
+        [Measurement {
+            stamp_ns,
+            quantity,
+            value,
+            reported_variance: var,
+            valid: true,
+        }]
     }
 
     #[test]
@@ -544,10 +745,21 @@ mod tests {
         let s = 1_000_000_000u64;
         p.push(0, &m(s, Quantity::Chainage, 0.0, None), s, &mut out);
         // A speed measured at 1.10 s arrives after a position measured at 1.15 s.
-        p.push(0, &m(s + 150_000_000, Quantity::Chainage, 1.5, None), s + 160_000_000, &mut out);
-        p.push(1, &m(s + 100_000_000, Quantity::Speed, 10.0, Some(0.01)), s + 170_000_000, &mut out);
+        p.push(
+            0,
+            &m(s + 150_000_000, Quantity::Chainage, 1.5, None),
+            s + 160_000_000,
+            &mut out,
+        );
+        p.push(
+            1,
+            &m(s + 100_000_000, Quantity::Speed, 10.0, Some(0.01)),
+            s + 170_000_000,
+            &mut out,
+        );
         p.finish(s + 200_000_000, &mut out);
-        let diags: Vec<FusedDiagnostics> = out.iter().filter_map(|f| f.diagnostics.clone()).collect();
+        let diags: Vec<FusedDiagnostics> =
+            out.iter().filter_map(|f| f.diagnostics.clone()).collect();
         let stamps: Vec<u64> = diags.iter().map(|d| d.stamp_ns).collect();
         assert_eq!(stamps, vec![s, s + 100_000_000, s + 150_000_000]);
         assert!(diags.iter().all(|d| d.decision == GateDecision::Accepted));
@@ -560,9 +772,19 @@ mod tests {
         let mut out = Vec::new();
         p.push(0, &m(0, Quantity::Chainage, 0.0, None), 0, &mut out);
         p.push(0, &m(10, Quantity::Chainage, f64::NAN, None), 10, &mut out);
-        p.push(0, &m(20, Quantity::Chainage, f64::INFINITY, None), 20, &mut out);
+        p.push(
+            0,
+            &m(20, Quantity::Chainage, f64::INFINITY, None),
+            20,
+            &mut out,
+        );
         p.push(1, &m(30, Quantity::Speed, 3.0, None), 30, &mut out); // "message" variance, none given
-        p.push(1, &m(40, Quantity::Speed, 0.0, Some(f64::NAN)), 40, &mut out);
+        p.push(
+            1,
+            &m(40, Quantity::Speed, 0.0, Some(f64::NAN)),
+            40,
+            &mut out,
+        );
         p.push(0, &m(50, Quantity::Chainage, 1e6, None), 50, &mut out); // far outside the gate
         p.finish(60, &mut out);
         assert_eq!(p.counts().accepted, 1);
@@ -574,7 +796,8 @@ mod tests {
             }
             // Every output survives JSON (which has no NaN) both ways.
             let d = f.diagnostics.as_ref().unwrap();
-            let back: FusedDiagnostics = serde_json::from_str(&serde_json::to_string(d).unwrap()).unwrap();
+            let back: FusedDiagnostics =
+                serde_json::from_str(&serde_json::to_string(d).unwrap()).unwrap();
             assert_eq!(back.decision, d.decision);
         }
     }

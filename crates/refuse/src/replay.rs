@@ -10,7 +10,9 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use railfuse_catalog::log::{read_channels, ChannelId, LogReader, LogRecord, LogWriter};
-use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, TrackMap};
+use railfuse_catalog::messages::{
+    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, TrackMap,
+};
 use railfuse_catalog::topics;
 use serde::Serialize;
 
@@ -79,16 +81,31 @@ struct Output {
 
 pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
     let input = opts.input;
-    let names: BTreeSet<&str> = opts.config.pipeline.iter().map(|p| p.name.as_str()).collect();
-    let is_replaced = |topic: &str| topics::fused_pipeline_of(topic).is_some_and(|n| names.contains(n));
+    let names: BTreeSet<&str> = opts
+        .config
+        .pipeline
+        .iter()
+        .map(|p| p.name.as_str())
+        .collect();
+    let is_replaced =
+        |topic: &str| topics::fused_pipeline_of(topic).is_some_and(|n| names.contains(n));
     let known = read_channels(input)?;
     if let Some(channels) = &known {
         for p in &opts.config.pipeline {
             for s in &p.sensor {
                 match channels.iter().find(|c| c.topic == s.topic) {
                     None => {
-                        let have: Vec<&str> = channels.iter().map(|c| c.topic.as_str()).filter(|t| !t.starts_with(topics::FUSED_PREFIX)).collect();
-                        return Err(channel_error(input, &p.name, &s.topic, format!("is not in the file (it has {})", have.join(", "))));
+                        let have: Vec<&str> = channels
+                            .iter()
+                            .map(|c| c.topic.as_str())
+                            .filter(|t| !t.starts_with(topics::FUSED_PREFIX))
+                            .collect();
+                        return Err(channel_error(
+                            input,
+                            &p.name,
+                            &s.topic,
+                            format!("is not in the file (it has {})", have.join(", ")),
+                        ));
                     }
                     Some(c) => check_sensor(input, p, s, c.schema_name())?,
                 }
@@ -99,17 +116,43 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
     let mut writer = LogWriter::create(opts.output)?;
     // Output channels take the highest ids the input does not use, so copied records keep
     // theirs.
-    let used: BTreeSet<u16> = known.iter().flatten().filter(|c| !is_replaced(&c.topic)).map(|c| c.id).collect();
-    let used_schemas: BTreeSet<u16> = known.iter().flatten().filter_map(|c| c.schema.as_ref().map(|s| s.id)).collect();
-    let mut free = (1..=u16::MAX).rev().filter(|id| !used.contains(id) && !used_schemas.contains(id));
-    let (state_schema, diag_schema) = (free.next().expect("ids to spare"), free.next().expect("ids to spare"));
+    let used: BTreeSet<u16> = known
+        .iter()
+        .flatten()
+        .filter(|c| !is_replaced(&c.topic))
+        .map(|c| c.id)
+        .collect();
+    let used_schemas: BTreeSet<u16> = known
+        .iter()
+        .flatten()
+        .filter_map(|c| c.schema.as_ref().map(|s| s.id))
+        .collect();
+    let mut free = (1..=u16::MAX)
+        .rev()
+        .filter(|id| !used.contains(id) && !used_schemas.contains(id));
+    let (state_schema, diag_schema) = (
+        free.next().expect("ids to spare"),
+        free.next().expect("ids to spare"),
+    );
     let mut outputs = Vec::new();
     for p in &opts.config.pipeline {
         outputs.push(Output {
-            state: writer.add_channel_with_ids::<FusedState>(state_schema, free.next().expect("ids"), &topics::fused_state(&p.name))?,
-            diagnostics: writer.add_channel_with_ids::<FusedDiagnostics>(diag_schema, free.next().expect("ids"), &topics::fused_diagnostics(&p.name))?,
+            state: writer.add_channel_with_ids::<FusedState>(
+                state_schema,
+                free.next().expect("ids"),
+                &topics::fused_state(&p.name),
+            )?,
+            diagnostics: writer.add_channel_with_ids::<FusedDiagnostics>(
+                diag_schema,
+                free.next().expect("ids"),
+                &topics::fused_diagnostics(&p.name),
+            )?,
             smoothed: match p.smoother {
-                true => Some(writer.add_channel_with_ids::<FusedState>(state_schema, free.next().expect("ids"), &topics::fused_smoothed(&p.name))?),
+                true => Some(writer.add_channel_with_ids::<FusedState>(
+                    state_schema,
+                    free.next().expect("ids"),
+                    &topics::fused_smoothed(&p.name),
+                )?),
                 false => None,
             },
             states: 0,
@@ -117,7 +160,13 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
         });
     }
 
-    let mut pipelines: Vec<AnyPipeline> = opts.config.pipeline.iter().cloned().map(AnyPipeline::new).collect::<Result<_>>()?;
+    let mut pipelines: Vec<AnyPipeline> = opts
+        .config
+        .pipeline
+        .iter()
+        .cloned()
+        .map(AnyPipeline::new)
+        .collect::<Result<_>>()?;
     let mut context = SensorContext::default();
     let mut measurements = Vec::new();
     let mut routes: HashMap<u16, Route> = HashMap::new();
@@ -145,7 +194,13 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                 if is_replaced(&c.topic) {
                     route.replaced = true;
                 } else {
-                    writer.copy_channel(c.id, c.schema.as_ref().map_or(0, |s| s.id), &c.topic, &c.message_encoding, &c.metadata)?;
+                    writer.copy_channel(
+                        c.id,
+                        c.schema.as_ref().map_or(0, |s| s.id),
+                        &c.topic,
+                        &c.message_encoding,
+                        &c.metadata,
+                    )?;
                     seen_topics.insert(c.topic.clone());
                     route.context = match c.schema_name() {
                         n if n == TrackMap::SCHEMA_NAME => Some(ContextKind::TrackMap),
@@ -154,7 +209,12 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                     };
                     for (pi, p) in pipelines.iter().enumerate() {
                         if let Some(si) = p.sensor_for(&c.topic) {
-                            check_sensor(input, p.config(), &p.config().sensor[si], c.schema_name())?;
+                            check_sensor(
+                                input,
+                                p.config(),
+                                &p.config().sensor[si],
+                                c.schema_name(),
+                            )?;
                             route.sensors.push((pi, si));
                             route.model = SensorModel::for_schema(c.schema_name());
                         }
@@ -172,7 +232,13 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                     report.out_of_order_messages += 1;
                 }
                 last_log_time = last_log_time.max(m.log_time_ns);
-                writer.write_raw(m.channel.id, m.sequence, m.log_time_ns, m.publish_time_ns, m.data)?;
+                writer.write_raw(
+                    m.channel.id,
+                    m.sequence,
+                    m.log_time_ns,
+                    m.publish_time_ns,
+                    m.data,
+                )?;
                 match route.context {
                     Some(ContextKind::TrackMap) => context.track = Some(m.decode(input)?),
                     Some(ContextKind::Events) => {
@@ -183,7 +249,9 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                             _ => None,
                         };
                         if let Some(failed) = failed {
-                            pipelines.iter_mut().for_each(|p| p.device_event(&e.text, failed));
+                            pipelines
+                                .iter_mut()
+                                .for_each(|p| p.device_event(&e.text, failed));
                         }
                     }
                     None => {}
@@ -193,24 +261,38 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
                     // skipped and counted: one bad message must not cost the whole replay.
                     if let Err(e) = model.decode(&m, input, &context, &mut measurements) {
                         report.undecodable_messages += 1;
-                        report.first_undecodable.get_or_insert_with(|| e.to_string());
+                        report
+                            .first_undecodable
+                            .get_or_insert_with(|| e.to_string());
                         continue;
                     }
                     for &(pi, si) in &route.sensors {
                         pipelines[pi].push(si, &measurements, m.log_time_ns, &mut fused_buf);
-                        emit(&mut writer, &mut outputs[pi], &mut fused_buf, &mut report.fused_messages)?;
+                        emit(
+                            &mut writer,
+                            &mut outputs[pi],
+                            &mut fused_buf,
+                            &mut report.fused_messages,
+                        )?;
                     }
                 }
             }
             LogRecord::Metadata { name, metadata } => {
-                let replaced = name == topics::metadata::PIPELINE && metadata.get("pipeline").is_some_and(|p| names.contains(p.as_str()));
+                let replaced = name == topics::metadata::PIPELINE
+                    && metadata
+                        .get("pipeline")
+                        .is_some_and(|p| names.contains(p.as_str()));
                 if !replaced {
                     writer.write_metadata(&name, metadata)?;
                 }
             }
-            LogRecord::Attachment { name, media_type, log_time_ns, create_time_ns, data } => {
-                writer.attach(&name, &media_type, log_time_ns, create_time_ns, data)?
-            }
+            LogRecord::Attachment {
+                name,
+                media_type,
+                log_time_ns,
+                create_time_ns,
+                data,
+            } => writer.attach(&name, &media_type, log_time_ns, create_time_ns, data)?,
         }
     }
     report.input_bytes = reader.bytes_read();
@@ -218,15 +300,28 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
     for p in &opts.config.pipeline {
         for s in &p.sensor {
             if !seen_topics.contains(&s.topic) {
-                return Err(channel_error(input, &p.name, &s.topic, "is not in the file".into()));
+                return Err(channel_error(
+                    input,
+                    &p.name,
+                    &s.topic,
+                    "is not in the file".into(),
+                ));
             }
         }
     }
     for (pi, p) in pipelines.iter_mut().enumerate() {
         p.finish(last_log_time, &mut fused_buf);
-        emit(&mut writer, &mut outputs[pi], &mut fused_buf, &mut report.fused_messages)?;
+        emit(
+            &mut writer,
+            &mut outputs[pi],
+            &mut fused_buf,
+            &mut report.fused_messages,
+        )?;
         if let (Some(channel), Some(smoothed)) = (outputs[pi].smoothed, p.smoothed()) {
-            let spill = |source| Error::Spill { pipeline: p.name().to_owned(), source };
+            let spill = |source| Error::Spill {
+                pipeline: p.name().to_owned(),
+                source,
+            };
             for state in smoothed.map_err(spill)? {
                 let state = state.map_err(spill)?;
                 writer.write(channel, state.stamp_ns, &state)?;
@@ -240,8 +335,14 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
             ("config_toml".to_owned(), p.config().to_toml()),
             ("config_source".to_owned(), opts.config_source.clone()),
             ("input".to_owned(), input.display().to_string()),
-            ("tool_version".to_owned(), concat!("railfuse ", env!("CARGO_PKG_VERSION")).to_owned()),
-            ("counts".to_owned(), serde_json::to_string(p.counts()).expect("counts serialise")),
+            (
+                "tool_version".to_owned(),
+                concat!("railfuse ", env!("CARGO_PKG_VERSION")).to_owned(),
+            ),
+            (
+                "counts".to_owned(),
+                serde_json::to_string(p.counts()).expect("counts serialise"),
+            ),
         ]);
         writer.write_metadata(topics::metadata::PIPELINE, metadata)?;
     }
@@ -258,7 +359,12 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
     Ok(report)
 }
 
-fn emit(writer: &mut LogWriter, out: &mut Output, fused: &mut Vec<Fused>, count: &mut u64) -> Result<()> {
+fn emit(
+    writer: &mut LogWriter,
+    out: &mut Output,
+    fused: &mut Vec<Fused>,
+    count: &mut u64,
+) -> Result<()> {
     for f in fused.drain(..) {
         if let Some(state) = &f.state {
             writer.write(out.state, f.log_time_ns, state)?;
@@ -274,38 +380,82 @@ fn emit(writer: &mut LogWriter, out: &mut Output, fused: &mut Vec<Fused>, count:
 }
 
 /// The channel's schema has a sensor model, and that model gives the fields the sensor asks for.
-fn check_sensor(input: &Path, p: &crate::config::PipelineConfig, s: &crate::config::SensorConfig, schema: &str) -> Result<()> {
+fn check_sensor(
+    input: &Path,
+    p: &crate::config::PipelineConfig,
+    s: &crate::config::SensorConfig,
+    schema: &str,
+) -> Result<()> {
     let Some(model) = SensorModel::for_schema(schema) else {
         let supported = SensorModel::SUPPORTED.join(", ");
-        return Err(channel_error(input, &p.name, &s.topic, format!("has schema '{schema}', which no sensor model reads (supported: {supported})")));
+        return Err(channel_error(
+            input,
+            &p.name,
+            &s.topic,
+            format!("has schema '{schema}', which no sensor model reads (supported: {supported})"),
+        ));
     };
     let gives: Vec<&str> = model.quantities().iter().map(|q| q.name()).collect();
-    let wanted = s.fields.clone().unwrap_or_else(|| model.quantities().to_vec());
+    let wanted = s
+        .fields
+        .clone()
+        .unwrap_or_else(|| model.quantities().to_vec());
     for q in &wanted {
         if !model.quantities().contains(q) {
-            return Err(channel_error(input, &p.name, &s.topic, format!("gives {} but not {}", gives.join(" and "), q.name())));
+            return Err(channel_error(
+                input,
+                &p.name,
+                &s.topic,
+                format!("gives {} but not {}", gives.join(" and "), q.name()),
+            ));
         }
         if q.index() >= p.motion.dimension() {
             return Err(channel_error(
                 input,
                 &p.name,
                 &s.topic,
-                format!("gives {}, which the {}-state motion model does not hold: set fields", q.name(), p.motion.dimension()),
+                format!(
+                    "gives {}, which the {}-state motion model does not hold: set fields",
+                    q.name(),
+                    p.motion.dimension()
+                ),
             ));
         }
         if s.variance.of(*q).is_none() {
-            return Err(channel_error(input, &p.name, &s.topic, format!("gives {}, and the sensor's variance table has no entry for it", q.name())));
+            return Err(channel_error(
+                input,
+                &p.name,
+                &s.topic,
+                format!(
+                    "gives {}, and the sensor's variance table has no entry for it",
+                    q.name()
+                ),
+            ));
         }
     }
     for state in s.sensor_states() {
         let q = state.quantity();
         if !wanted.contains(&q) {
-            return Err(channel_error(input, &p.name, &s.topic, format!("has a {} state but gives no {} to observe it", state.kind(), q.name())));
+            return Err(channel_error(
+                input,
+                &p.name,
+                &s.topic,
+                format!(
+                    "has a {} state but gives no {} to observe it",
+                    state.kind(),
+                    q.name()
+                ),
+            ));
         }
     }
     Ok(())
 }
 
 fn channel_error(input: &Path, pipeline: &str, topic: &str, problem: String) -> Error {
-    Error::Channel { input: input.to_owned(), pipeline: pipeline.to_owned(), topic: topic.to_owned(), problem }
+    Error::Channel {
+        input: input.to_owned(),
+        pipeline: pipeline.to_owned(),
+        topic: topic.to_owned(),
+        problem,
+    }
 }

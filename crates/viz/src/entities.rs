@@ -41,7 +41,10 @@ pub fn speed_error(pipeline: &str) -> String {
 /// One sensor state a pipeline estimates (a radar's scale factor, a receiver's bias), with
 /// its ±3σ bounds: `sensor_states/<pipeline>/<topic tail>/<kind>`.
 pub fn sensor_state(pipeline: &str, topic: &str, kind: &str) -> String {
-    format!("sensor_states/{pipeline}/{}/{kind}", topic.trim_start_matches('/').replace('/', "_"))
+    format!(
+        "sensor_states/{pipeline}/{}/{kind}",
+        topic.trim_start_matches('/').replace('/', "_")
+    )
 }
 
 /// A federated pipeline's information-sharing coefficients β, one series per device.

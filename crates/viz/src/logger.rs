@@ -5,7 +5,9 @@ use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::*;
 use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
 use railfuse_catalog::topics;
-use rerun::{Color, LineStrips2D, Points2D, Radius, RecordingStream, Scalars, SeriesLines, TextLog};
+use rerun::{
+    Color, LineStrips2D, Points2D, Radius, RecordingStream, Scalars, SeriesLines, TextLog,
+};
 
 use crate::{entities as ent, Error};
 
@@ -32,7 +34,12 @@ pub struct VizReport {
 const TRUTH_COLOR: (u8, u8, u8) = (235, 235, 235);
 const BAND_COLOR: (u8, u8, u8, u8) = (200, 60, 60, 160);
 /// Pipeline colours, by the order pipelines first appear.
-const PIPELINE_COLORS: [(u8, u8, u8); 4] = [(30, 120, 230), (230, 120, 20), (40, 170, 80), (160, 60, 200)];
+const PIPELINE_COLORS: [(u8, u8, u8); 4] = [
+    (30, 120, 230),
+    (230, 120, 20),
+    (40, 170, 80),
+    (160, 60, 200),
+];
 
 fn rgb((r, g, b): (u8, u8, u8)) -> Color {
     Color::from_rgb(r, g, b)
@@ -86,9 +93,17 @@ fn open_stream(sink: &Sink) -> Result<RecordingStream, Error> {
         Sink::Spawn => app.spawn(),
     }
     .map_err(|e| {
-        let first_line = e.to_string().lines().next().unwrap_or_default().trim().to_owned();
+        let first_line = e
+            .to_string()
+            .lines()
+            .next()
+            .unwrap_or_default()
+            .trim()
+            .to_owned();
         match sink {
-            Sink::Spawn => Error::Rerun(format!("{first_line} (the viewer comes with `pip install rerun-sdk==0.36.3`)")),
+            Sink::Spawn => Error::Rerun(format!(
+                "{first_line} (the viewer comes with `pip install rerun-sdk==0.36.3`)"
+            )),
             _ => Error::Rerun(first_line),
         }
     })?;
@@ -102,33 +117,56 @@ fn open_stream(sink: &Sink) -> Result<RecordingStream, Error> {
 /// layout as `railfuse viz`, fed one message at a time.
 pub struct LiveViz {
     logger: Logger,
-    channels: std::collections::HashMap<(String, String), std::sync::Arc<railfuse_catalog::log::ChannelInfo>>,
+    channels: std::collections::HashMap<
+        (String, String),
+        std::sync::Arc<railfuse_catalog::log::ChannelInfo>,
+    >,
 }
 
 impl LiveViz {
     pub fn open(sink: &Sink) -> Result<Self, Error> {
-        Ok(Self { logger: Logger::new(open_stream(sink)?, PathBuf::from("<live>")), channels: Default::default() })
+        Ok(Self {
+            logger: Logger::new(open_stream(sink)?, PathBuf::from("<live>")),
+            channels: Default::default(),
+        })
     }
 
     /// Logs one message given as its topic, schema name, log time and JSON payload.
-    pub fn message(&mut self, topic: &str, schema: &str, log_time_ns: u64, json: &[u8]) -> Result<(), Error> {
+    pub fn message(
+        &mut self,
+        topic: &str,
+        schema: &str,
+        log_time_ns: u64,
+        json: &[u8],
+    ) -> Result<(), Error> {
         let n = self.channels.len() as u16;
-        let channel = self.channels.entry((topic.to_owned(), schema.to_owned())).or_insert_with(|| {
-            std::sync::Arc::new(railfuse_catalog::log::ChannelInfo {
-                id: n,
-                topic: topic.to_owned(),
-                message_encoding: "json".into(),
-                metadata: Default::default(),
-                schema: Some(std::sync::Arc::new(railfuse_catalog::log::SchemaInfo {
+        let channel = self
+            .channels
+            .entry((topic.to_owned(), schema.to_owned()))
+            .or_insert_with(|| {
+                std::sync::Arc::new(railfuse_catalog::log::ChannelInfo {
                     id: n,
-                    name: schema.to_owned(),
-                    encoding: "jsonschema".into(),
-                    data: Vec::new(),
-                })),
-            })
-        });
-        let m = railfuse_catalog::log::LogMessage { channel, sequence: 0, log_time_ns, publish_time_ns: log_time_ns, data: json };
-        self.logger.rec.set_timestamp_nanos_since_epoch("log_time", log_time_ns as i64);
+                    topic: topic.to_owned(),
+                    message_encoding: "json".into(),
+                    metadata: Default::default(),
+                    schema: Some(std::sync::Arc::new(railfuse_catalog::log::SchemaInfo {
+                        id: n,
+                        name: schema.to_owned(),
+                        encoding: "jsonschema".into(),
+                        data: Vec::new(),
+                    })),
+                })
+            });
+        let m = railfuse_catalog::log::LogMessage {
+            channel,
+            sequence: 0,
+            log_time_ns,
+            publish_time_ns: log_time_ns,
+            data: json,
+        };
+        self.logger
+            .rec
+            .set_timestamp_nanos_since_epoch("log_time", log_time_ns as i64);
         self.logger.message(&m)
     }
 }
@@ -140,7 +178,9 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
     while let Some(record) = reader.next() {
         if let LogRecord::Message(m) = record? {
             logger.report.messages += 1;
-            logger.rec.set_timestamp_nanos_since_epoch("log_time", m.log_time_ns as i64);
+            logger
+                .rec
+                .set_timestamp_nanos_since_epoch("log_time", m.log_time_ns as i64);
             logger.message(&m)?;
         }
     }
@@ -149,7 +189,12 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
         Sink::Save(_) => logger.rec.flush_blocking(),
         Sink::Connect(_) | Sink::Spawn => logger.rec.flush_with_timeout(VIEWER_TIMEOUT),
     };
-    flushed.map_err(|e| Error::Rerun(format!("the Rerun viewer did not take the data within {} s: {e}", VIEWER_TIMEOUT.as_secs())))?;
+    flushed.map_err(|e| {
+        Error::Rerun(format!(
+            "the Rerun viewer did not take the data within {} s: {e}",
+            VIEWER_TIMEOUT.as_secs()
+        ))
+    })?;
     Ok(logger.report)
 }
 
@@ -167,8 +212,14 @@ impl Logger {
         }
     }
 
-    fn log<AS: ?Sized + rerun::AsComponents>(&mut self, entity: &str, data: &AS) -> Result<(), Error> {
-        self.rec.log(entity, data).map_err(|e| Error::Rerun(e.to_string()))?;
+    fn log<AS: ?Sized + rerun::AsComponents>(
+        &mut self,
+        entity: &str,
+        data: &AS,
+    ) -> Result<(), Error> {
+        self.rec
+            .log(entity, data)
+            .map_err(|e| Error::Rerun(e.to_string()))?;
         self.report.logged += 1;
         if !self.report.entities.contains(entity) {
             self.report.entities.insert(entity.to_owned());
@@ -176,8 +227,14 @@ impl Logger {
         Ok(())
     }
 
-    fn log_static<AS: ?Sized + rerun::AsComponents>(&mut self, entity: &str, data: &AS) -> Result<(), Error> {
-        self.rec.log_static(entity, data).map_err(|e| Error::Rerun(e.to_string()))?;
+    fn log_static<AS: ?Sized + rerun::AsComponents>(
+        &mut self,
+        entity: &str,
+        data: &AS,
+    ) -> Result<(), Error> {
+        self.rec
+            .log_static(entity, data)
+            .map_err(|e| Error::Rerun(e.to_string()))?;
         self.report.entities.insert(entity.to_owned());
         Ok(())
     }
@@ -187,8 +244,20 @@ impl Logger {
         [east as f32, -north as f32]
     }
 
-    fn series_style(&mut self, entity: &str, name: &str, color: Color, width: f32) -> Result<(), Error> {
-        self.log_static(entity, &SeriesLines::new().with_names([name]).with_colors([color]).with_widths([width]))
+    fn series_style(
+        &mut self,
+        entity: &str,
+        name: &str,
+        color: Color,
+        width: f32,
+    ) -> Result<(), Error> {
+        self.log_static(
+            entity,
+            &SeriesLines::new()
+                .with_names([name])
+                .with_colors([color])
+                .with_widths([width]),
+        )
     }
 
     fn message(&mut self, m: &railfuse_catalog::log::LogMessage<'_>) -> Result<(), Error> {
@@ -197,41 +266,76 @@ impl Logger {
         match m.channel.schema_name() {
             n if n == TrackMap::SCHEMA_NAME => {
                 let map: TrackMap = m.decode(path)?;
-                let strip: Vec<[f32; 2]> = map.vertices.iter().map(|v| Self::plan(v.east_m, v.north_m)).collect();
+                let strip: Vec<[f32; 2]> = map
+                    .vertices
+                    .iter()
+                    .map(|v| Self::plan(v.east_m, v.north_m))
+                    .collect();
                 self.log_static(
                     ent::TRACK,
-                    &LineStrips2D::new([strip]).with_colors([Color::from_rgb(170, 170, 170)]).with_radii([Radius::new_ui_points(1.5)]),
+                    &LineStrips2D::new([strip])
+                        .with_colors([Color::from_rgb(170, 170, 170)])
+                        .with_radii([Radius::new_ui_points(1.5)]),
                 )?;
                 let at = |c: f64| map.locate(c).map(|(e, n, _)| Self::plan(e, n));
-                let balises: Vec<_> = map.balises.iter().filter_map(|b| at(b.chainage_m)).collect();
+                let balises: Vec<_> = map
+                    .balises
+                    .iter()
+                    .filter_map(|b| at(b.chainage_m))
+                    .collect();
                 // Balise ids would crowd the plan view: they show on hover as instance data.
-                self.log_static(ent::BALISES, &Points2D::new(balises).with_colors([Color::from_rgb(250, 200, 0)]).with_radii([Radius::new_ui_points(4.0)]))?;
-                let stations: Vec<_> = map.stations.iter().filter_map(|s| at(s.chainage_m)).collect();
+                self.log_static(
+                    ent::BALISES,
+                    &Points2D::new(balises)
+                        .with_colors([Color::from_rgb(250, 200, 0)])
+                        .with_radii([Radius::new_ui_points(4.0)]),
+                )?;
+                let stations: Vec<_> = map
+                    .stations
+                    .iter()
+                    .filter_map(|s| at(s.chainage_m))
+                    .collect();
                 let names: Vec<_> = map.stations.iter().map(|s| s.name.clone()).collect();
                 self.log_static(
                     ent::STATIONS,
-                    &Points2D::new(stations).with_labels(names).with_colors([Color::from_rgb(255, 255, 255)]).with_radii([Radius::new_ui_points(6.0)]),
+                    &Points2D::new(stations)
+                        .with_labels(names)
+                        .with_colors([Color::from_rgb(255, 255, 255)])
+                        .with_radii([Radius::new_ui_points(6.0)]),
                 )?;
                 self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
                 self.map = Some(map);
             }
             n if n == GroundTruth::SCHEMA_NAME => {
                 let t: GroundTruth = m.decode(path)?;
-                self.truth.push(ReferenceSample { stamp_ns: t.stamp_ns, chainage_m: t.chainage_m, speed_mps: t.speed_mps });
+                self.truth.push(ReferenceSample {
+                    stamp_ns: t.stamp_ns,
+                    chainage_m: t.chainage_m,
+                    speed_mps: t.speed_mps,
+                });
                 self.log(
                     ent::TRUTH_POSITION,
-                    &Points2D::new([Self::plan(t.east_m, t.north_m)]).with_colors([rgb(TRUTH_COLOR)]).with_radii([Radius::new_ui_points(7.0)]),
+                    &Points2D::new([Self::plan(t.east_m, t.north_m)])
+                        .with_colors([rgb(TRUTH_COLOR)])
+                        .with_radii([Radius::new_ui_points(7.0)]),
                 )?;
                 self.log(ent::SPEED_TRUTH, &Scalars::single(t.speed_mps))?;
             }
             n if n == GnssFix::SCHEMA_NAME => {
                 let g: GnssFix = m.decode(path)?;
-                if let (Some(map), Some(lat), Some(lon)) = (&self.map, g.latitude_deg, g.longitude_deg) {
-                    let (e, n, _) = map.origin.to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
+                if let (Some(map), Some(lat), Some(lon)) =
+                    (&self.map, g.latitude_deg, g.longitude_deg)
+                {
+                    let (e, n, _) =
+                        map.origin
+                            .to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
                     let label = format!("{:?}", g.fix_type);
                     self.log(
                         ent::GNSS_POSITION,
-                        &Points2D::new([Self::plan(e, n)]).with_colors([fix_color(g.fix_type)]).with_radii([Radius::new_ui_points(4.0)]).with_labels([label]),
+                        &Points2D::new([Self::plan(e, n)])
+                            .with_colors([fix_color(g.fix_type)])
+                            .with_radii([Radius::new_ui_points(4.0)])
+                            .with_labels([label]),
                     )?;
                 }
                 if let Some(v) = g.speed_mps {
@@ -257,23 +361,34 @@ impl Logger {
             n if n == BalisePassage::SCHEMA_NAME => {
                 let b: BalisePassage = m.decode(path)?;
                 if let Some((s, _)) = self.truth.at(b.stamp_ns) {
-                    self.log(ent::BALISE_CHAINAGE_ERROR, &Scalars::single(b.chainage_m - s))?;
+                    self.log(
+                        ent::BALISE_CHAINAGE_ERROR,
+                        &Scalars::single(b.chainage_m - s),
+                    )?;
                 }
             }
             n if n == Event::SCHEMA_NAME => {
                 let e: Event = m.decode(path)?;
-                self.log(ent::EVENTS, &TextLog::new(format!("{:?}: {}", e.kind, e.text)))?;
+                self.log(
+                    ent::EVENTS,
+                    &TextLog::new(format!("{:?}: {}", e.kind, e.text)),
+                )?;
             }
             n if n == FusedState::SCHEMA_NAME => {
                 let Some(pipeline) = topics::fused_pipeline_of(topic) else {
                     return Ok(());
                 };
                 // A pipeline's RTS-smoothed states are a series of their own.
-                let series = if topic.ends_with("/smoothed") { format!("{pipeline}/smoothed") } else { pipeline.to_owned() };
+                let series = if topic.ends_with("/smoothed") {
+                    format!("{pipeline}/smoothed")
+                } else {
+                    pipeline.to_owned()
+                };
                 let f: FusedState = m.decode(path)?;
                 // Fused states are released after the reorder window: plot them at the
                 // instant they describe, so they line up with the truth.
-                self.rec.set_timestamp_nanos_since_epoch("log_time", f.stamp_ns as i64);
+                self.rec
+                    .set_timestamp_nanos_since_epoch("log_time", f.stamp_ns as i64);
                 self.fused(&series, &f)?;
             }
             n if n == FusedDiagnostics::SCHEMA_NAME => {
@@ -281,21 +396,35 @@ impl Logger {
                     return Ok(());
                 };
                 let d: FusedDiagnostics = m.decode(path)?;
-                let Some(sharing) = d.sharing else { return Ok(()) };
+                let Some(sharing) = d.sharing else {
+                    return Ok(());
+                };
                 let beta: Vec<f64> = sharing.iter().map(|s| s.beta).collect();
                 if self.shares.get(pipeline) == Some(&beta) {
                     return Ok(());
                 }
                 let entity = ent::sharing(pipeline);
                 if !self.shares.contains_key(pipeline) {
-                    let names: Vec<String> = sharing.iter().map(|s| format!("β {}", s.device)).collect();
+                    let names: Vec<String> =
+                        sharing.iter().map(|s| format!("β {}", s.device)).collect();
                     let colors: Vec<Color> = (0..names.len()).map(pipeline_color).collect();
-                    self.log_static(&entity, &SeriesLines::new().with_names(names).with_colors(colors))?;
+                    self.log_static(
+                        &entity,
+                        &SeriesLines::new().with_names(names).with_colors(colors),
+                    )?;
                 }
-                self.rec.set_timestamp_nanos_since_epoch("log_time", d.stamp_ns as i64);
+                self.rec
+                    .set_timestamp_nanos_since_epoch("log_time", d.stamp_ns as i64);
                 self.log(&entity, &Scalars::new(beta.clone()))?;
                 for s in sharing.iter().filter(|s| s.fault.is_some()) {
-                    self.log(ent::EVENTS, &TextLog::new(format!("{pipeline}: {} out ({})", s.device, s.fault.as_deref().unwrap_or_default())))?;
+                    self.log(
+                        ent::EVENTS,
+                        &TextLog::new(format!(
+                            "{pipeline}: {} out ({})",
+                            s.device,
+                            s.fault.as_deref().unwrap_or_default()
+                        )),
+                    )?;
                 }
                 self.shares.insert(pipeline.to_owned(), beta);
             }
@@ -310,9 +439,17 @@ impl Logger {
             None => {
                 self.pipelines.push(pipeline.to_owned());
                 let color = pipeline_color(self.pipelines.len() - 1);
-                for base in [ent::fused_speed(pipeline), ent::chainage_error(pipeline), ent::speed_error(pipeline)] {
+                for base in [
+                    ent::fused_speed(pipeline),
+                    ent::chainage_error(pipeline),
+                    ent::speed_error(pipeline),
+                ] {
                     let style = SeriesLines::new()
-                        .with_names([pipeline.to_owned(), format!("{pipeline} +3σ"), format!("{pipeline} −3σ")])
+                        .with_names([
+                            pipeline.to_owned(),
+                            format!("{pipeline} +3σ"),
+                            format!("{pipeline} −3σ"),
+                        ])
                         .with_colors([color, band_color(), band_color()])
                         .with_widths([1.5, 1.0, 1.0]);
                     self.log_static(&base, &style)?;
@@ -323,7 +460,12 @@ impl Logger {
         let color = pipeline_color(index);
         let (s3, v3) = (3.0 * f.chainage_std_m(), 3.0 * f.speed_std_mps());
         if let Some((e, n, _)) = self.map.as_ref().and_then(|m| m.locate(f.chainage_m)) {
-            self.log(&ent::fused_position(pipeline), &Points2D::new([Self::plan(e, n)]).with_colors([color]).with_radii([Radius::new_ui_points(5.0)]))?;
+            self.log(
+                &ent::fused_position(pipeline),
+                &Points2D::new([Self::plan(e, n)])
+                    .with_colors([color])
+                    .with_radii([Radius::new_ui_points(5.0)]),
+            )?;
         }
         self.band(&ent::fused_speed(pipeline), f.speed_mps, v3)?;
         if let Some((s, v)) = self.truth.at(f.stamp_ns) {
@@ -334,11 +476,9 @@ impl Logger {
             let entity = ent::sensor_state(pipeline, &st.topic, &st.kind);
             if self.sensor_states.insert(entity.clone()) {
                 let name = format!("{} {}", st.topic, st.kind);
-                let style = SeriesLines::new().with_names([name.clone(), format!("{name} +3σ"), format!("{name} −3σ")]).with_colors([
-                    color,
-                    band_color(),
-                    band_color(),
-                ]);
+                let style = SeriesLines::new()
+                    .with_names([name.clone(), format!("{name} +3σ"), format!("{name} −3σ")])
+                    .with_colors([color, band_color(), band_color()]);
                 self.log_static(&entity, &style)?;
             }
             self.band(&entity, st.value, 3.0 * st.std)?;
@@ -348,7 +488,10 @@ impl Logger {
 
     /// A value with its ±3σ band: three series of one entity, so they share one plot.
     fn band(&mut self, entity: &str, value: f64, three_sigma: f64) -> Result<(), Error> {
-        self.log(entity, &Scalars::new([value, value + three_sigma, value - three_sigma]))
+        self.log(
+            entity,
+            &Scalars::new([value, value + three_sigma, value - three_sigma]),
+        )
     }
 }
 
@@ -356,15 +499,25 @@ impl Logger {
 /// would otherwise queue data and retry for ever against an address where no viewer runs.
 fn probe_viewer(url: &str) -> Result<(), Error> {
     use std::net::{TcpStream, ToSocketAddrs};
-    let authority = url.split("://").nth(1).and_then(|rest| rest.split('/').next()).filter(|a| a.contains(':'));
+    let authority = url
+        .split("://")
+        .nth(1)
+        .and_then(|rest| rest.split('/').next())
+        .filter(|a| a.contains(':'));
     let Some(authority) = authority else {
-        return Err(Error::Rerun(format!("{url}: expected a viewer URL like rerun+http://127.0.0.1:9876/proxy")));
+        return Err(Error::Rerun(format!(
+            "{url}: expected a viewer URL like rerun+http://127.0.0.1:9876/proxy"
+        )));
     };
-    let addrs = authority.to_socket_addrs().map_err(|e| Error::Rerun(format!("{url}: {e}")))?;
+    let addrs = authority
+        .to_socket_addrs()
+        .map_err(|e| Error::Rerun(format!("{url}: {e}")))?;
     for addr in addrs {
         if TcpStream::connect_timeout(&addr, std::time::Duration::from_secs(3)).is_ok() {
             return Ok(());
         }
     }
-    Err(Error::Rerun(format!("{url}: no Rerun viewer is listening there (start one with `rerun`)")))
+    Err(Error::Rerun(format!(
+        "{url}: no Rerun viewer is listening there (start one with `rerun`)"
+    )))
 }

@@ -36,16 +36,27 @@ mod tests {
         let mut w = LogWriter::create(&path).unwrap();
         let ch = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();
         for k in 0..5000u64 {
-            let m = RadarSpeed { stamp_ns: k * 1000, speed_mps: k as f64 * 0.01, quality: 1.0, valid: k % 7 != 0, speed_variance_m2ps2: None };
+            let m = RadarSpeed {
+                stamp_ns: k * 1000,
+                speed_mps: k as f64 * 0.01,
+                quality: 1.0,
+                valid: k % 7 != 0,
+                speed_variance_m2ps2: None,
+            };
             w.write(ch, k * 1000 + 5, &m).unwrap();
         }
-        w.write_metadata("railfuse.test", BTreeMap::from([("a".to_owned(), "b".to_owned())])).unwrap();
+        w.write_metadata(
+            "railfuse.test",
+            BTreeMap::from([("a".to_owned(), "b".to_owned())]),
+        )
+        .unwrap();
         w.attach("notes.txt", "text/plain", 1, 2, b"hello").unwrap();
         assert!(!path.exists(), "the output must not appear before finish()");
         w.finish().unwrap();
 
         let mut r = LogReader::open(&path).unwrap();
-        let (mut messages, mut schemas, mut channels, mut metadata, mut attachments) = (0u64, 0, 0, 0, 0);
+        let (mut messages, mut schemas, mut channels, mut metadata, mut attachments) =
+            (0u64, 0, 0, 0, 0);
         while let Some(rec) = r.next() {
             match rec.unwrap() {
                 LogRecord::Schema(s) => {
@@ -59,7 +70,10 @@ mod tests {
                 LogRecord::Message(m) => {
                     let v: RadarSpeed = m.decode(&path).unwrap();
                     assert_eq!(v.stamp_ns, messages * 1000);
-                    assert_eq!((m.log_time_ns, m.publish_time_ns), (messages * 1000 + 5, messages * 1000));
+                    assert_eq!(
+                        (m.log_time_ns, m.publish_time_ns),
+                        (messages * 1000 + 5, messages * 1000)
+                    );
                     assert_eq!(v.valid, messages % 7 != 0);
                     messages += 1;
                 }
@@ -73,7 +87,10 @@ mod tests {
                 }
             }
         }
-        assert_eq!((messages, schemas, channels, metadata, attachments), (5000, 1, 1, 1, 1));
+        assert_eq!(
+            (messages, schemas, channels, metadata, attachments),
+            (5000, 1, 1, 1, 1)
+        );
         let known = read_channels(&path).unwrap().unwrap();
         assert_eq!(known.len(), 1);
         assert_eq!(known[0].schema_name(), RadarSpeed::SCHEMA_NAME);

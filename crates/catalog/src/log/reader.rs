@@ -69,8 +69,17 @@ pub enum LogRecord<'a> {
     Schema(Arc<SchemaInfo>),
     Channel(Arc<ChannelInfo>),
     Message(LogMessage<'a>),
-    Metadata { name: String, metadata: BTreeMap<String, String> },
-    Attachment { name: String, media_type: String, log_time_ns: u64, create_time_ns: u64, data: &'a [u8] },
+    Metadata {
+        name: String,
+        metadata: BTreeMap<String, String>,
+    },
+    Attachment {
+        name: String,
+        media_type: String,
+        log_time_ns: u64,
+        create_time_ns: u64,
+        data: &'a [u8],
+    },
 }
 
 /// A streaming reader over one MCAP file.
@@ -93,7 +102,9 @@ impl LogReader {
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_owned();
         let file = open_checked(&path)?;
-        let options = LinearReaderOptions::default().with_record_length_limit(super::RECORD_LENGTH_LIMIT).with_validate_chunk_crcs(true);
+        let options = LinearReaderOptions::default()
+            .with_record_length_limit(super::RECORD_LENGTH_LIMIT)
+            .with_validate_chunk_crcs(true);
         Ok(Self {
             path,
             file,
@@ -190,7 +201,12 @@ impl LogReader {
                 if self.schemas.contains_key(&header.id) {
                     return Ok(false);
                 }
-                let info = Arc::new(SchemaInfo { id: header.id, name: header.name.clone(), encoding: header.encoding.clone(), data: data.to_vec() });
+                let info = Arc::new(SchemaInfo {
+                    id: header.id,
+                    name: header.name.clone(),
+                    encoding: header.encoding.clone(),
+                    data: data.to_vec(),
+                });
                 self.schemas.insert(header.id, info);
                 true
             }
@@ -201,12 +217,12 @@ impl LogReader {
                 let schema = if c.schema_id == 0 {
                     None
                 } else {
-                    Some(
-                        self.schemas
-                            .get(&c.schema_id)
-                            .cloned()
-                            .ok_or_else(|| Error::mcap(&self.path, format!("channel {} names unknown schema {}", c.topic, c.schema_id)))?,
-                    )
+                    Some(self.schemas.get(&c.schema_id).cloned().ok_or_else(|| {
+                        Error::mcap(
+                            &self.path,
+                            format!("channel {} names unknown schema {}", c.topic, c.schema_id),
+                        )
+                    })?)
                 };
                 let info = Arc::new(ChannelInfo {
                     id: c.id,
@@ -220,7 +236,13 @@ impl LogReader {
             }
             Record::Message { header, .. } => {
                 if !self.channels.contains_key(&header.channel_id) {
-                    return Err(Error::mcap(&self.path, format!("message at log time {} on unknown channel {}", header.log_time, header.channel_id)));
+                    return Err(Error::mcap(
+                        &self.path,
+                        format!(
+                            "message at log time {} on unknown channel {}",
+                            header.log_time, header.channel_id
+                        ),
+                    ));
                 }
                 true
             }
@@ -240,7 +262,10 @@ impl LogReader {
                 publish_time_ns: header.publish_time,
                 data,
             }),
-            Record::Metadata(m) => LogRecord::Metadata { name: m.name.clone(), metadata: m.metadata.clone() },
+            Record::Metadata(m) => LogRecord::Metadata {
+                name: m.name.clone(),
+                metadata: m.metadata.clone(),
+            },
             Record::Attachment { header, data, .. } => LogRecord::Attachment {
                 name: header.name.clone(),
                 media_type: header.media_type.clone(),
@@ -277,7 +302,9 @@ pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
     while let Some(event) = reader.next_event() {
         match event.map_err(|e| Error::mcap(path, describe(&e)))? {
             SummaryReadEvent::ReadRequest(need) => {
-                let n = file.read(reader.insert(need)).map_err(|e| Error::io(path, e))?;
+                let n = file
+                    .read(reader.insert(need))
+                    .map_err(|e| Error::io(path, e))?;
                 reader.notify_read(n);
             }
             SummaryReadEvent::SeekRequest(to) => {
@@ -298,7 +325,14 @@ pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
                 topic: c.topic.clone(),
                 message_encoding: c.message_encoding.clone(),
                 metadata: c.metadata.clone(),
-                schema: c.schema.as_ref().map(|s| Arc::new(SchemaInfo { id: s.id, name: s.name.clone(), encoding: s.encoding.clone(), data: s.data.to_vec() })),
+                schema: c.schema.as_ref().map(|s| {
+                    Arc::new(SchemaInfo {
+                        id: s.id,
+                        name: s.name.clone(),
+                        encoding: s.encoding.clone(),
+                        data: s.data.to_vec(),
+                    })
+                }),
             })
         })
         .collect();
@@ -321,11 +355,17 @@ fn open_checked(path: &Path) -> Result<File> {
         }
     }
     if got == 0 {
-        return Err(Error::Empty { path: path.to_owned() });
+        return Err(Error::Empty {
+            path: path.to_owned(),
+        });
     }
     if magic[..got] != mcap::MAGIC[..got] || got < magic.len() {
-        return Err(Error::mcap(path, "it does not start with the MCAP magic bytes: not an MCAP file"));
+        return Err(Error::mcap(
+            path,
+            "it does not start with the MCAP magic bytes: not an MCAP file",
+        ));
     }
-    file.seek(SeekFrom::Start(0)).map_err(|e| Error::io(path, e))?;
+    file.seek(SeekFrom::Start(0))
+        .map_err(|e| Error::io(path, e))?;
     Ok(file)
 }

@@ -59,7 +59,13 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                 report.schemas += 1;
             }
             LogRecord::Channel(c) => {
-                writer.copy_channel(c.id, c.schema.as_ref().map_or(0, |s| s.id), &c.topic, &c.message_encoding, &c.metadata)?;
+                writer.copy_channel(
+                    c.id,
+                    c.schema.as_ref().map_or(0, |s| s.id),
+                    &c.topic,
+                    &c.message_encoding,
+                    &c.metadata,
+                )?;
                 channels.insert(c.id);
                 report.channels += 1;
             }
@@ -68,15 +74,30 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                     report.orphan_messages += 1;
                     continue;
                 }
-                writer.write_raw(m.channel.id, m.sequence, m.log_time_ns, m.publish_time_ns, m.data)?;
+                writer.write_raw(
+                    m.channel.id,
+                    m.sequence,
+                    m.log_time_ns,
+                    m.publish_time_ns,
+                    m.data,
+                )?;
                 report.messages += 1;
-                *report.messages_per_topic.entry(m.channel.topic.clone()).or_insert(0) += 1;
+                *report
+                    .messages_per_topic
+                    .entry(m.channel.topic.clone())
+                    .or_insert(0) += 1;
             }
             LogRecord::Metadata { name, metadata } => {
                 writer.write_metadata(&name, metadata)?;
                 report.metadata += 1;
             }
-            LogRecord::Attachment { name, media_type, log_time_ns, create_time_ns, data } => {
+            LogRecord::Attachment {
+                name,
+                media_type,
+                log_time_ns,
+                create_time_ns,
+                data,
+            } => {
                 writer.attach(&name, &media_type, log_time_ns, create_time_ns, data)?;
                 report.attachments += 1;
             }
@@ -96,12 +117,21 @@ mod tests {
     fn a_log_cut_anywhere_gives_back_every_complete_chunk_and_a_valid_file() {
         let d = tempfile::tempdir().unwrap();
         let path = d.path().join("full.mcap");
-        let opts = crate::log::WriterOptions { chunk_size: 64 << 10, zstd_level: 1 };
+        let opts = crate::log::WriterOptions {
+            chunk_size: 64 << 10,
+            zstd_level: 1,
+        };
         let mut w = LogWriter::create_with(&path, &opts).unwrap();
         let ch = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();
         let n = 60_000u64;
         for k in 0..n {
-            let m = RadarSpeed { stamp_ns: k, speed_mps: k as f64, quality: 1.0, valid: true, speed_variance_m2ps2: None };
+            let m = RadarSpeed {
+                stamp_ns: k,
+                speed_mps: k as f64,
+                quality: 1.0,
+                valid: true,
+                speed_variance_m2ps2: None,
+            };
             w.write(ch, k, &m).unwrap();
         }
         w.finish().unwrap();
@@ -117,7 +147,11 @@ mod tests {
             assert!(r.stopped_by.is_some(), "{r:?}");
             // Everything but the cut chunk (≈ 64 KiB of JSON, under 1 000 messages) survives,
             // as the same messages in the same order.
-            assert!(r.messages as f64 > n as f64 * cut - 1000.0 - n as f64 * 0.05, "cut {cut}: {} of {n}", r.messages);
+            assert!(
+                r.messages as f64 > n as f64 * cut - 1000.0 - n as f64 * 0.05,
+                "cut {cut}: {} of {n}",
+                r.messages
+            );
             assert!(r.messages > last);
             last = r.messages;
             let mut reader = LogReader::open(&fixed).unwrap();

@@ -24,7 +24,10 @@ pub struct WriterOptions {
 
 impl Default for WriterOptions {
     fn default() -> Self {
-        Self { chunk_size: 1 << 20, zstd_level: 1 }
+        Self {
+            chunk_size: 1 << 20,
+            zstd_level: 1,
+        }
     }
 }
 
@@ -59,7 +62,14 @@ impl LogWriter {
             .chunk_size(Some(options.chunk_size))
             .create(BufWriter::with_capacity(1 << 16, file))
             .map_err(|e| Error::write(&partial, e))?;
-        Ok(Self { path, partial, inner: Some(inner), schemas: HashMap::new(), sequences: HashMap::new(), buf: Vec::with_capacity(1024) })
+        Ok(Self {
+            path,
+            partial,
+            inner: Some(inner),
+            schemas: HashMap::new(),
+            sequences: HashMap::new(),
+            buf: Vec::with_capacity(1024),
+        })
     }
 
     pub fn path(&self) -> &Path {
@@ -67,7 +77,9 @@ impl LogWriter {
     }
 
     fn inner(&mut self) -> &mut mcap::Writer<BufWriter<File>> {
-        self.inner.as_mut().expect("only finish() takes the writer, and it consumes self")
+        self.inner
+            .as_mut()
+            .expect("only finish() takes the writer, and it consumes self")
     }
 
     /// Registers a channel of message type `M` on `topic`.
@@ -76,28 +88,52 @@ impl LogWriter {
             Some(&id) => id,
             None => {
                 let data = M::schema_bytes();
-                let id = self.inner().add_schema(M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data).map_err(|e| Error::write(&self.partial, e))?;
+                let id = self
+                    .inner()
+                    .add_schema(M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)
+                    .map_err(|e| Error::write(&self.partial, e))?;
                 self.schemas.insert(M::SCHEMA_NAME, id);
                 id
             }
         };
-        let id = self.inner().add_channel(schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new()).map_err(|e| Error::write(&self.partial, e))?;
+        let id = self
+            .inner()
+            .add_channel(schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())
+            .map_err(|e| Error::write(&self.partial, e))?;
         Ok(ChannelId(id))
     }
 
     /// Registers a channel of type `M` with explicit schema and channel ids (for outputs added
     /// beside copied input records, whose ids must stay as they were).
-    pub fn add_channel_with_ids<M: ChannelMessage>(&mut self, schema_id: u16, channel_id: u16, topic: &str) -> Result<ChannelId> {
+    pub fn add_channel_with_ids<M: ChannelMessage>(
+        &mut self,
+        schema_id: u16,
+        channel_id: u16,
+        topic: &str,
+    ) -> Result<ChannelId> {
         let data = M::schema_bytes();
-        self.inner().add_schema_with_id(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data).map_err(|e| Error::write(&self.partial, e))?;
         self.inner()
-            .add_channel_with_id(channel_id, schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())
+            .add_schema_with_id(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)
+            .map_err(|e| Error::write(&self.partial, e))?;
+        self.inner()
+            .add_channel_with_id(
+                channel_id,
+                schema_id,
+                topic,
+                super::MESSAGE_ENCODING,
+                &BTreeMap::new(),
+            )
             .map_err(|e| Error::write(&self.partial, e))?;
         Ok(ChannelId(channel_id))
     }
 
     /// Writes `msg` with the given receive time; `publish_time` is the message's own stamp.
-    pub fn write<M: ChannelMessage>(&mut self, channel: ChannelId, log_time_ns: u64, msg: &M) -> Result<()> {
+    pub fn write<M: ChannelMessage>(
+        &mut self,
+        channel: ChannelId,
+        log_time_ns: u64,
+        msg: &M,
+    ) -> Result<()> {
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
         serde_json::to_writer(&mut buf, msg).map_err(|e| Error::write(&self.partial, e))?;
@@ -114,35 +150,74 @@ impl LogWriter {
     }
 
     /// Writes an already-encoded message to a channel, as-is (used to copy input records).
-    pub fn write_raw(&mut self, channel: u16, sequence: u32, log_time_ns: u64, publish_time_ns: u64, data: &[u8]) -> Result<()> {
-        let header = MessageHeader { channel_id: channel, sequence, log_time: log_time_ns, publish_time: publish_time_ns };
-        self.inner().write_to_known_channel(&header, data).map_err(|e| Error::write(&self.partial, e))
+    pub fn write_raw(
+        &mut self,
+        channel: u16,
+        sequence: u32,
+        log_time_ns: u64,
+        publish_time_ns: u64,
+        data: &[u8],
+    ) -> Result<()> {
+        let header = MessageHeader {
+            channel_id: channel,
+            sequence,
+            log_time: log_time_ns,
+            publish_time: publish_time_ns,
+        };
+        self.inner()
+            .write_to_known_channel(&header, data)
+            .map_err(|e| Error::write(&self.partial, e))
     }
 
     /// Closes the current chunk and pushes it to the file: everything written so far survives
     /// a crash from here on (the recorder calls this about once a second).
     pub fn flush_chunk(&mut self) -> Result<()> {
-        self.inner().flush().map_err(|e| Error::write(&self.partial, e))
+        self.inner()
+            .flush()
+            .map_err(|e| Error::write(&self.partial, e))
     }
 
     /// Copies a schema record keeping its id.
     pub fn copy_schema(&mut self, id: u16, name: &str, encoding: &str, data: &[u8]) -> Result<()> {
-        self.inner().add_schema_with_id(id, name, encoding, data).map_err(|e| Error::write(&self.partial, e))?;
+        self.inner()
+            .add_schema_with_id(id, name, encoding, data)
+            .map_err(|e| Error::write(&self.partial, e))?;
         Ok(())
     }
 
     /// Copies a channel record keeping its id.
-    pub fn copy_channel(&mut self, id: u16, schema_id: u16, topic: &str, encoding: &str, metadata: &BTreeMap<String, String>) -> Result<()> {
-        self.inner().add_channel_with_id(id, schema_id, topic, encoding, metadata).map_err(|e| Error::write(&self.partial, e))?;
+    pub fn copy_channel(
+        &mut self,
+        id: u16,
+        schema_id: u16,
+        topic: &str,
+        encoding: &str,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<()> {
+        self.inner()
+            .add_channel_with_id(id, schema_id, topic, encoding, metadata)
+            .map_err(|e| Error::write(&self.partial, e))?;
         Ok(())
     }
 
     pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
-        let record = mcap::records::Metadata { name: name.to_owned(), metadata };
-        self.inner().write_metadata(&record).map_err(|e| Error::write(&self.partial, e))
+        let record = mcap::records::Metadata {
+            name: name.to_owned(),
+            metadata,
+        };
+        self.inner()
+            .write_metadata(&record)
+            .map_err(|e| Error::write(&self.partial, e))
     }
 
-    pub fn attach(&mut self, name: &str, media_type: &str, log_time_ns: u64, create_time_ns: u64, data: &[u8]) -> Result<()> {
+    pub fn attach(
+        &mut self,
+        name: &str,
+        media_type: &str,
+        log_time_ns: u64,
+        create_time_ns: u64,
+        data: &[u8],
+    ) -> Result<()> {
         let attachment = mcap::Attachment {
             log_time: log_time_ns,
             create_time: create_time_ns,
@@ -150,14 +225,19 @@ impl LogWriter {
             media_type: media_type.to_owned(),
             data: std::borrow::Cow::Borrowed(data),
         };
-        self.inner().attach(&attachment).map_err(|e| Error::write(&self.partial, e))
+        self.inner()
+            .attach(&attachment)
+            .map_err(|e| Error::write(&self.partial, e))
     }
 
     /// Writes the summary and index, flushes, and moves the file to its final name.
     pub fn finish(mut self) -> Result<()> {
         let mut inner = self.inner.take().expect("finish() runs once");
         inner.finish().map_err(|e| Error::write(&self.partial, e))?;
-        let file = inner.into_inner().into_inner().map_err(|e| Error::io(&self.partial, e.into_error()))?;
+        let file = inner
+            .into_inner()
+            .into_inner()
+            .map_err(|e| Error::io(&self.partial, e.into_error()))?;
         file.sync_all().map_err(|e| Error::io(&self.partial, e))?;
         std::fs::rename(&self.partial, &self.path).map_err(|e| Error::io(&self.path, e))
     }

@@ -3,7 +3,9 @@ use serde::{Deserialize, Serialize};
 
 /// Quality of a GNSS solution as the receiver reports it. `None` means "no position: do not
 /// use": a fix message with `None` carries no latitude or longitude.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, JsonSchema,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum FixType {
     None,

@@ -87,7 +87,10 @@ mod tests {
             let v: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
             assert_eq!(v["type"], "object", "{name}");
             if name != TrackMap::SCHEMA_NAME {
-                assert!(v["properties"]["stamp_ns"].is_object(), "{name} lacks stamp_ns");
+                assert!(
+                    v["properties"]["stamp_ns"].is_object(),
+                    "{name} lacks stamp_ns"
+                );
             }
         }
     }

@@ -59,10 +59,16 @@ impl TrackMap {
         if v.len() < 2 {
             return None;
         }
-        let i = v.partition_point(|p| p.chainage_m <= chainage_m).clamp(1, v.len() - 1);
+        let i = v
+            .partition_point(|p| p.chainage_m <= chainage_m)
+            .clamp(1, v.len() - 1);
         let (a, b) = (v[i - 1], v[i]);
         let len = b.chainage_m - a.chainage_m;
-        let f = if len > 0.0 { ((chainage_m - a.chainage_m) / len).clamp(0.0, 1.0) } else { 0.0 };
+        let f = if len > 0.0 {
+            ((chainage_m - a.chainage_m) / len).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
         Some((a.east_m + f * de, a.north_m + f * dn, de.atan2(dn)))
     }
@@ -75,11 +81,19 @@ impl TrackMap {
             let (a, b) = (w[0], w[1]);
             let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
             let len2 = de * de + dn * dn;
-            let f = if len2 > 0.0 { (((east_m - a.east_m) * de + (north_m - a.north_m) * dn) / len2).clamp(0.0, 1.0) } else { 0.0 };
+            let f = if len2 > 0.0 {
+                (((east_m - a.east_m) * de + (north_m - a.north_m) * dn) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             let (pe, pn) = (a.east_m + f * de, a.north_m + f * dn);
             let d2 = (east_m - pe).powi(2) + (north_m - pn).powi(2);
             if best.is_none_or(|(bd, _, _)| d2 < bd) {
-                best = Some((d2, a.chainage_m + f * (b.chainage_m - a.chainage_m), de.atan2(dn)));
+                best = Some((
+                    d2,
+                    a.chainage_m + f * (b.chainage_m - a.chainage_m),
+                    de.atan2(dn),
+                ));
             }
         }
         best.map(|(_, s, h)| (s, h))
@@ -90,7 +104,9 @@ impl TrackMap {
     }
 
     pub fn in_tunnel(&self, chainage_m: f64) -> Option<&Tunnel> {
-        self.tunnels.iter().find(|t| (t.start_chainage_m..=t.end_chainage_m).contains(&chainage_m))
+        self.tunnels
+            .iter()
+            .find(|t| (t.start_chainage_m..=t.end_chainage_m).contains(&chainage_m))
     }
 }
 
@@ -100,11 +116,27 @@ mod tests {
 
     #[test]
     fn projection_inverts_locate_on_a_bent_line() {
-        let origin = GeodeticOrigin { latitude_deg: 44.6, longitude_deg: 10.9, altitude_m: 30.0 };
+        let origin = GeodeticOrigin {
+            latitude_deg: 44.6,
+            longitude_deg: 10.9,
+            altitude_m: 30.0,
+        };
         let vertices = vec![
-            TrackVertex { chainage_m: 0.0, east_m: 0.0, north_m: 0.0 },
-            TrackVertex { chainage_m: 100.0, east_m: 100.0, north_m: 0.0 },
-            TrackVertex { chainage_m: 200.0, east_m: 100.0, north_m: 100.0 },
+            TrackVertex {
+                chainage_m: 0.0,
+                east_m: 0.0,
+                north_m: 0.0,
+            },
+            TrackVertex {
+                chainage_m: 100.0,
+                east_m: 100.0,
+                north_m: 0.0,
+            },
+            TrackVertex {
+                chainage_m: 200.0,
+                east_m: 100.0,
+                north_m: 100.0,
+            },
         ];
         let map = TrackMap {
             stamp_ns: 0,

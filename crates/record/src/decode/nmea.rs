@@ -22,9 +22,17 @@ impl std::fmt::Display for NmeaError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             NmeaError::NotASentence => write!(f, "not an NMEA sentence ($…*hh)"),
-            NmeaError::TooLong(n) => write!(f, "NMEA sentence of {n} bytes exceeds the {MAX_SENTENCE}-byte limit"),
-            NmeaError::Checksum { expected, found } => write!(f, "NMEA checksum {found:02X} where the sentence gives {expected:02X}"),
-            NmeaError::BadField { sentence, field } => write!(f, "NMEA {sentence}: field {field} does not parse"),
+            NmeaError::TooLong(n) => write!(
+                f,
+                "NMEA sentence of {n} bytes exceeds the {MAX_SENTENCE}-byte limit"
+            ),
+            NmeaError::Checksum { expected, found } => write!(
+                f,
+                "NMEA checksum {found:02X} where the sentence gives {expected:02X}"
+            ),
+            NmeaError::BadField { sentence, field } => {
+                write!(f, "NMEA {sentence}: field {field} does not parse")
+            }
         }
     }
 }
@@ -55,7 +63,11 @@ pub fn parse(line: &str) -> Result<Sentence<'_>, NmeaError> {
         return Err(NmeaError::NotASentence);
     }
     let (talker, kind) = head.split_at(head.len() - 3);
-    Ok(Sentence { talker, kind, fields: fields.collect() })
+    Ok(Sentence {
+        talker,
+        kind,
+        fields: fields.collect(),
+    })
 }
 
 /// What a sentence did to the assembler.
@@ -83,17 +95,26 @@ pub struct FixAssembler {
 fn num(s: &Sentence<'_>, i: usize) -> Result<Option<f64>, NmeaError> {
     match s.fields.get(i).copied().unwrap_or("") {
         "" => Ok(None),
-        t => t.parse::<f64>().map(Some).map_err(|_| NmeaError::BadField { sentence: s.kind.to_owned(), field: i + 1 }),
+        t => t.parse::<f64>().map(Some).map_err(|_| NmeaError::BadField {
+            sentence: s.kind.to_owned(),
+            field: i + 1,
+        }),
     }
 }
 
 /// `ddmm.mmmm` + hemisphere → signed degrees.
 fn angle(s: &Sentence<'_>, i: usize, deg_digits: usize) -> Result<Option<f64>, NmeaError> {
-    let (v, hemi) = (s.fields.get(i).copied().unwrap_or(""), s.fields.get(i + 1).copied().unwrap_or(""));
+    let (v, hemi) = (
+        s.fields.get(i).copied().unwrap_or(""),
+        s.fields.get(i + 1).copied().unwrap_or(""),
+    );
     if v.is_empty() {
         return Ok(None);
     }
-    let bad = || NmeaError::BadField { sentence: s.kind.to_owned(), field: i + 1 };
+    let bad = || NmeaError::BadField {
+        sentence: s.kind.to_owned(),
+        field: i + 1,
+    };
     if v.len() < deg_digits + 2 {
         return Err(bad());
     }
@@ -109,14 +130,22 @@ fn time_of_day(s: &Sentence<'_>, i: usize) -> Result<Option<(u32, u32, u32, i64)
     if t.is_empty() {
         return Ok(None);
     }
-    let bad = || NmeaError::BadField { sentence: s.kind.to_owned(), field: i + 1 };
+    let bad = || NmeaError::BadField {
+        sentence: s.kind.to_owned(),
+        field: i + 1,
+    };
     if t.len() < 6 {
         return Err(bad());
     }
     let h = t[..2].parse().map_err(|_| bad())?;
     let m = t[2..4].parse().map_err(|_| bad())?;
     let sec: f64 = t[4..].parse().map_err(|_| bad())?;
-    Ok(Some((h, m, sec.trunc() as u32, (sec.fract() * 1e9).round() as i64)))
+    Ok(Some((
+        h,
+        m,
+        sec.trunc() as u32,
+        (sec.fract() * 1e9).round() as i64,
+    )))
 }
 
 impl FixAssembler {
@@ -133,7 +162,11 @@ impl FixAssembler {
                     5 => FixType::RtkFloat,
                     _ => FixType::None,
                 };
-                let fix_type = if self.no_fix_mode { FixType::None } else { fix_type };
+                let fix_type = if self.no_fix_mode {
+                    FixType::None
+                } else {
+                    fix_type
+                };
                 let has = fix_type.has_position() && lat.is_some() && lon.is_some();
                 let altitude = match (num(s, 8)?, num(s, 10)?) {
                     (Some(msl), sep) => Some(msl + sep.unwrap_or(0.0)),
@@ -151,7 +184,9 @@ impl FixAssembler {
                     latitude_deg: lat.filter(|_| has),
                     longitude_deg: lon.filter(|_| has),
                     altitude_m: altitude.filter(|_| has),
-                    position_covariance_enu_m2: self.sigmas.filter(|_| has).map(|(sn, se, su)| [se * se, 0.0, 0.0, 0.0, sn * sn, 0.0, 0.0, 0.0, su * su]),
+                    position_covariance_enu_m2: self.sigmas.filter(|_| has).map(|(sn, se, su)| {
+                        [se * se, 0.0, 0.0, 0.0, sn * sn, 0.0, 0.0, 0.0, su * su]
+                    }),
                     speed_mps: self.speed_mps.filter(|_| has),
                     course_rad: self.course_rad.filter(|_| has),
                 }))
@@ -200,12 +235,17 @@ mod tests {
     #[test]
     fn a_fix_is_assembled_from_rmc_gst_and_gga() {
         let mut a = FixAssembler::default();
-        for line in ["$GNRMC,083559.00,A,4439.30664,N,01055.78382,E,0.074,,201022,,,R,V*0F", "$GNGST,083559.00,0.45,0.020,0.015,77.4,0.018,0.017,0.031*45"] {
+        for line in [
+            "$GNRMC,083559.00,A,4439.30664,N,01055.78382,E,0.074,,201022,,,R,V*0F",
+            "$GNGST,083559.00,0.45,0.020,0.015,77.4,0.018,0.017,0.031*45",
+        ] {
             let s = parse(line).unwrap_or_else(|e| panic!("{line}: {e}"));
             assert_eq!(a.feed(&s).unwrap(), Decoded::Context);
         }
         let gga = "$GNGGA,083559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*5B";
-        let Decoded::Fix(f) = a.feed(&parse(gga).unwrap()).unwrap() else { panic!() };
+        let Decoded::Fix(f) = a.feed(&parse(gga).unwrap()).unwrap() else {
+            panic!()
+        };
         assert_eq!(f.fix_type, FixType::RtkFixed);
         assert_eq!(f.stamp_ns, 1_666_254_959 * 1_000_000_000);
         assert!((f.latitude_deg.unwrap() - 44.655110666).abs() < 1e-8);
@@ -216,13 +256,22 @@ mod tests {
 
     #[test]
     fn bad_checksums_and_junk_are_errors_not_panics() {
-        assert!(matches!(parse("$GNGGA,1*00"), Err(NmeaError::Checksum { .. })));
+        assert!(matches!(
+            parse("$GNGGA,1*00"),
+            Err(NmeaError::Checksum { .. })
+        ));
         assert_eq!(parse("hello"), Err(NmeaError::NotASentence));
-        assert_eq!(parse(&format!("${}*00", "A".repeat(300))), Err(NmeaError::TooLong(304)));
-        let s = parse("$GBGSV,2,1,07,06,25,044,42,09,38,057,44,12,49,295,46,16,19,038,37,B*04").unwrap();
+        assert_eq!(
+            parse(&format!("${}*00", "A".repeat(300))),
+            Err(NmeaError::TooLong(304))
+        );
+        let s = parse("$GBGSV,2,1,07,06,25,044,42,09,38,057,44,12,49,295,46,16,19,038,37,B*04")
+            .unwrap();
         assert_eq!((s.talker, s.kind), ("GB", "GSV"));
         assert_eq!(FixAssembler::default().feed(&s).unwrap(), Decoded::Skipped);
-        let bad_field = parse("$GNGGA,08x559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*10");
+        let bad_field = parse(
+            "$GNGGA,08x559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*10",
+        );
         assert!(FixAssembler::default().feed(&bad_field.unwrap()).is_err());
     }
 }

@@ -12,11 +12,25 @@ pub fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
 }
 
 /// Unix time in nanoseconds of a UTC date and time; None when out of range or before 1970.
-pub fn unix_ns(year: i64, month: u32, day: u32, hour: u32, minute: u32, second: u32, nanos: i64) -> Option<u64> {
-    if !(1..=12).contains(&month) || !(1..=31).contains(&day) || hour > 23 || minute > 59 || second > 60 {
+pub fn unix_ns(
+    year: i64,
+    month: u32,
+    day: u32,
+    hour: u32,
+    minute: u32,
+    second: u32,
+    nanos: i64,
+) -> Option<u64> {
+    if !(1..=12).contains(&month)
+        || !(1..=31).contains(&day)
+        || hour > 23
+        || minute > 59
+        || second > 60
+    {
         return None;
     }
-    let secs = days_from_civil(year, month, day) * 86_400 + (hour * 3600 + minute * 60 + second) as i64;
+    let secs =
+        days_from_civil(year, month, day) * 86_400 + (hour * 3600 + minute * 60 + second) as i64;
     let ns = secs.checked_mul(1_000_000_000)?.checked_add(nanos)?;
     u64::try_from(ns).ok()
 }
@@ -28,8 +42,14 @@ mod tests {
     #[test]
     fn known_dates() {
         assert_eq!(days_from_civil(1970, 1, 1), 0);
-        assert_eq!(unix_ns(2026, 6, 1, 8, 0, 0, 0), Some(1_780_300_800 * 1_000_000_000));
-        assert_eq!(unix_ns(2022, 10, 20, 8, 24, 35, -5), Some(1_666_254_275 * 1_000_000_000 - 5));
+        assert_eq!(
+            unix_ns(2026, 6, 1, 8, 0, 0, 0),
+            Some(1_780_300_800 * 1_000_000_000)
+        );
+        assert_eq!(
+            unix_ns(2022, 10, 20, 8, 24, 35, -5),
+            Some(1_666_254_275 * 1_000_000_000 - 5)
+        );
         assert_eq!(unix_ns(2022, 13, 1, 0, 0, 0, 0), None);
     }
 }

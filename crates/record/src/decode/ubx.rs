@@ -24,9 +24,18 @@ impl std::fmt::Display for UbxError {
         match self {
             UbxError::NoSync => write!(f, "no UBX sync bytes b5 62"),
             UbxError::Truncated => write!(f, "UBX frame cut short"),
-            UbxError::TooLong(n) => write!(f, "UBX payload of {n} bytes exceeds the {MAX_PAYLOAD}-byte limit"),
-            UbxError::Checksum { expected, found } => write!(f, "UBX checksum {found:02x?} where the frame gives {expected:02x?}"),
-            UbxError::BadPayload { class, id, len } => write!(f, "UBX {class:02x}/{id:02x} with a {len}-byte payload of the wrong size"),
+            UbxError::TooLong(n) => write!(
+                f,
+                "UBX payload of {n} bytes exceeds the {MAX_PAYLOAD}-byte limit"
+            ),
+            UbxError::Checksum { expected, found } => write!(
+                f,
+                "UBX checksum {found:02x?} where the frame gives {expected:02x?}"
+            ),
+            UbxError::BadPayload { class, id, len } => write!(
+                f,
+                "UBX {class:02x}/{id:02x} with a {len}-byte payload of the wrong size"
+            ),
         }
     }
 }
@@ -69,7 +78,14 @@ pub fn parse_frame(bytes: &[u8]) -> Result<(Frame<'_>, usize), UbxError> {
     if expected != found {
         return Err(UbxError::Checksum { expected, found });
     }
-    Ok((Frame { class: bytes[2], id: bytes[3], payload: &bytes[6..6 + len] }, end))
+    Ok((
+        Frame {
+            class: bytes[2],
+            id: bytes[3],
+            payload: &bytes[6..6 + len],
+        },
+        end,
+    ))
 }
 
 /// UBX-NAV-PVT (class 0x01, id 0x07, 92 bytes).
@@ -114,11 +130,25 @@ impl NavPvt {
     pub fn decode(f: &Frame<'_>) -> Result<Self, UbxError> {
         let p = f.payload;
         if (f.class, f.id) != Self::CLASS_ID || p.len() != 92 {
-            return Err(UbxError::BadPayload { class: f.class, id: f.id, len: p.len() });
+            return Err(UbxError::BadPayload {
+                class: f.class,
+                id: f.id,
+                len: p.len(),
+            });
         }
         let valid = p[11];
         let utc_ns = (valid & 0x03 == 0x03)
-            .then(|| unix_ns(u16le(p, 4) as i64, p[6] as u32, p[7] as u32, p[8] as u32, p[9] as u32, p[10] as u32, i32le(p, 16) as i64))
+            .then(|| {
+                unix_ns(
+                    u16le(p, 4) as i64,
+                    p[6] as u32,
+                    p[7] as u32,
+                    p[8] as u32,
+                    p[9] as u32,
+                    p[10] as u32,
+                    i32le(p, 16) as i64,
+                )
+            })
             .flatten();
         let flags = p[21];
         Ok(NavPvt {
@@ -168,7 +198,9 @@ impl NavPvt {
             longitude_deg: has.then_some(self.lon_deg),
             altitude_m: has.then_some(self.height_m),
             // hAcc is the receiver's horizontal 1σ estimate: split evenly over east and north.
-            position_covariance_enu_m2: has.then(|| covariance_enu.unwrap_or([h2 / 2.0, 0.0, 0.0, 0.0, h2 / 2.0, 0.0, 0.0, 0.0, v2])),
+            position_covariance_enu_m2: has.then(|| {
+                covariance_enu.unwrap_or([h2 / 2.0, 0.0, 0.0, 0.0, h2 / 2.0, 0.0, 0.0, 0.0, v2])
+            }),
             speed_mps: has.then_some(self.ground_speed_mps),
             course_rad: (has && self.ground_speed_mps > 0.5).then_some(self.heading_motion_rad),
         }
@@ -190,13 +222,21 @@ impl NavCov {
     pub fn decode(f: &Frame<'_>) -> Result<Self, UbxError> {
         let p = f.payload;
         if (f.class, f.id) != Self::CLASS_ID || p.len() != 64 {
-            return Err(UbxError::BadPayload { class: f.class, id: f.id, len: p.len() });
+            return Err(UbxError::BadPayload {
+                class: f.class,
+                id: f.id,
+                len: p.len(),
+            });
         }
         let c = |o| f32le(p, o) as f64;
         let (nn, ne, nd, ee, ed, dd) = (c(16), c(20), c(24), c(28), c(32), c(36));
         // NED → ENU: E = e, N = n, U = −d.
         let enu = [ee, ne, -ed, ne, nn, -nd, -ed, -nd, dd];
-        Ok(NavCov { itow_ms: u32le(p, 0), pos_valid: p[5] != 0, enu_m2: enu })
+        Ok(NavCov {
+            itow_ms: u32le(p, 0),
+            pos_valid: p[5] != 0,
+            enu_m2: enu,
+        })
     }
 }
 
@@ -226,7 +266,10 @@ mod tests {
         let mut b = Vec::new();
         assert!(hex_into("b56205010200068a98c1", &mut b));
         let (f, used) = parse_frame(&b).unwrap();
-        assert_eq!((f.class, f.id, f.payload, used), (0x05, 0x01, &[0x06, 0x8a][..], 10));
+        assert_eq!(
+            (f.class, f.id, f.payload, used),
+            (0x05, 0x01, &[0x06, 0x8a][..], 10)
+        );
         b[6] ^= 1;
         assert!(matches!(parse_frame(&b), Err(UbxError::Checksum { .. })));
         assert_eq!(parse_frame(&b[..7]), Err(UbxError::Truncated));

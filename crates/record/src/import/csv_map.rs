@@ -61,7 +61,10 @@ pub struct ChannelMapping {
 }
 
 fn invalid(path: &Path, msg: String) -> Error {
-    Error::Io { path: path.to_owned(), source: std::io::Error::new(std::io::ErrorKind::InvalidData, msg) }
+    Error::Io {
+        path: path.to_owned(),
+        source: std::io::Error::new(std::io::ErrorKind::InvalidData, msg),
+    }
 }
 
 /// A cell as JSON: a number when it parses as one, a boolean for true/false, else text.
@@ -78,39 +81,84 @@ fn cell(text: &str) -> Value {
 }
 
 pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<ImportReport> {
-    let text = std::fs::read_to_string(mapping_path).map_err(|source| Error::Io { path: mapping_path.to_owned(), source })?;
-    let map: CsvMapping = toml::from_str(&text).map_err(|e| invalid(mapping_path, e.message().to_owned()))?;
+    let text = std::fs::read_to_string(mapping_path).map_err(|source| Error::Io {
+        path: mapping_path.to_owned(),
+        source,
+    })?;
+    let map: CsvMapping =
+        toml::from_str(&text).map_err(|e| invalid(mapping_path, e.message().to_owned()))?;
     let scale: f64 = match map.time_unit.as_str() {
         "s" => 1e9,
         "ms" => 1e6,
         "us" => 1e3,
         "ns" => 1.0,
-        u => return Err(invalid(mapping_path, format!("time_unit '{u}': s, ms, us or ns"))),
+        u => {
+            return Err(invalid(
+                mapping_path,
+                format!("time_unit '{u}': s, ms, us or ns"),
+            ))
+        }
     };
     let delimiter = match map.delimiter.as_bytes() {
         [d] => *d,
-        _ => return Err(invalid(mapping_path, format!("delimiter '{}' must be one character", map.delimiter))),
+        _ => {
+            return Err(invalid(
+                mapping_path,
+                format!("delimiter '{}' must be one character", map.delimiter),
+            ))
+        }
     };
-    let mut reader = csv::ReaderBuilder::new().delimiter(delimiter).flexible(true).from_path(input).map_err(|e| invalid(input, e.to_string()))?;
-    let headers = reader.headers().map_err(|e| invalid(input, e.to_string()))?.clone();
+    let mut reader = csv::ReaderBuilder::new()
+        .delimiter(delimiter)
+        .flexible(true)
+        .from_path(input)
+        .map_err(|e| invalid(input, e.to_string()))?;
+    let headers = reader
+        .headers()
+        .map_err(|e| invalid(input, e.to_string()))?
+        .clone();
     let column = |name: &str| headers.iter().position(|h| h.trim() == name);
-    let time_col =
-        column(&map.time_column).ok_or_else(|| invalid(mapping_path, format!("time_column '{}' is not a column of {}", map.time_column, input.display())))?;
+    let time_col = column(&map.time_column).ok_or_else(|| {
+        invalid(
+            mapping_path,
+            format!(
+                "time_column '{}' is not a column of {}",
+                map.time_column,
+                input.display()
+            ),
+        )
+    })?;
     let mut channels = Vec::new();
     for c in &map.channel {
         let mut cols = Vec::new();
         for (field, col) in &c.fields {
-            let i = column(col).ok_or_else(|| invalid(mapping_path, format!("channel {}: column '{col}' is not in {}", c.topic, input.display())))?;
+            let i = column(col).ok_or_else(|| {
+                invalid(
+                    mapping_path,
+                    format!(
+                        "channel {}: column '{col}' is not in {}",
+                        c.topic,
+                        input.display()
+                    ),
+                )
+            })?;
             cols.push((field.clone(), i));
         }
-        let constants: Vec<(String, Value)> = c.constants.iter().map(|(k, v)| (k.clone(), serde_json::to_value(v).unwrap_or(Value::Null))).collect();
+        let constants: Vec<(String, Value)> = c
+            .constants
+            .iter()
+            .map(|(k, v)| (k.clone(), serde_json::to_value(v).unwrap_or(Value::Null)))
+            .collect();
         channels.push((c, cols, constants));
     }
     let mut report = ImportReport {
         input: input.to_owned(),
         output: output.to_owned(),
         format: "csv".into(),
-        time_base: format!("column '{}' in {} + {} ns", map.time_column, map.time_unit, map.time_offset_ns),
+        time_base: format!(
+            "column '{}' in {} + {} ns",
+            map.time_column, map.time_unit, map.time_offset_ns
+        ),
         ..Default::default()
     };
     let mut writer = ItemWriter::new(LogWriter::create(output)?);
@@ -125,12 +173,20 @@ pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<Import
             }
         };
         let t = record.get(time_col).unwrap_or("").trim();
-        let Some(stamp) = t.parse::<f64>().ok().filter(|x| x.is_finite() && *x >= 0.0).map(|x| (x * scale) as u64 + map.time_offset_ns) else {
+        let Some(stamp) = t
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite() && *x >= 0.0)
+            .map(|x| (x * scale) as u64 + map.time_offset_ns)
+        else {
             report.skip(line, "bad time", t);
             continue;
         };
         for (c, cols, constants) in &channels {
-            if cols.iter().any(|(_, i)| record.get(*i).is_none_or(|v| v.trim().is_empty())) {
+            if cols
+                .iter()
+                .any(|(_, i)| record.get(*i).is_none_or(|v| v.trim().is_empty()))
+            {
                 continue;
             }
             let mut obj = serde_json::Map::new();

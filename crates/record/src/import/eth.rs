@@ -55,7 +55,13 @@ fn board_ns(t: &str) -> Option<u64> {
 }
 
 fn open(path: &Path) -> Result<BufReader<File>> {
-    Ok(BufReader::with_capacity(1 << 16, File::open(path).map_err(|source| Error::Io { path: path.to_owned(), source })?))
+    Ok(BufReader::with_capacity(
+        1 << 16,
+        File::open(path).map_err(|source| Error::Io {
+            path: path.to_owned(),
+            source,
+        })?,
+    ))
 }
 
 /// First pass: node-clock time minus UTC of the first NAV-PVT with a valid time.
@@ -63,14 +69,23 @@ fn utc_offset(path: &Path) -> Result<Option<i128>> {
     let mut r = open(path)?;
     let mut line = Vec::new();
     let mut bytes = Vec::new();
-    while let Some(ok) = read_line_bounded(&mut r, &mut line).map_err(|source| Error::Io { path: path.to_owned(), source })? {
+    while let Some(ok) = read_line_bounded(&mut r, &mut line).map_err(|source| Error::Io {
+        path: path.to_owned(),
+        source,
+    })? {
         if !ok {
             continue;
         }
-        let Ok(text) = std::str::from_utf8(&line) else { continue };
+        let Ok(text) = std::str::from_utf8(&line) else {
+            continue;
+        };
         let mut f = text.splitn(3, ',');
-        let (Some(t), Some("U"), Some(data)) = (f.next(), f.next(), f.next()) else { continue };
-        let (Some(board), true) = (board_ns(t), hex_into(data, &mut bytes)) else { continue };
+        let (Some(t), Some("U"), Some(data)) = (f.next(), f.next(), f.next()) else {
+            continue;
+        };
+        let (Some(board), true) = (board_ns(t), hex_into(data, &mut bytes)) else {
+            continue;
+        };
         if let Ok((frame, _)) = ubx::parse_frame(&bytes) {
             if let Ok(pvt) = NavPvt::decode(&frame) {
                 if let Some(utc) = pvt.utc_ns {
@@ -90,7 +105,14 @@ struct Out {
 }
 
 impl Out {
-    fn write<M: ChannelMessage>(&mut self, report: &mut ImportReport, channel: ChannelId, topic: &str, log_time: u64, m: &M) -> Result<()> {
+    fn write<M: ChannelMessage>(
+        &mut self,
+        report: &mut ImportReport,
+        channel: ChannelId,
+        topic: &str,
+        log_time: u64,
+        m: &M,
+    ) -> Result<()> {
         self.writer.write(channel, log_time, m)?;
         report.messages += 1;
         *report.per_topic.entry(topic.to_owned()).or_insert(0) += 1;
@@ -100,21 +122,40 @@ impl Out {
 
 /// Imports one node log into a railfuse MCAP log.
 pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
-    let mut report = ImportReport { input: input.to_owned(), output: output.to_owned(), format: "eth".into(), ..Default::default() };
+    let mut report = ImportReport {
+        input: input.to_owned(),
+        output: output.to_owned(),
+        format: "eth".into(),
+        ..Default::default()
+    };
     let offset = utc_offset(input)?;
     report.time_base = match offset {
         Some(_) => "UTC, from the first NAV-PVT with a valid time; other records by their node-clock offset to it".into(),
         None => "node clock since start-up (no NAV-PVT with a valid time in the file)".into(),
     };
-    let to_utc = |board: u64| -> u64 { offset.map_or(board, |o| (board as i128 + o).max(0) as u64) };
-    let stem = input.file_stem().and_then(|s| s.to_str()).unwrap_or("eth").to_owned();
-    let node = stem.split('_').find(|p| p.starts_with("SN")).unwrap_or("SN?").to_owned();
+    let to_utc =
+        |board: u64| -> u64 { offset.map_or(board, |o| (board as i128 + o).max(0) as u64) };
+    let stem = input
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("eth")
+        .to_owned();
+    let node = stem
+        .split('_')
+        .find(|p| p.starts_with("SN"))
+        .unwrap_or("SN?")
+        .to_owned();
 
     let mut writer = LogWriter::create(output)?;
     let imu = writer.add_channel::<Imu>(topics::IMU)?;
     let gnss = writer.add_channel::<GnssFix>(topics::GNSS_FIX)?;
     let events = writer.add_channel::<Event>(topics::EVENTS)?;
-    let mut out = Out { writer, imu, gnss, events };
+    let mut out = Out {
+        writer,
+        imu,
+        gnss,
+        events,
+    };
 
     let mut r = open(input)?;
     let (mut line, mut bytes) = (Vec::new(), Vec::new());
@@ -122,12 +163,19 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
     // A NAV-PVT waits for the NAV-COV of its epoch (the receiver sends it right after).
     let mut pending: Option<NavPvt> = None;
     let mut n = 0u64;
-    let io = |source| Error::Io { path: input.to_owned(), source };
+    let io = |source| Error::Io {
+        path: input.to_owned(),
+        source,
+    };
     while let Some(ok) = read_line_bounded(&mut r, &mut line).map_err(io)? {
         n += 1;
         report.lines += 1;
         if !ok {
-            report.skip(n, "line too long", format!("over {} bytes", super::MAX_LINE));
+            report.skip(
+                n,
+                "line too long",
+                format!("over {} bytes", super::MAX_LINE),
+            );
             continue;
         }
         let Ok(text) = std::str::from_utf8(&line) else {
@@ -138,7 +186,11 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
             continue;
         }
         let mut f = text.splitn(3, ',');
-        let (t, kind, data) = (f.next().unwrap_or(""), f.next().unwrap_or(""), f.next().unwrap_or(""));
+        let (t, kind, data) = (
+            f.next().unwrap_or(""),
+            f.next().unwrap_or(""),
+            f.next().unwrap_or(""),
+        );
         let Some(board) = board_ns(t) else {
             report.skip(n, "bad timestamp", t);
             continue;
@@ -154,8 +206,16 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
                 let m = Imu {
                     stamp_ns: now,
                     sensor_id: format!("asm330lhh-{node}"),
-                    angular_rate_radps: [w(0) * GYRO_RADPS_PER_LSB, w(1) * GYRO_RADPS_PER_LSB, w(2) * GYRO_RADPS_PER_LSB],
-                    specific_force_mps2: [w(3) * ACCEL_MPS2_PER_LSB, w(4) * ACCEL_MPS2_PER_LSB, w(5) * ACCEL_MPS2_PER_LSB],
+                    angular_rate_radps: [
+                        w(0) * GYRO_RADPS_PER_LSB,
+                        w(1) * GYRO_RADPS_PER_LSB,
+                        w(2) * GYRO_RADPS_PER_LSB,
+                    ],
+                    specific_force_mps2: [
+                        w(3) * ACCEL_MPS2_PER_LSB,
+                        w(4) * ACCEL_MPS2_PER_LSB,
+                        w(5) * ACCEL_MPS2_PER_LSB,
+                    ],
                 };
                 out.write(&mut report, out.imu, topics::IMU, now, &m)?;
             }
@@ -188,7 +248,10 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
                     NavCov::CLASS_ID => match NavCov::decode(&frame) {
                         Ok(cov) => match pending.take() {
                             Some(pvt) if pvt.itow_ms == cov.itow_ms => {
-                                let fix = pvt.to_fix(pvt.utc_ns.unwrap_or(now), cov.pos_valid.then_some(cov.enu_m2));
+                                let fix = pvt.to_fix(
+                                    pvt.utc_ns.unwrap_or(now),
+                                    cov.pos_valid.then_some(cov.enu_m2),
+                                );
                                 out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
                             }
                             other => {
@@ -198,8 +261,18 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
                         },
                         Err(e) => report.skip(n, "UBX NAV-COV rejected", e),
                     },
-                    (0x05, _) => *report.skipped.entry("UBX ACK/NAK (not data)".into()).or_insert(0) += 1,
-                    (c, i) => *report.skipped.entry(format!("UBX {c:02x}/{i:02x} (not decoded)")).or_insert(0) += 1,
+                    (0x05, _) => {
+                        *report
+                            .skipped
+                            .entry("UBX ACK/NAK (not data)".into())
+                            .or_insert(0) += 1
+                    }
+                    (c, i) => {
+                        *report
+                            .skipped
+                            .entry(format!("UBX {c:02x}/{i:02x} (not decoded)"))
+                            .or_insert(0) += 1
+                    }
                 }
             }
             "N" => match nmea::parse(data).map(|s| nmea.feed(&s)) {
@@ -210,18 +283,29 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
                     out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
                 }
                 Ok(Ok(Decoded::Context)) => {}
-                Ok(Ok(Decoded::Skipped)) => *report.skipped.entry("NMEA sentence type not used (GSV, GLL, …)".into()).or_insert(0) += 1,
+                Ok(Ok(Decoded::Skipped)) => {
+                    *report
+                        .skipped
+                        .entry("NMEA sentence type not used (GSV, GLL, …)".into())
+                        .or_insert(0) += 1
+                }
                 Ok(Err(e)) | Err(e) => report.skip(n, "NMEA sentence rejected", e),
             },
             "BRK" | "ARR" | "DEP" => {
                 let kind = match (kind, data.trim()) {
                     ("ARR", _) => EventKind::StationArrival,
                     ("DEP", _) => EventKind::StationDeparture,
-                    (_, d) if d.contains("CONNECTED") && !d.contains("DISCONNECTED") => EventKind::CorrectionLinkUp,
+                    (_, d) if d.contains("CONNECTED") && !d.contains("DISCONNECTED") => {
+                        EventKind::CorrectionLinkUp
+                    }
                     (_, d) if d.contains("DISCONNECTED") => EventKind::CorrectionLinkDown,
                     _ => EventKind::OperatorNote,
                 };
-                let e = Event { stamp_ns: now, kind, text: data.trim().to_owned() };
+                let e = Event {
+                    stamp_ns: now,
+                    kind,
+                    text: data.trim().to_owned(),
+                };
                 out.write(&mut report, out.events, topics::EVENTS, now, &e)?;
             }
             other => report.skip(n, "unknown line type", other),
@@ -234,10 +318,19 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
     }
     let run = BTreeMap::from([
         ("run_id".to_owned(), stem.clone()),
-        ("source".to_owned(), "ETH-PBL Railway-Precise-Localization (imported)".to_owned()),
+        (
+            "source".to_owned(),
+            "ETH-PBL Railway-Precise-Localization (imported)".to_owned(),
+        ),
         ("input".to_owned(), input.display().to_string()),
         ("node".to_owned(), node),
-        ("train".to_owned(), stem.split('_').find(|p| p.starts_with('R')).unwrap_or("").to_owned()),
+        (
+            "train".to_owned(),
+            stem.split('_')
+                .find(|p| p.starts_with('R'))
+                .unwrap_or("")
+                .to_owned(),
+        ),
         ("time_base".to_owned(), report.time_base.clone()),
         ("tool_version".to_owned(), crate::TOOL_VERSION.to_owned()),
     ]);

@@ -22,7 +22,10 @@ pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<Impor
         time_base: "GNSS time of each solution (UTC)".into(),
         ..Default::default()
     };
-    let io = |source| Error::Io { path: input.to_owned(), source };
+    let io = |source| Error::Io {
+        path: input.to_owned(),
+        source,
+    };
     let mut file = std::fs::File::open(input).map_err(io)?;
     let mut writer = LogWriter::create(output)?;
     let channel = writer.add_channel::<GnssFix>(topics::GNSS_FIX)?;
@@ -40,7 +43,9 @@ pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<Impor
             decoder.feed(&buf[..n], 0, &mut stats, &mut items);
         }
         for item in items.drain(..) {
-            let Message::Gnss(mut fix) = item.message else { continue };
+            let Message::Gnss(mut fix) = item.message else {
+                continue;
+            };
             // A solution before the first date (NMEA GGA before any RMC) has no UTC yet.
             if fix.stamp_ns == 0 {
                 fix.stamp_ns = last_stamp;
@@ -48,10 +53,17 @@ pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<Impor
             last_stamp = fix.stamp_ns;
             writer.write(channel, fix.stamp_ns, &fix)?;
             report.messages += 1;
-            *report.per_topic.entry(topics::GNSS_FIX.to_owned()).or_insert(0) += 1;
+            *report
+                .per_topic
+                .entry(topics::GNSS_FIX.to_owned())
+                .or_insert(0) += 1;
         }
     }
-    for (what, n) in [("checksum failures", stats.checksum_failures), ("malformed", stats.malformed), ("oversized", stats.oversized)] {
+    for (what, n) in [
+        ("checksum failures", stats.checksum_failures),
+        ("malformed", stats.malformed),
+        ("oversized", stats.oversized),
+    ] {
         if n > 0 {
             report.skipped.insert(what.to_owned(), n);
         }

@@ -36,7 +36,8 @@ impl ImportReport {
     pub(crate) fn skip(&mut self, line: u64, reason: &str, detail: impl std::fmt::Display) {
         *self.skipped.entry(reason.to_owned()).or_insert(0) += 1;
         if self.first_problems.len() < 10 {
-            self.first_problems.push(format!("line {line}: {reason}: {detail}"));
+            self.first_problems
+                .push(format!("line {line}: {reason}: {detail}"));
         }
     }
 }
@@ -52,7 +53,11 @@ fn read_line_bounded(r: &mut impl BufRead, buf: &mut Vec<u8>) -> std::io::Result
     loop {
         let available = r.fill_buf()?;
         if available.is_empty() {
-            return Ok(if buf.is_empty() && !oversized { None } else { Some(!oversized) });
+            return Ok(if buf.is_empty() && !oversized {
+                None
+            } else {
+                Some(!oversized)
+            });
         }
         let (chunk, done) = match available.iter().position(|&b| b == b'\n') {
             Some(i) => (&available[..i], Some(i + 1)),

@@ -35,7 +35,10 @@ impl Message {
     /// Its schema name and JSON payload (for live viewers).
     pub fn schema_and_json(&self) -> (&'static str, Vec<u8>) {
         fn j<M: ChannelMessage + serde::Serialize>(m: &M) -> (&'static str, Vec<u8>) {
-            (M::SCHEMA_NAME, serde_json::to_vec(m).expect("a message serialises"))
+            (
+                M::SCHEMA_NAME,
+                serde_json::to_vec(m).expect("a message serialises"),
+            )
         }
         match self {
             Message::Gnss(m) => j(m),
@@ -79,7 +82,8 @@ fn type_of_topic(topic: &str) -> Option<&'static str> {
 
 /// Parses one JSON line; the error says what is wrong with it.
 pub fn parse_json_line(line: &str, receive_ns: u64) -> Result<Item, String> {
-    let v: serde_json::Map<String, Value> = serde_json::from_str(line).map_err(|e| format!("not a JSON object: {e}"))?;
+    let v: serde_json::Map<String, Value> =
+        serde_json::from_str(line).map_err(|e| format!("not a JSON object: {e}"))?;
     from_object(v, receive_ns)
 }
 
@@ -93,7 +97,9 @@ pub fn from_object(mut v: serde_json::Map<String, Value>, receive_ns: u64) -> Re
     let ty = match v.remove("type") {
         Some(Value::String(t)) => t,
         Some(_) => return Err("\"type\" must be a string".into()),
-        None => type_of_topic(&topic).ok_or_else(|| format!("{topic} is not a standard topic: name its \"type\""))?.to_owned(),
+        None => type_of_topic(&topic)
+            .ok_or_else(|| format!("{topic} is not a standard topic: name its \"type\""))?
+            .to_owned(),
     };
     v.entry("stamp_ns").or_insert(Value::from(receive_ns));
     let obj = Value::Object(v);
@@ -109,7 +115,11 @@ pub fn from_object(mut v: serde_json::Map<String, Value>, receive_ns: u64) -> Re
         "Event" => Message::Event(serde_json::from_value(obj).map_err(bad)?),
         other => return Err(format!("unknown type {other}")),
     };
-    Ok(Item { topic, log_time_ns: receive_ns, message })
+    Ok(Item {
+        topic,
+        log_time_ns: receive_ns,
+        message,
+    })
 }
 
 /// Writes items, adding each (topic, type) channel the first time it appears.
@@ -120,7 +130,10 @@ pub struct ItemWriter {
 
 impl ItemWriter {
     pub fn new(writer: LogWriter) -> Self {
-        Self { writer, channels: HashMap::new() }
+        Self {
+            writer,
+            channels: HashMap::new(),
+        }
     }
 
     fn channel<M: ChannelMessage>(&mut self, topic: &str) -> railfuse_catalog::Result<ChannelId> {
@@ -132,7 +145,12 @@ impl ItemWriter {
         Ok(c)
     }
 
-    pub fn write_message<M: ChannelMessage>(&mut self, topic: &str, log_time_ns: u64, m: &M) -> railfuse_catalog::Result<()> {
+    pub fn write_message<M: ChannelMessage>(
+        &mut self,
+        topic: &str,
+        log_time_ns: u64,
+        m: &M,
+    ) -> railfuse_catalog::Result<()> {
         let c = self.channel::<M>(topic)?;
         self.writer.write(c, log_time_ns, m)
     }
@@ -160,12 +178,26 @@ mod tests {
 
     #[test]
     fn json_lines_name_their_channel_and_bad_ones_say_why() {
-        let i = parse_json_line(r#"{"topic":"/radar/speed","speed_mps":12.5,"quality":1.0,"valid":true}"#, 77).unwrap();
-        assert!(matches!(i.message, Message::Radar(RadarSpeed { stamp_ns: 77, speed_mps, .. }) if speed_mps == 12.5));
+        let i = parse_json_line(
+            r#"{"topic":"/radar/speed","speed_mps":12.5,"quality":1.0,"valid":true}"#,
+            77,
+        )
+        .unwrap();
+        assert!(
+            matches!(i.message, Message::Radar(RadarSpeed { stamp_ns: 77, speed_mps, .. }) if speed_mps == 12.5)
+        );
         let i = parse_json_line(r#"{"topic":"/radar/front","type":"RadarSpeed","stamp_ns":5,"speed_mps":1.0,"quality":1.0,"valid":false}"#, 9).unwrap();
         assert_eq!((i.topic.as_str(), i.log_time_ns), ("/radar/front", 9));
-        assert!(parse_json_line("{]", 0).unwrap_err().contains("not a JSON object"));
-        assert!(parse_json_line(r#"{"topic":"/x","speed_mps":1}"#, 0).unwrap_err().contains("name its \"type\""));
-        assert!(parse_json_line(r#"{"topic":"/radar/speed","speed_mps":"fast"}"#, 0).unwrap_err().contains("not a valid RadarSpeed"));
+        assert!(parse_json_line("{]", 0)
+            .unwrap_err()
+            .contains("not a JSON object"));
+        assert!(parse_json_line(r#"{"topic":"/x","speed_mps":1}"#, 0)
+            .unwrap_err()
+            .contains("name its \"type\""));
+        assert!(
+            parse_json_line(r#"{"topic":"/radar/speed","speed_mps":"fast"}"#, 0)
+                .unwrap_err()
+                .contains("not a valid RadarSpeed")
+        );
     }
 }

@@ -86,8 +86,15 @@ pub struct RecordReport {
 }
 
 /// Joins a source's thread; an error that ended it goes on the list as "<source>: <cause>".
-fn join_source(name: String, handle: std::thread::JoinHandle<Result<(), String>>, failed: &mut Vec<String>) {
-    if let Err(e) = handle.join().unwrap_or_else(|_| Err("the source's thread panicked".to_owned())) {
+fn join_source(
+    name: String,
+    handle: std::thread::JoinHandle<Result<(), String>>,
+    failed: &mut Vec<String>,
+) {
+    if let Err(e) = handle
+        .join()
+        .unwrap_or_else(|_| Err("the source's thread panicked".to_owned()))
+    {
         failed.push(format!("{name}: {e}"));
     }
 }
@@ -95,36 +102,63 @@ fn join_source(name: String, handle: std::thread::JoinHandle<Result<(), String>>
 /// The path of part `n` (1-based) when splitting: `run.mcap` → `run-001.mcap`.
 pub fn part_path(output: &Path, n: u32) -> PathBuf {
     let stem = output.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
-    let ext = output.extension().and_then(|s| s.to_str()).unwrap_or("mcap");
+    let ext = output
+        .extension()
+        .and_then(|s| s.to_str())
+        .unwrap_or("mcap");
     output.with_file_name(format!("{stem}-{n:03}.{ext}"))
 }
 
 /// Opens one output file with the recorder's channel and the run metadata.
-fn open_part(path: &Path, opts: &RecordOptions, part: Option<u32>) -> railfuse_catalog::Result<(ItemWriter, railfuse_catalog::log::ChannelId)> {
+fn open_part(
+    path: &Path,
+    opts: &RecordOptions,
+    part: Option<u32>,
+) -> railfuse_catalog::Result<(ItemWriter, railfuse_catalog::log::ChannelId)> {
     let mut writer = ItemWriter::new(LogWriter::create(path)?);
-    let diag = writer.writer.add_channel::<RecorderDiagnostics>(topics::RECORDER_DIAGNOSTICS)?;
+    let diag = writer
+        .writer
+        .add_channel::<RecorderDiagnostics>(topics::RECORDER_DIAGNOSTICS)?;
     let mut metadata = opts.metadata.clone();
-    metadata.insert("sources".into(), opts.sources.iter().map(|s| s.to_string()).collect::<Vec<_>>().join("; "));
+    metadata.insert(
+        "sources".into(),
+        opts.sources
+            .iter()
+            .map(|s| s.to_string())
+            .collect::<Vec<_>>()
+            .join("; "),
+    );
     metadata.insert("tool_version".into(), crate::TOOL_VERSION.into());
     metadata.insert("source".into(), "recorded".into());
     if let Some(n) = part {
         metadata.insert("part".into(), n.to_string());
     }
-    writer.writer.write_metadata(topics::metadata::RUN, metadata)?;
+    writer
+        .writer
+        .write_metadata(topics::metadata::RUN, metadata)?;
     Ok((writer, diag))
 }
 
 fn file_size(path: &Path) -> u64 {
     let mut partial = path.as_os_str().to_owned();
     partial.push(".partial");
-    std::fs::metadata(&partial).or_else(|_| std::fs::metadata(path)).map_or(0, |m| m.len())
+    std::fs::metadata(&partial)
+        .or_else(|_| std::fs::metadata(path))
+        .map_or(0, |m| m.len())
 }
 
 /// Records until `stop` is set, the duration is up, or every source has ended.
-pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalog::Result<RecordReport> {
+pub fn record(
+    mut opts: RecordOptions,
+    stop: Arc<AtomicBool>,
+) -> railfuse_catalog::Result<RecordReport> {
     let splitting = opts.split_bytes.is_some() || opts.split_every.is_some();
     let mut part = 1u32;
-    let mut current = if splitting { part_path(&opts.output, part) } else { opts.output.clone() };
+    let mut current = if splitting {
+        part_path(&opts.output, part)
+    } else {
+        opts.output.clone()
+    };
     let (mut writer, mut diag) = open_part(&current, &opts, splitting.then_some(part))?;
     let mut files = vec![current.clone()];
     let mut part_started = Instant::now();
@@ -135,10 +169,16 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
     let mut threads = Vec::new();
     for spec in &opts.sources {
         let (tx, rx) = sync_channel(opts.queue.max(1));
-        let s = Arc::new(Mutex::new(SourceStats { name: spec.to_string(), ..Default::default() }));
+        let s = Arc::new(Mutex::new(SourceStats {
+            name: spec.to_string(),
+            ..Default::default()
+        }));
         let (spec, st, stop) = (spec.clone(), s.clone(), source_stop.clone());
         let name = spec.to_string();
-        threads.push(Some((name, std::thread::spawn(move || sources::run(spec, tx, st, stop)))));
+        threads.push(Some((
+            name,
+            std::thread::spawn(move || sources::run(spec, tx, st, stop)),
+        )));
         queues.push(rx);
         stats.push(s);
     }
@@ -180,18 +220,36 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
                 }
             }
         }
-        let snapshot =
-            || -> Vec<SourceStats> { stats.iter().zip(&written).map(|(s, &w)| SourceStats { written: w, ..s.lock().expect("stats").clone() }).collect() };
+        let snapshot = || -> Vec<SourceStats> {
+            stats
+                .iter()
+                .zip(&written)
+                .map(|(s, &w)| SourceStats {
+                    written: w,
+                    ..s.lock().expect("stats").clone()
+                })
+                .collect()
+        };
         if last_flush.elapsed() >= opts.chunk_interval {
-            let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: snapshot(), bytes_written: file_size(&current) };
-            let r = writer.writer.write(diag, d.stamp_ns, &d).and_then(|()| writer.writer.flush_chunk());
+            let d = RecorderDiagnostics {
+                stamp_ns: sources::now_ns(),
+                sources: snapshot(),
+                bytes_written: file_size(&current),
+            };
+            let r = writer
+                .writer
+                .write(diag, d.stamp_ns, &d)
+                .and_then(|()| writer.writer.flush_chunk());
             if let Err(e) = r {
                 write_error = Some(e.to_string());
                 stopped_by = "write error".to_owned();
                 break 'run;
             }
             last_flush = Instant::now();
-            let full = opts.split_bytes.is_some_and(|b| d.bytes_written >= b) || opts.split_every.is_some_and(|t| part_started.elapsed() >= t);
+            let full = opts.split_bytes.is_some_and(|b| d.bytes_written >= b)
+                || opts
+                    .split_every
+                    .is_some_and(|t| part_started.elapsed() >= t);
             if full {
                 part += 1;
                 let next = part_path(&opts.output, part);
@@ -214,12 +272,17 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
                 part_started = Instant::now();
             }
         }
-        for slot in threads.iter_mut().filter(|t| t.as_ref().is_some_and(|(_, h)| h.is_finished())) {
+        for slot in threads
+            .iter_mut()
+            .filter(|t| t.as_ref().is_some_and(|(_, h)| h.is_finished()))
+        {
             let (name, handle) = slot.take().expect("finished source");
             join_source(name, handle, &mut failed_sources);
         }
         if let Some(status) = opts.status.as_mut() {
-            if last_status.elapsed() >= Duration::from_secs(1) || failed_sources.len() > reported_failures {
+            if last_status.elapsed() >= Duration::from_secs(1)
+                || failed_sources.len() > reported_failures
+            {
                 reported_failures = failed_sources.len();
                 status(&Status {
                     elapsed_s: started.elapsed().as_secs_f64(),
@@ -268,8 +331,19 @@ pub fn record(mut opts: RecordOptions, stop: Arc<AtomicBool>) -> railfuse_catalo
         }
     }
     drop(queues);
-    let sources: Vec<SourceStats> = stats.iter().zip(&written).map(|(s, &w)| SourceStats { written: w, ..s.lock().expect("stats").clone() }).collect();
-    let d = RecorderDiagnostics { stamp_ns: sources::now_ns(), sources: sources.clone(), bytes_written: file_size(&current) };
+    let sources: Vec<SourceStats> = stats
+        .iter()
+        .zip(&written)
+        .map(|(s, &w)| SourceStats {
+            written: w,
+            ..s.lock().expect("stats").clone()
+        })
+        .collect();
+    let d = RecorderDiagnostics {
+        stamp_ns: sources::now_ns(),
+        sources: sources.clone(),
+        bytes_written: file_size(&current),
+    };
     if write_error.is_none() {
         if let Err(e) = writer.writer.write(diag, d.stamp_ns, &d) {
             write_error = Some(e.to_string());

@@ -16,7 +16,12 @@ fn baud_constant(baud: u32) -> io::Result<libc::speed_t> {
         230400 => libc::B230400,
         460800 => libc::B460800,
         921600 => libc::B921600,
-        _ => return Err(io::Error::new(io::ErrorKind::InvalidInput, format!("unsupported baud rate {baud} (4800 … 921600)"))),
+        _ => {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!("unsupported baud rate {baud} (4800 … 921600)"),
+            ))
+        }
     })
 }
 
@@ -24,7 +29,11 @@ fn baud_constant(baud: u32) -> io::Result<libc::speed_t> {
 /// every 100 ms so the reader can notice a stop.
 pub fn open(path: &Path, baud: u32) -> io::Result<File> {
     let speed = baud_constant(baud)?;
-    let file = std::fs::OpenOptions::new().read(true).write(true).custom_flags_noctty().open(path)?;
+    let file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .custom_flags_noctty()
+        .open(path)?;
     let fd = file.as_raw_fd();
     // SAFETY: `fd` is a valid open descriptor for the lifetime of `file`; `t` is fully
     // initialised by tcgetattr before use.
@@ -37,7 +46,10 @@ pub fn open(path: &Path, baud: u32) -> io::Result<File> {
         t.c_cflag |= libc::CLOCAL | libc::CREAD;
         t.c_cc[libc::VMIN] = 0;
         t.c_cc[libc::VTIME] = 1;
-        if libc::cfsetispeed(&mut t, speed) != 0 || libc::cfsetospeed(&mut t, speed) != 0 || libc::tcsetattr(fd, libc::TCSANOW, &t) != 0 {
+        if libc::cfsetispeed(&mut t, speed) != 0
+            || libc::cfsetospeed(&mut t, speed) != 0
+            || libc::tcsetattr(fd, libc::TCSANOW, &t) != 0
+        {
             return Err(io::Error::last_os_error());
         }
     }

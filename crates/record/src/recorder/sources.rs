@@ -20,9 +20,7 @@ use super::stream::{StreamDecoder, StreamFormat};
 #[derive(Debug, Clone)]
 pub enum SourceSpec {
     /// JSON lines in UDP datagrams.
-    Udp {
-        addr: SocketAddr,
-    },
+    Udp { addr: SocketAddr },
     /// A TCP listener; each connection a stream of the given format.
     TcpListen {
         addr: SocketAddr,
@@ -69,12 +67,39 @@ impl std::fmt::Display for SourceSpec {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             SourceSpec::Udp { addr } => write!(f, "udp {addr} (json)"),
-            SourceSpec::TcpListen { addr, format, topic } => write!(f, "tcp listen {addr} ({format:?}{})", to(topic)),
-            SourceSpec::TcpClient { addr, format, topic } => write!(f, "tcp {addr} ({format:?}{})", to(topic)),
+            SourceSpec::TcpListen {
+                addr,
+                format,
+                topic,
+            } => write!(f, "tcp listen {addr} ({format:?}{})", to(topic)),
+            SourceSpec::TcpClient {
+                addr,
+                format,
+                topic,
+            } => write!(f, "tcp {addr} ({format:?}{})", to(topic)),
             SourceSpec::Stdin { format, topic } => write!(f, "stdin ({format:?}{})", to(topic)),
-            SourceSpec::File { path, format, topic } => write!(f, "file {} ({format:?}{})", path.display(), to(topic)),
-            SourceSpec::Serial { path, baud, format, topic } => write!(f, "serial {} {baud} baud ({format:?}{})", path.display(), to(topic)),
-            SourceSpec::Simulated { scenario, seed, speed, .. } => write!(f, "simulator {scenario} seed {seed} ×{speed}"),
+            SourceSpec::File {
+                path,
+                format,
+                topic,
+            } => write!(f, "file {} ({format:?}{})", path.display(), to(topic)),
+            SourceSpec::Serial {
+                path,
+                baud,
+                format,
+                topic,
+            } => write!(
+                f,
+                "serial {} {baud} baud ({format:?}{})",
+                path.display(),
+                to(topic)
+            ),
+            SourceSpec::Simulated {
+                scenario,
+                seed,
+                speed,
+                ..
+            } => write!(f, "simulator {scenario} seed {seed} ×{speed}"),
         }
     }
 }
@@ -82,7 +107,9 @@ impl std::fmt::Display for SourceSpec {
 pub type Stats = Arc<Mutex<SourceStats>>;
 
 pub fn now_ns() -> u64 {
-    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_nanos() as u64)
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos() as u64)
 }
 
 /// Queues decoded items; false when the recorder has gone.
@@ -91,7 +118,12 @@ fn send(tx: &SyncSender<Item>, stats: &Stats, items: &mut Vec<Item>) -> bool {
 }
 
 /// Queues decoded items, GNSS fixes on `gnss_topic` when the source is mapped to one.
-fn send_as(tx: &SyncSender<Item>, stats: &Stats, items: &mut Vec<Item>, gnss_topic: Option<&str>) -> bool {
+fn send_as(
+    tx: &SyncSender<Item>,
+    stats: &Stats,
+    items: &mut Vec<Item>,
+    gnss_topic: Option<&str>,
+) -> bool {
     for mut item in items.drain(..) {
         if let (Some(t), Message::Gnss(_)) = (gnss_topic, &item.message) {
             item.topic = t.to_owned();
@@ -132,18 +164,36 @@ fn pump_with(
                 return Ok(());
             }
             Ok(n) => {
-                d.feed(&buf[..n], now_ns(), &mut stats.lock().expect("stats"), &mut items);
+                d.feed(
+                    &buf[..n],
+                    now_ns(),
+                    &mut stats.lock().expect("stats"),
+                    &mut items,
+                );
                 if !send_as(tx, stats, &mut items, topic) {
                     return Ok(());
                 }
             }
-            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut | std::io::ErrorKind::Interrupted) => {}
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock
+                        | std::io::ErrorKind::TimedOut
+                        | std::io::ErrorKind::Interrupted
+                ) => {}
             Err(e) => return Err(e),
         }
     }
 }
 
-fn pump(r: impl Read, format: StreamFormat, topic: Option<&str>, tx: &SyncSender<Item>, stats: &Stats, stop: &AtomicBool) -> std::io::Result<()> {
+fn pump(
+    r: impl Read,
+    format: StreamFormat,
+    topic: Option<&str>,
+    tx: &SyncSender<Item>,
+    stats: &Stats,
+    stop: &AtomicBool,
+) -> std::io::Result<()> {
     pump_with(r, format, topic, tx, stats, stop, false)
 }
 
@@ -154,7 +204,12 @@ fn set_error(stats: &Stats, e: impl std::fmt::Display) {
 /// Runs one source until it ends or `stop` is set. An error that ends the source for good (a
 /// port that cannot be bound, a file that cannot be read) is returned as well as counted;
 /// sources that reconnect (serial, TCP client) only count theirs.
-pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<AtomicBool>) -> Result<(), String> {
+pub fn run(
+    spec: SourceSpec,
+    tx: SyncSender<Item>,
+    stats: Stats,
+    stop: Arc<AtomicBool>,
+) -> Result<(), String> {
     let result = run_until_end(spec, tx, &stats, stop);
     let mut s = stats.lock().expect("stats");
     s.connected = false;
@@ -164,12 +219,19 @@ pub fn run(spec: SourceSpec, tx: SyncSender<Item>, stats: Stats, stop: Arc<Atomi
     result
 }
 
-fn run_until_end(spec: SourceSpec, tx: SyncSender<Item>, stats: &Stats, stop: Arc<AtomicBool>) -> Result<(), String> {
+fn run_until_end(
+    spec: SourceSpec,
+    tx: SyncSender<Item>,
+    stats: &Stats,
+    stop: Arc<AtomicBool>,
+) -> Result<(), String> {
     let tick = Duration::from_millis(200);
     stats.lock().expect("stats").connected = true;
     match spec {
         SourceSpec::Udp { addr } => {
-            let sock = match UdpSocket::bind(addr).and_then(|s| s.set_read_timeout(Some(tick)).map(|()| s)) {
+            let sock = match UdpSocket::bind(addr)
+                .and_then(|s| s.set_read_timeout(Some(tick)).map(|()| s))
+            {
                 Ok(s) => s,
                 Err(e) => return Err(format!("cannot bind {addr}: {e}")),
             };
@@ -194,36 +256,54 @@ fn run_until_end(spec: SourceSpec, tx: SyncSender<Item>, stats: &Stats, stop: Ar
                             return Ok(());
                         }
                     }
-                    Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                        ) => {}
                     Err(e) => set_error(stats, e),
                 }
             }
         }
-        SourceSpec::TcpListen { addr, format, topic } => {
-            let listener = match TcpListener::bind(addr).and_then(|l| l.set_nonblocking(true).map(|()| l)) {
-                Ok(l) => l,
-                Err(e) => return Err(format!("cannot bind {addr}: {e}")),
-            };
+        SourceSpec::TcpListen {
+            addr,
+            format,
+            topic,
+        } => {
+            let listener =
+                match TcpListener::bind(addr).and_then(|l| l.set_nonblocking(true).map(|()| l)) {
+                    Ok(l) => l,
+                    Err(e) => return Err(format!("cannot bind {addr}: {e}")),
+                };
             std::thread::scope(|scope| {
                 while !stop.load(Ordering::Relaxed) {
                     match listener.accept() {
                         Ok((conn, _)) => {
-                            let (tx, stats, stop, topic) = (tx.clone(), stats.clone(), stop.clone(), topic.clone());
+                            let (tx, stats, stop, topic) =
+                                (tx.clone(), stats.clone(), stop.clone(), topic.clone());
                             scope.spawn(move || {
                                 let _ = conn.set_nonblocking(false);
                                 let _ = conn.set_read_timeout(Some(tick));
-                                if let Err(e) = pump(conn, format, topic.as_deref(), &tx, &stats, &stop) {
+                                if let Err(e) =
+                                    pump(conn, format, topic.as_deref(), &tx, &stats, &stop)
+                                {
                                     set_error(&stats, e);
                                 }
                             });
                         }
-                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(20)),
+                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                            std::thread::sleep(Duration::from_millis(20))
+                        }
                         Err(e) => set_error(stats, e),
                     }
                 }
             });
         }
-        SourceSpec::TcpClient { addr, format, topic } => {
+        SourceSpec::TcpClient {
+            addr,
+            format,
+            topic,
+        } => {
             let mut backoff = Duration::from_millis(250);
             let mut first = true;
             while !stop.load(Ordering::Relaxed) {
@@ -251,13 +331,31 @@ fn run_until_end(spec: SourceSpec, tx: SyncSender<Item>, stats: &Stats, stop: Ar
             }
         }
         SourceSpec::Stdin { format, topic } => {
-            pump(std::io::stdin().lock(), format, topic.as_deref(), &tx, stats, &stop).map_err(|e| format!("standard input: {e}"))?;
+            pump(
+                std::io::stdin().lock(),
+                format,
+                topic.as_deref(),
+                &tx,
+                stats,
+                &stop,
+            )
+            .map_err(|e| format!("standard input: {e}"))?;
         }
-        SourceSpec::File { path, format, topic } => {
+        SourceSpec::File {
+            path,
+            format,
+            topic,
+        } => {
             let f = std::fs::File::open(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-            pump(f, format, topic.as_deref(), &tx, stats, &stop).map_err(|e| format!("{}: {e}", path.display()))?;
+            pump(f, format, topic.as_deref(), &tx, stats, &stop)
+                .map_err(|e| format!("{}: {e}", path.display()))?;
         }
-        SourceSpec::Serial { path, baud, format, topic } => {
+        SourceSpec::Serial {
+            path,
+            baud,
+            format,
+            topic,
+        } => {
             let mut backoff = Duration::from_millis(250);
             let mut first = true;
             while !stop.load(Ordering::Relaxed) {
@@ -268,7 +366,9 @@ fn run_until_end(spec: SourceSpec, tx: SyncSender<Item>, stats: &Stats, stop: Ar
                         }
                         backoff = Duration::from_millis(250);
                         stats.lock().expect("stats").connected = true;
-                        if let Err(e) = pump_with(f, format, topic.as_deref(), &tx, stats, &stop, true) {
+                        if let Err(e) =
+                            pump_with(f, format, topic.as_deref(), &tx, stats, &stop, true)
+                        {
                             set_error(stats, format!("{}: {e}", path.display()));
                         }
                     }
@@ -283,7 +383,12 @@ fn run_until_end(spec: SourceSpec, tx: SyncSender<Item>, stats: &Stats, stop: Ar
                 backoff = (backoff * 2).min(Duration::from_secs(8));
             }
         }
-        SourceSpec::Simulated { scenario, seed, speed, duration_s } => {
+        SourceSpec::Simulated {
+            scenario,
+            seed,
+            speed,
+            duration_s,
+        } => {
             simulated(&scenario, seed, speed, duration_s, &tx, stats, &stop)?;
         }
     }
@@ -293,8 +398,17 @@ fn run_until_end(spec: SourceSpec, tx: SyncSender<Item>, stats: &Stats, stop: Ar
 /// The simulator as a live source: the run is simulated ahead into a temporary file (a
 /// fraction of a second of work per minute of run) and played out at the pace of its log
 /// times, stamped with the live clock.
-fn simulated(scenario: &str, seed: u64, speed: f64, duration_s: Option<f64>, tx: &SyncSender<Item>, stats: &Stats, stop: &AtomicBool) -> Result<(), String> {
-    let preset = crate::Scenario::preset(scenario).ok_or_else(|| format!("unknown scenario '{scenario}'"))?;
+fn simulated(
+    scenario: &str,
+    seed: u64,
+    speed: f64,
+    duration_s: Option<f64>,
+    tx: &SyncSender<Item>,
+    stats: &Stats,
+    stop: &AtomicBool,
+) -> Result<(), String> {
+    let preset = crate::Scenario::preset(scenario)
+        .ok_or_else(|| format!("unknown scenario '{scenario}'"))?;
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let path = dir.path().join("sim.mcap");
     crate::simulate(&preset, seed, duration_s, &[], &path).map_err(|e| e.to_string())?;
@@ -305,7 +419,9 @@ fn simulated(scenario: &str, seed: u64, speed: f64, duration_s: Option<f64>, tx:
         if stop.load(Ordering::Relaxed) {
             break;
         }
-        let LogRecord::Message(m) = rec.map_err(|e| e.to_string())? else { continue };
+        let LogRecord::Message(m) = rec.map_err(|e| e.to_string())? else {
+            continue;
+        };
         let t0 = *sim0.get_or_insert(m.log_time_ns);
         let offset = m.log_time_ns.saturating_sub(t0);
         let due = wall0 + Duration::from_nanos((offset as f64 / speed) as u64);
@@ -317,19 +433,50 @@ fn simulated(scenario: &str, seed: u64, speed: f64, duration_s: Option<f64>, tx:
         let schema = m.channel.schema_name();
         let p: &std::path::Path = &path;
         let message = match schema {
-            s if s == GnssFix::SCHEMA_NAME => Message::Gnss(restamp(m.decode::<GnssFix>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == Imu::SCHEMA_NAME => Message::Imu(restamp(m.decode::<Imu>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == RadarSpeed::SCHEMA_NAME => Message::Radar(restamp(m.decode::<RadarSpeed>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == Odometer::SCHEMA_NAME => Message::Odometer(restamp(m.decode::<Odometer>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == LoopPosition::SCHEMA_NAME => Message::Loop(restamp(m.decode::<LoopPosition>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == BalisePassage::SCHEMA_NAME => Message::Balise(restamp(m.decode::<BalisePassage>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == Event::SCHEMA_NAME => Message::Event(restamp(m.decode::<Event>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == GroundTruth::SCHEMA_NAME => Message::Truth(restamp(m.decode::<GroundTruth>(p).map_err(|e| e.to_string())?, shift)),
-            s if s == TrackMap::SCHEMA_NAME => Message::Map(restamp(m.decode::<TrackMap>(p).map_err(|e| e.to_string())?, shift)),
+            s if s == GnssFix::SCHEMA_NAME => Message::Gnss(restamp(
+                m.decode::<GnssFix>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == Imu::SCHEMA_NAME => Message::Imu(restamp(
+                m.decode::<Imu>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == RadarSpeed::SCHEMA_NAME => Message::Radar(restamp(
+                m.decode::<RadarSpeed>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == Odometer::SCHEMA_NAME => Message::Odometer(restamp(
+                m.decode::<Odometer>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == LoopPosition::SCHEMA_NAME => Message::Loop(restamp(
+                m.decode::<LoopPosition>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == BalisePassage::SCHEMA_NAME => Message::Balise(restamp(
+                m.decode::<BalisePassage>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == Event::SCHEMA_NAME => Message::Event(restamp(
+                m.decode::<Event>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == GroundTruth::SCHEMA_NAME => Message::Truth(restamp(
+                m.decode::<GroundTruth>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
+            s if s == TrackMap::SCHEMA_NAME => Message::Map(restamp(
+                m.decode::<TrackMap>(p).map_err(|e| e.to_string())?,
+                shift,
+            )),
             _ => continue,
         };
         stats.lock().expect("stats").received += 1;
-        items.push(Item { topic: m.channel.topic.clone(), log_time_ns: shift(m.log_time_ns), message });
+        items.push(Item {
+            topic: m.channel.topic.clone(),
+            log_time_ns: shift(m.log_time_ns),
+            message,
+        });
         if !send(tx, stats, &mut items) {
             break;
         }
@@ -338,7 +485,10 @@ fn simulated(scenario: &str, seed: u64, speed: f64, duration_s: Option<f64>, tx:
 }
 
 /// Moves a message's sensor time onto the live clock.
-fn restamp<M: ChannelMessage + serde::Serialize + serde::de::DeserializeOwned>(m: M, shift: impl Fn(u64) -> u64) -> M {
+fn restamp<M: ChannelMessage + serde::Serialize + serde::de::DeserializeOwned>(
+    m: M,
+    shift: impl Fn(u64) -> u64,
+) -> M {
     let mut v = serde_json::to_value(&m).expect("a message serialises");
     if let Some(t) = v.get("stamp_ns").and_then(|t| t.as_u64()) {
         v["stamp_ns"] = serde_json::Value::from(shift(t));

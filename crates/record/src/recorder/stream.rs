@@ -42,11 +42,23 @@ pub struct StreamDecoder {
 
 impl StreamDecoder {
     pub fn new(format: StreamFormat) -> Self {
-        Self { format, buf: Vec::new(), skipping: false, nmea: FixAssembler::default(), pending_pvt: None }
+        Self {
+            format,
+            buf: Vec::new(),
+            skipping: false,
+            nmea: FixAssembler::default(),
+            pending_pvt: None,
+        }
     }
 
     /// Decodes `bytes` (any split of the stream), received at `receive_ns`.
-    pub fn feed(&mut self, bytes: &[u8], receive_ns: u64, stats: &mut SourceStats, out: &mut Vec<Item>) {
+    pub fn feed(
+        &mut self,
+        bytes: &[u8],
+        receive_ns: u64,
+        stats: &mut SourceStats,
+        out: &mut Vec<Item>,
+    ) {
         match self.format {
             StreamFormat::Ubx => self.feed_ubx(bytes, receive_ns, stats, out),
             _ => {
@@ -79,7 +91,12 @@ impl StreamDecoder {
             self.line(&line, receive_ns, stats, out);
         }
         if let Some(pvt) = self.pending_pvt.take() {
-            push_fix(pvt.to_fix(pvt.utc_ns.unwrap_or(receive_ns), None), receive_ns, stats, out);
+            push_fix(
+                pvt.to_fix(pvt.utc_ns.unwrap_or(receive_ns), None),
+                receive_ns,
+                stats,
+                out,
+            );
         }
     }
 
@@ -124,7 +141,13 @@ impl StreamDecoder {
         }
     }
 
-    fn feed_ubx(&mut self, bytes: &[u8], receive_ns: u64, stats: &mut SourceStats, out: &mut Vec<Item>) {
+    fn feed_ubx(
+        &mut self,
+        bytes: &[u8],
+        receive_ns: u64,
+        stats: &mut SourceStats,
+        out: &mut Vec<Item>,
+    ) {
         self.buf.extend_from_slice(bytes);
         let mut start = 0;
         loop {
@@ -161,14 +184,24 @@ impl StreamDecoder {
                         NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
                             Ok(pvt) => {
                                 if let Some(prev) = self.pending_pvt.replace(pvt) {
-                                    push_fix(prev.to_fix(prev.utc_ns.unwrap_or(receive_ns), None), receive_ns, stats, out);
+                                    push_fix(
+                                        prev.to_fix(prev.utc_ns.unwrap_or(receive_ns), None),
+                                        receive_ns,
+                                        stats,
+                                        out,
+                                    );
                                 }
                             }
                             Err(_) => stats.malformed += 1,
                         },
                         NavCov::CLASS_ID => {
-                            if let (Ok(cov), Some(pvt)) = (NavCov::decode(&frame), self.pending_pvt.take()) {
-                                let fix = pvt.to_fix(pvt.utc_ns.unwrap_or(receive_ns), cov.pos_valid.then_some(cov.enu_m2));
+                            if let (Ok(cov), Some(pvt)) =
+                                (NavCov::decode(&frame), self.pending_pvt.take())
+                            {
+                                let fix = pvt.to_fix(
+                                    pvt.utc_ns.unwrap_or(receive_ns),
+                                    cov.pos_valid.then_some(cov.enu_m2),
+                                );
                                 if pvt.itow_ms == cov.itow_ms {
                                     push_fix(fix, receive_ns, stats, out);
                                 } else {
@@ -193,7 +226,11 @@ impl StreamDecoder {
 
 fn push_fix(fix: GnssFix, receive_ns: u64, stats: &mut SourceStats, out: &mut Vec<Item>) {
     stats.received += 1;
-    out.push(Item { topic: topics::GNSS_FIX.to_owned(), log_time_ns: receive_ns, message: Message::Gnss(fix) });
+    out.push(Item {
+        topic: topics::GNSS_FIX.to_owned(),
+        log_time_ns: receive_ns,
+        message: Message::Gnss(fix),
+    });
 }
 
 #[cfg(test)]
@@ -228,9 +265,14 @@ mod tests {
         let mut out = Vec::new();
         let mut input = vec![b'x'; MAX_LINE + 10];
         input.extend_from_slice(b"\n{not json}\n\xff\xfe\n");
-        input.extend_from_slice(br#"{"topic":"/radar/speed","speed_mps":3.0,"quality":1.0,"valid":true}"#);
+        input.extend_from_slice(
+            br#"{"topic":"/radar/speed","speed_mps":3.0,"quality":1.0,"valid":true}"#,
+        );
         input.push(b'\n');
         d.feed(&input, 1, &mut stats, &mut out);
-        assert_eq!((stats.oversized, stats.malformed, stats.received, out.len()), (1, 2, 1, 1));
+        assert_eq!(
+            (stats.oversized, stats.malformed, stats.received, out.len()),
+            (1, 2, 1, 1)
+        );
     }
 }

@@ -48,7 +48,15 @@ pub struct Driver {
 impl Driver {
     pub fn new(p: DriverParams, stations: Vec<f64>) -> Self {
         let until_s = p.initial_dwell_s;
-        Self { p, stations, target: 0, phase: Phase::Dwell { until_s }, s: 0.0, v: 0.0, a: 0.0 }
+        Self {
+            p,
+            stations,
+            target: 0,
+            phase: Phase::Dwell { until_s },
+            s: 0.0,
+            v: 0.0,
+            a: 0.0,
+        }
     }
 
     /// Advances the true state by `dt` at time `t` (s since start).
@@ -72,10 +80,16 @@ impl Driver {
                 let d = self.stations[self.target] - self.s;
                 let v_brake = (2.0 * self.p.braking_mps2 * d.max(0.0)).sqrt();
                 let v_ref = self.p.max_speed_mps.min(v_brake);
-                let a_max = self.p.acceleration_mps2 * (self.p.power_limit_speed_mps / self.v.max(1e-3)).min(1.0);
+                let a_max = self.p.acceleration_mps2
+                    * (self.p.power_limit_speed_mps / self.v.max(1e-3)).min(1.0);
                 // Proportional speed control, with feed-forward of the braking curve's slope.
-                let feed_forward = if v_brake < self.p.max_speed_mps { -self.p.braking_mps2 } else { 0.0 };
-                let a_cmd = (feed_forward + 1.2 * (v_ref - self.v)).clamp(-1.3 * self.p.braking_mps2, a_max);
+                let feed_forward = if v_brake < self.p.max_speed_mps {
+                    -self.p.braking_mps2
+                } else {
+                    0.0
+                };
+                let a_cmd = (feed_forward + 1.2 * (v_ref - self.v))
+                    .clamp(-1.3 * self.p.braking_mps2, a_max);
                 let max_da = self.p.jerk_mps3 * dt;
                 self.a += (a_cmd - self.a).clamp(-max_da, max_da);
                 let v_next = self.v + self.a * dt;
@@ -90,7 +104,9 @@ impl Driver {
                 if d < 0.5 && self.v < 0.05 {
                     self.v = 0.0;
                     self.a = 0.0;
-                    self.phase = Phase::Dwell { until_s: t + self.p.dwell_s };
+                    self.phase = Phase::Dwell {
+                        until_s: t + self.p.dwell_s,
+                    };
                     return Some(DriverEvent::Arrived(self.target));
                 }
                 None

@@ -35,7 +35,15 @@ pub struct FaultSpec {
     pub reported: bool,
 }
 
-pub const DEVICES: &[&str] = &["gnss", "imu", "radar", "odometer1", "odometer2", "loop", "balise"];
+pub const DEVICES: &[&str] = &[
+    "gnss",
+    "imu",
+    "radar",
+    "odometer1",
+    "odometer2",
+    "loop",
+    "balise",
+];
 
 impl std::str::FromStr for FaultSpec {
     type Err = String;
@@ -45,27 +53,44 @@ impl std::str::FromStr for FaultSpec {
         let (device, mode, start, end, reported) = match parts[..] {
             [d, m, a, b] => (d, m, a, b, false),
             [d, m, a, b, "reported"] => (d, m, a, b, true),
-            _ => return Err(format!("'{s}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260")),
+            _ => return Err(format!(
+                "'{s}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260"
+            )),
         };
         if !DEVICES.contains(&device) {
-            return Err(format!("'{s}': unknown device '{device}' (devices: {})", DEVICES.join(", ")));
+            return Err(format!(
+                "'{s}': unknown device '{device}' (devices: {})",
+                DEVICES.join(", ")
+            ));
         }
         let mode = match mode {
             "dropout" => FaultMode::Dropout,
             "stuck" => FaultMode::Stuck,
             m => match m.strip_prefix("bias=").map(str::parse::<f64>) {
                 Some(Ok(b)) if b.is_finite() => FaultMode::Bias(b),
-                _ => return Err(format!("'{s}': unknown mode '{m}' (dropout, stuck, bias=VALUE)")),
+                _ => {
+                    return Err(format!(
+                        "'{s}': unknown mode '{m}' (dropout, stuck, bias=VALUE)"
+                    ))
+                }
             },
         };
         let time = |t: &str| t.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0);
         let (Some(start_s), Some(end_s)) = (time(start), time(end)) else {
-            return Err(format!("'{s}': START and END are seconds from the start of the run"));
+            return Err(format!(
+                "'{s}': START and END are seconds from the start of the run"
+            ));
         };
         if end_s <= start_s {
             return Err(format!("'{s}': the window ends before it starts"));
         }
-        Ok(FaultSpec { device: device.to_owned(), mode, start_s, end_s, reported })
+        Ok(FaultSpec {
+            device: device.to_owned(),
+            mode,
+            start_s,
+            end_s,
+            reported,
+        })
     }
 }
 
@@ -132,23 +157,42 @@ impl FaultInjector {
     /// sends it (None: dropped).
     pub fn apply(&mut self, log_time_ns: u64, emit: Emit, events: &mut Vec<Event>) -> Option<Emit> {
         for f in &mut self.faults {
-            let text = |what: &str| format!("{}: {} {}", f.spec.device, describe(f.spec.mode), what);
+            let text =
+                |what: &str| format!("{}: {} {}", f.spec.device, describe(f.spec.mode), what);
             if !f.started && log_time_ns >= f.start_ns {
                 f.started = true;
-                events.push(Event { stamp_ns: f.start_ns, kind: EventKind::FaultInjected, text: text("starts") });
+                events.push(Event {
+                    stamp_ns: f.start_ns,
+                    kind: EventKind::FaultInjected,
+                    text: text("starts"),
+                });
                 if f.spec.reported {
-                    events.push(Event { stamp_ns: f.start_ns, kind: EventKind::DeviceFault, text: topic_of(&f.spec.device).to_owned() });
+                    events.push(Event {
+                        stamp_ns: f.start_ns,
+                        kind: EventKind::DeviceFault,
+                        text: topic_of(&f.spec.device).to_owned(),
+                    });
                 }
             }
             if f.started && !f.cleared && log_time_ns >= f.end_ns {
                 f.cleared = true;
-                events.push(Event { stamp_ns: f.end_ns, kind: EventKind::FaultCleared, text: text("ends") });
+                events.push(Event {
+                    stamp_ns: f.end_ns,
+                    kind: EventKind::FaultCleared,
+                    text: text("ends"),
+                });
                 if f.spec.reported {
-                    events.push(Event { stamp_ns: f.end_ns, kind: EventKind::DeviceRecovered, text: topic_of(&f.spec.device).to_owned() });
+                    events.push(Event {
+                        stamp_ns: f.end_ns,
+                        kind: EventKind::DeviceRecovered,
+                        text: topic_of(&f.spec.device).to_owned(),
+                    });
                 }
             }
         }
-        let Some(device) = device_of(&emit) else { return Some(emit) };
+        let Some(device) = device_of(&emit) else {
+            return Some(emit);
+        };
         let mut emit = Some(emit);
         for f in self.faults.iter_mut().filter(|f| f.spec.device == device) {
             let Some(e) = emit.take() else { break };
@@ -214,7 +258,8 @@ fn biased(mut e: Emit, b: f64) -> Emit {
             if let (Some(lat), Some(lon)) = (m.latitude_deg, m.longitude_deg) {
                 let course = m.course_rad.unwrap_or(0.0);
                 m.latitude_deg = Some(lat + b * course.cos() / M_PER_DEG);
-                m.longitude_deg = Some(lon + b * course.sin() / (M_PER_DEG * lat.to_radians().cos()));
+                m.longitude_deg =
+                    Some(lon + b * course.sin() / (M_PER_DEG * lat.to_radians().cos()));
             }
         }
         Emit::Imu(m) => m.specific_force_mps2[0] += b,
@@ -233,17 +278,37 @@ mod tests {
     use railfuse_catalog::messages::RadarSpeed;
 
     fn radar(t: u64, v: f64) -> Emit {
-        Emit::Radar(RadarSpeed { stamp_ns: t, speed_mps: v, quality: 1.0, valid: true, speed_variance_m2ps2: None })
+        Emit::Radar(RadarSpeed {
+            stamp_ns: t,
+            speed_mps: v,
+            quality: 1.0,
+            valid: true,
+            speed_variance_m2ps2: None,
+        })
     }
 
     #[test]
     fn specs_parse_and_bad_ones_say_why() {
         let f: FaultSpec = "gnss:bias=30:150:250".parse().unwrap();
         assert_eq!(f.mode, FaultMode::Bias(30.0));
-        assert!("radar:melt:1:2".parse::<FaultSpec>().unwrap_err().contains("unknown mode"));
-        assert!("warp:dropout:1:2".parse::<FaultSpec>().unwrap_err().contains("unknown device"));
-        assert!("radar:dropout:5:2".parse::<FaultSpec>().unwrap_err().contains("ends before"));
-        assert!("radar:stuck:1:2:reported".parse::<FaultSpec>().unwrap().reported);
+        assert!("radar:melt:1:2"
+            .parse::<FaultSpec>()
+            .unwrap_err()
+            .contains("unknown mode"));
+        assert!("warp:dropout:1:2"
+            .parse::<FaultSpec>()
+            .unwrap_err()
+            .contains("unknown device"));
+        assert!("radar:dropout:5:2"
+            .parse::<FaultSpec>()
+            .unwrap_err()
+            .contains("ends before"));
+        assert!(
+            "radar:stuck:1:2:reported"
+                .parse::<FaultSpec>()
+                .unwrap()
+                .reported
+        );
     }
 
     #[test]
@@ -251,22 +316,42 @@ mod tests {
         let sec = 1_000_000_000;
         for (mode, expect) in [
             (FaultMode::Dropout, vec![Some(1.0), None, None, Some(4.0)]),
-            (FaultMode::Stuck, vec![Some(1.0), Some(1.0), Some(1.0), Some(4.0)]),
-            (FaultMode::Bias(0.5), vec![Some(1.0), Some(2.5), Some(3.5), Some(4.0)]),
+            (
+                FaultMode::Stuck,
+                vec![Some(1.0), Some(1.0), Some(1.0), Some(4.0)],
+            ),
+            (
+                FaultMode::Bias(0.5),
+                vec![Some(1.0), Some(2.5), Some(3.5), Some(4.0)],
+            ),
         ] {
-            let mut inj = FaultInjector::new(&[FaultSpec { device: "radar".into(), mode, start_s: 2.0, end_s: 4.0, reported: false }], 0);
+            let mut inj = FaultInjector::new(
+                &[FaultSpec {
+                    device: "radar".into(),
+                    mode,
+                    start_s: 2.0,
+                    end_s: 4.0,
+                    reported: false,
+                }],
+                0,
+            );
             let mut events = Vec::new();
             let got: Vec<Option<f64>> = (1..=4)
-                .map(|k| match inj.apply(k * sec, radar(k * sec, k as f64), &mut events) {
-                    Some(Emit::Radar(m)) => {
-                        assert_eq!(m.stamp_ns, k * sec);
-                        Some(m.speed_mps)
-                    }
-                    _ => None,
-                })
+                .map(
+                    |k| match inj.apply(k * sec, radar(k * sec, k as f64), &mut events) {
+                        Some(Emit::Radar(m)) => {
+                            assert_eq!(m.stamp_ns, k * sec);
+                            Some(m.speed_mps)
+                        }
+                        _ => None,
+                    },
+                )
                 .collect();
             assert_eq!(got, expect, "{mode:?}");
-            assert_eq!(events.iter().map(|e| e.kind).collect::<Vec<_>>(), vec![EventKind::FaultInjected, EventKind::FaultCleared]);
+            assert_eq!(
+                events.iter().map(|e| e.kind).collect::<Vec<_>>(),
+                vec![EventKind::FaultInjected, EventKind::FaultCleared]
+            );
         }
     }
 }

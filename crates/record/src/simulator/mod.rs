@@ -25,7 +25,10 @@ pub use track::{Segment, TrackParams};
 use driver::{Driver, DriverEvent, Phase};
 use faults::FaultInjector;
 use seed000::{JerkStep, Seed000Params};
-use sensors::{balise::BaliseReader, gnss::Gnss, imu::ImuSensor, induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream};
+use sensors::{
+    balise::BaliseReader, gnss::Gnss, imu::ImuSensor, induction_loop::InductionLoop,
+    odometer::OdometerSensor, radar::Radar, rng_stream,
+};
 use track::Track;
 use world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
 
@@ -51,7 +54,12 @@ struct SimLog {
 }
 
 impl SimLog {
-    fn create(path: &Path, scenario: &Scenario, seed: u64, faults: &[FaultSpec]) -> railfuse_catalog::Result<Self> {
+    fn create(
+        path: &Path,
+        scenario: &Scenario,
+        seed: u64,
+        faults: &[FaultSpec],
+    ) -> railfuse_catalog::Result<Self> {
         let mut writer = LogWriter::create(path)?;
         let mut channels = BTreeMap::new();
         macro_rules! channel {
@@ -78,17 +86,36 @@ impl SimLog {
                 }
                 channel!(GnssFix, topics::GNSS_FIX);
                 channel!(Imu, topics::IMU);
-                for topic in [topics::ODOMETER_1, topics::ODOMETER_2].into_iter().take(p.odometers.len()) {
+                for topic in [topics::ODOMETER_1, topics::ODOMETER_2]
+                    .into_iter()
+                    .take(p.odometers.len())
+                {
                     channel!(Odometer, topic);
                 }
             }
         }
-        let report = SimulationReport { scenario: scenario.name().into(), seed, ..Default::default() };
+        let report = SimulationReport {
+            scenario: scenario.name().into(),
+            seed,
+            ..Default::default()
+        };
         let faults = FaultInjector::new(faults, SIMULATED_START_NS);
-        Ok(Self { writer, channels, report, faults, fault_specs: Vec::new(), fault_events: Vec::new() })
+        Ok(Self {
+            writer,
+            channels,
+            report,
+            faults,
+            fault_specs: Vec::new(),
+            fault_events: Vec::new(),
+        })
     }
 
-    fn write<M: ChannelMessage>(&mut self, topic: &'static str, log_time_ns: u64, msg: &M) -> railfuse_catalog::Result<()> {
+    fn write<M: ChannelMessage>(
+        &mut self,
+        topic: &'static str,
+        log_time_ns: u64,
+        msg: &M,
+    ) -> railfuse_catalog::Result<()> {
         self.writer.write(self.channels[topic], log_time_ns, msg)?;
         self.report.messages += 1;
         *self.report.per_topic.entry(topic.to_owned()).or_insert(0) += 1;
@@ -114,21 +141,35 @@ impl SimLog {
         }
     }
 
-    fn finish(mut self, scenario: &Scenario, track: &TrackMap, duration_s: f64) -> railfuse_catalog::Result<SimulationReport> {
+    fn finish(
+        mut self,
+        scenario: &Scenario,
+        track: &TrackMap,
+        duration_s: f64,
+    ) -> railfuse_catalog::Result<SimulationReport> {
         let train = match scenario {
             Scenario::Default(p) | Scenario::Seed001(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
         };
         let run = BTreeMap::from([
-            ("run_id".into(), format!("sim-{}-seed{}", scenario.name(), self.report.seed)),
+            (
+                "run_id".into(),
+                format!("sim-{}-seed{}", scenario.name(), self.report.seed),
+            ),
             ("train".into(), train),
             ("route".into(), track.name.clone()),
             ("scenario".into(), scenario.name().into()),
             ("seed".into(), self.report.seed.to_string()),
             ("duration_s".into(), format!("{duration_s:.3}")),
             ("start_time_ns".into(), SIMULATED_START_NS.to_string()),
-            ("scenario_parameters".into(), serde_json::to_string(scenario).expect("parameters serialise")),
-            ("faults".into(), serde_json::to_string(&self.fault_specs).expect("faults serialise")),
+            (
+                "scenario_parameters".into(),
+                serde_json::to_string(scenario).expect("parameters serialise"),
+            ),
+            (
+                "faults".into(),
+                serde_json::to_string(&self.fault_specs).expect("faults serialise"),
+            ),
             ("tool_version".into(), crate::TOOL_VERSION.into()),
             ("source".into(), "simulated".into()),
         ]);
@@ -145,9 +186,17 @@ impl SimLog {
 ///
 /// `faults` make devices fail for windows of the run (line scenarios only: source 000's
 /// simulation has no device models to break; the caller checks).
-pub fn simulate(scenario: &Scenario, seed: u64, duration_s: Option<f64>, faults: &[FaultSpec], out: &Path) -> railfuse_catalog::Result<SimulationReport> {
+pub fn simulate(
+    scenario: &Scenario,
+    seed: u64,
+    duration_s: Option<f64>,
+    faults: &[FaultSpec],
+    out: &Path,
+) -> railfuse_catalog::Result<SimulationReport> {
     match scenario {
-        Scenario::Default(p) | Scenario::Seed001(p) => simulate_line(scenario, p, seed, duration_s, faults, out),
+        Scenario::Default(p) | Scenario::Seed001(p) => {
+            simulate_line(scenario, p, seed, duration_s, faults, out)
+        }
         Scenario::Seed000(p) => simulate_seed000(scenario, p, seed, duration_s, out),
     }
 }
@@ -172,9 +221,17 @@ fn simulate_line(
     log.fault_specs = faults.to_vec();
     log.write(topics::TRACK_MAP, start, map)?;
 
-    let mut driver = Driver::new(p.driver.clone(), map.stations.iter().map(|s| s.chainage_m).collect());
+    let mut driver = Driver::new(
+        p.driver.clone(),
+        map.stations.iter().map(|s| s.chainage_m).collect(),
+    );
     let mut sensors: Vec<Box<dyn SimSensor>> = vec![
-        Box::new(Gnss::new(p.gnss.clone(), map.origin, start, rng_stream(seed, 1))),
+        Box::new(Gnss::new(
+            p.gnss.clone(),
+            map.origin,
+            start,
+            rng_stream(seed, 1),
+        )),
         Box::new(ImuSensor::new(p.imu.clone(), start, rng_stream(seed, 2))),
         Box::new(Radar::new(p.radar.clone(), start, rng_stream(seed, 3))),
     ];
@@ -182,10 +239,19 @@ fn simulate_line(
         sensors.push(Box::new(InductionLoop::new(l.clone(), rng_stream(seed, 4))));
     }
     if let Some(b) = &p.balise {
-        sensors.push(Box::new(BaliseReader::new(b.clone(), map.balises.clone(), rng_stream(seed, 5))));
+        sensors.push(Box::new(BaliseReader::new(
+            b.clone(),
+            map.balises.clone(),
+            rng_stream(seed, 5),
+        )));
     }
     for (i, o) in p.odometers.iter().take(2).enumerate() {
-        sensors.push(Box::new(OdometerSensor::new(o.clone(), i, start, rng_stream(seed, 10 + i as u64))));
+        sensors.push(Box::new(OdometerSensor::new(
+            o.clone(),
+            i,
+            start,
+            rng_stream(seed, 10 + i as u64),
+        )));
     }
     let mut truth_schedule = Schedule::new(start, p.truth_rate_hz);
     let mut outbox = Outbox::default();
@@ -197,13 +263,26 @@ fn simulate_line(
     let mut t_ns = start;
     loop {
         let t = (t_ns - start) as f64 / 1e9;
-        let event = |kind, text: String| Emit::Event(Event { stamp_ns: t_ns, kind, text });
+        let event = |kind, text: String| {
+            Emit::Event(Event {
+                stamp_ns: t_ns,
+                kind,
+                text,
+            })
+        };
         match driver.step(t, dt) {
-            Some(DriverEvent::Arrived(i)) => outbox.push(t_ns, event(EventKind::StationArrival, map.stations[i].name.clone())),
-            Some(DriverEvent::Departed(i)) => outbox.push(t_ns, event(EventKind::StationDeparture, map.stations[i].name.clone())),
+            Some(DriverEvent::Arrived(i)) => outbox.push(
+                t_ns,
+                event(EventKind::StationArrival, map.stations[i].name.clone()),
+            ),
+            Some(DriverEvent::Departed(i)) => outbox.push(
+                t_ns,
+                event(EventKind::StationDeparture, map.stations[i].name.clone()),
+            ),
             None => {}
         }
-        let (east_m, north_m, heading_rad) = map.locate(driver.s).expect("a built track has vertices");
+        let (east_m, north_m, heading_rad) =
+            map.locate(driver.s).expect("a built track has vertices");
         match (map.in_tunnel(driver.s), &tunnel_name) {
             (Some(t), None) => {
                 outbox.push(t_ns, event(EventKind::TunnelEntry, t.name.clone()));
@@ -215,9 +294,16 @@ fn simulate_line(
             }
             _ => {}
         }
-        let corrections = !p.correction_outages_s.iter().any(|&(a, len)| t >= a && t < a + len);
+        let corrections = !p
+            .correction_outages_s
+            .iter()
+            .any(|&(a, len)| t >= a && t < a + len);
         if corrections != had_corrections {
-            let kind = if corrections { EventKind::CorrectionLinkUp } else { EventKind::CorrectionLinkDown };
+            let kind = if corrections {
+                EventKind::CorrectionLinkUp
+            } else {
+                EventKind::CorrectionLinkDown
+            };
             outbox.push(t_ns, event(kind, "RTCM corrections".into()));
             had_corrections = corrections;
         }
@@ -270,7 +356,13 @@ fn truth(w: &World, origin: &GeodeticOrigin) -> GroundTruth {
     }
 }
 
-fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_s: Option<f64>, out: &Path) -> railfuse_catalog::Result<SimulationReport> {
+fn simulate_seed000(
+    scenario: &Scenario,
+    p: &Seed000Params,
+    seed: u64,
+    duration_s: Option<f64>,
+    out: &Path,
+) -> railfuse_catalog::Result<SimulationReport> {
     use sensors::gauss;
     let start = SIMULATED_START_NS;
     let duration = duration_s.unwrap_or(p.duration_s);
@@ -279,14 +371,34 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
     // A straight guideway long enough for the run, due east.
     let v_end = p.initial_speed_mps + p.initial_acceleration_mps2 * duration;
     let length = (p.initial_speed_mps + v_end) / 2.0 * duration * 1.2 + 1000.0;
-    let origin = GeodeticOrigin { latitude_deg: 31.19, longitude_deg: 121.34, altitude_m: 5.0 };
+    let origin = GeodeticOrigin {
+        latitude_deg: 31.19,
+        longitude_deg: 121.34,
+        altitude_m: 5.0,
+    };
     let n_balises = (length / p.balise_spacing_m) as usize;
     let map = TrackMap {
         stamp_ns: start,
         name: "maglev guideway (source 000 simulation)".into(),
         origin,
-        vertices: vec![TrackVertex { chainage_m: 0.0, east_m: 0.0, north_m: 0.0 }, TrackVertex { chainage_m: length, east_m: length, north_m: 0.0 }],
-        balises: (1..=n_balises).map(|k| TrackBalise { balise_id: format!("BG{k:04}"), chainage_m: k as f64 * p.balise_spacing_m }).collect(),
+        vertices: vec![
+            TrackVertex {
+                chainage_m: 0.0,
+                east_m: 0.0,
+                north_m: 0.0,
+            },
+            TrackVertex {
+                chainage_m: length,
+                east_m: length,
+                north_m: 0.0,
+            },
+        ],
+        balises: (1..=n_balises)
+            .map(|k| TrackBalise {
+                balise_id: format!("BG{k:04}"),
+                chainage_m: k as f64 * p.balise_spacing_m,
+            })
+            .collect(),
         tunnels: vec![],
         stations: vec![],
         sleeper_spacing_m: 1.032,
@@ -299,7 +411,12 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
     let mut radar_rng = rng_stream(seed, 2);
     let (loop_sigma, radar_sigma) = (p.loop_variance_m2.sqrt(), p.radar_variance_m2ps2.sqrt());
     let truth_per_step = (p.truth_rate_hz * period).round().max(1.0) as u64;
-    let mut x = JerkStep { s: 0.0, v: p.initial_speed_mps, a: p.initial_acceleration_mps2, jerk: 0.0 };
+    let mut x = JerkStep {
+        s: 0.0,
+        v: p.initial_speed_mps,
+        a: p.initial_acceleration_mps2,
+        jerk: 0.0,
+    };
     let mut next_balise = 0;
     let stamp = |k: u64, tau: f64| start + seconds(k as f64 * period + tau);
     for k in 0..=steps {
@@ -307,11 +424,26 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
         let t_ns = stamp(k, 0.0);
         let z_loop = x.s + gauss(&mut loop_rng, loop_sigma);
         let z_radar = x.v + gauss(&mut radar_rng, radar_sigma);
-        log.write(topics::LOOP_POSITION, t_ns, &LoopPosition { stamp_ns: t_ns, chainage_m: z_loop, crossing: None, variance_m2: Some(p.loop_variance_m2) })?;
+        log.write(
+            topics::LOOP_POSITION,
+            t_ns,
+            &LoopPosition {
+                stamp_ns: t_ns,
+                chainage_m: z_loop,
+                crossing: None,
+                variance_m2: Some(p.loop_variance_m2),
+            },
+        )?;
         log.write(
             topics::RADAR_SPEED,
             t_ns,
-            &RadarSpeed { stamp_ns: t_ns, speed_mps: z_radar, quality: 1.0, valid: true, speed_variance_m2ps2: Some(p.radar_variance_m2ps2) },
+            &RadarSpeed {
+                stamp_ns: t_ns,
+                speed_mps: z_radar,
+                quality: 1.0,
+                valid: true,
+                speed_variance_m2ps2: Some(p.radar_variance_m2ps2),
+            },
         )?;
         if k == steps {
             write_seed000_truth(&mut log, &x, t_ns, &origin)?;
@@ -320,7 +452,9 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
         // The jerk w_k acting over (k, k+1].
         x.jerk = gauss(&mut process, p.process_noise_variance.sqrt());
         // Truth samples and balise passages of this step, written in time order.
-        let mut within: Vec<(f64, Option<usize>)> = (0..truth_per_step).map(|i| (i as f64 * period / truth_per_step as f64, None)).collect();
+        let mut within: Vec<(f64, Option<usize>)> = (0..truth_per_step)
+            .map(|i| (i as f64 * period / truth_per_step as f64, None))
+            .collect();
         while let Some(b) = map.balises.get(next_balise) {
             let Some(tau) = x.passes(b.chainage_m, period) else {
                 break;
@@ -334,11 +468,26 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
             match balise {
                 None => {
                     let (s, v, a) = x.at(tau);
-                    write_seed000_truth(&mut log, &JerkStep { s, v, a, jerk: x.jerk }, t, &origin)?;
+                    write_seed000_truth(
+                        &mut log,
+                        &JerkStep {
+                            s,
+                            v,
+                            a,
+                            jerk: x.jerk,
+                        },
+                        t,
+                        &origin,
+                    )?;
                 }
                 Some(i) => {
                     let b = &map.balises[i];
-                    let msg = BalisePassage { stamp_ns: t, balise_id: b.balise_id.clone(), chainage_m: b.chainage_m, variance_m2: Some(p.balise_variance_m2) };
+                    let msg = BalisePassage {
+                        stamp_ns: t,
+                        balise_id: b.balise_id.clone(),
+                        chainage_m: b.chainage_m,
+                        variance_m2: Some(p.balise_variance_m2),
+                    };
                     log.write(topics::BALISE, t, &msg)?;
                 }
             }
@@ -349,7 +498,12 @@ fn simulate_seed000(scenario: &Scenario, p: &Seed000Params, seed: u64, duration_
     log.finish(scenario, &map, steps as f64 * period)
 }
 
-fn write_seed000_truth(log: &mut SimLog, x: &JerkStep, t_ns: u64, origin: &GeodeticOrigin) -> railfuse_catalog::Result<()> {
+fn write_seed000_truth(
+    log: &mut SimLog,
+    x: &JerkStep,
+    t_ns: u64,
+    origin: &GeodeticOrigin,
+) -> railfuse_catalog::Result<()> {
     let (lat, lon, _) = origin.to_geodetic(x.s, 0.0, 0.0);
     let truth = GroundTruth {
         stamp_ns: t_ns,

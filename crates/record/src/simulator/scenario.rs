@@ -6,7 +6,10 @@ use serde::{Deserialize, Serialize};
 
 use super::driver::DriverParams;
 use super::seed000::Seed000Params;
-use super::sensors::{balise::BaliseParams, gnss::GnssParams, imu::ImuParams, induction_loop::LoopParams, odometer::OdometerParams, radar::RadarParams};
+use super::sensors::{
+    balise::BaliseParams, gnss::GnssParams, imu::ImuParams, induction_loop::LoopParams,
+    odometer::OdometerParams, radar::RadarParams,
+};
 use super::track::{Segment, TrackParams};
 
 /// 2026-06-01T08:00:00Z: simulated runs start here, so logs are reproducible to the byte.
@@ -92,17 +95,33 @@ impl LineScenario {
             train: "simulated EMU, 4 cars".into(),
             track: TrackParams {
                 name: "Modena test line (simulated)".into(),
-                origin: GeodeticOrigin { latitude_deg: 44.6551, longitude_deg: 10.9297, altitude_m: 40.0 },
+                origin: GeodeticOrigin {
+                    latitude_deg: 44.6551,
+                    longitude_deg: 10.9297,
+                    altitude_m: 40.0,
+                },
                 heading_deg: 60.0,
                 pattern: vec![
                     Segment::Straight { length_m: 1800.0 },
-                    Segment::Curve { radius_m: 1500.0, angle_deg: 35.0 },
+                    Segment::Curve {
+                        radius_m: 1500.0,
+                        angle_deg: 35.0,
+                    },
                     Segment::Straight { length_m: 2600.0 },
-                    Segment::Curve { radius_m: 2000.0, angle_deg: -30.0 },
+                    Segment::Curve {
+                        radius_m: 2000.0,
+                        angle_deg: -30.0,
+                    },
                     Segment::Straight { length_m: 2200.0 },
-                    Segment::Curve { radius_m: 1200.0, angle_deg: 25.0 },
+                    Segment::Curve {
+                        radius_m: 1200.0,
+                        angle_deg: 25.0,
+                    },
                     Segment::Straight { length_m: 1500.0 },
-                    Segment::Curve { radius_m: 1800.0, angle_deg: -30.0 },
+                    Segment::Curve {
+                        radius_m: 1800.0,
+                        angle_deg: -30.0,
+                    },
                 ],
                 station_spacing_m: 5700.0,
                 balise_spacing_m: 1000.0,
@@ -160,7 +179,10 @@ impl LineScenario {
                 dropout_probability: 0.002,
                 dropout_s: (0.5, 2.0),
             },
-            odometers: vec![odometer("axle1", 0.846, true), odometer("axle2", 0.852, false)],
+            odometers: vec![
+                odometer("axle1", 0.846, true),
+                odometer("axle2", 0.852, false),
+            ],
             induction_loop: Some(LoopParams {
                 crossing_spacing_m: 25.0,
                 latency_s: 0.02,
@@ -169,7 +191,12 @@ impl LineScenario {
                 timing_sigma_s: 0.003,
                 reported_variance_m2: 0.01,
             }),
-            balise: Some(BaliseParams { latency_s: 0.03, detection_sigma_m: 0.15, miss_probability: 0.01, reported_variance_m2: 0.04 }),
+            balise: Some(BaliseParams {
+                latency_s: 0.03,
+                detection_sigma_m: 0.15,
+                miss_probability: 0.01,
+                reported_variance_m2: 0.04,
+            }),
         }
     }
 
@@ -187,7 +214,11 @@ impl LineScenario {
             train: "maglev (source 001 simulation)".into(),
             track: TrackParams {
                 name: "maglev guideway (source 001 simulation)".into(),
-                origin: GeodeticOrigin { latitude_deg: 31.19, longitude_deg: 121.34, altitude_m: 5.0 },
+                origin: GeodeticOrigin {
+                    latitude_deg: 31.19,
+                    longitude_deg: 121.34,
+                    altitude_m: 5.0,
+                },
                 heading_deg: 90.0,
                 pattern: vec![Segment::Straight { length_m: 60_000.0 }],
                 station_spacing_m: 43_000.0,
@@ -211,8 +242,19 @@ impl LineScenario {
             // No differential corrections at all: BeiDou single-point fixes.
             correction_outages_s: vec![(0.0, 1e9)],
             truth_rate_hz: 100.0,
-            gnss: GnssParams { sigma_single_m: 2.5, speed_sigma_mps: 0.1, ..base.gnss },
-            imu: ImuParams { sensor_id: "ins0".into(), rate_hz: 100.0, accel_noise_mps2: 0.02, accel_bias_mps2: 0.005, accel_bias_walk: 2e-5, ..base.imu },
+            gnss: GnssParams {
+                sigma_single_m: 2.5,
+                speed_sigma_mps: 0.1,
+                ..base.gnss
+            },
+            imu: ImuParams {
+                sensor_id: "ins0".into(),
+                rate_hz: 100.0,
+                accel_noise_mps2: 0.02,
+                accel_bias_mps2: 0.005,
+                accel_bias_walk: 2e-5,
+                ..base.imu
+            },
             radar: RadarParams {
                 rate_hz: 50.0,
                 latency_s: 0.01,

@@ -65,7 +65,11 @@ impl JerkStep {
     /// `[s, v, a]` a time `tau` into the step.
     pub fn at(&self, tau: f64) -> (f64, f64, f64) {
         let j = self.jerk;
-        (self.s + self.v * tau + self.a * tau * tau / 2.0 + j * tau.powi(3) / 6.0, self.v + self.a * tau + j * tau * tau / 2.0, self.a + j * tau)
+        (
+            self.s + self.v * tau + self.a * tau * tau / 2.0 + j * tau.powi(3) / 6.0,
+            self.v + self.a * tau + j * tau * tau / 2.0,
+            self.a + j * tau,
+        )
     }
 
     /// Time into the step at which chainage `b` is passed (the train moves forward).

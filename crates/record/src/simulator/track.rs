@@ -24,13 +24,19 @@ impl Segment {
     fn length_m(&self) -> f64 {
         match *self {
             Segment::Straight { length_m } => length_m,
-            Segment::Curve { radius_m, angle_deg } => radius_m * angle_deg.to_radians().abs(),
+            Segment::Curve {
+                radius_m,
+                angle_deg,
+            } => radius_m * angle_deg.to_radians().abs(),
         }
     }
     fn curvature(&self) -> f64 {
         match *self {
             Segment::Straight { .. } => 0.0,
-            Segment::Curve { radius_m, angle_deg } => angle_deg.signum() / radius_m,
+            Segment::Curve {
+                radius_m,
+                angle_deg,
+            } => angle_deg.signum() / radius_m,
         }
     }
 }
@@ -64,40 +70,73 @@ pub struct Track {
 
 impl Track {
     /// Lays the pattern until the track holds `stations` stations `station_spacing_m` apart.
-    pub fn build(p: &TrackParams, stations: usize, stamp_ns: u64, rng: &mut impl rand::Rng) -> Track {
+    pub fn build(
+        p: &TrackParams,
+        stations: usize,
+        stamp_ns: u64,
+        rng: &mut impl rand::Rng,
+    ) -> Track {
         let length = p.station_spacing_m * (stations.max(2) - 1) as f64 + 200.0;
         let mut curvature = Vec::new();
-        let mut vertices = vec![TrackVertex { chainage_m: 0.0, east_m: 0.0, north_m: 0.0 }];
+        let mut vertices = vec![TrackVertex {
+            chainage_m: 0.0,
+            east_m: 0.0,
+            north_m: 0.0,
+        }];
         let (mut s, mut e, mut n, mut psi) = (0.0f64, 0.0f64, 0.0f64, p.heading_deg.to_radians());
         'lay: loop {
             for seg in &p.pattern {
                 curvature.push((s, seg.curvature()));
                 let len = seg.length_m();
                 // Straights need only their ends; curves a vertex every `vertex_spacing_m`.
-                let steps = if seg.curvature() == 0.0 { 1 } else { (len / p.vertex_spacing_m).ceil().max(1.0) as usize };
+                let steps = if seg.curvature() == 0.0 {
+                    1
+                } else {
+                    (len / p.vertex_spacing_m).ceil().max(1.0) as usize
+                };
                 let ds = len / steps as f64;
                 for _ in 0..steps {
                     // Exact arc (or straight) step: advance along the chord of the arc.
                     let dpsi = seg.curvature() * ds;
                     let mid = psi + dpsi / 2.0;
-                    let chord = if dpsi.abs() > 1e-12 { 2.0 * (dpsi / 2.0).sin() / seg.curvature() } else { ds };
+                    let chord = if dpsi.abs() > 1e-12 {
+                        2.0 * (dpsi / 2.0).sin() / seg.curvature()
+                    } else {
+                        ds
+                    };
                     e += chord * mid.sin();
                     n += chord * mid.cos();
                     psi += dpsi;
                     s += ds;
-                    vertices.push(TrackVertex { chainage_m: s, east_m: e, north_m: n });
+                    vertices.push(TrackVertex {
+                        chainage_m: s,
+                        east_m: e,
+                        north_m: n,
+                    });
                 }
                 if s >= length {
                     break 'lay;
                 }
             }
         }
-        let stations = (0..stations.max(2)).map(|k| Station { name: format!("S{k}"), chainage_m: k as f64 * p.station_spacing_m }).collect();
+        let stations = (0..stations.max(2))
+            .map(|k| Station {
+                name: format!("S{k}"),
+                chainage_m: k as f64 * p.station_spacing_m,
+            })
+            .collect();
         let mut balises = Vec::new();
         let mut b = p.balise_spacing_m / 2.0;
         while b < s - 50.0 {
-            let jitter = if p.balise_jitter_m > 0.0 { rng.random_range(-p.balise_jitter_m..p.balise_jitter_m) } else { 0.0 };
-            balises.push(TrackBalise { balise_id: format!("BG{:04}", balises.len() + 1), chainage_m: b + jitter });
+            let jitter = if p.balise_jitter_m > 0.0 {
+                rng.random_range(-p.balise_jitter_m..p.balise_jitter_m)
+            } else {
+                0.0
+            };
+            balises.push(TrackBalise {
+                balise_id: format!("BG{:04}", balises.len() + 1),
+                chainage_m: b + jitter,
+            });
             b += p.balise_spacing_m;
         }
         let tunnels = p
@@ -105,7 +144,11 @@ impl Track {
             .iter()
             .filter(|(a, _)| *a < s)
             .enumerate()
-            .map(|(i, &(a, z))| Tunnel { name: format!("T{}", i + 1), start_chainage_m: a, end_chainage_m: z.min(s) })
+            .map(|(i, &(a, z))| Tunnel {
+                name: format!("T{}", i + 1),
+                start_chainage_m: a,
+                end_chainage_m: z.min(s),
+            })
             .collect();
         Track {
             map: TrackMap {
@@ -143,9 +186,19 @@ mod tests {
     fn a_full_circle_of_curves_closes_on_itself() {
         let p = TrackParams {
             name: "circle".into(),
-            origin: GeodeticOrigin { latitude_deg: 45.0, longitude_deg: 10.0, altitude_m: 0.0 },
+            origin: GeodeticOrigin {
+                latitude_deg: 45.0,
+                longitude_deg: 10.0,
+                altitude_m: 0.0,
+            },
             heading_deg: 0.0,
-            pattern: vec![Segment::Curve { radius_m: 500.0, angle_deg: 90.0 }; 4],
+            pattern: vec![
+                Segment::Curve {
+                    radius_m: 500.0,
+                    angle_deg: 90.0
+                };
+                4
+            ],
             station_spacing_m: 500.0 * std::f64::consts::TAU - 300.0,
             balise_spacing_m: 1000.0,
             balise_jitter_m: 0.0,
@@ -157,10 +210,16 @@ mod tests {
         let t = Track::build(&p, 2, 0, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1));
         let last = t.map.vertices.last().unwrap();
         assert!((last.chainage_m - 500.0 * std::f64::consts::TAU).abs() < 1e-6);
-        assert!(last.east_m.abs() < 1e-6 && last.north_m.abs() < 1e-6, "{last:?}");
+        assert!(
+            last.east_m.abs() < 1e-6 && last.north_m.abs() < 1e-6,
+            "{last:?}"
+        );
         // Quarter way round a right-hand circle starting north: due east of the centre's top.
         let (e, n, psi) = t.map.locate(500.0 * std::f64::consts::FRAC_PI_2).unwrap();
-        assert!((e - 500.0).abs() < 0.1 && (n - 500.0).abs() < 0.1, "{e} {n}");
+        assert!(
+            (e - 500.0).abs() < 0.1 && (n - 500.0).abs() < 0.1,
+            "{e} {n}"
+        );
         assert!((psi - std::f64::consts::FRAC_PI_2).abs() < 0.02);
         assert_eq!(t.curvature(10.0), 1.0 / 500.0);
     }

@@ -3,7 +3,9 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
-use railfuse_catalog::messages::{BalisePassage, Event, GnssFix, GroundTruth, Imu, LoopPosition, Odometer, RadarSpeed};
+use railfuse_catalog::messages::{
+    BalisePassage, Event, GnssFix, GroundTruth, Imu, LoopPosition, Odometer, RadarSpeed,
+};
 
 /// The true world at one simulation step.
 #[derive(Debug, Clone, Copy)]
@@ -29,7 +31,11 @@ impl World {
     /// The sub-step time (ns) at which the train was at `chainage` during the last step,
     /// assuming constant speed over the step: for crossing detectors.
     pub fn time_at(&self, chainage: f64) -> u64 {
-        let back_s = if self.speed_mps > 1e-6 { ((self.chainage_m - chainage) / self.speed_mps).clamp(0.0, self.dt) } else { 0.0 };
+        let back_s = if self.speed_mps > 1e-6 {
+            ((self.chainage_m - chainage) / self.speed_mps).clamp(0.0, self.dt)
+        } else {
+            0.0
+        };
         self.t_ns - (back_s * 1e9) as u64
     }
 }
@@ -81,7 +87,11 @@ pub struct Outbox {
 impl Outbox {
     pub fn push(&mut self, log_time_ns: u64, emit: Emit) {
         self.seq += 1;
-        self.heap.push(Pending { log_time_ns, seq: self.seq, emit });
+        self.heap.push(Pending {
+            log_time_ns,
+            seq: self.seq,
+            emit,
+        });
     }
 
     /// Takes the next message received at or before `now_ns`.
@@ -108,7 +118,10 @@ pub struct Schedule {
 
 impl Schedule {
     pub fn new(start_ns: u64, rate_hz: f64) -> Self {
-        Self { next_ns: start_ns, period_ns: (1e9 / rate_hz).round() as u64 }
+        Self {
+            next_ns: start_ns,
+            period_ns: (1e9 / rate_hz).round() as u64,
+        }
     }
     /// True (and advances) when a sample is due at `t_ns`.
     pub fn due(&mut self, t_ns: u64) -> bool {

@@ -8,7 +8,9 @@
 //! so that it fits with NIS = 1: the evidence of many sensor samples outweighs the model.
 
 use super::rts::EpochRecorder;
-use super::{Estimator, EstimatorDiagnostics, LocalFilter, Outcome, ScalarMeasurement, StateAndCovariance};
+use super::{
+    Estimator, EstimatorDiagnostics, LocalFilter, Outcome, ScalarMeasurement, StateAndCovariance,
+};
 use crate::model::TransitionModel;
 
 pub struct Centralised<const N: usize, F: LocalFilter<N>> {
@@ -24,8 +26,20 @@ pub struct Centralised<const N: usize, F: LocalFilter<N>> {
 }
 
 impl<const N: usize, F: LocalFilter<N>> Centralised<N, F> {
-    pub fn new(filter: F, model: Box<dyn TransitionModel<N>>, time_ns: u64, recorder: Option<EpochRecorder<N>>) -> Self {
-        let mut c = Self { filter, model, time_ns, recorder, lockout_after: 0, rejections: [0; N] };
+    pub fn new(
+        filter: F,
+        model: Box<dyn TransitionModel<N>>,
+        time_ns: u64,
+        recorder: Option<EpochRecorder<N>>,
+    ) -> Self {
+        let mut c = Self {
+            filter,
+            model,
+            time_ns,
+            recorder,
+            lockout_after: 0,
+            rejections: [0; N],
+        };
         if let Some(r) = &mut c.recorder {
             r.begin_epoch(time_ns, c.filter.estimate(), None);
         }
@@ -51,7 +65,11 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Centralised<N, F> {
         self.filter.predict(self.model.as_ref(), dt, 1.0);
         self.time_ns = t_ns;
         if let Some(r) = &mut self.recorder {
-            r.begin_epoch(t_ns, self.filter.estimate(), Some(self.model.transition(dt)));
+            r.begin_epoch(
+                t_ns,
+                self.filter.estimate(),
+                Some(self.model.transition(dt)),
+            );
         }
     }
 
@@ -60,11 +78,15 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Centralised<N, F> {
         let innovation = self.filter.innovation(&m.h, m.r, z);
         let k = m.quantity;
         if !innovation.passes(m.gate_nis) {
-            if self.lockout_after == 0 || !innovation.nis.is_finite() || self.rejections[k] + 1 < self.lockout_after {
+            if self.lockout_after == 0
+                || !innovation.nis.is_finite()
+                || self.rejections[k] + 1 < self.lockout_after
+            {
                 self.rejections[k] += 1;
                 return Outcome::RejectedGate(innovation);
             }
-            let extra = (innovation.residual * innovation.residual - innovation.variance) / (m.h[k] * m.h[k]);
+            let extra = (innovation.residual * innovation.residual - innovation.variance)
+                / (m.h[k] * m.h[k]);
             let mut widened = self.filter.estimate();
             widened.covariance[(k, k)] += extra;
             self.filter.reset(&widened);
@@ -74,7 +96,11 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Centralised<N, F> {
                 r.widen_prediction(k, extra);
             }
             self.rejections[k] = 0;
-            return if self.filter.update(&m.h, m.r, z) { Outcome::AcceptedAfterLockout(innovation) } else { Outcome::RejectedNumerics(innovation) };
+            return if self.filter.update(&m.h, m.r, z) {
+                Outcome::AcceptedAfterLockout(innovation)
+            } else {
+                Outcome::RejectedNumerics(innovation)
+            };
         }
         self.rejections[k] = 0;
         if self.filter.update(&m.h, m.r, z) {
@@ -113,13 +139,22 @@ mod tests {
     /// speed sensor (10 Hz) see it. Returns the worst speed error after the stop and the
     /// accelerometer's outcomes.
     fn hard_stop(lockout_after: u32) -> (f64, Vec<Outcome>) {
-        let model = Box::new(ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(0.02) });
-        let init = KalmanFilter::new(Vector3::new(0.0, 1.8, -0.9), Matrix3::from_diagonal(&Vector3::new(1.0, 1e-4, 1e-4)));
+        let model = Box::new(ConstantAcceleration {
+            noise: ProcessNoise::WhiteJerkPsd(0.02),
+        });
+        let init = KalmanFilter::new(
+            Vector3::new(0.0, 1.8, -0.9),
+            Matrix3::from_diagonal(&Vector3::new(1.0, 1e-4, 1e-4)),
+        );
         let mut c = Centralised::new(init, model, 0, None).with_gate_lockout(lockout_after);
         let (mut worst, mut outcomes) = (0.0f64, Vec::new());
         for k in 1..=600u64 {
             let t = k as f64 * 0.01;
-            let (v, a) = if t < 2.0 { (1.8 - 0.9 * t, -0.9) } else { (0.0, 0.0) };
+            let (v, a) = if t < 2.0 {
+                (1.8 - 0.9 * t, -0.9)
+            } else {
+                (0.0, 0.0)
+            };
             c.advance_to(k * 10_000_000);
             outcomes.push(c.process(&ScalarMeasurement {
                 device: 0,
@@ -132,7 +167,15 @@ mod tests {
             }));
             if k % 10 == 0 {
                 // The speed sensor's outcomes are not kept: the lockout run below is the accelerometer's.
-                c.process(&ScalarMeasurement { device: 0, quantity: 1, h: RowVector3::new(0.0, 1.0, 0.0), offset: 0.0, r: 0.01, z: v, gate_nis: Some(16.0) });
+                c.process(&ScalarMeasurement {
+                    device: 0,
+                    quantity: 1,
+                    h: RowVector3::new(0.0, 1.0, 0.0),
+                    offset: 0.0,
+                    r: 0.01,
+                    z: v,
+                    gate_nis: Some(16.0),
+                });
             }
             if t >= 2.0 {
                 worst = worst.max((c.estimate().state[1] - v).abs());
@@ -145,13 +188,30 @@ mod tests {
     #[test]
     fn a_hard_stop_locks_the_gate_and_lockout_recovery_reopens_it() {
         let (locked, outcomes) = hard_stop(0);
-        let gated = outcomes.iter().filter(|o| matches!(o, Outcome::RejectedGate(_))).count();
-        assert!(locked > 0.3 && gated > 20, "without recovery the filter runs away: {locked} m/s, {gated} gated");
+        let gated = outcomes
+            .iter()
+            .filter(|o| matches!(o, Outcome::RejectedGate(_)))
+            .count();
+        assert!(
+            locked > 0.3 && gated > 20,
+            "without recovery the filter runs away: {locked} m/s, {gated} gated"
+        );
         let (recovered, outcomes) = hard_stop(5);
-        let lockouts = outcomes.iter().filter(|o| matches!(o, Outcome::AcceptedAfterLockout(_))).count();
-        assert!(lockouts >= 1 && recovered < 0.1, "with recovery: {recovered} m/s after {lockouts} lockouts");
+        let lockouts = outcomes
+            .iter()
+            .filter(|o| matches!(o, Outcome::AcceptedAfterLockout(_)))
+            .count();
+        assert!(
+            lockouts >= 1 && recovered < 0.1,
+            "with recovery: {recovered} m/s after {lockouts} lockouts"
+        );
         // The run that set it off: exactly `lockout_after` - 1 gate rejections before it.
-        let first = outcomes.iter().position(|o| matches!(o, Outcome::AcceptedAfterLockout(_))).unwrap();
-        assert!(outcomes[first - 4..first].iter().all(|o| matches!(o, Outcome::RejectedGate(_))));
+        let first = outcomes
+            .iter()
+            .position(|o| matches!(o, Outcome::AcceptedAfterLockout(_)))
+            .unwrap();
+        assert!(outcomes[first - 4..first]
+            .iter()
+            .all(|o| matches!(o, Outcome::RejectedGate(_))));
     }
 }

@@ -24,7 +24,10 @@ use nalgebra::{SMatrix, SVector};
 
 use super::sharing::{Redistribution, SharingTable};
 use super::working_state::{DetectorSettings, WorkingState};
-use super::{DeviceShare, Estimator, EstimatorDiagnostics, KalmanFilter, LocalFilter, Outcome, ScalarMeasurement, StateAndCovariance, MASTER};
+use super::{
+    DeviceShare, Estimator, EstimatorDiagnostics, KalmanFilter, LocalFilter, Outcome,
+    ScalarMeasurement, StateAndCovariance, MASTER,
+};
 use crate::model::TransitionModel;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -78,17 +81,35 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         time_ns: u64,
         mut make: impl FnMut(usize, &StateAndCovariance<N>) -> F,
     ) -> Self {
-        let beta = settings.sharing.shares(initial.state[1.min(N - 1)], &vec![true; names.len()], settings.redistribution);
+        let beta = settings.sharing.shares(
+            initial.state[1.min(N - 1)],
+            &vec![true; names.len()],
+            settings.redistribution,
+        );
         let devices = names
             .into_iter()
             .enumerate()
             .map(|(i, name)| {
                 let share = share_of(initial, beta[i], settings.feedback);
-                Device { name, filter: make(i, &share), health: WorkingState::new(settings.detector, time_ns), grace: 0, disagreement: SVector::zeros() }
+                Device {
+                    name,
+                    filter: make(i, &share),
+                    health: WorkingState::new(settings.detector, time_ns),
+                    grace: 0,
+                    disagreement: SVector::zeros(),
+                }
             })
             .collect();
         let next_fusion_ns = time_ns + settings.fusion_period_ns;
-        Self { master: KalmanFilter::new(initial.state, initial.covariance), settings, model, devices, beta, time_ns, next_fusion_ns }
+        Self {
+            master: KalmanFilter::new(initial.state, initial.covariance),
+            settings,
+            model,
+            devices,
+            beta,
+            time_ns,
+            next_fusion_ns,
+        }
     }
 
     fn healthy(&self) -> Vec<bool> {
@@ -106,7 +127,8 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         let mut info_state = SVector::<f64, N>::zeros();
         let mut any = false;
         for (d, &b) in self.devices.iter().zip(&self.beta) {
-            if !d.health.healthy() || (self.settings.feedback == Feedback::FusionReset && b <= 0.0) {
+            if !d.health.healthy() || (self.settings.feedback == Feedback::FusionReset && b <= 0.0)
+            {
                 continue;
             }
             let e = d.filter.estimate();
@@ -118,7 +140,10 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             any = true;
         }
         let p = inverse_spd(&info).filter(|_| any)?;
-        let fused = StateAndCovariance { state: p * info_state, covariance: super::symmetric(p) };
+        let fused = StateAndCovariance {
+            state: p * info_state,
+            covariance: super::symmetric(p),
+        };
         fused.is_finite().then_some(fused)
     }
 
@@ -129,12 +154,20 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
     /// covariance: the test is conservative.)
     fn consistency_test(&mut self) -> bool {
         let bound = self.settings.detector.consistency_chi2;
-        let healthy: Vec<usize> = (0..self.devices.len()).filter(|&i| self.devices[i].health.healthy() && self.devices[i].grace == 0).collect();
+        let healthy: Vec<usize> = (0..self.devices.len())
+            .filter(|&i| self.devices[i].health.healthy() && self.devices[i].grace == 0)
+            .collect();
         if bound <= 0.0 || healthy.len() < 3 {
             return false;
         }
-        let estimates: Vec<StateAndCovariance<N>> = healthy.iter().map(|&i| self.devices[i].filter.estimate()).collect();
-        let infos: Vec<Option<SMatrix<f64, N, N>>> = estimates.iter().map(|e| inverse_spd(&e.covariance)).collect();
+        let estimates: Vec<StateAndCovariance<N>> = healthy
+            .iter()
+            .map(|&i| self.devices[i].filter.estimate())
+            .collect();
+        let infos: Vec<Option<SMatrix<f64, N, N>>> = estimates
+            .iter()
+            .map(|e| inverse_spd(&e.covariance))
+            .collect();
         let mut worst: Option<(usize, f64)> = None;
         for (k, &i) in healthy.iter().enumerate() {
             let mut info = SMatrix::<f64, N, N>::zeros();
@@ -145,9 +178,13 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
                     info_state += inv * e.state;
                 }
             }
-            let Some(p_others) = inverse_spd(&info) else { continue };
+            let Some(p_others) = inverse_spd(&info) else {
+                continue;
+            };
             let d = estimates[k].state - p_others * info_state;
-            let Some(s_inv) = inverse_spd(&(estimates[k].covariance + p_others)) else { continue };
+            let Some(s_inv) = inverse_spd(&(estimates[k].covariance + p_others)) else {
+                continue;
+            };
             let stat = (d.transpose() * s_inv * d)[0];
             if stat.is_finite() && worst.is_none_or(|(_, w)| stat > w) {
                 worst = Some((i, stat));
@@ -174,7 +211,11 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         for d in &mut self.devices {
             d.health.check_exclusion(self.time_ns);
         }
-        for d in self.devices.iter_mut().filter(|d| d.health.must_prove_agreement()) {
+        for d in self
+            .devices
+            .iter_mut()
+            .filter(|d| d.health.must_prove_agreement())
+        {
             let e = d.filter.estimate();
             let agrees = match inverse_spd(&(e.covariance + master.covariance)) {
                 Some(s_inv) => {
@@ -186,7 +227,11 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             // Rejoining after agreeing: the reset below brings it in with its share.
             d.health.on_readmission_test(agrees);
         }
-        self.beta = self.settings.sharing.shares(self.speed(), &self.healthy(), self.settings.redistribution);
+        self.beta = self.settings.sharing.shares(
+            self.speed(),
+            &self.healthy(),
+            self.settings.redistribution,
+        );
         let nominal = self.settings.sharing.at(self.speed()).to_vec();
         for ((d, &b), &b0) in self.devices.iter_mut().zip(&self.beta).zip(&nominal) {
             d.grace = d.grace.saturating_sub(1);
@@ -205,7 +250,11 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             } else if d.health.must_prove_agreement() {
                 // The shadow restarts from the fused estimate each cycle, so that what it shows
                 // at the next fusion is its disagreement over one cycle only.
-                d.filter.reset(&share_of(&self.master.estimate, if b0 > 0.0 { b0 } else { 1.0 }, Feedback::FusionReset));
+                d.filter.reset(&share_of(
+                    &self.master.estimate,
+                    if b0 > 0.0 { b0 } else { 1.0 },
+                    Feedback::FusionReset,
+                ));
             }
         }
     }
@@ -216,7 +265,11 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         }
         let dt = (t_ns - self.time_ns) as f64 / 1e9;
         for (d, &b) in self.devices.iter_mut().zip(&self.beta) {
-            let q_scale = if self.settings.feedback == Feedback::FusionReset && b > 0.0 { 1.0 / b } else { 1.0 };
+            let q_scale = if self.settings.feedback == Feedback::FusionReset && b > 0.0 {
+                1.0 / b
+            } else {
+                1.0
+            };
             d.filter.predict(self.model.as_ref(), dt, q_scale);
         }
         self.master.predict(self.model.as_ref(), dt);
@@ -229,10 +282,18 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         if let Some(fused) = self.fuse() {
             self.master.estimate = fused;
         }
-        self.beta = self.settings.sharing.shares(self.speed(), &self.healthy(), self.settings.redistribution);
+        self.beta = self.settings.sharing.shares(
+            self.speed(),
+            &self.healthy(),
+            self.settings.redistribution,
+        );
         if let Some(i) = rejoined {
             let b = self.beta[i];
-            let mut share = share_of(&self.master.estimate, if b > 0.0 { b } else { 1.0 }, self.settings.feedback);
+            let mut share = share_of(
+                &self.master.estimate,
+                if b > 0.0 { b } else { 1.0 },
+                self.settings.feedback,
+            );
             let d = &mut self.devices[i];
             for k in 0..N {
                 share.covariance[(k, k)] += d.disagreement[k];
@@ -243,9 +304,16 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
     }
 }
 
-fn share_of<const N: usize>(e: &StateAndCovariance<N>, beta: f64, feedback: Feedback) -> StateAndCovariance<N> {
+fn share_of<const N: usize>(
+    e: &StateAndCovariance<N>,
+    beta: f64,
+    feedback: Feedback,
+) -> StateAndCovariance<N> {
     match feedback {
-        Feedback::FusionReset => StateAndCovariance { state: e.state, covariance: e.covariance / beta },
+        Feedback::FusionReset => StateAndCovariance {
+            state: e.state,
+            covariance: e.covariance / beta,
+        },
         Feedback::NoReset => e.clone(),
     }
 }
@@ -276,7 +344,9 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
     fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome {
         let z = m.z - m.offset;
         if m.device == MASTER {
-            let mut master = KalmanFilter { estimate: self.estimate() };
+            let mut master = KalmanFilter {
+                estimate: self.estimate(),
+            };
             let innovation = master.innovation(&m.h, m.r, z);
             if !innovation.passes(m.gate_nis) {
                 return Outcome::RejectedGate(innovation);
@@ -287,10 +357,15 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
             // An absolute fix in the master is shared back at once, whatever the feedback mode:
             // otherwise the next fusion would forget it.
             self.master = master;
-            self.beta = self.settings.sharing.shares(self.speed(), &self.healthy(), self.settings.redistribution);
+            self.beta = self.settings.sharing.shares(
+                self.speed(),
+                &self.healthy(),
+                self.settings.redistribution,
+            );
             for (d, &b) in self.devices.iter_mut().zip(&self.beta) {
                 if b > 0.0 {
-                    d.filter.reset(&share_of(&self.master.estimate, b, self.settings.feedback));
+                    d.filter
+                        .reset(&share_of(&self.master.estimate, b, self.settings.feedback));
                 }
             }
             return Outcome::Accepted(innovation);
@@ -298,12 +373,17 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
         let moving = self.speed().abs() > 1.0;
         let quantity = m.quantity;
         let i = m.device;
-        if self.devices[i].health.on_message(self.time_ns, quantity, m.z, moving) {
+        if self.devices[i]
+            .health
+            .on_message(self.time_ns, quantity, m.z, moving)
+        {
             self.health_changed(None);
             return Outcome::RejectedDeviceFault(None);
         }
         if !self.devices[i].health.healthy() {
-            let fused = KalmanFilter { estimate: self.estimate() };
+            let fused = KalmanFilter {
+                estimate: self.estimate(),
+            };
             let innovation = fused.innovation(&m.h, m.r, z);
             let d = &mut self.devices[i];
             if d.health.must_prove_agreement() {
@@ -320,7 +400,9 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
         if self.devices[i].grace > 0 {
             // How far the fused estimate still is from this device (not its own sub-filter,
             // which follows the device): what the next reset must leave room for.
-            let fused = KalmanFilter { estimate: self.estimate() };
+            let fused = KalmanFilter {
+                estimate: self.estimate(),
+            };
             let nu = fused.innovation(&m.h, m.r, z).residual;
             self.devices[i].disagreement[quantity] = (nu * nu - m.r).max(0.0);
         }
@@ -362,15 +444,21 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
             let mut dd = EstimatorDiagnostics::default();
             d.filter.diagnostics(&mut dd);
             if let Some(ess) = dd.effective_sample_size {
-                out.effective_sample_size = Some(out.effective_sample_size.map_or(ess, |e: f64| e.min(ess)));
-                out.resampled = Some(out.resampled.unwrap_or(false) | dd.resampled.unwrap_or(false));
+                out.effective_sample_size =
+                    Some(out.effective_sample_size.map_or(ess, |e: f64| e.min(ess)));
+                out.resampled =
+                    Some(out.resampled.unwrap_or(false) | dd.resampled.unwrap_or(false));
             }
         }
         out.sharing = Some(
             self.devices
                 .iter()
                 .zip(&self.beta)
-                .map(|(d, &b)| DeviceShare { device: d.name.clone(), beta: b, fault: d.health.fault().map(|f| f.describe().to_owned()) })
+                .map(|(d, &b)| DeviceShare {
+                    device: d.name.clone(),
+                    beta: b,
+                    fault: d.health.fault().map(|f| f.describe().to_owned()),
+                })
                 .collect(),
         );
         out
@@ -402,8 +490,20 @@ mod tests {
     use nalgebra::{Matrix3, RowVector3, Vector3};
 
     fn settings(feedback: Feedback) -> FederatedSettings {
-        let detector = DetectorSettings { timeout_s: 1e9, stuck_messages: u32::MAX, gate_failures: u32::MAX, consistency_chi2: 0.0, ..Default::default() };
-        FederatedSettings { feedback, fusion_period_ns: 0, sharing: SharingTable::source_001(), redistribution: Redistribution::Even, detector }
+        let detector = DetectorSettings {
+            timeout_s: 1e9,
+            stuck_messages: u32::MAX,
+            gate_failures: u32::MAX,
+            consistency_chi2: 0.0,
+            ..Default::default()
+        };
+        FederatedSettings {
+            feedback,
+            fusion_period_ns: 0,
+            sharing: SharingTable::source_001(),
+            redistribution: Redistribution::Even,
+            detector,
+        }
     }
 
     /// Three devices (INS acceleration, GNSS position and speed, radar speed), measurements at
@@ -418,13 +518,26 @@ mod tests {
             let noise = ((k * 7919) % 17) as f64 / 17.0 - 0.5;
             let (device, h, r, z) = match k % 4 {
                 0 => (0, RowVector3::new(0.0, 0.0, 1.0), 0.01, a + 0.1 * noise),
-                1 => (1, RowVector3::new(1.0, 0.0, 0.0), 4.0, 0.25 * ts * ts.min(120.0) + 2.0 * noise),
+                1 => (
+                    1,
+                    RowVector3::new(1.0, 0.0, 0.0),
+                    4.0,
+                    0.25 * ts * ts.min(120.0) + 2.0 * noise,
+                ),
                 2 => (1, RowVector3::new(0.0, 1.0, 0.0), 0.04, v + 0.2 * noise),
                 _ => (2, RowVector3::new(0.0, 1.0, 0.0), 0.01, v + 0.1 * noise),
             };
             estimator.advance_to(t);
             let quantity = h.iamax_full().1;
-            let o = estimator.process(&ScalarMeasurement { device, quantity, h, offset: 0.0, r, z, gate_nis: None });
+            let o = estimator.process(&ScalarMeasurement {
+                device,
+                quantity,
+                h,
+                offset: 0.0,
+                r,
+                z,
+                gate_nis: None,
+            });
             assert!(matches!(o, Outcome::Accepted(_)), "{o:?}");
             out.push(estimator.estimate());
         }
@@ -432,41 +545,75 @@ mod tests {
     }
 
     fn model() -> Box<dyn TransitionModel<3>> {
-        Box::new(ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(0.02) })
+        Box::new(ConstantAcceleration {
+            noise: ProcessNoise::WhiteJerkPsd(0.02),
+        })
     }
 
     fn initial() -> StateAndCovariance<3> {
-        StateAndCovariance { state: Vector3::new(0.5, 0.4, 0.0), covariance: Matrix3::from_diagonal(&Vector3::new(25.0, 4.0, 1.0)) }
+        StateAndCovariance {
+            state: Vector3::new(0.5, 0.4, 0.0),
+            covariance: Matrix3::from_diagonal(&Vector3::new(25.0, 4.0, 1.0)),
+        }
     }
 
     fn federated(feedback: Feedback) -> Federated<3, KalmanFilter<3>> {
         let names = vec!["ins".into(), "gnss".into(), "radar".into()];
-        Federated::new(settings(feedback), model(), names, &initial(), 1_000_000_000, |_, s| KalmanFilter::new(s.state, s.covariance))
+        Federated::new(
+            settings(feedback),
+            model(),
+            names,
+            &initial(),
+            1_000_000_000,
+            |_, s| KalmanFilter::new(s.state, s.covariance),
+        )
     }
 
     #[test]
     fn fusion_reset_with_information_sharing_is_the_centralised_kalman_filter() {
         let init = initial();
-        let mut central = Centralised::new(KalmanFilter::new(init.state, init.covariance), model(), 1_000_000_000, None);
+        let mut central = Centralised::new(
+            KalmanFilter::new(init.state, init.covariance),
+            model(),
+            1_000_000_000,
+            None,
+        );
         let c = run(&mut central);
         let f = run(&mut federated(Feedback::FusionReset));
         let mut worst = 0.0f64;
         for (a, b) in c.iter().zip(&f) {
-            for (x, y) in a.state.iter().chain(a.covariance.iter()).zip(b.state.iter().chain(b.covariance.iter())) {
+            for (x, y) in a
+                .state
+                .iter()
+                .chain(a.covariance.iter())
+                .zip(b.state.iter().chain(b.covariance.iter()))
+            {
                 worst = worst.max((x - y).abs() / x.abs().max(1.0));
             }
         }
         eprintln!("federated (fusion-reset) vs centralised: worst relative difference {worst:e}");
-        assert!(worst < 1e-6, "federated (fusion-reset) differs from centralised by {worst}");
+        assert!(
+            worst < 1e-6,
+            "federated (fusion-reset) differs from centralised by {worst}"
+        );
     }
 
     #[test]
     fn without_reset_the_federated_filter_is_not_the_centralised_one() {
         let init = initial();
-        let mut central = Centralised::new(KalmanFilter::new(init.state, init.covariance), model(), 1_000_000_000, None);
+        let mut central = Centralised::new(
+            KalmanFilter::new(init.state, init.covariance),
+            model(),
+            1_000_000_000,
+            None,
+        );
         let c = run(&mut central);
         let f = run(&mut federated(Feedback::NoReset));
-        let gap = c.iter().zip(&f).map(|(a, b)| (a.state[0] - b.state[0]).abs()).fold(0.0, f64::max);
+        let gap = c
+            .iter()
+            .zip(&f)
+            .map(|(a, b)| (a.state[0] - b.state[0]).abs())
+            .fold(0.0, f64::max);
         // It double-counts the common prior and process noise: a visible, not a rounding, gap.
         eprintln!("federated (no reset) vs centralised: largest chainage gap {gap:.4} m");
         assert!(gap > 1e-3, "no-reset gap {gap}");

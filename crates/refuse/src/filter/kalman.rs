@@ -24,7 +24,9 @@ pub struct KalmanFilter<const N: usize> {
 
 impl<const N: usize> KalmanFilter<N> {
     pub fn new(state: SVector<f64, N>, covariance: SMatrix<f64, N, N>) -> Self {
-        Self { estimate: StateAndCovariance { state, covariance } }
+        Self {
+            estimate: StateAndCovariance { state, covariance },
+        }
     }
 
     pub fn predict(&mut self, model: &(impl TransitionModel<N> + ?Sized), dt: f64) {
@@ -40,7 +42,10 @@ impl<const N: usize> KalmanFilter<N> {
     /// The innovation `z` would produce, without changing the estimate (for gating).
     pub fn innovation(&self, h: &RowSVector<f64, N>, r: f64, z: f64) -> Innovation {
         let e = &self.estimate;
-        Innovation::new(z - (h * e.state)[0], (h * e.covariance * h.transpose())[0] + r)
+        Innovation::new(
+            z - (h * e.state)[0],
+            (h * e.covariance * h.transpose())[0] + r,
+        )
     }
 
     /// Joseph-form update with a scalar measurement; returns the innovation it used.
@@ -91,7 +96,10 @@ mod tests {
 
     #[test]
     fn a_position_update_pulls_the_state_by_the_gain_and_shrinks_the_variance() {
-        let mut kf = KalmanFilter::new(Vector3::new(0.0, 10.0, 0.0), Matrix3::from_diagonal(&Vector3::new(4.0, 1.0, 0.1)));
+        let mut kf = KalmanFilter::new(
+            Vector3::new(0.0, 10.0, 0.0),
+            Matrix3::from_diagonal(&Vector3::new(4.0, 1.0, 0.1)),
+        );
         let i = kf.update(&RowVector3::new(1.0, 0.0, 0.0), 4.0, 2.0);
         assert_eq!(i.residual, 2.0);
         assert_eq!(i.variance, 8.0);
@@ -101,12 +109,18 @@ mod tests {
 
     #[test]
     fn covariance_stays_symmetric_and_positive_over_many_irregular_steps() {
-        let model = ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(0.05) };
+        let model = ConstantAcceleration {
+            noise: ProcessNoise::WhiteJerkPsd(0.05),
+        };
         let mut kf = KalmanFilter::new(Vector3::zeros(), Matrix3::identity() * 1e6);
         for k in 0..20_000 {
             let dt = 0.001 + (k % 7) as f64 * 0.013;
             kf.predict(&model, dt);
-            let h = if k % 3 == 0 { RowVector3::new(1.0, 0.0, 0.0) } else { RowVector3::new(0.0, 1.0, 0.0) };
+            let h = if k % 3 == 0 {
+                RowVector3::new(1.0, 0.0, 0.0)
+            } else {
+                RowVector3::new(0.0, 1.0, 0.0)
+            };
             kf.update(&h, 1e-6, k as f64);
             let p = kf.estimate.covariance;
             assert_eq!(p, p.transpose());

@@ -35,7 +35,10 @@ pub struct StateAndCovariance<const N: usize> {
 
 impl<const N: usize> StateAndCovariance<N> {
     pub fn is_finite(&self) -> bool {
-        self.state.iter().chain(self.covariance.iter()).all(|x| x.is_finite())
+        self.state
+            .iter()
+            .chain(self.covariance.iter())
+            .all(|x| x.is_finite())
     }
 }
 
@@ -52,7 +55,11 @@ pub struct Innovation {
 
 impl Innovation {
     pub fn new(residual: f64, variance: f64) -> Self {
-        Self { residual, variance, nis: residual * residual / variance }
+        Self {
+            residual,
+            variance,
+            nis: residual * residual / variance,
+        }
     }
 
     /// True when the innovation passes the NIS gate (a NaN NIS never passes).
@@ -105,7 +112,10 @@ pub enum Outcome {
 impl Outcome {
     pub fn innovation(&self) -> Option<Innovation> {
         match *self {
-            Outcome::Accepted(i) | Outcome::AcceptedAfterLockout(i) | Outcome::RejectedGate(i) | Outcome::RejectedNumerics(i) => Some(i),
+            Outcome::Accepted(i)
+            | Outcome::AcceptedAfterLockout(i)
+            | Outcome::RejectedGate(i)
+            | Outcome::RejectedNumerics(i) => Some(i),
             Outcome::RejectedDeviceFault(i) => i,
         }
     }

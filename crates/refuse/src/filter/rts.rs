@@ -48,13 +48,27 @@ const fn smoothed_len(n: usize) -> usize {
 
 impl<const N: usize> EpochRecorder<N> {
     pub fn new() -> std::io::Result<Self> {
-        Ok(Self { file: BufWriter::with_capacity(1 << 16, tempfile::tempfile()?), records: 0, open: None, error: None })
+        Ok(Self {
+            file: BufWriter::with_capacity(1 << 16, tempfile::tempfile()?),
+            records: 0,
+            open: None,
+            error: None,
+        })
     }
 
     /// Starts the epoch at `stamp_ns` with the prediction into it (`transition` None for the
     /// first epoch).
-    pub fn begin_epoch(&mut self, stamp_ns: u64, prior: StateAndCovariance<N>, transition: Option<SMatrix<f64, N, N>>) {
-        self.open = Some((stamp_ns, prior, transition.unwrap_or_else(SMatrix::identity)));
+    pub fn begin_epoch(
+        &mut self,
+        stamp_ns: u64,
+        prior: StateAndCovariance<N>,
+        transition: Option<SMatrix<f64, N, N>>,
+    ) {
+        self.open = Some((
+            stamp_ns,
+            prior,
+            transition.unwrap_or_else(SMatrix::identity),
+        ));
     }
 
     /// Adds `variance` to component `k` of the open epoch's prediction (process noise the
@@ -72,7 +86,14 @@ impl<const N: usize> EpochRecorder<N> {
         };
         let mut buf = Vec::with_capacity(record_len(N) * 8);
         buf.extend_from_slice(&stamp.to_le_bytes());
-        for x in prior.state.iter().chain(prior.covariance.iter()).chain(f.iter()).chain(posterior.state.iter()).chain(posterior.covariance.iter()) {
+        for x in prior
+            .state
+            .iter()
+            .chain(prior.covariance.iter())
+            .chain(f.iter())
+            .chain(posterior.state.iter())
+            .chain(posterior.covariance.iter())
+        {
             buf.extend_from_slice(&x.to_le_bytes());
         }
         if self.error.is_none() {
@@ -98,7 +119,11 @@ impl<const N: usize> EpochRecorder<N> {
         const BLOCK: u64 = 4096;
         let (rl, sl) = (record_len(N) * 8, smoothed_len(N) * 8);
         // (x^s, P^s) of epoch k+1 and its prior and transition.
-        let mut next: Option<(StateAndCovariance<N>, StateAndCovariance<N>, SMatrix<f64, N, N>)> = None;
+        let mut next: Option<(
+            StateAndCovariance<N>,
+            StateAndCovariance<N>,
+            SMatrix<f64, N, N>,
+        )> = None;
         let mut hi = n;
         let mut bytes = Vec::new();
         let mut out = Vec::new();
@@ -113,11 +138,18 @@ impl<const N: usize> EpochRecorder<N> {
                 let rec = Record::<N>::parse(&bytes[k * rl..(k + 1) * rl]);
                 let smoothed = match &next {
                     None => rec.posterior.clone(),
-                    Some((xs_next, prior_next, f_next)) => rts_step(&rec.posterior, prior_next, f_next, xs_next),
+                    Some((xs_next, prior_next, f_next)) => {
+                        rts_step(&rec.posterior, prior_next, f_next, xs_next)
+                    }
                 };
                 let o = &mut out[k * sl..(k + 1) * sl];
                 o[..8].copy_from_slice(&rec.stamp_ns.to_le_bytes());
-                for (i, x) in smoothed.state.iter().chain(smoothed.covariance.iter()).enumerate() {
+                for (i, x) in smoothed
+                    .state
+                    .iter()
+                    .chain(smoothed.covariance.iter())
+                    .enumerate()
+                {
                     o[8 + i * 8..16 + i * 8].copy_from_slice(&x.to_le_bytes());
                 }
                 next = Some((smoothed, rec.prior, rec.transition));
@@ -127,7 +159,10 @@ impl<const N: usize> EpochRecorder<N> {
             hi = lo;
         }
         output.seek(SeekFrom::Start(0))?;
-        Ok(SmoothedEpochs { reader: BufReader::with_capacity(1 << 16, output), remaining: n })
+        Ok(SmoothedEpochs {
+            reader: BufReader::with_capacity(1 << 16, output),
+            remaining: n,
+        })
     }
 }
 
@@ -139,14 +174,19 @@ pub fn rts_step<const N: usize>(
     smoothed_next: &StateAndCovariance<N>,
 ) -> StateAndCovariance<N> {
     let p_pred = prior_next.covariance;
-    let inv = p_pred.cholesky().map(|c| c.inverse()).or_else(|| p_pred.try_inverse());
+    let inv = p_pred
+        .cholesky()
+        .map(|c| c.inverse())
+        .or_else(|| p_pred.try_inverse());
     let Some(inv) = inv else {
         return filtered.clone();
     };
     let c = filtered.covariance * transition_next.transpose() * inv;
     StateAndCovariance {
         state: filtered.state + c * (smoothed_next.state - prior_next.state),
-        covariance: symmetric(filtered.covariance + c * (smoothed_next.covariance - p_pred) * c.transpose()),
+        covariance: symmetric(
+            filtered.covariance + c * (smoothed_next.covariance - p_pred) * c.transpose(),
+        ),
     }
 }
 
@@ -160,11 +200,18 @@ struct Record<const N: usize> {
 impl<const N: usize> Record<N> {
     fn parse(b: &[u8]) -> Self {
         let stamp_ns = u64::from_le_bytes(b[..8].try_into().expect("8 bytes"));
-        let mut vals = b[8..].chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")));
+        let mut vals = b[8..]
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")));
         let prior = read_gaussian(&mut vals);
         let transition = SMatrix::from_iterator(vals.by_ref().take(N * N));
         let posterior = read_gaussian(&mut vals);
-        Self { stamp_ns, prior, transition, posterior }
+        Self {
+            stamp_ns,
+            prior,
+            transition,
+            posterior,
+        }
     }
 }
 
@@ -191,8 +238,13 @@ impl<const N: usize> Iterator for SmoothedEpochs<N> {
         let mut b = vec![0u8; smoothed_len(N) * 8];
         Some(self.reader.read_exact(&mut b).map(|()| {
             let stamp_ns = u64::from_le_bytes(b[..8].try_into().expect("8 bytes"));
-            let mut vals = b[8..].chunks_exact(8).map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")));
-            SmoothedEpoch { stamp_ns, estimate: read_gaussian(&mut vals) }
+            let mut vals = b[8..]
+                .chunks_exact(8)
+                .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")));
+            SmoothedEpoch {
+                stamp_ns,
+                estimate: read_gaussian(&mut vals),
+            }
         }))
     }
 }
@@ -207,7 +259,9 @@ mod tests {
     /// The spilled, blocked backward pass equals a plain in-memory RTS over the same epochs.
     #[test]
     fn spilled_smoother_equals_the_in_memory_recursion_across_blocks() {
-        let model = ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(0.1) };
+        let model = ConstantAcceleration {
+            noise: ProcessNoise::WhiteJerkPsd(0.1),
+        };
         let mut kf = KalmanFilter::new(Vector3::new(0.0, 10.0, 0.0), Matrix3::identity());
         let mut rec = EpochRecorder::<3>::new().unwrap();
         let mut mem: Vec<(StateAndCovariance<3>, StateAndCovariance<3>, Matrix3<f64>)> = Vec::new();

@@ -35,26 +35,55 @@ impl SharingTable {
     pub fn source_001() -> Self {
         Self {
             bands: vec![
-                SpeedBand { below_mps: 50.0 * KMH, beta: vec![0.6, 0.3, 0.1] },
-                SpeedBand { below_mps: 150.0 * KMH, beta: vec![0.5, 0.4, 0.1] },
-                SpeedBand { below_mps: f64::INFINITY, beta: vec![0.4, 0.4, 0.2] },
+                SpeedBand {
+                    below_mps: 50.0 * KMH,
+                    beta: vec![0.6, 0.3, 0.1],
+                },
+                SpeedBand {
+                    below_mps: 150.0 * KMH,
+                    beta: vec![0.5, 0.4, 0.1],
+                },
+                SpeedBand {
+                    below_mps: f64::INFINITY,
+                    beta: vec![0.4, 0.4, 0.2],
+                },
             ],
         }
     }
 
     /// Source 000's coefficients for devices (loop, radar): α_loop 0.8 below 70 m/s, 0.5 above.
     pub fn source_000() -> Self {
-        Self { bands: vec![SpeedBand { below_mps: 70.0, beta: vec![0.8, 0.2] }, SpeedBand { below_mps: f64::INFINITY, beta: vec![0.5, 0.5] }] }
+        Self {
+            bands: vec![
+                SpeedBand {
+                    below_mps: 70.0,
+                    beta: vec![0.8, 0.2],
+                },
+                SpeedBand {
+                    below_mps: f64::INFINITY,
+                    beta: vec![0.5, 0.5],
+                },
+            ],
+        }
     }
 
     pub fn even(devices: usize) -> Self {
-        Self { bands: vec![SpeedBand { below_mps: f64::INFINITY, beta: vec![1.0 / devices as f64; devices] }] }
+        Self {
+            bands: vec![SpeedBand {
+                below_mps: f64::INFINITY,
+                beta: vec![1.0 / devices as f64; devices],
+            }],
+        }
     }
 
     /// The table for `speed_mps` (its magnitude).
     pub fn at(&self, speed_mps: f64) -> &[f64] {
         let s = speed_mps.abs();
-        let band = self.bands.iter().find(|b| s < b.below_mps).unwrap_or_else(|| self.bands.last().expect("a table has bands"));
+        let band = self
+            .bands
+            .iter()
+            .find(|b| s < b.below_mps)
+            .unwrap_or_else(|| self.bands.last().expect("a table has bands"));
         &band.beta
     }
 
@@ -62,9 +91,19 @@ impl SharingTable {
     /// All zero when no device is healthy.
     pub fn shares(&self, speed_mps: f64, healthy: &[bool], how: Redistribution) -> Vec<f64> {
         let base = self.at(speed_mps);
-        let lost: f64 = base.iter().zip(healthy).filter(|(_, h)| !**h).map(|(b, _)| b).sum();
+        let lost: f64 = base
+            .iter()
+            .zip(healthy)
+            .filter(|(_, h)| !**h)
+            .map(|(b, _)| b)
+            .sum();
         let alive = healthy.iter().filter(|h| **h).count();
-        let alive_sum: f64 = base.iter().zip(healthy).filter(|(_, h)| **h).map(|(b, _)| b).sum();
+        let alive_sum: f64 = base
+            .iter()
+            .zip(healthy)
+            .filter(|(_, h)| **h)
+            .map(|(b, _)| b)
+            .sum();
         base.iter()
             .zip(healthy)
             .map(|(&b, &h)| match (h, how) {
@@ -88,10 +127,19 @@ mod tests {
         assert_eq!(t.at(-100.0 / 3.6), &[0.5, 0.4, 0.1]);
         assert_eq!(t.at(200.0 / 3.6), &[0.4, 0.4, 0.2]);
         let even = t.shares(100.0 / 3.6, &[true, false, true], Redistribution::Even);
-        assert!((even[0] - 0.7).abs() < 1e-12 && even[1] == 0.0 && (even[2] - 0.3).abs() < 1e-12, "{even:?}");
+        assert!(
+            (even[0] - 0.7).abs() < 1e-12 && even[1] == 0.0 && (even[2] - 0.3).abs() < 1e-12,
+            "{even:?}"
+        );
         let acc = t.shares(100.0 / 3.6, &[true, false, true], Redistribution::Accuracy);
-        assert!((acc[0] - 0.5 / 0.6).abs() < 1e-12 && (acc[2] - 0.1 / 0.6).abs() < 1e-12, "{acc:?}");
-        assert_eq!(t.shares(10.0, &[false; 3], Redistribution::Even), vec![0.0; 3]);
+        assert!(
+            (acc[0] - 0.5 / 0.6).abs() < 1e-12 && (acc[2] - 0.1 / 0.6).abs() < 1e-12,
+            "{acc:?}"
+        );
+        assert_eq!(
+            t.shares(10.0, &[false; 3], Redistribution::Even),
+            vec![0.0; 3]
+        );
         assert!((acc.iter().sum::<f64>() - 1.0).abs() < 1e-12);
     }
 }

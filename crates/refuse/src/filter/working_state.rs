@@ -185,8 +185,13 @@ impl WorkingState {
     /// The result of a fusion-time consistency test for this device (true: it was the one in
     /// disagreement beyond the bound); true when that failed the device.
     pub fn on_consistency(&mut self, inconsistent: bool) -> bool {
-        self.inconsistent_run = if inconsistent { self.inconsistent_run + 1 } else { 0 };
-        if self.fault.is_none() && self.inconsistent_run >= self.settings.consistency_fusions.max(1) {
+        self.inconsistent_run = if inconsistent {
+            self.inconsistent_run + 1
+        } else {
+            0
+        };
+        if self.fault.is_none() && self.inconsistent_run >= self.settings.consistency_fusions.max(1)
+        {
             self.fail(Fault::Inconsistent);
             return true;
         }
@@ -241,7 +246,10 @@ impl WorkingState {
     /// once it talks); true when that happened.
     pub fn check_exclusion(&mut self, now_ns: u64) -> bool {
         let excluded = now_ns.saturating_sub(self.failed_since_ns) as f64 / 1e9;
-        if self.settings.max_exclusion_s > 0.0 && self.must_prove_agreement() && excluded > self.settings.max_exclusion_s {
+        if self.settings.max_exclusion_s > 0.0
+            && self.must_prove_agreement()
+            && excluded > self.settings.max_exclusion_s
+        {
             self.fault = Some(Fault::Probation);
             self.good_run = 0;
             return true;
@@ -261,7 +269,10 @@ mod tests {
         assert!(!w.check_timeout(1_900_000_000));
         assert!(w.check_timeout(2_100_000_000));
         assert_eq!(w.fault(), Some(Fault::Timeout));
-        assert!(!w.must_prove_agreement(), "a silent device needs only live messages");
+        assert!(
+            !w.must_prove_agreement(),
+            "a silent device needs only live messages"
+        );
         for k in 0..4 {
             w.on_message(3_000_000_000 + k, 1, k as f64, true);
             assert!(!w.on_readmission_test(true));
@@ -269,15 +280,29 @@ mod tests {
         assert!(w.on_readmission_test(true));
         assert!(w.healthy());
 
-        let stuck: Vec<bool> = (0..10).map(|k| w.on_message(4_000_000_000 + k, 1, 42.0, true)).collect();
+        let stuck: Vec<bool> = (0..10)
+            .map(|k| w.on_message(4_000_000_000 + k, 1, 42.0, true))
+            .collect();
         assert_eq!(stuck.iter().position(|&b| b), Some(9));
         let mut w = WorkingState::new(s, 0);
-        assert!(!(0..9).any(|k| w.on_message(k, 1, 0.0, false)), "a standing train's zeros are not stuck");
-        assert!(!(0..4).any(|_| w.on_gate(0, false) | w.on_gate(1, true)), "failures of one quantity count in a row");
+        assert!(
+            !(0..9).any(|k| w.on_message(k, 1, 0.0, false)),
+            "a standing train's zeros are not stuck"
+        );
+        assert!(
+            !(0..4).any(|_| w.on_gate(0, false) | w.on_gate(1, true)),
+            "failures of one quantity count in a row"
+        );
         assert!(w.on_gate(0, false));
-        assert!(w.must_prove_agreement(), "a device that failed its gates must agree again");
+        assert!(
+            w.must_prove_agreement(),
+            "a device that failed its gates must agree again"
+        );
         assert!(w.report(true) && w.fault() == Some(Fault::Reported));
-        assert!(!(0..10).any(|_| w.on_readmission_test(true)), "a reported fault waits for its recovery event");
+        assert!(
+            !(0..10).any(|_| w.on_readmission_test(true)),
+            "a reported fault waits for its recovery event"
+        );
         w.report(false);
         assert!((0..5).any(|_| w.on_readmission_test(true)));
     }

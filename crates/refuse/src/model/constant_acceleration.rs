@@ -41,7 +41,17 @@ impl TransitionModel<3> for ConstantAcceleration {
             ProcessNoise::WhiteJerkPsd(q) => {
                 let (d2, d3) = (dt * dt, dt * dt * dt);
                 let (d4, d5) = (d3 * dt, d3 * d2);
-                q * Matrix3::new(d5 / 20.0, d4 / 8.0, d3 / 6.0, d4 / 8.0, d3 / 3.0, d2 / 2.0, d3 / 6.0, d2 / 2.0, dt)
+                q * Matrix3::new(
+                    d5 / 20.0,
+                    d4 / 8.0,
+                    d3 / 6.0,
+                    d4 / 8.0,
+                    d3 / 3.0,
+                    d2 / 2.0,
+                    d3 / 6.0,
+                    d2 / 2.0,
+                    dt,
+                )
             }
             ProcessNoise::PiecewiseJerkVariance(var) => {
                 let g = Vector3::new(dt * dt * dt / 6.0, dt * dt / 2.0, dt);
@@ -57,7 +67,9 @@ mod tests {
 
     #[test]
     fn transition_composes_over_split_steps() {
-        let m = ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(1.0) };
+        let m = ConstantAcceleration {
+            noise: ProcessNoise::WhiteJerkPsd(1.0),
+        };
         let whole = m.transition(0.7);
         let split = m.transition(0.3) * m.transition(0.4);
         assert!((whole - split).abs().max() < 1e-15);
@@ -67,7 +79,9 @@ mod tests {
     fn continuous_noise_adds_up_over_split_steps() {
         // For white jerk, Q(a+b) = F(b) Q(a) F(b)ᵀ + Q(b): the model does not depend on how
         // the interval is cut, which is what makes irregular sample times safe.
-        let m = ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(0.3) };
+        let m = ConstantAcceleration {
+            noise: ProcessNoise::WhiteJerkPsd(0.3),
+        };
         let (a, b) = (0.25, 0.6);
         let f = m.transition(b);
         let composed = f * m.process_noise(a) * f.transpose() + m.process_noise(b);
@@ -76,7 +90,9 @@ mod tests {
 
     #[test]
     fn piecewise_noise_is_rank_one_and_matches_the_source() {
-        let m = ConstantAcceleration { noise: ProcessNoise::PiecewiseJerkVariance(0.001) };
+        let m = ConstantAcceleration {
+            noise: ProcessNoise::PiecewiseJerkVariance(0.001),
+        };
         let q = m.process_noise(1.0);
         assert!((q[(2, 2)] - 0.001).abs() < 1e-15);
         assert!((q[(0, 0)] - 0.001 / 36.0).abs() < 1e-15);

@@ -30,7 +30,9 @@ mod tests {
 
     #[test]
     fn noise_adds_up_over_split_steps() {
-        let m = ConstantVelocity { acceleration_psd: 0.4 };
+        let m = ConstantVelocity {
+            acceleration_psd: 0.4,
+        };
         let (a, b) = (0.3, 0.45);
         let f = m.transition(b);
         let composed = f * m.process_noise(a) * f.transpose() + m.process_noise(b);

@@ -50,23 +50,34 @@ impl SensorState {
     /// Its prior standard deviation.
     pub fn std(&self) -> f64 {
         match *self {
-            SensorState::ChainageBias { std_m: std, .. } | SensorState::AccelerationBias { std_mps2: std, .. } => std,
+            SensorState::ChainageBias { std_m: std, .. }
+            | SensorState::AccelerationBias { std_mps2: std, .. } => std,
             SensorState::ScaleFactor { std, .. } => std,
         }
     }
 
     fn transition(&self, dt: f64) -> f64 {
         match *self {
-            SensorState::ChainageBias { time_constant_s, .. } | SensorState::AccelerationBias { time_constant_s, .. } => (-dt / time_constant_s).exp(),
+            SensorState::ChainageBias {
+                time_constant_s, ..
+            }
+            | SensorState::AccelerationBias {
+                time_constant_s, ..
+            } => (-dt / time_constant_s).exp(),
             SensorState::ScaleFactor { .. } => 1.0,
         }
     }
 
     fn process_noise(&self, dt: f64) -> f64 {
         match *self {
-            SensorState::ChainageBias { std_m: std, time_constant_s } | SensorState::AccelerationBias { std_mps2: std, time_constant_s } => {
-                std * std * -(-2.0 * dt / time_constant_s).exp_m1()
+            SensorState::ChainageBias {
+                std_m: std,
+                time_constant_s,
             }
+            | SensorState::AccelerationBias {
+                std_mps2: std,
+                time_constant_s,
+            } => std * std * -(-2.0 * dt / time_constant_s).exp_m1(),
             SensorState::ScaleFactor { walk_per_s, .. } => walk_per_s * dt,
         }
     }
@@ -81,7 +92,8 @@ pub struct WithSensorStates<const B: usize, const N: usize> {
 impl<const B: usize, const N: usize> TransitionModel<N> for WithSensorStates<B, N> {
     fn transition(&self, dt: f64) -> SMatrix<f64, N, N> {
         let mut f = SMatrix::<f64, N, N>::identity();
-        f.fixed_view_mut::<B, B>(0, 0).copy_from(&self.motion.transition(dt));
+        f.fixed_view_mut::<B, B>(0, 0)
+            .copy_from(&self.motion.transition(dt));
         for (i, s) in self.states.iter().enumerate() {
             f[(B + i, B + i)] = s.transition(dt);
         }
@@ -90,7 +102,8 @@ impl<const B: usize, const N: usize> TransitionModel<N> for WithSensorStates<B, 
 
     fn process_noise(&self, dt: f64) -> SMatrix<f64, N, N> {
         let mut q = SMatrix::<f64, N, N>::zeros();
-        q.fixed_view_mut::<B, B>(0, 0).copy_from(&self.motion.process_noise(dt));
+        q.fixed_view_mut::<B, B>(0, 0)
+            .copy_from(&self.motion.process_noise(dt));
         for (i, s) in self.states.iter().enumerate() {
             q[(B + i, B + i)] = s.process_noise(dt);
         }
@@ -105,8 +118,19 @@ mod tests {
 
     fn model() -> WithSensorStates<3, 5> {
         WithSensorStates {
-            motion: Box::new(ConstantAcceleration { noise: ProcessNoise::WhiteJerkPsd(0.3) }),
-            states: vec![SensorState::ChainageBias { std_m: 2.0, time_constant_s: 60.0 }, SensorState::ScaleFactor { std: 0.01, walk_per_s: 1e-8 }],
+            motion: Box::new(ConstantAcceleration {
+                noise: ProcessNoise::WhiteJerkPsd(0.3),
+            }),
+            states: vec![
+                SensorState::ChainageBias {
+                    std_m: 2.0,
+                    time_constant_s: 60.0,
+                },
+                SensorState::ScaleFactor {
+                    std: 0.01,
+                    walk_per_s: 1e-8,
+                },
+            ],
         }
     }
 
@@ -117,7 +141,12 @@ mod tests {
         let f = m.transition(b);
         let composed = f * m.process_noise(a) * f.transpose() + m.process_noise(b);
         assert!((composed - m.process_noise(a + b)).abs().max() < 1e-12);
-        assert!((m.transition(a + b) - m.transition(b) * m.transition(a)).abs().max() < 1e-15);
+        assert!(
+            (m.transition(a + b) - m.transition(b) * m.transition(a))
+                .abs()
+                .max()
+                < 1e-15
+        );
         // A Gauss–Markov bias at its stationary variance stays there.
         let (phi, q) = (m.transition(3.0)[(3, 3)], m.process_noise(3.0)[(3, 3)]);
         assert!((phi * 4.0 * phi + q - 4.0).abs() < 1e-12);

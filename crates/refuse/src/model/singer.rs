@@ -36,7 +36,17 @@ impl TransitionModel<3> for Singer {
     fn transition(&self, dt: f64) -> Matrix3<f64> {
         let alpha = 1.0 / self.time_constant_s;
         let e = (-alpha * dt).exp();
-        Matrix3::new(1.0, dt, (alpha * dt - 1.0 + e) / (alpha * alpha), 0.0, 1.0, (1.0 - e) / alpha, 0.0, 0.0, e)
+        Matrix3::new(
+            1.0,
+            dt,
+            (alpha * dt - 1.0 + e) / (alpha * alpha),
+            0.0,
+            1.0,
+            (1.0 - e) / alpha,
+            0.0,
+            0.0,
+            e,
+        )
     }
 
     fn process_noise(&self, dt: f64) -> Matrix3<f64> {
@@ -45,7 +55,8 @@ impl TransitionModel<3> for Singer {
         let mut m = SMatrix::<f64, 6, 6>::zeros();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-a * dt));
         m[(2, 5)] = q * dt;
-        m.fixed_view_mut::<3, 3>(3, 3).copy_from(&(a.transpose() * dt));
+        m.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&(a.transpose() * dt));
         let e = m.exp();
         let f = e.fixed_view::<3, 3>(3, 3).transpose();
         let qd = f * e.fixed_view::<3, 3>(0, 3);
@@ -59,7 +70,10 @@ mod tests {
 
     #[test]
     fn transition_is_the_matrix_exponential() {
-        let m = Singer { time_constant_s: 8.0, acceleration_std_mps2: 0.3 };
+        let m = Singer {
+            time_constant_s: 8.0,
+            acceleration_std_mps2: 0.3,
+        };
         let (a, _) = m.continuous();
         let dt = 0.37;
         assert!(((a * dt).exp() - m.transition(dt)).abs().max() < 1e-12);
@@ -67,7 +81,10 @@ mod tests {
 
     #[test]
     fn noise_adds_up_over_split_steps_and_the_acceleration_settles_at_its_variance() {
-        let m = Singer { time_constant_s: 5.0, acceleration_std_mps2: 0.4 };
+        let m = Singer {
+            time_constant_s: 5.0,
+            acceleration_std_mps2: 0.4,
+        };
         let (a, b) = (0.2, 0.9);
         let f = m.transition(b);
         let composed = f * m.process_noise(a) * f.transpose() + m.process_noise(b);

@@ -31,7 +31,13 @@ pub struct BaliseReader {
 impl BaliseReader {
     pub fn new(p: BaliseParams, balises: Vec<TrackBalise>, mut rng: ChaCha8Rng) -> Self {
         let offset = gauss(&mut rng, p.detection_sigma_m);
-        Self { p, rng, balises, next: 0, offset }
+        Self {
+            p,
+            rng,
+            balises,
+            next: 0,
+            offset,
+        }
     }
 }
 
@@ -44,7 +50,12 @@ impl SimSensor for BaliseReader {
             }
             if !self.rng.random_bool(self.p.miss_probability) {
                 let stamp_ns = w.time_at(at);
-                let msg = BalisePassage { stamp_ns, balise_id: b.balise_id.clone(), chainage_m: b.chainage_m, variance_m2: Some(self.p.reported_variance_m2) };
+                let msg = BalisePassage {
+                    stamp_ns,
+                    balise_id: b.balise_id.clone(),
+                    chainage_m: b.chainage_m,
+                    variance_m2: Some(self.p.reported_variance_m2),
+                };
                 out.push(stamp_ns + seconds(self.p.latency_s), Emit::Balise(msg));
             }
             self.next += 1;

@@ -112,11 +112,19 @@ impl SimSensor for Gnss {
         // First-order Gauss-Markov bias with stationary σ `bias_sigma`.
         let phi = (-dt / self.p.bias_tau_s).exp();
         let q = bias_sigma * (1.0 - phi * phi).sqrt();
-        self.bias = (phi * self.bias.0 + gauss(&mut self.rng, q), phi * self.bias.1 + gauss(&mut self.rng, q));
+        self.bias = (
+            phi * self.bias.0 + gauss(&mut self.rng, q),
+            phi * self.bias.1 + gauss(&mut self.rng, q),
+        );
         let target_sats = if w.in_tunnel { 0.0 } else { 18.0 };
         self.satellites += 0.2 * (target_sats - self.satellites) + gauss(&mut self.rng, 0.3);
         self.satellites = self.satellites.clamp(0.0, 32.0);
-        let satellites = if fix == FixType::None { self.satellites.min(3.0) } else { self.satellites.max(5.0) }.round() as u8;
+        let satellites = if fix == FixType::None {
+            self.satellites.min(3.0)
+        } else {
+            self.satellites.max(5.0)
+        }
+        .round() as u8;
         let mut msg = GnssFix {
             stamp_ns: w.t_ns,
             fix_type: fix,
@@ -138,8 +146,10 @@ impl SimSensor for Gnss {
             msg.latitude_deg = Some(lat);
             msg.longitude_deg = Some(lon);
             msg.altitude_m = Some(alt);
-            msg.position_covariance_enu_m2 = Some([var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, 3.24 * var]);
-            msg.speed_mps = Some((w.speed_mps + gauss(&mut self.rng, self.p.speed_sigma_mps)).max(0.0));
+            msg.position_covariance_enu_m2 =
+                Some([var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, 3.24 * var]);
+            msg.speed_mps =
+                Some((w.speed_mps + gauss(&mut self.rng, self.p.speed_sigma_mps)).max(0.0));
             if w.speed_mps > 0.5 {
                 let c = w.heading_rad + gauss(&mut self.rng, self.p.speed_sigma_mps / w.speed_mps);
                 msg.course_rad = Some(c.rem_euclid(std::f64::consts::TAU));

@@ -38,7 +38,13 @@ impl ImuSensor {
     pub fn new(p: ImuParams, start_ns: u64, mut rng: ChaCha8Rng) -> Self {
         let accel_bias = std::array::from_fn(|_| gauss(&mut rng, p.accel_bias_mps2));
         let gyro_bias = std::array::from_fn(|_| gauss(&mut rng, p.gyro_bias_radps));
-        Self { schedule: Schedule::new(start_ns, p.rate_hz), p, rng, accel_bias, gyro_bias }
+        Self {
+            schedule: Schedule::new(start_ns, p.rate_hz),
+            p,
+            rng,
+            accel_bias,
+            gyro_bias,
+        }
     }
 }
 
@@ -57,12 +63,30 @@ impl SimSensor for ImuSensor {
         }
         // A right-hand curve (positive curvature) pushes the body towards -y and yaws it
         // clockwise, which is a negative rate about the up axis.
-        let truth_f = [w.acceleration_mps2, -w.speed_mps * w.speed_mps * w.curvature, GRAVITY_MPS2];
+        let truth_f = [
+            w.acceleration_mps2,
+            -w.speed_mps * w.speed_mps * w.curvature,
+            GRAVITY_MPS2,
+        ];
         let truth_w = [0.0, 0.0, -w.speed_mps * w.curvature];
-        let specific_force_mps2 =
-            std::array::from_fn(|i| quantise(truth_f[i] + self.accel_bias[i] + gauss(&mut self.rng, p.accel_noise_mps2), p.accel_lsb_mps2));
-        let angular_rate_radps = std::array::from_fn(|i| quantise(truth_w[i] + self.gyro_bias[i] + gauss(&mut self.rng, p.gyro_noise_radps), p.gyro_lsb_radps));
-        let msg = Imu { stamp_ns: w.t_ns, sensor_id: p.sensor_id.clone(), specific_force_mps2, angular_rate_radps };
+        let specific_force_mps2 = std::array::from_fn(|i| {
+            quantise(
+                truth_f[i] + self.accel_bias[i] + gauss(&mut self.rng, p.accel_noise_mps2),
+                p.accel_lsb_mps2,
+            )
+        });
+        let angular_rate_radps = std::array::from_fn(|i| {
+            quantise(
+                truth_w[i] + self.gyro_bias[i] + gauss(&mut self.rng, p.gyro_noise_radps),
+                p.gyro_lsb_radps,
+            )
+        });
+        let msg = Imu {
+            stamp_ns: w.t_ns,
+            sensor_id: p.sensor_id.clone(),
+            specific_force_mps2,
+            angular_rate_radps,
+        };
         out.push(w.t_ns + seconds(p.latency_s), Emit::Imu(msg));
     }
 }

@@ -31,7 +31,11 @@ pub struct InductionLoop {
 
 impl InductionLoop {
     pub fn new(p: LoopParams, rng: ChaCha8Rng) -> Self {
-        Self { p, rng, next_crossing: 1 }
+        Self {
+            p,
+            rng,
+            next_crossing: 1,
+        }
     }
 }
 
@@ -45,8 +49,14 @@ impl SimSensor for InductionLoop {
             }
             let jitter = gauss(&mut self.rng, p.timing_sigma_s);
             let stamp_ns = (w.time_at(at) as i64 + (jitter * 1e9) as i64) as u64;
-            let reported = at * (1.0 + p.scale_error) + gauss(&mut self.rng, p.installation_sigma_m);
-            let msg = LoopPosition { stamp_ns, chainage_m: reported, crossing: Some(self.next_crossing), variance_m2: Some(p.reported_variance_m2) };
+            let reported =
+                at * (1.0 + p.scale_error) + gauss(&mut self.rng, p.installation_sigma_m);
+            let msg = LoopPosition {
+                stamp_ns,
+                chainage_m: reported,
+                crossing: Some(self.next_crossing),
+                variance_m2: Some(p.reported_variance_m2),
+            };
             out.push(stamp_ns + seconds(p.latency_s), Emit::Loop(msg));
             self.next_crossing += 1;
         }

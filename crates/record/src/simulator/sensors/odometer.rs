@@ -49,7 +49,16 @@ pub struct OdometerSensor {
 
 impl OdometerSensor {
     pub fn new(p: OdometerParams, index: usize, start_ns: u64, rng: ChaCha8Rng) -> Self {
-        Self { schedule: Schedule::new(start_ns, p.rate_hz), p, index, rng, wheel_distance_m: 0.0, history: VecDeque::new(), last_pulses: 0, episode: (0.0, 0) }
+        Self {
+            schedule: Schedule::new(start_ns, p.rate_hz),
+            p,
+            index,
+            rng,
+            wheel_distance_m: 0.0,
+            history: VecDeque::new(),
+            last_pulses: 0,
+            episode: (0.0, 0),
+        }
     }
 }
 
@@ -79,12 +88,18 @@ impl SimSensor for OdometerSensor {
         let pulse_len_cfg = PI * p.configured_diameter_m / p.pulses_per_revolution as f64;
         let pulses = (self.wheel_distance_m / pulse_len_true).floor() as u64;
         self.history.push_back((w.t_ns, pulses));
-        while self.history.len() > 2 && (w.t_ns - self.history[1].0) as f64 / 1e9 >= p.speed_window_s {
+        while self.history.len() > 2
+            && (w.t_ns - self.history[1].0) as f64 / 1e9 >= p.speed_window_s
+        {
             self.history.pop_front();
         }
         let (t0, c0) = *self.history.front().expect("just pushed");
         let span = (w.t_ns - t0) as f64 / 1e9;
-        let speed = if span > 0.0 { (pulses - c0) as f64 * pulse_len_cfg / span } else { 0.0 };
+        let speed = if span > 0.0 {
+            (pulses - c0) as f64 * pulse_len_cfg / span
+        } else {
+            0.0
+        };
         let msg = Odometer {
             stamp_ns: w.t_ns,
             sensor_id: p.sensor_id.clone(),
@@ -95,6 +110,9 @@ impl SimSensor for OdometerSensor {
             speed_mps: speed,
         };
         self.last_pulses = pulses;
-        out.push(w.t_ns + seconds(p.latency_s), Emit::Odometer(self.index, msg));
+        out.push(
+            w.t_ns + seconds(p.latency_s),
+            Emit::Odometer(self.index, msg),
+        );
     }
 }

@@ -34,7 +34,12 @@ pub struct Radar {
 
 impl Radar {
     pub fn new(p: RadarParams, start_ns: u64, rng: ChaCha8Rng) -> Self {
-        Self { schedule: Schedule::new(start_ns, p.rate_hz), p, rng, dropout_until_ns: 0 }
+        Self {
+            schedule: Schedule::new(start_ns, p.rate_hz),
+            p,
+            rng,
+            dropout_until_ns: 0,
+        }
     }
 }
 
@@ -45,12 +50,14 @@ impl SimSensor for Radar {
         }
         let p = &self.p;
         if w.t_ns >= self.dropout_until_ns && self.rng.random_bool(p.dropout_probability) {
-            self.dropout_until_ns = w.t_ns + seconds(self.rng.random_range(p.dropout_s.0..p.dropout_s.1));
+            self.dropout_until_ns =
+                w.t_ns + seconds(self.rng.random_range(p.dropout_s.0..p.dropout_s.1));
         }
         let sigma = p.sigma_base_mps + p.sigma_per_mps * w.speed_mps;
         let valid = w.speed_mps >= p.min_speed_mps && w.t_ns >= self.dropout_until_ns;
         let msg = if valid {
-            let speed = (w.speed_mps * (1.0 + p.scale_error) + gauss(&mut self.rng, sigma)).max(0.0);
+            let speed =
+                (w.speed_mps * (1.0 + p.scale_error) + gauss(&mut self.rng, sigma)).max(0.0);
             RadarSpeed {
                 stamp_ns: w.t_ns,
                 speed_mps: speed,
@@ -59,7 +66,13 @@ impl SimSensor for Radar {
                 speed_variance_m2ps2: Some(sigma * sigma),
             }
         } else {
-            RadarSpeed { stamp_ns: w.t_ns, speed_mps: 0.0, quality: 0.0, valid: false, speed_variance_m2ps2: None }
+            RadarSpeed {
+                stamp_ns: w.t_ns,
+                speed_mps: 0.0,
+                quality: 0.0,
+                valid: false,
+                speed_variance_m2ps2: None,
+            }
         };
         out.push(w.t_ns + seconds(p.latency_s), Emit::Radar(msg));
     }

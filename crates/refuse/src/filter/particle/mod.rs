@@ -77,7 +77,9 @@ impl<const N: usize> ParticleFilter<N> {
 
     fn resample(&mut self) {
         let mut idx = std::mem::take(&mut self.scratch);
-        self.settings.resampling.resample(&self.weights, &mut self.rng, &mut idx);
+        self.settings
+            .resampling
+            .resample(&self.weights, &mut self.rng, &mut idx);
         let survivors: Vec<SVector<f64, N>> = idx.iter().map(|&i| self.particles[i]).collect();
         self.particles = survivors;
         self.scratch = idx;
@@ -130,13 +132,27 @@ impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
     }
 
     fn innovation(&self, h: &RowSVector<f64, N>, r: f64, z: f64) -> Innovation {
-        let mean: f64 = self.particles.iter().zip(&self.weights).map(|(p, w)| w * (h * p)[0]).sum();
-        let var: f64 = self.particles.iter().zip(&self.weights).map(|(p, w)| w * ((h * p)[0] - mean).powi(2)).sum();
+        let mean: f64 = self
+            .particles
+            .iter()
+            .zip(&self.weights)
+            .map(|(p, w)| w * (h * p)[0])
+            .sum();
+        let var: f64 = self
+            .particles
+            .iter()
+            .zip(&self.weights)
+            .map(|(p, w)| w * ((h * p)[0] - mean).powi(2))
+            .sum();
         Innovation::new(z - mean, var + r)
     }
 
     fn update(&mut self, h: &RowSVector<f64, N>, r: f64, z: f64) -> bool {
-        let log_lik: Vec<f64> = self.particles.iter().map(|p| -0.5 * (z - (h * p)[0]).powi(2) / r).collect();
+        let log_lik: Vec<f64> = self
+            .particles
+            .iter()
+            .map(|p| -0.5 * (z - (h * p)[0]).powi(2) / r)
+            .collect();
         let max = log_lik.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if !max.is_finite() {
             return false;
@@ -156,7 +172,8 @@ impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
         }
         self.weights.iter_mut().for_each(|w| *w /= total);
         self.last_ess = self.effective_sample_size();
-        self.last_resampled = self.last_ess < self.settings.ess_threshold * self.particles.len() as f64;
+        self.last_resampled =
+            self.last_ess < self.settings.ess_threshold * self.particles.len() as f64;
         if self.last_resampled {
             self.resample();
         }
@@ -173,7 +190,10 @@ impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
             let d = p - mean;
             cov += d * d.transpose() * *w;
         }
-        StateAndCovariance { state: mean, covariance: symmetric(cov) }
+        StateAndCovariance {
+            state: mean,
+            covariance: symmetric(cov),
+        }
     }
 
     fn reset(&mut self, to: &StateAndCovariance<N>) {
@@ -201,9 +221,20 @@ mod tests {
     use nalgebra::{Matrix2, RowVector2, Vector2};
 
     fn run(particles: usize, seed: u64) -> (StateAndCovariance<2>, StateAndCovariance<2>) {
-        let model = ConstantVelocity { acceleration_psd: 0.05 };
-        let init = StateAndCovariance { state: Vector2::new(0.0, 10.0), covariance: Matrix2::new(4.0, 0.0, 0.0, 1.0) };
-        let settings = ParticleSettings { particles, resampling: Resampling::Systematic, ess_threshold: 0.5, roughening: 0.0, seed };
+        let model = ConstantVelocity {
+            acceleration_psd: 0.05,
+        };
+        let init = StateAndCovariance {
+            state: Vector2::new(0.0, 10.0),
+            covariance: Matrix2::new(4.0, 0.0, 0.0, 1.0),
+        };
+        let settings = ParticleSettings {
+            particles,
+            resampling: Resampling::Systematic,
+            ess_threshold: 0.5,
+            roughening: 0.0,
+            seed,
+        };
         let mut pf = ParticleFilter::new(settings, &init);
         let mut kf = KalmanFilter::new(init.state, init.covariance);
         for k in 1..=40 {
@@ -212,9 +243,17 @@ mod tests {
             kf.predict(&model, dt);
             let t = k as f64 * dt;
             let (h, r, z) = if k % 2 == 0 {
-                (RowVector2::new(1.0, 0.0), 1.0, 10.0 * t + ((k * 37) % 5) as f64 * 0.3 - 0.6)
+                (
+                    RowVector2::new(1.0, 0.0),
+                    1.0,
+                    10.0 * t + ((k * 37) % 5) as f64 * 0.3 - 0.6,
+                )
             } else {
-                (RowVector2::new(0.0, 1.0), 0.04, 10.0 + ((k * 11) % 3) as f64 * 0.1 - 0.1)
+                (
+                    RowVector2::new(0.0, 1.0),
+                    0.04,
+                    10.0 + ((k * 11) % 3) as f64 * 0.1 - 0.1,
+                )
             };
             LocalFilter::update(&mut pf, &h, r, z);
             kf.update(&h, r, z);
@@ -235,7 +274,8 @@ mod tests {
                 for i in 0..2 {
                     let sd = kf.covariance[(i, i)].sqrt();
                     worst_mean = worst_mean.max((pf.state[i] - kf.state[i]).abs() / sd);
-                    worst_var = worst_var.max((pf.covariance[(i, i)] / kf.covariance[(i, i)] - 1.0).abs());
+                    worst_var =
+                        worst_var.max((pf.covariance[(i, i)] / kf.covariance[(i, i)] - 1.0).abs());
                 }
             }
             (worst_mean, worst_var)
@@ -243,8 +283,14 @@ mod tests {
         let (m_small, v_small) = gap(200);
         let (m_big, v_big) = gap(20_000);
         eprintln!("particle vs Kalman: 200 particles: mean {m_small:.3} σ, variance {v_small:.3}; 20 000: mean {m_big:.4} σ, variance {v_big:.4}");
-        assert!(m_big < 0.05 && v_big < 0.10, "20 000 particles: mean gap {m_big} σ, variance gap {v_big}");
-        assert!(m_big < m_small && v_big < v_small, "no convergence: {m_small}/{v_small} → {m_big}/{v_big}");
+        assert!(
+            m_big < 0.05 && v_big < 0.10,
+            "20 000 particles: mean gap {m_big} σ, variance gap {v_big}"
+        );
+        assert!(
+            m_big < m_small && v_big < v_small,
+            "no convergence: {m_small}/{v_small} → {m_big}/{v_big}"
+        );
     }
 
     #[test]
@@ -261,10 +307,24 @@ mod tests {
     #[test]
     fn the_same_seed_gives_the_same_run_and_a_far_measurement_never_makes_nan() {
         assert_eq!(run(500, 3).0, run(500, 3).0);
-        let init = StateAndCovariance { state: Vector2::new(0.0, 10.0), covariance: Matrix2::identity() };
-        let settings = ParticleSettings { particles: 100, resampling: Resampling::Residual, ess_threshold: 0.5, roughening: 0.2, seed: 1 };
+        let init = StateAndCovariance {
+            state: Vector2::new(0.0, 10.0),
+            covariance: Matrix2::identity(),
+        };
+        let settings = ParticleSettings {
+            particles: 100,
+            resampling: Resampling::Residual,
+            ess_threshold: 0.5,
+            roughening: 0.2,
+            seed: 1,
+        };
         let mut pf = ParticleFilter::new(settings, &init);
-        assert!(LocalFilter::update(&mut pf, &RowVector2::new(1.0, 0.0), 1e-4, 1e6));
+        assert!(LocalFilter::update(
+            &mut pf,
+            &RowVector2::new(1.0, 0.0),
+            1e-4,
+            1e6
+        ));
         assert!(pf.estimate().is_finite());
     }
 }

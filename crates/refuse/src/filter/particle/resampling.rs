@@ -36,7 +36,9 @@ impl Resampling {
                 walk(weights, (0..n).map(|k| (k as f64 + u0) / n as f64), out);
             }
             Resampling::Stratified => {
-                let u: Vec<f64> = (0..n).map(|k| (k as f64 + rng.random::<f64>()) / n as f64).collect();
+                let u: Vec<f64> = (0..n)
+                    .map(|k| (k as f64 + rng.random::<f64>()) / n as f64)
+                    .collect();
                 walk(weights, u.into_iter(), out);
             }
             Resampling::Residual => {
@@ -78,7 +80,11 @@ fn walk(weights: &[f64], pointers: impl Iterator<Item = f64>, out: &mut Vec<usiz
 }
 
 fn heaviest(weights: &[f64]) -> usize {
-    weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i)
+    weights
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i)
 }
 
 #[cfg(test)]
@@ -87,7 +93,12 @@ mod tests {
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;
 
-    const SCHEMES: [Resampling; 4] = [Resampling::Multinomial, Resampling::Systematic, Resampling::Stratified, Resampling::Residual];
+    const SCHEMES: [Resampling; 4] = [
+        Resampling::Multinomial,
+        Resampling::Systematic,
+        Resampling::Stratified,
+        Resampling::Residual,
+    ];
 
     /// Each scheme keeps N particles, and over many rounds the mean number of copies of
     /// particle i is N·wᵢ within 4 standard errors (multinomial variance bounds them all).
@@ -105,14 +116,20 @@ mod tests {
             for _ in 0..rounds {
                 scheme.resample(&w, &mut rng, &mut out);
                 assert_eq!(out.len(), n, "{scheme:?}");
-                assert!(out.windows(2).all(|p| p[0] <= p[1]), "{scheme:?} not sorted");
+                assert!(
+                    out.windows(2).all(|p| p[0] <= p[1]),
+                    "{scheme:?} not sorted"
+                );
                 out.iter().for_each(|&i| copies[i] += 1);
             }
             for i in 0..n {
                 let mean = copies[i] as f64 / rounds as f64;
                 let expected = n as f64 * w[i];
                 let se = (n as f64 * w[i] * (1.0 - w[i]) / rounds as f64).sqrt();
-                assert!((mean - expected).abs() <= 4.0 * se + 1e-12, "{scheme:?}: particle {i}: mean {mean}, expected {expected}");
+                assert!(
+                    (mean - expected).abs() <= 4.0 * se + 1e-12,
+                    "{scheme:?}: particle {i}: mean {mean}, expected {expected}"
+                );
             }
             assert_eq!(copies[3], 0, "{scheme:?} copied a zero-weight particle");
         }
@@ -127,7 +144,10 @@ mod tests {
             for _ in 0..1000 {
                 scheme.resample(&w, &mut rng, &mut out);
                 let c0 = out.iter().filter(|&&i| i == 0).count();
-                assert!((2..=3).contains(&c0), "{scheme:?}: {c0} copies of w = 0.55 of 4");
+                assert!(
+                    (2..=3).contains(&c0),
+                    "{scheme:?}: {c0} copies of w = 0.55 of 4"
+                );
             }
         }
     }
