@@ -5,7 +5,8 @@ use railfuse_catalog::log::recover;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The damaged log (a recording cut off by a crash or power loss, e.g. `run.mcap.partial`).
+    /// The damaged log (a recording cut off by a crash or power loss, e.g. `run.mcap.partial`,
+    /// or a file with corrupt chunks anywhere).
     pub input: PathBuf,
     /// Where to write the salvaged, complete log.
     #[arg(short, long)]
@@ -21,25 +22,33 @@ pub fn run(a: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&r)?);
         return Ok(());
     }
+    let mib = |b: u64| b as f64 / (1 << 20) as f64;
     println!(
-        "recovered {} messages on {} channels, {} metadata records, {} attachments from {} ({:.1} of {:.1} MiB read) -> {}",
+        "recovered {} messages ({} intact chunks copied as they were) on {} channels, {} metadata \
+         records, {} attachments from {} ({:.1} MiB) -> {}",
         r.messages,
+        r.chunks,
         r.channels,
         r.metadata,
         r.attachments,
         r.input.display(),
-        r.bytes_read as f64 / (1 << 20) as f64,
-        r.input_bytes as f64 / (1 << 20) as f64,
+        mib(r.input_bytes),
         r.output.display()
     );
     for (topic, n) in &r.messages_per_topic {
         println!("  {topic:<28} {n}");
     }
-    match &r.stopped_by {
-        Some(why) => {
-            println!("lost: everything after the last complete chunk; reading stopped at: {why}")
-        }
-        None => println!("the file was complete: nothing lost"),
+    if r.skipped.is_empty() {
+        println!("the file was complete: nothing lost");
+    }
+    for d in &r.skipped {
+        println!(
+            "skipped bytes {}..{} ({:.1} KiB): {}",
+            d.offset,
+            d.offset + d.length,
+            d.length as f64 / 1024.0,
+            d.cause
+        );
     }
     if r.orphan_messages > 0 {
         println!(

@@ -5,8 +5,10 @@
 //! chunks with a summary, into a temporary file that only becomes the output once it is
 //! complete.
 
+pub mod format;
 mod reader;
 mod recover;
+pub mod scan;
 mod writer;
 
 pub use reader::{read_channels, ChannelInfo, LogMessage, LogReader, LogRecord, SchemaInfo};

@@ -1,5 +1,5 @@
 //! Streaming MCAP reader yielding schemas, channels, messages, metadata and attachments in file
-//! order, borrowing message payloads from the decoder's buffer (no copy per message).
+//! order, borrowing message payloads from the decompressed chunk (no copy per message).
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -7,8 +7,10 @@ use std::io::{ErrorKind, Read};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use mcap::records::Record;
-use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+use mcap::records::{op, AttachmentHeader, MessageHeader, Metadata, Record};
+
+use super::format::{self, Records, FRAME};
+use super::scan::{Chunk, Item, ReadAhead, Scanner};
 
 use crate::error::{Error, Result};
 use crate::messages::ChannelMessage;
@@ -82,39 +84,47 @@ pub enum LogRecord<'a> {
     },
 }
 
-/// A streaming reader over one MCAP file.
+/// A streaming reader over one MCAP file, in file order: top-level records, and the records
+/// of each chunk as the read-ahead thread hands the chunk over decompressed.
 pub struct LogReader {
     path: PathBuf,
-    file: File,
-    reader: LinearReader,
+    items: ReadAhead,
     schemas: HashMap<u16, Arc<SchemaInfo>>,
     channels: HashMap<u16, Arc<ChannelInfo>>,
-    /// Set once the data section ends: what follows is the summary, which repeats records.
-    in_summary: bool,
     done: bool,
-    bytes_read: u64,
-    // Parsed records whose payload must outlive `next_event`'s borrow (chunk contents are
-    // decompressed into the reader and handed out as owned data).
-    current: Option<Record<'static>>,
+    /// The chunk being walked and where in its records.
+    chunk: Option<Chunk>,
+    at: usize,
+    /// The top-level record being handed out (unchunked messages, attachments).
+    top: Vec<u8>,
+    emit: Emit,
+}
+
+/// What `next` hands out, found before the borrow that returns it.
+enum Emit {
+    Nothing,
+    Schema(u16),
+    Channel(u16),
+    ChunkMessage { header: MessageHeader, start: usize, end: usize },
+    TopMessage { header: MessageHeader },
+    Metadata(Option<Metadata>),
+    Attachment { header: AttachmentHeader, start: usize, end: usize },
 }
 
 impl LogReader {
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_owned();
-        let file = open_checked(&path)?;
-        let options = LinearReaderOptions::default()
-            .with_record_length_limit(super::RECORD_LENGTH_LIMIT)
-            .with_validate_chunk_crcs(true);
+        let scanner = Scanner::open(&path)?;
         Ok(Self {
             path,
-            file,
-            reader: LinearReader::new_with_options(options),
+            items: ReadAhead::new(scanner, 3),
             schemas: HashMap::new(),
             channels: HashMap::new(),
-            in_summary: false,
             done: false,
-            bytes_read: 0,
-            current: None,
+            chunk: None,
+            at: 0,
+            top: Vec::new(),
+            emit: Emit::Nothing,
         })
     }
 
@@ -124,156 +134,170 @@ impl LogReader {
 
     /// Bytes of the file consumed so far (for progress and throughput).
     pub fn bytes_read(&self) -> u64 {
-        self.bytes_read
+        self.items.position()
     }
 
     pub fn channel(&self, id: u16) -> Option<&Arc<ChannelInfo>> {
         self.channels.get(&id)
     }
 
-    /// The next record in file order, or `None` at the end of the file.
+    /// The next record in file order, or `None` at the end of the data section.
     #[allow(clippy::should_implement_trait)] // a lending iterator: records borrow the reader
     pub fn next(&mut self) -> Option<Result<LogRecord<'_>>> {
+        match self.advance() {
+            Ok(true) => Some(Ok(self.emitted())),
+            Ok(false) => None,
+            Err(e) => {
+                self.done = true;
+                Some(Err(e))
+            }
+        }
+    }
+
+    /// Moves to the next record to hand out; false at the end.
+    fn advance(&mut self) -> Result<bool> {
         loop {
             if self.done {
-                return None;
+                return Ok(false);
             }
-            let event = match self.reader.next_event() {
+            if let Some(chunk) = &self.chunk {
+                let records = &chunk.records;
+                if self.at < records.len() {
+                    // The scanner checked that every record of the chunk is whole.
+                    let framed = Records::new(&records[self.at..]).next().expect("whole")
+                        .expect("checked whole");
+                    let start = self.at + FRAME;
+                    self.at = start + framed.body.len();
+                    let (opcode, end) = (framed.opcode, self.at);
+                    if self.accept(opcode, start, end, true)? {
+                        return Ok(true);
+                    }
+                    continue;
+                }
+                self.chunk = None;
+            }
+            match self.items.next() {
                 None => {
                     self.done = true;
-                    return None;
+                    return Ok(false);
                 }
-                Some(Err(e)) => {
-                    self.done = true;
-                    return Some(Err(Error::mcap(&self.path, describe(&e))));
+                Some(Err(e)) => return Err(e),
+                Some(Ok(Item::Chunk(c))) => {
+                    self.chunk = Some(c);
+                    self.at = 0;
                 }
-                Some(Ok(ev)) => ev,
-            };
-            match event {
-                LinearReadEvent::ReadRequest(need) => {
-                    let buf = self.reader.insert(need);
-                    let n = loop {
-                        match self.file.read(buf) {
-                            Ok(n) => break n,
-                            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
-                            Err(e) => {
-                                self.done = true;
-                                return Some(Err(Error::io(&self.path, e)));
-                            }
-                        }
-                    };
-                    self.bytes_read += n as u64;
-                    self.reader.notify_read(n);
-                }
-                LinearReadEvent::Record { data, opcode } => {
-                    let record = match mcap::parse_record(opcode, data) {
-                        Ok(r) => r.into_owned(),
-                        Err(e) => {
-                            self.done = true;
-                            return Some(Err(Error::mcap(&self.path, describe(&e))));
-                        }
-                    };
-                    self.current = Some(record);
-                    // Split borrows: the record lives in `self.current`, the tables beside it.
-                    match self.accept() {
-                        Ok(true) => return Some(Ok(self.emit())),
-                        Ok(false) => continue,
-                        Err(e) => {
-                            self.done = true;
-                            return Some(Err(e));
-                        }
+                Some(Ok(Item::Record { opcode, body, .. })) => {
+                    self.top = body;
+                    if self.accept(opcode, 0, self.top.len(), false)? {
+                        return Ok(true);
                     }
+                }
+                Some(Ok(Item::Damage(d))) => {
+                    return Err(Error::Damaged { path: self.path.clone(), offset: d.offset, cause: d.cause })
                 }
             }
         }
     }
 
-    /// Updates the schema/channel tables from the current record; says whether to emit it.
-    fn accept(&mut self) -> Result<bool> {
-        let record = self.current.as_ref().expect("set by caller");
-        Ok(match record {
-            Record::DataEnd(_) => {
-                self.in_summary = true;
-                false
-            }
-            _ if self.in_summary => false,
-            Record::Schema { header, data } => {
-                if self.schemas.contains_key(&header.id) {
-                    return Ok(false);
+    /// Takes in the record at `start..end` of the chunk (or of `top`); says whether to hand
+    /// it out.
+    fn accept(&mut self, opcode: u8, start: usize, end: usize, in_chunk: bool) -> Result<bool> {
+        let body = match (in_chunk, &self.chunk) {
+            (true, Some(c)) => &c.records[start..end],
+            _ => &self.top[start..end],
+        };
+        let bad = |e: String| Error::mcap(&self.path, e);
+        self.emit = match opcode {
+            op::MESSAGE => {
+                let m = format::parse_message(body).ok_or_else(|| bad("a message record is cut short".into()))?;
+                if !self.channels.contains_key(&m.header.channel_id) {
+                    return Err(bad(format!(
+                        "message at log time {} on unknown channel {}",
+                        m.header.log_time, m.header.channel_id
+                    )));
                 }
-                let info = Arc::new(SchemaInfo {
-                    id: header.id,
-                    name: header.name.clone(),
-                    encoding: header.encoding.clone(),
-                    data: data.to_vec(),
-                });
-                self.schemas.insert(header.id, info);
-                true
-            }
-            Record::Channel(c) => {
-                if self.channels.contains_key(&c.id) {
-                    return Ok(false);
+                let start = start + format::MESSAGE_HEADER;
+                match in_chunk {
+                    true => Emit::ChunkMessage { header: m.header, start, end },
+                    false => Emit::TopMessage { header: m.header },
                 }
-                let schema = if c.schema_id == 0 {
-                    None
-                } else {
-                    Some(self.schemas.get(&c.schema_id).cloned().ok_or_else(|| {
-                        Error::mcap(
-                            &self.path,
-                            format!("channel {} names unknown schema {}", c.topic, c.schema_id),
-                        )
-                    })?)
-                };
-                let info = Arc::new(ChannelInfo {
-                    id: c.id,
-                    topic: c.topic.clone(),
-                    message_encoding: c.message_encoding.clone(),
-                    metadata: c.metadata.clone(),
-                    schema,
-                });
-                self.channels.insert(c.id, info);
-                true
             }
-            Record::Message { header, .. } => {
-                if !self.channels.contains_key(&header.channel_id) {
-                    return Err(Error::mcap(
-                        &self.path,
-                        format!(
-                            "message at log time {} on unknown channel {}",
-                            header.log_time, header.channel_id
-                        ),
-                    ));
+            op::SCHEMA | op::CHANNEL | op::METADATA | op::ATTACHMENT => {
+                let record = mcap::parse_record(opcode, body).map_err(|e| bad(describe(&e)))?;
+                match record {
+                    Record::Schema { header, data } => {
+                        if self.schemas.contains_key(&header.id) {
+                            return Ok(false);
+                        }
+                        let info = SchemaInfo { id: header.id, name: header.name, encoding: header.encoding, data: data.into_owned() };
+                        self.schemas.insert(info.id, Arc::new(info));
+                        Emit::Schema(header.id)
+                    }
+                    Record::Channel(c) => {
+                        if self.channels.contains_key(&c.id) {
+                            return Ok(false);
+                        }
+                        let schema = match c.schema_id {
+                            0 => None,
+                            id => Some(self.schemas.get(&id).cloned().ok_or_else(|| {
+                                bad(format!("channel {} names unknown schema {id}", c.topic))
+                            })?),
+                        };
+                        let info = ChannelInfo {
+                            id: c.id,
+                            topic: c.topic,
+                            message_encoding: c.message_encoding,
+                            metadata: c.metadata,
+                            schema,
+                        };
+                        self.channels.insert(c.id, Arc::new(info));
+                        Emit::Channel(c.id)
+                    }
+                    Record::Metadata(m) => Emit::Metadata(Some(m)),
+                    Record::Attachment { header, data, .. } => {
+                        // The data sits just before the trailing CRC.
+                        let end = end - 4;
+                        Emit::Attachment { start: end - data.len(), end, header }
+                    }
+                    _ => return Ok(false),
                 }
-                true
             }
-            Record::Metadata(_) | Record::Attachment { .. } => true,
-            _ => false,
-        })
+            _ => return Ok(false),
+        };
+        Ok(true)
     }
 
-    fn emit(&self) -> LogRecord<'_> {
-        match self.current.as_ref().expect("set by caller") {
-            Record::Schema { header, .. } => LogRecord::Schema(self.schemas[&header.id].clone()),
-            Record::Channel(c) => LogRecord::Channel(self.channels[&c.id].clone()),
-            Record::Message { header, data } => LogRecord::Message(LogMessage {
+    fn emitted(&mut self) -> LogRecord<'_> {
+        let chunk = self.chunk.as_ref().map_or(&[][..], |c| &c.records[..]);
+        match std::mem::replace(&mut self.emit, Emit::Nothing) {
+            Emit::Schema(id) => LogRecord::Schema(self.schemas[&id].clone()),
+            Emit::Channel(id) => LogRecord::Channel(self.channels[&id].clone()),
+            Emit::ChunkMessage { header, start, end } => LogRecord::Message(LogMessage {
                 channel: &self.channels[&header.channel_id],
                 sequence: header.sequence,
                 log_time_ns: header.log_time,
                 publish_time_ns: header.publish_time,
-                data,
+                data: &chunk[start..end],
             }),
-            Record::Metadata(m) => LogRecord::Metadata {
-                name: m.name.clone(),
-                metadata: m.metadata.clone(),
-            },
-            Record::Attachment { header, data, .. } => LogRecord::Attachment {
-                name: header.name.clone(),
-                media_type: header.media_type.clone(),
+            Emit::TopMessage { header } => LogRecord::Message(LogMessage {
+                channel: &self.channels[&header.channel_id],
+                sequence: header.sequence,
+                log_time_ns: header.log_time,
+                publish_time_ns: header.publish_time,
+                data: &self.top[format::MESSAGE_HEADER..],
+            }),
+            Emit::Metadata(m) => {
+                let m = m.expect("set by accept");
+                LogRecord::Metadata { name: m.name, metadata: m.metadata }
+            }
+            Emit::Attachment { header, start, end } => LogRecord::Attachment {
+                name: header.name,
+                media_type: header.media_type,
                 log_time_ns: header.log_time,
                 create_time_ns: header.create_time,
-                data,
+                data: &self.top[start..end],
             },
-            _ => unreachable!("accept() only passes the kinds above"),
+            Emit::Nothing => unreachable!("emitted() follows a successful advance()"),
         }
     }
 }

@@ -1,34 +1,41 @@
-//! Salvage of a damaged log: a recorder killed mid-run, a power cut, a truncated copy. Every
-//! record the file holds intact, up to the first damage (a cut-off or corrupt chunk, a torn
-//! record), is copied with its ids into a new, complete log with its summary and indexes; the
-//! report says how much was saved and where and why reading stopped.
+//! Salvage of a damaged log: a recorder killed mid-run, a power cut, a truncated copy, a disk
+//! that flipped bytes in the middle. Every intact record, before and after any damage, is
+//! copied in order into a new, complete log with its summary and indexes; intact chunks are
+//! copied byte for byte. The report says how much was saved and each stretch that was
+//! skipped, where and why.
 //!
-//! A chunk is either whole or lost: its records are compressed together and checked by CRC,
-//! so what survives is everything up to the last completed chunk (the recorder closes chunks
-//! at least every second for that reason).
+//! A chunk is either whole or lost: its records are compressed together and checked by CRC.
+//! Channels whose defining record was lost with a damaged chunk are taken from the file's
+//! summary when the end of the file is intact; messages on channels known from neither are
+//! counted as orphans.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 
+use mcap::records::op;
 use serde::Serialize;
 
-use super::{LogReader, LogRecord, LogWriter};
-use crate::error::Result;
+use super::format::{self, Records};
+use super::scan::{Damage, Item, Scanner};
+use super::{read_channels, LogWriter};
+use crate::error::{Error, Result};
 
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct RecoverReport {
     pub input: PathBuf,
     pub output: PathBuf,
     pub input_bytes: u64,
-    /// Bytes of the input read before the damage (or the whole file).
-    pub bytes_read: u64,
     pub schemas: u64,
     pub channels: u64,
     pub messages: u64,
     pub metadata: u64,
     pub attachments: u64,
+    /// Intact chunks copied as they were.
+    pub chunks: u64,
     pub messages_per_topic: BTreeMap<String, u64>,
-    /// Why reading stopped before the end, if it did.
+    /// Each stretch of the input that held no intact record, in file order.
+    pub skipped: Vec<Damage>,
+    /// The first damage, in words (None for an intact file).
     pub stopped_by: Option<String>,
     /// Messages on channels whose channel record was lost (skipped).
     pub orphan_messages: u64,
@@ -36,94 +43,163 @@ pub struct RecoverReport {
 
 /// Copies every intact record of `input` into a complete log at `output`.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
+    let mut scanner = Scanner::salvage(input)?;
     let mut report = RecoverReport {
         input: input.to_owned(),
         output: output.to_owned(),
-        input_bytes: std::fs::metadata(input).map(|m| m.len()).unwrap_or(0),
+        input_bytes: scanner.size(),
         ..Default::default()
     };
-    let mut reader = LogReader::open(input)?;
     let mut writer = LogWriter::create(output)?;
-    let mut channels = std::collections::HashSet::new();
-    while let Some(record) = reader.next() {
-        let record = match record {
-            Ok(r) => r,
-            Err(e) => {
-                report.stopped_by = Some(e.to_string());
-                break;
-            }
-        };
-        match record {
-            LogRecord::Schema(s) => {
-                writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
-                report.schemas += 1;
-            }
-            LogRecord::Channel(c) => {
-                writer.copy_channel(
-                    c.id,
-                    c.schema.as_ref().map_or(0, |s| s.id),
-                    &c.topic,
-                    &c.message_encoding,
-                    &c.metadata,
-                )?;
-                channels.insert(c.id);
-                report.channels += 1;
-            }
-            LogRecord::Message(m) => {
-                if !channels.contains(&m.channel.id) {
-                    report.orphan_messages += 1;
-                    continue;
-                }
-                writer.write_raw(
-                    m.channel.id,
-                    m.sequence,
-                    m.log_time_ns,
-                    m.publish_time_ns,
-                    m.data,
-                )?;
-                report.messages += 1;
-                *report
-                    .messages_per_topic
-                    .entry(m.channel.topic.clone())
-                    .or_insert(0) += 1;
-            }
-            LogRecord::Metadata { name, metadata } => {
-                writer.write_metadata(&name, metadata)?;
-                report.metadata += 1;
-            }
-            LogRecord::Attachment {
-                name,
-                media_type,
-                log_time_ns,
-                create_time_ns,
-                data,
-            } => {
-                writer.attach(&name, &media_type, log_time_ns, create_time_ns, data)?;
-                report.attachments += 1;
-            }
+    let mut channels: BTreeMap<u16, String> = BTreeMap::new();
+    // Channels lost with a damaged chunk may still be in an intact summary.
+    let mut from_summary = BTreeMap::new();
+    if let Ok(Some(summary)) = read_channels(input) {
+        for c in summary {
+            from_summary.insert(c.id, c);
         }
     }
-    report.bytes_read = reader.bytes_read().min(report.input_bytes);
+    let mut schemas = HashSet::new();
+    while let Some(item) = scanner.next() {
+        match item? {
+            Item::Damage(d) => {
+                report.stopped_by.get_or_insert_with(|| format!("byte {}: {}", d.offset, d.cause));
+                report.skipped.push(d);
+            }
+            Item::Chunk(chunk) => {
+                let mut orphans = false;
+                let mut counts: Vec<(u16, u64)> = Vec::new();
+                for record in Records::new(&chunk.records) {
+                    let record = record.map_err(|e| Error::mcap(input, e))?;
+                    match record.opcode {
+                        op::SCHEMA => {
+                            schemas.insert(u16::from_le_bytes([record.body[0], record.body[1]]));
+                        }
+                        op::CHANNEL => {
+                            if let Ok(mcap::records::Record::Channel(c)) =
+                                mcap::parse_record(op::CHANNEL, record.body)
+                            {
+                                channels.insert(c.id, c.topic);
+                            }
+                        }
+                        op::MESSAGE => {
+                            let Some(m) = format::parse_message(record.body) else { continue };
+                            let id = m.header.channel_id;
+                            if !channels.contains_key(&id) && !restore(&mut writer, id, &from_summary, &mut channels)? {
+                                orphans = true;
+                            }
+                            match counts.last_mut() {
+                                Some((c, n)) if *c == id => *n += 1,
+                                _ => counts.push((id, 1)),
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+                if orphans {
+                    // Copy message by message, leaving out those no channel defines.
+                    copy_known_messages(&mut writer, &chunk.records, &channels, &mut report)?;
+                } else {
+                    writer.copy_chunk(&chunk)?;
+                    report.chunks += 1;
+                    for (id, n) in counts {
+                        report.messages += n;
+                        *report.messages_per_topic.entry(channels[&id].clone()).or_insert(0) += n;
+                    }
+                }
+            }
+            Item::Record { opcode, body, .. } => match mcap::parse_record(opcode, &body) {
+                Ok(mcap::records::Record::Schema { header, data }) => {
+                    writer.copy_schema(header.id, &header.name, &header.encoding, &data)?;
+                    schemas.insert(header.id);
+                }
+                Ok(mcap::records::Record::Channel(c)) => {
+                    writer.copy_channel(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
+                    channels.insert(c.id, c.topic);
+                }
+                Ok(mcap::records::Record::Message { header, data }) => {
+                    if !channels.contains_key(&header.channel_id)
+                        && !restore(&mut writer, header.channel_id, &from_summary, &mut channels)?
+                    {
+                        report.orphan_messages += 1;
+                        continue;
+                    }
+                    writer.write_raw(header.channel_id, header.sequence, header.log_time, header.publish_time, &data)?;
+                    count(&mut report, &channels[&header.channel_id]);
+                }
+                Ok(mcap::records::Record::Metadata(m)) => {
+                    writer.write_metadata(&m.name, m.metadata)?;
+                    report.metadata += 1;
+                }
+                Ok(mcap::records::Record::Attachment { header, data, .. }) => {
+                    writer.attach(&header.name, &header.media_type, header.log_time, header.create_time, &data)?;
+                    report.attachments += 1;
+                }
+                _ => {}
+            },
+        }
+    }
+    report.schemas = schemas.len() as u64;
+    report.channels = channels.len() as u64;
     writer.finish()?;
     Ok(report)
+}
+
+fn count(report: &mut RecoverReport, topic: &str) {
+    report.messages += 1;
+    *report.messages_per_topic.entry(topic.to_owned()).or_insert(0) += 1;
+}
+
+/// Writes the summary's definition of channel `id` (and its schema), if the summary has it.
+fn restore(
+    writer: &mut LogWriter,
+    id: u16,
+    summary: &BTreeMap<u16, std::sync::Arc<super::ChannelInfo>>,
+    channels: &mut BTreeMap<u16, String>,
+) -> Result<bool> {
+    let Some(c) = summary.get(&id) else { return Ok(false) };
+    if let Some(s) = &c.schema {
+        writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
+    }
+    let schema_id = c.schema.as_ref().map_or(0, |s| s.id);
+    writer.copy_channel(id, schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
+    channels.insert(id, c.topic.clone());
+    Ok(true)
+}
+
+fn copy_known_messages(
+    writer: &mut LogWriter,
+    records: &[u8],
+    channels: &BTreeMap<u16, String>,
+    report: &mut RecoverReport,
+) -> Result<()> {
+    for record in Records::new(records).flatten() {
+        if record.opcode != op::MESSAGE {
+            continue;
+        }
+        let Some(m) = format::parse_message(record.body) else { continue };
+        let h = m.header;
+        match channels.get(&h.channel_id) {
+            Some(topic) => {
+                writer.write_raw(h.channel_id, h.sequence, h.log_time, h.publish_time, m.data)?;
+                count(report, topic);
+            }
+            None => report.orphan_messages += 1,
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::log::{LogReader, LogRecord, WriterOptions};
     use crate::messages::RadarSpeed;
 
-    #[test]
-    fn a_log_cut_anywhere_gives_back_every_complete_chunk_and_a_valid_file() {
-        let d = tempfile::tempdir().unwrap();
-        let path = d.path().join("full.mcap");
-        let opts = crate::log::WriterOptions {
-            chunk_size: 64 << 10,
-            zstd_level: 1,
-        };
-        let mut w = LogWriter::create_with(&path, &opts).unwrap();
+    fn log(path: &Path, n: u64) -> Vec<u8> {
+        let opts = WriterOptions { chunk_size: 64 << 10, zstd_level: 1 };
+        let mut w = LogWriter::create_with(path, &opts).unwrap();
         let ch = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();
-        let n = 60_000u64;
         for k in 0..n {
             let m = RadarSpeed {
                 stamp_ns: k,
@@ -135,7 +211,27 @@ mod tests {
             w.write(ch, k, &m).unwrap();
         }
         w.finish().unwrap();
-        let bytes = std::fs::read(&path).unwrap();
+        std::fs::read(path).unwrap()
+    }
+
+    /// The stamps of a log's messages, in file order.
+    fn stamps(path: &Path) -> Vec<u64> {
+        let mut reader = LogReader::open(path).unwrap();
+        let mut out = Vec::new();
+        while let Some(rec) = reader.next() {
+            if let LogRecord::Message(m) = rec.unwrap() {
+                out.push(m.decode::<RadarSpeed>(path).unwrap().stamp_ns);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_log_cut_anywhere_gives_back_every_complete_chunk_and_a_valid_file() {
+        let d = tempfile::tempdir().unwrap();
+        let path = d.path().join("full.mcap");
+        let n = 60_000u64;
+        let bytes = log(&path, n);
         let whole = recover(&path, &d.path().join("whole.mcap")).unwrap();
         assert_eq!((whole.messages, whole.stopped_by.as_deref()), (n, None));
         let mut last = 0;
@@ -144,7 +240,7 @@ mod tests {
             std::fs::write(&broken, &bytes[..(bytes.len() as f64 * cut) as usize]).unwrap();
             let fixed = d.path().join("fixed.mcap");
             let r = recover(&broken, &fixed).unwrap();
-            assert!(r.stopped_by.is_some(), "{r:?}");
+            assert!(r.stopped_by.as_deref().unwrap().contains("truncated"), "{r:?}");
             // Everything but the cut chunk (≈ 64 KiB of JSON, under 1 000 messages) survives,
             // as the same messages in the same order.
             assert!(
@@ -154,16 +250,62 @@ mod tests {
             );
             assert!(r.messages > last);
             last = r.messages;
-            let mut reader = LogReader::open(&fixed).unwrap();
-            let mut k = 0u64;
-            while let Some(rec) = reader.next() {
-                if let LogRecord::Message(m) = rec.unwrap() {
-                    let v: RadarSpeed = m.decode(&fixed).unwrap();
-                    assert_eq!(v.stamp_ns, k);
-                    k += 1;
+            let got = stamps(&fixed);
+            assert_eq!(got, (0..r.messages).collect::<Vec<_>>());
+        }
+    }
+
+    #[test]
+    fn damage_in_the_middle_costs_only_the_damaged_chunk() {
+        let d = tempfile::tempdir().unwrap();
+        let path = d.path().join("full.mcap");
+        let n = 60_000u64;
+        let bytes = log(&path, n);
+        // A spot inside the compressed data of the chunk nearest the middle of the file.
+        let mut scanner = Scanner::open(&path).unwrap();
+        let mut mid = 0;
+        while let Some(item) = scanner.next() {
+            if let Item::Chunk(c) = item.unwrap() {
+                if c.offset as usize > bytes.len() / 2 {
+                    mid = c.offset as usize + 200;
+                    break;
                 }
             }
-            assert_eq!(k, r.messages);
+        }
+        let garbage: Vec<u8> = (0..5000u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+        let cases: Vec<(&str, Vec<u8>)> = vec![
+            ("flipped bytes", {
+                let mut b = bytes.clone();
+                for x in &mut b[mid..mid + 64] {
+                    *x ^= 0x5a;
+                }
+                b
+            }),
+            ("garbage inserted", [&bytes[..mid], &garbage[..], &bytes[mid..]].concat()),
+            ("torn write", [&bytes[..mid], &bytes[mid + 20_000..]].concat()),
+        ];
+        for (label, broken_bytes) in cases {
+            let broken = d.path().join("broken.mcap");
+            std::fs::write(&broken, &broken_bytes).unwrap();
+            // Strict readers name the damage and the way out.
+            let mut reader = LogReader::open(&broken).unwrap();
+            let err = loop {
+                match reader.next() {
+                    Some(Ok(_)) => continue,
+                    Some(Err(e)) => break e.to_string(),
+                    None => panic!("{label}: read a damaged file to the end"),
+                }
+            };
+            assert!(err.contains("damaged at byte") && err.contains("railfuse recover"), "{err}");
+            let fixed = d.path().join("fixed.mcap");
+            let r = recover(&broken, &fixed).unwrap();
+            assert!(!r.skipped.is_empty(), "{label}: {r:?}");
+            let got = stamps(&fixed);
+            // In order, no duplicates, and at most two chunks' worth (≈ 2 × 1 000) lost.
+            assert!(got.windows(2).all(|w| w[0] < w[1]), "{label}: out of order");
+            assert!(got.len() as u64 > n - 2_000, "{label}: {} of {n}", got.len());
+            assert_eq!(*got.last().unwrap(), n - 1, "{label}: the chunks after the damage");
+            assert_eq!(r.messages, got.len() as u64);
         }
     }
 }

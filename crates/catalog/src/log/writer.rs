@@ -1,12 +1,26 @@
-//! MCAP writer for railfuse channels: zstd chunks, message indexes, summary, metadata.
+//! The log writer: messages gathered into chunks, compressed and written on a worker thread,
+//! input chunks copied byte for byte, and the summary (schemas, channels, statistics, chunk,
+//! metadata and attachment indexes) at the end.
+//!
+//! The calling thread encodes messages and frames records; the worker owns the file: it
+//! compresses, writes, and keeps the offsets the indexes need. A write error stops the worker;
+//! the next call returns it, with its cause ("No space left on device").
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::thread::JoinHandle;
 
-use mcap::records::MessageHeader;
+use mcap::records::{
+    op, AttachmentHeader, AttachmentIndex, Channel, ChunkHeader, ChunkIndex, DataEnd,
+    Header, MessageHeader, MessageIndexEntry, Metadata, MetadataIndex, SchemaHeader, Statistics,
+    SummaryOffset,
+};
 
+use super::format::{self, put_message, put_record, Records, FRAME, MAGIC};
+use super::scan::Chunk;
 use crate::error::{Error, Result};
 use crate::messages::ChannelMessage;
 
@@ -24,11 +38,34 @@ pub struct WriterOptions {
 
 impl Default for WriterOptions {
     fn default() -> Self {
-        Self {
-            chunk_size: 1 << 20,
-            zstd_level: 1,
-        }
+        Self { chunk_size: 1 << 20, zstd_level: 1 }
     }
+}
+
+type Index = BTreeMap<u16, Vec<MessageIndexEntry>>;
+
+/// Work for the file side.
+enum Job {
+    /// Framed top-level records (schemas, channels).
+    Records(Vec<u8>),
+    Metadata { record: Vec<u8>, name: String },
+    Attachment { record: Vec<u8>, index: AttachmentIndex },
+    /// Records to compress into a chunk.
+    Compress { records: Vec<u8>, index: Index, start: u64, end: u64 },
+    /// A chunk record to write as it is.
+    Copy { raw: Vec<u8>, header: ChunkHeader, index: Index },
+    /// Hand everything so far to the OS, then answer.
+    Flush(SyncSender<()>),
+    Finish { schemas: Vec<u8>, channels: Vec<u8>, statistics: Statistics },
+}
+
+/// Messages gathered for the next chunk.
+#[derive(Default)]
+struct OpenChunk {
+    records: Vec<u8>,
+    index: Index,
+    start: u64,
+    end: u64,
 }
 
 /// Writes a railfuse log. The output appears under its name only after [`LogWriter::finish`]:
@@ -37,9 +74,16 @@ impl Default for WriterOptions {
 pub struct LogWriter {
     path: PathBuf,
     partial: PathBuf,
-    inner: Option<mcap::Writer<BufWriter<File>>>,
-    schemas: HashMap<&'static str, u16>,
+    chunk_size: usize,
+    jobs: Option<SyncSender<Job>>,
+    worker: Option<JoinHandle<Result<()>>>,
+    schema_ids: HashMap<String, u16>,
+    /// Framed schema and channel records, repeated in the summary.
+    schemas: BTreeMap<u16, Vec<u8>>,
+    channels: BTreeMap<u16, Vec<u8>>,
     sequences: HashMap<u16, u32>,
+    open: OpenChunk,
+    stats: Statistics,
     buf: Vec<u8>,
 }
 
@@ -54,20 +98,30 @@ impl LogWriter {
         partial.push(".partial");
         let partial = PathBuf::from(partial);
         let file = File::create(&partial).map_err(|e| Error::io(&partial, e))?;
-        let inner = mcap::WriteOptions::new()
-            .profile(super::PROFILE)
-            .library(concat!("railfuse ", env!("CARGO_PKG_VERSION")))
-            .compression(Some(mcap::Compression::Zstd))
-            .compression_level(options.zstd_level)
-            .chunk_size(Some(options.chunk_size))
-            .create(BufWriter::with_capacity(1 << 16, file))
-            .map_err(|e| Error::write(&partial, e))?;
+        let mut start = MAGIC.to_vec();
+        let header = Header {
+            profile: super::PROFILE.into(),
+            library: concat!("railfuse ", env!("CARGO_PKG_VERSION")).into(),
+        };
+        put_record(&mut start, op::HEADER, &format::body(&header));
+        let (jobs, rx) = sync_channel(4);
+        let mut file_side = FileSide::new(file, partial.clone(), options.zstd_level);
+        let worker = std::thread::Builder::new()
+            .name("log-writer".into())
+            .spawn(move || file_side.run(start, rx))
+            .map_err(|e| Error::io(&partial, e))?;
         Ok(Self {
             path,
             partial,
-            inner: Some(inner),
-            schemas: HashMap::new(),
+            chunk_size: options.chunk_size as usize,
+            jobs: Some(jobs),
+            worker: Some(worker),
+            schema_ids: HashMap::new(),
+            schemas: BTreeMap::new(),
+            channels: BTreeMap::new(),
             sequences: HashMap::new(),
+            open: OpenChunk::default(),
+            stats: Statistics::default(),
             buf: Vec::with_capacity(1024),
         })
     }
@@ -76,30 +130,36 @@ impl LogWriter {
         &self.path
     }
 
-    fn inner(&mut self) -> &mut mcap::Writer<BufWriter<File>> {
-        self.inner
-            .as_mut()
-            .expect("only finish() takes the writer, and it consumes self")
+    fn send(&mut self, job: Job) -> Result<()> {
+        let sent = self.jobs.as_ref().map(|j| j.send(job).is_ok()).unwrap_or(false);
+        if sent {
+            return Ok(());
+        }
+        Err(self.stopped())
+    }
+
+    /// The worker stopped on an error: that error.
+    fn stopped(&mut self) -> Error {
+        self.jobs = None;
+        match self.worker.take().map(|w| w.join()) {
+            Some(Ok(Err(e))) => e,
+            _ => Error::Write { path: self.partial.clone(), cause: "the writer stopped".into() },
+        }
     }
 
     /// Registers a channel of message type `M` on `topic`.
     pub fn add_channel<M: ChannelMessage>(&mut self, topic: &str) -> Result<ChannelId> {
-        let schema_id = match self.schemas.get(M::SCHEMA_NAME) {
+        let schema_id = match self.schema_ids.get(M::SCHEMA_NAME) {
             Some(&id) => id,
             None => {
+                let id = (1..=u16::MAX).find(|i| !self.schemas.contains_key(i)).unwrap_or(0);
                 let data = M::schema_bytes();
-                let id = self
-                    .inner()
-                    .add_schema(M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)
-                    .map_err(|e| Error::write(&self.partial, e))?;
-                self.schemas.insert(M::SCHEMA_NAME, id);
+                self.copy_schema(id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)?;
                 id
             }
         };
-        let id = self
-            .inner()
-            .add_channel(schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())
-            .map_err(|e| Error::write(&self.partial, e))?;
+        let id = (1..=u16::MAX).find(|i| !self.channels.contains_key(i)).unwrap_or(0);
+        self.copy_channel(id, schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())?;
         Ok(ChannelId(id))
     }
 
@@ -111,20 +171,48 @@ impl LogWriter {
         channel_id: u16,
         topic: &str,
     ) -> Result<ChannelId> {
-        let data = M::schema_bytes();
-        self.inner()
-            .add_schema_with_id(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)
-            .map_err(|e| Error::write(&self.partial, e))?;
-        self.inner()
-            .add_channel_with_id(
-                channel_id,
-                schema_id,
-                topic,
-                super::MESSAGE_ENCODING,
-                &BTreeMap::new(),
-            )
-            .map_err(|e| Error::write(&self.partial, e))?;
+        if !self.schemas.contains_key(&schema_id) {
+            let data = M::schema_bytes();
+            self.copy_schema(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)?;
+        }
+        self.copy_channel(channel_id, schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())?;
         Ok(ChannelId(channel_id))
+    }
+
+    /// Writes a schema record keeping its id (once per id).
+    pub fn copy_schema(&mut self, id: u16, name: &str, encoding: &str, data: &[u8]) -> Result<()> {
+        if self.schemas.contains_key(&id) {
+            return Ok(());
+        }
+        let record = schema_record(id, name, encoding, data);
+        self.schema_ids.entry(name.to_owned()).or_insert(id);
+        self.schemas.insert(id, record.clone());
+        self.send(Job::Records(record))
+    }
+
+    /// Writes a channel record keeping its id (once per id).
+    pub fn copy_channel(
+        &mut self,
+        id: u16,
+        schema_id: u16,
+        topic: &str,
+        encoding: &str,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<()> {
+        if self.channels.contains_key(&id) {
+            return Ok(());
+        }
+        let channel = Channel {
+            id,
+            schema_id,
+            topic: topic.to_owned(),
+            message_encoding: encoding.to_owned(),
+            metadata: metadata.clone(),
+        };
+        let mut record = Vec::new();
+        put_record(&mut record, op::CHANNEL, &format::body(&channel));
+        self.channels.insert(id, record.clone());
+        self.send(Job::Records(record))
     }
 
     /// Writes `msg` with the given receive time; `publish_time` is the message's own stamp.
@@ -164,50 +252,84 @@ impl LogWriter {
             log_time: log_time_ns,
             publish_time: publish_time_ns,
         };
-        self.inner()
-            .write_to_known_channel(&header, data)
-            .map_err(|e| Error::write(&self.partial, e))
+        let open = &mut self.open;
+        if open.records.is_empty() {
+            (open.start, open.end) = (log_time_ns, log_time_ns);
+        }
+        (open.start, open.end) = (open.start.min(log_time_ns), open.end.max(log_time_ns));
+        let offset = open.records.len() as u64;
+        open.index.entry(channel).or_default().push(MessageIndexEntry { log_time: log_time_ns, offset });
+        put_message(&mut open.records, &header, data);
+        count_message(&mut self.stats, channel, log_time_ns);
+        if self.open.records.len() >= self.chunk_size {
+            self.close_chunk()?;
+        }
+        Ok(())
     }
 
-    /// Closes the current chunk and pushes it to the file: everything written so far survives
-    /// a crash from here on (the recorder calls this about once a second).
+    /// Sends the messages gathered so far to be compressed as a chunk.
+    pub fn close_chunk(&mut self) -> Result<()> {
+        if self.open.records.is_empty() {
+            return Ok(());
+        }
+        let open = std::mem::take(&mut self.open);
+        self.open.records.reserve(self.chunk_size + (self.chunk_size >> 3));
+        self.stats.chunk_count += 1;
+        self.send(Job::Compress {
+            records: open.records,
+            index: open.index,
+            start: open.start,
+            end: open.end,
+        })
+    }
+
+    /// Copies an input chunk byte for byte. The schemas and channels it defines are taken
+    /// into the summary; its messages count in the statistics and get a message index.
+    pub fn copy_chunk(&mut self, chunk: &Chunk) -> Result<()> {
+        let mut index = Index::new();
+        for record in Records::new(&chunk.records) {
+            let record = record.map_err(|e| Error::mcap(&self.partial, e))?;
+            match record.opcode {
+                op::MESSAGE => {
+                    let Some(m) = format::parse_message(record.body) else { continue };
+                    let (channel, log_time) = (m.header.channel_id, m.header.log_time);
+                    let offset = record.offset as u64;
+                    index.entry(channel).or_default().push(MessageIndexEntry { log_time, offset });
+                    count_message(&mut self.stats, channel, log_time);
+                }
+                op::SCHEMA | op::CHANNEL => {
+                    let mut framed = Vec::with_capacity(FRAME + record.body.len());
+                    put_record(&mut framed, record.opcode, record.body);
+                    let id = u16::from_le_bytes([record.body[0], record.body[1]]);
+                    let table =
+                        if record.opcode == op::SCHEMA { &mut self.schemas } else { &mut self.channels };
+                    table.entry(id).or_insert(framed);
+                }
+                _ => {}
+            }
+        }
+        self.stats.chunk_count += 1;
+        self.send(Job::Copy { raw: chunk.raw.clone(), header: chunk.header.clone(), index })
+    }
+
+    /// Closes the current chunk and hands everything written so far to the OS: it survives a
+    /// crash of this process from here on (the recorder calls this about once a second).
     pub fn flush_chunk(&mut self) -> Result<()> {
-        self.inner()
-            .flush()
-            .map_err(|e| Error::write(&self.partial, e))
-    }
-
-    /// Copies a schema record keeping its id.
-    pub fn copy_schema(&mut self, id: u16, name: &str, encoding: &str, data: &[u8]) -> Result<()> {
-        self.inner()
-            .add_schema_with_id(id, name, encoding, data)
-            .map_err(|e| Error::write(&self.partial, e))?;
-        Ok(())
-    }
-
-    /// Copies a channel record keeping its id.
-    pub fn copy_channel(
-        &mut self,
-        id: u16,
-        schema_id: u16,
-        topic: &str,
-        encoding: &str,
-        metadata: &BTreeMap<String, String>,
-    ) -> Result<()> {
-        self.inner()
-            .add_channel_with_id(id, schema_id, topic, encoding, metadata)
-            .map_err(|e| Error::write(&self.partial, e))?;
-        Ok(())
+        self.close_chunk()?;
+        let (tx, rx) = sync_channel(1);
+        self.send(Job::Flush(tx))?;
+        match rx.recv() {
+            Ok(()) => Ok(()),
+            Err(_) => Err(self.stopped()),
+        }
     }
 
     pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
-        let record = mcap::records::Metadata {
-            name: name.to_owned(),
-            metadata,
-        };
-        self.inner()
-            .write_metadata(&record)
-            .map_err(|e| Error::write(&self.partial, e))
+        let mut record = Vec::new();
+        let m = Metadata { name: name.to_owned(), metadata };
+        put_record(&mut record, op::METADATA, &format::body(&m));
+        self.stats.metadata_count += 1;
+        self.send(Job::Metadata { record, name: name.to_owned() })
     }
 
     pub fn attach(
@@ -218,27 +340,45 @@ impl LogWriter {
         create_time_ns: u64,
         data: &[u8],
     ) -> Result<()> {
-        let attachment = mcap::Attachment {
+        let header = AttachmentHeader {
             log_time: log_time_ns,
             create_time: create_time_ns,
             name: name.to_owned(),
             media_type: media_type.to_owned(),
-            data: std::borrow::Cow::Borrowed(data),
         };
-        self.inner()
-            .attach(&attachment)
-            .map_err(|e| Error::write(&self.partial, e))
+        let mut body = format::body(&header);
+        body.extend_from_slice(&(data.len() as u64).to_le_bytes());
+        body.extend_from_slice(data);
+        let crc = crc32fast::hash(&body);
+        body.extend_from_slice(&crc.to_le_bytes());
+        let mut record = Vec::new();
+        put_record(&mut record, op::ATTACHMENT, &body);
+        let index = AttachmentIndex {
+            offset: 0,
+            length: record.len() as u64,
+            log_time: log_time_ns,
+            create_time: create_time_ns,
+            data_size: data.len() as u64,
+            name: name.to_owned(),
+            media_type: media_type.to_owned(),
+        };
+        self.stats.attachment_count += 1;
+        self.send(Job::Attachment { record, index })
     }
 
     /// Writes the summary and index, flushes, and moves the file to its final name.
     pub fn finish(mut self) -> Result<()> {
-        let mut inner = self.inner.take().expect("finish() runs once");
-        inner.finish().map_err(|e| Error::write(&self.partial, e))?;
-        let file = inner
-            .into_inner()
-            .into_inner()
-            .map_err(|e| Error::io(&self.partial, e.into_error()))?;
-        file.sync_all().map_err(|e| Error::io(&self.partial, e))?;
+        self.close_chunk()?;
+        let mut statistics = std::mem::take(&mut self.stats);
+        statistics.schema_count = self.schemas.len() as u16;
+        statistics.channel_count = self.channels.len() as u32;
+        let schemas = self.schemas.values().flatten().copied().collect();
+        let channels = self.channels.values().flatten().copied().collect();
+        self.send(Job::Finish { schemas, channels, statistics })?;
+        self.jobs = None;
+        if let Some(Ok(Err(e))) = self.worker.take().map(|w| w.join()) {
+            return Err(e);
+        }
         std::fs::rename(&self.partial, &self.path).map_err(|e| Error::io(&self.path, e))
     }
 }
@@ -246,8 +386,196 @@ impl LogWriter {
 impl Drop for LogWriter {
     fn drop(&mut self) {
         // Dropped without finish(): an error path. Leave no `.partial` file behind.
-        if self.inner.take().is_some() {
+        if let Some(worker) = self.worker.take() {
+            self.jobs = None;
+            let _ = worker.join();
             let _ = std::fs::remove_file(&self.partial);
         }
+    }
+}
+
+fn count_message(stats: &mut Statistics, channel: u16, log_time: u64) {
+    if stats.message_count == 0 {
+        (stats.message_start_time, stats.message_end_time) = (log_time, log_time);
+    }
+    stats.message_count += 1;
+    stats.message_start_time = stats.message_start_time.min(log_time);
+    stats.message_end_time = stats.message_end_time.max(log_time);
+    *stats.channel_message_counts.entry(channel).or_insert(0) += 1;
+}
+
+fn schema_record(id: u16, name: &str, encoding: &str, data: &[u8]) -> Vec<u8> {
+    let header = SchemaHeader { id, name: name.to_owned(), encoding: encoding.to_owned() };
+    let mut body = format::body(&header);
+    body.extend_from_slice(&(data.len() as u32).to_le_bytes());
+    body.extend_from_slice(data);
+    let mut record = Vec::new();
+    put_record(&mut record, op::SCHEMA, &body);
+    record
+}
+
+/// The worker's side: the file, its offset and CRC, and the indexes that need offsets.
+struct FileSide {
+    out: BufWriter<File>,
+    path: PathBuf,
+    offset: u64,
+    crc: crc32fast::Hasher,
+    compressor: zstd::bulk::Compressor<'static>,
+    chunk_indexes: Vec<u8>,
+    metadata_indexes: Vec<u8>,
+    attachment_indexes: Vec<u8>,
+    scratch: Vec<u8>,
+}
+
+impl FileSide {
+    fn new(file: File, path: PathBuf, level: u32) -> Self {
+        Self {
+            out: BufWriter::with_capacity(1 << 16, file),
+            path,
+            offset: 0,
+            crc: crc32fast::Hasher::new(),
+            compressor: zstd::bulk::Compressor::new(level as i32).expect("a valid zstd level"),
+            chunk_indexes: Vec::new(),
+            metadata_indexes: Vec::new(),
+            attachment_indexes: Vec::new(),
+            scratch: Vec::new(),
+        }
+    }
+
+    fn run(&mut self, start: Vec<u8>, jobs: Receiver<Job>) -> Result<()> {
+        self.put(&start)?;
+        while let Ok(job) = jobs.recv() {
+            match job {
+                Job::Records(r) => self.put(&r)?,
+                Job::Metadata { record, name } => {
+                    let index = MetadataIndex { offset: self.offset, length: record.len() as u64, name };
+                    self.put(&record)?;
+                    put_record(&mut self.metadata_indexes, op::METADATA_INDEX, &format::body(&index));
+                }
+                Job::Attachment { record, mut index } => {
+                    index.offset = self.offset;
+                    self.put(&record)?;
+                    put_record(&mut self.attachment_indexes, op::ATTACHMENT_INDEX, &format::body(&index));
+                }
+                Job::Compress { records, index, start, end } => {
+                    let compressed = self.compressor.compress(&records).map_err(|e| self.error(e))?;
+                    let header = ChunkHeader {
+                        message_start_time: start,
+                        message_end_time: end,
+                        uncompressed_size: records.len() as u64,
+                        uncompressed_crc: crc32fast::hash(&records),
+                        compression: "zstd".into(),
+                        compressed_size: compressed.len() as u64,
+                    };
+                    let mut raw = std::mem::take(&mut self.scratch);
+                    raw.clear();
+                    let head = format::body(&header);
+                    raw.push(op::CHUNK);
+                    raw.extend_from_slice(&((head.len() + compressed.len()) as u64).to_le_bytes());
+                    raw.extend_from_slice(&head);
+                    raw.extend_from_slice(&compressed);
+                    let result = self.put_chunk(&raw, &header, index);
+                    self.scratch = raw;
+                    result?;
+                }
+                Job::Copy { raw, header, index } => self.put_chunk(&raw, &header, index)?,
+                Job::Flush(done) => {
+                    self.out.flush().map_err(|e| self.error(e))?;
+                    let _ = done.send(());
+                }
+                Job::Finish { schemas, channels, statistics } => {
+                    return self.finish(schemas, channels, statistics)
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn error(&self, e: impl std::error::Error) -> Error {
+        Error::write(&self.path, e)
+    }
+
+    fn put(&mut self, bytes: &[u8]) -> Result<()> {
+        self.out.write_all(bytes).map_err(|e| Error::write(&self.path, e))?;
+        self.crc.update(bytes);
+        self.offset += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// A chunk record, then its message indexes, and its entry for the chunk index.
+    fn put_chunk(&mut self, raw: &[u8], header: &ChunkHeader, index: Index) -> Result<()> {
+        let chunk_start = self.offset;
+        self.put(raw)?;
+        let indexes_start = self.offset;
+        let mut offsets = BTreeMap::new();
+        let mut records = Vec::new();
+        for (channel, entries) in index {
+            offsets.insert(channel, indexes_start + records.len() as u64);
+            let mut body = Vec::with_capacity(6 + 16 * entries.len());
+            body.extend_from_slice(&channel.to_le_bytes());
+            body.extend_from_slice(&((16 * entries.len()) as u32).to_le_bytes());
+            for e in entries {
+                body.extend_from_slice(&e.log_time.to_le_bytes());
+                body.extend_from_slice(&e.offset.to_le_bytes());
+            }
+            put_record(&mut records, op::MESSAGE_INDEX, &body);
+        }
+        self.put(&records)?;
+        let chunk_index = ChunkIndex {
+            message_start_time: header.message_start_time,
+            message_end_time: header.message_end_time,
+            chunk_start_offset: chunk_start,
+            chunk_length: raw.len() as u64,
+            message_index_offsets: offsets,
+            message_index_length: records.len() as u64,
+            compression: header.compression.clone(),
+            compressed_size: header.compressed_size,
+            uncompressed_size: header.uncompressed_size,
+        };
+        put_record(&mut self.chunk_indexes, op::CHUNK_INDEX, &format::body(&chunk_index));
+        Ok(())
+    }
+
+    fn finish(&mut self, schemas: Vec<u8>, channels: Vec<u8>, statistics: Statistics) -> Result<()> {
+        let data_crc = std::mem::take(&mut self.crc).finalize();
+        let mut data_end = Vec::new();
+        put_record(&mut data_end, op::DATA_END, &format::body(&DataEnd { data_section_crc: data_crc }));
+        self.put(&data_end)?;
+
+        let summary_start = self.offset;
+        self.crc = crc32fast::Hasher::new();
+        let mut stats = Vec::new();
+        put_record(&mut stats, op::STATISTICS, &format::body(&statistics));
+        let groups = [
+            (op::SCHEMA, schemas),
+            (op::CHANNEL, channels),
+            (op::STATISTICS, stats),
+            (op::CHUNK_INDEX, std::mem::take(&mut self.chunk_indexes)),
+            (op::ATTACHMENT_INDEX, std::mem::take(&mut self.attachment_indexes)),
+            (op::METADATA_INDEX, std::mem::take(&mut self.metadata_indexes)),
+        ];
+        let mut offsets = Vec::new();
+        for (opcode, group) in groups.iter().filter(|(_, g)| !g.is_empty()) {
+            let offset = SummaryOffset {
+                group_opcode: *opcode,
+                group_start: self.offset,
+                group_length: group.len() as u64,
+            };
+            put_record(&mut offsets, op::SUMMARY_OFFSET, &format::body(&offset));
+            self.put(group)?;
+        }
+        let summary_offset_start = self.offset;
+        self.put(&offsets)?;
+        // The footer's CRC covers the summary up to and including the footer's own offsets.
+        let mut footer = vec![op::FOOTER];
+        footer.extend_from_slice(&20u64.to_le_bytes()); // summary start, offset start, CRC
+        footer.extend_from_slice(&summary_start.to_le_bytes());
+        footer.extend_from_slice(&summary_offset_start.to_le_bytes());
+        self.put(&footer)?;
+        let crc = std::mem::take(&mut self.crc).finalize();
+        self.put(&crc.to_le_bytes())?;
+        self.put(MAGIC)?;
+        self.out.flush().map_err(|e| Error::write(&self.path, e))?;
+        self.out.get_ref().sync_all().map_err(|e| Error::io(&self.path, e))
     }
 }

@@ -1,0 +1,89 @@
+//! Re-fusion output pinned: every channel of the output of `samples/` runs (the copied input
+//! channels and the fused ones) is digested per topic and compared with
+//! `tests/golden/refuse-digests.txt`, written by the code before the file-to-file fast path.
+//! A change to the filters that is meant to change their output re-blesses it:
+//!
+//!     RAILFUSE_BLESS=1 cargo test --test golden
+//!
+//! and the diff of the digest file shows which channels moved.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use common::*;
+use railfuse_catalog::log::{LogReader, LogRecord};
+use sha2::{Digest, Sha256};
+
+/// Per topic: message count and SHA-256 over (log time, publish time, payload) in file order.
+fn digests(path: &Path) -> BTreeMap<String, (u64, String)> {
+    let mut hashers: BTreeMap<String, (u64, Sha256)> = BTreeMap::new();
+    let mut r = LogReader::open(path).unwrap();
+    while let Some(rec) = r.next() {
+        if let LogRecord::Message(m) = rec.unwrap() {
+            let (n, h) = hashers.entry(m.channel.topic.clone()).or_default();
+            *n += 1;
+            h.update(m.log_time_ns.to_le_bytes());
+            h.update(m.publish_time_ns.to_le_bytes());
+            h.update((m.data.len() as u64).to_le_bytes());
+            h.update(m.data);
+        }
+    }
+    hashers
+        .into_iter()
+        .map(|(t, (n, h))| (t, (n, format!("{:x}", h.finalize()))))
+        .collect()
+}
+
+#[test]
+fn refuse_output_of_the_sample_runs_is_unchanged() {
+    let d = tempfile::tempdir().unwrap();
+    let short = sample("short-run.mcap");
+    let seed000 = d.path().join("seed000.mcap");
+    let seed001 = d.path().join("seed001.mcap");
+    ok(&["simulate", "--scenario", "seed000", "--seed", "1", "-o", s(&seed000)]);
+    ok(&["simulate", "--scenario", "seed001", "--seed", "1", "-o", s(&seed001)]);
+    let fused_once = d.path().join("short-run.kalman.mcap");
+    // (label, input, config, output)
+    let runs: Vec<(&str, &Path, &str, std::path::PathBuf)> = vec![
+        ("short-run kalman", &short, "kalman.toml", fused_once.clone()),
+        ("short-run models", &short, "models.toml", d.path().join("m.mcap")),
+        ("short-run sensor-states", &short, "sensor-states.toml", d.path().join("c.mcap")),
+        // Re-fusing a fused file: the re-run pipeline's channels are replaced.
+        ("short-run kalman again", &fused_once, "kalman.toml", d.path().join("k2.mcap")),
+        ("seed000", &seed000, "seed000.toml", d.path().join("s0.mcap")),
+        ("seed001", &seed001, "seed001.toml", d.path().join("s1.mcap")),
+    ];
+    let mut text = String::new();
+    for (label, input, config, output) in &runs {
+        let config = sample(config);
+        ok(&["refuse", s(input), "-c", s(&config), "-o", s(output)]);
+        for (topic, (n, h)) in digests(output) {
+            writeln!(text, "{label}\t{topic}\t{n}\t{h}").unwrap();
+        }
+    }
+    let golden = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/refuse-digests.txt");
+    if std::env::var_os("RAILFUSE_BLESS").is_some() {
+        std::fs::create_dir_all(golden.parent().unwrap()).unwrap();
+        std::fs::write(&golden, &text).unwrap();
+        return;
+    }
+    let want = std::fs::read_to_string(&golden).expect("tests/golden/refuse-digests.txt");
+    let differ: Vec<String> = want
+        .lines()
+        .zip(text.lines())
+        .filter(|(a, b)| a != b)
+        .map(|(a, b)| format!("  want {a}\n  got  {b}"))
+        .collect();
+    assert!(
+        differ.is_empty() && want.lines().count() == text.lines().count(),
+        "re-fusion output changed ({} of {} lines differ, {} vs {} lines):\n{}",
+        differ.len(),
+        want.lines().count(),
+        want.lines().count(),
+        text.lines().count(),
+        differ.join("\n")
+    );
+}
