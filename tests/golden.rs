@@ -43,18 +43,64 @@ fn refuse_output_of_the_sample_runs_is_unchanged() {
     let short = sample("short-run.mcap");
     let seed000 = d.path().join("seed000.mcap");
     let seed001 = d.path().join("seed001.mcap");
-    ok(&["simulate", "--scenario", "seed000", "--seed", "1", "-o", s(&seed000)]);
-    ok(&["simulate", "--scenario", "seed001", "--seed", "1", "-o", s(&seed001)]);
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed000",
+        "--seed",
+        "1",
+        "-o",
+        s(&seed000),
+    ]);
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed001",
+        "--seed",
+        "1",
+        "-o",
+        s(&seed001),
+    ]);
     let fused_once = d.path().join("short-run.kalman.mcap");
     // (label, input, config, output)
     let runs: Vec<(&str, &Path, &str, std::path::PathBuf)> = vec![
-        ("short-run kalman", &short, "kalman.toml", fused_once.clone()),
-        ("short-run models", &short, "models.toml", d.path().join("m.mcap")),
-        ("short-run sensor-states", &short, "sensor-states.toml", d.path().join("c.mcap")),
+        (
+            "short-run kalman",
+            &short,
+            "kalman.toml",
+            fused_once.clone(),
+        ),
+        (
+            "short-run models",
+            &short,
+            "models.toml",
+            d.path().join("m.mcap"),
+        ),
+        (
+            "short-run sensor-states",
+            &short,
+            "sensor-states.toml",
+            d.path().join("c.mcap"),
+        ),
         // Re-fusing a fused file: the re-run pipeline's channels are replaced.
-        ("short-run kalman again", &fused_once, "kalman.toml", d.path().join("k2.mcap")),
-        ("seed000", &seed000, "seed000.toml", d.path().join("s0.mcap")),
-        ("seed001", &seed001, "seed001.toml", d.path().join("s1.mcap")),
+        (
+            "short-run kalman again",
+            &fused_once,
+            "kalman.toml",
+            d.path().join("k2.mcap"),
+        ),
+        (
+            "seed000",
+            &seed000,
+            "seed000.toml",
+            d.path().join("s0.mcap"),
+        ),
+        (
+            "seed001",
+            &seed001,
+            "seed001.toml",
+            d.path().join("s1.mcap"),
+        ),
     ];
     let mut text = String::new();
     for (label, input, config, output) in &runs {

@@ -1,19 +1,32 @@
-//! `railfuse bench`: throughput and memory figures, measured on real files (not a timed test).
+//! `railfuse bench`: file-to-file throughput and memory of `railfuse refuse`, timed as a user
+//! runs it (the whole command in a child process, accuracy table included), beside a peer: the
+//! same job in Python with the official `mcap` reader and writer and filterpy
+//! (`bench/peer_refuse.py`), on the same file. Measured on real files, not a timed test.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
 use super::refuse::RunStats;
-use super::DEFAULT_PIPELINES;
+use super::{DEFAULT_PIPELINES, SEED001_PIPELINES};
+
+const PEER: &str = include_str!("../../bench/peer_refuse.py");
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Durations (s) of the simulated logs to measure; memory should not grow with them.
+    /// Durations (s) of the simulated default-scenario logs to measure with samples/kalman.toml;
+    /// memory should not grow with them.
     #[arg(long, value_delimiter = ',', default_value = "600,3600")]
     pub durations: Vec<f64>,
+    /// Also measure a seed001 run (source 001's maglev) with samples/seed001.toml.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub seed001: bool,
+    /// Python with `mcap` and `filterpy` for the peer (default: $RAILFUSE_PYTHON, then the
+    /// test venv `.venv-interop/bin/python` that `tests/run` installs).
+    #[arg(long)]
+    pub python: Option<PathBuf>,
     /// Folder for the benchmark files.
     #[arg(long, default_value = "target/bench")]
     pub dir: PathBuf,
@@ -27,55 +40,150 @@ pub struct Args {
     pub record_speedup: f64,
 }
 
+/// One measured `refuse` run.
+struct Measured {
+    wall_s: f64,
+    peak_rss_kib: Option<u64>,
+}
+
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
         return super::bench_record::run(&a.dir, secs, a.record_speedup);
     }
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
-    let config = a.dir.join("kalman.toml");
-    std::fs::write(&config, DEFAULT_PIPELINES)?;
-    let exe = std::env::current_exe()?;
+    let kalman = a.dir.join("kalman.toml");
+    std::fs::write(&kalman, DEFAULT_PIPELINES)?;
+    let seed001 = a.dir.join("seed001.toml");
+    std::fs::write(&seed001, SEED001_PIPELINES)?;
+    let peer = a.dir.join("peer_refuse.py");
+    std::fs::write(&peer, PEER)?;
+    let python = a.python.clone().or_else(find_python);
     println!(
-        "{:>10} {:>10} {:>10} {:>14} {:>14} {:>14} {:>12}",
-        "run s", "messages", "MiB", "simulate msg/s", "refuse msg/s", "refuse MB/s", "refuse RSS"
+        "{:<28} {:>9} {:>6} {:>9} {:>13} {:>10} {:>8} {:>11} {:>7}",
+        "log, pipelines",
+        "messages",
+        "MiB",
+        "refuse s",
+        "refuse msg/s",
+        "peak RSS",
+        "peer s",
+        "peer msg/s",
+        "ratio"
     );
-    for d in a.durations {
-        let raw = a.dir.join(format!("bench-{d:.0}s.mcap"));
-        let fused = a.dir.join(format!("bench-{d:.0}s.fused.mcap"));
-        let started = Instant::now();
-        let sim = railfuse_record::simulate(
-            &railfuse_record::Scenario::preset("default").expect("preset"),
-            1,
-            Some(d),
-            &[],
-            &raw,
-        )?;
-        let sim_rate = sim.messages as f64 / started.elapsed().as_secs_f64();
-        // Refuse in a child process, so its peak memory is its own.
-        let out = Command::new(&exe)
-            .args(["refuse", "--json", "-c"])
-            .arg(&config)
-            .arg("-o")
-            .arg(&fused)
-            .arg(&raw)
-            .output()?;
-        if !out.status.success() {
-            bail!("refuse failed: {}", String::from_utf8_lossy(&out.stderr));
-        }
-        let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
-        let stats: RunStats = serde_json::from_value(v["run"].clone())?;
-        let bytes = std::fs::metadata(&raw)?.len() as f64;
+    let mut runs: Vec<(String, &str, Option<f64>, &Path)> = a
+        .durations
+        .iter()
+        .map(|&d| {
+            (
+                format!("default {d:.0} s, kalman"),
+                "default",
+                Some(d),
+                kalman.as_path(),
+            )
+        })
+        .collect();
+    if a.seed001 {
+        runs.push((
+            "seed001, seed001.toml".into(),
+            "seed001",
+            None,
+            seed001.as_path(),
+        ));
+    }
+    for (label, scenario, duration, config) in runs {
+        let tag = label.replace([' ', ','], "");
+        let raw = a.dir.join(format!("bench-{tag}.mcap"));
+        let preset = railfuse_record::Scenario::preset(scenario).expect("a built-in preset");
+        let sim = railfuse_record::simulate(&preset, 1, duration, &[], &raw)?;
+        let ours = refuse_child(&raw, config, &a.dir.join(format!("bench-{tag}.fused.mcap")))?;
+        let rate = sim.messages as f64 / ours.wall_s;
+        // The peer runs the Kalman job only (source 001's federated filters it has not).
+        let theirs = match (&python, scenario) {
+            (Some(py), "default") => Some(peer_child(py, &peer, &raw, config, &a.dir)?),
+            _ => None,
+        };
+        let mib = std::fs::metadata(&raw)?.len() as f64 / (1 << 20) as f64;
+        let (peer_s, peer_rate, ratio) = match theirs {
+            Some(s) => {
+                let r = sim.messages as f64 / s;
+                (
+                    format!("{s:.2}"),
+                    format!("{:.1} k", r / 1e3),
+                    format!("{:.0}x", rate / r),
+                )
+            }
+            None => ("-".into(), "-".into(), "-".into()),
+        };
         println!(
-            "{:>10.0} {:>10} {:>10.1} {:>14.0} {:>14.0} {:>14.1} {:>9} KiB",
-            d,
+            "{:<28} {:>9} {:>6.1} {:>9.3} {:>11.2} M {:>6} KiB {:>8} {:>11} {:>7}",
+            label,
             sim.messages,
-            bytes / (1 << 20) as f64,
-            sim_rate,
-            stats.input_messages_per_s,
-            bytes / stats.elapsed_s / 1e6,
-            stats.peak_rss_kib.map_or("-".into(), |k| k.to_string())
+            mib,
+            ours.wall_s,
+            rate / 1e6,
+            ours.peak_rss_kib.map_or("-".into(), |k| k.to_string()),
+            peer_s,
+            peer_rate,
+            ratio
+        );
+    }
+    if python.is_none() {
+        println!(
+            "peer: not run: no Python with mcap and filterpy (run tests/run once, or --python)"
         );
     }
     Ok(())
+}
+
+/// `railfuse refuse` in a child process, timed from spawn to exit, so its peak memory is its
+/// own and the time is what a user waits.
+fn refuse_child(raw: &Path, config: &Path, fused: &Path) -> Result<Measured> {
+    let exe = std::env::current_exe()?;
+    let started = Instant::now();
+    let out = Command::new(&exe)
+        .args(["refuse", "--json", "-c"])
+        .arg(config)
+        .arg("-o")
+        .arg(fused)
+        .arg(raw)
+        .output()?;
+    let wall_s = started.elapsed().as_secs_f64();
+    if !out.status.success() {
+        bail!("refuse failed: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
+    let stats: RunStats = serde_json::from_value(v["run"].clone())?;
+    Ok(Measured {
+        wall_s,
+        peak_rss_kib: stats.peak_rss_kib,
+    })
+}
+
+/// The Python peer on the same file, timed the same way (interpreter start included).
+fn peer_child(python: &Path, script: &Path, raw: &Path, config: &Path, dir: &Path) -> Result<f64> {
+    let started = Instant::now();
+    let out = Command::new(python)
+        .arg(script)
+        .arg(raw)
+        .arg(config)
+        .arg(dir.join("bench-peer.fused.mcap"))
+        .output()
+        .with_context(|| format!("{}: cannot run", python.display()))?;
+    let wall_s = started.elapsed().as_secs_f64();
+    if !out.status.success() {
+        bail!(
+            "the Python peer failed: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    Ok(wall_s)
+}
+
+fn find_python() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("RAILFUSE_PYTHON") {
+        return Some(PathBuf::from(p));
+    }
+    let venv = PathBuf::from(".venv-interop/bin/python");
+    venv.exists().then_some(venv)
 }

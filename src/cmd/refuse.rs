@@ -4,7 +4,7 @@ use std::time::Instant;
 use anyhow::Result;
 use railfuse_catalog::topics;
 use railfuse_refuse::config::PipelinesConfig;
-use railfuse_refuse::eval::{evaluate, EvalReport};
+use railfuse_refuse::eval::EvalReport;
 use railfuse_refuse::replay::{refuse, RefuseOptions, RefuseReport};
 
 use super::eval::print_eval;
@@ -31,8 +31,7 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     let config = PipelinesConfig::load(&a.config)?;
     let source = a.config.display().to_string();
-    let (report, stats) = refuse_with(&a.input, &a.output, &config, source)?;
-    let eval = evaluate(&a.output, &a.reference)?;
+    let (report, eval, stats) = refuse_with(&a.input, &a.output, &config, source, &a.reference)?;
     if a.json {
         println!(
             "{}",
@@ -60,13 +59,15 @@ pub fn refuse_with(
     output: &Path,
     config: &PipelinesConfig,
     source: String,
-) -> Result<(RefuseReport, RunStats)> {
+    reference: &str,
+) -> Result<(RefuseReport, EvalReport, RunStats)> {
     let started = Instant::now();
-    let report = refuse(&RefuseOptions {
+    let (report, eval) = refuse(&RefuseOptions {
         input,
         output,
         config,
         config_source: source,
+        reference,
     })?;
     let elapsed_s = started.elapsed().as_secs_f64();
     let stats = RunStats {
@@ -95,7 +96,7 @@ pub fn refuse_with(
             report.out_of_order_messages
         );
     }
-    Ok((report, stats))
+    Ok((report, eval, stats))
 }
 
 /// Peak resident set size of this process, from /proc/self/status.
@@ -131,8 +132,7 @@ pub fn refuse_and_evaluate(
     source: String,
     reference: &str,
 ) -> Result<(RefuseReport, EvalReport)> {
-    let (report, _) = refuse_with(input, output, config, source)?;
-    let eval = evaluate(output, reference)?;
+    let (report, eval, _) = refuse_with(input, output, config, source, reference)?;
     print_eval(&eval);
     Ok((report, eval))
 }

@@ -10,7 +10,7 @@ use railfuse_catalog::topics;
 use railfuse_record::simulator::FaultSpec;
 use railfuse_record::{simulate, Scenario};
 use railfuse_refuse::config::{embedded_path, PipelinesConfig};
-use railfuse_refuse::eval::{evaluate, PipelineEval};
+use railfuse_refuse::eval::PipelineEval;
 use railfuse_refuse::replay::{refuse, RefuseOptions};
 
 use super::{SEED000_PIPELINES, SEED001_PIPELINES};
@@ -90,13 +90,13 @@ fn run_one(
     let fused = dir.join(format!("{scenario}-{tag}-seed{seed}.fused.mcap"));
     let preset = Scenario::preset(scenario).expect("a built-in preset");
     let sim = simulate(&preset, seed, None, faults, &raw)?;
-    refuse(&RefuseOptions {
+    let (_, eval) = refuse(&RefuseOptions {
         input: &raw,
         output: &fused,
         config,
         config_source: format!("samples/{scenario}.toml"),
+        reference: topics::GROUND_TRUTH,
     })?;
-    let eval = evaluate(&fused, topics::GROUND_TRUTH)?;
     std::fs::remove_file(&raw).ok();
     std::fs::remove_file(&fused).ok();
     Ok((eval.pipelines, sim.duration_s))

@@ -18,7 +18,11 @@ pub enum Error {
     #[error(
         "{path}: damaged at byte {offset}: {cause}; `railfuse recover` salvages every intact chunk"
     )]
-    Damaged { path: PathBuf, offset: u64, cause: String },
+    Damaged {
+        path: PathBuf,
+        offset: u64,
+        cause: String,
+    },
     #[error("{path}: the file is empty")]
     Empty { path: PathBuf },
     #[error("{path}: message on {topic} at log time {log_time_ns} ns does not decode as {schema}: {source}")]

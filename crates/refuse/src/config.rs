@@ -134,12 +134,19 @@ impl MotionConfig {
     }
 }
 
-/// The filter starts at its first position measurement: chainage from it; speed from the
-/// latest valid speed measurement before it (else `speed_mps`, `speed_std_mps`); acceleration
-/// `acceleration_mps2` (default 0) with `acceleration_std_mps2`.
+/// Where the filter starts. By default at its first position measurement: chainage from it;
+/// speed from the latest valid speed measurement before it (else `speed_mps`,
+/// `speed_std_mps`); acceleration `acceleration_mps2` (default 0) with
+/// `acceleration_std_mps2`. With `chainage_m` (and `chainage_std_m`, default 0.01 m) it
+/// starts there at its first usable measurement of any kind; a pipeline none of whose sensors
+/// gives chainage (radar and odometers only) starts so at chainage 0: distance travelled.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct InitialConfig {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chainage_m: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub chainage_std_m: Option<f64>,
     pub speed_mps: f64,
     pub speed_std_mps: f64,
     pub acceleration_mps2: f64,
@@ -149,6 +156,8 @@ pub struct InitialConfig {
 impl Default for InitialConfig {
     fn default() -> Self {
         Self {
+            chainage_m: None,
+            chainage_std_m: None,
             speed_mps: 0.0,
             speed_std_mps: 5.0,
             acceleration_mps2: 0.0,
@@ -454,6 +463,13 @@ impl PipelineConfig {
             && init.acceleration_mps2.is_finite())
         {
             return Err("initial standard deviations must be positive".into());
+        }
+        if init.chainage_m.is_some_and(|c| !c.is_finite())
+            || init
+                .chainage_std_m
+                .is_some_and(|s| !(s.is_finite() && s > 0.0))
+        {
+            return Err("initial chainage_m must be finite and chainage_std_m positive".into());
         }
         if self.gate_lockout.is_some() && self.filter.is_federated() {
             return Err("gate_lockout is for kalman and particle pipelines; a federated pipeline's devices have [federated] detector.gate_failures".into());

@@ -15,7 +15,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::log::{read_summary, LogMessage, LogReader, LogRecord};
 use railfuse_catalog::messages::{
     ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision, GnssFix,
     GroundTruth, TrackMap,
@@ -104,14 +104,12 @@ struct Scored {
 }
 
 impl Scored {
-    fn new(name: String, pipeline: String) -> Self {
-        // Fused states are released up to a reorder window (default 0.5 s) behind the
-        // replay; 5 s covers any sane window.
+    fn new(name: String, pipeline: String, lag_s: f64) -> Self {
         Self {
             smoothed: name.ends_with("/smoothed"),
             name,
             pipeline,
-            meter: AccuracyMeter::new(5.0),
+            meter: AccuracyMeter::new(lag_s),
             states: 0,
             nis: Consistency::default(),
             gated: 0,
@@ -163,183 +161,268 @@ fn window_of(e: &Event) -> Option<(String, bool)> {
     })
 }
 
-pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
-    let mut scored: Vec<Scored> = Vec::new();
-    let mut roles: BTreeMap<u16, Role> = BTreeMap::new();
-    let mut spans: Vec<Span> = Vec::new();
-    let mut filters: BTreeMap<String, String> = BTreeMap::new();
-    let mut map: Option<TrackMap> = None;
-    let mut reference: Option<ReferenceKind> = None;
-    let mut smoothed_channels = false;
-    let mut first_ns: Option<u64> = None;
-    let index_of = |scored: &mut Vec<Scored>, name: String, pipeline: &str| match scored
-        .iter()
-        .position(|s| s.name == name)
-    {
-        Some(i) => i,
-        None => {
-            scored.push(Scored::new(name, pipeline.to_owned()));
-            scored.len() - 1
-        }
-    };
+/// The evaluation of one log, fed record by record: by [`evaluate`] from a file, or by the
+/// `refuse` replay as it goes (input records, and its fused outputs without a JSON round trip).
+pub struct Evaluator {
+    path: PathBuf,
+    reference_topic: String,
+    /// How far fused states may lag the reference in file order, s.
+    lag_s: f64,
+    scored: Vec<Scored>,
+    roles: BTreeMap<u16, Role>,
+    spans: Vec<Span>,
+    filters: BTreeMap<String, String>,
+    map: Option<TrackMap>,
+    reference: Option<ReferenceKind>,
+    smoothed_channels: bool,
+    first_ns: Option<u64>,
+}
 
+impl Evaluator {
+    /// `lag_s`: how far a fused state may trail its reference (the reorder window, plus a
+    /// chunk's time span where fused chunks follow the input chunk they came from).
+    pub fn new(path: &Path, reference_topic: &str, lag_s: f64) -> Self {
+        Self {
+            path: path.to_owned(),
+            reference_topic: reference_topic.to_owned(),
+            lag_s,
+            scored: Vec::new(),
+            roles: BTreeMap::new(),
+            spans: Vec::new(),
+            filters: BTreeMap::new(),
+            map: None,
+            reference: None,
+            smoothed_channels: false,
+            first_ns: None,
+        }
+    }
+
+    fn index_of(&mut self, name: String, pipeline: &str) -> usize {
+        match self.scored.iter().position(|s| s.name == name) {
+            Some(i) => i,
+            None => {
+                self.scored
+                    .push(Scored::new(name, pipeline.to_owned(), self.lag_s));
+                self.scored.len() - 1
+            }
+        }
+    }
+
+    /// Takes in a channel; says whether the evaluation reads its messages.
+    pub fn channel(&mut self, id: u16, topic: &str, schema: &str) -> bool {
+        let role = if topic == self.reference_topic {
+            let kind = match schema {
+                s if s == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
+                s if s == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),
+                s if s == GnssFix::SCHEMA_NAME => Some(ReferenceKind::Gnss),
+                _ => None,
+            };
+            self.reference = self.reference.or(kind);
+            kind.map(Role::Reference)
+        } else if let Some(p) = topics::fused_pipeline_of(topic) {
+            match topic.rsplit('/').next() {
+                Some("state") if schema == FusedState::SCHEMA_NAME => {
+                    Some(Role::State(self.index_of(p.to_owned(), p)))
+                }
+                Some("smoothed") if schema == FusedState::SCHEMA_NAME => {
+                    self.smoothed_channels = true;
+                    Some(Role::Smoothed(self.index_of(format!("{p}/smoothed"), p)))
+                }
+                Some("diagnostics") if schema == FusedDiagnostics::SCHEMA_NAME => {
+                    Some(Role::Diagnostics(self.index_of(p.to_owned(), p)))
+                }
+                _ => None,
+            }
+        } else if schema == TrackMap::SCHEMA_NAME {
+            Some(Role::TrackMap)
+        } else if schema == Event::SCHEMA_NAME {
+            Some(Role::Events)
+        } else {
+            None
+        };
+        if let Some(r) = role {
+            self.roles.insert(id, r);
+        }
+        role.is_some_and(|r| !matches!(r, Role::Smoothed(_)))
+    }
+
+    /// The log time of any message of the file (the report's times count from the first).
+    pub fn log_time(&mut self, t_ns: u64) {
+        self.first_ns = Some(self.first_ns.map_or(t_ns, |f| f.min(t_ns)));
+    }
+
+    /// A message of a channel [`Evaluator::channel`] said it reads.
+    pub fn message(&mut self, m: &LogMessage<'_>) -> Result<()> {
+        let path = &self.path;
+        match self.roles.get(&m.channel.id).copied() {
+            Some(Role::Reference(kind)) => {
+                if let Some((t, s, v)) = reference_sample(kind, m, path, self.map.as_ref())? {
+                    self.reference_sample(t, s, v);
+                }
+            }
+            Some(Role::State(_)) => self.fused_state(m.channel.id, &m.decode(path)?),
+            Some(Role::Diagnostics(_)) => self.fused_diagnostics(m.channel.id, &m.decode(path)?),
+            Some(Role::TrackMap) => self.map = Some(m.decode(path)?),
+            Some(Role::Events) => {
+                let e: Event = m.decode(path)?;
+                if let Some((label, opens)) = window_of(&e) {
+                    if opens {
+                        self.spans.push(Span {
+                            label,
+                            start_ns: e.stamp_ns,
+                            end_ns: None,
+                        });
+                    } else if let Some(s) = self
+                        .spans
+                        .iter_mut()
+                        .rev()
+                        .find(|s| s.label == label && s.end_ns.is_none())
+                    {
+                        s.end_ns = Some(e.stamp_ns);
+                    }
+                }
+            }
+            Some(Role::Smoothed(_)) | None => {}
+        }
+        Ok(())
+    }
+
+    fn reference_sample(&mut self, t: u64, s: f64, v: f64) {
+        // Smoothed channels get the reference in their own later pass.
+        for x in self.scored.iter_mut().filter(|x| !x.smoothed) {
+            x.meter.add_reference(t, s, v, &self.spans);
+        }
+    }
+
+    /// A fused state on channel `id` (a `/fused/<name>/state` channel).
+    pub fn fused_state(&mut self, id: u16, state: &FusedState) {
+        if let Some(Role::State(i)) = self.roles.get(&id).copied() {
+            self.scored[i].meter.add_estimate(state, &self.spans);
+            self.scored[i].states += 1;
+        }
+    }
+
+    /// A fused diagnostics record on channel `id`.
+    pub fn fused_diagnostics(&mut self, id: u16, d: &FusedDiagnostics) {
+        let Some(Role::Diagnostics(i)) = self.roles.get(&id).copied() else {
+            return;
+        };
+        let s = &mut self.scored[i];
+        match d.decision {
+            GateDecision::Accepted => {}
+            GateDecision::RejectedGate => s.gated += 1,
+            GateDecision::AcceptedAfterLockout => {
+                s.lockouts += 1;
+                return;
+            }
+            GateDecision::RejectedDeviceFault => s.device_fault += 1,
+            _ => return,
+        }
+        if let (Some(nis), GateDecision::Accepted | GateDecision::RejectedGate) =
+            (d.nis, d.decision)
+        {
+            s.nis.add(nis, CHI2_95_1DOF);
+        }
+    }
+
+    /// A metadata record (pipeline records name each pipeline's filter).
+    pub fn metadata(&mut self, name: &str, metadata: &BTreeMap<String, String>) {
+        if name == topics::metadata::PIPELINE {
+            if let (Some(p), Some(f)) = (metadata.get("pipeline"), metadata.get("filter")) {
+                self.filters.insert(p.clone(), f.clone());
+            }
+        }
+    }
+
+    /// The report. Smoothed states, if any, are scored from `log` (the file holding them) in
+    /// passes of their own.
+    pub fn finish(mut self, log: &Path) -> Result<EvalReport> {
+        if self.smoothed_channels && self.reference.is_some() {
+            score_smoothed(log, &self.roles, &mut self.scored, &self.spans)?;
+        }
+        let t0 = self.first_ns.unwrap_or(0);
+        let filters = self.filters;
+        let pipelines = self
+            .scored
+            .into_iter()
+            .filter(|s| s.states > 0 || s.gated > 0 || s.nis.summary().is_some())
+            .map(|mut s| {
+                s.meter.finish();
+                PipelineEval {
+                    filter: filters.get(&s.pipeline).cloned(),
+                    name: s.name,
+                    pipeline: s.pipeline,
+                    states: s.states,
+                    position_error_m: s.meter.position.summary(),
+                    speed_error_mps: s.meter.speed.summary(),
+                    nees: s.meter.nees.summary(),
+                    nis: s.nis.summary(),
+                    gated: s.gated,
+                    lockout_recoveries: s.lockouts,
+                    device_fault_rejections: s.device_fault,
+                    unmatched_states: s.meter.unmatched,
+                    windows: s
+                        .meter
+                        .windows
+                        .iter()
+                        .map(|w| WindowEval {
+                            label: w.label.clone(),
+                            position_error_m: w.position.summary(),
+                            speed_error_mps: w.speed.summary(),
+                        })
+                        .collect(),
+                }
+            })
+            .collect();
+        let secs = |t: u64| t.saturating_sub(t0) as f64 / 1e9;
+        Ok(EvalReport {
+            input: self.path,
+            reference: self.reference.map(|_| self.reference_topic),
+            windows: self
+                .spans
+                .iter()
+                .map(|s| SpanReport {
+                    label: s.label.clone(),
+                    start_s: secs(s.start_ns),
+                    end_s: s.end_ns.map(secs),
+                })
+                .collect(),
+            pipelines,
+        })
+    }
+}
+
+/// How far, in s, fused states may trail the reference in file order: the reorder window
+/// (5 s covers any sane one) plus the longest chunk, since railfuse writes the fused chunk of
+/// an input chunk right after it.
+pub fn lag_allowance_s(longest_chunk_ns: Option<u64>) -> f64 {
+    5.0 + longest_chunk_ns.unwrap_or(0) as f64 / 1e9
+}
+
+/// The accuracy table of a log's fused channels against `reference_topic`.
+pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
+    let longest = read_summary(input)?.and_then(|s| s.longest_chunk_ns);
+    let mut eval = Evaluator::new(input, reference_topic, lag_allowance_s(longest));
+    let mut reads = std::collections::HashSet::new();
     let mut reader = LogReader::open(input)?;
     while let Some(record) = reader.next() {
         match record? {
             LogRecord::Channel(c) => {
-                let schema = c.schema_name();
-                let role = if c.topic == reference_topic {
-                    let kind = match schema {
-                        s if s == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
-                        s if s == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),
-                        s if s == GnssFix::SCHEMA_NAME => Some(ReferenceKind::Gnss),
-                        _ => None,
-                    };
-                    reference = reference.or(kind);
-                    kind.map(Role::Reference)
-                } else if let Some(p) = topics::fused_pipeline_of(&c.topic) {
-                    match c.topic.rsplit('/').next() {
-                        Some("state") if schema == FusedState::SCHEMA_NAME => {
-                            Some(Role::State(index_of(&mut scored, p.to_owned(), p)))
-                        }
-                        Some("smoothed") if schema == FusedState::SCHEMA_NAME => {
-                            smoothed_channels = true;
-                            Some(Role::Smoothed(index_of(
-                                &mut scored,
-                                format!("{p}/smoothed"),
-                                p,
-                            )))
-                        }
-                        Some("diagnostics") if schema == FusedDiagnostics::SCHEMA_NAME => {
-                            Some(Role::Diagnostics(index_of(&mut scored, p.to_owned(), p)))
-                        }
-                        _ => None,
-                    }
-                } else if schema == TrackMap::SCHEMA_NAME {
-                    Some(Role::TrackMap)
-                } else if schema == Event::SCHEMA_NAME {
-                    Some(Role::Events)
-                } else {
-                    None
-                };
-                if let Some(r) = role {
-                    roles.insert(c.id, r);
+                if eval.channel(c.id, &c.topic, c.schema_name()) {
+                    reads.insert(c.id);
                 }
             }
             LogRecord::Message(m) => {
-                first_ns = Some(first_ns.map_or(m.log_time_ns, |f: u64| f.min(m.log_time_ns)));
-                match roles.get(&m.channel.id).copied() {
-                    Some(Role::Reference(kind)) => {
-                        if let Some((t, s, v)) = reference_sample(kind, &m, input, map.as_ref())? {
-                            // Smoothed channels get the reference in their own later pass.
-                            for x in scored.iter_mut().filter(|x| !x.smoothed) {
-                                x.meter.add_reference(t, s, v, &spans);
-                            }
-                        }
-                    }
-                    Some(Role::State(i)) => {
-                        let st: FusedState = m.decode(input)?;
-                        scored[i].meter.add_estimate(&st, &spans);
-                        scored[i].states += 1;
-                    }
-                    Some(Role::Diagnostics(i)) => {
-                        let d: FusedDiagnostics = m.decode(input)?;
-                        match d.decision {
-                            GateDecision::Accepted => {}
-                            GateDecision::RejectedGate => scored[i].gated += 1,
-                            GateDecision::AcceptedAfterLockout => {
-                                scored[i].lockouts += 1;
-                                continue;
-                            }
-                            GateDecision::RejectedDeviceFault => scored[i].device_fault += 1,
-                            _ => continue,
-                        }
-                        if let (Some(nis), GateDecision::Accepted | GateDecision::RejectedGate) =
-                            (d.nis, d.decision)
-                        {
-                            scored[i].nis.add(nis, CHI2_95_1DOF);
-                        }
-                    }
-                    Some(Role::TrackMap) => map = Some(m.decode(input)?),
-                    Some(Role::Events) => {
-                        let e: Event = m.decode(input)?;
-                        if let Some((label, opens)) = window_of(&e) {
-                            if opens {
-                                spans.push(Span {
-                                    label,
-                                    start_ns: e.stamp_ns,
-                                    end_ns: None,
-                                });
-                            } else if let Some(s) = spans
-                                .iter_mut()
-                                .rev()
-                                .find(|s| s.label == label && s.end_ns.is_none())
-                            {
-                                s.end_ns = Some(e.stamp_ns);
-                            }
-                        }
-                    }
-                    Some(Role::Smoothed(_)) | None => {}
+                eval.log_time(m.log_time_ns);
+                if reads.contains(&m.channel.id) {
+                    eval.message(&m)?;
                 }
             }
-            LogRecord::Metadata { name, metadata } if name == topics::metadata::PIPELINE => {
-                if let (Some(p), Some(f)) = (metadata.get("pipeline"), metadata.get("filter")) {
-                    filters.insert(p.clone(), f.clone());
-                }
-            }
+            LogRecord::Metadata { name, metadata } => eval.metadata(&name, &metadata),
             _ => {}
         }
     }
-    if smoothed_channels && reference.is_some() {
-        score_smoothed(input, &roles, &mut scored, &spans)?;
-    }
-
-    let t0 = first_ns.unwrap_or(0);
-    let pipelines = scored
-        .into_iter()
-        .filter(|s| s.states > 0 || s.gated > 0 || s.nis.summary().is_some())
-        .map(|mut s| {
-            s.meter.finish();
-            PipelineEval {
-                filter: filters.get(&s.pipeline).cloned(),
-                name: s.name,
-                pipeline: s.pipeline,
-                states: s.states,
-                position_error_m: s.meter.position.summary(),
-                speed_error_mps: s.meter.speed.summary(),
-                nees: s.meter.nees.summary(),
-                nis: s.nis.summary(),
-                gated: s.gated,
-                lockout_recoveries: s.lockouts,
-                device_fault_rejections: s.device_fault,
-                unmatched_states: s.meter.unmatched,
-                windows: s
-                    .meter
-                    .windows
-                    .iter()
-                    .map(|w| WindowEval {
-                        label: w.label.clone(),
-                        position_error_m: w.position.summary(),
-                        speed_error_mps: w.speed.summary(),
-                    })
-                    .collect(),
-            }
-        })
-        .collect();
-    let secs = |t: u64| t.saturating_sub(t0) as f64 / 1e9;
-    Ok(EvalReport {
-        input: input.to_owned(),
-        reference: reference.map(|_| reference_topic.to_owned()),
-        windows: spans
-            .iter()
-            .map(|s| SpanReport {
-                label: s.label.clone(),
-                start_s: secs(s.start_ns),
-                end_s: s.end_ns.map(secs),
-            })
-            .collect(),
-        pipelines,
-    })
+    eval.finish(input)
 }
 
 /// Later passes for smoothed states, one per smoothed channel: one reader walks its states,

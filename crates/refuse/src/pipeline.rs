@@ -26,10 +26,14 @@ use crate::filter::{
     Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
     StateAndCovariance, MASTER,
 };
-use crate::measurement::{Measurement, Quantity};
+use crate::measurement::{Measurement, Quantity, SensorModel};
 use crate::model::{
     ConstantAcceleration, ConstantVelocity, SensorState, Singer, TransitionModel, WithSensorStates,
 };
+
+/// Spread of a start chainage given without one, m: distance from where the log starts is
+/// exact.
+pub const DEFAULT_CHAINAGE_STD_M: f64 = 0.01;
 
 /// What a pipeline did with its measurements.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
@@ -101,6 +105,8 @@ pub struct Pipeline<const N: usize> {
     seq: u64,
     /// The latest valid speed measurement before the first position: the initial speed.
     speed_before_init: Option<(f64, f64)>,
+    /// Per sensor: whether it may give chainage (until its channel is seen, it may).
+    gives_chainage: Vec<bool>,
     output_period_ns: Option<u64>,
     next_output_ns: u64,
     pub counts: PipelineCounts,
@@ -147,6 +153,7 @@ impl<const N: usize> Pipeline<N> {
                 scale_state,
             })
         };
+        let gives_chainage = vec![true; config.sensor.len()];
         let sensors = config
             .sensor
             .iter()
@@ -197,6 +204,7 @@ impl<const N: usize> Pipeline<N> {
             pending: HashMap::new(),
             seq: 0,
             speed_before_init: None,
+            gives_chainage,
             next_output_ns: 0,
             counts: PipelineCounts::default(),
         })
@@ -266,6 +274,42 @@ impl<const N: usize> Pipeline<N> {
                 .expect("every queued key has its measurement");
             self.process(p, log_time_ns, out);
         }
+    }
+
+    /// Where the filter starts when that does not wait for a position measurement: the
+    /// configured chainage, or distance 0 for a pipeline none of whose sensors gives chainage.
+    fn known_start(&self) -> Option<(f64, f64)> {
+        let init = &self.config.initial;
+        let var = init
+            .chainage_std_m
+            .unwrap_or(DEFAULT_CHAINAGE_STD_M)
+            .powi(2);
+        match init.chainage_m {
+            Some(c) => Some((c, var)),
+            None if !self.gives_chainage.iter().any(|g| *g) => Some((0.0, var)),
+            None => None,
+        }
+    }
+
+    /// Builds the estimator at `init`, time `t0_ns`.
+    fn start(&mut self, init: &StateAndCovariance<N>, t0_ns: u64) {
+        let estimator = self.build(init, t0_ns);
+        self.estimator = Some(estimator);
+        self.time_ns = t0_ns;
+        if let Some(period) = self.output_period_ns {
+            // Ticks on whole multiples of the period, for comparable outputs.
+            self.next_output_ns = t0_ns.div_ceil(period) * period;
+        }
+    }
+
+    /// Sensor `sensor` turned out to be read by `model`: it gives chainage only if both its
+    /// fields and the model do.
+    pub fn resolve_sensor(&mut self, sensor: usize, model: SensorModel) {
+        let gives = self.sensors[sensor]
+            .fields
+            .iter()
+            .any(|f| f.quantity == Quantity::Chainage);
+        self.gives_chainage[sensor] = gives && model.quantities().contains(&Quantity::Chainage);
     }
 
     fn initial(&self, chainage: f64, r: f64) -> StateAndCovariance<N> {
@@ -413,18 +457,22 @@ impl<const N: usize> Pipeline<N> {
             e.heard_from(device, m.stamp_ns);
         }
         let mut state = None;
+        let usable = usable_variance.is_some() && m.valid && m.value.is_finite();
+        if usable && self.estimator.is_none() {
+            // Told where it starts (or with no position sensor: at distance 0), the filter
+            // starts at its first usable measurement and then uses it.
+            if let Some((chainage, var)) = self.known_start() {
+                let init = self.initial(chainage, var);
+                self.start(&init, m.stamp_ns);
+            }
+        }
         let decision = match (usable_variance, self.estimator.is_some()) {
             (None, _) => GateDecision::RejectedInvalid,
             _ if !m.valid || !m.value.is_finite() => GateDecision::RejectedInvalid,
             (Some(r), false) if m.quantity == Quantity::Chainage => {
                 let init = self.initial(m.value, r);
-                let estimator = self.build(&init, m.stamp_ns);
-                self.estimator = Some(estimator);
-                self.time_ns = m.stamp_ns;
-                if let Some(period) = self.output_period_ns {
-                    // Ticks on whole multiples of the period, for comparable outputs.
-                    self.next_output_ns = m.stamp_ns.div_ceil(period) * period;
-                } else {
+                self.start(&init, m.stamp_ns);
+                if self.output_period_ns.is_none() {
                     state = Some(fused_state(&self.layout, m.stamp_ns, &init, &source));
                 }
                 GateDecision::Accepted
@@ -705,6 +753,10 @@ impl AnyPipeline {
 
     pub fn device_event(&mut self, device: &str, failed: bool) {
         each!(self, p => p.device_event(device, failed))
+    }
+
+    pub fn resolve_sensor(&mut self, sensor: usize, model: SensorModel) {
+        each!(self, p => p.resolve_sensor(sensor, model))
     }
 
     pub fn smoothed(

@@ -8,8 +8,14 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use railfuse_catalog::log::{read_channels, ChannelId, LogReader, LogRecord, LogWriter};
+use mcap::records::op;
+use railfuse_catalog::log::format::{self, Records};
+use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner};
+use railfuse_catalog::log::{
+    read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
+};
 use railfuse_catalog::messages::{
     ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, TrackMap,
 };
@@ -18,7 +24,8 @@ use serde::Serialize;
 
 use crate::config::PipelinesConfig;
 use crate::error::{Error, Result};
-use crate::measurement::{SensorContext, SensorModel};
+use crate::eval::{self, EvalReport, Evaluator};
+use crate::measurement::{Measurement, SensorContext, SensorModel};
 use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 
 pub struct RefuseOptions<'a> {
@@ -27,6 +34,8 @@ pub struct RefuseOptions<'a> {
     pub config: &'a PipelinesConfig,
     /// Where the configuration came from (a path, or "embedded default"), for the metadata.
     pub config_source: String,
+    /// The reference topic of the accuracy evaluation made in the same pass.
+    pub reference: &'a str,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -63,6 +72,8 @@ struct Route {
     /// (pipeline, sensor index) pairs fed by this channel, and how to read it.
     sensors: Vec<(usize, usize)>,
     model: Option<SensorModel>,
+    /// The evaluation reads it (reference, track map, events, kept fused channels).
+    evaluated: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -79,301 +90,546 @@ struct Output {
     smoothed_states: u64,
 }
 
-pub fn refuse(opts: &RefuseOptions<'_>) -> Result<RefuseReport> {
-    let input = opts.input;
-    let names: BTreeSet<&str> = opts
-        .config
-        .pipeline
-        .iter()
-        .map(|p| p.name.as_str())
-        .collect();
-    let is_replaced =
-        |topic: &str| topics::fused_pipeline_of(topic).is_some_and(|n| names.contains(n));
-    let known = read_channels(input)?;
-    if let Some(channels) = &known {
-        for p in &opts.config.pipeline {
-            for s in &p.sensor {
-                match channels.iter().find(|c| c.topic == s.topic) {
-                    None => {
-                        let have: Vec<&str> = channels
-                            .iter()
-                            .map(|c| c.topic.as_str())
-                            .filter(|t| !t.starts_with(topics::FUSED_PREFIX))
-                            .collect();
-                        return Err(channel_error(
-                            input,
-                            &p.name,
-                            &s.topic,
-                            format!("is not in the file (it has {})", have.join(", ")),
-                        ));
-                    }
-                    Some(c) => check_sensor(input, p, s, c.schema_name())?,
-                }
-            }
+/// Replays `opts.input` through the pipelines into `opts.output` and evaluates the result
+/// against `opts.reference` in the same pass.
+pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
+    let summary = read_summary(opts.input)?;
+    let mut replay = Replay::new(opts, summary)?;
+    let mut items = ReadAhead::new(Scanner::open(opts.input)?, 4);
+    for item in &mut items {
+        match item? {
+            Item::Chunk(chunk) => replay.chunk(&chunk)?,
+            Item::Record { opcode, body, .. } => replay.top_level(opcode, &body)?,
+            Item::Damage(_) => unreachable!("a strict scanner reports damage as an error"),
         }
     }
+    replay.report.input_bytes = items.position();
+    replay.finish()
+}
 
-    let mut writer = LogWriter::create(opts.output)?;
-    // Output channels take the highest ids the input does not use, so copied records keep
-    // theirs.
-    let used: BTreeSet<u16> = known
-        .iter()
-        .flatten()
-        .filter(|c| !is_replaced(&c.topic))
-        .map(|c| c.id)
-        .collect();
-    let used_schemas: BTreeSet<u16> = known
-        .iter()
-        .flatten()
-        .filter_map(|c| c.schema.as_ref().map(|s| s.id))
-        .collect();
-    let mut free = (1..=u16::MAX)
-        .rev()
-        .filter(|id| !used.contains(id) && !used_schemas.contains(id));
-    let (state_schema, diag_schema) = (
-        free.next().expect("ids to spare"),
-        free.next().expect("ids to spare"),
-    );
-    let mut outputs = Vec::new();
-    for p in &opts.config.pipeline {
-        outputs.push(Output {
-            state: writer.add_channel_with_ids::<FusedState>(
-                state_schema,
-                free.next().expect("ids"),
-                &topics::fused_state(&p.name),
-            )?,
-            diagnostics: writer.add_channel_with_ids::<FusedDiagnostics>(
+/// One `refuse` run in progress.
+struct Replay<'a> {
+    opts: &'a RefuseOptions<'a>,
+    /// The pipelines being run, whose earlier outputs the input may hold.
+    names: BTreeSet<String>,
+    writer: LogWriter,
+    pipelines: Vec<AnyPipeline>,
+    outputs: Vec<Output>,
+    context: SensorContext,
+    schemas: HashMap<u16, Arc<SchemaInfo>>,
+    channels: HashMap<u16, Arc<ChannelInfo>>,
+    routes: HashMap<u16, Route>,
+    seen_topics: BTreeSet<String>,
+    eval: Evaluator,
+    measurements: Vec<Measurement>,
+    fused: Vec<Fused>,
+    report: RefuseReport,
+    last_log_time: u64,
+}
+
+impl<'a> Replay<'a> {
+    /// Checks the pipelines against the file's channels (when it has a summary), opens the
+    /// output and registers the fused channels.
+    fn new(opts: &'a RefuseOptions<'a>, summary: Option<LogSummary>) -> Result<Self> {
+        let input = opts.input;
+        let names: BTreeSet<String> = opts
+            .config
+            .pipeline
+            .iter()
+            .map(|p| p.name.clone())
+            .collect();
+        let known = summary.as_ref().map(|s| &s.channels);
+        if let Some(channels) = known {
+            check_channels(input, opts.config, channels)?;
+        }
+        let mut writer = LogWriter::create(opts.output)?;
+        // Output channels take the highest ids the input does not use, so copied records keep
+        // theirs (replaced channels' ids too: their records may sit in chunks copied whole).
+        let used: BTreeSet<u16> = known.into_iter().flatten().map(|c| c.id).collect();
+        let used_schemas: BTreeSet<u16> = known
+            .into_iter()
+            .flatten()
+            .filter_map(|c| c.schema.as_ref().map(|s| s.id))
+            .collect();
+        let mut free = (1..=u16::MAX)
+            .rev()
+            .filter(|id| !used.contains(id) && !used_schemas.contains(id));
+        let mut next = || {
+            free.next()
+                .ok_or_else(|| Error::Log(ids_exhausted(opts.output)))
+        };
+        let (state_schema, diag_schema) = (next()?, next()?);
+        // Fused states of kept pipelines may trail the reference by a chunk in file order.
+        let lag = eval::lag_allowance_s(summary.as_ref().and_then(|s| s.longest_chunk_ns));
+        let mut eval = Evaluator::new(opts.output, opts.reference, lag);
+        let mut outputs = Vec::new();
+        for p in &opts.config.pipeline {
+            let state_topic = topics::fused_state(&p.name);
+            let diag_topic = topics::fused_diagnostics(&p.name);
+            let state =
+                writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &state_topic)?;
+            let diagnostics = writer.add_channel_with_ids::<FusedDiagnostics>(
                 diag_schema,
-                free.next().expect("ids"),
-                &topics::fused_diagnostics(&p.name),
-            )?,
-            smoothed: match p.smoother {
-                true => Some(writer.add_channel_with_ids::<FusedState>(
-                    state_schema,
-                    free.next().expect("ids"),
-                    &topics::fused_smoothed(&p.name),
-                )?),
+                next()?,
+                &diag_topic,
+            )?;
+            eval.channel(state.0, &state_topic, FusedState::SCHEMA_NAME);
+            eval.channel(diagnostics.0, &diag_topic, FusedDiagnostics::SCHEMA_NAME);
+            let smoothed = match p.smoother {
+                true => {
+                    let topic = topics::fused_smoothed(&p.name);
+                    let id =
+                        writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &topic)?;
+                    eval.channel(id.0, &topic, FusedState::SCHEMA_NAME);
+                    Some(id)
+                }
                 false => None,
+            };
+            outputs.push(Output {
+                state,
+                diagnostics,
+                smoothed,
+                states: 0,
+                smoothed_states: 0,
+            });
+        }
+        let pipelines = opts
+            .config
+            .pipeline
+            .iter()
+            .cloned()
+            .map(AnyPipeline::new)
+            .collect::<Result<_>>()?;
+        Ok(Self {
+            opts,
+            names,
+            writer,
+            pipelines,
+            outputs,
+            context: SensorContext::default(),
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            routes: HashMap::new(),
+            seen_topics: BTreeSet::new(),
+            eval,
+            measurements: Vec::new(),
+            fused: Vec::new(),
+            report: RefuseReport {
+                input: input.to_owned(),
+                output: opts.output.to_owned(),
+                input_messages: 0,
+                input_bytes: 0,
+                fused_messages: 0,
+                out_of_order_messages: 0,
+                undecodable_messages: 0,
+                first_undecodable: None,
+                pipelines: Vec::new(),
             },
-            states: 0,
-            smoothed_states: 0,
-        });
+            last_log_time: 0,
+        })
     }
 
-    let mut pipelines: Vec<AnyPipeline> = opts
-        .config
-        .pipeline
-        .iter()
-        .cloned()
-        .map(AnyPipeline::new)
-        .collect::<Result<_>>()?;
-    let mut context = SensorContext::default();
-    let mut measurements = Vec::new();
-    let mut routes: HashMap<u16, Route> = HashMap::new();
-    let mut seen_topics = BTreeSet::new();
-    let mut fused_buf: Vec<Fused> = Vec::new();
-    let mut report = RefuseReport {
-        input: input.to_owned(),
-        output: opts.output.to_owned(),
-        input_messages: 0,
-        input_bytes: 0,
-        fused_messages: 0,
-        out_of_order_messages: 0,
-        undecodable_messages: 0,
-        first_undecodable: None,
-        pipelines: Vec::new(),
-    };
-    let mut last_log_time = 0u64;
+    fn is_replaced(&self, topic: &str) -> bool {
+        topics::fused_pipeline_of(topic).is_some_and(|n| self.names.contains(n))
+    }
 
-    let mut reader = LogReader::open(input)?;
-    while let Some(record) = reader.next() {
-        match record? {
-            LogRecord::Schema(s) => writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?,
-            LogRecord::Channel(c) => {
-                let mut route = Route::default();
-                if is_replaced(&c.topic) {
-                    route.replaced = true;
-                } else {
-                    writer.copy_channel(
-                        c.id,
-                        c.schema.as_ref().map_or(0, |s| s.id),
-                        &c.topic,
-                        &c.message_encoding,
-                        &c.metadata,
-                    )?;
-                    seen_topics.insert(c.topic.clone());
-                    route.context = match c.schema_name() {
-                        n if n == TrackMap::SCHEMA_NAME => Some(ContextKind::TrackMap),
-                        n if n == Event::SCHEMA_NAME => Some(ContextKind::Events),
-                        _ => None,
-                    };
-                    for (pi, p) in pipelines.iter().enumerate() {
-                        if let Some(si) = p.sensor_for(&c.topic) {
-                            check_sensor(
-                                input,
-                                p.config(),
-                                &p.config().sensor[si],
-                                c.schema_name(),
-                            )?;
-                            route.sensors.push((pi, si));
-                            route.model = SensorModel::for_schema(c.schema_name());
-                        }
-                    }
+    /// An input chunk: its messages go to the pipelines and the evaluation; the chunk itself
+    /// is copied byte for byte unless it holds a replaced channel, and the fused records it
+    /// gave rise to follow it in a chunk of their own.
+    fn chunk(&mut self, chunk: &Chunk) -> Result<()> {
+        let mut rewrite = false;
+        for record in Records::new(&chunk.records) {
+            let record = record.map_err(|e| self.damaged(chunk.offset, e))?;
+            match record.opcode {
+                op::SCHEMA => self.schema(record.body, false)?,
+                op::CHANNEL => rewrite |= !self.channel(record.body, false)?,
+                op::MESSAGE => {
+                    let m = format::parse_message(record.body).ok_or_else(|| {
+                        self.damaged(chunk.offset, "a message record is cut short".into())
+                    })?;
+                    rewrite |= !self.message(&m)?;
                 }
-                routes.insert(c.id, route);
+                _ => {}
             }
-            LogRecord::Message(m) => {
-                let route = &routes[&m.channel.id];
-                if route.replaced {
-                    continue;
+        }
+        if rewrite {
+            self.rewrite(chunk)?;
+        } else {
+            self.writer.copy_chunk(chunk)?;
+        }
+        self.writer.close_chunk()?;
+        Ok(())
+    }
+
+    /// Writes a chunk's records but those of replaced channels.
+    fn rewrite(&mut self, chunk: &Chunk) -> Result<()> {
+        for record in Records::new(&chunk.records).flatten() {
+            match record.opcode {
+                op::SCHEMA => {
+                    let id = u16::from_le_bytes([record.body[0], record.body[1]]);
+                    let s = &self.schemas[&id];
+                    self.writer
+                        .copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
                 }
-                report.input_messages += 1;
-                if m.log_time_ns < last_log_time {
-                    report.out_of_order_messages += 1;
-                }
-                last_log_time = last_log_time.max(m.log_time_ns);
-                writer.write_raw(
-                    m.channel.id,
-                    m.sequence,
-                    m.log_time_ns,
-                    m.publish_time_ns,
-                    m.data,
-                )?;
-                match route.context {
-                    Some(ContextKind::TrackMap) => context.track = Some(m.decode(input)?),
-                    Some(ContextKind::Events) => {
-                        let e: Event = m.decode(input)?;
-                        let failed = match e.kind {
-                            EventKind::DeviceFault => Some(true),
-                            EventKind::DeviceRecovered => Some(false),
-                            _ => None,
-                        };
-                        if let Some(failed) = failed {
-                            pipelines
-                                .iter_mut()
-                                .for_each(|p| p.device_event(&e.text, failed));
-                        }
+                op::CHANNEL => {
+                    let id = u16::from_le_bytes([record.body[0], record.body[1]]);
+                    if !self.routes[&id].replaced {
+                        copy_channel(&mut self.writer, &self.channels[&id])?;
                     }
-                    None => {}
                 }
-                if let Some(model) = route.model {
-                    // A sensor message that does not decode (a null where a number belongs) is
-                    // skipped and counted: one bad message must not cost the whole replay.
-                    if let Err(e) = model.decode(&m, input, &context, &mut measurements) {
-                        report.undecodable_messages += 1;
-                        report
-                            .first_undecodable
-                            .get_or_insert_with(|| e.to_string());
-                        continue;
-                    }
-                    for &(pi, si) in &route.sensors {
-                        pipelines[pi].push(si, &measurements, m.log_time_ns, &mut fused_buf);
-                        emit(
-                            &mut writer,
-                            &mut outputs[pi],
-                            &mut fused_buf,
-                            &mut report.fused_messages,
+                op::MESSAGE => {
+                    let m = format::parse_message(record.body).expect("parsed before");
+                    let h = m.header;
+                    if !self.routes[&h.channel_id].replaced {
+                        self.writer.write_raw(
+                            h.channel_id,
+                            h.sequence,
+                            h.log_time,
+                            h.publish_time,
+                            m.data,
                         )?;
                     }
                 }
+                _ => {}
             }
-            LogRecord::Metadata { name, metadata } => {
-                let replaced = name == topics::metadata::PIPELINE
-                    && metadata
-                        .get("pipeline")
-                        .is_some_and(|p| names.contains(p.as_str()));
-                if !replaced {
-                    writer.write_metadata(&name, metadata)?;
+        }
+        Ok(())
+    }
+
+    /// A record outside chunks.
+    fn top_level(&mut self, opcode: u8, body: &[u8]) -> Result<()> {
+        match opcode {
+            op::SCHEMA => self.schema(body, true),
+            op::CHANNEL => self.channel(body, true).map(|_| ()),
+            op::MESSAGE => {
+                let m = format::parse_message(body)
+                    .ok_or_else(|| self.damaged(0, "a message record is cut short".into()))?;
+                let h = m.header;
+                if self.message(&m)? {
+                    self.writer.write_raw(
+                        h.channel_id,
+                        h.sequence,
+                        h.log_time,
+                        h.publish_time,
+                        m.data,
+                    )?;
+                }
+                Ok(())
+            }
+            op::METADATA | op::ATTACHMENT => match mcap::parse_record(opcode, body) {
+                Ok(mcap::records::Record::Metadata(m)) => {
+                    let replaced = m.name == topics::metadata::PIPELINE
+                        && m.metadata
+                            .get("pipeline")
+                            .is_some_and(|p| self.names.contains(p));
+                    if !replaced {
+                        self.eval.metadata(&m.name, &m.metadata);
+                        self.writer.write_metadata(&m.name, m.metadata)?;
+                    }
+                    Ok(())
+                }
+                Ok(mcap::records::Record::Attachment {
+                    header: h, data, ..
+                }) => Ok(self.writer.attach(
+                    &h.name,
+                    &h.media_type,
+                    h.log_time,
+                    h.create_time,
+                    &data,
+                )?),
+                Ok(_) => Ok(()),
+                Err(e) => Err(self.damaged(0, e.to_string())),
+            },
+            _ => Ok(()),
+        }
+    }
+
+    fn damaged(&self, offset: u64, cause: String) -> Error {
+        Error::Log(railfuse_catalog::Error::Damaged {
+            path: self.opts.input.to_owned(),
+            offset,
+            cause,
+        })
+    }
+
+    fn schema(&mut self, body: &[u8], top_level: bool) -> Result<()> {
+        let Ok(mcap::records::Record::Schema { header, data }) =
+            mcap::parse_record(op::SCHEMA, body)
+        else {
+            return Err(self.damaged(0, "a schema record does not parse".into()));
+        };
+        if self.schemas.contains_key(&header.id) {
+            return Ok(());
+        }
+        let info = SchemaInfo {
+            id: header.id,
+            name: header.name,
+            encoding: header.encoding,
+            data: data.into_owned(),
+        };
+        if top_level {
+            self.writer
+                .copy_schema(info.id, &info.name, &info.encoding, &info.data)?;
+        }
+        self.schemas.insert(info.id, Arc::new(info));
+        Ok(())
+    }
+
+    /// Routes a channel; false when it is replaced (its records are left out).
+    fn channel(&mut self, body: &[u8], top_level: bool) -> Result<bool> {
+        let Ok(mcap::records::Record::Channel(c)) = mcap::parse_record(op::CHANNEL, body) else {
+            return Err(self.damaged(0, "a channel record does not parse".into()));
+        };
+        if let Some(route) = self.routes.get(&c.id) {
+            return Ok(!route.replaced);
+        }
+        let schema = match c.schema_id {
+            0 => None,
+            id => Some(self.schemas.get(&id).cloned().ok_or_else(|| {
+                self.damaged(0, format!("channel {} names unknown schema {id}", c.topic))
+            })?),
+        };
+        let info = Arc::new(ChannelInfo {
+            id: c.id,
+            topic: c.topic,
+            message_encoding: c.message_encoding,
+            metadata: c.metadata,
+            schema,
+        });
+        let mut route = Route::default();
+        if self.is_replaced(&info.topic) {
+            route.replaced = true;
+        } else {
+            if top_level {
+                copy_channel(&mut self.writer, &info)?;
+            }
+            self.seen_topics.insert(info.topic.clone());
+            let schema = info.schema_name();
+            route.context = match schema {
+                n if n == TrackMap::SCHEMA_NAME => Some(ContextKind::TrackMap),
+                n if n == Event::SCHEMA_NAME => Some(ContextKind::Events),
+                _ => None,
+            };
+            route.evaluated = self.eval.channel(info.id, &info.topic, schema);
+            for (pi, p) in self.pipelines.iter_mut().enumerate() {
+                if let Some(si) = p.sensor_for(&info.topic) {
+                    check_sensor(self.opts.input, p.config(), &p.config().sensor[si], schema)?;
+                    let model = SensorModel::for_schema(schema).expect("checked");
+                    p.resolve_sensor(si, model);
+                    route.sensors.push((pi, si));
+                    route.model = Some(model);
                 }
             }
-            LogRecord::Attachment {
-                name,
-                media_type,
-                log_time_ns,
-                create_time_ns,
-                data,
-            } => writer.attach(&name, &media_type, log_time_ns, create_time_ns, data)?,
         }
+        let kept = !route.replaced;
+        self.routes.insert(info.id, route);
+        self.channels.insert(info.id, info);
+        Ok(kept)
     }
-    report.input_bytes = reader.bytes_read();
 
-    for p in &opts.config.pipeline {
-        for s in &p.sensor {
-            if !seen_topics.contains(&s.topic) {
-                return Err(channel_error(
-                    input,
-                    &p.name,
-                    &s.topic,
-                    "is not in the file".into(),
-                ));
+    /// One input message: context, evaluation, pipelines. False when it is left out
+    /// (a replaced channel's).
+    fn message(&mut self, m: &format::MessageView<'_>) -> Result<bool> {
+        let h = m.header;
+        let Some(route) = self.routes.get(&h.channel_id) else {
+            return Err(self.damaged(
+                0,
+                format!(
+                    "message at log time {} on unknown channel {}",
+                    h.log_time, h.channel_id
+                ),
+            ));
+        };
+        if route.replaced {
+            return Ok(false);
+        }
+        self.report.input_messages += 1;
+        if h.log_time < self.last_log_time {
+            self.report.out_of_order_messages += 1;
+        }
+        self.last_log_time = self.last_log_time.max(h.log_time);
+        self.eval.log_time(h.log_time);
+        if route.context.is_none() && route.model.is_none() && !route.evaluated {
+            return Ok(true); // passes through untouched
+        }
+        let input = self.opts.input;
+        let msg = LogMessage {
+            channel: &self.channels[&h.channel_id],
+            sequence: h.sequence,
+            log_time_ns: h.log_time,
+            publish_time_ns: h.publish_time,
+            data: m.data,
+        };
+        if route.evaluated {
+            self.eval.message(&msg)?;
+        }
+        match route.context {
+            Some(ContextKind::TrackMap) => self.context.track = Some(msg.decode(input)?),
+            Some(ContextKind::Events) => {
+                let e: Event = msg.decode(input)?;
+                let failed = match e.kind {
+                    EventKind::DeviceFault => Some(true),
+                    EventKind::DeviceRecovered => Some(false),
+                    _ => None,
+                };
+                if let Some(failed) = failed {
+                    self.pipelines
+                        .iter_mut()
+                        .for_each(|p| p.device_event(&e.text, failed));
+                }
+            }
+            None => {}
+        }
+        let Some(model) = route.model else {
+            return Ok(true);
+        };
+        // A sensor message that does not decode (a null where a number belongs) is skipped
+        // and counted: one bad message must not cost the whole replay.
+        if let Err(e) = model.decode(&msg, input, &self.context, &mut self.measurements) {
+            self.report.undecodable_messages += 1;
+            self.report
+                .first_undecodable
+                .get_or_insert_with(|| e.to_string());
+            return Ok(true);
+        }
+        let sensors =
+            std::mem::take(&mut self.routes.get_mut(&h.channel_id).expect("routed").sensors);
+        let result = (|| {
+            for &(pi, si) in &sensors {
+                self.pipelines[pi].push(si, &self.measurements, h.log_time, &mut self.fused);
+                self.emit(pi)?;
+            }
+            Ok(())
+        })();
+        self.routes.get_mut(&h.channel_id).expect("routed").sensors = sensors;
+        result.map(|()| true)
+    }
+
+    /// Writes and scores what pipeline `pi` released.
+    fn emit(&mut self, pi: usize) -> Result<()> {
+        let out = &mut self.outputs[pi];
+        for f in self.fused.drain(..) {
+            if let Some(state) = &f.state {
+                self.writer.write(out.state, f.log_time_ns, state)?;
+                self.eval.fused_state(out.state.0, state);
+                out.states += 1;
+                self.report.fused_messages += 1;
+            }
+            if let Some(d) = &f.diagnostics {
+                self.writer.write(out.diagnostics, f.log_time_ns, d)?;
+                self.eval.fused_diagnostics(out.diagnostics.0, d);
+                self.report.fused_messages += 1;
             }
         }
+        Ok(())
     }
-    for (pi, p) in pipelines.iter_mut().enumerate() {
-        p.finish(last_log_time, &mut fused_buf);
-        emit(
-            &mut writer,
-            &mut outputs[pi],
-            &mut fused_buf,
-            &mut report.fused_messages,
-        )?;
-        if let (Some(channel), Some(smoothed)) = (outputs[pi].smoothed, p.smoothed()) {
-            let spill = |source| Error::Spill {
-                pipeline: p.name().to_owned(),
-                source,
-            };
-            for state in smoothed.map_err(spill)? {
-                let state = state.map_err(spill)?;
-                writer.write(channel, state.stamp_ns, &state)?;
-                report.fused_messages += 1;
-                outputs[pi].smoothed_states += 1;
+
+    /// Flushes the pipelines, writes smoothed states and each pipeline's metadata, closes the
+    /// output and finishes the evaluation.
+    fn finish(mut self) -> Result<(RefuseReport, EvalReport)> {
+        let input = self.opts.input;
+        for p in &self.opts.config.pipeline {
+            for s in &p.sensor {
+                if !self.seen_topics.contains(&s.topic) {
+                    return Err(channel_error(
+                        input,
+                        &p.name,
+                        &s.topic,
+                        "is not in the file".into(),
+                    ));
+                }
             }
         }
-        let metadata = BTreeMap::from([
-            ("pipeline".to_owned(), p.name().to_owned()),
-            ("filter".to_owned(), p.config().filter.name().to_owned()),
-            ("config_toml".to_owned(), p.config().to_toml()),
-            ("config_source".to_owned(), opts.config_source.clone()),
-            ("input".to_owned(), input.display().to_string()),
-            (
-                "tool_version".to_owned(),
-                concat!("railfuse ", env!("CARGO_PKG_VERSION")).to_owned(),
-            ),
-            (
-                "counts".to_owned(),
-                serde_json::to_string(p.counts()).expect("counts serialise"),
-            ),
-        ]);
-        writer.write_metadata(topics::metadata::PIPELINE, metadata)?;
+        for pi in 0..self.pipelines.len() {
+            self.pipelines[pi].finish(self.last_log_time, &mut self.fused);
+            self.emit(pi)?;
+            self.write_smoothed(pi)?;
+            let p = &self.pipelines[pi];
+            let metadata = BTreeMap::from([
+                ("pipeline".to_owned(), p.name().to_owned()),
+                ("filter".to_owned(), p.config().filter.name().to_owned()),
+                ("config_toml".to_owned(), p.config().to_toml()),
+                ("config_source".to_owned(), self.opts.config_source.clone()),
+                ("input".to_owned(), input.display().to_string()),
+                (
+                    "tool_version".to_owned(),
+                    concat!("railfuse ", env!("CARGO_PKG_VERSION")).to_owned(),
+                ),
+                (
+                    "counts".to_owned(),
+                    serde_json::to_string(p.counts()).expect("counts serialise"),
+                ),
+            ]);
+            self.eval.metadata(topics::metadata::PIPELINE, &metadata);
+            self.writer
+                .write_metadata(topics::metadata::PIPELINE, metadata)?;
+        }
+        self.writer.finish()?;
+        for (p, out) in self.pipelines.iter().zip(&self.outputs) {
+            self.report.pipelines.push(PipelineReport {
+                name: p.name().to_owned(),
+                counts: p.counts().clone(),
+                fused_states: out.states,
+                smoothed_states: out.smoothed_states,
+            });
+        }
+        let eval = self.eval.finish(self.opts.output)?;
+        Ok((self.report, eval))
     }
-    writer.finish()?;
 
-    for (p, out) in pipelines.iter().zip(&outputs) {
-        report.pipelines.push(PipelineReport {
-            name: p.name().to_owned(),
-            counts: p.counts().clone(),
-            fused_states: out.states,
-            smoothed_states: out.smoothed_states,
-        });
+    fn write_smoothed(&mut self, pi: usize) -> Result<()> {
+        let (Some(channel), Some(smoothed)) =
+            (self.outputs[pi].smoothed, self.pipelines[pi].smoothed())
+        else {
+            return Ok(());
+        };
+        let name = self.pipelines[pi].name().to_owned();
+        let spill = |source| Error::Spill {
+            pipeline: name.clone(),
+            source,
+        };
+        for state in smoothed.map_err(spill)? {
+            let state = state.map_err(spill)?;
+            self.writer.write(channel, state.stamp_ns, &state)?;
+            self.report.fused_messages += 1;
+            self.outputs[pi].smoothed_states += 1;
+        }
+        Ok(())
     }
-    Ok(report)
 }
 
-fn emit(
-    writer: &mut LogWriter,
-    out: &mut Output,
-    fused: &mut Vec<Fused>,
-    count: &mut u64,
+fn copy_channel(writer: &mut LogWriter, c: &ChannelInfo) -> Result<()> {
+    let schema = c.schema.as_ref().map_or(0, |s| s.id);
+    Ok(writer.copy_channel(c.id, schema, &c.topic, &c.message_encoding, &c.metadata)?)
+}
+
+fn ids_exhausted(output: &Path) -> railfuse_catalog::Error {
+    railfuse_catalog::Error::Write {
+        path: output.to_owned(),
+        cause: "no channel ids left for the fused channels".into(),
+    }
+}
+
+/// Every sensor of every pipeline names a channel the file has, with a schema its model reads.
+fn check_channels(
+    input: &Path,
+    config: &PipelinesConfig,
+    channels: &[Arc<ChannelInfo>],
 ) -> Result<()> {
-    for f in fused.drain(..) {
-        if let Some(state) = &f.state {
-            writer.write(out.state, f.log_time_ns, state)?;
-            out.states += 1;
-            *count += 1;
-        }
-        if let Some(d) = &f.diagnostics {
-            writer.write(out.diagnostics, f.log_time_ns, d)?;
-            *count += 1;
+    for p in &config.pipeline {
+        for s in &p.sensor {
+            match channels.iter().find(|c| c.topic == s.topic) {
+                None => {
+                    let have: Vec<&str> = channels
+                        .iter()
+                        .map(|c| c.topic.as_str())
+                        .filter(|t| !t.starts_with(topics::FUSED_PREFIX))
+                        .collect();
+                    let problem = format!("is not in the file (it has {})", have.join(", "));
+                    return Err(channel_error(input, &p.name, &s.topic, problem));
+                }
+                Some(c) => check_sensor(input, p, s, c.schema_name())?,
+            }
         }
     }
     Ok(())

@@ -105,13 +105,18 @@ impl<'a> Iterator for Records<'a> {
         }
         if rest.len() < FRAME {
             self.pos = self.data.len();
-            return Some(Err(format!("a record header is cut off at byte {}", self.pos)));
+            return Some(Err(format!(
+                "a record header is cut off at byte {}",
+                self.pos
+            )));
         }
         let len = u64::from_le_bytes(rest[1..FRAME].try_into().expect("8 bytes"));
         if len > (rest.len() - FRAME) as u64 {
             let at = self.pos;
             self.pos = self.data.len();
-            return Some(Err(format!("a record at byte {at} runs past the end of its chunk")));
+            return Some(Err(format!(
+                "a record at byte {at} runs past the end of its chunk"
+            )));
         }
         let framed = Framed {
             opcode: rest[0],
@@ -144,7 +149,9 @@ pub fn parse_chunk_header(body: &[u8]) -> Result<(ChunkHeader, usize), String> {
 pub fn decompress(header: &ChunkHeader, data: &[u8], limit: usize) -> Result<Vec<u8>, String> {
     let size = usize::try_from(header.uncompressed_size).unwrap_or(usize::MAX);
     if size > limit {
-        return Err(format!("chunk claims {size} bytes uncompressed, over the {limit}-byte limit"));
+        return Err(format!(
+            "chunk claims {size} bytes uncompressed, over the {limit}-byte limit"
+        ));
     }
     let records = match header.compression.as_str() {
         "" => data.to_vec(),
@@ -160,7 +167,10 @@ pub fn decompress(header: &ChunkHeader, data: &[u8], limit: usize) -> Result<Vec
         other => return Err(format!("unknown chunk compression '{other}'")),
     };
     if records.len() != size {
-        return Err(format!("chunk decompresses to {} bytes, not {size}", records.len()));
+        return Err(format!(
+            "chunk decompresses to {} bytes, not {size}",
+            records.len()
+        ));
     }
     if header.uncompressed_crc != 0 {
         let crc = crc32fast::hash(&records);
@@ -181,7 +191,12 @@ mod tests {
     #[test]
     fn a_message_record_reads_back_and_the_walk_stops_at_a_cut() {
         let mut buf = Vec::new();
-        let h = MessageHeader { channel_id: 7, sequence: 3, log_time: 11, publish_time: 10 };
+        let h = MessageHeader {
+            channel_id: 7,
+            sequence: 3,
+            log_time: 11,
+            publish_time: 10,
+        };
         put_message(&mut buf, &h, b"{}");
         put_record(&mut buf, op::METADATA, b"xyz");
         let got: Vec<_> = Records::new(&buf).collect::<Result<_, _>>().unwrap();

@@ -11,7 +11,10 @@ mod recover;
 pub mod scan;
 mod writer;
 
-pub use reader::{read_channels, ChannelInfo, LogMessage, LogReader, LogRecord, SchemaInfo};
+pub use reader::{
+    read_channels, read_summary, ChannelInfo, LogMessage, LogReader, LogRecord, LogSummary,
+    SchemaInfo,
+};
 pub use recover::{recover, RecoverReport};
 pub use writer::{ChannelId, LogWriter, WriterOptions};
 

@@ -105,10 +105,20 @@ enum Emit {
     Nothing,
     Schema(u16),
     Channel(u16),
-    ChunkMessage { header: MessageHeader, start: usize, end: usize },
-    TopMessage { header: MessageHeader },
+    ChunkMessage {
+        header: MessageHeader,
+        start: usize,
+        end: usize,
+    },
+    TopMessage {
+        header: MessageHeader,
+    },
     Metadata(Option<Metadata>),
-    Attachment { header: AttachmentHeader, start: usize, end: usize },
+    Attachment {
+        header: AttachmentHeader,
+        start: usize,
+        end: usize,
+    },
 }
 
 impl LogReader {
@@ -164,7 +174,9 @@ impl LogReader {
                 let records = &chunk.records;
                 if self.at < records.len() {
                     // The scanner checked that every record of the chunk is whole.
-                    let framed = Records::new(&records[self.at..]).next().expect("whole")
+                    let framed = Records::new(&records[self.at..])
+                        .next()
+                        .expect("whole")
                         .expect("checked whole");
                     let start = self.at + FRAME;
                     self.at = start + framed.body.len();
@@ -193,7 +205,11 @@ impl LogReader {
                     }
                 }
                 Some(Ok(Item::Damage(d))) => {
-                    return Err(Error::Damaged { path: self.path.clone(), offset: d.offset, cause: d.cause })
+                    return Err(Error::Damaged {
+                        path: self.path.clone(),
+                        offset: d.offset,
+                        cause: d.cause,
+                    })
                 }
             }
         }
@@ -209,7 +225,8 @@ impl LogReader {
         let bad = |e: String| Error::mcap(&self.path, e);
         self.emit = match opcode {
             op::MESSAGE => {
-                let m = format::parse_message(body).ok_or_else(|| bad("a message record is cut short".into()))?;
+                let m = format::parse_message(body)
+                    .ok_or_else(|| bad("a message record is cut short".into()))?;
                 if !self.channels.contains_key(&m.header.channel_id) {
                     return Err(bad(format!(
                         "message at log time {} on unknown channel {}",
@@ -218,7 +235,11 @@ impl LogReader {
                 }
                 let start = start + format::MESSAGE_HEADER;
                 match in_chunk {
-                    true => Emit::ChunkMessage { header: m.header, start, end },
+                    true => Emit::ChunkMessage {
+                        header: m.header,
+                        start,
+                        end,
+                    },
                     false => Emit::TopMessage { header: m.header },
                 }
             }
@@ -229,7 +250,12 @@ impl LogReader {
                         if self.schemas.contains_key(&header.id) {
                             return Ok(false);
                         }
-                        let info = SchemaInfo { id: header.id, name: header.name, encoding: header.encoding, data: data.into_owned() };
+                        let info = SchemaInfo {
+                            id: header.id,
+                            name: header.name,
+                            encoding: header.encoding,
+                            data: data.into_owned(),
+                        };
                         self.schemas.insert(info.id, Arc::new(info));
                         Emit::Schema(header.id)
                     }
@@ -257,7 +283,11 @@ impl LogReader {
                     Record::Attachment { header, data, .. } => {
                         // The data sits just before the trailing CRC.
                         let end = end - 4;
-                        Emit::Attachment { start: end - data.len(), end, header }
+                        Emit::Attachment {
+                            start: end - data.len(),
+                            end,
+                            header,
+                        }
                     }
                     _ => return Ok(false),
                 }
@@ -288,7 +318,10 @@ impl LogReader {
             }),
             Emit::Metadata(m) => {
                 let m = m.expect("set by accept");
-                LogRecord::Metadata { name: m.name, metadata: m.metadata }
+                LogRecord::Metadata {
+                    name: m.name,
+                    metadata: m.metadata,
+                }
             }
             Emit::Attachment { header, start, end } => LogRecord::Attachment {
                 name: header.name,
@@ -313,9 +346,24 @@ fn describe(e: &mcap::McapError) -> String {
     }
 }
 
+/// What a file's summary section tells without reading the data.
+#[derive(Debug, Clone)]
+pub struct LogSummary {
+    /// Every channel, by id.
+    pub channels: Vec<Arc<ChannelInfo>>,
+    /// The longest time span of one chunk (log time), if the file has chunk indexes.
+    pub longest_chunk_ns: Option<u64>,
+}
+
 /// The channel table of a file from its summary section (one seek to the end), or `None` when
 /// the file has no summary. A file without a valid footer (truncated) is an error.
 pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
+    Ok(read_summary(path)?.map(|s| s.channels))
+}
+
+/// The summary section of a file (one seek to the end), or `None` when it has none. A file
+/// without a valid footer (truncated) is an error.
+pub fn read_summary(path: &Path) -> Result<Option<LogSummary>> {
     use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
     use std::io::Seek;
     let mut file = open_checked(path)?;
@@ -361,7 +409,15 @@ pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
         })
         .collect();
     channels.sort_by_key(|c| c.id);
-    Ok(Some(channels))
+    let longest_chunk_ns = summary
+        .chunk_indexes
+        .iter()
+        .map(|c| c.message_end_time.saturating_sub(c.message_start_time))
+        .max();
+    Ok(Some(LogSummary {
+        channels,
+        longest_chunk_ns,
+    }))
 }
 
 /// Opens a file that must be an MCAP file: not empty, starting with the MCAP magic.

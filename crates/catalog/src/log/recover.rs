@@ -63,7 +63,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
     while let Some(item) = scanner.next() {
         match item? {
             Item::Damage(d) => {
-                report.stopped_by.get_or_insert_with(|| format!("byte {}: {}", d.offset, d.cause));
+                report
+                    .stopped_by
+                    .get_or_insert_with(|| format!("byte {}: {}", d.offset, d.cause));
                 report.skipped.push(d);
             }
             Item::Chunk(chunk) => {
@@ -83,9 +85,13 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                             }
                         }
                         op::MESSAGE => {
-                            let Some(m) = format::parse_message(record.body) else { continue };
+                            let Some(m) = format::parse_message(record.body) else {
+                                continue;
+                            };
                             let id = m.header.channel_id;
-                            if !channels.contains_key(&id) && !restore(&mut writer, id, &from_summary, &mut channels)? {
+                            if !channels.contains_key(&id)
+                                && !restore(&mut writer, id, &from_summary, &mut channels)?
+                            {
                                 orphans = true;
                             }
                             match counts.last_mut() {
@@ -104,7 +110,10 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                     report.chunks += 1;
                     for (id, n) in counts {
                         report.messages += n;
-                        *report.messages_per_topic.entry(channels[&id].clone()).or_insert(0) += n;
+                        *report
+                            .messages_per_topic
+                            .entry(channels[&id].clone())
+                            .or_insert(0) += n;
                     }
                 }
             }
@@ -114,7 +123,13 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                     schemas.insert(header.id);
                 }
                 Ok(mcap::records::Record::Channel(c)) => {
-                    writer.copy_channel(c.id, c.schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
+                    writer.copy_channel(
+                        c.id,
+                        c.schema_id,
+                        &c.topic,
+                        &c.message_encoding,
+                        &c.metadata,
+                    )?;
                     channels.insert(c.id, c.topic);
                 }
                 Ok(mcap::records::Record::Message { header, data }) => {
@@ -124,7 +139,13 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                         report.orphan_messages += 1;
                         continue;
                     }
-                    writer.write_raw(header.channel_id, header.sequence, header.log_time, header.publish_time, &data)?;
+                    writer.write_raw(
+                        header.channel_id,
+                        header.sequence,
+                        header.log_time,
+                        header.publish_time,
+                        &data,
+                    )?;
                     count(&mut report, &channels[&header.channel_id]);
                 }
                 Ok(mcap::records::Record::Metadata(m)) => {
@@ -132,7 +153,13 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                     report.metadata += 1;
                 }
                 Ok(mcap::records::Record::Attachment { header, data, .. }) => {
-                    writer.attach(&header.name, &header.media_type, header.log_time, header.create_time, &data)?;
+                    writer.attach(
+                        &header.name,
+                        &header.media_type,
+                        header.log_time,
+                        header.create_time,
+                        &data,
+                    )?;
                     report.attachments += 1;
                 }
                 _ => {}
@@ -147,7 +174,10 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
 
 fn count(report: &mut RecoverReport, topic: &str) {
     report.messages += 1;
-    *report.messages_per_topic.entry(topic.to_owned()).or_insert(0) += 1;
+    *report
+        .messages_per_topic
+        .entry(topic.to_owned())
+        .or_insert(0) += 1;
 }
 
 /// Writes the summary's definition of channel `id` (and its schema), if the summary has it.
@@ -157,7 +187,9 @@ fn restore(
     summary: &BTreeMap<u16, std::sync::Arc<super::ChannelInfo>>,
     channels: &mut BTreeMap<u16, String>,
 ) -> Result<bool> {
-    let Some(c) = summary.get(&id) else { return Ok(false) };
+    let Some(c) = summary.get(&id) else {
+        return Ok(false);
+    };
     if let Some(s) = &c.schema {
         writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
     }
@@ -177,7 +209,9 @@ fn copy_known_messages(
         if record.opcode != op::MESSAGE {
             continue;
         }
-        let Some(m) = format::parse_message(record.body) else { continue };
+        let Some(m) = format::parse_message(record.body) else {
+            continue;
+        };
         let h = m.header;
         match channels.get(&h.channel_id) {
             Some(topic) => {
@@ -197,7 +231,10 @@ mod tests {
     use crate::messages::RadarSpeed;
 
     fn log(path: &Path, n: u64) -> Vec<u8> {
-        let opts = WriterOptions { chunk_size: 64 << 10, zstd_level: 1 };
+        let opts = WriterOptions {
+            chunk_size: 64 << 10,
+            zstd_level: 1,
+        };
         let mut w = LogWriter::create_with(path, &opts).unwrap();
         let ch = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();
         for k in 0..n {
@@ -240,7 +277,10 @@ mod tests {
             std::fs::write(&broken, &bytes[..(bytes.len() as f64 * cut) as usize]).unwrap();
             let fixed = d.path().join("fixed.mcap");
             let r = recover(&broken, &fixed).unwrap();
-            assert!(r.stopped_by.as_deref().unwrap().contains("truncated"), "{r:?}");
+            assert!(
+                r.stopped_by.as_deref().unwrap().contains("truncated"),
+                "{r:?}"
+            );
             // Everything but the cut chunk (≈ 64 KiB of JSON, under 1 000 messages) survives,
             // as the same messages in the same order.
             assert!(
@@ -272,7 +312,9 @@ mod tests {
                 }
             }
         }
-        let garbage: Vec<u8> = (0..5000u32).map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8).collect();
+        let garbage: Vec<u8> = (0..5000u32)
+            .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+            .collect();
         let cases: Vec<(&str, Vec<u8>)> = vec![
             ("flipped bytes", {
                 let mut b = bytes.clone();
@@ -281,8 +323,14 @@ mod tests {
                 }
                 b
             }),
-            ("garbage inserted", [&bytes[..mid], &garbage[..], &bytes[mid..]].concat()),
-            ("torn write", [&bytes[..mid], &bytes[mid + 20_000..]].concat()),
+            (
+                "garbage inserted",
+                [&bytes[..mid], &garbage[..], &bytes[mid..]].concat(),
+            ),
+            (
+                "torn write",
+                [&bytes[..mid], &bytes[mid + 20_000..]].concat(),
+            ),
         ];
         for (label, broken_bytes) in cases {
             let broken = d.path().join("broken.mcap");
@@ -296,15 +344,26 @@ mod tests {
                     None => panic!("{label}: read a damaged file to the end"),
                 }
             };
-            assert!(err.contains("damaged at byte") && err.contains("railfuse recover"), "{err}");
+            assert!(
+                err.contains("damaged at byte") && err.contains("railfuse recover"),
+                "{err}"
+            );
             let fixed = d.path().join("fixed.mcap");
             let r = recover(&broken, &fixed).unwrap();
             assert!(!r.skipped.is_empty(), "{label}: {r:?}");
             let got = stamps(&fixed);
             // In order, no duplicates, and at most two chunks' worth (≈ 2 × 1 000) lost.
             assert!(got.windows(2).all(|w| w[0] < w[1]), "{label}: out of order");
-            assert!(got.len() as u64 > n - 2_000, "{label}: {} of {n}", got.len());
-            assert_eq!(*got.last().unwrap(), n - 1, "{label}: the chunks after the damage");
+            assert!(
+                got.len() as u64 > n - 2_000,
+                "{label}: {} of {n}",
+                got.len()
+            );
+            assert_eq!(
+                *got.last().unwrap(),
+                n - 1,
+                "{label}: the chunks after the damage"
+            );
             assert_eq!(r.messages, got.len() as u64);
         }
     }

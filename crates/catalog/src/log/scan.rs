@@ -25,7 +25,11 @@ use crate::error::{Error, Result};
 pub enum Item {
     /// A record other than a chunk: schema, channel, message (unchunked files), metadata,
     /// attachment, message index, or an application's private record.
-    Record { opcode: u8, offset: u64, body: Vec<u8> },
+    Record {
+        opcode: u8,
+        offset: u64,
+        body: Vec<u8>,
+    },
     /// A chunk, intact.
     Chunk(Chunk),
     /// Bytes that hold no intact record (salvage mode only).
@@ -92,11 +96,14 @@ impl Scanner {
         let file = File::open(path).map_err(|e| Error::io(path, e))?;
         let size = file.metadata().map_err(|e| Error::io(path, e))?.len();
         if size == 0 {
-            return Err(Error::Empty { path: path.to_owned() });
+            return Err(Error::Empty {
+                path: path.to_owned(),
+            });
         }
         let mut magic = [0u8; 8];
         let n = (size as usize).min(8);
-        file.read_exact_at(&mut magic[..n], 0).map_err(|e| Error::io(path, e))?;
+        file.read_exact_at(&mut magic[..n], 0)
+            .map_err(|e| Error::io(path, e))?;
         if n < 8 || &magic != MAGIC {
             return Err(Error::mcap(
                 path,
@@ -117,7 +124,10 @@ impl Scanner {
         match s.frame(8) {
             Ok((op::HEADER, len)) => s.pos = 8 + FRAME as u64 + len,
             Ok((other, _)) => {
-                return Err(Error::mcap(path, format!("opens with record 0x{other:02x}, not a header")))
+                return Err(Error::mcap(
+                    path,
+                    format!("opens with record 0x{other:02x}, not a header"),
+                ))
             }
             Err(cause) => return Err(Error::mcap(path, cause)),
         }
@@ -153,13 +163,21 @@ impl Scanner {
             }
             Err(cause) if !self.salvage => {
                 self.done = true;
-                Some(Err(Error::Damaged { path: self.path.clone(), offset: at, cause }))
+                Some(Err(Error::Damaged {
+                    path: self.path.clone(),
+                    offset: at,
+                    cause,
+                }))
             }
             Err(cause) => {
                 let resume = self.resume_after(at);
                 self.pos = resume.unwrap_or(self.size);
                 self.done = resume.is_none();
-                Some(Ok(Item::Damage(Damage { offset: at, length: self.pos - at, cause })))
+                Some(Ok(Item::Damage(Damage {
+                    offset: at,
+                    length: self.pos - at,
+                    cause,
+                })))
             }
         }
     }
@@ -175,9 +193,15 @@ impl Scanner {
         let start = at + FRAME as u64;
         match opcode {
             op::DATA_END | op::FOOTER => return Ok(None),
-            op::HEADER | op::CHUNK_INDEX | op::ATTACHMENT_INDEX | op::STATISTICS
-            | op::METADATA_INDEX | op::SUMMARY_OFFSET => {
-                return Err(format!("record 0x{opcode:02x} does not belong in the data section"))
+            op::HEADER
+            | op::CHUNK_INDEX
+            | op::ATTACHMENT_INDEX
+            | op::STATISTICS
+            | op::METADATA_INDEX
+            | op::SUMMARY_OFFSET => {
+                return Err(format!(
+                    "record 0x{opcode:02x} does not belong in the data section"
+                ))
             }
             0x10..=0x7f => return Err(format!("unknown record opcode 0x{opcode:02x}")),
             _ => {}
@@ -186,11 +210,20 @@ impl Scanner {
             let mut raw = vec![0u8; FRAME + len as usize];
             self.read_at(&mut raw, at)?;
             let (header, records) = check_chunk(&raw[FRAME..])?;
-            Item::Chunk(Chunk { offset: at, header, raw, records })
+            Item::Chunk(Chunk {
+                offset: at,
+                header,
+                raw,
+                records,
+            })
         } else {
             let mut body = vec![0u8; len as usize];
             self.read_at(&mut body, start)?;
-            Item::Record { opcode, offset: at, body }
+            Item::Record {
+                opcode,
+                offset: at,
+                body,
+            }
         };
         self.pos = start + len;
         Ok(Some(item))
@@ -212,7 +245,9 @@ impl Scanner {
             ));
         }
         if len > super::RECORD_LENGTH_LIMIT as u64 {
-            return Err(format!("the record at byte {at} claims {len} bytes, over the limit"));
+            return Err(format!(
+                "the record at byte {at} claims {len} bytes, over the limit"
+            ));
         }
         Ok((frame[0], len))
     }
@@ -233,7 +268,9 @@ impl Scanner {
 
     /// Whether a record that checks out starts at `q`.
     fn intact_at(&mut self, q: u64) -> bool {
-        let Ok((opcode, len)) = self.frame(q) else { return false };
+        let Ok((opcode, len)) = self.frame(q) else {
+            return false;
+        };
         if opcode == op::CHUNK {
             // The header alone rules out almost every false start before reading a body.
             let mut head = vec![0u8; (len as usize).min(4096)];
@@ -284,7 +321,9 @@ impl Scanner {
         }
         let n = READ_AHEAD.min((self.size - at) as usize);
         self.ahead.resize(n, 0);
-        self.file.read_exact_at(&mut self.ahead, at).map_err(|e| e.to_string())?;
+        self.file
+            .read_exact_at(&mut self.ahead, at)
+            .map_err(|e| e.to_string())?;
         self.ahead_at = at;
         buf.copy_from_slice(&self.ahead[..buf.len()]);
         Ok(())
@@ -348,7 +387,11 @@ impl ReadAhead {
                 }
             })
             .expect("a thread to read ahead");
-        Self { items, position: 0, size }
+        Self {
+            items,
+            position: 0,
+            size,
+        }
     }
 
     /// Bytes of the file read up to the item last returned.

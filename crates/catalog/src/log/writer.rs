@@ -14,8 +14,8 @@ use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;
 
 use mcap::records::{
-    op, AttachmentHeader, AttachmentIndex, Channel, ChunkHeader, ChunkIndex, DataEnd,
-    Header, MessageHeader, MessageIndexEntry, Metadata, MetadataIndex, SchemaHeader, Statistics,
+    op, AttachmentHeader, AttachmentIndex, Channel, ChunkHeader, ChunkIndex, DataEnd, Header,
+    MessageHeader, MessageIndexEntry, Metadata, MetadataIndex, SchemaHeader, Statistics,
     SummaryOffset,
 };
 
@@ -38,7 +38,10 @@ pub struct WriterOptions {
 
 impl Default for WriterOptions {
     fn default() -> Self {
-        Self { chunk_size: 1 << 20, zstd_level: 1 }
+        Self {
+            chunk_size: 1 << 20,
+            zstd_level: 1,
+        }
     }
 }
 
@@ -48,15 +51,34 @@ type Index = BTreeMap<u16, Vec<MessageIndexEntry>>;
 enum Job {
     /// Framed top-level records (schemas, channels).
     Records(Vec<u8>),
-    Metadata { record: Vec<u8>, name: String },
-    Attachment { record: Vec<u8>, index: AttachmentIndex },
+    Metadata {
+        record: Vec<u8>,
+        name: String,
+    },
+    Attachment {
+        record: Vec<u8>,
+        index: AttachmentIndex,
+    },
     /// Records to compress into a chunk.
-    Compress { records: Vec<u8>, index: Index, start: u64, end: u64 },
+    Compress {
+        records: Vec<u8>,
+        index: Index,
+        start: u64,
+        end: u64,
+    },
     /// A chunk record to write as it is.
-    Copy { raw: Vec<u8>, header: ChunkHeader, index: Index },
+    Copy {
+        raw: Vec<u8>,
+        header: ChunkHeader,
+        index: Index,
+    },
     /// Hand everything so far to the OS, then answer.
     Flush(SyncSender<()>),
-    Finish { schemas: Vec<u8>, channels: Vec<u8>, statistics: Statistics },
+    Finish {
+        schemas: Vec<u8>,
+        channels: Vec<u8>,
+        statistics: Statistics,
+    },
 }
 
 /// Messages gathered for the next chunk.
@@ -131,7 +153,11 @@ impl LogWriter {
     }
 
     fn send(&mut self, job: Job) -> Result<()> {
-        let sent = self.jobs.as_ref().map(|j| j.send(job).is_ok()).unwrap_or(false);
+        let sent = self
+            .jobs
+            .as_ref()
+            .map(|j| j.send(job).is_ok())
+            .unwrap_or(false);
         if sent {
             return Ok(());
         }
@@ -143,7 +169,10 @@ impl LogWriter {
         self.jobs = None;
         match self.worker.take().map(|w| w.join()) {
             Some(Ok(Err(e))) => e,
-            _ => Error::Write { path: self.partial.clone(), cause: "the writer stopped".into() },
+            _ => Error::Write {
+                path: self.partial.clone(),
+                cause: "the writer stopped".into(),
+            },
         }
     }
 
@@ -152,14 +181,24 @@ impl LogWriter {
         let schema_id = match self.schema_ids.get(M::SCHEMA_NAME) {
             Some(&id) => id,
             None => {
-                let id = (1..=u16::MAX).find(|i| !self.schemas.contains_key(i)).unwrap_or(0);
+                let id = (1..=u16::MAX)
+                    .find(|i| !self.schemas.contains_key(i))
+                    .unwrap_or(0);
                 let data = M::schema_bytes();
                 self.copy_schema(id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)?;
                 id
             }
         };
-        let id = (1..=u16::MAX).find(|i| !self.channels.contains_key(i)).unwrap_or(0);
-        self.copy_channel(id, schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())?;
+        let id = (1..=u16::MAX)
+            .find(|i| !self.channels.contains_key(i))
+            .unwrap_or(0);
+        self.copy_channel(
+            id,
+            schema_id,
+            topic,
+            super::MESSAGE_ENCODING,
+            &BTreeMap::new(),
+        )?;
         Ok(ChannelId(id))
     }
 
@@ -175,7 +214,13 @@ impl LogWriter {
             let data = M::schema_bytes();
             self.copy_schema(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)?;
         }
-        self.copy_channel(channel_id, schema_id, topic, super::MESSAGE_ENCODING, &BTreeMap::new())?;
+        self.copy_channel(
+            channel_id,
+            schema_id,
+            topic,
+            super::MESSAGE_ENCODING,
+            &BTreeMap::new(),
+        )?;
         Ok(ChannelId(channel_id))
     }
 
@@ -258,7 +303,13 @@ impl LogWriter {
         }
         (open.start, open.end) = (open.start.min(log_time_ns), open.end.max(log_time_ns));
         let offset = open.records.len() as u64;
-        open.index.entry(channel).or_default().push(MessageIndexEntry { log_time: log_time_ns, offset });
+        open.index
+            .entry(channel)
+            .or_default()
+            .push(MessageIndexEntry {
+                log_time: log_time_ns,
+                offset,
+            });
         put_message(&mut open.records, &header, data);
         count_message(&mut self.stats, channel, log_time_ns);
         if self.open.records.len() >= self.chunk_size {
@@ -273,7 +324,9 @@ impl LogWriter {
             return Ok(());
         }
         let open = std::mem::take(&mut self.open);
-        self.open.records.reserve(self.chunk_size + (self.chunk_size >> 3));
+        self.open
+            .records
+            .reserve(self.chunk_size + (self.chunk_size >> 3));
         self.stats.chunk_count += 1;
         self.send(Job::Compress {
             records: open.records,
@@ -291,25 +344,37 @@ impl LogWriter {
             let record = record.map_err(|e| Error::mcap(&self.partial, e))?;
             match record.opcode {
                 op::MESSAGE => {
-                    let Some(m) = format::parse_message(record.body) else { continue };
+                    let Some(m) = format::parse_message(record.body) else {
+                        continue;
+                    };
                     let (channel, log_time) = (m.header.channel_id, m.header.log_time);
                     let offset = record.offset as u64;
-                    index.entry(channel).or_default().push(MessageIndexEntry { log_time, offset });
+                    index
+                        .entry(channel)
+                        .or_default()
+                        .push(MessageIndexEntry { log_time, offset });
                     count_message(&mut self.stats, channel, log_time);
                 }
                 op::SCHEMA | op::CHANNEL => {
                     let mut framed = Vec::with_capacity(FRAME + record.body.len());
                     put_record(&mut framed, record.opcode, record.body);
                     let id = u16::from_le_bytes([record.body[0], record.body[1]]);
-                    let table =
-                        if record.opcode == op::SCHEMA { &mut self.schemas } else { &mut self.channels };
+                    let table = if record.opcode == op::SCHEMA {
+                        &mut self.schemas
+                    } else {
+                        &mut self.channels
+                    };
                     table.entry(id).or_insert(framed);
                 }
                 _ => {}
             }
         }
         self.stats.chunk_count += 1;
-        self.send(Job::Copy { raw: chunk.raw.clone(), header: chunk.header.clone(), index })
+        self.send(Job::Copy {
+            raw: chunk.raw.clone(),
+            header: chunk.header.clone(),
+            index,
+        })
     }
 
     /// Closes the current chunk and hands everything written so far to the OS: it survives a
@@ -326,10 +391,16 @@ impl LogWriter {
 
     pub fn write_metadata(&mut self, name: &str, metadata: BTreeMap<String, String>) -> Result<()> {
         let mut record = Vec::new();
-        let m = Metadata { name: name.to_owned(), metadata };
+        let m = Metadata {
+            name: name.to_owned(),
+            metadata,
+        };
         put_record(&mut record, op::METADATA, &format::body(&m));
         self.stats.metadata_count += 1;
-        self.send(Job::Metadata { record, name: name.to_owned() })
+        self.send(Job::Metadata {
+            record,
+            name: name.to_owned(),
+        })
     }
 
     pub fn attach(
@@ -374,7 +445,11 @@ impl LogWriter {
         statistics.channel_count = self.channels.len() as u32;
         let schemas = self.schemas.values().flatten().copied().collect();
         let channels = self.channels.values().flatten().copied().collect();
-        self.send(Job::Finish { schemas, channels, statistics })?;
+        self.send(Job::Finish {
+            schemas,
+            channels,
+            statistics,
+        })?;
         self.jobs = None;
         if let Some(Ok(Err(e))) = self.worker.take().map(|w| w.join()) {
             return Err(e);
@@ -405,7 +480,11 @@ fn count_message(stats: &mut Statistics, channel: u16, log_time: u64) {
 }
 
 fn schema_record(id: u16, name: &str, encoding: &str, data: &[u8]) -> Vec<u8> {
-    let header = SchemaHeader { id, name: name.to_owned(), encoding: encoding.to_owned() };
+    let header = SchemaHeader {
+        id,
+        name: name.to_owned(),
+        encoding: encoding.to_owned(),
+    };
     let mut body = format::body(&header);
     body.extend_from_slice(&(data.len() as u32).to_le_bytes());
     body.extend_from_slice(data);
@@ -448,17 +527,37 @@ impl FileSide {
             match job {
                 Job::Records(r) => self.put(&r)?,
                 Job::Metadata { record, name } => {
-                    let index = MetadataIndex { offset: self.offset, length: record.len() as u64, name };
+                    let index = MetadataIndex {
+                        offset: self.offset,
+                        length: record.len() as u64,
+                        name,
+                    };
                     self.put(&record)?;
-                    put_record(&mut self.metadata_indexes, op::METADATA_INDEX, &format::body(&index));
+                    put_record(
+                        &mut self.metadata_indexes,
+                        op::METADATA_INDEX,
+                        &format::body(&index),
+                    );
                 }
                 Job::Attachment { record, mut index } => {
                     index.offset = self.offset;
                     self.put(&record)?;
-                    put_record(&mut self.attachment_indexes, op::ATTACHMENT_INDEX, &format::body(&index));
+                    put_record(
+                        &mut self.attachment_indexes,
+                        op::ATTACHMENT_INDEX,
+                        &format::body(&index),
+                    );
                 }
-                Job::Compress { records, index, start, end } => {
-                    let compressed = self.compressor.compress(&records).map_err(|e| self.error(e))?;
+                Job::Compress {
+                    records,
+                    index,
+                    start,
+                    end,
+                } => {
+                    let compressed = self
+                        .compressor
+                        .compress(&records)
+                        .map_err(|e| self.error(e))?;
                     let header = ChunkHeader {
                         message_start_time: start,
                         message_end_time: end,
@@ -483,9 +582,11 @@ impl FileSide {
                     self.out.flush().map_err(|e| self.error(e))?;
                     let _ = done.send(());
                 }
-                Job::Finish { schemas, channels, statistics } => {
-                    return self.finish(schemas, channels, statistics)
-                }
+                Job::Finish {
+                    schemas,
+                    channels,
+                    statistics,
+                } => return self.finish(schemas, channels, statistics),
             }
         }
         Ok(())
@@ -496,7 +597,9 @@ impl FileSide {
     }
 
     fn put(&mut self, bytes: &[u8]) -> Result<()> {
-        self.out.write_all(bytes).map_err(|e| Error::write(&self.path, e))?;
+        self.out
+            .write_all(bytes)
+            .map_err(|e| Error::write(&self.path, e))?;
         self.crc.update(bytes);
         self.offset += bytes.len() as u64;
         Ok(())
@@ -532,14 +635,29 @@ impl FileSide {
             compressed_size: header.compressed_size,
             uncompressed_size: header.uncompressed_size,
         };
-        put_record(&mut self.chunk_indexes, op::CHUNK_INDEX, &format::body(&chunk_index));
+        put_record(
+            &mut self.chunk_indexes,
+            op::CHUNK_INDEX,
+            &format::body(&chunk_index),
+        );
         Ok(())
     }
 
-    fn finish(&mut self, schemas: Vec<u8>, channels: Vec<u8>, statistics: Statistics) -> Result<()> {
+    fn finish(
+        &mut self,
+        schemas: Vec<u8>,
+        channels: Vec<u8>,
+        statistics: Statistics,
+    ) -> Result<()> {
         let data_crc = std::mem::take(&mut self.crc).finalize();
         let mut data_end = Vec::new();
-        put_record(&mut data_end, op::DATA_END, &format::body(&DataEnd { data_section_crc: data_crc }));
+        put_record(
+            &mut data_end,
+            op::DATA_END,
+            &format::body(&DataEnd {
+                data_section_crc: data_crc,
+            }),
+        );
         self.put(&data_end)?;
 
         let summary_start = self.offset;
@@ -551,8 +669,14 @@ impl FileSide {
             (op::CHANNEL, channels),
             (op::STATISTICS, stats),
             (op::CHUNK_INDEX, std::mem::take(&mut self.chunk_indexes)),
-            (op::ATTACHMENT_INDEX, std::mem::take(&mut self.attachment_indexes)),
-            (op::METADATA_INDEX, std::mem::take(&mut self.metadata_indexes)),
+            (
+                op::ATTACHMENT_INDEX,
+                std::mem::take(&mut self.attachment_indexes),
+            ),
+            (
+                op::METADATA_INDEX,
+                std::mem::take(&mut self.metadata_indexes),
+            ),
         ];
         let mut offsets = Vec::new();
         for (opcode, group) in groups.iter().filter(|(_, g)| !g.is_empty()) {
@@ -576,6 +700,9 @@ impl FileSide {
         self.put(&crc.to_le_bytes())?;
         self.put(MAGIC)?;
         self.out.flush().map_err(|e| Error::write(&self.path, e))?;
-        self.out.get_ref().sync_all().map_err(|e| Error::io(&self.path, e))
+        self.out
+            .get_ref()
+            .sync_all()
+            .map_err(|e| Error::io(&self.path, e))
     }
 }

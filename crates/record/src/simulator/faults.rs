@@ -53,9 +53,11 @@ impl std::str::FromStr for FaultSpec {
         let (device, mode, start, end, reported) = match parts[..] {
             [d, m, a, b] => (d, m, a, b, false),
             [d, m, a, b, "reported"] => (d, m, a, b, true),
-            _ => return Err(format!(
+            _ => {
+                return Err(format!(
                 "'{s}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260"
-            )),
+            ))
+            }
         };
         if !DEVICES.contains(&device) {
             return Err(format!(
