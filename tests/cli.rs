@@ -727,3 +727,47 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
         stderr(&bad)
     );
 }
+
+#[test]
+fn a_pipeline_without_a_position_sensor_starts_at_distance_zero_or_where_told() {
+    let d = tempfile::tempdir().unwrap();
+    let run = sample("short-run.mcap");
+    let speed_only = "[[pipeline]]\nname = \"odo\"\nfilter = \"kalman\"\n\
+        motion = { model = \"constant_acceleration\", jerk_psd = 0.2 }\n\
+        [[pipeline.sensor]]\ntopic = \"/radar/speed\"\nvariance = 0.1\n\
+        [[pipeline.sensor]]\ntopic = \"/odometer/1\"\nvariance = 0.1\n\
+        [[pipeline.sensor]]\ntopic = \"/odometer/2\"\nvariance = 0.1\n";
+    let told = speed_only.replace("name = \"odo\"", "name = \"told\"")
+        + "[pipeline.initial]\nchainage_m = 1234.5\nchainage_std_m = 2.0\n";
+    let truth: Vec<railfuse_catalog::messages::GroundTruth> = messages(&run, "/truth");
+    let travelled = truth.last().unwrap().chainage_m - truth[0].chainage_m;
+    for (name, text, start) in [("odo", speed_only.to_owned(), 0.0), ("told", told, 1234.5)] {
+        let (cfg, out) = (
+            d.path().join(format!("{name}.toml")),
+            d.path().join(format!("{name}.mcap")),
+        );
+        std::fs::write(&cfg, text).unwrap();
+        let o = ok(&["refuse", s(&run), "-c", s(&cfg), "-o", s(&out), "--json"]);
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let counts = &v["refuse"]["pipelines"][0]["counts"];
+        assert_eq!(counts["before_initialisation"], 0, "{name}: {counts}");
+        let states: Vec<railfuse_catalog::messages::FusedState> =
+            messages(&out, &format!("/fused/{name}/state"));
+        assert!(states.len() > 1000, "{name}: {} states", states.len());
+        assert!(
+            (states[0].chainage_m - start).abs() < 0.5,
+            "{name}: {}",
+            states[0].chainage_m
+        );
+        assert!(
+            states[0].covariance[0] < 4.5,
+            "{name}: starts with the given spread"
+        );
+        // Distance travelled from speeds alone, within 2 % of the truth.
+        let moved = states.last().unwrap().chainage_m - states[0].chainage_m;
+        assert!(
+            (moved - travelled).abs() < 0.02 * travelled,
+            "{name}: {moved} vs {travelled}"
+        );
+    }
+}

@@ -415,3 +415,104 @@ fn a_log_killed_mid_write_is_recovered_and_the_python_reader_reads_it() {
     assert_eq!(py["messages"].as_u64().unwrap(), messages);
     assert_eq!(py["topics"]["/imu"], r["messages_per_topic"]["/imu"]);
 }
+
+/// Per topic, the messages of the chunks of `path` that hold no damage; the byte range of the
+/// chunk nearest the middle.
+fn chunks_around_the_middle(
+    path: &std::path::Path,
+) -> (
+    std::ops::Range<usize>,
+    std::collections::BTreeMap<String, u64>,
+) {
+    use railfuse_catalog::log::format::{parse_message, Records};
+    use railfuse_catalog::log::scan::{Item, Scanner};
+    let size = std::fs::metadata(path).unwrap().len() as usize;
+    let topics: std::collections::HashMap<u16, String> = railfuse_catalog::log::read_channels(path)
+        .unwrap()
+        .unwrap()
+        .iter()
+        .map(|c| (c.id, c.topic.clone()))
+        .collect();
+    let mut scanner = Scanner::open(path).unwrap();
+    let mut middle = None;
+    let mut lost = std::collections::BTreeMap::new();
+    while let Some(item) = scanner.next() {
+        if let Item::Chunk(c) = item.unwrap() {
+            if middle.is_none() && c.offset as usize > size / 2 {
+                middle = Some(c.offset as usize..c.offset as usize + c.raw.len());
+                for r in Records::new(&c.records).flatten() {
+                    if let Some(m) = parse_message(r.body) {
+                        *lost
+                            .entry(topics[&m.header.channel_id].clone())
+                            .or_insert(0) += 1;
+                    }
+                }
+            }
+        }
+    }
+    (middle.unwrap(), lost)
+}
+
+#[test]
+fn a_corrupt_chunk_in_the_middle_costs_that_chunk_only_and_python_reads_the_rest() {
+    let d = tempfile::tempdir().unwrap();
+    let raw = d.path().join("run.mcap");
+    ok(&[
+        "simulate",
+        "--seed",
+        "2",
+        "--duration",
+        "120",
+        "-o",
+        s(&raw),
+    ]);
+    let original = python_ok("check_mcap.py", &[s(&raw)]);
+    let (chunk, lost) = chunks_around_the_middle(&raw);
+    let mut bytes = std::fs::read(&raw).unwrap();
+    for b in &mut bytes[chunk.start + 100..chunk.start + 164] {
+        *b ^= 0xa5; // flipped bits inside the compressed records
+    }
+    let broken = d.path().join("broken.mcap");
+    std::fs::write(&broken, &bytes).unwrap();
+    // Every reader says it is damaged, where, and what salvages it: one line, exit 1.
+    let cfg = common::sample("kalman.toml");
+    let (out, rrd) = (d.path().join("f.mcap"), d.path().join("f.rrd"));
+    let mut lines = Vec::new();
+    for args in [
+        vec!["info", s(&broken)],
+        vec!["refuse", s(&broken), "-c", s(&cfg), "-o", s(&out)],
+        vec!["viz", s(&broken), "--save", s(&rrd)],
+    ] {
+        let o = railfuse(&args);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && err.lines().count() == 1,
+            "{args:?}: {err}"
+        );
+        assert!(
+            err.contains(&format!("damaged at byte {}", chunk.start)),
+            "{err}"
+        );
+        assert!(
+            err.contains("railfuse recover") && err.contains(s(&broken)),
+            "{err}"
+        );
+        lines.push(err.trim().to_owned());
+    }
+    assert!(lines.windows(2).all(|w| w[0] == w[1]), "{lines:?}");
+    let fixed = d.path().join("fixed.mcap");
+    let r: serde_json::Value =
+        serde_json::from_slice(&ok(&["recover", s(&broken), "-o", s(&fixed), "--json"]).stdout)
+            .unwrap();
+    assert_eq!(r["skipped"].as_array().unwrap().len(), 1, "{r}");
+    assert_eq!(r["skipped"][0]["offset"], chunk.start as u64, "{r}");
+    // The official reader reads the salvage: every message of the original but the lost
+    // chunk's, topic by topic.
+    let py = python_ok("check_mcap.py", &[s(&fixed)]);
+    for (topic, n) in original["topics"].as_object().unwrap() {
+        let want = n.as_u64().unwrap() - lost.get(topic).copied().unwrap_or(0);
+        assert_eq!(py["topics"][topic].as_u64().unwrap_or(0), want, "{topic}");
+    }
+    assert_eq!(py["messages"], r["messages"]);
+    assert!(lost.values().sum::<u64>() < original["messages"].as_u64().unwrap() / 10);
+}

@@ -415,6 +415,79 @@ fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
     assert_eq!(gnss_fixes(&b)[0].satellites, 29);
 }
 
+/// NMEA sentences with their checksums, CRLF-terminated.
+fn nmea_text(bodies: &[String]) -> String {
+    bodies
+        .iter()
+        .map(|b| format!("${b}*{:02X}\r\n", b.bytes().fold(0u8, |a, x| a ^ x)))
+        .collect()
+}
+
+#[test]
+fn nmea_fixes_before_the_date_wait_for_it_or_take_date_and_are_never_stamped_1970() {
+    let d = tempfile::tempdir().unwrap();
+    let gga = |s: u32| {
+        format!("GNGGA,0835{s:02}.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000")
+    };
+    let rmc =
+        |s: u32| format!("GNRMC,0835{s:02}.00,A,4439.30664,N,01055.78382,E,10.0,90.0,201022,,,R,V");
+    // 2022-10-20 08:35:00 UTC
+    let t0 = 1_666_254_900u64 * 1_000_000_000;
+    let stamps = |path: &std::path::Path| -> Vec<u64> {
+        gnss_fixes(path).iter().map(|f| f.stamp_ns).collect()
+    };
+    // Each second a GGA, then the RMC: the first GGA has no date when it arrives.
+    let first_gga = d.path().join("gga-first.nmea");
+    let bodies: Vec<String> = (0..10).flat_map(|s| [gga(s), rmc(s)]).collect();
+    std::fs::write(&first_gga, nmea_text(&bodies)).unwrap();
+    let out = d.path().join("a.mcap");
+    ok(&["import", "--format", "nmea", s(&first_gga), "-o", s(&out)]);
+    let want: Vec<u64> = (0..10).map(|s| t0 + s * 1_000_000_000).collect();
+    assert_eq!(stamps(&out), want);
+    // No RMC or ZDA at all: nothing can be dated, so nothing is stamped 1970; --date dates it.
+    let no_date = d.path().join("gga-only.nmea");
+    std::fs::write(&no_date, nmea_text(&(0..10).map(gga).collect::<Vec<_>>())).unwrap();
+    let r: serde_json::Value = serde_json::from_slice(
+        &ok(&[
+            "import",
+            "--format",
+            "nmea",
+            s(&no_date),
+            "-o",
+            s(&out),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(r["messages"], 0, "{r}");
+    let undated = "NMEA fixes with no date (no RMC/ZDA after them; give --date)";
+    assert_eq!(r["skipped"][undated], 10, "{r}");
+    let args = [
+        "import",
+        "--format",
+        "nmea",
+        "--date",
+        "2022-10-20",
+        s(&no_date),
+        "-o",
+        s(&out),
+    ];
+    ok(&args);
+    assert_eq!(stamps(&out), want);
+    let bad = railfuse(&[
+        "import",
+        "--format",
+        "nmea",
+        "--date",
+        "20.10.2022",
+        s(&no_date),
+        "-o",
+        s(&out),
+    ]);
+    assert!(!bad.status.success() && stderr(&bad).contains("is not a date YYYY-MM-DD"));
+}
+
 #[test]
 fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
     let d = tempfile::tempdir().unwrap();

@@ -11,11 +11,14 @@ pub struct Args {
     /// The railfuse MCAP log to write.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Input format: `eth` (ETH-PBL railway node CSV: raw IMU, UBX frames as hex, NMEA,
-    /// correction-link and station events), `nmea` or `ubx` (a GNSS receiver's capture), `csv`
-    /// (any table, with `--map`).
-    #[arg(long, default_value = "eth")]
-    pub format: String,
+    /// Input format.
+    #[arg(long, value_enum, default_value_t = Format::Eth)]
+    pub format: Format,
+    /// UTC date (YYYY-MM-DD) of NMEA fixes that come before any RMC or ZDA sentence. Without
+    /// it they wait for the first such sentence, and any that never get a date are dropped
+    /// and counted (never stamped 1970).
+    #[arg(long, value_parser = parse_date)]
+    pub date: Option<(i64, u32, u32)>,
     /// The column mapping of a CSV import (TOML; see `railfuse import --help` and the README).
     #[arg(long, value_name = "MAPPING.toml")]
     pub map: Option<PathBuf>,
@@ -24,12 +27,41 @@ pub struct Args {
     pub json: bool,
 }
 
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum Format {
+    /// ETH-PBL railway node CSV: raw IMU, UBX frames as hex, NMEA, correction-link and
+    /// station events.
+    Eth,
+    /// A GNSS receiver's NMEA 0183 capture.
+    Nmea,
+    /// A GNSS receiver's u-blox UBX capture.
+    Ubx,
+    /// Any table, with `--map`.
+    Csv,
+}
+
+fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
+    let bad = || format!("'{s}' is not a date YYYY-MM-DD");
+    let mut parts = s.splitn(3, '-');
+    let mut next = || {
+        parts
+            .next()
+            .and_then(|p| p.parse::<i64>().ok())
+            .ok_or_else(bad)
+    };
+    let (y, m, d) = (next()?, next()?, next()?);
+    if !(1970..=9999).contains(&y) || !(1..=12).contains(&m) || !(1..=31).contains(&d) {
+        return Err(bad());
+    }
+    Ok((y, m as u32, d as u32))
+}
+
 pub fn run(a: Args) -> Result<()> {
-    let report: ImportReport = match a.format.as_str() {
-        "eth" => eth::import(&a.input, &a.output)?,
-        "nmea" => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea)?,
-        "ubx" => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx)?,
-        "csv" => {
+    let report: ImportReport = match a.format {
+        Format::Eth => eth::import(&a.input, &a.output)?,
+        Format::Nmea => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea, a.date)?,
+        Format::Ubx => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx, a.date)?,
+        Format::Csv => {
             let Some(map) = &a.map else {
                 anyhow::bail!(
                     "--format csv needs --map MAPPING.toml (the column of each message field)"
@@ -37,7 +69,6 @@ pub fn run(a: Args) -> Result<()> {
             };
             csv_map::import(&a.input, map, &a.output)?
         }
-        other => anyhow::bail!("--format {other}: unknown (formats: eth, nmea, ubx, csv)"),
     };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);

@@ -36,9 +36,10 @@ pub struct Args {
     /// Record the embedded simulator in real time (the default when no source is given).
     #[arg(long, value_name = "SCENARIO")]
     pub simulate: Option<String>,
-    /// Simulator: seed, and how many times faster than real time.
+    /// Simulator: the seed of its random streams (the same seed gives the same run).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Simulator: how many times faster than real time it plays (1 = real time).
     #[arg(long, default_value_t = 1.0)]
     pub speed: f64,
     /// Address the network listeners bind to (127.0.0.1 unless you open them up).

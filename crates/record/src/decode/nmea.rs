@@ -1,11 +1,28 @@
 //! NMEA 0183 sentences: `$<talker><type>,<fields>*<hh>` with the XOR checksum of everything
-//! between `$` and `*`. GGA, RMC, VTG, GSA and GST are decoded and assembled into fixes: one
-//! fix per GGA, with the date, speed and course of the latest RMC/VTG and the covariance of
-//! the latest GST. Other sentence types are recognised and skipped.
+//! between `$` and `*`. GGA, RMC, ZDA, VTG, GSA and GST are decoded and assembled into fixes:
+//! one fix per GGA, with the date of the latest RMC/ZDA, the speed and course of the latest
+//! RMC/VTG and the covariance of the latest GST. Other sentence types are recognised and
+//! skipped.
+//!
+//! GGA carries only the time of day. A GGA before any date waits (up to [`MAX_HELD`] fixes)
+//! for the first RMC or ZDA and is then stamped with its date; a live recorder gives its UTC
+//! clock instead, and the fix takes the day that puts it nearest that clock; an import can be
+//! told the date. A fix is never stamped with a made-up day (1970).
+
+use std::collections::VecDeque;
 
 use railfuse_catalog::messages::{FixType, GnssFix};
 
 use super::time::unix_ns;
+
+/// Fixes held while no date is known (a minute at 10 Hz); older ones are dropped and counted.
+pub const MAX_HELD: usize = 600;
+
+/// A UTC calendar date.
+pub type Date = (i64, u32, u32);
+
+/// Time of day: hours, minutes, seconds, nanoseconds.
+type TimeOfDay = (u32, u32, u32, i64);
 
 /// Longest sentence accepted (the standard says 82 characters; receivers exceed it a little).
 pub const MAX_SENTENCE: usize = 256;
@@ -71,11 +88,13 @@ pub fn parse(line: &str) -> Result<Sentence<'_>, NmeaError> {
 }
 
 /// What a sentence did to the assembler.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Decoded {
-    /// A fix (from GGA); `stamp_ns` is None while no RMC has given the date.
-    Fix(GnssFix),
-    /// Used to complete the next fix (RMC, VTG, GSA, GST).
+    /// A fix (GGA) is ready: take it with [`FixAssembler::next_fix`].
+    Fix,
+    /// A fix (GGA) waits for a date.
+    Held,
+    /// Used to complete fixes (RMC, ZDA, VTG, GSA, GST); an RMC or ZDA may release held ones.
     Context,
     /// A sentence type railfuse does not use (GSV, GLL, TXT, …).
     Skipped,
@@ -84,7 +103,11 @@ pub enum Decoded {
 /// Assembles fixes from a stream of sentences of one receiver.
 #[derive(Debug, Default, Clone)]
 pub struct FixAssembler {
-    date: Option<(i64, u32, u32)>,
+    date: Option<Date>,
+    held: VecDeque<(TimeOfDay, GnssFix)>,
+    ready: VecDeque<GnssFix>,
+    /// Fixes dropped for want of a date.
+    pub undated: u64,
     speed_mps: Option<f64>,
     course_rad: Option<f64>,
     /// (σ lat, σ lon, σ alt) in metres from GST.
@@ -124,8 +147,21 @@ fn angle(s: &Sentence<'_>, i: usize, deg_digits: usize) -> Result<Option<f64>, N
     Ok(Some(if matches!(hemi, "S" | "W") { -x } else { x }))
 }
 
+/// The stamp of time of day `tod` on the day (of the days around `clock_ns`) that puts it
+/// nearest that clock.
+fn nearest_day(clock_ns: u64, (h, mi, se, ns): TimeOfDay) -> Option<u64> {
+    const DAY_NS: u64 = 86_400_000_000_000;
+    let midnight = clock_ns - clock_ns % DAY_NS;
+    let tod = (h as u64 * 3600 + mi as u64 * 60 + se as u64) * 1_000_000_000;
+    let at = (midnight + tod).checked_add_signed(ns)?;
+    [at.checked_sub(DAY_NS), Some(at), at.checked_add(DAY_NS)]
+        .into_iter()
+        .flatten()
+        .min_by_key(|t| t.abs_diff(clock_ns))
+}
+
 /// `hhmmss.ss` → (h, m, s, ns).
-fn time_of_day(s: &Sentence<'_>, i: usize) -> Result<Option<(u32, u32, u32, i64)>, NmeaError> {
+fn time_of_day(s: &Sentence<'_>, i: usize) -> Result<Option<TimeOfDay>, NmeaError> {
     let t = s.fields.get(i).copied().unwrap_or("");
     if t.is_empty() {
         return Ok(None);
@@ -149,7 +185,44 @@ fn time_of_day(s: &Sentence<'_>, i: usize) -> Result<Option<(u32, u32, u32, i64)
 }
 
 impl FixAssembler {
-    pub fn feed(&mut self, s: &Sentence<'_>) -> Result<Decoded, NmeaError> {
+    /// An assembler that knows the date from the start (an import given `--date`).
+    pub fn with_date(date: Option<Date>) -> Self {
+        Self {
+            date,
+            ..Self::default()
+        }
+    }
+
+    /// The next fix ready, in the order of their GGA sentences.
+    pub fn next_fix(&mut self) -> Option<GnssFix> {
+        self.ready.pop_front()
+    }
+
+    /// End of the stream: fixes still waiting for a date are dropped; returns how many were
+    /// dropped for want of one in all.
+    pub fn finish(&mut self) -> u64 {
+        self.undated += self.held.len() as u64;
+        self.held.clear();
+        self.undated
+    }
+
+    /// A date is known: the held fixes get their stamps.
+    fn release(&mut self) {
+        let Some((y, mo, d)) = self.date else { return };
+        while let Some(((h, mi, se, ns), mut fix)) = self.held.pop_front() {
+            match unix_ns(y, mo, d, h, mi, se, ns) {
+                Some(stamp) => {
+                    fix.stamp_ns = stamp;
+                    self.ready.push_back(fix);
+                }
+                None => self.undated += 1,
+            }
+        }
+    }
+
+    /// Feeds one sentence. `clock_ns` is a UTC clock near the sentence's time when there is
+    /// one (a live recorder's receive time): a fix before any date takes the day nearest it.
+    pub fn feed(&mut self, s: &Sentence<'_>, clock_ns: Option<u64>) -> Result<Decoded, NmeaError> {
         match s.kind {
             "GGA" => {
                 let tod = time_of_day(s, 0)?;
@@ -172,12 +245,14 @@ impl FixAssembler {
                     (Some(msl), sep) => Some(msl + sep.unwrap_or(0.0)),
                     _ => None,
                 };
-                let stamp = match (self.date, tod) {
-                    (Some((y, mo, d)), Some((h, mi, se, ns))) => unix_ns(y, mo, d, h, mi, se, ns),
-                    _ => None,
+                let Some(tod) = tod else {
+                    return Err(NmeaError::BadField {
+                        sentence: "GGA".into(),
+                        field: 1,
+                    });
                 };
-                Ok(Decoded::Fix(GnssFix {
-                    stamp_ns: stamp.unwrap_or(0),
+                let fix = GnssFix {
+                    stamp_ns: 0,
                     fix_type: if has { fix_type } else { FixType::None },
                     satellites: num(s, 6)?.unwrap_or(0.0).clamp(0.0, 255.0) as u8,
                     hdop: num(s, 7)?,
@@ -189,7 +264,36 @@ impl FixAssembler {
                     }),
                     speed_mps: self.speed_mps.filter(|_| has),
                     course_rad: self.course_rad.filter(|_| has),
-                }))
+                };
+                let (h, mi, se, ns) = tod;
+                let stamp = match (self.date, clock_ns) {
+                    (Some((y, mo, d)), _) => unix_ns(y, mo, d, h, mi, se, ns),
+                    (None, Some(clock)) => nearest_day(clock, tod),
+                    (None, None) => {
+                        if self.held.len() == MAX_HELD {
+                            self.held.pop_front();
+                            self.undated += 1;
+                        }
+                        self.held.push_back((tod, fix));
+                        return Ok(Decoded::Held);
+                    }
+                };
+                let Some(stamp_ns) = stamp else {
+                    return Err(NmeaError::BadField {
+                        sentence: "GGA".into(),
+                        field: 1,
+                    });
+                };
+                self.ready.push_back(GnssFix { stamp_ns, ..fix });
+                Ok(Decoded::Fix)
+            }
+            "ZDA" => {
+                // hhmmss.ss, day, month, year
+                if let (Some(d), Some(m), Some(y)) = (num(s, 1)?, num(s, 2)?, num(s, 3)?) {
+                    self.date = Some((y as i64, m as u32, d as u32));
+                    self.release();
+                }
+                Ok(Decoded::Context)
             }
             "RMC" => {
                 let date = s.fields.get(8).copied().unwrap_or("");
@@ -197,6 +301,7 @@ impl FixAssembler {
                     let p = |r: std::ops::Range<usize>| date[r].parse::<u32>().ok();
                     if let (Some(d), Some(m), Some(y)) = (p(0..2), p(2..4), p(4..6)) {
                         self.date = Some((2000 + y as i64, m, d));
+                        self.release();
                     }
                 }
                 let valid = s.fields.get(1).copied() == Some("A");
@@ -240,12 +345,11 @@ mod tests {
             "$GNGST,083559.00,0.45,0.020,0.015,77.4,0.018,0.017,0.031*45",
         ] {
             let s = parse(line).unwrap_or_else(|e| panic!("{line}: {e}"));
-            assert_eq!(a.feed(&s).unwrap(), Decoded::Context);
+            assert_eq!(a.feed(&s, None).unwrap(), Decoded::Context);
         }
         let gga = "$GNGGA,083559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*5B";
-        let Decoded::Fix(f) = a.feed(&parse(gga).unwrap()).unwrap() else {
-            panic!()
-        };
+        assert_eq!(a.feed(&parse(gga).unwrap(), None).unwrap(), Decoded::Fix);
+        let f = a.next_fix().unwrap();
         assert_eq!(f.fix_type, FixType::RtkFixed);
         assert_eq!(f.stamp_ns, 1_666_254_959 * 1_000_000_000);
         assert!((f.latitude_deg.unwrap() - 44.655110666).abs() < 1e-8);
@@ -268,10 +372,55 @@ mod tests {
         let s = parse("$GBGSV,2,1,07,06,25,044,42,09,38,057,44,12,49,295,46,16,19,038,37,B*04")
             .unwrap();
         assert_eq!((s.talker, s.kind), ("GB", "GSV"));
-        assert_eq!(FixAssembler::default().feed(&s).unwrap(), Decoded::Skipped);
+        assert_eq!(
+            FixAssembler::default().feed(&s, None).unwrap(),
+            Decoded::Skipped
+        );
         let bad_field = parse(
             "$GNGGA,08x559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*10",
         );
-        assert!(FixAssembler::default().feed(&bad_field.unwrap()).is_err());
+        assert!(FixAssembler::default()
+            .feed(&bad_field.unwrap(), None)
+            .is_err());
+    }
+
+    const GGA: &str =
+        "$GNGGA,083559.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*5B";
+    const STAMP: u64 = 1_666_254_959 * 1_000_000_000; // 2022-10-20 08:35:59 UTC
+
+    #[test]
+    fn a_fix_before_the_date_waits_for_it_and_is_never_stamped_1970() {
+        let mut a = FixAssembler::default();
+        assert_eq!(a.feed(&parse(GGA).unwrap(), None).unwrap(), Decoded::Held);
+        assert!(a.next_fix().is_none());
+        let rmc = "$GNRMC,083559.00,A,4439.30664,N,01055.78382,E,0.074,,201022,,,R,V*0F";
+        a.feed(&parse(rmc).unwrap(), None).unwrap();
+        assert_eq!(a.next_fix().unwrap().stamp_ns, STAMP);
+        // ZDA gives the date too.
+        let mut z = FixAssembler::default();
+        z.feed(&parse(GGA).unwrap(), None).unwrap();
+        let zda = "$GNZDA,083559.00,20,10,2022,00,00*7B";
+        z.feed(&parse(zda).unwrap(), None).unwrap();
+        assert_eq!(z.next_fix().unwrap().stamp_ns, STAMP);
+        // Never dated: dropped and counted at the end, not stamped 1970.
+        let mut n = FixAssembler::default();
+        n.feed(&parse(GGA).unwrap(), None).unwrap();
+        assert_eq!((n.finish(), n.next_fix()), (1, None));
+        // A date given up front, or a live clock near the fix (just after midnight UTC).
+        let mut d = FixAssembler::with_date(Some((2022, 10, 20)));
+        d.feed(&parse(GGA).unwrap(), None).unwrap();
+        assert_eq!(d.next_fix().unwrap().stamp_ns, STAMP);
+        let mut c = FixAssembler::default();
+        c.feed(&parse(GGA).unwrap(), Some(STAMP + 3_000_000_000))
+            .unwrap();
+        assert_eq!(c.next_fix().unwrap().stamp_ns, STAMP);
+        let late =
+            "$GNGGA,235959.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000*58";
+        let after_midnight = 1_666_310_400 * 1_000_000_000 + 2_000_000_000; // 2022-10-21 00:00:02
+        c.feed(&parse(late).unwrap(), Some(after_midnight)).unwrap();
+        assert_eq!(
+            c.next_fix().unwrap().stamp_ns,
+            after_midnight - 3_000_000_000
+        );
     }
 }

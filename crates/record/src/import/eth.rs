@@ -275,21 +275,21 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
                     }
                 }
             }
-            "N" => match nmea::parse(data).map(|s| nmea.feed(&s)) {
-                Ok(Ok(Decoded::Fix(mut fix))) => {
-                    if fix.stamp_ns == 0 {
-                        fix.stamp_ns = now;
+            // With the node clock on UTC, a GGA before any RMC takes the day nearest it.
+            "N" => match nmea::parse(data).and_then(|s| nmea.feed(&s, offset.map(|_| now))) {
+                Ok(Decoded::Fix) => {
+                    while let Some(fix) = nmea.next_fix() {
+                        out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
                     }
-                    out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
                 }
-                Ok(Ok(Decoded::Context)) => {}
-                Ok(Ok(Decoded::Skipped)) => {
+                Ok(Decoded::Context | Decoded::Held) => {}
+                Ok(Decoded::Skipped) => {
                     *report
                         .skipped
                         .entry("NMEA sentence type not used (GSV, GLL, …)".into())
                         .or_insert(0) += 1
                 }
-                Ok(Err(e)) | Err(e) => report.skip(n, "NMEA sentence rejected", e),
+                Err(e) => report.skip(n, "NMEA sentence rejected", e),
             },
             "BRK" | "ARR" | "DEP" => {
                 let kind = match (kind, data.trim()) {

@@ -14,7 +14,14 @@ use super::ImportReport;
 use crate::recorder::message::Message;
 use crate::recorder::stream::{StreamDecoder, StreamFormat};
 
-pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<ImportReport> {
+/// `date`: the UTC date of NMEA fixes that come before any RMC or ZDA sentence (without it,
+/// they wait for the first such sentence; those that never get a date are dropped, counted).
+pub fn import(
+    input: &Path,
+    output: &Path,
+    format: StreamFormat,
+    date: Option<crate::decode::nmea::Date>,
+) -> Result<ImportReport> {
     let mut report = ImportReport {
         input: input.to_owned(),
         output: output.to_owned(),
@@ -29,10 +36,9 @@ pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<Impor
     let mut file = std::fs::File::open(input).map_err(io)?;
     let mut writer = LogWriter::create(output)?;
     let channel = writer.add_channel::<GnssFix>(topics::GNSS_FIX)?;
-    let mut decoder = StreamDecoder::new(format);
+    let mut decoder = StreamDecoder::with_date(format, date);
     let mut stats = SourceStats::default();
     let (mut buf, mut items) = (vec![0u8; 64 << 10], Vec::new());
-    let mut last_stamp = 0u64;
     let mut eof = false;
     while !eof {
         let n = file.read(&mut buf).map_err(io)?;
@@ -43,14 +49,9 @@ pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<Impor
             decoder.feed(&buf[..n], 0, &mut stats, &mut items);
         }
         for item in items.drain(..) {
-            let Message::Gnss(mut fix) = item.message else {
+            let Message::Gnss(fix) = item.message else {
                 continue;
             };
-            // A solution before the first date (NMEA GGA before any RMC) has no UTC yet.
-            if fix.stamp_ns == 0 {
-                fix.stamp_ns = last_stamp;
-            }
-            last_stamp = fix.stamp_ns;
             writer.write(channel, fix.stamp_ns, &fix)?;
             report.messages += 1;
             *report
@@ -63,6 +64,10 @@ pub fn import(input: &Path, output: &Path, format: StreamFormat) -> Result<Impor
         ("checksum failures", stats.checksum_failures),
         ("malformed", stats.malformed),
         ("oversized", stats.oversized),
+        (
+            "NMEA fixes with no date (no RMC/ZDA after them; give --date)",
+            decoder.undated_fixes(),
+        ),
     ] {
         if n > 0 {
             report.skipped.insert(what.to_owned(), n);

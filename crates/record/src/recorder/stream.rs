@@ -42,13 +42,24 @@ pub struct StreamDecoder {
 
 impl StreamDecoder {
     pub fn new(format: StreamFormat) -> Self {
+        Self::with_date(format, None)
+    }
+
+    /// A decoder whose NMEA fixes take `date` until an RMC or ZDA says otherwise (an import
+    /// of a capture whose first fixes come before any date).
+    pub fn with_date(format: StreamFormat, date: Option<nmea::Date>) -> Self {
         Self {
             format,
             buf: Vec::new(),
             skipping: false,
-            nmea: FixAssembler::default(),
+            nmea: FixAssembler::with_date(date),
             pending_pvt: None,
         }
+    }
+
+    /// NMEA fixes dropped because no date came for them (after [`StreamDecoder::finish`]).
+    pub fn undated_fixes(&self) -> u64 {
+        self.nmea.undated
     }
 
     /// Decodes `bytes` (any split of the stream), received at `receive_ns`.
@@ -90,6 +101,7 @@ impl StreamDecoder {
             let line = std::mem::take(&mut self.buf);
             self.line(&line, receive_ns, stats, out);
         }
+        self.nmea.finish();
         if let Some(pvt) = self.pending_pvt.take() {
             push_fix(
                 pvt.to_fix(pvt.utc_ns.unwrap_or(receive_ns), None),
@@ -122,21 +134,15 @@ impl StreamDecoder {
                     stats.last_error = Some(e);
                 }
             },
-            StreamFormat::Nmea => match nmea::parse(text).and_then(|s| self.nmea.feed(&s)) {
-                Ok(Decoded::Fix(mut fix)) => {
-                    if fix.stamp_ns == 0 {
-                        fix.stamp_ns = receive_ns;
-                    }
+            StreamFormat::Nmea => {
+                // A live source's receive time is a UTC clock; a file's is 0 (none).
+                let clock = (receive_ns > 0).then_some(receive_ns);
+                let fed = nmea::parse(text).and_then(|s| self.nmea.feed(&s, clock));
+                while let Some(fix) = self.nmea.next_fix() {
                     push_fix(fix, receive_ns, stats, out);
                 }
-                Ok(_) => {}
-                Err(NmeaError::Checksum { .. }) => stats.checksum_failures += 1,
-                Err(NmeaError::TooLong(_)) => stats.oversized += 1,
-                Err(e) => {
-                    stats.malformed += 1;
-                    stats.last_error = Some(e.to_string());
-                }
-            },
+                count_nmea_outcome(fed, stats);
+            }
             StreamFormat::Ubx => unreachable!("UBX is binary"),
         }
     }
@@ -231,6 +237,18 @@ fn push_fix(fix: GnssFix, receive_ns: u64, stats: &mut SourceStats, out: &mut Ve
         log_time_ns: receive_ns,
         message: Message::Gnss(fix),
     });
+}
+
+fn count_nmea_outcome(fed: Result<Decoded, NmeaError>, stats: &mut SourceStats) {
+    match fed {
+        Ok(_) => {}
+        Err(NmeaError::Checksum { .. }) => stats.checksum_failures += 1,
+        Err(NmeaError::TooLong(_)) => stats.oversized += 1,
+        Err(e) => {
+            stats.malformed += 1;
+            stats.last_error = Some(e.to_string());
+        }
+    }
 }
 
 #[cfg(test)]
