@@ -516,3 +516,28 @@ fn a_corrupt_chunk_in_the_middle_costs_that_chunk_only_and_python_reads_the_rest
     assert_eq!(py["messages"], r["messages"]);
     assert!(lost.values().sum::<u64>() < original["messages"].as_u64().unwrap() / 10);
 }
+
+#[test]
+fn every_message_kind_validates_against_its_schema_in_the_python_reader() {
+    use railfuse_catalog::log::LogWriter;
+    use railfuse_catalog::messages::MessageKind;
+    let d = tempfile::tempdir().unwrap();
+    let path = d.path().join("kinds.mcap");
+    let mut w = LogWriter::create(&path).unwrap();
+    for &kind in MessageKind::ALL {
+        let topic = format!("/sample/{}", kind.type_name());
+        let channel = w.add_channel_of(kind, &topic).unwrap();
+        let m = kind.example();
+        w.write_any(channel, m.stamp_ns(), &m).unwrap();
+    }
+    w.finish().unwrap();
+    let py = python_ok("check_mcap.py", &[s(&path)]);
+    assert_eq!(py["messages"], MessageKind::ALL.len(), "{py}");
+    for &kind in MessageKind::ALL {
+        assert_eq!(
+            py["topics"][format!("/sample/{}", kind.type_name())],
+            1,
+            "{kind:?}: {py}"
+        );
+    }
+}

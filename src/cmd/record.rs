@@ -392,7 +392,8 @@ pub fn run(mut a: Args) -> Result<()> {
                     if failed {
                         return;
                     }
-                    let (schema, json) = item.message.schema_and_json();
+                    let (schema, json) =
+                        (item.message.kind().schema_name(), item.message.to_json());
                     // A viewer that goes away must not stop the recording: say so once.
                     if let Err(e) = live.message(&item.topic, schema, item.log_time_ns, &json) {
                         eprintln!("\nviewer: {e}; recording continues without it");

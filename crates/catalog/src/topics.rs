@@ -1,6 +1,8 @@
 //! Topic names of the standard channels. Fused channels live under `/fused/<pipeline>/…` so
 //! that several pipelines sit side by side in one file.
 
+use crate::messages::MessageKind;
+
 pub const GNSS_FIX: &str = "/gnss/fix";
 pub const IMU: &str = "/imu";
 pub const RADAR_SPEED: &str = "/radar/speed";
@@ -13,6 +15,24 @@ pub const TRACK_MAP: &str = "/track/map";
 pub const GROUND_TRUTH: &str = "/truth";
 pub const EVENTS: &str = "/events";
 pub const RECORDER_DIAGNOSTICS: &str = "/recorder/diagnostics";
+
+/// The message kind a standard topic carries.
+pub fn standard_kind(topic: &str) -> Option<MessageKind> {
+    Some(match topic {
+        GNSS_FIX => MessageKind::GnssFix,
+        IMU => MessageKind::Imu,
+        RADAR_SPEED => MessageKind::RadarSpeed,
+        ODOMETER_1 | ODOMETER_2 => MessageKind::Odometer,
+        LOOP_POSITION => MessageKind::LoopPosition,
+        BALISE => MessageKind::BalisePassage,
+        EDDY_CURRENT => MessageKind::EddyCurrentBlock,
+        TRACK_MAP => MessageKind::TrackMap,
+        GROUND_TRUTH => MessageKind::GroundTruth,
+        EVENTS => MessageKind::Event,
+        RECORDER_DIAGNOSTICS => MessageKind::RecorderDiagnostics,
+        _ => return None,
+    })
+}
 
 /// Prefix of every fused channel.
 pub const FUSED_PREFIX: &str = "/fused/";
@@ -32,6 +52,26 @@ pub fn fused_smoothed(pipeline: &str) -> String {
     format!("{FUSED_PREFIX}{pipeline}/smoothed")
 }
 
+/// The channels each pipeline writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FusedChannel {
+    State,
+    Diagnostics,
+    Smoothed,
+}
+
+/// The pipeline and channel of a fused topic (`/fused/<pipeline>/<channel>`), if it is one.
+pub fn parse_fused(topic: &str) -> Option<(&str, FusedChannel)> {
+    let (pipeline, channel) = topic.strip_prefix(FUSED_PREFIX)?.split_once('/')?;
+    let channel = match channel {
+        "state" => FusedChannel::State,
+        "diagnostics" => FusedChannel::Diagnostics,
+        "smoothed" => FusedChannel::Smoothed,
+        _ => return None,
+    };
+    (!pipeline.is_empty()).then_some((pipeline, channel))
+}
+
 /// The pipeline name of a fused topic, if it is one.
 pub fn fused_pipeline_of(topic: &str) -> Option<&str> {
     topic
@@ -47,4 +87,25 @@ pub mod metadata {
     pub const RUN: &str = "railfuse.run";
     /// One record per pipeline: the exact configuration that made its fused channels.
     pub const PIPELINE: &str = "railfuse.pipeline";
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fused_topics_are_built_and_parsed_by_one_module() {
+        for (topic, channel) in [
+            (fused_state("kf"), FusedChannel::State),
+            (fused_diagnostics("kf"), FusedChannel::Diagnostics),
+            (fused_smoothed("kf"), FusedChannel::Smoothed),
+        ] {
+            assert_eq!(parse_fused(&topic), Some(("kf", channel)));
+            assert_eq!(fused_pipeline_of(&topic), Some("kf"));
+        }
+        assert_eq!(parse_fused("/fused/kf/other"), None);
+        assert_eq!(parse_fused("/fused//state"), None);
+        assert_eq!(parse_fused(RADAR_SPEED), None);
+        assert_eq!(standard_kind(RADAR_SPEED), Some(MessageKind::RadarSpeed));
+    }
 }

@@ -20,7 +20,7 @@ use railfuse_catalog::messages::{
     ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision, GnssFix,
     GroundTruth, TrackMap,
 };
-use railfuse_catalog::topics;
+use railfuse_catalog::topics::{self, FusedChannel};
 use serde::Serialize;
 
 use crate::accuracy::{
@@ -219,16 +219,16 @@ impl Evaluator {
             };
             self.reference = self.reference.or(kind);
             kind.map(Role::Reference)
-        } else if let Some(p) = topics::fused_pipeline_of(topic) {
-            match topic.rsplit('/').next() {
-                Some("state") if schema == FusedState::SCHEMA_NAME => {
+        } else if let Some((p, channel)) = topics::parse_fused(topic) {
+            match (channel, schema) {
+                (FusedChannel::State, s) if s == FusedState::SCHEMA_NAME => {
                     Some(Role::State(self.index_of(p.to_owned(), p)))
                 }
-                Some("smoothed") if schema == FusedState::SCHEMA_NAME => {
+                (FusedChannel::Smoothed, s) if s == FusedState::SCHEMA_NAME => {
                     self.smoothed_channels = true;
                     Some(Role::Smoothed(self.index_of(format!("{p}/smoothed"), p)))
                 }
-                Some("diagnostics") if schema == FusedDiagnostics::SCHEMA_NAME => {
+                (FusedChannel::Diagnostics, s) if s == FusedDiagnostics::SCHEMA_NAME => {
                     Some(Role::Diagnostics(self.index_of(p.to_owned(), p)))
                 }
                 _ => None,

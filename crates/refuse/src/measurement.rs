@@ -18,7 +18,7 @@ use std::path::Path;
 use nalgebra::RowSVector;
 use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::messages::{
-    BalisePassage, ChannelMessage, GnssFix, Imu, LoopPosition, Odometer, RadarSpeed, TrackMap,
+    BalisePassage, GnssFix, Imu, LoopPosition, MessageKind, Odometer, RadarSpeed, TrackMap,
 };
 use serde::{Deserialize, Serialize};
 
@@ -82,25 +82,30 @@ pub enum SensorModel {
 }
 
 impl SensorModel {
-    pub const SUPPORTED: &'static [&'static str] = &[
-        LoopPosition::SCHEMA_NAME,
-        BalisePassage::SCHEMA_NAME,
-        RadarSpeed::SCHEMA_NAME,
-        Odometer::SCHEMA_NAME,
-        GnssFix::SCHEMA_NAME,
-        Imu::SCHEMA_NAME,
+    /// The message kinds a sensor model reads.
+    pub const SUPPORTED: &'static [MessageKind] = &[
+        MessageKind::LoopPosition,
+        MessageKind::BalisePassage,
+        MessageKind::RadarSpeed,
+        MessageKind::Odometer,
+        MessageKind::GnssFix,
+        MessageKind::Imu,
     ];
 
-    pub fn for_schema(schema: &str) -> Option<Self> {
-        Some(match schema {
-            s if s == LoopPosition::SCHEMA_NAME => SensorModel::LoopPosition,
-            s if s == BalisePassage::SCHEMA_NAME => SensorModel::BalisePosition,
-            s if s == RadarSpeed::SCHEMA_NAME => SensorModel::RadarSpeed,
-            s if s == Odometer::SCHEMA_NAME => SensorModel::OdometerSpeed,
-            s if s == GnssFix::SCHEMA_NAME => SensorModel::GnssFix,
-            s if s == Imu::SCHEMA_NAME => SensorModel::ImuAcceleration,
+    pub fn for_kind(kind: MessageKind) -> Option<Self> {
+        Some(match kind {
+            MessageKind::LoopPosition => SensorModel::LoopPosition,
+            MessageKind::BalisePassage => SensorModel::BalisePosition,
+            MessageKind::RadarSpeed => SensorModel::RadarSpeed,
+            MessageKind::Odometer => SensorModel::OdometerSpeed,
+            MessageKind::GnssFix => SensorModel::GnssFix,
+            MessageKind::Imu => SensorModel::ImuAcceleration,
             _ => return None,
         })
+    }
+
+    pub fn for_schema(schema: &str) -> Option<Self> {
+        Self::for_kind(MessageKind::from_schema(schema)?)
     }
 
     /// The quantities this model can give.

@@ -643,7 +643,11 @@ fn check_sensor(
     schema: &str,
 ) -> Result<()> {
     let Some(model) = SensorModel::for_schema(schema) else {
-        let supported = SensorModel::SUPPORTED.join(", ");
+        let supported: Vec<&str> = SensorModel::SUPPORTED
+            .iter()
+            .map(|k| k.schema_name())
+            .collect();
+        let supported = supported.join(", ");
         return Err(channel_error(
             input,
             &p.name,

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::*;
 use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
-use railfuse_catalog::topics;
+use railfuse_catalog::topics::{self, FusedChannel};
 use rerun::{
     Color, LineStrips2D, Points2D, Radius, RecordingStream, Scalars, SeriesLines, TextLog,
 };
@@ -126,7 +126,7 @@ pub struct LiveViz {
 impl LiveViz {
     pub fn open(sink: &Sink) -> Result<Self, Error> {
         Ok(Self {
-            logger: Logger::new(open_stream(sink)?, PathBuf::from("<live>")),
+            logger: Logger::new(open_stream(sink)?, PathBuf::from("<live>"), 0),
             channels: Default::default(),
         })
     }
@@ -174,7 +174,12 @@ impl LiveViz {
 /// Logs the whole file to the sink, streaming.
 pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
     let mut reader = LogReader::open(path)?;
-    let mut logger = Logger::new(open_stream(sink)?, path.to_owned());
+    // Fused states may trail the truth in file order by a chunk (railfuse writes the fused
+    // chunk of an input chunk right after it): the truth is kept that much longer.
+    let longest_chunk_ns = railfuse_catalog::log::read_summary(path)?
+        .and_then(|s| s.longest_chunk_ns)
+        .unwrap_or(0);
+    let mut logger = Logger::new(open_stream(sink)?, path.to_owned(), longest_chunk_ns);
     while let Some(record) = reader.next() {
         if let LogRecord::Message(m) = record? {
             logger.report.messages += 1;
@@ -199,12 +204,12 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
 }
 
 impl Logger {
-    fn new(rec: RecordingStream, path: PathBuf) -> Self {
+    fn new(rec: RecordingStream, path: PathBuf, longest_chunk_ns: u64) -> Self {
         Logger {
             rec,
             path: path.into(),
             map: None,
-            truth: ReferenceTrack::new(10.0),
+            truth: ReferenceTrack::new(10.0 + longest_chunk_ns as f64 / 1e9),
             pipelines: Vec::new(),
             shares: Default::default(),
             sensor_states: Default::default(),
@@ -263,8 +268,8 @@ impl Logger {
     fn message(&mut self, m: &railfuse_catalog::log::LogMessage<'_>) -> Result<(), Error> {
         let path = &*self.path.clone();
         let topic = m.channel.topic.as_str();
-        match m.channel.schema_name() {
-            n if n == TrackMap::SCHEMA_NAME => {
+        match m.channel.kind() {
+            Some(MessageKind::TrackMap) => {
                 let map: TrackMap = m.decode(path)?;
                 let strip: Vec<[f32; 2]> = map
                     .vertices
@@ -306,7 +311,7 @@ impl Logger {
                 self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
                 self.map = Some(map);
             }
-            n if n == GroundTruth::SCHEMA_NAME => {
+            Some(MessageKind::GroundTruth) => {
                 let t: GroundTruth = m.decode(path)?;
                 self.truth.push(ReferenceSample {
                     stamp_ns: t.stamp_ns,
@@ -321,7 +326,7 @@ impl Logger {
                 )?;
                 self.log(ent::SPEED_TRUTH, &Scalars::single(t.speed_mps))?;
             }
-            n if n == GnssFix::SCHEMA_NAME => {
+            Some(MessageKind::GnssFix) => {
                 let g: GnssFix = m.decode(path)?;
                 if let (Some(map), Some(lat), Some(lon)) =
                     (&self.map, g.latitude_deg, g.longitude_deg)
@@ -342,23 +347,23 @@ impl Logger {
                     self.log(ent::SPEED_GNSS, &Scalars::single(v))?;
                 }
             }
-            n if n == RadarSpeed::SCHEMA_NAME => {
+            Some(MessageKind::RadarSpeed) => {
                 let r: RadarSpeed = m.decode(path)?;
                 if r.valid {
                     self.log(ent::SPEED_RADAR, &Scalars::single(r.speed_mps))?;
                 }
             }
-            n if n == Odometer::SCHEMA_NAME => {
+            Some(MessageKind::Odometer) => {
                 let o: Odometer = m.decode(path)?;
                 self.log(&ent::speed_of(topic), &Scalars::single(o.speed_mps))?;
             }
-            n if n == LoopPosition::SCHEMA_NAME => {
+            Some(MessageKind::LoopPosition) => {
                 let l: LoopPosition = m.decode(path)?;
                 if let Some((s, _)) = self.truth.at(l.stamp_ns) {
                     self.log(ent::LOOP_CHAINAGE_ERROR, &Scalars::single(l.chainage_m - s))?;
                 }
             }
-            n if n == BalisePassage::SCHEMA_NAME => {
+            Some(MessageKind::BalisePassage) => {
                 let b: BalisePassage = m.decode(path)?;
                 if let Some((s, _)) = self.truth.at(b.stamp_ns) {
                     self.log(
@@ -367,22 +372,19 @@ impl Logger {
                     )?;
                 }
             }
-            n if n == Event::SCHEMA_NAME => {
+            Some(MessageKind::Event) => {
                 let e: Event = m.decode(path)?;
                 self.log(
                     ent::EVENTS,
                     &TextLog::new(format!("{:?}: {}", e.kind, e.text)),
                 )?;
             }
-            n if n == FusedState::SCHEMA_NAME => {
-                let Some(pipeline) = topics::fused_pipeline_of(topic) else {
-                    return Ok(());
-                };
+            Some(MessageKind::FusedState) => {
                 // A pipeline's RTS-smoothed states are a series of their own.
-                let series = if topic.ends_with("/smoothed") {
-                    format!("{pipeline}/smoothed")
-                } else {
-                    pipeline.to_owned()
+                let series = match topics::parse_fused(topic) {
+                    Some((pipeline, FusedChannel::State)) => pipeline.to_owned(),
+                    Some((pipeline, FusedChannel::Smoothed)) => format!("{pipeline}/smoothed"),
+                    _ => return Ok(()),
                 };
                 let f: FusedState = m.decode(path)?;
                 // Fused states are released after the reorder window: plot them at the
@@ -391,8 +393,8 @@ impl Logger {
                     .set_timestamp_nanos_since_epoch("log_time", f.stamp_ns as i64);
                 self.fused(&series, &f)?;
             }
-            n if n == FusedDiagnostics::SCHEMA_NAME => {
-                let Some(pipeline) = topics::fused_pipeline_of(topic) else {
+            Some(MessageKind::FusedDiagnostics) => {
+                let Some((pipeline, FusedChannel::Diagnostics)) = topics::parse_fused(topic) else {
                     return Ok(());
                 };
                 let d: FusedDiagnostics = m.decode(path)?;

@@ -13,7 +13,7 @@ use super::format::{self, Records, FRAME};
 use super::scan::{Chunk, Item, ReadAhead, Scanner};
 
 use crate::error::{Error, Result};
-use crate::messages::ChannelMessage;
+use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SchemaInfo {
@@ -35,6 +35,11 @@ pub struct ChannelInfo {
 impl ChannelInfo {
     pub fn schema_name(&self) -> &str {
         self.schema.as_ref().map_or("", |s| s.name.as_str())
+    }
+
+    /// The catalogue message kind of its schema, if railfuse knows it.
+    pub fn kind(&self) -> Option<MessageKind> {
+        MessageKind::from_schema(self.schema_name())
     }
 }
 
@@ -58,6 +63,23 @@ impl LogMessage<'_> {
             log_time_ns: self.log_time_ns,
             source,
         })
+    }
+
+    /// Decodes the payload as whatever catalogue kind its channel carries; `None` for a
+    /// schema the catalogue does not know.
+    pub fn decode_any(&self, path: &Path) -> Result<Option<AnyMessage>> {
+        let Some(kind) = self.channel.kind() else {
+            return Ok(None);
+        };
+        kind.decode(self.data)
+            .map(Some)
+            .map_err(|source| Error::Decode {
+                path: path.to_owned(),
+                topic: self.channel.topic.clone(),
+                schema: kind.schema_name().to_owned(),
+                log_time_ns: self.log_time_ns,
+                source,
+            })
     }
 
     /// True when the channel's schema is `M`'s.

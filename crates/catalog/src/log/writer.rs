@@ -22,7 +22,7 @@ use mcap::records::{
 use super::format::{self, put_message, put_record, Records, FRAME, MAGIC};
 use super::scan::Chunk;
 use crate::error::{Error, Result};
-use crate::messages::ChannelMessage;
+use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
 
 /// A channel registered with a [`LogWriter`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -178,14 +178,19 @@ impl LogWriter {
 
     /// Registers a channel of message type `M` on `topic`.
     pub fn add_channel<M: ChannelMessage>(&mut self, topic: &str) -> Result<ChannelId> {
-        let schema_id = match self.schema_ids.get(M::SCHEMA_NAME) {
+        self.add_channel_of(M::KIND, topic)
+    }
+
+    /// Registers a channel of message kind `kind` on `topic`.
+    pub fn add_channel_of(&mut self, kind: MessageKind, topic: &str) -> Result<ChannelId> {
+        let schema_id = match self.schema_ids.get(kind.schema_name()) {
             Some(&id) => id,
             None => {
                 let id = (1..=u16::MAX)
                     .find(|i| !self.schemas.contains_key(i))
                     .unwrap_or(0);
-                let data = M::schema_bytes();
-                self.copy_schema(id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)?;
+                let data = kind.schema_bytes();
+                self.copy_schema(id, kind.schema_name(), super::SCHEMA_ENCODING, &data)?;
                 id
             }
         };
@@ -274,6 +279,23 @@ impl LogWriter {
         let result = self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &buf);
         self.buf = buf;
         result
+    }
+
+    /// Writes a message of any kind (the channel must be of its kind).
+    pub fn write_any(
+        &mut self,
+        channel: ChannelId,
+        log_time_ns: u64,
+        msg: &AnyMessage,
+    ) -> Result<()> {
+        let sequence = self.next_sequence(channel.0);
+        self.write_raw(
+            channel.0,
+            sequence,
+            log_time_ns,
+            msg.stamp_ns(),
+            &msg.to_json(),
+        )
     }
 
     fn next_sequence(&mut self, channel: u16) -> u32 {

@@ -12,4 +12,3 @@ pub struct BalisePassage {
     #[serde(default)]
     pub variance_m2: Option<f64>,
 }
-super::channel_message!(BalisePassage, "railfuse.BalisePassage");

@@ -14,4 +14,3 @@ pub struct EddyCurrentBlock {
     /// The trailing sensor's samples (volts), same length as `sensor_a`.
     pub sensor_b: Vec<f32>,
 }
-super::channel_message!(EddyCurrentBlock, "railfuse.EddyCurrentBlock");

@@ -27,4 +27,3 @@ pub struct Event {
     /// Station name, device name or free text.
     pub text: String,
 }
-super::channel_message!(Event, "railfuse.Event");

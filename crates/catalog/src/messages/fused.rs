@@ -17,7 +17,6 @@ pub struct FusedState {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sensor_states: Vec<SensorStateEstimate>,
 }
-super::channel_message!(FusedState, "railfuse.FusedState");
 
 /// One estimated sensor calibration state.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -107,4 +106,3 @@ pub struct DeviceShare {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fault: Option<String>,
 }
-super::channel_message!(FusedDiagnostics, "railfuse.FusedDiagnostics");

@@ -48,4 +48,3 @@ pub struct GnssFix {
     #[serde(default)]
     pub course_rad: Option<f64>,
 }
-super::channel_message!(GnssFix, "railfuse.GnssFix");

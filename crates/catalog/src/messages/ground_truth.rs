@@ -15,4 +15,3 @@ pub struct GroundTruth {
     /// Track heading, clockwise from north.
     pub heading_rad: f64,
 }
-super::channel_message!(GroundTruth, "railfuse.GroundTruth");

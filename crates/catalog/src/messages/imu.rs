@@ -11,4 +11,3 @@ pub struct Imu {
     /// Angular rate, rad/s.
     pub angular_rate_radps: [f64; 3],
 }
-super::channel_message!(Imu, "railfuse.Imu");

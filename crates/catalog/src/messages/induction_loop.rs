@@ -14,4 +14,3 @@ pub struct LoopPosition {
     #[serde(default)]
     pub variance_m2: Option<f64>,
 }
-super::channel_message!(LoopPosition, "railfuse.LoopPosition");

@@ -4,6 +4,7 @@
 mod balise;
 mod eddy_current;
 mod events;
+mod examples;
 mod fused;
 mod gnss;
 mod ground_truth;
@@ -12,6 +13,7 @@ mod induction_loop;
 mod odometer;
 mod radar;
 mod recorder;
+mod registry;
 mod track_map;
 
 pub use balise::BalisePassage;
@@ -25,6 +27,7 @@ pub use induction_loop::LoopPosition;
 pub use odometer::Odometer;
 pub use radar::RadarSpeed;
 pub use recorder::{RecorderDiagnostics, SourceStats};
+pub use registry::{AnyMessage, MessageKind};
 pub use track_map::{Station, TrackBalise, TrackMap, TrackVertex, Tunnel};
 
 use serde::{de::DeserializeOwned, Serialize};
@@ -33,6 +36,8 @@ use serde::{de::DeserializeOwned, Serialize};
 pub trait ChannelMessage: Serialize + DeserializeOwned + schemars::JsonSchema {
     /// The MCAP schema name, `railfuse.<Type>`.
     const SCHEMA_NAME: &'static str;
+    /// Its entry in the registry.
+    const KIND: MessageKind;
 
     /// The sensor's own timestamp, ns since the Unix epoch.
     fn stamp_ns(&self) -> u64;
@@ -44,37 +49,12 @@ pub trait ChannelMessage: Serialize + DeserializeOwned + schemars::JsonSchema {
     }
 }
 
-macro_rules! channel_message {
-    ($ty:ty, $name:literal) => {
-        impl $crate::messages::ChannelMessage for $ty {
-            const SCHEMA_NAME: &'static str = $name;
-            fn stamp_ns(&self) -> u64 {
-                self.stamp_ns
-            }
-        }
-    };
-}
-pub(crate) use channel_message;
-
 /// Every schema of the catalogue, by name: what a validator or a new recorder source needs.
 pub fn all_schemas() -> Vec<(&'static str, Vec<u8>)> {
-    fn entry<M: ChannelMessage>() -> (&'static str, Vec<u8>) {
-        (M::SCHEMA_NAME, M::schema_bytes())
-    }
-    vec![
-        entry::<GnssFix>(),
-        entry::<Imu>(),
-        entry::<RadarSpeed>(),
-        entry::<Odometer>(),
-        entry::<LoopPosition>(),
-        entry::<BalisePassage>(),
-        entry::<EddyCurrentBlock>(),
-        entry::<TrackMap>(),
-        entry::<GroundTruth>(),
-        entry::<Event>(),
-        entry::<FusedState>(),
-        entry::<FusedDiagnostics>(),
-    ]
+    MessageKind::ALL
+        .iter()
+        .map(|k| (k.schema_name(), k.schema_bytes()))
+        .collect()
 }
 
 #[cfg(test)]

@@ -17,4 +17,3 @@ pub struct Odometer {
     /// Speed over the last sample interval, m/s.
     pub speed_mps: f64,
 }
-super::channel_message!(Odometer, "railfuse.Odometer");

@@ -15,4 +15,3 @@ pub struct RadarSpeed {
     #[serde(default)]
     pub speed_variance_m2ps2: Option<f64>,
 }
-super::channel_message!(RadarSpeed, "railfuse.RadarSpeed");

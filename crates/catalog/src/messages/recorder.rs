@@ -32,4 +32,3 @@ pub struct RecorderDiagnostics {
     /// Bytes written to the log so far.
     pub bytes_written: u64,
 }
-super::channel_message!(RecorderDiagnostics, "railfuse.RecorderDiagnostics");

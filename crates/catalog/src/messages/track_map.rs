@@ -49,7 +49,6 @@ pub struct TrackMap {
     #[serde(default)]
     pub loop_crossing_spacing_m: Option<f64>,
 }
-super::channel_message!(TrackMap, "railfuse.TrackMap");
 
 impl TrackMap {
     /// East, north and heading (clockwise from north) at a chainage, interpolated along the

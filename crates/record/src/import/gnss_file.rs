@@ -7,11 +7,10 @@ use std::io::Read;
 use std::path::Path;
 
 use railfuse_catalog::log::LogWriter;
-use railfuse_catalog::messages::{GnssFix, SourceStats};
+use railfuse_catalog::messages::{AnyMessage, GnssFix, SourceStats};
 use railfuse_catalog::{topics, Error, Result};
 
 use super::ImportReport;
-use crate::recorder::message::Message;
 use crate::recorder::stream::{StreamDecoder, StreamFormat};
 
 /// `date`: the UTC date of NMEA fixes that come before any RMC or ZDA sentence (without it,
@@ -49,7 +48,7 @@ pub fn import(
             decoder.feed(&buf[..n], 0, &mut stats, &mut items);
         }
         for item in items.drain(..) {
-            let Message::Gnss(fix) = item.message else {
+            let AnyMessage::GnssFix(fix) = item.message else {
                 continue;
             };
             writer.write(channel, fix.stamp_ns, &fix)?;

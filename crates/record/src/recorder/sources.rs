@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::*;
 
-use super::message::{Item, Message};
+use super::message::Item;
 use super::stream::{StreamDecoder, StreamFormat};
 
 /// Where messages come from.
@@ -125,7 +125,7 @@ fn send_as(
     gnss_topic: Option<&str>,
 ) -> bool {
     for mut item in items.drain(..) {
-        if let (Some(t), Message::Gnss(_)) = (gnss_topic, &item.message) {
+        if let (Some(t), AnyMessage::GnssFix(_)) = (gnss_topic, &item.message) {
             item.topic = t.to_owned();
         }
         match tx.try_send(item) {
@@ -430,47 +430,15 @@ fn simulated(
         }
         // Shift the run onto the live clock: sensor and log times keep their spacing.
         let shift = |t: u64| live0 + ((t.saturating_sub(t0)) as f64 / speed) as u64;
-        let schema = m.channel.schema_name();
-        let p: &std::path::Path = &path;
-        let message = match schema {
-            s if s == GnssFix::SCHEMA_NAME => Message::Gnss(restamp(
-                m.decode::<GnssFix>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == Imu::SCHEMA_NAME => Message::Imu(restamp(
-                m.decode::<Imu>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == RadarSpeed::SCHEMA_NAME => Message::Radar(restamp(
-                m.decode::<RadarSpeed>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == Odometer::SCHEMA_NAME => Message::Odometer(restamp(
-                m.decode::<Odometer>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == LoopPosition::SCHEMA_NAME => Message::Loop(restamp(
-                m.decode::<LoopPosition>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == BalisePassage::SCHEMA_NAME => Message::Balise(restamp(
-                m.decode::<BalisePassage>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == Event::SCHEMA_NAME => Message::Event(restamp(
-                m.decode::<Event>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == GroundTruth::SCHEMA_NAME => Message::Truth(restamp(
-                m.decode::<GroundTruth>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            s if s == TrackMap::SCHEMA_NAME => Message::Map(restamp(
-                m.decode::<TrackMap>(p).map_err(|e| e.to_string())?,
-                shift,
-            )),
-            _ => continue,
+        // Messages of kinds the catalogue does not know are passed over.
+        let Some(kind) = MessageKind::from_schema(m.channel.schema_name()) else {
+            continue;
         };
+        let mut message = kind
+            .decode(m.data)
+            .map_err(|e| format!("{}: {}: {e}", path.display(), m.channel.topic))?;
+        let stamp = message.stamp_ns_mut();
+        *stamp = shift(*stamp);
         stats.lock().expect("stats").received += 1;
         items.push(Item {
             topic: m.channel.topic.clone(),
@@ -482,16 +450,4 @@ fn simulated(
         }
     }
     Ok(())
-}
-
-/// Moves a message's sensor time onto the live clock.
-fn restamp<M: ChannelMessage + serde::Serialize + serde::de::DeserializeOwned>(
-    m: M,
-    shift: impl Fn(u64) -> u64,
-) -> M {
-    let mut v = serde_json::to_value(&m).expect("a message serialises");
-    if let Some(t) = v.get("stamp_ns").and_then(|t| t.as_u64()) {
-        v["stamp_ns"] = serde_json::Value::from(shift(t));
-    }
-    serde_json::from_value(v).unwrap_or(m)
 }

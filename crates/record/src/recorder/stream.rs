@@ -2,10 +2,10 @@
 //! UBX (GNSS receivers). Every length is bounded and every checksum checked; what does not
 //! decode is counted in the source's statistics and skipped, never fatal.
 
-use railfuse_catalog::messages::{GnssFix, SourceStats};
+use railfuse_catalog::messages::{AnyMessage, GnssFix, SourceStats};
 use railfuse_catalog::topics;
 
-use super::message::{parse_json_line, Item, Message};
+use super::message::{parse_json_line, Item};
 use crate::decode::nmea::{self, Decoded, FixAssembler, NmeaError};
 use crate::decode::ubx::{self, NavCov, NavPvt, UbxError};
 
@@ -235,7 +235,7 @@ fn push_fix(fix: GnssFix, receive_ns: u64, stats: &mut SourceStats, out: &mut Ve
     out.push(Item {
         topic: topics::GNSS_FIX.to_owned(),
         log_time_ns: receive_ns,
-        message: Message::Gnss(fix),
+        message: AnyMessage::GnssFix(fix),
     });
 }
 

@@ -1,0 +1,96 @@
+//! A sample message of every kind, as a sensor gateway would send it in a JSON line: for
+//! documentation, and for the tests that take every kind through encoding, decoding and its
+//! JSON schema. The match is exhaustive, so a new kind cannot be added without its sample.
+
+use serde_json::{json, Value};
+
+use super::{AnyMessage, MessageKind};
+
+/// 2026-06-01 08:00:00 UTC.
+const T: u64 = 1_780_300_800_000_000_000;
+
+impl MessageKind {
+    /// The sample message's fields as JSON.
+    pub fn example_json(self) -> Value {
+        match self {
+            MessageKind::GnssFix => json!({
+                "stamp_ns": T, "fix_type": "rtk_fixed", "satellites": 21, "hdop": 0.6,
+                "latitude_deg": 44.6551106, "longitude_deg": 10.9297304, "altitude_m": 79.3,
+                "position_covariance_enu_m2": [4e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 1e-3],
+                "speed_mps": 22.5, "course_rad": 1.2
+            }),
+            MessageKind::Imu => json!({
+                "stamp_ns": T, "sensor_id": "imu0",
+                "specific_force_mps2": [0.31, -0.02, 9.81], "angular_rate_radps": [0.0, 0.001, 0.02]
+            }),
+            MessageKind::RadarSpeed => json!({
+                "stamp_ns": T, "speed_mps": 22.4, "quality": 0.93, "valid": true,
+                "speed_variance_m2ps2": 0.01
+            }),
+            MessageKind::Odometer => json!({
+                "stamp_ns": T, "sensor_id": "axle1", "pulse_count": 120_455,
+                "pulses_per_revolution": 200, "wheel_diameter_m": 0.92,
+                "distance_increment_m": 0.9, "speed_mps": 22.6
+            }),
+            MessageKind::LoopPosition => json!({
+                "stamp_ns": T, "chainage_m": 1250.0, "crossing": 50, "variance_m2": 0.01
+            }),
+            MessageKind::BalisePassage => json!({
+                "stamp_ns": T, "balise_id": "B-0012", "chainage_m": 12_004.2, "variance_m2": 0.04
+            }),
+            MessageKind::EddyCurrentBlock => json!({
+                "stamp_ns": T, "sample_rate_hz": 10_000.0, "spacing_m": 0.3,
+                "sensor_a": [0.1, 0.4, -0.2], "sensor_b": [0.0, 0.1, 0.4]
+            }),
+            MessageKind::TrackMap => json!({
+                "stamp_ns": T, "name": "test line",
+                "origin": {"latitude_deg": 44.6, "longitude_deg": 10.9, "altitude_m": 40.0},
+                "vertices": [
+                    {"chainage_m": 0.0, "east_m": 0.0, "north_m": 0.0},
+                    {"chainage_m": 100.0, "east_m": 100.0, "north_m": 0.0}
+                ],
+                "balises": [{"balise_id": "B-1", "chainage_m": 50.0}],
+                "tunnels": [{"name": "T1", "start_chainage_m": 60.0, "end_chainage_m": 80.0}],
+                "stations": [{"name": "A", "chainage_m": 0.0}],
+                "sleeper_spacing_m": 0.6, "loop_crossing_spacing_m": 25.0
+            }),
+            MessageKind::GroundTruth => json!({
+                "stamp_ns": T, "chainage_m": 1250.2, "speed_mps": 22.5, "acceleration_mps2": 0.1,
+                "east_m": 1200.0, "north_m": 310.0, "latitude_deg": 44.61,
+                "longitude_deg": 10.92, "heading_rad": 0.3
+            }),
+            MessageKind::Event => json!({
+                "stamp_ns": T, "kind": "tunnel_entry", "text": "T1"
+            }),
+            MessageKind::FusedState => json!({
+                "stamp_ns": T, "chainage_m": 1250.1, "speed_mps": 22.5, "acceleration_mps2": 0.1,
+                "covariance": [0.04, 0.001, 0.0, 0.001, 0.01, 0.0, 0.0, 0.0, 0.02],
+                "source": "/loop/position",
+                "sensor_states": [
+                    {"topic": "/radar/speed", "kind": "scale_factor", "value": 0.003, "std": 2e-4}
+                ]
+            }),
+            MessageKind::FusedDiagnostics => json!({
+                "stamp_ns": T, "source": "/radar/speed", "measurement": 22.4,
+                "measurement_variance": 0.1, "innovation": -0.1, "innovation_variance": 0.11,
+                "nis": 0.09, "decision": "accepted", "device": "radar",
+                "effective_sample_size": 812.5, "resampled": true,
+                "sharing": [{"device": "radar", "beta": 0.5, "fault": "silent for 1.2 s"}]
+            }),
+            MessageKind::RecorderDiagnostics => json!({
+                "stamp_ns": T, "bytes_written": 1_048_576,
+                "sources": [{
+                    "name": "udp:5600", "received": 100, "written": 99, "malformed": 1,
+                    "checksum_failures": 0, "oversized": 0, "dropped": 0, "reconnects": 0,
+                    "connected": true, "last_error": "not a JSON object"
+                }]
+            }),
+        }
+    }
+
+    /// The sample message.
+    pub fn example(self) -> AnyMessage {
+        self.from_value(self.example_json())
+            .expect("every sample fits its type")
+    }
+}
