@@ -771,3 +771,62 @@ fn a_pipeline_without_a_position_sensor_starts_at_distance_zero_or_where_told() 
         );
     }
 }
+
+#[test]
+fn the_accuracy_refuse_prints_in_its_pass_equals_eval_of_the_written_file() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("s0.mcap"), d.path().join("s0.fused.mcap"));
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed000",
+        "--seed",
+        "3",
+        "-o",
+        s(&raw),
+    ]);
+    let cfg = sample("seed000.toml"); // kf_balise has an RTS smoother
+    let o = ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]);
+    let in_pass: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let o = ok(&["eval", s(&fused), "--json"]);
+    let from_file: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (a, b) = (&in_pass["eval"]["pipelines"], &from_file["pipelines"]);
+    assert!(
+        a.as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p["name"] == "kf_balise/smoothed"),
+        "{a}"
+    );
+    // The same states and counts; figures equal but for the last bits: the file's JSON floats
+    // are parsed by serde_json's fast parser (within an ulp), the in-pass ones never left f64.
+    let worst = differ(a, b);
+    assert!(
+        worst < 1e-9,
+        "in-pass and file evaluations differ by {worst}:\n{a}\n{b}"
+    );
+    assert_eq!(in_pass["eval"]["windows"], from_file["windows"]);
+}
+
+/// The largest relative difference between two JSON documents of the same shape (∞ where
+/// the shapes or any non-number differ).
+fn differ(a: &serde_json::Value, b: &serde_json::Value) -> f64 {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            (x - y).abs() / x.abs().max(y.abs()).max(1e-300)
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => x
+            .iter()
+            .zip(y)
+            .map(|(x, y)| differ(x, y))
+            .fold(0.0, f64::max),
+        (Value::Object(x), Value::Object(y)) if x.len() == y.len() => x
+            .iter()
+            .map(|(k, v)| y.get(k).map_or(f64::INFINITY, |w| differ(v, w)))
+            .fold(0.0, f64::max),
+        _ if a == b => 0.0,
+        _ => f64::INFINITY,
+    }
+}

@@ -2,7 +2,7 @@ use std::collections::BTreeMap;
 use std::io::IsTerminal;
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -78,12 +78,6 @@ pub struct Args {
     /// Print the final report as JSON.
     #[arg(long)]
     pub json: bool,
-}
-
-static SIGNALLED: AtomicBool = AtomicBool::new(false);
-
-extern "C" fn on_signal(_: libc::c_int) {
-    SIGNALLED.store(true, Ordering::SeqCst);
 }
 
 /// `FORMAT[=TOPIC]`: the stream format and, optionally, the channel its GNSS fixes go to
@@ -336,20 +330,12 @@ pub fn run(mut a: Args) -> Result<()> {
             a.chunk_interval
         );
     }
-    // SAFETY: installing async-signal-safe handlers (an atomic store) before threads start.
-    unsafe {
-        libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
-        libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
-    }
+    // Ctrl-C or SIGTERM finishes the file (summary, indexes) instead of killing the run.
     let stop = Arc::new(AtomicBool::new(false));
-    let bridge = stop.clone();
-    std::thread::spawn(move || loop {
-        if SIGNALLED.load(Ordering::SeqCst) {
-            bridge.store(true, Ordering::SeqCst);
-            return;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    });
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, stop.clone())
+            .context("cannot install the Ctrl-C / SIGTERM handler")?;
+    }
     let terminal = std::io::stderr().is_terminal();
     let mut since_plain = 0u32;
     let mut warned = 0;

@@ -128,7 +128,14 @@ fn reference_sample(
 ) -> Result<Option<(u64, f64, f64)>> {
     Ok(match kind {
         ReferenceKind::Truth => {
-            let t: GroundTruth = m.decode(path)?;
+            // The three fields scored; the others are skipped unconverted (100 Hz channel).
+            #[derive(serde::Deserialize)]
+            struct Sample {
+                stamp_ns: u64,
+                chainage_m: f64,
+                speed_mps: f64,
+            }
+            let t: Sample = m.decode_fields(path)?;
             Some((t.stamp_ns, t.chainage_m, t.speed_mps))
         }
         ReferenceKind::Fused => {
@@ -175,6 +182,9 @@ pub struct Evaluator {
     map: Option<TrackMap>,
     reference: Option<ReferenceKind>,
     smoothed_channels: bool,
+    /// Smoothed channels whose states come straight from the replay, each with the reference
+    /// walked beside them.
+    smoothed_fed: BTreeMap<u16, ReferenceWalk>,
     first_ns: Option<u64>,
 }
 
@@ -193,6 +203,7 @@ impl Evaluator {
             map: None,
             reference: None,
             smoothed_channels: false,
+            smoothed_fed: BTreeMap::new(),
             first_ns: None,
         }
     }
@@ -211,12 +222,7 @@ impl Evaluator {
     /// Takes in a channel; says whether the evaluation reads its messages.
     pub fn channel(&mut self, id: u16, topic: &str, schema: &str) -> bool {
         let role = if topic == self.reference_topic {
-            let kind = match schema {
-                s if s == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
-                s if s == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),
-                s if s == GnssFix::SCHEMA_NAME => Some(ReferenceKind::Gnss),
-                _ => None,
-            };
+            let kind = reference_kind(schema);
             self.reference = self.reference.or(kind);
             kind.map(Role::Reference)
         } else if let Some((p, channel)) = topics::parse_fused(topic) {
@@ -302,6 +308,33 @@ impl Evaluator {
         }
     }
 
+    /// A smoothed state on channel `id`, straight from the smoother; the reference is read
+    /// from `reference_log` (the replay's input) in step with them.
+    pub fn smoothed_state(
+        &mut self,
+        id: u16,
+        state: &FusedState,
+        reference_log: &Path,
+    ) -> Result<()> {
+        let Some(Role::Smoothed(i)) = self.roles.get(&id).copied() else {
+            return Ok(());
+        };
+        if self.reference.is_none() {
+            return Ok(());
+        }
+        let walk = match self.smoothed_fed.entry(id) {
+            std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::btree_map::Entry::Vacant(e) => {
+                e.insert(ReferenceWalk::open(reference_log, &self.reference_topic)?)
+            }
+        };
+        let s = &mut self.scored[i];
+        walk.feed_until(&mut s.meter, state.stamp_ns, &self.spans)?;
+        s.meter.add_estimate(state, &self.spans);
+        s.states += 1;
+        Ok(())
+    }
+
     /// A fused diagnostics record on channel `id`.
     pub fn fused_diagnostics(&mut self, id: u16, d: &FusedDiagnostics) {
         let Some(Role::Diagnostics(i)) = self.roles.get(&id).copied() else {
@@ -334,11 +367,29 @@ impl Evaluator {
         }
     }
 
-    /// The report. Smoothed states, if any, are scored from `log` (the file holding them) in
-    /// passes of their own.
+    /// The report. Smoothed states not fed directly are scored from `log` (a file holding
+    /// them and the reference) in passes of their own.
     pub fn finish(mut self, log: &Path) -> Result<EvalReport> {
         if self.smoothed_channels && self.reference.is_some() {
-            score_smoothed(log, &self.roles, &mut self.scored, &self.spans)?;
+            let channels: Vec<(u16, usize)> = self
+                .roles
+                .iter()
+                .filter(|(id, _)| !self.smoothed_fed.contains_key(id))
+                .filter_map(|(&id, r)| {
+                    if let Role::Smoothed(i) = r {
+                        Some((id, *i))
+                    } else {
+                        None
+                    }
+                })
+                .collect();
+            score_smoothed(
+                log,
+                &self.reference_topic,
+                &channels,
+                &mut self.scored,
+                &self.spans,
+            )?;
         }
         let t0 = self.first_ns.unwrap_or(0);
         let filters = self.filters;
@@ -425,29 +476,91 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
     eval.finish(input)
 }
 
-/// Later passes for smoothed states, one per smoothed channel: one reader walks its states,
-/// another the reference, in step.
+/// A log's reference channel read in step with states that come later in the file (smoothed
+/// states exist only once the whole run is filtered): it feeds a meter the reference up to
+/// each state's stamp.
+struct ReferenceWalk {
+    path: PathBuf,
+    reader: LogReader,
+    topic: String,
+    roles: BTreeMap<u16, Role>,
+    map: Option<TrackMap>,
+    done: bool,
+}
+
+impl ReferenceWalk {
+    fn open(path: &Path, topic: &str) -> Result<Self> {
+        Ok(Self {
+            path: path.to_owned(),
+            reader: LogReader::open(path)?,
+            topic: topic.to_owned(),
+            roles: BTreeMap::new(),
+            map: None,
+            done: false,
+        })
+    }
+
+    /// Feeds `meter` the reference until it has passed `stamp_ns`.
+    fn feed_until(
+        &mut self,
+        meter: &mut AccuracyMeter,
+        stamp_ns: u64,
+        spans: &[Span],
+    ) -> Result<()> {
+        while !self.done && meter.reference_newest_ns().is_none_or(|n| n < stamp_ns) {
+            let Some(record) = self.reader.next() else {
+                self.done = true;
+                break;
+            };
+            match record? {
+                LogRecord::Channel(c) => {
+                    let kind = reference_kind(c.schema_name());
+                    if c.topic == self.topic && kind.is_some() {
+                        self.roles
+                            .insert(c.id, Role::Reference(kind.expect("checked")));
+                    } else if c.schema_name() == TrackMap::SCHEMA_NAME {
+                        self.roles.insert(c.id, Role::TrackMap);
+                    }
+                }
+                LogRecord::Message(m) => match self.roles.get(&m.channel.id).copied() {
+                    Some(Role::TrackMap) => self.map = Some(m.decode(&self.path)?),
+                    Some(Role::Reference(kind)) => {
+                        let sample = reference_sample(kind, &m, &self.path, self.map.as_ref())?;
+                        if let Some((t, s, v)) = sample {
+                            meter.add_reference(t, s, v, spans);
+                        }
+                    }
+                    _ => {}
+                },
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The reference kind a schema gives.
+fn reference_kind(schema: &str) -> Option<ReferenceKind> {
+    match schema {
+        s if s == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
+        s if s == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),
+        s if s == GnssFix::SCHEMA_NAME => Some(ReferenceKind::Gnss),
+        _ => None,
+    }
+}
+
+/// Later passes for the smoothed channels of `log` not fed to the evaluator directly, one
+/// per channel: one reader walks its states, another the reference, in step.
 fn score_smoothed(
-    input: &Path,
-    roles: &BTreeMap<u16, Role>,
+    log: &Path,
+    reference_topic: &str,
+    channels: &[(u16, usize)],
     scored: &mut [Scored],
     spans: &[Span],
 ) -> Result<()> {
-    let channels: Vec<(u16, usize)> = roles
-        .iter()
-        .filter_map(|(&id, r)| {
-            if let Role::Smoothed(i) = r {
-                Some((id, *i))
-            } else {
-                None
-            }
-        })
-        .collect();
-    for (channel, i) in channels {
-        let mut estimates = LogReader::open(input)?;
-        let mut refs = LogReader::open(input)?;
-        let mut map: Option<TrackMap> = None;
-        let mut refs_done = false;
+    for &(channel, i) in channels {
+        let mut estimates = LogReader::open(log)?;
+        let mut walk = ReferenceWalk::open(log, reference_topic)?;
         while let Some(record) = estimates.next() {
             let LogRecord::Message(m) = record? else {
                 continue;
@@ -455,29 +568,8 @@ fn score_smoothed(
             if m.channel.id != channel {
                 continue;
             }
-            let st: FusedState = m.decode(input)?;
-            // Feed the reference until it has passed this state's stamp.
-            while !refs_done
-                && scored[i]
-                    .meter
-                    .reference_newest_ns()
-                    .is_none_or(|n| n < st.stamp_ns)
-            {
-                let Some(r) = refs.next() else {
-                    refs_done = true;
-                    break;
-                };
-                let LogRecord::Message(rm) = r? else { continue };
-                match roles.get(&rm.channel.id).copied() {
-                    Some(Role::TrackMap) => map = Some(rm.decode(input)?),
-                    Some(Role::Reference(kind)) => {
-                        if let Some((t, s, v)) = reference_sample(kind, &rm, input, map.as_ref())? {
-                            scored[i].meter.add_reference(t, s, v, spans);
-                        }
-                    }
-                    _ => {}
-                }
-            }
+            let st: FusedState = m.decode(log)?;
+            walk.feed_until(&mut scored[i].meter, st.stamp_ns, spans)?;
             scored[i].meter.add_estimate(&st, spans);
             scored[i].states += 1;
         }

@@ -229,6 +229,11 @@ impl<'a> Replay<'a> {
         })
     }
 
+    /// The reference is a channel this run writes (another pipeline's state).
+    fn reference_is_ours(&self) -> bool {
+        self.is_replaced(self.opts.reference)
+    }
+
     fn is_replaced(&self, topic: &str) -> bool {
         topics::fused_pipeline_of(topic).is_some_and(|n| self.names.contains(n))
     }
@@ -564,6 +569,13 @@ impl<'a> Replay<'a> {
             self.writer
                 .write_metadata(topics::metadata::PIPELINE, metadata)?;
         }
+        // Smoothed states not scored on the way are in the input beside its reference, unless
+        // the reference is this run's own output.
+        let log = if self.reference_is_ours() {
+            self.opts.output
+        } else {
+            self.opts.input
+        };
         self.writer.finish()?;
         for (p, out) in self.pipelines.iter().zip(&self.outputs) {
             self.report.pipelines.push(PipelineReport {
@@ -573,7 +585,7 @@ impl<'a> Replay<'a> {
                 smoothed_states: out.smoothed_states,
             });
         }
-        let eval = self.eval.finish(self.opts.output)?;
+        let eval = self.eval.finish(log)?;
         Ok((self.report, eval))
     }
 
@@ -591,6 +603,10 @@ impl<'a> Replay<'a> {
         for state in smoothed.map_err(spill)? {
             let state = state.map_err(spill)?;
             self.writer.write(channel, state.stamp_ns, &state)?;
+            if !self.reference_is_ours() {
+                self.eval
+                    .smoothed_state(channel.0, &state, self.opts.input)?;
+            }
             self.report.fused_messages += 1;
             self.outputs[pi].smoothed_states += 1;
         }
