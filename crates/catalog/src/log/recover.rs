@@ -69,7 +69,9 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                 report.skipped.push(d);
             }
             Item::Chunk(chunk) => {
-                let mut orphans = false;
+                // Copied as it is unless a channel in it, or a message's channel, lost its
+                // definition with the damage (and the summary cannot give it back).
+                let mut whole = true;
                 let mut counts: Vec<(u16, u64)> = Vec::new();
                 for record in Records::new(&chunk.records) {
                     let record = record.map_err(|e| Error::mcap(input, e))?;
@@ -78,10 +80,24 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                             schemas.insert(u16::from_le_bytes([record.body[0], record.body[1]]));
                         }
                         op::CHANNEL => {
-                            if let Ok(mcap::records::Record::Channel(c)) =
+                            let Ok(mcap::records::Record::Channel(c)) =
                                 mcap::parse_record(op::CHANNEL, record.body)
-                            {
+                            else {
+                                whole = false;
+                                continue;
+                            };
+                            let known = c.schema_id == 0
+                                || schemas.contains(&c.schema_id)
+                                || restore_schema(
+                                    &mut writer,
+                                    c.schema_id,
+                                    &from_summary,
+                                    &mut schemas,
+                                )?;
+                            if known {
                                 channels.insert(c.id, c.topic);
+                            } else {
+                                whole = false;
                             }
                         }
                         op::MESSAGE => {
@@ -90,9 +106,15 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                             };
                             let id = m.header.channel_id;
                             if !channels.contains_key(&id)
-                                && !restore(&mut writer, id, &from_summary, &mut channels)?
+                                && !restore(
+                                    &mut writer,
+                                    id,
+                                    &from_summary,
+                                    &mut channels,
+                                    &mut schemas,
+                                )?
                             {
-                                orphans = true;
+                                whole = false;
                             }
                             match counts.last_mut() {
                                 Some((c, n)) if *c == id => *n += 1,
@@ -102,10 +124,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                         _ => {}
                     }
                 }
-                if orphans {
-                    // Copy message by message, leaving out those no channel defines.
-                    copy_known_messages(&mut writer, &chunk.records, &channels, &mut report)?;
-                } else {
+                if whole {
                     writer.copy_chunk(&chunk)?;
                     report.chunks += 1;
                     for (id, n) in counts {
@@ -115,6 +134,8 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                             .entry(channels[&id].clone())
                             .or_insert(0) += n;
                     }
+                } else {
+                    copy_usable_records(&mut writer, &chunk.records, &channels, &mut report)?;
                 }
             }
             Item::Record { opcode, body, .. } => match mcap::parse_record(opcode, &body) {
@@ -123,18 +144,25 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                     schemas.insert(header.id);
                 }
                 Ok(mcap::records::Record::Channel(c)) => {
-                    writer.copy_channel(
-                        c.id,
-                        c.schema_id,
-                        &c.topic,
-                        &c.message_encoding,
-                        &c.metadata,
-                    )?;
-                    channels.insert(c.id, c.topic);
+                    // A channel whose schema was lost (and is not in the summary) is left out.
+                    let known = c.schema_id == 0
+                        || schemas.contains(&c.schema_id)
+                        || restore_schema(&mut writer, c.schema_id, &from_summary, &mut schemas)?;
+                    if known {
+                        let (id, schema, topic) = (c.id, c.schema_id, &c.topic);
+                        writer.copy_channel(id, schema, topic, &c.message_encoding, &c.metadata)?;
+                        channels.insert(c.id, c.topic);
+                    }
                 }
                 Ok(mcap::records::Record::Message { header, data }) => {
                     if !channels.contains_key(&header.channel_id)
-                        && !restore(&mut writer, header.channel_id, &from_summary, &mut channels)?
+                        && !restore(
+                            &mut writer,
+                            header.channel_id,
+                            &from_summary,
+                            &mut channels,
+                            &mut schemas,
+                        )?
                     {
                         report.orphan_messages += 1;
                         continue;
@@ -180,18 +208,22 @@ fn count(report: &mut RecoverReport, topic: &str) {
         .or_insert(0) += 1;
 }
 
+type Summary = BTreeMap<u16, std::sync::Arc<super::ChannelInfo>>;
+
 /// Writes the summary's definition of channel `id` (and its schema), if the summary has it.
 fn restore(
     writer: &mut LogWriter,
     id: u16,
-    summary: &BTreeMap<u16, std::sync::Arc<super::ChannelInfo>>,
+    summary: &Summary,
     channels: &mut BTreeMap<u16, String>,
+    schemas: &mut HashSet<u16>,
 ) -> Result<bool> {
     let Some(c) = summary.get(&id) else {
         return Ok(false);
     };
     if let Some(s) = &c.schema {
         writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
+        schemas.insert(s.id);
     }
     let schema_id = c.schema.as_ref().map_or(0, |s| s.id);
     writer.copy_channel(id, schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
@@ -199,26 +231,71 @@ fn restore(
     Ok(true)
 }
 
-fn copy_known_messages(
+/// Writes the summary's schema `id`, if a channel of the summary uses it.
+fn restore_schema(
+    writer: &mut LogWriter,
+    id: u16,
+    summary: &Summary,
+    schemas: &mut HashSet<u16>,
+) -> Result<bool> {
+    let Some(s) = summary
+        .values()
+        .filter_map(|c| c.schema.as_ref())
+        .find(|s| s.id == id)
+    else {
+        return Ok(false);
+    };
+    writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
+    schemas.insert(id);
+    Ok(true)
+}
+
+/// A chunk record by record: its schemas, the channels whose schema is known, and their
+/// messages; messages of channels defined nowhere are counted as orphans.
+fn copy_usable_records(
     writer: &mut LogWriter,
     records: &[u8],
     channels: &BTreeMap<u16, String>,
     report: &mut RecoverReport,
 ) -> Result<()> {
+    use mcap::records::Record;
     for record in Records::new(records).flatten() {
-        if record.opcode != op::MESSAGE {
-            continue;
-        }
-        let Some(m) = format::parse_message(record.body) else {
-            continue;
-        };
-        let h = m.header;
-        match channels.get(&h.channel_id) {
-            Some(topic) => {
-                writer.write_raw(h.channel_id, h.sequence, h.log_time, h.publish_time, m.data)?;
-                count(report, topic);
+        match (
+            record.opcode,
+            mcap::parse_record(record.opcode, record.body),
+        ) {
+            (op::SCHEMA, Ok(Record::Schema { header: h, data })) => {
+                writer.copy_schema(h.id, &h.name, &h.encoding, &data)?;
             }
-            None => report.orphan_messages += 1,
+            (op::CHANNEL, Ok(Record::Channel(c))) if channels.contains_key(&c.id) => {
+                writer.copy_channel(
+                    c.id,
+                    c.schema_id,
+                    &c.topic,
+                    &c.message_encoding,
+                    &c.metadata,
+                )?;
+            }
+            (op::MESSAGE, _) => {
+                let Some(m) = format::parse_message(record.body) else {
+                    continue;
+                };
+                let h = m.header;
+                match channels.get(&h.channel_id) {
+                    Some(topic) => {
+                        writer.write_raw(
+                            h.channel_id,
+                            h.sequence,
+                            h.log_time,
+                            h.publish_time,
+                            m.data,
+                        )?;
+                        count(report, topic);
+                    }
+                    None => report.orphan_messages += 1,
+                }
+            }
+            _ => {}
         }
     }
     Ok(())

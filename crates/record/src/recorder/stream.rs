@@ -38,6 +38,7 @@ pub struct StreamDecoder {
     skipping: bool,
     nmea: FixAssembler,
     pending_pvt: Option<NavPvt>,
+    undated_pvt: u64,
 }
 
 impl StreamDecoder {
@@ -54,12 +55,30 @@ impl StreamDecoder {
             skipping: false,
             nmea: FixAssembler::with_date(date),
             pending_pvt: None,
+            undated_pvt: 0,
         }
     }
 
-    /// NMEA fixes dropped because no date came for them (after [`StreamDecoder::finish`]).
+    /// Fixes dropped for want of a time: NMEA fixes no date came for (after
+    /// [`StreamDecoder::finish`]), NAV-PVTs without valid UTC read from a file.
     pub fn undated_fixes(&self) -> u64 {
-        self.nmea.undated
+        self.nmea.undated + self.undated_pvt
+    }
+
+    /// A NAV-PVT as a fix, stamped with its UTC or, from a live source, the receive time; a
+    /// file's PVT without valid time has neither and is counted, never stamped 1970.
+    fn push_pvt(
+        &mut self,
+        pvt: &NavPvt,
+        cov: Option<[f64; 9]>,
+        receive_ns: u64,
+        stats: &mut SourceStats,
+        out: &mut Vec<Item>,
+    ) {
+        match pvt.utc_ns.or((receive_ns > 0).then_some(receive_ns)) {
+            Some(stamp) => push_fix(pvt.to_fix(stamp, cov), receive_ns, stats, out),
+            None => self.undated_pvt += 1,
+        }
     }
 
     /// Decodes `bytes` (any split of the stream), received at `receive_ns`.
@@ -103,12 +122,7 @@ impl StreamDecoder {
         }
         self.nmea.finish();
         if let Some(pvt) = self.pending_pvt.take() {
-            push_fix(
-                pvt.to_fix(pvt.utc_ns.unwrap_or(receive_ns), None),
-                receive_ns,
-                stats,
-                out,
-            );
+            self.push_pvt(&pvt, None, receive_ns, stats, out);
         }
     }
 
@@ -190,12 +204,7 @@ impl StreamDecoder {
                         NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
                             Ok(pvt) => {
                                 if let Some(prev) = self.pending_pvt.replace(pvt) {
-                                    push_fix(
-                                        prev.to_fix(prev.utc_ns.unwrap_or(receive_ns), None),
-                                        receive_ns,
-                                        stats,
-                                        out,
-                                    );
+                                    self.push_pvt(&prev, None, receive_ns, stats, out);
                                 }
                             }
                             Err(_) => stats.malformed += 1,
@@ -204,12 +213,9 @@ impl StreamDecoder {
                             if let (Ok(cov), Some(pvt)) =
                                 (NavCov::decode(&frame), self.pending_pvt.take())
                             {
-                                let fix = pvt.to_fix(
-                                    pvt.utc_ns.unwrap_or(receive_ns),
-                                    cov.pos_valid.then_some(cov.enu_m2),
-                                );
                                 if pvt.itow_ms == cov.itow_ms {
-                                    push_fix(fix, receive_ns, stats, out);
+                                    let cov = cov.pos_valid.then_some(cov.enu_m2);
+                                    self.push_pvt(&pvt, cov, receive_ns, stats, out);
                                 } else {
                                     self.pending_pvt = Some(pvt);
                                 }
