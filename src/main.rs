@@ -3,6 +3,7 @@
 //! stderr with a non-zero exit.
 
 mod cmd;
+mod progress;
 mod table;
 
 use std::process::ExitCode;
@@ -16,6 +17,9 @@ use clap::{Parser, Subcommand};
     about = "MCAP log recorder and offline re-fusion toolkit for train speed and position testing"
 )]
 struct Cli {
+    /// No progress output (bars on a terminal, periodic lines otherwise).
+    #[arg(long, short, global = true)]
+    quiet: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -56,6 +60,7 @@ fn main() -> ExitCode {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
     let cli = Cli::parse();
+    progress::set_quiet(cli.quiet);
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Info(a) => cmd::info::run(a),

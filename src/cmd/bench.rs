@@ -91,7 +91,9 @@ pub fn run(a: Args) -> Result<()> {
             seed001.as_path(),
         ));
     }
-    for (label, scenario, duration, config) in runs {
+    let bar = crate::progress::Progress::steps("bench", runs.len() as u64);
+    for (done, (label, scenario, duration, config)) in runs.into_iter().enumerate() {
+        bar.set(done as u64);
         let tag = label.replace([' ', ','], "");
         let raw = a.dir.join(format!("bench-{tag}.mcap"));
         let preset = railfuse_record::Scenario::preset(scenario).expect("a built-in preset");

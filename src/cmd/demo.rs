@@ -46,7 +46,7 @@ pub fn run(a: Args) -> Result<()> {
         source,
         railfuse_catalog::topics::GROUND_TRUTH,
     )?;
-    let viz = visualize(&fused, &Sink::Save(rrd.clone()))?;
+    let viz = visualize(&fused, &Sink::Save(rrd.clone()), &|_| {})?;
     eprintln!(
         "logged {} records on {} Rerun entities -> {}",
         viz.logged,

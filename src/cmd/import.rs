@@ -58,7 +58,13 @@ fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
 
 pub fn run(a: Args) -> Result<()> {
     let report: ImportReport = match a.format {
-        Format::Eth => eth::import(&a.input, &a.output)?,
+        Format::Eth => {
+            let size = std::fs::metadata(&a.input).map_or(0, |m| m.len());
+            let bar = crate::progress::Progress::bytes("import", size);
+            let report = eth::import_with_progress(&a.input, &a.output, &|done| bar.set(done))?;
+            bar.finish();
+            report
+        }
         Format::Nmea => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea, a.date)?,
         Format::Ubx => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx, a.date)?,
         Format::Csv => {

@@ -62,13 +62,18 @@ pub fn refuse_with(
     reference: &str,
 ) -> Result<(RefuseReport, EvalReport, RunStats)> {
     let started = Instant::now();
+    let size = std::fs::metadata(input).map_or(0, |m| m.len());
+    let bar = crate::progress::Progress::bytes("refuse", size);
+    let progress = |done: u64| bar.set(done);
     let (report, eval) = refuse(&RefuseOptions {
         input,
         output,
         config,
         config_source: source,
         reference,
+        progress: Some(&progress),
     })?;
+    bar.finish();
     let elapsed_s = started.elapsed().as_secs_f64();
     let stats = RunStats {
         elapsed_s,

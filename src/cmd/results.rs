@@ -96,6 +96,7 @@ fn run_one(
         config,
         config_source: format!("samples/{scenario}.toml"),
         reference: topics::GROUND_TRUTH,
+        progress: None,
     })?;
     std::fs::remove_file(&raw).ok();
     std::fs::remove_file(&fused).ok();
@@ -120,6 +121,9 @@ pub fn run(a: Args) -> Result<()> {
     // Source 000: every pipeline of samples/seed000.toml, no faults.
     let names000: Vec<String> = c000.pipeline.iter().map(|p| p.name.clone()).collect();
     let mut env000 = vec![Envelope::default(); names000.len()];
+    // Runs: source 000's seeds, then five source 001 cases for every seed.
+    let bar = crate::progress::Progress::steps("results", seeds * 6);
+    let mut done = 0;
     for seed in 0..seeds {
         let (evals, duration) = run_one(&a.dir, "seed000", seed, &[], &c000, "clean")?;
         for (e, name) in env000.iter_mut().zip(&names000) {
@@ -127,7 +131,8 @@ pub fn run(a: Args) -> Result<()> {
                 e.add(p, duration);
             }
         }
-        eprintln!("seed000 seed {seed} done");
+        done += 1;
+        bar.set(done);
     }
 
     // Source 001: the federated filter (and the centralised one) clean and with one device
@@ -155,7 +160,7 @@ pub fn run(a: Args) -> Result<()> {
     ];
     let names001 = ["fkf", "fkf_cal", "kf", "kf_cal", "kf/smoothed"];
     let mut env001 = vec![[Envelope::default(); 5]; cases.len()];
-    for (ci, (tag, faults)) in cases.iter().enumerate() {
+    for (ci, (_, faults)) in cases.iter().enumerate() {
         for seed in 0..seeds {
             let (evals, duration) =
                 run_one(&a.dir, "seed001", seed, faults, &c001, &format!("case{ci}"))?;
@@ -164,9 +169,11 @@ pub fn run(a: Args) -> Result<()> {
                     e.add(p, duration);
                 }
             }
+            done += 1;
+            bar.set(done);
         }
-        eprintln!("seed001 {tag} done");
     }
+    bar.finish();
 
     let mut md = String::new();
     writeln!(md, "# Results: sources 000 and 001 reproduced\n")?;

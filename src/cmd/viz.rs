@@ -25,7 +25,10 @@ pub fn run(a: Args) -> Result<()> {
         (None, Some(url)) => Sink::Connect(url),
         (None, None) => Sink::Spawn,
     };
-    let report = visualize(&a.input, &sink)?;
+    let size = std::fs::metadata(&a.input).map_or(0, |m| m.len());
+    let bar = crate::progress::Progress::bytes("viz", size);
+    let report = visualize(&a.input, &sink, &|done| bar.set(done))?;
+    bar.finish();
     let target = match &sink {
         Sink::Save(p) => p.display().to_string(),
         Sink::Connect(u) => u.clone(),

@@ -36,6 +36,8 @@ pub struct RefuseOptions<'a> {
     pub config_source: String,
     /// The reference topic of the accuracy evaluation made in the same pass.
     pub reference: &'a str,
+    /// Told the bytes of the input read so far, as the replay goes.
+    pub progress: Option<&'a (dyn Fn(u64) + Sync)>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -96,7 +98,10 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
     let summary = read_summary(opts.input)?;
     let mut replay = Replay::new(opts, summary)?;
     let mut items = ReadAhead::new(Scanner::open(opts.input)?, 4);
-    for item in &mut items {
+    while let Some(item) = items.next() {
+        if let Some(progress) = opts.progress {
+            progress(items.position());
+        }
         match item? {
             Item::Chunk(chunk) => replay.chunk(&chunk)?,
             Item::Record { opcode, body, .. } => replay.top_level(opcode, &body)?,
@@ -268,36 +273,10 @@ impl<'a> Replay<'a> {
 
     /// Writes a chunk's records but those of replaced channels.
     fn rewrite(&mut self, chunk: &Chunk) -> Result<()> {
-        for record in Records::new(&chunk.records).flatten() {
-            match record.opcode {
-                op::SCHEMA => {
-                    let id = u16::from_le_bytes([record.body[0], record.body[1]]);
-                    let s = &self.schemas[&id];
-                    self.writer
-                        .copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
-                }
-                op::CHANNEL => {
-                    let id = u16::from_le_bytes([record.body[0], record.body[1]]);
-                    if !self.routes[&id].replaced {
-                        copy_channel(&mut self.writer, &self.channels[&id])?;
-                    }
-                }
-                op::MESSAGE => {
-                    let m = format::parse_message(record.body).expect("parsed before");
-                    let h = m.header;
-                    if !self.routes[&h.channel_id].replaced {
-                        self.writer.write_raw(
-                            h.channel_id,
-                            h.sequence,
-                            h.log_time,
-                            h.publish_time,
-                            m.data,
-                        )?;
-                    }
-                }
-                _ => {}
-            }
-        }
+        let routes = &self.routes;
+        self.writer.copy_records_where(&chunk.records, |id| {
+            routes.get(&id).is_some_and(|r| !r.replaced)
+        })?;
         Ok(())
     }
 

@@ -172,7 +172,8 @@ impl LiveViz {
 }
 
 /// Logs the whole file to the sink, streaming.
-pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
+/// `progress` is told the bytes of the file read so far.
+pub fn visualize(path: &Path, sink: &Sink, progress: &dyn Fn(u64)) -> Result<VizReport, Error> {
     let mut reader = LogReader::open(path)?;
     // Fused states may trail the truth in file order by a chunk (railfuse writes the fused
     // chunk of an input chunk right after it): the truth is kept that much longer.
@@ -187,6 +188,9 @@ pub fn visualize(path: &Path, sink: &Sink) -> Result<VizReport, Error> {
                 .rec
                 .set_timestamp_nanos_since_epoch("log_time", m.log_time_ns as i64);
             logger.message(&m)?;
+            if logger.report.messages % 4096 == 0 {
+                progress(reader.bytes_read());
+            }
         }
     }
     // A viewer that never takes the data must not hang the command; a file always does.

@@ -128,14 +128,16 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                     writer.copy_chunk(&chunk)?;
                     report.chunks += 1;
                     for (id, n) in counts {
-                        report.messages += n;
-                        *report
-                            .messages_per_topic
-                            .entry(channels[&id].clone())
-                            .or_insert(0) += n;
+                        count(&mut report, &channels[&id], n);
                     }
                 } else {
-                    copy_usable_records(&mut writer, &chunk.records, &channels, &mut report)?;
+                    // Record by record, leaving out channels defined nowhere (orphans).
+                    let (copied, orphans) = writer
+                        .copy_records_where(&chunk.records, |id| channels.contains_key(&id))?;
+                    report.orphan_messages += orphans;
+                    for (id, n) in copied {
+                        count(&mut report, &channels[&id], n);
+                    }
                 }
             }
             Item::Record { opcode, body, .. } => match mcap::parse_record(opcode, &body) {
@@ -174,7 +176,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                         header.publish_time,
                         &data,
                     )?;
-                    count(&mut report, &channels[&header.channel_id]);
+                    count(&mut report, &channels[&header.channel_id], 1);
                 }
                 Ok(mcap::records::Record::Metadata(m)) => {
                     writer.write_metadata(&m.name, m.metadata)?;
@@ -200,12 +202,12 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
     Ok(report)
 }
 
-fn count(report: &mut RecoverReport, topic: &str) {
-    report.messages += 1;
+fn count(report: &mut RecoverReport, topic: &str, n: u64) {
+    report.messages += n;
     *report
         .messages_per_topic
         .entry(topic.to_owned())
-        .or_insert(0) += 1;
+        .or_insert(0) += n;
 }
 
 type Summary = BTreeMap<u16, std::sync::Arc<super::ChannelInfo>>;
@@ -248,57 +250,6 @@ fn restore_schema(
     writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
     schemas.insert(id);
     Ok(true)
-}
-
-/// A chunk record by record: its schemas, the channels whose schema is known, and their
-/// messages; messages of channels defined nowhere are counted as orphans.
-fn copy_usable_records(
-    writer: &mut LogWriter,
-    records: &[u8],
-    channels: &BTreeMap<u16, String>,
-    report: &mut RecoverReport,
-) -> Result<()> {
-    use mcap::records::Record;
-    for record in Records::new(records).flatten() {
-        match (
-            record.opcode,
-            mcap::parse_record(record.opcode, record.body),
-        ) {
-            (op::SCHEMA, Ok(Record::Schema { header: h, data })) => {
-                writer.copy_schema(h.id, &h.name, &h.encoding, &data)?;
-            }
-            (op::CHANNEL, Ok(Record::Channel(c))) if channels.contains_key(&c.id) => {
-                writer.copy_channel(
-                    c.id,
-                    c.schema_id,
-                    &c.topic,
-                    &c.message_encoding,
-                    &c.metadata,
-                )?;
-            }
-            (op::MESSAGE, _) => {
-                let Some(m) = format::parse_message(record.body) else {
-                    continue;
-                };
-                let h = m.header;
-                match channels.get(&h.channel_id) {
-                    Some(topic) => {
-                        writer.write_raw(
-                            h.channel_id,
-                            h.sequence,
-                            h.log_time,
-                            h.publish_time,
-                            m.data,
-                        )?;
-                        count(report, topic);
-                    }
-                    None => report.orphan_messages += 1,
-                }
-            }
-            _ => {}
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]

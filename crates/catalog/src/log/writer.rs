@@ -380,7 +380,7 @@ impl LogWriter {
                 op::SCHEMA | op::CHANNEL => {
                     let mut framed = Vec::with_capacity(FRAME + record.body.len());
                     put_record(&mut framed, record.opcode, record.body);
-                    let id = u16::from_le_bytes([record.body[0], record.body[1]]);
+                    let id = channel_of(record.body);
                     let table = if record.opcode == op::SCHEMA {
                         &mut self.schemas
                     } else {
@@ -397,6 +397,62 @@ impl LogWriter {
             header: chunk.header.clone(),
             index,
         })
+    }
+
+    /// Copies the records of a chunk (decompressed) one by one into new chunks, keeping the
+    /// channels `keep` says yes to: every schema, the kept channels and their messages.
+    /// Returns, per kept channel, how many messages were copied, and how many were left out.
+    pub fn copy_records_where(
+        &mut self,
+        records: &[u8],
+        mut keep: impl FnMut(u16) -> bool,
+    ) -> Result<(BTreeMap<u16, u64>, u64)> {
+        use mcap::records::Record;
+        let (mut copied, mut left_out) = (BTreeMap::new(), 0);
+        for record in Records::new(records) {
+            let record = record.map_err(|e| Error::mcap(&self.partial, e))?;
+            let parsed = || mcap::parse_record(record.opcode, record.body).ok();
+            match record.opcode {
+                op::SCHEMA => {
+                    if let Some(Record::Schema { header: h, data }) = parsed() {
+                        self.copy_schema(h.id, &h.name, &h.encoding, &data)?;
+                    }
+                }
+                op::CHANNEL => {
+                    if let Some(Record::Channel(c)) =
+                        parsed().filter(|_| keep(channel_of(record.body)))
+                    {
+                        self.copy_channel(
+                            c.id,
+                            c.schema_id,
+                            &c.topic,
+                            &c.message_encoding,
+                            &c.metadata,
+                        )?;
+                    }
+                }
+                op::MESSAGE => {
+                    let Some(m) = format::parse_message(record.body) else {
+                        continue;
+                    };
+                    let h = m.header;
+                    if keep(h.channel_id) {
+                        self.write_raw(
+                            h.channel_id,
+                            h.sequence,
+                            h.log_time,
+                            h.publish_time,
+                            m.data,
+                        )?;
+                        *copied.entry(h.channel_id).or_insert(0) += 1;
+                    } else {
+                        left_out += 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+        Ok((copied, left_out))
     }
 
     /// Closes the current chunk and hands everything written so far to the OS: it survives a
@@ -489,6 +545,11 @@ impl Drop for LogWriter {
             let _ = std::fs::remove_file(&self.partial);
         }
     }
+}
+
+/// The id a schema or channel record body starts with.
+fn channel_of(body: &[u8]) -> u16 {
+    u16::from_le_bytes([body[0], body[1]])
 }
 
 fn count_message(stats: &mut Statistics, channel: u16, log_time: u64) {

@@ -122,6 +122,15 @@ impl Out {
 
 /// Imports one node log into a railfuse MCAP log.
 pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
+    import_with_progress(input, output, &|_| {})
+}
+
+/// [`import`], telling `progress` the bytes of the input read so far.
+pub fn import_with_progress(
+    input: &Path,
+    output: &Path,
+    progress: &dyn Fn(u64),
+) -> Result<ImportReport> {
     let mut report = ImportReport {
         input: input.to_owned(),
         output: output.to_owned(),
@@ -167,9 +176,14 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
         path: input.to_owned(),
         source,
     };
+    let mut consumed = 0u64;
     while let Some(ok) = read_line_bounded(&mut r, &mut line).map_err(io)? {
         n += 1;
         report.lines += 1;
+        consumed += line.len() as u64 + 1;
+        if n % 4096 == 0 {
+            progress(consumed);
+        }
         if !ok {
             report.skip(
                 n,
