@@ -1,13 +1,15 @@
 use std::collections::BTreeMap;
 use std::io::IsTerminal;
-use std::net::{IpAddr, SocketAddr};
+use std::net::IpAddr;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
-use railfuse_record::recorder::{record, RecordOptions, SourceSpec, Status, StreamFormat};
+use railfuse_record::recorder::{
+    record, RecordOptions, SourceSpec, SourcesFile, SpecError, Status,
+};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -80,199 +82,59 @@ pub struct Args {
     pub json: bool,
 }
 
-/// `FORMAT[=TOPIC]`: the stream format and, optionally, the channel its GNSS fixes go to
-/// (a second receiver on `/gnss/rx2`).
-fn format_or(text: Option<&str>, default: StreamFormat) -> Result<(StreamFormat, Option<String>)> {
-    let Some(t) = text else {
-        return Ok((default, None));
-    };
-    let (f, topic) = match t.split_once('=') {
-        Some((f, topic)) if topic.starts_with('/') => (f, Some(topic.to_owned())),
-        Some((_, topic)) => bail!("{t}: the channel must start with '/', not '{topic}'"),
-        None => (t, None),
-    };
-    let format = if f.is_empty() {
-        default
-    } else {
-        f.parse().map_err(anyhow::Error::msg)?
-    };
-    Ok((format, topic))
-}
-
-fn is_format(t: &str) -> bool {
-    match t.split_once('=') {
-        Some((f, topic)) => {
-            (f.is_empty() || f.parse::<StreamFormat>().is_ok()) && topic.starts_with('/')
-        }
-        None => t.parse::<StreamFormat>().is_ok(),
-    }
-}
-
-/// One `[[source]]` of a sources file: exactly one of the kinds, with its options.
-#[derive(serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SourceEntry {
-    udp: Option<u16>,
-    tcp: Option<u16>,
-    tcp_client: Option<String>,
-    serial: Option<String>,
-    baud: Option<u32>,
-    file: Option<String>,
-    stdin: Option<bool>,
-    simulate: Option<String>,
-    format: Option<String>,
-    topic: Option<String>,
-}
-
-#[derive(serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SourcesFile {
-    source: Vec<SourceEntry>,
-}
-
-/// Adds a sources file's entries to the flags, in their flag spelling (one parser for both).
-fn add_sources_file(a: &mut Args, path: &std::path::Path) -> Result<()> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
-    let file: SourcesFile = toml::from_str(&text)
-        .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.message()))?;
-    for (i, e) in file.source.into_iter().enumerate() {
-        let fmt = match (&e.format, &e.topic) {
-            (Some(f), Some(t)) => format!(":{f}={t}"),
-            (Some(f), None) => format!(":{f}"),
-            (None, Some(t)) => format!(":={t}"),
-            (None, None) => String::new(),
-        };
-        let kinds = [
-            e.udp.is_some(),
-            e.tcp.is_some(),
-            e.tcp_client.is_some(),
-            e.serial.is_some(),
-            e.file.is_some(),
-            e.stdin.is_some(),
-            e.simulate.is_some(),
-        ];
-        if kinds.iter().filter(|k| **k).count() != 1 {
-            bail!("{}: source {}: give exactly one of udp, tcp, tcp_client, serial, file, stdin, simulate", path.display(), i + 1);
-        }
-        if let Some(p) = e.udp {
-            a.udp.push(p);
-        } else if let Some(p) = e.tcp {
-            a.tcp.push(format!("{p}{fmt}"));
-        } else if let Some(addr) = e.tcp_client {
-            a.tcp_client.push(format!("{addr}{fmt}"));
-        } else if let Some(dev) = e.serial {
-            let baud = e.baud.with_context(|| {
-                format!("{}: source {}: serial needs baud", path.display(), i + 1)
-            })?;
-            a.serial.push(format!("{dev}:{baud}{fmt}"));
-        } else if let Some(f) = e.file {
-            a.file.push(format!("{f}{fmt}"));
-        } else if e.stdin == Some(true) {
-            a.stdin = Some(fmt.trim_start_matches(':').to_owned())
-                .filter(|f| !f.is_empty())
-                .or(Some("json".into()));
-        } else if let Some(s) = e.simulate {
-            a.simulate = Some(s);
-        }
-    }
-    Ok(())
-}
-
+/// Every source: the flags' specs, then a sources file's tables, listeners bound to `--bind`,
+/// the simulator (also when nothing else is given) with `--seed` and `--speed`.
 fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
+    let flags = a
+        .udp
+        .iter()
+        .map(|p| ("udp", p.to_string()))
+        .chain(a.tcp.iter().map(|t| ("tcp", t.clone())))
+        .chain(a.tcp_client.iter().map(|t| ("tcp-client", t.clone())))
+        .chain(a.serial.iter().map(|t| ("serial", t.clone())))
+        .chain(a.file.iter().map(|t| ("file", t.clone())))
+        .chain(a.stdin.iter().map(|t| ("stdin", t.clone())));
     let mut out = Vec::new();
-    for &port in &a.udp {
-        out.push(SourceSpec::Udp {
-            addr: SocketAddr::new(a.bind, port),
-        });
+    for (kind, args) in flags {
+        out.push(SourceSpec::from_flag(kind, &args).map_err(|e| match e {
+            SpecError::Bad { what, .. } => anyhow::anyhow!("--{kind} {args}: {what}"),
+            other => anyhow::anyhow!("--{kind} {args}: {other}"),
+        })?);
     }
-    for t in &a.tcp {
-        let (port, fmt) = t
-            .split_once(':')
-            .map_or((t.as_str(), None), |(p, f)| (p, Some(f)));
-        let port: u16 = port
-            .parse()
-            .with_context(|| format!("--tcp {t}: not a port"))?;
-        let (format, topic) = format_or(fmt, StreamFormat::JsonLines)?;
-        out.push(SourceSpec::TcpListen {
-            addr: SocketAddr::new(a.bind, port),
-            format,
-            topic,
-        });
+    if let Some(path) = &a.sources {
+        let text = std::fs::read_to_string(path).with_context(|| format!("{}", path.display()))?;
+        // toml's message names the line and column and the table's own error.
+        let file: SourcesFile = toml::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim()))?;
+        out.extend(file.source);
     }
-    for t in &a.tcp_client {
-        let parts: Vec<&str> = t.rsplitn(2, ':').collect();
-        let (addr, fmt) = match parts[..] {
-            [f, rest] if is_format(f) => (rest.to_owned(), Some(f)),
-            _ => (t.clone(), None),
-        };
-        let (format, topic) = format_or(fmt, StreamFormat::JsonLines)?;
-        out.push(SourceSpec::TcpClient {
-            addr,
-            format,
-            topic,
-        });
+    if let Some(scenario) = &a.simulate {
+        out.push(SourceSpec::from_flag("simulate", scenario)?);
     }
-    for t in &a.serial {
-        let parts: Vec<&str> = t.split(':').collect();
-        let (dev, baud, fmt) = match parts[..] {
-            [d, b] => (d, b, None),
-            [d, b, f] => (d, b, Some(f)),
-            _ => bail!("--serial {t}: DEVICE:BAUD[:FORMAT]"),
-        };
-        let baud: u32 = baud
-            .parse()
-            .with_context(|| format!("--serial {t}: baud rate"))?;
-        let (format, topic) = format_or(fmt, StreamFormat::Nmea)?;
-        out.push(SourceSpec::Serial {
-            path: dev.into(),
-            baud,
-            format,
-            topic,
-        });
+    if out.is_empty() {
+        out.push(SourceSpec::from_flag("simulate", "")?);
     }
-    for t in &a.file {
-        let (path, fmt) = match t.rsplit_once(':') {
-            Some((p, f)) if is_format(f) => (p, Some(f)),
-            _ => (t.as_str(), None),
-        };
-        let by_ext = match std::path::Path::new(path)
-            .extension()
-            .and_then(|e| e.to_str())
-        {
-            Some("ubx") => StreamFormat::Ubx,
-            Some("nmea") | Some("txt") => StreamFormat::Nmea,
-            _ => StreamFormat::JsonLines,
-        };
-        let (format, topic) = format_or(fmt, by_ext)?;
-        out.push(SourceSpec::File {
-            path: path.into(),
-            format,
-            topic,
-        });
+    if !(a.speed.is_finite() && a.speed > 0.0) {
+        bail!("--speed must be positive, not {}", a.speed);
     }
-    if let Some(f) = &a.stdin {
-        let (format, topic) = format_or(Some(f), StreamFormat::JsonLines)?;
-        out.push(SourceSpec::Stdin { format, topic });
-    }
-    if a.simulate.is_some() || out.is_empty() {
-        if !(a.speed.is_finite() && a.speed > 0.0) {
-            bail!("--speed must be positive, not {}", a.speed);
-        }
-        let scenario = a.simulate.clone().unwrap_or_else(|| "default".into());
-        if railfuse_record::Scenario::preset(&scenario).is_none() {
-            bail!(
-                "--simulate {scenario}: unknown scenario (presets: {})",
-                railfuse_record::Scenario::NAMES.join(", ")
-            );
-        }
-        out.push(SourceSpec::Simulated {
+    for spec in &mut out {
+        if let SourceSpec::Simulated {
             scenario,
-            seed: a.seed,
-            speed: a.speed,
-            duration_s: None,
-        });
+            seed,
+            speed,
+            ..
+        } = spec
+        {
+            if railfuse_record::Scenario::preset(scenario).is_none() {
+                bail!(
+                    "--simulate {scenario}: unknown scenario (presets: {})",
+                    railfuse_record::Scenario::NAMES.join(", ")
+                );
+            }
+            (*seed, *speed) = (a.seed, a.speed);
+        }
     }
-    Ok(out)
+    Ok(out.into_iter().map(|s| s.bind(a.bind)).collect())
 }
 
 fn status_line(s: &Status) -> String {
@@ -296,10 +158,7 @@ fn status_line(s: &Status) -> String {
     )
 }
 
-pub fn run(mut a: Args) -> Result<()> {
-    if let Some(f) = a.sources.clone() {
-        add_sources_file(&mut a, &f)?;
-    }
+pub fn run(a: Args) -> Result<()> {
     let specs = sources(&a)?;
     let mut metadata = BTreeMap::new();
     if let Some(f) = &a.meta_file {

@@ -288,15 +288,8 @@ impl<'a> Replay<'a> {
             op::MESSAGE => {
                 let m = format::parse_message(body)
                     .ok_or_else(|| self.damaged(0, "a message record is cut short".into()))?;
-                let h = m.header;
                 if self.message(&m)? {
-                    self.writer.write_raw(
-                        h.channel_id,
-                        h.sequence,
-                        h.log_time,
-                        h.publish_time,
-                        m.data,
-                    )?;
+                    self.writer.copy_message(&m)?;
                 }
                 Ok(())
             }

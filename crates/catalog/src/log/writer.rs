@@ -399,6 +399,12 @@ impl LogWriter {
         })
     }
 
+    /// Copies a message record as it was (channel, sequence, times, payload).
+    pub fn copy_message(&mut self, m: &format::MessageView<'_>) -> Result<()> {
+        let h = &m.header;
+        self.write_raw(h.channel_id, h.sequence, h.log_time, h.publish_time, m.data)
+    }
+
     /// Copies the records of a chunk (decompressed) one by one into new chunks, keeping the
     /// channels `keep` says yes to: every schema, the kept channels and their messages.
     /// Returns, per kept channel, how many messages were copied, and how many were left out.
@@ -435,16 +441,9 @@ impl LogWriter {
                     let Some(m) = format::parse_message(record.body) else {
                         continue;
                     };
-                    let h = m.header;
-                    if keep(h.channel_id) {
-                        self.write_raw(
-                            h.channel_id,
-                            h.sequence,
-                            h.log_time,
-                            h.publish_time,
-                            m.data,
-                        )?;
-                        *copied.entry(h.channel_id).or_insert(0) += 1;
+                    if keep(m.header.channel_id) {
+                        self.copy_message(&m)?;
+                        *copied.entry(m.header.channel_id).or_insert(0) += 1;
                     } else {
                         left_out += 1;
                     }

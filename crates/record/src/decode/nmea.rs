@@ -54,6 +54,8 @@ impl std::fmt::Display for NmeaError {
     }
 }
 
+impl std::error::Error for NmeaError {}
+
 /// A checked sentence: its type (without talker) and fields.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sentence<'a> {

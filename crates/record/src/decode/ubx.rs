@@ -40,6 +40,8 @@ impl std::fmt::Display for UbxError {
     }
 }
 
+impl std::error::Error for UbxError {}
+
 /// One checked frame.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Frame<'a> {

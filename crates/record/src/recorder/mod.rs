@@ -10,6 +10,7 @@
 
 pub mod message;
 mod serial;
+pub mod source_spec;
 pub mod sources;
 pub mod stream;
 
@@ -26,7 +27,7 @@ use railfuse_catalog::topics;
 use serde::Serialize;
 
 use message::{Item, ItemWriter};
-pub use sources::SourceSpec;
+pub use source_spec::{SourceSpec, SourcesFile, SpecError};
 pub use stream::StreamFormat;
 
 /// Called with the live figures (the CLI's status display).

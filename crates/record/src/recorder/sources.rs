@@ -3,8 +3,8 @@
 //! rather than grows without bound.
 
 use std::io::Read;
-use std::net::{SocketAddr, TcpListener, TcpStream, UdpSocket};
-use std::path::PathBuf;
+use std::net::{TcpListener, TcpStream, UdpSocket};
+
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
@@ -14,95 +14,8 @@ use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::*;
 
 use super::message::Item;
+use super::source_spec::SourceSpec;
 use super::stream::{StreamDecoder, StreamFormat};
-
-/// Where messages come from.
-#[derive(Debug, Clone)]
-pub enum SourceSpec {
-    /// JSON lines in UDP datagrams.
-    Udp { addr: SocketAddr },
-    /// A TCP listener; each connection a stream of the given format.
-    TcpListen {
-        addr: SocketAddr,
-        format: StreamFormat,
-        topic: Option<String>,
-    },
-    /// A TCP connection to a receiver or gateway, retried with backoff when it drops.
-    TcpClient {
-        addr: String,
-        format: StreamFormat,
-        topic: Option<String>,
-    },
-    Stdin {
-        format: StreamFormat,
-        topic: Option<String>,
-    },
-    File {
-        path: PathBuf,
-        format: StreamFormat,
-        topic: Option<String>,
-    },
-    /// A serial device (a real tty, configured with termios), reopened with backoff when it
-    /// goes away (a USB receiver unplugged).
-    Serial {
-        path: PathBuf,
-        baud: u32,
-        format: StreamFormat,
-        topic: Option<String>,
-    },
-    /// The embedded simulator, played out in real time (or `speed` times faster).
-    Simulated {
-        scenario: String,
-        seed: u64,
-        speed: f64,
-        duration_s: Option<f64>,
-    },
-}
-
-fn to(topic: &Option<String>) -> String {
-    topic.as_ref().map_or(String::new(), |t| format!(" → {t}"))
-}
-
-impl std::fmt::Display for SourceSpec {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            SourceSpec::Udp { addr } => write!(f, "udp {addr} (json)"),
-            SourceSpec::TcpListen {
-                addr,
-                format,
-                topic,
-            } => write!(f, "tcp listen {addr} ({format:?}{})", to(topic)),
-            SourceSpec::TcpClient {
-                addr,
-                format,
-                topic,
-            } => write!(f, "tcp {addr} ({format:?}{})", to(topic)),
-            SourceSpec::Stdin { format, topic } => write!(f, "stdin ({format:?}{})", to(topic)),
-            SourceSpec::File {
-                path,
-                format,
-                topic,
-            } => write!(f, "file {} ({format:?}{})", path.display(), to(topic)),
-            SourceSpec::Serial {
-                path,
-                baud,
-                format,
-                topic,
-            } => write!(
-                f,
-                "serial {} {baud} baud ({format:?}{})",
-                path.display(),
-                to(topic)
-            ),
-            SourceSpec::Simulated {
-                scenario,
-                seed,
-                speed,
-                ..
-            } => write!(f, "simulator {scenario} seed {seed} ×{speed}"),
-        }
-    }
-}
 
 pub type Stats = Arc<Mutex<SourceStats>>;
 

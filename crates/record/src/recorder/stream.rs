@@ -12,11 +12,19 @@ use crate::decode::ubx::{self, NavCov, NavPvt, UbxError};
 /// Longest line accepted on a text stream.
 pub const MAX_LINE: usize = 64 << 10;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(try_from = "String")]
 pub enum StreamFormat {
     JsonLines,
     Nmea,
     Ubx,
+}
+
+impl TryFrom<String> for StreamFormat {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse()
+    }
 }
 
 impl std::str::FromStr for StreamFormat {
