@@ -53,26 +53,9 @@ pub fn simulate_to(
             Scenario::NAMES.join(", ")
         );
     };
-    if let Some(d) = duration {
-        if !(d.is_finite() && d > 0.0) {
-            bail!("--duration must be a positive number of seconds, not {d}");
-        }
-    }
-    if !faults.is_empty() && preset.line().is_none() {
-        bail!("--fault: scenario '{scenario}' is source 000's bare simulation with no device models to break; use default or seed001");
-    }
-    for f in faults {
-        let has = match f.device.as_str() {
-            "loop" => preset.line().is_some_and(|p| p.induction_loop.is_some()),
-            "balise" => preset.line().is_some_and(|p| p.balise.is_some()),
-            "odometer1" => preset.line().is_some_and(|p| !p.odometers.is_empty()),
-            "odometer2" => preset.line().is_some_and(|p| p.odometers.len() > 1),
-            _ => true,
-        };
-        if !has {
-            bail!("--fault: scenario '{scenario}' has no {} to fail", f.device);
-        }
-    }
+    preset
+        .check(duration, faults)
+        .map_err(|e| anyhow::anyhow!("--{e}"))?;
     let started = Instant::now();
     let report = simulate(&preset, seed, duration, faults, output)?;
     let wall = started.elapsed().as_secs_f64();

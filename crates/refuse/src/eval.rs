@@ -458,10 +458,8 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
     let mut reader = LogReader::open(input)?;
     while let Some(record) = reader.next() {
         match record? {
-            LogRecord::Channel(c) => {
-                if eval.channel(c.id, &c.topic, c.schema_name()) {
-                    reads.insert(c.id);
-                }
+            LogRecord::Channel(c) if eval.channel(c.id, &c.topic, c.schema_name()) => {
+                reads.insert(c.id);
             }
             LogRecord::Message(m) => {
                 eval.log_time(m.log_time_ns);
@@ -513,15 +511,15 @@ impl ReferenceWalk {
                 break;
             };
             match record? {
-                LogRecord::Channel(c) => {
-                    let kind = reference_kind(c.schema_name());
-                    if c.topic == self.topic && kind.is_some() {
-                        self.roles
-                            .insert(c.id, Role::Reference(kind.expect("checked")));
-                    } else if c.schema_name() == TrackMap::SCHEMA_NAME {
+                LogRecord::Channel(c) => match reference_kind(c.schema_name()) {
+                    Some(kind) if c.topic == self.topic => {
+                        self.roles.insert(c.id, Role::Reference(kind));
+                    }
+                    _ if c.schema_name() == TrackMap::SCHEMA_NAME => {
                         self.roles.insert(c.id, Role::TrackMap);
                     }
-                }
+                    _ => {}
+                },
                 LogRecord::Message(m) => match self.roles.get(&m.channel.id).copied() {
                     Some(Role::TrackMap) => self.map = Some(m.decode(&self.path)?),
                     Some(Role::Reference(kind)) => {

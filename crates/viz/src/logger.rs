@@ -188,7 +188,7 @@ pub fn visualize(path: &Path, sink: &Sink, progress: &dyn Fn(u64)) -> Result<Viz
                 .rec
                 .set_timestamp_nanos_since_epoch("log_time", m.log_time_ns as i64);
             logger.message(&m)?;
-            if logger.report.messages % 4096 == 0 {
+            if logger.report.messages.is_multiple_of(4096) {
                 progress(reader.bytes_read());
             }
         }

@@ -293,7 +293,7 @@ impl Scanner {
             op::MESSAGE_INDEX => {
                 body.len() >= 6 && {
                     let n = u32::from_le_bytes(body[2..6].try_into().expect("4 bytes")) as usize;
-                    n == body.len() - 6 && n % 16 == 0
+                    n == body.len() - 6 && n.is_multiple_of(16)
                 }
             }
             op::DATA_END => len == 4 && self.ends_with_magic(),

@@ -181,7 +181,7 @@ pub fn import_with_progress(
         n += 1;
         report.lines += 1;
         consumed += line.len() as u64 + 1;
-        if n % 4096 == 0 {
+        if n.is_multiple_of(4096) {
             progress(consumed);
         }
         if !ok {

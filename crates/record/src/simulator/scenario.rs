@@ -71,6 +71,43 @@ impl Scenario {
             Scenario::Seed000(_) => None,
         }
     }
+
+    /// Whether a run of `duration_s` (the preset's own when `None`) with `faults` can be
+    /// simulated: a positive duration, and every failed device one the scenario has.
+    pub fn check(
+        &self,
+        duration_s: Option<f64>,
+        faults: &[super::FaultSpec],
+    ) -> Result<(), String> {
+        if let Some(d) = duration_s.filter(|d| !(d.is_finite() && *d > 0.0)) {
+            return Err(format!(
+                "duration must be a positive number of seconds, not {d}"
+            ));
+        }
+        let name = self.name();
+        let Some(line) = self.line() else {
+            return match faults.is_empty() {
+                true => Ok(()),
+                false => Err(format!("fault: scenario '{name}' is source 000's bare simulation with no device models to break; use default or seed001")),
+            };
+        };
+        for f in faults {
+            let has = match f.device.as_str() {
+                "loop" => line.induction_loop.is_some(),
+                "balise" => line.balise.is_some(),
+                "odometer1" => !line.odometers.is_empty(),
+                "odometer2" => line.odometers.len() > 1,
+                _ => true,
+            };
+            if !has {
+                return Err(format!(
+                    "fault: scenario '{name}' has no {} to fail",
+                    f.device
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl LineScenario {
