@@ -53,6 +53,38 @@ impl Quantity {
     }
 }
 
+/// How a sensor's measurement of one quantity sees the state: `z = H x + offset`. A bias
+/// state adds to the row; a scale-factor state `k` makes a speed sensor non-linear,
+/// `z = (1 + k) v`, linearised at the estimate of the moment (an extended Kalman row):
+/// `H = [0, 1 + k̂, …, v̂, …]`, offset `−v̂ k̂`.
+#[derive(Debug, Clone, Copy)]
+pub struct ObservationRow<const N: usize> {
+    /// The row of the linear part (the quantity's unit entry and any bias state's).
+    pub h: RowSVector<f64, N>,
+    /// The state holding this sensor's scale factor, if the pipeline estimates one.
+    pub scale_state: Option<usize>,
+}
+
+impl<const N: usize> ObservationRow<N> {
+    /// Whether the row depends on the estimate (and so needs a linearisation point).
+    pub fn is_linearised(&self) -> bool {
+        self.scale_state.is_some()
+    }
+
+    /// `H` and the offset at the linearisation point `x` (ignored for a linear row).
+    pub fn at(&self, x: Option<&nalgebra::SVector<f64, N>>) -> (RowSVector<f64, N>, f64) {
+        match (self.scale_state, x) {
+            (Some(j), Some(x)) => {
+                let (v, k) = (x[Quantity::Speed.index()], x[j]);
+                let mut h = self.h;
+                (h[Quantity::Speed.index()], h[j]) = (1.0 + k, v);
+                (h, -v * k)
+            }
+            _ => (self.h, 0.0),
+        }
+    }
+}
+
 /// One scalar measurement taken from a message.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measurement {

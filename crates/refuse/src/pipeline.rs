@@ -11,7 +11,7 @@
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
-use nalgebra::{RowSVector, SMatrix, SVector};
+use nalgebra::{SMatrix, SVector};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 use serde::Serialize;
 
@@ -26,7 +26,7 @@ use crate::filter::{
     Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
     StateAndCovariance, MASTER,
 };
-use crate::measurement::{Measurement, Quantity, SensorModel};
+use crate::measurement::{Measurement, ObservationRow, Quantity, SensorModel};
 use crate::model::{
     ConstantAcceleration, ConstantVelocity, SensorState, Singer, TransitionModel, WithSensorStates,
 };
@@ -61,10 +61,18 @@ pub struct Fused {
 
 struct Field<const N: usize> {
     quantity: Quantity,
-    h: RowSVector<f64, N>,
+    row: ObservationRow<N>,
     variance: VarianceValue,
-    /// The state holding this speed sensor's scale factor, if the pipeline estimates one.
-    scale_state: Option<usize>,
+}
+
+impl<const N: usize> Field<N> {
+    /// The variance of measurement `m`: the configured one, or the one it carries.
+    fn variance_of(&self, m: &Measurement) -> Option<f64> {
+        match self.variance {
+            VarianceValue::Fixed(v) => Some(v),
+            VarianceValue::FromMessage(_) => m.reported_variance,
+        }
+    }
 }
 
 /// What each state component is: the motion states, then one per sensor state.
@@ -148,9 +156,8 @@ impl<const N: usize> Pipeline<N> {
             }
             Some(Field {
                 quantity: q,
-                h,
+                row: ObservationRow { h, scale_state },
                 variance,
-                scale_state,
             })
         };
         let gives_chainage = vec![true; config.sensor.len()];
@@ -423,15 +430,42 @@ impl<const N: usize> Pipeline<N> {
         }
     }
 
+    /// One measurement through the filter: its variance, the start of the filter if this is
+    /// where it starts, the update, and the diagnostics record of what was done with it.
     fn process(&mut self, p: Pending, log_time_ns: u64, out: &mut Vec<Fused>) {
-        let sensor = &self.sensors[p.sensor];
-        let field = &sensor.fields[p.field];
         let m = p.measurement;
-        let variance = match field.variance {
-            VarianceValue::Fixed(v) => Some(v),
-            VarianceValue::FromMessage(_) => m.reported_variance,
+        let variance = self.sensors[p.sensor].fields[p.field].variance_of(&m);
+        let mut diagnostics = self.diagnostics(p.sensor, &m, variance);
+        if let Some(e) = &mut self.estimator {
+            e.heard_from(self.sensors[p.sensor].device, m.stamp_ns);
+        }
+        let usable =
+            variance.filter(|r| r.is_finite() && *r > 0.0 && m.valid && m.value.is_finite());
+        let (decision, state) = match usable {
+            None => (GateDecision::RejectedInvalid, None),
+            Some(r) if self.estimator.is_none() => {
+                self.initialise(&p, r, log_time_ns, out, &mut diagnostics)
+            }
+            Some(r) => self.update(&p, r, log_time_ns, out, &mut diagnostics),
         };
-        let mut diagnostics = FusedDiagnostics {
+        diagnostics.decision = decision;
+        self.count(decision);
+        out.push(Fused {
+            log_time_ns,
+            state,
+            diagnostics: Some(diagnostics),
+        });
+    }
+
+    /// The diagnostics record of a measurement, before the filter has seen it.
+    fn diagnostics(
+        &self,
+        sensor: usize,
+        m: &Measurement,
+        variance: Option<f64>,
+    ) -> FusedDiagnostics {
+        let sensor = &self.sensors[sensor];
+        FusedDiagnostics {
             stamp_ns: m.stamp_ns,
             source: sensor.topic.clone(),
             measurement: m.value.is_finite().then_some(m.value),
@@ -444,120 +478,115 @@ impl<const N: usize> Pipeline<N> {
             effective_sample_size: None,
             resampled: None,
             sharing: None,
-        };
-        let (h, scale_state, device, gate_nis, source) = (
-            field.h,
-            field.scale_state,
-            sensor.device,
-            sensor.gate_nis,
-            sensor.topic.clone(),
-        );
-        let usable_variance = variance.filter(|r| r.is_finite() && *r > 0.0);
-        if let Some(e) = &mut self.estimator {
-            e.heard_from(device, m.stamp_ns);
         }
-        let mut state = None;
-        let usable = usable_variance.is_some() && m.valid && m.value.is_finite();
-        if usable && self.estimator.is_none() {
-            // Told where it starts (or with no position sensor: at distance 0), the filter
-            // starts at its first usable measurement and then uses it.
-            if let Some((chainage, var)) = self.known_start() {
-                let init = self.initial(chainage, var);
-                self.start(&init, m.stamp_ns);
-            }
+    }
+
+    /// A usable measurement before the filter runs: it starts the filter where the pipeline
+    /// is told to start (and is then used), or at a position measurement (which gives the
+    /// start); a speed before that is kept as the initial speed.
+    fn initialise(
+        &mut self,
+        p: &Pending,
+        r: f64,
+        log_time_ns: u64,
+        out: &mut Vec<Fused>,
+        diagnostics: &mut FusedDiagnostics,
+    ) -> (GateDecision, Option<FusedState>) {
+        let m = &p.measurement;
+        if let Some((chainage, var)) = self.known_start() {
+            let init = self.initial(chainage, var);
+            self.start(&init, m.stamp_ns);
+            return self.update(p, r, log_time_ns, out, diagnostics);
         }
-        let decision = match (usable_variance, self.estimator.is_some()) {
-            (None, _) => GateDecision::RejectedInvalid,
-            _ if !m.valid || !m.value.is_finite() => GateDecision::RejectedInvalid,
-            (Some(r), false) if m.quantity == Quantity::Chainage => {
+        match m.quantity {
+            Quantity::Chainage => {
                 let init = self.initial(m.value, r);
                 self.start(&init, m.stamp_ns);
-                if self.output_period_ns.is_none() {
-                    state = Some(fused_state(&self.layout, m.stamp_ns, &init, &source));
-                }
-                GateDecision::Accepted
+                let source = &self.sensors[p.sensor].topic;
+                let state = self
+                    .output_period_ns
+                    .is_none()
+                    .then(|| fused_state(&self.layout, m.stamp_ns, &init, source));
+                (GateDecision::Accepted, state)
             }
-            (Some(r), false) => {
-                if m.quantity == Quantity::Speed {
-                    self.speed_before_init = Some((m.value, r));
-                }
-                GateDecision::BeforeInitialisation
+            Quantity::Speed => {
+                self.speed_before_init = Some((m.value, r));
+                (GateDecision::BeforeInitialisation, None)
             }
-            (Some(_), true) if m.stamp_ns < self.time_ns => GateDecision::RejectedLate,
-            (Some(r), true) => {
-                self.ticks_before(m.stamp_ns, log_time_ns, out);
-                let e = self.estimator.as_mut().expect("initialised");
-                e.advance_to(m.stamp_ns);
-                self.time_ns = m.stamp_ns;
-                let (mut h, mut offset) = (h, 0.0);
-                if let Some(j) = scale_state {
-                    let x = e.linearisation_point(device);
-                    let (v, k) = (x[1], x[j]);
-                    (h[1], h[j], offset) = (1.0 + k, v, -v * k);
-                }
-                let outcome = e.process(&ScalarMeasurement {
-                    device,
-                    quantity: m.quantity.index(),
-                    h,
-                    offset,
-                    r,
-                    z: m.value,
-                    gate_nis,
-                });
-                if let Some(i) = outcome.innovation() {
-                    diagnostics.innovation = Some(i.residual);
-                    diagnostics.innovation_variance = Some(i.variance);
-                    diagnostics.nis = Some(i.nis);
-                }
-                let extra = e.diagnostics();
-                diagnostics.effective_sample_size = extra.effective_sample_size;
-                diagnostics.resampled = extra.resampled;
-                diagnostics.sharing = extra.sharing;
-                match outcome {
-                    Outcome::Accepted(_) => {
-                        if self.output_period_ns.is_none() {
-                            state = Some(fused_state(
-                                &self.layout,
-                                m.stamp_ns,
-                                &e.estimate(),
-                                &source,
-                            ));
-                        }
-                        GateDecision::Accepted
-                    }
-                    Outcome::AcceptedAfterLockout(_) => {
-                        if self.output_period_ns.is_none() {
-                            state = Some(fused_state(
-                                &self.layout,
-                                m.stamp_ns,
-                                &e.estimate(),
-                                &source,
-                            ));
-                        }
-                        GateDecision::AcceptedAfterLockout
-                    }
-                    Outcome::RejectedGate(_) => GateDecision::RejectedGate,
-                    Outcome::RejectedNumerics(_) => GateDecision::RejectedInvalid,
-                    Outcome::RejectedDeviceFault(_) => GateDecision::RejectedDeviceFault,
-                }
-            }
-        };
-        diagnostics.decision = decision;
-        let counter = match decision {
-            GateDecision::Accepted => &mut self.counts.accepted,
-            GateDecision::AcceptedAfterLockout => &mut self.counts.accepted_after_lockout,
-            GateDecision::RejectedGate => &mut self.counts.rejected_gate,
-            GateDecision::RejectedInvalid => &mut self.counts.rejected_invalid,
-            GateDecision::RejectedLate => &mut self.counts.rejected_late,
-            GateDecision::RejectedDeviceFault => &mut self.counts.rejected_device_fault,
-            GateDecision::BeforeInitialisation => &mut self.counts.before_initialisation,
-        };
-        *counter += 1;
-        out.push(Fused {
-            log_time_ns,
-            state,
-            diagnostics: Some(diagnostics),
+            Quantity::Acceleration => (GateDecision::BeforeInitialisation, None),
+        }
+    }
+
+    /// A usable measurement for the running filter: output ticks up to it, prediction to its
+    /// time, the gated update (linearised where the row needs it).
+    fn update(
+        &mut self,
+        p: &Pending,
+        r: f64,
+        log_time_ns: u64,
+        out: &mut Vec<Fused>,
+        diagnostics: &mut FusedDiagnostics,
+    ) -> (GateDecision, Option<FusedState>) {
+        let m = &p.measurement;
+        if m.stamp_ns < self.time_ns {
+            return (GateDecision::RejectedLate, None);
+        }
+        self.ticks_before(m.stamp_ns, log_time_ns, out);
+        let sensor = &self.sensors[p.sensor];
+        let row = sensor.fields[p.field].row;
+        let e = self.estimator.as_mut().expect("initialised");
+        e.advance_to(m.stamp_ns);
+        self.time_ns = m.stamp_ns;
+        let x = row
+            .is_linearised()
+            .then(|| e.linearisation_point(sensor.device));
+        let (h, offset) = row.at(x.as_ref());
+        let outcome = e.process(&ScalarMeasurement {
+            device: sensor.device,
+            quantity: m.quantity.index(),
+            h,
+            offset,
+            r,
+            z: m.value,
+            gate_nis: sensor.gate_nis,
         });
+        if let Some(i) = outcome.innovation() {
+            diagnostics.innovation = Some(i.residual);
+            diagnostics.innovation_variance = Some(i.variance);
+            diagnostics.nis = Some(i.nis);
+        }
+        let extra = e.diagnostics();
+        diagnostics.effective_sample_size = extra.effective_sample_size;
+        diagnostics.resampled = extra.resampled;
+        diagnostics.sharing = extra.sharing;
+        let decision = match outcome {
+            Outcome::Accepted(_) => GateDecision::Accepted,
+            Outcome::AcceptedAfterLockout(_) => GateDecision::AcceptedAfterLockout,
+            Outcome::RejectedGate(_) => GateDecision::RejectedGate,
+            Outcome::RejectedNumerics(_) => GateDecision::RejectedInvalid,
+            Outcome::RejectedDeviceFault(_) => GateDecision::RejectedDeviceFault,
+        };
+        let used = matches!(
+            decision,
+            GateDecision::Accepted | GateDecision::AcceptedAfterLockout
+        );
+        // With an output rate, states come from the ticks; otherwise one per update.
+        let state = (used && self.output_period_ns.is_none())
+            .then(|| fused_state(&self.layout, m.stamp_ns, &e.estimate(), &sensor.topic));
+        (decision, state)
+    }
+
+    fn count(&mut self, decision: GateDecision) {
+        let c = &mut self.counts;
+        *match decision {
+            GateDecision::Accepted => &mut c.accepted,
+            GateDecision::AcceptedAfterLockout => &mut c.accepted_after_lockout,
+            GateDecision::RejectedGate => &mut c.rejected_gate,
+            GateDecision::RejectedInvalid => &mut c.rejected_invalid,
+            GateDecision::RejectedLate => &mut c.rejected_late,
+            GateDecision::RejectedDeviceFault => &mut c.rejected_device_fault,
+            GateDecision::BeforeInitialisation => &mut c.before_initialisation,
+        } += 1;
     }
 
     /// The smoothed states, once `finish` has run (Kalman pipelines with `smoother = true`).
