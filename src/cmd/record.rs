@@ -36,7 +36,8 @@ pub struct Args {
     #[arg(long, value_name = "FORMAT")]
     pub stdin: Option<String>,
     /// Record the embedded simulator in real time (the default when no source is given).
-    #[arg(long, value_name = "SCENARIO")]
+    #[arg(long, value_name = "SCENARIO",
+          value_parser = clap::builder::PossibleValuesParser::new(railfuse_record::Scenario::NAMES))]
     pub simulate: Option<String>,
     /// Simulator: the seed of its random streams (the same seed gives the same run).
     #[arg(long, default_value_t = 0)]

@@ -9,7 +9,8 @@ use railfuse_record::{simulate, Scenario, SimulationReport};
 pub struct Args {
     /// Scenario preset: `default` (a mixed line run with every sensor), `seed000` (source
     /// 000's maglev simulation) or `seed001` (source 001's: INS, BeiDou, Doppler radar, 500 s).
-    #[arg(long, default_value = "default")]
+    #[arg(long, default_value = "default",
+          value_parser = clap::builder::PossibleValuesParser::new(Scenario::NAMES))]
     pub scenario: String,
     /// Seed of every random draw: the same seed gives the same file.
     #[arg(long, default_value_t = 0)]
