@@ -259,6 +259,40 @@ pub fn hex_into(text: &str, out: &mut Vec<u8>) -> bool {
     true
 }
 
+/// Pairs each NAV-PVT with the NAV-COV of its epoch (the receiver sends it right after):
+/// the solution is released with its covariance when that arrives, without it when the next
+/// NAV-PVT comes first or the stream ends.
+#[derive(Debug, Default, Clone)]
+pub struct PvtCovPairing {
+    pending: Option<NavPvt>,
+}
+
+impl PvtCovPairing {
+    /// A NAV-PVT arrived: the one waiting before it, if any, is released without covariance.
+    pub fn pvt(&mut self, pvt: NavPvt) -> Option<NavPvt> {
+        self.pending.replace(pvt)
+    }
+
+    /// A NAV-COV arrived: the waiting NAV-PVT of its epoch with its covariance (when the
+    /// receiver marks it valid), or `None` when no NAV-PVT of that epoch waits.
+    pub fn cov(&mut self, cov: &NavCov) -> Option<(NavPvt, Option<[f64; 9]>)> {
+        match self.pending.take() {
+            Some(pvt) if pvt.itow_ms == cov.itow_ms => {
+                Some((pvt, cov.pos_valid.then_some(cov.enu_m2)))
+            }
+            other => {
+                self.pending = other;
+                None
+            }
+        }
+    }
+
+    /// End of the stream: the solution still waiting, if any.
+    pub fn finish(&mut self) -> Option<NavPvt> {
+        self.pending.take()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -32,7 +32,7 @@ use railfuse_catalog::{topics, Error, Result};
 
 use super::{read_line_bounded, ImportReport};
 use crate::decode::nmea::{self, Decoded, FixAssembler};
-use crate::decode::ubx::{self, hex_into, NavCov, NavPvt};
+use crate::decode::ubx::{self, hex_into, NavCov, NavPvt, PvtCovPairing};
 
 const GYRO_RADPS_PER_LSB: f64 = 4.37e-3 * std::f64::consts::PI / 180.0;
 const ACCEL_MPS2_PER_LSB: f64 = 0.061e-3 * 9.806_65;
@@ -170,7 +170,9 @@ pub fn import_with_progress(
     let (mut line, mut bytes) = (Vec::new(), Vec::new());
     let mut nmea = FixAssembler::default();
     // A NAV-PVT waits for the NAV-COV of its epoch (the receiver sends it right after).
-    let mut pending: Option<NavPvt> = None;
+    let mut pairing = PvtCovPairing::default();
+    // The node clock of the last line: the time of a solution left waiting at the end.
+    let mut last_now = None;
     let mut n = 0u64;
     let io = |source| Error::Io {
         path: input.to_owned(),
@@ -210,6 +212,7 @@ pub fn import_with_progress(
             continue;
         };
         let now = to_utc(board);
+        last_now = Some(now);
         match kind {
             "I" => {
                 if data.len() != 24 || !hex_into(data, &mut bytes) {
@@ -252,7 +255,7 @@ pub fn import_with_progress(
                 match (frame.class, frame.id) {
                     NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
                         Ok(pvt) => {
-                            if let Some(prev) = pending.replace(pvt) {
+                            if let Some(prev) = pairing.pvt(pvt) {
                                 let fix = prev.to_fix(prev.utc_ns.unwrap_or(now), None);
                                 out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
                             }
@@ -260,18 +263,12 @@ pub fn import_with_progress(
                         Err(e) => report.skip(n, "UBX NAV-PVT rejected", e),
                     },
                     NavCov::CLASS_ID => match NavCov::decode(&frame) {
-                        Ok(cov) => match pending.take() {
-                            Some(pvt) if pvt.itow_ms == cov.itow_ms => {
-                                let fix = pvt.to_fix(
-                                    pvt.utc_ns.unwrap_or(now),
-                                    cov.pos_valid.then_some(cov.enu_m2),
-                                );
+                        Ok(cov) => match pairing.cov(&cov) {
+                            Some((pvt, cov)) => {
+                                let fix = pvt.to_fix(pvt.utc_ns.unwrap_or(now), cov);
                                 out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
                             }
-                            other => {
-                                pending = other;
-                                report.skip(n, "UBX NAV-COV without its NAV-PVT", cov.itow_ms);
-                            }
+                            None => report.skip(n, "UBX NAV-COV without its NAV-PVT", cov.itow_ms),
                         },
                         Err(e) => report.skip(n, "UBX NAV-COV rejected", e),
                     },
@@ -325,10 +322,9 @@ pub fn import_with_progress(
             other => report.skip(n, "unknown line type", other),
         }
     }
-    if let Some(pvt) = pending.take() {
-        let t = pvt.utc_ns.unwrap_or(0);
-        let fix = pvt.to_fix(t, None);
-        out.write(&mut report, out.gnss, topics::GNSS_FIX, t, &fix)?;
+    if let (Some(pvt), Some(now)) = (pairing.finish(), last_now) {
+        let fix = pvt.to_fix(pvt.utc_ns.unwrap_or(now), None);
+        out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
     }
     let run = BTreeMap::from([
         ("run_id".to_owned(), stem.clone()),

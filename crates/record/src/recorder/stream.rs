@@ -7,7 +7,7 @@ use railfuse_catalog::topics;
 
 use super::message::{parse_json_line, Item};
 use crate::decode::nmea::{self, Decoded, FixAssembler, NmeaError};
-use crate::decode::ubx::{self, NavCov, NavPvt, UbxError};
+use crate::decode::ubx::{self, NavCov, NavPvt, PvtCovPairing, UbxError};
 
 /// Longest line accepted on a text stream.
 pub const MAX_LINE: usize = 64 << 10;
@@ -45,7 +45,7 @@ pub struct StreamDecoder {
     /// Discarding the rest of an oversized line.
     skipping: bool,
     nmea: FixAssembler,
-    pending_pvt: Option<NavPvt>,
+    pairing: PvtCovPairing,
     undated_pvt: u64,
 }
 
@@ -62,7 +62,7 @@ impl StreamDecoder {
             buf: Vec::new(),
             skipping: false,
             nmea: FixAssembler::with_date(date),
-            pending_pvt: None,
+            pairing: PvtCovPairing::default(),
             undated_pvt: 0,
         }
     }
@@ -129,7 +129,7 @@ impl StreamDecoder {
             self.line(&line, receive_ns, stats, out);
         }
         self.nmea.finish();
-        if let Some(pvt) = self.pending_pvt.take() {
+        if let Some(pvt) = self.pairing.finish() {
             self.push_pvt(&pvt, None, receive_ns, stats, out);
         }
     }
@@ -211,22 +211,18 @@ impl StreamDecoder {
                     match (frame.class, frame.id) {
                         NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
                             Ok(pvt) => {
-                                if let Some(prev) = self.pending_pvt.replace(pvt) {
+                                if let Some(prev) = self.pairing.pvt(pvt) {
                                     self.push_pvt(&prev, None, receive_ns, stats, out);
                                 }
                             }
                             Err(_) => stats.malformed += 1,
                         },
                         NavCov::CLASS_ID => {
-                            if let (Ok(cov), Some(pvt)) =
-                                (NavCov::decode(&frame), self.pending_pvt.take())
-                            {
-                                if pvt.itow_ms == cov.itow_ms {
-                                    let cov = cov.pos_valid.then_some(cov.enu_m2);
-                                    self.push_pvt(&pvt, cov, receive_ns, stats, out);
-                                } else {
-                                    self.pending_pvt = Some(pvt);
-                                }
+                            let paired = NavCov::decode(&frame)
+                                .ok()
+                                .and_then(|c| self.pairing.cov(&c));
+                            if let Some((pvt, cov)) = paired {
+                                self.push_pvt(&pvt, cov, receive_ns, stats, out);
                             }
                         }
                         _ => {}
