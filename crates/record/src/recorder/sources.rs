@@ -217,31 +217,16 @@ fn run_until_end(
             format,
             topic,
         } => {
-            let mut backoff = Duration::from_millis(250);
-            let mut first = true;
-            while !stop.load(Ordering::Relaxed) {
-                match TcpStream::connect(&addr) {
-                    Ok(conn) => {
-                        if !first {
-                            stats.lock().expect("stats").reconnects += 1;
-                        }
-                        first = false;
-                        backoff = Duration::from_millis(250);
-                        stats.lock().expect("stats").connected = true;
-                        let _ = conn.set_read_timeout(Some(tick));
-                        if let Err(e) = pump(conn, format, topic.as_deref(), &tx, stats, &stop) {
-                            set_error(stats, e);
-                        }
-                    }
-                    Err(e) => set_error(stats, format!("cannot connect to {addr}: {e}")),
-                }
-                stats.lock().expect("stats").connected = false;
-                let until = Instant::now() + backoff;
-                while Instant::now() < until && !stop.load(Ordering::Relaxed) {
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                backoff = (backoff * 2).min(Duration::from_secs(8));
-            }
+            let open = || {
+                let conn = TcpStream::connect(&addr)
+                    .map_err(|e| format!("cannot connect to {addr}: {e}"))?;
+                let _ = conn.set_read_timeout(Some(tick));
+                Ok(conn)
+            };
+            let run = |conn| {
+                pump(conn, format, topic.as_deref(), &tx, stats, &stop).map_err(|e| e.to_string())
+            };
+            with_reconnects(stats, &stop, open, run);
         }
         SourceSpec::Stdin { format, topic } => {
             pump(
@@ -269,32 +254,13 @@ fn run_until_end(
             format,
             topic,
         } => {
-            let mut backoff = Duration::from_millis(250);
-            let mut first = true;
-            while !stop.load(Ordering::Relaxed) {
-                match super::serial::open(&path, baud) {
-                    Ok(f) => {
-                        if !first {
-                            stats.lock().expect("stats").reconnects += 1;
-                        }
-                        backoff = Duration::from_millis(250);
-                        stats.lock().expect("stats").connected = true;
-                        if let Err(e) =
-                            pump_with(f, format, topic.as_deref(), &tx, stats, &stop, true)
-                        {
-                            set_error(stats, format!("{}: {e}", path.display()));
-                        }
-                    }
-                    Err(e) => set_error(stats, format!("{}: {e}", path.display())),
-                }
-                first = false;
-                stats.lock().expect("stats").connected = false;
-                let until = Instant::now() + backoff;
-                while Instant::now() < until && !stop.load(Ordering::Relaxed) {
-                    std::thread::sleep(Duration::from_millis(20));
-                }
-                backoff = (backoff * 2).min(Duration::from_secs(8));
-            }
+            let open =
+                || super::serial::open(&path, baud).map_err(|e| format!("{}: {e}", path.display()));
+            let run = |port| {
+                pump_with(port, format, topic.as_deref(), &tx, stats, &stop, true)
+                    .map_err(|e| format!("{}: {e}", path.display()))
+            };
+            with_reconnects(stats, &stop, open, run);
         }
         SourceSpec::Simulated {
             scenario,
@@ -306,6 +272,41 @@ fn run_until_end(
         }
     }
     Ok(())
+}
+
+/// Opens a connection (a TCP receiver, a serial device) and reads it, again and again until
+/// the recorder stops: 0.25 s between attempts, doubling to 8 s, back to 0.25 s after a
+/// success; a connection after an earlier one counts as a reconnect.
+fn with_reconnects<C>(
+    stats: &Stats,
+    stop: &AtomicBool,
+    mut open: impl FnMut() -> Result<C, String>,
+    mut run: impl FnMut(C) -> Result<(), String>,
+) {
+    const FIRST: Duration = Duration::from_millis(250);
+    let (mut backoff, mut connected_before) = (FIRST, false);
+    while !stop.load(Ordering::Relaxed) {
+        match open() {
+            Ok(connection) => {
+                {
+                    let mut s = stats.lock().expect("stats");
+                    s.reconnects += u64::from(connected_before);
+                    s.connected = true;
+                }
+                (backoff, connected_before) = (FIRST, true);
+                if let Err(e) = run(connection) {
+                    set_error(stats, e);
+                }
+            }
+            Err(e) => set_error(stats, e),
+        }
+        stats.lock().expect("stats").connected = false;
+        let until = Instant::now() + backoff;
+        while Instant::now() < until && !stop.load(Ordering::Relaxed) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        backoff = (backoff * 2).min(Duration::from_secs(8));
+    }
 }
 
 /// The simulator as a live source: the run is simulated ahead into a temporary file (a
