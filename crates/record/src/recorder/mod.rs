@@ -87,11 +87,7 @@ pub struct RecordReport {
 }
 
 /// Joins a source's thread; an error that ended it goes on the list as "<source>: <cause>".
-fn join_source(
-    name: String,
-    handle: std::thread::JoinHandle<Result<(), String>>,
-    failed: &mut Vec<String>,
-) {
+fn join_source(name: String, handle: SourceThread, failed: &mut Vec<String>) {
     if let Err(e) = handle
         .join()
         .unwrap_or_else(|_| Err("the source's thread panicked".to_owned()))
@@ -153,216 +149,270 @@ pub fn record(
     mut opts: RecordOptions,
     stop: Arc<AtomicBool>,
 ) -> railfuse_catalog::Result<RecordReport> {
-    let splitting = opts.split_bytes.is_some() || opts.split_every.is_some();
-    let mut part = 1u32;
-    let mut current = if splitting {
-        part_path(&opts.output, part)
-    } else {
-        opts.output.clone()
+    let mut rec = Recording::start(&opts)?;
+    let stopped_by = loop {
+        let busy = match rec.drain_queues(&mut opts, 1024) {
+            Ok(busy) => busy,
+            Err(e) => break rec.write_failed(e),
+        };
+        if rec.last_flush.elapsed() >= opts.chunk_interval {
+            if let Err(e) = rec.close_chunk(&opts) {
+                break rec.write_failed(e);
+            }
+        }
+        rec.reap_sources();
+        rec.report_status(&mut opts);
+        if stop.load(Ordering::Relaxed) {
+            break "signal".to_owned();
+        }
+        if opts.duration.is_some_and(|d| rec.started.elapsed() >= d) {
+            break "duration".to_owned();
+        }
+        if !rec.open.iter().any(|&o| o) {
+            break "every source ended".to_owned();
+        }
+        if !busy {
+            std::thread::sleep(Duration::from_millis(2));
+        }
     };
-    let (mut writer, mut diag) = open_part(&current, &opts, splitting.then_some(part))?;
-    let mut files = vec![current.clone()];
-    let mut part_started = Instant::now();
+    Ok(rec.finish(opts, stopped_by))
+}
 
-    let source_stop = Arc::new(AtomicBool::new(false));
-    let mut queues: Vec<Receiver<Item>> = Vec::new();
-    let mut stats: Vec<sources::Stats> = Vec::new();
-    let mut threads = Vec::new();
-    for spec in &opts.sources {
-        let (tx, rx) = sync_channel(opts.queue.max(1));
-        let s = Arc::new(Mutex::new(SourceStats {
-            name: spec.to_string(),
-            ..Default::default()
-        }));
-        let (spec, st, stop) = (spec.clone(), s.clone(), source_stop.clone());
-        let name = spec.to_string();
-        threads.push(Some((
-            name,
-            std::thread::spawn(move || sources::run(spec, tx, st, stop)),
-        )));
-        queues.push(rx);
-        stats.push(s);
+type SourceThread = std::thread::JoinHandle<Result<(), String>>;
+
+/// A recording in progress: the sources' threads and queues, the open output file and the
+/// counts.
+struct Recording {
+    writer: ItemWriter,
+    diag: railfuse_catalog::log::ChannelId,
+    /// The file being written, and every file so far (several when splitting).
+    current: PathBuf,
+    files: Vec<PathBuf>,
+    part: u32,
+    part_started: Instant,
+    source_stop: Arc<AtomicBool>,
+    queues: Vec<Receiver<Item>>,
+    stats: Vec<sources::Stats>,
+    /// Each source's name and thread, until it is joined.
+    threads: Vec<Option<(String, SourceThread)>>,
+    written: Vec<u64>,
+    open: Vec<bool>,
+    started: Instant,
+    last_flush: Instant,
+    last_status: Instant,
+    reported_failures: usize,
+    messages: u64,
+    per_topic: BTreeMap<String, u64>,
+    write_error: Option<String>,
+    failed_sources: Vec<String>,
+}
+
+impl Recording {
+    /// Opens the first file and starts a thread per source, each with its bounded queue.
+    fn start(opts: &RecordOptions) -> railfuse_catalog::Result<Self> {
+        let splitting = opts.split_bytes.is_some() || opts.split_every.is_some();
+        let current = if splitting {
+            part_path(&opts.output, 1)
+        } else {
+            opts.output.clone()
+        };
+        let (writer, diag) = open_part(&current, opts, splitting.then_some(1))?;
+        let source_stop = Arc::new(AtomicBool::new(false));
+        let (mut queues, mut stats, mut threads) = (Vec::new(), Vec::new(), Vec::new());
+        for spec in &opts.sources {
+            let (tx, rx) = sync_channel(opts.queue.max(1));
+            let s = Arc::new(Mutex::new(SourceStats {
+                name: spec.to_string(),
+                ..Default::default()
+            }));
+            let (spec, st, stop) = (spec.clone(), s.clone(), source_stop.clone());
+            let name = spec.to_string();
+            threads.push(Some((
+                name,
+                std::thread::spawn(move || sources::run(spec, tx, st, stop)),
+            )));
+            queues.push(rx);
+            stats.push(s);
+        }
+        let now = Instant::now();
+        Ok(Self {
+            writer,
+            diag,
+            files: vec![current.clone()],
+            current,
+            part: 1,
+            part_started: now,
+            source_stop,
+            written: vec![0; queues.len()],
+            open: vec![true; queues.len()],
+            queues,
+            stats,
+            threads,
+            started: now,
+            last_flush: now,
+            last_status: now,
+            reported_failures: 0,
+            messages: 0,
+            per_topic: BTreeMap::new(),
+            write_error: None,
+            failed_sources: Vec::new(),
+        })
     }
-    let mut written = vec![0u64; queues.len()];
-    let mut open = vec![true; queues.len()];
-    let started = Instant::now();
-    let mut last_flush = Instant::now();
-    let mut last_status = Instant::now();
-    let mut reported_failures = 0;
-    let (mut messages, mut per_topic) = (0u64, BTreeMap::<String, u64>::new());
-    let mut write_error: Option<String> = None;
-    let mut failed_sources = Vec::new();
-    let stopped_by;
-    'run: loop {
+
+    /// Writes what the sources queued, at most `turn` items per source (so one flooding
+    /// source cannot starve the others); says whether anything came.
+    fn drain_queues(
+        &mut self,
+        opts: &mut RecordOptions,
+        turn: usize,
+    ) -> railfuse_catalog::Result<bool> {
         let mut busy = false;
-        for (i, q) in queues.iter().enumerate() {
-            // Bounded turns keep one flooding source from starving the others.
-            for _ in 0..1024 {
+        for (i, q) in self.queues.iter().enumerate() {
+            for _ in 0..turn {
                 match q.try_recv() {
                     Ok(item) => {
                         busy = true;
-                        if let Err(e) = writer.write(&item) {
-                            write_error = Some(e.to_string());
-                            stopped_by = "write error".to_owned();
-                            break 'run;
-                        }
-                        written[i] += 1;
-                        messages += 1;
+                        self.writer.write(&item)?;
+                        self.written[i] += 1;
+                        self.messages += 1;
                         if let Some(tap) = opts.tap.as_mut() {
                             tap(&item);
                         }
-                        *per_topic.entry(item.topic).or_insert(0) += 1;
+                        *self.per_topic.entry(item.topic).or_insert(0) += 1;
                     }
                     Err(TryRecvError::Empty) => break,
                     Err(TryRecvError::Disconnected) => {
-                        open[i] = false;
+                        self.open[i] = false;
                         break;
                     }
                 }
             }
         }
-        let snapshot = || -> Vec<SourceStats> {
-            stats
-                .iter()
-                .zip(&written)
-                .map(|(s, &w)| SourceStats {
-                    written: w,
-                    ..s.lock().expect("stats").clone()
-                })
-                .collect()
+        Ok(busy)
+    }
+
+    /// A write error ends the recording: kept for the report.
+    fn write_failed(&mut self, e: railfuse_catalog::Error) -> String {
+        self.write_error = Some(e.to_string());
+        "write error".to_owned()
+    }
+
+    /// Every source's figures, with what was written of it.
+    fn snapshot(&self) -> Vec<SourceStats> {
+        self.stats
+            .iter()
+            .zip(&self.written)
+            .map(|(s, &w)| SourceStats {
+                written: w,
+                ..s.lock().expect("stats").clone()
+            })
+            .collect()
+    }
+
+    /// Writes `/recorder/diagnostics`, closes the chunk (what a crash can lose ends here) and
+    /// starts the next file when this one is full.
+    fn close_chunk(&mut self, opts: &RecordOptions) -> railfuse_catalog::Result<()> {
+        let d = RecorderDiagnostics {
+            stamp_ns: sources::now_ns(),
+            sources: self.snapshot(),
+            bytes_written: file_size(&self.current),
         };
-        if last_flush.elapsed() >= opts.chunk_interval {
-            let d = RecorderDiagnostics {
-                stamp_ns: sources::now_ns(),
-                sources: snapshot(),
-                bytes_written: file_size(&current),
-            };
-            let r = writer
+        self.writer.writer.write(self.diag, d.stamp_ns, &d)?;
+        self.writer.writer.flush_chunk()?;
+        self.last_flush = Instant::now();
+        let full = opts.split_bytes.is_some_and(|b| d.bytes_written >= b)
+            || opts
+                .split_every
+                .is_some_and(|t| self.part_started.elapsed() >= t);
+        if full {
+            self.part += 1;
+            let next = part_path(&opts.output, self.part);
+            let (writer, diag) = open_part(&next, opts, Some(self.part))?;
+            self.diag = diag;
+            std::mem::replace(&mut self.writer, writer)
                 .writer
-                .write(diag, d.stamp_ns, &d)
-                .and_then(|()| writer.writer.flush_chunk());
-            if let Err(e) = r {
-                write_error = Some(e.to_string());
-                stopped_by = "write error".to_owned();
-                break 'run;
-            }
-            last_flush = Instant::now();
-            let full = opts.split_bytes.is_some_and(|b| d.bytes_written >= b)
-                || opts
-                    .split_every
-                    .is_some_and(|t| part_started.elapsed() >= t);
-            if full {
-                part += 1;
-                let next = part_path(&opts.output, part);
-                let r = std::mem::replace(
-                    &mut writer,
-                    open_part(&next, &opts, Some(part)).map(|(w, c)| {
-                        diag = c;
-                        w
-                    })?,
-                )
-                .writer
-                .finish();
-                if let Err(e) = r {
-                    write_error = Some(e.to_string());
-                    stopped_by = "write error".to_owned();
-                    break 'run;
-                }
-                current = next;
-                files.push(current.clone());
-                part_started = Instant::now();
-            }
+                .finish()?;
+            self.current = next;
+            self.files.push(self.current.clone());
+            self.part_started = Instant::now();
         }
-        for slot in threads
+        Ok(())
+    }
+
+    /// Joins the threads of sources that ended; the ones that failed go on the list.
+    fn reap_sources(&mut self) {
+        for slot in self
+            .threads
             .iter_mut()
             .filter(|t| t.as_ref().is_some_and(|(_, h)| h.is_finished()))
         {
             let (name, handle) = slot.take().expect("finished source");
-            join_source(name, handle, &mut failed_sources);
+            join_source(name, handle, &mut self.failed_sources);
         }
-        if let Some(status) = opts.status.as_mut() {
-            if last_status.elapsed() >= Duration::from_secs(1)
-                || failed_sources.len() > reported_failures
-            {
-                reported_failures = failed_sources.len();
-                status(&Status {
-                    elapsed_s: started.elapsed().as_secs_f64(),
-                    messages,
-                    per_topic: per_topic.clone(),
-                    bytes_written: file_size(&current),
-                    sources: snapshot(),
-                    failed_sources: failed_sources.clone(),
-                });
-                last_status = Instant::now();
+    }
+
+    /// The live status, once a second and at once when a source fails for good.
+    fn report_status(&mut self, opts: &mut RecordOptions) {
+        let Some(status) = opts.status.as_mut() else {
+            return;
+        };
+        if self.last_status.elapsed() < Duration::from_secs(1)
+            && self.failed_sources.len() <= self.reported_failures
+        {
+            return;
+        }
+        self.reported_failures = self.failed_sources.len();
+        status(&Status {
+            elapsed_s: self.started.elapsed().as_secs_f64(),
+            messages: self.messages,
+            per_topic: self.per_topic.clone(),
+            bytes_written: file_size(&self.current),
+            sources: self.snapshot(),
+            failed_sources: self.failed_sources.clone(),
+        });
+        self.last_status = Instant::now();
+    }
+
+    /// Stops the sources, writes what they still queued (unless the disk is the problem) and
+    /// the last diagnostics, and finishes the file.
+    fn finish(mut self, mut opts: RecordOptions, stopped_by: String) -> RecordReport {
+        self.source_stop.store(true, Ordering::Relaxed);
+        for (name, handle) in std::mem::take(&mut self.threads).into_iter().flatten() {
+            join_source(name, handle, &mut self.failed_sources);
+        }
+        if self.write_error.is_none() {
+            // Every source has stopped: its queue is all there is.
+            opts.tap = None;
+            if let Err(e) = self.drain_queues(&mut opts, usize::MAX) {
+                self.write_error = Some(e.to_string());
             }
         }
-        if stop.load(Ordering::Relaxed) {
-            stopped_by = "signal".to_owned();
-            break;
-        }
-        if opts.duration.is_some_and(|d| started.elapsed() >= d) {
-            stopped_by = "duration".to_owned();
-            break;
-        }
-        if !open.iter().any(|&o| o) {
-            stopped_by = "every source ended".to_owned();
-            break;
-        }
-        if !busy {
-            std::thread::sleep(Duration::from_millis(2));
-        }
-    }
-    source_stop.store(true, Ordering::Relaxed);
-    // Let the sources notice the stop, then write what they still queued (unless the disk is
-    // the problem).
-    for (name, handle) in threads.into_iter().flatten() {
-        join_source(name, handle, &mut failed_sources);
-    }
-    if write_error.is_none() {
-        for (i, q) in queues.iter().enumerate() {
-            while let Ok(item) = q.try_recv() {
-                if let Err(e) = writer.write(&item) {
-                    write_error = Some(e.to_string());
-                    break;
-                }
-                written[i] += 1;
-                messages += 1;
-                *per_topic.entry(item.topic).or_insert(0) += 1;
+        self.queues.clear();
+        let sources = self.snapshot();
+        let d = RecorderDiagnostics {
+            stamp_ns: sources::now_ns(),
+            sources: sources.clone(),
+            bytes_written: file_size(&self.current),
+        };
+        if self.write_error.is_none() {
+            if let Err(e) = self.writer.writer.write(self.diag, d.stamp_ns, &d) {
+                self.write_error = Some(e.to_string());
             }
         }
-    }
-    drop(queues);
-    let sources: Vec<SourceStats> = stats
-        .iter()
-        .zip(&written)
-        .map(|(s, &w)| SourceStats {
-            written: w,
-            ..s.lock().expect("stats").clone()
-        })
-        .collect();
-    let d = RecorderDiagnostics {
-        stamp_ns: sources::now_ns(),
-        sources: sources.clone(),
-        bytes_written: file_size(&current),
-    };
-    if write_error.is_none() {
-        if let Err(e) = writer.writer.write(diag, d.stamp_ns, &d) {
-            write_error = Some(e.to_string());
+        let finished = self.writer.writer.finish();
+        if let (Err(e), None) = (&finished, &self.write_error) {
+            self.write_error = Some(e.to_string());
+        }
+        RecordReport {
+            output: opts.output,
+            duration_s: self.started.elapsed().as_secs_f64(),
+            messages: self.messages,
+            per_topic: self.per_topic,
+            sources,
+            stopped_by,
+            write_error: self.write_error,
+            failed_sources: self.failed_sources,
+            files: self.files,
         }
     }
-    let finished = writer.writer.finish();
-    if let (Err(e), None) = (&finished, &write_error) {
-        write_error = Some(e.to_string());
-    }
-    Ok(RecordReport {
-        output: opts.output,
-        duration_s: started.elapsed().as_secs_f64(),
-        messages,
-        per_topic,
-        sources,
-        stopped_by,
-        write_error,
-        failed_sources,
-        files,
-    })
 }
