@@ -269,52 +269,12 @@ impl Logger {
         )
     }
 
+    /// One message to the entities of its kind.
     fn message(&mut self, m: &railfuse_catalog::log::LogMessage<'_>) -> Result<(), Error> {
         let path = &*self.path.clone();
         let topic = m.channel.topic.as_str();
         match m.channel.kind() {
-            Some(MessageKind::TrackMap) => {
-                let map: TrackMap = m.decode(path)?;
-                let strip: Vec<[f32; 2]> = map
-                    .vertices
-                    .iter()
-                    .map(|v| Self::plan(v.east_m, v.north_m))
-                    .collect();
-                self.log_static(
-                    ent::TRACK,
-                    &LineStrips2D::new([strip])
-                        .with_colors([Color::from_rgb(170, 170, 170)])
-                        .with_radii([Radius::new_ui_points(1.5)]),
-                )?;
-                let at = |c: f64| map.locate(c).map(|(e, n, _)| Self::plan(e, n));
-                let balises: Vec<_> = map
-                    .balises
-                    .iter()
-                    .filter_map(|b| at(b.chainage_m))
-                    .collect();
-                // Balise ids would crowd the plan view: they show on hover as instance data.
-                self.log_static(
-                    ent::BALISES,
-                    &Points2D::new(balises)
-                        .with_colors([Color::from_rgb(250, 200, 0)])
-                        .with_radii([Radius::new_ui_points(4.0)]),
-                )?;
-                let stations: Vec<_> = map
-                    .stations
-                    .iter()
-                    .filter_map(|s| at(s.chainage_m))
-                    .collect();
-                let names: Vec<_> = map.stations.iter().map(|s| s.name.clone()).collect();
-                self.log_static(
-                    ent::STATIONS,
-                    &Points2D::new(stations)
-                        .with_labels(names)
-                        .with_colors([Color::from_rgb(255, 255, 255)])
-                        .with_radii([Radius::new_ui_points(6.0)]),
-                )?;
-                self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
-                self.map = Some(map);
-            }
+            Some(MessageKind::TrackMap) => self.track_map(m.decode(path)?)?,
             Some(MessageKind::GroundTruth) => {
                 let t: GroundTruth = m.decode(path)?;
                 self.truth.push(ReferenceSample {
@@ -330,27 +290,7 @@ impl Logger {
                 )?;
                 self.log(ent::SPEED_TRUTH, &Scalars::single(t.speed_mps))?;
             }
-            Some(MessageKind::GnssFix) => {
-                let g: GnssFix = m.decode(path)?;
-                if let (Some(map), Some(lat), Some(lon)) =
-                    (&self.map, g.latitude_deg, g.longitude_deg)
-                {
-                    let (e, n, _) =
-                        map.origin
-                            .to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
-                    let label = format!("{:?}", g.fix_type);
-                    self.log(
-                        ent::GNSS_POSITION,
-                        &Points2D::new([Self::plan(e, n)])
-                            .with_colors([fix_color(g.fix_type)])
-                            .with_radii([Radius::new_ui_points(4.0)])
-                            .with_labels([label]),
-                    )?;
-                }
-                if let Some(v) = g.speed_mps {
-                    self.log(ent::SPEED_GNSS, &Scalars::single(v))?;
-                }
-            }
+            Some(MessageKind::GnssFix) => self.gnss(&m.decode(path)?)?,
             Some(MessageKind::RadarSpeed) => {
                 let r: RadarSpeed = m.decode(path)?;
                 if r.valid {
@@ -398,44 +338,112 @@ impl Logger {
                 self.fused(&series, &f)?;
             }
             Some(MessageKind::FusedDiagnostics) => {
-                let Some((pipeline, FusedChannel::Diagnostics)) = topics::parse_fused(topic) else {
-                    return Ok(());
-                };
-                let d: FusedDiagnostics = m.decode(path)?;
-                let Some(sharing) = d.sharing else {
-                    return Ok(());
-                };
-                let beta: Vec<f64> = sharing.iter().map(|s| s.beta).collect();
-                if self.shares.get(pipeline) == Some(&beta) {
-                    return Ok(());
+                if let Some((pipeline, FusedChannel::Diagnostics)) = topics::parse_fused(topic) {
+                    self.sharing(pipeline, m.decode(path)?)?;
                 }
-                let entity = ent::sharing(pipeline);
-                if !self.shares.contains_key(pipeline) {
-                    let names: Vec<String> =
-                        sharing.iter().map(|s| format!("β {}", s.device)).collect();
-                    let colors: Vec<Color> = (0..names.len()).map(pipeline_color).collect();
-                    self.log_static(
-                        &entity,
-                        &SeriesLines::new().with_names(names).with_colors(colors),
-                    )?;
-                }
-                self.rec
-                    .set_timestamp_nanos_since_epoch("log_time", d.stamp_ns as i64);
-                self.log(&entity, &Scalars::new(beta.clone()))?;
-                for s in sharing.iter().filter(|s| s.fault.is_some()) {
-                    self.log(
-                        ent::EVENTS,
-                        &TextLog::new(format!(
-                            "{pipeline}: {} out ({})",
-                            s.device,
-                            s.fault.as_deref().unwrap_or_default()
-                        )),
-                    )?;
-                }
-                self.shares.insert(pipeline.to_owned(), beta);
             }
             _ => {}
         }
+        Ok(())
+    }
+
+    /// The track, balises and stations on the plan view (static).
+    fn track_map(&mut self, map: TrackMap) -> Result<(), Error> {
+        let strip: Vec<[f32; 2]> = map
+            .vertices
+            .iter()
+            .map(|v| Self::plan(v.east_m, v.north_m))
+            .collect();
+        self.log_static(
+            ent::TRACK,
+            &LineStrips2D::new([strip])
+                .with_colors([Color::from_rgb(170, 170, 170)])
+                .with_radii([Radius::new_ui_points(1.5)]),
+        )?;
+        let at = |c: f64| map.locate(c).map(|(e, n, _)| Self::plan(e, n));
+        let balises: Vec<_> = map
+            .balises
+            .iter()
+            .filter_map(|b| at(b.chainage_m))
+            .collect();
+        // Balise ids would crowd the plan view: they show on hover as instance data.
+        self.log_static(
+            ent::BALISES,
+            &Points2D::new(balises)
+                .with_colors([Color::from_rgb(250, 200, 0)])
+                .with_radii([Radius::new_ui_points(4.0)]),
+        )?;
+        let stations: Vec<_> = map
+            .stations
+            .iter()
+            .filter_map(|s| at(s.chainage_m))
+            .collect();
+        let names: Vec<_> = map.stations.iter().map(|s| s.name.clone()).collect();
+        self.log_static(
+            ent::STATIONS,
+            &Points2D::new(stations)
+                .with_labels(names)
+                .with_colors([Color::from_rgb(255, 255, 255)])
+                .with_radii([Radius::new_ui_points(6.0)]),
+        )?;
+        self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
+        self.map = Some(map);
+        Ok(())
+    }
+
+    /// A GNSS fix on the plan view (coloured by fix type) and its speed.
+    fn gnss(&mut self, g: &GnssFix) -> Result<(), Error> {
+        if let (Some(map), Some(lat), Some(lon)) = (&self.map, g.latitude_deg, g.longitude_deg) {
+            let (e, n, _) =
+                map.origin
+                    .to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
+            let label = format!("{:?}", g.fix_type);
+            self.log(
+                ent::GNSS_POSITION,
+                &Points2D::new([Self::plan(e, n)])
+                    .with_colors([fix_color(g.fix_type)])
+                    .with_radii([Radius::new_ui_points(4.0)])
+                    .with_labels([label]),
+            )?;
+        }
+        if let Some(v) = g.speed_mps {
+            self.log(ent::SPEED_GNSS, &Scalars::single(v))?;
+        }
+        Ok(())
+    }
+
+    /// A federated pipeline's β per device, logged when it changes, and devices going out.
+    fn sharing(&mut self, pipeline: &str, d: FusedDiagnostics) -> Result<(), Error> {
+        let Some(sharing) = d.sharing else {
+            return Ok(());
+        };
+        let beta: Vec<f64> = sharing.iter().map(|s| s.beta).collect();
+        if self.shares.get(pipeline) == Some(&beta) {
+            return Ok(());
+        }
+        let entity = ent::sharing(pipeline);
+        if !self.shares.contains_key(pipeline) {
+            let names: Vec<String> = sharing.iter().map(|s| format!("β {}", s.device)).collect();
+            let colors: Vec<Color> = (0..names.len()).map(pipeline_color).collect();
+            self.log_static(
+                &entity,
+                &SeriesLines::new().with_names(names).with_colors(colors),
+            )?;
+        }
+        self.rec
+            .set_timestamp_nanos_since_epoch("log_time", d.stamp_ns as i64);
+        self.log(&entity, &Scalars::new(beta.clone()))?;
+        for s in sharing.iter().filter(|s| s.fault.is_some()) {
+            self.log(
+                ent::EVENTS,
+                &TextLog::new(format!(
+                    "{pipeline}: {} out ({})",
+                    s.device,
+                    s.fault.as_deref().unwrap_or_default()
+                )),
+            )?;
+        }
+        self.shares.insert(pipeline.to_owned(), beta);
         Ok(())
     }
 
