@@ -103,7 +103,7 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
             progress(items.position());
         }
         match item? {
-            Item::Chunk(chunk) => replay.chunk(&chunk)?,
+            Item::Chunk(chunk) => replay.chunk(chunk)?,
             Item::Record { opcode, body, .. } => replay.top_level(opcode, &body)?,
             Item::Damage(_) => unreachable!("a strict scanner reports damage as an error"),
         }
@@ -246,7 +246,7 @@ impl<'a> Replay<'a> {
     /// An input chunk: its messages go to the pipelines and the evaluation; the chunk itself
     /// is copied byte for byte unless it holds a replaced channel, and the fused records it
     /// gave rise to follow it in a chunk of their own.
-    fn chunk(&mut self, chunk: &Chunk) -> Result<()> {
+    fn chunk(&mut self, chunk: Chunk) -> Result<()> {
         let mut rewrite = false;
         for record in Records::new(&chunk.records) {
             let record = record.map_err(|e| self.damaged(chunk.offset, e))?;
@@ -263,7 +263,7 @@ impl<'a> Replay<'a> {
             }
         }
         if rewrite {
-            self.rewrite(chunk)?;
+            self.rewrite(&chunk)?;
         } else {
             self.writer.copy_chunk(chunk)?;
         }

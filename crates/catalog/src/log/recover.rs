@@ -125,7 +125,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
                     }
                 }
                 if whole {
-                    writer.copy_chunk(&chunk)?;
+                    writer.copy_chunk(chunk)?;
                     report.chunks += 1;
                     for (id, n) in counts {
                         count(&mut report, &channels[&id], n);

@@ -359,8 +359,9 @@ impl LogWriter {
     }
 
     /// Copies an input chunk byte for byte. The schemas and channels it defines are taken
-    /// into the summary; its messages count in the statistics and get a message index.
-    pub fn copy_chunk(&mut self, chunk: &Chunk) -> Result<()> {
+    /// into the summary; its messages count in the statistics and get a message index. The
+    /// chunk is taken, so its bytes go to the file without another copy.
+    pub fn copy_chunk(&mut self, chunk: Chunk) -> Result<()> {
         let mut index = Index::new();
         for record in Records::new(&chunk.records) {
             let record = record.map_err(|e| Error::mcap(&self.partial, e))?;
@@ -393,8 +394,8 @@ impl LogWriter {
         }
         self.stats.chunk_count += 1;
         self.send(Job::Copy {
-            raw: chunk.raw.clone(),
-            header: chunk.header.clone(),
+            raw: chunk.raw,
+            header: chunk.header,
             index,
         })
     }
