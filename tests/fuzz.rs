@@ -20,8 +20,9 @@ use railfuse_catalog::log::{read_summary, recover, LogReader};
 use railfuse_catalog::messages::SourceStats;
 use railfuse_record::recorder::stream::StreamDecoder;
 use railfuse_record::recorder::StreamFormat;
-use railfuse_refuse::config::PipelinesConfig;
+use railfuse_refuse::measurement::SensorModel;
 use railfuse_refuse::pipeline::AnyPipeline;
+use railfuse_refuse::spec::Pipelines;
 
 #[derive(Debug, Clone)]
 enum Mutation {
@@ -211,9 +212,18 @@ fn pipeline_config() {
         let Ok(text) = std::str::from_utf8(data) else {
             return Ok(());
         };
-        if let Ok(config) = PipelinesConfig::parse(text, path) {
+        if let Ok(config) = Pipelines::parse(text, path) {
             for p in config.pipeline {
-                let _ = AnyPipeline::new(p);
+                let mut pipeline =
+                    AnyPipeline::new(p.clone()).map_err(|e| TestCaseError::fail(e.to_string()))?;
+                // Bound to a channel of every kind a sensor model reads.
+                for si in 0..p.sensors.len() {
+                    for kind in SensorModel::SUPPORTED {
+                        if let Ok(b) = p.bind(Path::new("fuzz.mcap"), si, kind.schema_name()) {
+                            pipeline.bind(si, &b);
+                        }
+                    }
+                }
             }
         }
         Ok(())

@@ -1,7 +1,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use railfuse_refuse::config::{embedded_path, PipelinesConfig};
+use railfuse_refuse::config::embedded_path;
+use railfuse_refuse::spec::Pipelines;
 use railfuse_viz::{visualize, Sink};
 
 use super::refuse::refuse_and_evaluate;
@@ -34,7 +35,7 @@ pub fn run(a: Args) -> Result<()> {
     let text = format!("{DEFAULT_PIPELINES}\n{SENSOR_STATES_PIPELINES}");
     std::fs::write(&config_path, &text)
         .with_context(|| format!("{}: cannot write", config_path.display()))?;
-    let config = PipelinesConfig::parse(
+    let config = Pipelines::parse(
         &text,
         &embedded_path("samples/kalman.toml + samples/sensor-states.toml"),
     )?;

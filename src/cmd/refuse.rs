@@ -3,9 +3,9 @@ use std::time::Instant;
 
 use anyhow::Result;
 use railfuse_catalog::topics;
-use railfuse_refuse::config::PipelinesConfig;
 use railfuse_refuse::eval::EvalReport;
 use railfuse_refuse::replay::{refuse, RefuseOptions, RefuseReport};
+use railfuse_refuse::spec::Pipelines;
 
 use super::eval::print_eval;
 
@@ -29,7 +29,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let config = PipelinesConfig::load(&a.config)?;
+    let config = Pipelines::load(&a.config)?;
     let source = a.config.display().to_string();
     let (report, eval, stats) = refuse_with(&a.input, &a.output, &config, source, &a.reference)?;
     if a.json {
@@ -57,7 +57,7 @@ pub struct RunStats {
 pub fn refuse_with(
     input: &Path,
     output: &Path,
-    config: &PipelinesConfig,
+    config: &Pipelines,
     source: String,
     reference: &str,
 ) -> Result<(RefuseReport, EvalReport, RunStats)> {
@@ -133,7 +133,7 @@ pub fn print_counts(report: &RefuseReport) {
 pub fn refuse_and_evaluate(
     input: &Path,
     output: &Path,
-    config: &PipelinesConfig,
+    config: &Pipelines,
     source: String,
     reference: &str,
 ) -> Result<(RefuseReport, EvalReport)> {

@@ -9,9 +9,10 @@ use anyhow::{Context, Result};
 use railfuse_catalog::topics;
 use railfuse_record::simulator::FaultSpec;
 use railfuse_record::{simulate, Scenario};
-use railfuse_refuse::config::{embedded_path, PipelinesConfig};
+use railfuse_refuse::config::embedded_path;
 use railfuse_refuse::eval::PipelineEval;
 use railfuse_refuse::replay::{refuse, RefuseOptions};
+use railfuse_refuse::spec::Pipelines;
 
 use super::{SEED000_PIPELINES, SEED001_PIPELINES};
 
@@ -83,7 +84,7 @@ fn run_one(
     scenario: &str,
     seed: u64,
     faults: &[FaultSpec],
-    config: &PipelinesConfig,
+    config: &Pipelines,
     tag: &str,
 ) -> Result<(Vec<PipelineEval>, f64)> {
     let raw = dir.join(format!("{scenario}-{tag}-seed{seed}.mcap"));
@@ -114,8 +115,8 @@ fn verdict(ok: bool, close: bool) -> &'static str {
 pub fn run(a: Args) -> Result<()> {
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
-    let c000 = PipelinesConfig::parse(SEED000_PIPELINES, &embedded_path("samples/seed000.toml"))?;
-    let c001 = PipelinesConfig::parse(SEED001_PIPELINES, &embedded_path("samples/seed001.toml"))?;
+    let c000 = Pipelines::parse(SEED000_PIPELINES, &embedded_path("samples/seed000.toml"))?;
+    let c001 = Pipelines::parse(SEED001_PIPELINES, &embedded_path("samples/seed001.toml"))?;
     let seeds = a.seeds.max(1);
 
     // Source 000: every pipeline of samples/seed000.toml, no faults.

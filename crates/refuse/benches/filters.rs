@@ -16,125 +16,154 @@ use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Through
 use nalgebra::{Matrix3, RowVector3, Vector3};
 use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::{ChannelMessage, TrackMap};
-use railfuse_refuse::config::PipelinesConfig;
 use railfuse_refuse::filter::particle::{ParticleSettings, Resampling};
 use railfuse_refuse::filter::{LocalFilter, ParticleFilter, StateAndCovariance};
 use railfuse_refuse::measurement::{Measurement, SensorContext, SensorModel};
 use railfuse_refuse::model::{ConstantAcceleration, ProcessNoise};
 use railfuse_refuse::pipeline::{AnyPipeline, Fused};
+use railfuse_refuse::spec::Pipelines;
 
 /// One message's measurements, as the replay hands them to a pipeline.
 struct Replayed {
+    /// Index into [`Stream::topics`].
     topic: usize,
     log_time_ns: u64,
     measurements: Vec<Measurement>,
 }
 
-/// Simulates `scenario` and decodes every message a pipeline of `config` reads.
-fn stream(
-    scenario: &str,
-    duration: Option<f64>,
-    config: &PipelinesConfig,
-) -> (Vec<Replayed>, Vec<String>) {
+/// The measurements of a simulated log, and its sensor channels with their schemas.
+struct Stream {
+    replayed: Vec<Replayed>,
+    topics: Vec<(String, String)>,
+}
+
+/// Simulates `scenario` and decodes every message of a channel a sensor model reads.
+fn stream(scenario: &str, duration: Option<f64>) -> Stream {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");
     let preset = railfuse_record::Scenario::preset(scenario).unwrap();
     railfuse_record::simulate(&preset, 1, duration, &[], &path).unwrap();
-    let topics: Vec<String> = config.pipeline[0]
-        .sensor
-        .iter()
-        .map(|s| s.topic.clone())
-        .collect();
+    let mut topics: Vec<(String, String)> = Vec::new();
     let mut ctx = SensorContext::default();
-    let mut out = Vec::new();
+    let mut replayed = Vec::new();
     let mut reader = LogReader::open(&path).unwrap();
     while let Some(r) = reader.next() {
         let LogRecord::Message(m) = r.unwrap() else {
             continue;
         };
-        if m.channel.schema_name() == TrackMap::SCHEMA_NAME {
+        let schema = m.channel.schema_name();
+        if schema == TrackMap::SCHEMA_NAME {
             ctx.track = Some(m.decode(Path::new("bench")).unwrap());
             continue;
         }
-        let Some(topic) = topics.iter().position(|t| *t == m.channel.topic) else {
+        let Some(model) = SensorModel::for_schema(schema) else {
             continue;
         };
-        let model = SensorModel::for_schema(m.channel.schema_name()).unwrap();
+        let topic = match topics.iter().position(|(t, _)| *t == m.channel.topic) {
+            Some(i) => i,
+            None => {
+                topics.push((m.channel.topic.clone(), schema.to_owned()));
+                topics.len() - 1
+            }
+        };
         let mut measurements = Vec::new();
         model
             .decode(&m, Path::new("bench"), &ctx, &mut measurements)
             .unwrap();
-        out.push(Replayed {
+        replayed.push(Replayed {
             topic,
             log_time_ns: m.log_time_ns,
             measurements,
         });
     }
-    (out, topics)
+    Stream { replayed, topics }
 }
 
-fn replay(pipelines: &mut [AnyPipeline], stream: &[Replayed], out: &mut Vec<Fused>) -> usize {
+impl Stream {
+    /// Messages of the channels the first pipeline of `spec` reads.
+    fn read_by(&self, spec: &Pipelines) -> u64 {
+        let p = &spec.pipeline[0];
+        let read: Vec<bool> = self
+            .topics
+            .iter()
+            .map(|(t, _)| p.sensor_for(t).is_some())
+            .collect();
+        self.replayed.iter().filter(|r| read[r.topic]).count() as u64
+    }
+}
+
+/// The pipelines of `spec`, each sensor bound to its channel of `stream`, with the sensor
+/// index of each stream topic.
+fn pipelines(spec: &Pipelines, stream: &Stream) -> Vec<(AnyPipeline, Vec<Option<usize>>)> {
+    spec.pipeline
+        .iter()
+        .map(|ps| {
+            let mut p = AnyPipeline::new(ps.clone()).unwrap();
+            let sensors = stream
+                .topics
+                .iter()
+                .map(|(topic, schema)| {
+                    let si = ps.sensor_for(topic)?;
+                    p.bind(si, &ps.bind(Path::new("bench"), si, schema).unwrap());
+                    Some(si)
+                })
+                .collect();
+            (p, sensors)
+        })
+        .collect()
+}
+
+fn replay(spec: &Pipelines, stream: &Stream, out: &mut Vec<Fused>) -> usize {
+    let mut pipelines = pipelines(spec, stream);
     let mut states = 0;
-    for r in stream {
-        for p in pipelines.iter_mut() {
-            p.push(r.topic, &r.measurements, r.log_time_ns, out);
-            states += out.len();
-            out.clear();
+    for r in &stream.replayed {
+        for (p, sensors) in pipelines.iter_mut() {
+            if let Some(si) = sensors[r.topic] {
+                p.push(si, &r.measurements, r.log_time_ns, out);
+                states += out.len();
+                out.clear();
+            }
         }
     }
     states
 }
 
-fn config(text: &str, copies: usize) -> PipelinesConfig {
-    let mut c = PipelinesConfig::parse(text, Path::new("bench.toml")).unwrap();
+/// The first pipeline of a config file, `copies` times under different names.
+fn config(text: &str, copies: usize) -> Pipelines {
+    let mut c = Pipelines::parse(text, Path::new("bench.toml")).unwrap();
     let first = c.pipeline[0].clone();
     c.pipeline = (0..copies)
-        .map(|i| railfuse_refuse::config::PipelineConfig {
-            name: format!("p{i}"),
-            ..first.clone()
-        })
+        .map(|i| first.renamed(&format!("p{i}")))
         .collect();
     c
 }
 
 fn kalman(c: &mut Criterion) {
     let kalman_toml = include_str!("../../../samples/kalman.toml");
-    let (stream, _) = stream("default", Some(600.0), &config(kalman_toml, 1));
+    let stream = stream("default", Some(600.0));
     let mut out = Vec::new();
     let mut g = c.benchmark_group("kalman_replay");
-    g.throughput(Throughput::Elements(stream.len() as u64));
+    let one = config(kalman_toml, 1);
+    g.throughput(Throughput::Elements(stream.read_by(&one)));
     g.bench_function("default_run_600s", |b| {
-        b.iter(|| {
-            let mut p: Vec<AnyPipeline> = config(kalman_toml, 1)
-                .pipeline
-                .into_iter()
-                .map(|c| AnyPipeline::new(c).unwrap())
-                .collect();
-            replay(&mut p, &stream, &mut out)
-        })
+        b.iter(|| replay(&one, &stream, &mut out))
     });
     g.finish();
 
     let mut g = c.benchmark_group("side_by_side");
-    g.throughput(Throughput::Elements(stream.len() as u64));
+    g.throughput(Throughput::Elements(stream.read_by(&one)));
     for n in [1usize, 2, 4, 8] {
-        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, &n| {
-            b.iter(|| {
-                let mut p: Vec<AnyPipeline> = config(kalman_toml, n)
-                    .pipeline
-                    .into_iter()
-                    .map(|c| AnyPipeline::new(c).unwrap())
-                    .collect();
-                replay(&mut p, &stream, &mut out)
-            })
+        let copies = config(kalman_toml, n);
+        g.bench_with_input(BenchmarkId::from_parameter(n), &n, |b, _| {
+            b.iter(|| replay(&copies, &stream, &mut out))
         });
     }
     g.finish();
 }
 
 /// Pipeline `name` of a config file, alone.
-fn named(text: &str, name: &str) -> PipelinesConfig {
-    let mut c = PipelinesConfig::parse(text, Path::new("bench.toml")).unwrap();
+fn named(text: &str, name: &str) -> Pipelines {
+    let mut c = Pipelines::parse(text, Path::new("bench.toml")).unwrap();
     c.pipeline.retain(|p| p.name == name);
     c
 }
@@ -143,22 +172,14 @@ fn named(text: &str, name: &str) -> PipelinesConfig {
 /// sensor states (6 states, one of them an EKF row).
 fn federated(c: &mut Criterion) {
     let toml = include_str!("../../../samples/seed001.toml");
-    let (stream, _) = stream("seed001", None, &config(toml, 1));
+    let stream = stream("seed001", None);
     let mut out = Vec::new();
     let mut g = c.benchmark_group("seed001_replay");
     g.sample_size(10);
-    g.throughput(Throughput::Elements(stream.len() as u64));
     for name in ["fkf", "fkf_cal", "kf_cal"] {
-        g.bench_function(name, |b| {
-            b.iter(|| {
-                let mut p: Vec<AnyPipeline> = named(toml, name)
-                    .pipeline
-                    .into_iter()
-                    .map(|c| AnyPipeline::new(c).unwrap())
-                    .collect();
-                replay(&mut p, &stream, &mut out)
-            })
-        });
+        let spec = named(toml, name);
+        g.throughput(Throughput::Elements(stream.read_by(&spec)));
+        g.bench_function(name, |b| b.iter(|| replay(&spec, &stream, &mut out)));
     }
     g.finish();
 }

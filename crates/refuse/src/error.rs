@@ -17,17 +17,23 @@ pub enum Error {
     /// A TOML syntax or type error: toml's message already names the line and column.
     #[error("{path}: {message}")]
     ConfigSyntax { path: PathBuf, message: String },
-    #[error("{path}: pipeline '{pipeline}': {message}")]
+    /// A value or combination the file's syntax allows but railfuse cannot run; the line and
+    /// column are those of the table it is about.
+    #[error("{path}: line {line}, column {column}: pipeline '{pipeline}': {message}")]
     ConfigInvalid {
         path: PathBuf,
+        line: usize,
+        column: usize,
         pipeline: String,
         message: String,
     },
-    #[error("{input}: pipeline '{pipeline}' reads channel {topic}, which {problem}")]
+    /// A sensor and the log's channel do not fit; `declared` is where the sensor's table is.
+    #[error("{input}: pipeline '{pipeline}' reads channel {topic} ({declared}), which {problem}")]
     Channel {
         input: PathBuf,
         pipeline: String,
         topic: String,
+        declared: String,
         problem: String,
     },
     /// The RTS smoother's spill file (a temporary file) could not be written or read.

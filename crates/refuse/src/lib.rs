@@ -8,7 +8,8 @@
 //!   filter, federated filters with information-sharing coefficients β and a working-state
 //!   detector per device;
 //! - [`measurement`]: sensor models, how each channel's messages become measurements;
-//! - [`config`]: the pipeline TOML;
+//! - [`config`]: the pipeline TOML as written;
+//! - [`spec`]: the pipelines validated, and each sensor bound to its channel;
 //! - [`pipeline`]: one configured estimator fed in sensor-time order;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
@@ -23,5 +24,6 @@ pub mod measurement;
 pub mod model;
 pub mod pipeline;
 pub mod replay;
+pub mod spec;
 
 pub use error::{Error, Result};

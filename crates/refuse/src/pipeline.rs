@@ -15,25 +15,17 @@ use nalgebra::{SMatrix, SVector};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 use serde::Serialize;
 
-use crate::config::{
-    FilterKind, MotionConfig, PipelineConfig, VarianceValue, MASTER_DEVICE, MAX_STATES,
-};
+use crate::config::VarianceValue;
 use crate::error::{Error, Result};
-use crate::filter::federated::{Federated, FederatedSettings};
-use crate::filter::particle::ParticleSettings;
+use crate::filter::federated::Federated;
 use crate::filter::rts::EpochRecorder;
 use crate::filter::{
     Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
-    StateAndCovariance, MASTER,
+    StateAndCovariance,
 };
-use crate::measurement::{Measurement, ObservationRow, Quantity, SensorModel};
-use crate::model::{
-    ConstantAcceleration, ConstantVelocity, SensorState, Singer, TransitionModel, WithSensorStates,
-};
-
-/// Spread of a start chainage given without one, m: distance from where the log starts is
-/// exact.
-pub const DEFAULT_CHAINAGE_STD_M: f64 = 0.01;
+use crate::measurement::{Measurement, ObservationRow, Quantity};
+use crate::model::SensorState;
+use crate::spec::{EstimatorSpec, PipelineSpec, SensorBinding, MAX_STATES};
 
 /// What a pipeline did with its measurements.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
@@ -83,13 +75,9 @@ pub struct StateLayout {
     pub sensor: Vec<(String, &'static str)>,
 }
 
+/// A sensor's fields as rows of the observation matrix, once it is bound to its channel.
 struct Sensor<const N: usize> {
-    topic: String,
-    /// Device index for federated estimators ([`MASTER`] for the master filter).
-    device: usize,
-    device_name: Option<String>,
     fields: Vec<Field<N>>,
-    gate_nis: Option<f64>,
 }
 
 struct Pending {
@@ -99,9 +87,10 @@ struct Pending {
 }
 
 pub struct Pipeline<const N: usize> {
-    pub config: PipelineConfig,
+    pub spec: PipelineSpec,
     sensors: Vec<Sensor<N>>,
-    make_model: fn(&PipelineConfig) -> Box<dyn TransitionModel<N>>,
+    /// Every sensor state with the index of its sensor, in state order.
+    states: Vec<(usize, SensorState)>,
     layout: StateLayout,
     estimator: Option<Box<dyn Estimator<N>>>,
     smoother: Option<EpochRecorder<N>>,
@@ -121,33 +110,63 @@ pub struct Pipeline<const N: usize> {
 }
 
 impl<const N: usize> Pipeline<N> {
-    fn new(
-        config: PipelineConfig,
-        make_model: fn(&PipelineConfig) -> Box<dyn TransitionModel<N>>,
-    ) -> Result<Self> {
-        let devices = config.devices();
-        let motion = config.motion.dimension();
-        let states = config.sensor_states();
+    fn new(spec: PipelineSpec) -> Result<Self> {
+        debug_assert_eq!(spec.dimension(), N);
+        let states = spec.sensor_states();
         let layout = StateLayout {
-            motion,
+            motion: spec.motion.dimension(),
             sensor: states
                 .iter()
-                .map(|(i, s)| (config.sensor[*i].topic.clone(), s.kind()))
+                .map(|(i, s)| (spec.sensors[*i].topic.clone(), s.kind()))
                 .collect(),
         };
-        let field = |i: usize, q: Quantity, variance: VarianceValue| {
-            if q.index() >= motion {
-                return None;
-            }
+        let smoother = if spec.estimator.smoother() {
+            Some(EpochRecorder::new().map_err(|source| Error::Spill {
+                pipeline: spec.name.clone(),
+                source,
+            })?)
+        } else {
+            None
+        };
+        Ok(Self {
+            window_ns: spec.reorder_window_ns,
+            output_period_ns: spec.output_period_ns,
+            sensors: spec
+                .sensors
+                .iter()
+                .map(|_| Sensor { fields: Vec::new() })
+                .collect(),
+            gives_chainage: vec![true; spec.sensors.len()],
+            spec,
+            states,
+            layout,
+            estimator: None,
+            smoother,
+            time_ns: 0,
+            order: BinaryHeap::new(),
+            pending: HashMap::new(),
+            seq: 0,
+            speed_before_init: None,
+            next_output_ns: 0,
+            counts: PipelineCounts::default(),
+        })
+    }
+
+    /// Sensor `sensor` is bound to its channel: its fields become rows of the observation
+    /// matrix, and it gives chainage only if one of them is chainage.
+    pub fn bind(&mut self, sensor: usize, binding: &SensorBinding) {
+        let motion = self.layout.motion;
+        let field = |q: Quantity, variance: VarianceValue| {
             let mut h = q.h::<N>()?;
             let mut scale_state = None;
-            // Sensor `i`'s state on this quantity: a bias adds to the row, a scale factor makes
-            // it non-linear (linearised at each update).
-            if let Some(p) = states
+            // The sensor's state on this quantity: a bias adds to the row, a scale factor
+            // makes it non-linear (linearised at each update).
+            if let Some(p) = self
+                .states
                 .iter()
-                .position(|(j, s)| *j == i && s.quantity() == q)
+                .position(|(j, s)| *j == sensor && s.quantity() == q)
             {
-                match states[p].1 {
+                match self.states[p].1 {
                     SensorState::ScaleFactor { .. } => scale_state = Some(motion + p),
                     SensorState::ChainageBias { .. } | SensorState::AccelerationBias { .. } => {
                         h[motion + p] = 1.0
@@ -160,61 +179,12 @@ impl<const N: usize> Pipeline<N> {
                 variance,
             })
         };
-        let gives_chainage = vec![true; config.sensor.len()];
-        let sensors = config
-            .sensor
+        self.sensors[sensor].fields = binding
+            .fields
             .iter()
-            .enumerate()
-            .map(|(i, s)| Sensor {
-                topic: s.topic.clone(),
-                device: match s.device_name() {
-                    MASTER_DEVICE => MASTER,
-                    d => devices.iter().position(|n| n == d).unwrap_or(0),
-                },
-                device_name: config
-                    .filter
-                    .is_federated()
-                    .then(|| s.device_name().to_owned()),
-                fields: s
-                    .fields
-                    .clone()
-                    .unwrap_or_else(|| {
-                        vec![Quantity::Chainage, Quantity::Speed, Quantity::Acceleration]
-                    })
-                    .into_iter()
-                    .filter_map(|q| field(i, q, s.variance.of(q)?))
-                    .collect(),
-                gate_nis: s.gate_nis,
-            })
+            .filter_map(|&(q, v)| field(q, v))
             .collect();
-        let smoother = if config.smoother {
-            Some(EpochRecorder::new().map_err(|source| Error::Spill {
-                pipeline: config.name.clone(),
-                source,
-            })?)
-        } else {
-            None
-        };
-        Ok(Self {
-            window_ns: (config.reorder_window_s * 1e9) as u64,
-            output_period_ns: config
-                .output_rate_hz
-                .map(|r| (1e9 / r).round().max(1.0) as u64),
-            config,
-            sensors,
-            make_model,
-            layout,
-            estimator: None,
-            smoother,
-            time_ns: 0,
-            order: BinaryHeap::new(),
-            pending: HashMap::new(),
-            seq: 0,
-            speed_before_init: None,
-            gives_chainage,
-            next_output_ns: 0,
-            counts: PipelineCounts::default(),
-        })
+        self.gives_chainage[sensor] = binding.fields.iter().any(|(q, _)| *q == Quantity::Chainage);
     }
 
     /// Queues the measurements of one message of sensor `sensor`, received at `log_time_ns`,
@@ -259,11 +229,11 @@ impl<const N: usize> Pipeline<N> {
     /// A device's own fault report; `name` is its device name or one of its topics.
     pub fn device_event(&mut self, name: &str, failed: bool) {
         let device = self
-            .config
-            .sensor
+            .spec
+            .sensors
             .iter()
             .find(|s| s.topic == name)
-            .map_or(name, |s| s.device_name());
+            .map_or(name, |s| s.device_name.as_deref().unwrap_or(&s.topic));
         if let Some(e) = &mut self.estimator {
             e.device_event(device, failed);
         }
@@ -286,14 +256,10 @@ impl<const N: usize> Pipeline<N> {
     /// Where the filter starts when that does not wait for a position measurement: the
     /// configured chainage, or distance 0 for a pipeline none of whose sensors gives chainage.
     fn known_start(&self) -> Option<(f64, f64)> {
-        let init = &self.config.initial;
-        let var = init
-            .chainage_std_m
-            .unwrap_or(DEFAULT_CHAINAGE_STD_M)
-            .powi(2);
-        match init.chainage_m {
-            Some(c) => Some((c, var)),
-            None if !self.gives_chainage.iter().any(|g| *g) => Some((0.0, var)),
+        let init = &self.spec.initial;
+        match init.chainage {
+            Some(start) => Some(start),
+            None if !self.gives_chainage.iter().any(|g| *g) => Some((0.0, init.distance_variance)),
             None => None,
         }
     }
@@ -309,22 +275,12 @@ impl<const N: usize> Pipeline<N> {
         }
     }
 
-    /// Sensor `sensor` turned out to be read by `model`: it gives chainage only if both its
-    /// fields and the model do.
-    pub fn resolve_sensor(&mut self, sensor: usize, model: SensorModel) {
-        let gives = self.sensors[sensor]
-            .fields
-            .iter()
-            .any(|f| f.quantity == Quantity::Chainage);
-        self.gives_chainage[sensor] = gives && model.quantities().contains(&Quantity::Chainage);
-    }
-
     fn initial(&self, chainage: f64, r: f64) -> StateAndCovariance<N> {
-        let init = &self.config.initial;
+        let init = &self.spec.initial;
         let (speed, speed_var) = self
             .speed_before_init
-            .unwrap_or((init.speed_mps, init.speed_std_mps.powi(2)));
-        let (motion, states) = (self.layout.motion, self.config.sensor_states());
+            .unwrap_or((init.speed_mps, init.speed_variance));
+        let (motion, states) = (self.layout.motion, &self.states);
         // Motion states from the first fix; sensor states at zero with their prior spread.
         let mean = |i: usize| {
             if i < motion {
@@ -335,7 +291,7 @@ impl<const N: usize> Pipeline<N> {
         };
         let var = |i: usize| {
             if i < motion {
-                [r, speed_var, init.acceleration_std_mps2.powi(2)][i]
+                [r, speed_var, init.acceleration_variance][i]
             } else {
                 states[i - motion].1.std().powi(2)
             }
@@ -347,64 +303,46 @@ impl<const N: usize> Pipeline<N> {
     }
 
     fn build(&mut self, init: &StateAndCovariance<N>, t0: u64) -> Box<dyn Estimator<N>> {
-        let model = (self.make_model)(&self.config);
-        let c = &self.config;
-        let particles = |seed_offset: u64| {
-            let p = c.particle.clone().unwrap_or_default();
-            ParticleSettings {
-                particles: p.particles,
-                resampling: p.resampling,
-                ess_threshold: p.ess_threshold,
-                roughening: p.roughening,
-                seed: p.seed.wrapping_add(seed_offset),
-            }
-        };
-        let lockout = c
-            .gate_lockout
-            .unwrap_or(crate::config::DEFAULT_GATE_LOCKOUT);
-        let federated = || {
-            let f = c.federated.clone().unwrap_or_default();
-            FederatedSettings {
-                feedback: f.feedback,
-                fusion_period_ns: (f.fusion_period_s * 1e9).round() as u64,
-                sharing: c.sharing_table().expect("validated on load"),
-                redistribution: f.redistribution,
-                detector: f.detector,
-            }
-        };
-        match c.filter {
-            FilterKind::Kalman => Box::new(
+        let states = self.states.iter().map(|(_, s)| *s).collect();
+        let model = self.spec.motion.with_sensor_states::<N>(states);
+        let devices = self.spec.devices.clone();
+        match &self.spec.estimator {
+            EstimatorSpec::Kalman { gate_lockout, .. } => Box::new(
                 Centralised::new(
                     KalmanFilter::new(init.state, init.covariance),
                     model,
                     t0,
                     self.smoother.take(),
                 )
-                .with_gate_lockout(lockout),
+                .with_gate_lockout(*gate_lockout),
             ),
-            FilterKind::Particle => Box::new(
-                Centralised::new(ParticleFilter::new(particles(0), init), model, t0, None)
-                    .with_gate_lockout(lockout),
+            EstimatorSpec::Particle {
+                particle,
+                gate_lockout,
+            } => Box::new(
+                Centralised::new(ParticleFilter::new(*particle, init), model, t0, None)
+                    .with_gate_lockout(*gate_lockout),
             ),
-            FilterKind::FederatedKalman => Box::new(Federated::new(
-                federated(),
+            EstimatorSpec::FederatedKalman { federated } => Box::new(Federated::new(
+                federated.clone(),
                 model,
-                c.devices(),
+                devices,
                 init,
                 t0,
                 |_, s| KalmanFilter::new(s.state, s.covariance),
             )),
-            FilterKind::FederatedParticle => {
-                // Each local particle filter has its own random stream.
-                Box::new(Federated::new(
-                    federated(),
-                    model,
-                    c.devices(),
-                    init,
-                    t0,
-                    |i, s| ParticleFilter::new(particles(i as u64 + 1), s),
-                ))
-            }
+            // Each local particle filter has its own random stream.
+            EstimatorSpec::FederatedParticle {
+                federated,
+                particle,
+            } => Box::new(Federated::new(
+                federated.clone(),
+                model,
+                devices,
+                init,
+                t0,
+                |i, s| ParticleFilter::new(particle.stream(i as u64 + 1), s),
+            )),
         }
     }
 
@@ -437,7 +375,7 @@ impl<const N: usize> Pipeline<N> {
         let variance = self.sensors[p.sensor].fields[p.field].variance_of(&m);
         let mut diagnostics = self.diagnostics(p.sensor, &m, variance);
         if let Some(e) = &mut self.estimator {
-            e.heard_from(self.sensors[p.sensor].device, m.stamp_ns);
+            e.heard_from(self.spec.sensors[p.sensor].device, m.stamp_ns);
         }
         let usable =
             variance.filter(|r| r.is_finite() && *r > 0.0 && m.valid && m.value.is_finite());
@@ -464,7 +402,7 @@ impl<const N: usize> Pipeline<N> {
         m: &Measurement,
         variance: Option<f64>,
     ) -> FusedDiagnostics {
-        let sensor = &self.sensors[sensor];
+        let sensor = &self.spec.sensors[sensor];
         FusedDiagnostics {
             stamp_ns: m.stamp_ns,
             source: sensor.topic.clone(),
@@ -502,7 +440,7 @@ impl<const N: usize> Pipeline<N> {
             Quantity::Chainage => {
                 let init = self.initial(m.value, r);
                 self.start(&init, m.stamp_ns);
-                let source = &self.sensors[p.sensor].topic;
+                let source = &self.spec.sensors[p.sensor].topic;
                 let state = self
                     .output_period_ns
                     .is_none()
@@ -532,8 +470,8 @@ impl<const N: usize> Pipeline<N> {
             return (GateDecision::RejectedLate, None);
         }
         self.ticks_before(m.stamp_ns, log_time_ns, out);
-        let sensor = &self.sensors[p.sensor];
-        let row = sensor.fields[p.field].row;
+        let sensor = &self.spec.sensors[p.sensor];
+        let row = self.sensors[p.sensor].fields[p.field].row;
         let e = self.estimator.as_mut().expect("initialised");
         e.advance_to(m.stamp_ns);
         self.time_ns = m.stamp_ns;
@@ -647,75 +585,6 @@ pub fn fused_state<const N: usize>(
     }
 }
 
-fn motion_2(m: &MotionConfig) -> Box<dyn TransitionModel<2>> {
-    match *m {
-        MotionConfig::ConstantVelocity { acceleration_psd } => {
-            Box::new(ConstantVelocity { acceleration_psd })
-        }
-        _ => unreachable!("AnyPipeline picks two states for the constant-velocity model only"),
-    }
-}
-
-fn motion_3(m: &MotionConfig) -> Box<dyn TransitionModel<3>> {
-    match *m {
-        MotionConfig::ConstantAcceleration {
-            jerk_psd: Some(q), ..
-        } => Box::new(ConstantAcceleration {
-            noise: crate::model::ProcessNoise::WhiteJerkPsd(q),
-        }),
-        MotionConfig::ConstantAcceleration {
-            jerk_variance: Some(v),
-            ..
-        } => Box::new(ConstantAcceleration {
-            noise: crate::model::ProcessNoise::PiecewiseJerkVariance(v),
-        }),
-        MotionConfig::Singer {
-            time_constant_s,
-            acceleration_std_mps2,
-        } => Box::new(Singer {
-            time_constant_s,
-            acceleration_std_mps2,
-        }),
-        _ => unreachable!("validated on load: a three-state model"),
-    }
-}
-
-/// The `B` motion states of `c` with its sensor states appended: `N` in all.
-fn with_sensor_states<const B: usize, const N: usize>(
-    motion: Box<dyn TransitionModel<B>>,
-    c: &PipelineConfig,
-) -> Box<dyn TransitionModel<N>> {
-    Box::new(WithSensorStates::<B, N> {
-        motion,
-        states: c
-            .sensor_states()
-            .into_iter()
-            .map(|(_, s): (usize, SensorState)| s)
-            .collect(),
-    })
-}
-
-/// The full model of an `N`-state pipeline: its motion model (two or three states) and its
-/// sensor states.
-fn model<const N: usize>(c: &PipelineConfig) -> Box<dyn TransitionModel<N>> {
-    match c.motion.dimension() {
-        2 => with_sensor_states::<2, N>(motion_2(&c.motion), c),
-        _ => with_sensor_states::<3, N>(motion_3(&c.motion), c),
-    }
-}
-
-/// The motion model alone, when there are no sensor states (no block-diagonal wrapper).
-fn model_2(c: &PipelineConfig) -> Box<dyn TransitionModel<2>> {
-    motion_2(&c.motion)
-}
-
-fn model_3(c: &PipelineConfig) -> Box<dyn TransitionModel<3>> {
-    match c.motion.dimension() {
-        3 => motion_3(&c.motion),
-        _ => model::<3>(c),
-    }
-}
-
 /// A pipeline of any state dimension up to [`MAX_STATES`].
 pub enum AnyPipeline {
     Two(Pipeline<2>),
@@ -738,32 +607,27 @@ macro_rules! each {
 }
 
 impl AnyPipeline {
-    pub fn new(config: PipelineConfig) -> Result<Self> {
+    pub fn new(spec: PipelineSpec) -> Result<Self> {
         const _: () = assert!(MAX_STATES == 6, "AnyPipeline has a variant per dimension");
-        Ok(match config.dimension() {
-            2 => AnyPipeline::Two(Pipeline::new(config, model_2)?),
-            3 => AnyPipeline::Three(Pipeline::new(config, model_3)?),
-            4 => AnyPipeline::Four(Pipeline::new(config, model::<4>)?),
-            5 => AnyPipeline::Five(Pipeline::new(config, model::<5>)?),
-            _ => AnyPipeline::Six(Pipeline::new(config, model::<6>)?),
+        Ok(match spec.dimension() {
+            2 => AnyPipeline::Two(Pipeline::new(spec)?),
+            3 => AnyPipeline::Three(Pipeline::new(spec)?),
+            4 => AnyPipeline::Four(Pipeline::new(spec)?),
+            5 => AnyPipeline::Five(Pipeline::new(spec)?),
+            _ => AnyPipeline::Six(Pipeline::new(spec)?),
         })
     }
 
-    pub fn config(&self) -> &PipelineConfig {
-        each!(self, p => &p.config)
+    pub fn spec(&self) -> &PipelineSpec {
+        each!(self, p => &p.spec)
     }
 
     pub fn name(&self) -> &str {
-        &self.config().name
+        &self.spec().name
     }
 
     pub fn counts(&self) -> &PipelineCounts {
         each!(self, p => &p.counts)
-    }
-
-    /// Index of the configured sensor reading `topic`.
-    pub fn sensor_for(&self, topic: &str) -> Option<usize> {
-        self.config().sensor.iter().position(|s| s.topic == topic)
     }
 
     pub fn push(
@@ -784,8 +648,8 @@ impl AnyPipeline {
         each!(self, p => p.device_event(device, failed))
     }
 
-    pub fn resolve_sensor(&mut self, sensor: usize, model: SensorModel) {
-        each!(self, p => p.resolve_sensor(sensor, model))
+    pub fn bind(&mut self, sensor: usize, binding: &SensorBinding) {
+        each!(self, p => p.bind(sensor, binding))
     }
 
     pub fn smoothed(
@@ -798,15 +662,25 @@ impl AnyPipeline {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::PipelinesConfig;
+    use crate::spec::Pipelines;
+    use railfuse_catalog::messages::MessageKind;
 
     fn pipeline(gate: &str) -> AnyPipeline {
         let text = format!(
             "[[pipeline]]\nname = \"p\"\nfilter = \"kalman\"\nmotion = {{ model = \"constant_acceleration\", jerk_psd = 0.1 }}\nreorder_window_s = 0.2\n\
              [[pipeline.sensor]]\ntopic = \"/pos\"\nvariance = 0.01\n{gate}\n[[pipeline.sensor]]\ntopic = \"/spd\"\nvariance = \"message\"\n"
         );
-        let c = PipelinesConfig::parse(&text, std::path::Path::new("t.toml")).unwrap();
-        AnyPipeline::new(c.pipeline[0].clone()).unwrap()
+        let c = Pipelines::parse(&text, std::path::Path::new("t.toml")).unwrap();
+        let mut p = AnyPipeline::new(c.pipeline[0].clone()).unwrap();
+        let input = std::path::Path::new("t.mcap");
+        let kinds = [MessageKind::LoopPosition, MessageKind::RadarSpeed];
+        for (i, kind) in kinds.iter().enumerate() {
+            p.bind(
+                i,
+                &c.pipeline[0].bind(input, i, kind.schema_name()).unwrap(),
+            );
+        }
+        p
     }
 
     fn m(stamp_ns: u64, quantity: Quantity, value: f64, var: Option<f64>) -> [Measurement; 1] {

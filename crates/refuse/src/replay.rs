@@ -22,16 +22,16 @@ use railfuse_catalog::messages::{
 use railfuse_catalog::topics;
 use serde::Serialize;
 
-use crate::config::PipelinesConfig;
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalReport, Evaluator};
 use crate::measurement::{Measurement, SensorContext, SensorModel};
 use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
+use crate::spec::Pipelines;
 
 pub struct RefuseOptions<'a> {
     pub input: &'a Path,
     pub output: &'a Path,
-    pub config: &'a PipelinesConfig,
+    pub config: &'a Pipelines,
     /// Where the configuration came from (a path, or "embedded default"), for the metadata.
     pub config_source: String,
     /// The reference topic of the accuracy evaluation made in the same pass.
@@ -137,16 +137,8 @@ impl<'a> Replay<'a> {
     /// output and registers the fused channels.
     fn new(opts: &'a RefuseOptions<'a>, summary: Option<LogSummary>) -> Result<Self> {
         let input = opts.input;
-        let names: BTreeSet<String> = opts
-            .config
-            .pipeline
-            .iter()
-            .map(|p| p.name.clone())
-            .collect();
+        let names: BTreeSet<String> = opts.config.names().map(str::to_owned).collect();
         let known = summary.as_ref().map(|s| &s.channels);
-        if let Some(channels) = known {
-            check_channels(input, opts.config, channels)?;
-        }
         let mut writer = LogWriter::create(opts.output)?;
         // Output channels take the highest ids the input does not use, so copied records keep
         // theirs (replaced channels' ids too: their records may sit in chunks copied whole).
@@ -180,7 +172,7 @@ impl<'a> Replay<'a> {
             )?;
             eval.channel(state.0, &state_topic, FusedState::SCHEMA_NAME);
             eval.channel(diagnostics.0, &diag_topic, FusedDiagnostics::SCHEMA_NAME);
-            let smoothed = match p.smoother {
+            let smoothed = match p.estimator.smoother() {
                 true => {
                     let topic = topics::fused_smoothed(&p.name);
                     let id =
@@ -205,7 +197,7 @@ impl<'a> Replay<'a> {
             .cloned()
             .map(AnyPipeline::new)
             .collect::<Result<_>>()?;
-        Ok(Self {
+        let mut replay = Self {
             opts,
             names,
             writer,
@@ -231,7 +223,15 @@ impl<'a> Replay<'a> {
                 pipelines: Vec::new(),
             },
             last_log_time: 0,
-        })
+        };
+        // With a summary, every sensor is bound to its channel before anything is read.
+        if let Some(channels) = known {
+            for c in channels {
+                replay.route(c.clone())?;
+            }
+            replay.check_every_sensor_bound(channels)?;
+        }
+        Ok(replay)
     }
 
     /// The reference is a channel this run writes (another pipeline's state).
@@ -357,29 +357,42 @@ impl<'a> Replay<'a> {
         let Ok(mcap::records::Record::Channel(c)) = mcap::parse_record(op::CHANNEL, body) else {
             return Err(self.damaged(0, "a channel record does not parse".into()));
         };
-        if let Some(route) = self.routes.get(&c.id) {
+        // Routed already when the summary listed it.
+        let info = match self.channels.get(&c.id) {
+            Some(info) => info.clone(),
+            None => {
+                let schema = match c.schema_id {
+                    0 => None,
+                    id => Some(self.schemas.get(&id).cloned().ok_or_else(|| {
+                        self.damaged(0, format!("channel {} names unknown schema {id}", c.topic))
+                    })?),
+                };
+                Arc::new(ChannelInfo {
+                    id: c.id,
+                    topic: c.topic,
+                    message_encoding: c.message_encoding,
+                    metadata: c.metadata,
+                    schema,
+                })
+            }
+        };
+        let kept = self.route(info.clone())?;
+        if kept && top_level {
+            copy_channel(&mut self.writer, &info)?;
+        }
+        Ok(kept)
+    }
+
+    /// Decides what to do with a channel's messages, binding the pipelines' sensors that read
+    /// it; false when it is replaced. Each channel is routed once.
+    fn route(&mut self, info: Arc<ChannelInfo>) -> Result<bool> {
+        if let Some(route) = self.routes.get(&info.id) {
             return Ok(!route.replaced);
         }
-        let schema = match c.schema_id {
-            0 => None,
-            id => Some(self.schemas.get(&id).cloned().ok_or_else(|| {
-                self.damaged(0, format!("channel {} names unknown schema {id}", c.topic))
-            })?),
-        };
-        let info = Arc::new(ChannelInfo {
-            id: c.id,
-            topic: c.topic,
-            message_encoding: c.message_encoding,
-            metadata: c.metadata,
-            schema,
-        });
         let mut route = Route::default();
         if self.is_replaced(&info.topic) {
             route.replaced = true;
         } else {
-            if top_level {
-                copy_channel(&mut self.writer, &info)?;
-            }
             self.seen_topics.insert(info.topic.clone());
             let schema = info.schema_name();
             route.context = match schema {
@@ -389,12 +402,11 @@ impl<'a> Replay<'a> {
             };
             route.evaluated = self.eval.channel(info.id, &info.topic, schema);
             for (pi, p) in self.pipelines.iter_mut().enumerate() {
-                if let Some(si) = p.sensor_for(&info.topic) {
-                    check_sensor(self.opts.input, p.config(), &p.config().sensor[si], schema)?;
-                    let model = SensorModel::for_schema(schema).expect("checked");
-                    p.resolve_sensor(si, model);
+                if let Some(si) = p.spec().sensor_for(&info.topic) {
+                    let binding = p.spec().bind(self.opts.input, si, schema)?;
+                    p.bind(si, &binding);
                     route.sensors.push((pi, si));
-                    route.model = Some(model);
+                    route.model = Some(binding.model);
                 }
             }
         }
@@ -402,6 +414,28 @@ impl<'a> Replay<'a> {
         self.routes.insert(info.id, route);
         self.channels.insert(info.id, info);
         Ok(kept)
+    }
+
+    /// Every sensor of every pipeline has met its channel; `channels` are the log's, named
+    /// in the error.
+    fn check_every_sensor_bound(&self, channels: &[Arc<ChannelInfo>]) -> Result<()> {
+        for p in &self.opts.config.pipeline {
+            for (si, s) in p.sensors.iter().enumerate() {
+                if !self.seen_topics.contains(&s.topic) {
+                    let have: Vec<&str> = channels
+                        .iter()
+                        .map(|c| c.topic.as_str())
+                        .filter(|t| !t.starts_with(topics::FUSED_PREFIX))
+                        .collect();
+                    let problem = match have.is_empty() {
+                        true => "is not in the file".to_owned(),
+                        false => format!("is not in the file (it has {})", have.join(", ")),
+                    };
+                    return Err(p.channel_error(self.opts.input, si, problem));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// One input message: context, evaluation, pipelines. False when it is left out
@@ -505,18 +539,7 @@ impl<'a> Replay<'a> {
     /// output and finishes the evaluation.
     fn finish(mut self) -> Result<(RefuseReport, EvalReport)> {
         let input = self.opts.input;
-        for p in &self.opts.config.pipeline {
-            for s in &p.sensor {
-                if !self.seen_topics.contains(&s.topic) {
-                    return Err(channel_error(
-                        input,
-                        &p.name,
-                        &s.topic,
-                        "is not in the file".into(),
-                    ));
-                }
-            }
-        }
+        self.check_every_sensor_bound(&[])?;
         for pi in 0..self.pipelines.len() {
             self.pipelines[pi].finish(self.last_log_time, &mut self.fused);
             self.emit(pi)?;
@@ -524,8 +547,11 @@ impl<'a> Replay<'a> {
             let p = &self.pipelines[pi];
             let metadata = BTreeMap::from([
                 ("pipeline".to_owned(), p.name().to_owned()),
-                ("filter".to_owned(), p.config().filter.name().to_owned()),
-                ("config_toml".to_owned(), p.config().to_toml()),
+                (
+                    "filter".to_owned(),
+                    p.spec().estimator.kind().name().to_owned(),
+                ),
+                ("config_toml".to_owned(), p.spec().to_toml()),
                 ("config_source".to_owned(), self.opts.config_source.clone()),
                 ("input".to_owned(), input.display().to_string()),
                 (
@@ -595,115 +621,5 @@ fn ids_exhausted(output: &Path) -> railfuse_catalog::Error {
     railfuse_catalog::Error::Write {
         path: output.to_owned(),
         cause: "no channel ids left for the fused channels".into(),
-    }
-}
-
-/// Every sensor of every pipeline names a channel the file has, with a schema its model reads.
-fn check_channels(
-    input: &Path,
-    config: &PipelinesConfig,
-    channels: &[Arc<ChannelInfo>],
-) -> Result<()> {
-    for p in &config.pipeline {
-        for s in &p.sensor {
-            match channels.iter().find(|c| c.topic == s.topic) {
-                None => {
-                    let have: Vec<&str> = channels
-                        .iter()
-                        .map(|c| c.topic.as_str())
-                        .filter(|t| !t.starts_with(topics::FUSED_PREFIX))
-                        .collect();
-                    let problem = format!("is not in the file (it has {})", have.join(", "));
-                    return Err(channel_error(input, &p.name, &s.topic, problem));
-                }
-                Some(c) => check_sensor(input, p, s, c.schema_name())?,
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The channel's schema has a sensor model, and that model gives the fields the sensor asks for.
-fn check_sensor(
-    input: &Path,
-    p: &crate::config::PipelineConfig,
-    s: &crate::config::SensorConfig,
-    schema: &str,
-) -> Result<()> {
-    let Some(model) = SensorModel::for_schema(schema) else {
-        let supported: Vec<&str> = SensorModel::SUPPORTED
-            .iter()
-            .map(|k| k.schema_name())
-            .collect();
-        let supported = supported.join(", ");
-        return Err(channel_error(
-            input,
-            &p.name,
-            &s.topic,
-            format!("has schema '{schema}', which no sensor model reads (supported: {supported})"),
-        ));
-    };
-    let gives: Vec<&str> = model.quantities().iter().map(|q| q.name()).collect();
-    let wanted = s
-        .fields
-        .clone()
-        .unwrap_or_else(|| model.quantities().to_vec());
-    for q in &wanted {
-        if !model.quantities().contains(q) {
-            return Err(channel_error(
-                input,
-                &p.name,
-                &s.topic,
-                format!("gives {} but not {}", gives.join(" and "), q.name()),
-            ));
-        }
-        if q.index() >= p.motion.dimension() {
-            return Err(channel_error(
-                input,
-                &p.name,
-                &s.topic,
-                format!(
-                    "gives {}, which the {}-state motion model does not hold: set fields",
-                    q.name(),
-                    p.motion.dimension()
-                ),
-            ));
-        }
-        if s.variance.of(*q).is_none() {
-            return Err(channel_error(
-                input,
-                &p.name,
-                &s.topic,
-                format!(
-                    "gives {}, and the sensor's variance table has no entry for it",
-                    q.name()
-                ),
-            ));
-        }
-    }
-    for state in s.sensor_states() {
-        let q = state.quantity();
-        if !wanted.contains(&q) {
-            return Err(channel_error(
-                input,
-                &p.name,
-                &s.topic,
-                format!(
-                    "has a {} state but gives no {} to observe it",
-                    state.kind(),
-                    q.name()
-                ),
-            ));
-        }
-    }
-    Ok(())
-}
-
-fn channel_error(input: &Path, pipeline: &str, topic: &str, problem: String) -> Error {
-    Error::Channel {
-        input: input.to_owned(),
-        pipeline: pipeline.to_owned(),
-        topic: topic.to_owned(),
-        problem,
     }
 }

@@ -36,3 +36,45 @@ impl<const N: usize, M: TransitionModel<N> + ?Sized> TransitionModel<N> for Box<
         (**self).process_noise(dt)
     }
 }
+
+/// The motion model of a pipeline, its process noise chosen: what a configuration's `motion`
+/// table becomes once validated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MotionModel {
+    ConstantVelocity(ConstantVelocity),
+    ConstantAcceleration(ConstantAcceleration),
+    Singer(Singer),
+}
+
+impl MotionModel {
+    /// Its motion states: `[s, v]` or `[s, v, a]`.
+    pub fn dimension(&self) -> usize {
+        match self {
+            MotionModel::ConstantVelocity(_) => 2,
+            MotionModel::ConstantAcceleration(_) | MotionModel::Singer(_) => 3,
+        }
+    }
+
+    /// The transition model of an `N`-state pipeline: these motion states followed by
+    /// `states`. `N` is [`dimension`](Self::dimension) plus the number of sensor states.
+    pub fn with_sensor_states<const N: usize>(
+        &self,
+        states: Vec<SensorState>,
+    ) -> Box<dyn TransitionModel<N>> {
+        debug_assert_eq!(self.dimension() + states.len(), N);
+        match *self {
+            MotionModel::ConstantVelocity(m) => Box::new(WithSensorStates::<2, N> {
+                motion: Box::new(m),
+                states,
+            }),
+            MotionModel::ConstantAcceleration(m) => Box::new(WithSensorStates::<3, N> {
+                motion: Box::new(m),
+                states,
+            }),
+            MotionModel::Singer(m) => Box::new(WithSensorStates::<3, N> {
+                motion: Box::new(m),
+                states,
+            }),
+        }
+    }
+}

@@ -24,15 +24,60 @@ use rand_distr::{Distribution, StandardNormal};
 use super::{symmetric, EstimatorDiagnostics, Innovation, LocalFilter, StateAndCovariance};
 use crate::model::TransitionModel;
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A particle filter's settings: the `[pipeline.particle]` table as written.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 pub struct ParticleSettings {
     pub particles: usize,
     pub resampling: Resampling,
     /// Resample when N_eff < threshold · N.
     pub ess_threshold: f64,
-    /// Roughening constant K (0 turns roughening off).
+    /// Roughening constant K after resampling (0 turns roughening off).
     pub roughening: f64,
     pub seed: u64,
+}
+
+impl Default for ParticleSettings {
+    fn default() -> Self {
+        Self {
+            particles: 1000,
+            resampling: Resampling::Systematic,
+            ess_threshold: 0.5,
+            roughening: 0.1,
+            seed: 1,
+        }
+    }
+}
+
+impl ParticleSettings {
+    /// Checks every value; the message names the offending key.
+    pub fn check(&self) -> Result<(), String> {
+        if self.particles == 0 {
+            return Err("particle.particles must be at least 1".into());
+        }
+        if !(self.ess_threshold > 0.0 && self.ess_threshold <= 1.0) {
+            return Err(format!(
+                "particle.ess_threshold must be in (0, 1], not {}",
+                self.ess_threshold
+            ));
+        }
+        if !(self.roughening.is_finite() && self.roughening >= 0.0) {
+            return Err(format!(
+                "particle.roughening must be ≥ 0, not {}",
+                self.roughening
+            ));
+        }
+        Ok(())
+    }
+
+    /// The same settings on random stream `offset` (each local filter of a federated
+    /// pipeline has its own).
+    pub fn stream(self, offset: u64) -> Self {
+        Self {
+            seed: self.seed.wrapping_add(offset),
+            ..self
+        }
+    }
 }
 
 #[derive(Debug, Clone)]
