@@ -10,7 +10,9 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 
 use super::refuse::RunStats;
-use super::{DEFAULT_PIPELINES, SEED001_PIPELINES};
+use railfuse_experiments::sources::SEED001_PIPELINES;
+
+use super::DEFAULT_PIPELINES;
 
 const PEER: &str = include_str!("../../bench/peer_refuse.py");
 

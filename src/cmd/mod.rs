@@ -13,9 +13,3 @@ pub mod viz;
 
 /// The pipeline configuration used when none is given: `samples/kalman.toml`.
 pub const DEFAULT_PIPELINES: &str = include_str!("../../samples/kalman.toml");
-
-/// Source 000's experiment: `samples/seed000.toml`.
-pub const SEED000_PIPELINES: &str = include_str!("../../samples/seed000.toml");
-
-/// Source 001's experiment: `samples/seed001.toml`.
-pub const SEED001_PIPELINES: &str = include_str!("../../samples/seed001.toml");

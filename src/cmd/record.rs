@@ -32,7 +32,8 @@ pub struct Args {
     /// A file of NMEA, UBX or JSON lines: PATH[:FORMAT] (default by extension). Repeatable.
     #[arg(long, value_name = "PATH[:FORMAT]")]
     pub file: Vec<String>,
-    /// Read standard input in this format (json, nmea, ubx).
+    /// Read standard input: FORMAT[=/TOPIC], FORMAT one of json, nmea, ubx (default json);
+    /// `=/TOPIC` sends a receiver's fixes to their own channel.
     #[arg(long, value_name = "FORMAT")]
     pub stdin: Option<String>,
     /// Record the embedded simulator in real time (the default when no source is given).

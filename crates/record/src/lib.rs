@@ -10,10 +10,12 @@
 //! This crate knows nothing of filters or Rerun: it depends only on the channel catalogue.
 
 pub mod decode;
+pub mod error;
 pub mod import;
 pub mod recorder;
 pub mod simulator;
 
+pub use error::{Error, Result};
 pub use simulator::{simulate, Scenario, SimulationReport};
 
 /// The version written into every log's run metadata.

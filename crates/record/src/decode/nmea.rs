@@ -27,34 +27,17 @@ type TimeOfDay = (u32, u32, u32, i64);
 /// Longest sentence accepted (the standard says 82 characters; receivers exceed it a little).
 pub const MAX_SENTENCE: usize = 256;
 
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum NmeaError {
+    #[error("not an NMEA sentence ($…*hh)")]
     NotASentence,
+    #[error("NMEA sentence of {0} bytes exceeds the {MAX_SENTENCE}-byte limit")]
     TooLong(usize),
+    #[error("NMEA checksum {found:02X} where the sentence gives {expected:02X}")]
     Checksum { expected: u8, found: u8 },
+    #[error("NMEA {sentence}: field {field} does not parse")]
     BadField { sentence: String, field: usize },
 }
-
-impl std::fmt::Display for NmeaError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            NmeaError::NotASentence => write!(f, "not an NMEA sentence ($…*hh)"),
-            NmeaError::TooLong(n) => write!(
-                f,
-                "NMEA sentence of {n} bytes exceeds the {MAX_SENTENCE}-byte limit"
-            ),
-            NmeaError::Checksum { expected, found } => write!(
-                f,
-                "NMEA checksum {found:02X} where the sentence gives {expected:02X}"
-            ),
-            NmeaError::BadField { sentence, field } => {
-                write!(f, "NMEA {sentence}: field {field} does not parse")
-            }
-        }
-    }
-}
-
-impl std::error::Error for NmeaError {}
 
 /// A checked sentence: its type (without talker) and fields.
 #[derive(Debug, Clone, PartialEq)]

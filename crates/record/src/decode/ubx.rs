@@ -10,37 +10,19 @@ pub const SYNC: [u8; 2] = [0xb5, 0x62];
 /// Largest payload accepted (the biggest messages u-blox receivers send are a few KiB).
 pub const MAX_PAYLOAD: usize = 8192;
 
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum UbxError {
+    #[error("no UBX sync bytes b5 62")]
     NoSync,
+    #[error("UBX frame cut short")]
     Truncated,
+    #[error("UBX payload of {0} bytes exceeds the {MAX_PAYLOAD}-byte limit")]
     TooLong(usize),
+    #[error("UBX checksum {found:02x?} where the frame gives {expected:02x?}")]
     Checksum { expected: [u8; 2], found: [u8; 2] },
+    #[error("UBX {class:02x}/{id:02x} with a {len}-byte payload of the wrong size")]
     BadPayload { class: u8, id: u8, len: usize },
 }
-
-impl std::fmt::Display for UbxError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            UbxError::NoSync => write!(f, "no UBX sync bytes b5 62"),
-            UbxError::Truncated => write!(f, "UBX frame cut short"),
-            UbxError::TooLong(n) => write!(
-                f,
-                "UBX payload of {n} bytes exceeds the {MAX_PAYLOAD}-byte limit"
-            ),
-            UbxError::Checksum { expected, found } => write!(
-                f,
-                "UBX checksum {found:02x?} where the frame gives {expected:02x?}"
-            ),
-            UbxError::BadPayload { class, id, len } => write!(
-                f,
-                "UBX {class:02x}/{id:02x} with a {len}-byte payload of the wrong size"
-            ),
-        }
-    }
-}
-
-impl std::error::Error for UbxError {}
 
 /// One checked frame.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -21,11 +21,11 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use railfuse_catalog::log::LogWriter;
-use railfuse_catalog::{Error, Result};
 use serde::Deserialize;
 use serde_json::Value;
 
 use super::ImportReport;
+use crate::error::{MappingError, Result};
 use crate::recorder::message::{from_object, ItemWriter};
 
 #[derive(Debug, Clone, Deserialize)]
@@ -60,13 +60,6 @@ pub struct ChannelMapping {
     pub constants: BTreeMap<String, toml::Value>,
 }
 
-fn invalid(path: &Path, msg: String) -> Error {
-    Error::Io {
-        path: path.to_owned(),
-        source: std::io::Error::new(std::io::ErrorKind::InvalidData, msg),
-    }
-}
-
 /// A cell as JSON: a number when it parses as one, a boolean for true/false, else text.
 fn cell(text: &str) -> Value {
     let t = text.trim();
@@ -81,67 +74,69 @@ fn cell(text: &str) -> Value {
 }
 
 pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<ImportReport> {
-    let text = std::fs::read_to_string(mapping_path).map_err(|source| Error::Io {
+    let text = std::fs::read_to_string(mapping_path).map_err(|source| MappingError::Read {
         path: mapping_path.to_owned(),
         source,
     })?;
-    let map: CsvMapping =
-        toml::from_str(&text).map_err(|e| invalid(mapping_path, e.message().to_owned()))?;
+    let map: CsvMapping = toml::from_str(&text).map_err(|source| MappingError::Toml {
+        path: mapping_path.to_owned(),
+        source,
+    })?;
     let scale: f64 = match map.time_unit.as_str() {
         "s" => 1e9,
         "ms" => 1e6,
         "us" => 1e3,
         "ns" => 1.0,
         u => {
-            return Err(invalid(
-                mapping_path,
-                format!("time_unit '{u}': s, ms, us or ns"),
-            ))
+            return Err(MappingError::TimeUnit {
+                path: mapping_path.to_owned(),
+                unit: u.to_owned(),
+            }
+            .into())
         }
     };
     let delimiter = match map.delimiter.as_bytes() {
         [d] => *d,
         _ => {
-            return Err(invalid(
-                mapping_path,
-                format!("delimiter '{}' must be one character", map.delimiter),
-            ))
+            return Err(MappingError::Delimiter {
+                path: mapping_path.to_owned(),
+                delimiter: map.delimiter.clone(),
+            }
+            .into())
         }
     };
     let mut reader = csv::ReaderBuilder::new()
         .delimiter(delimiter)
         .flexible(true)
         .from_path(input)
-        .map_err(|e| invalid(input, e.to_string()))?;
+        .map_err(|source| MappingError::Csv {
+            path: input.to_owned(),
+            source,
+        })?;
     let headers = reader
         .headers()
-        .map_err(|e| invalid(input, e.to_string()))?
+        .map_err(|source| MappingError::Csv {
+            path: input.to_owned(),
+            source,
+        })?
         .clone();
-    let column = |name: &str| headers.iter().position(|h| h.trim() == name);
-    let time_col = column(&map.time_column).ok_or_else(|| {
-        invalid(
-            mapping_path,
-            format!(
-                "time_column '{}' is not a column of {}",
-                map.time_column,
-                input.display()
-            ),
-        )
-    })?;
+    let column = |what: String, name: &str| {
+        headers
+            .iter()
+            .position(|h| h.trim() == name)
+            .ok_or_else(|| MappingError::NoColumn {
+                mapping: mapping_path.to_owned(),
+                input: input.to_owned(),
+                what,
+                column: name.to_owned(),
+            })
+    };
+    let time_col = column("time_column".into(), &map.time_column)?;
     let mut channels = Vec::new();
     for c in &map.channel {
         let mut cols = Vec::new();
         for (field, col) in &c.fields {
-            let i = column(col).ok_or_else(|| {
-                invalid(
-                    mapping_path,
-                    format!(
-                        "channel {}: column '{col}' is not in {}",
-                        c.topic,
-                        input.display()
-                    ),
-                )
-            })?;
+            let i = column(format!("channel {}: column", c.topic), col)?;
             cols.push((field.clone(), i));
         }
         let constants: Vec<(String, Value)> = c

@@ -16,6 +16,8 @@ use railfuse_catalog::messages::*;
 use railfuse_catalog::topics;
 use serde_json::Value;
 
+use crate::error::JsonLineError;
+
 /// A message ready to write: topic, receive time, message.
 #[derive(Debug, Clone)]
 pub struct Item {
@@ -25,31 +27,41 @@ pub struct Item {
 }
 
 /// Parses one JSON line; the error says what is wrong with it.
-pub fn parse_json_line(line: &str, receive_ns: u64) -> Result<Item, String> {
+pub fn parse_json_line(line: &str, receive_ns: u64) -> Result<Item, JsonLineError> {
     let v: serde_json::Map<String, Value> =
-        serde_json::from_str(line).map_err(|e| format!("not a JSON object: {e}"))?;
+        serde_json::from_str(line).map_err(JsonLineError::NotAnObject)?;
     from_object(v, receive_ns)
 }
 
 /// A message from a JSON object holding `topic`, optionally `type`, and the message's fields.
-pub fn from_object(mut v: serde_json::Map<String, Value>, receive_ns: u64) -> Result<Item, String> {
+pub fn from_object(
+    mut v: serde_json::Map<String, Value>,
+    receive_ns: u64,
+) -> Result<Item, JsonLineError> {
     let topic = match v.remove("topic") {
         Some(Value::String(t)) if t.starts_with('/') && t.len() <= 256 => t,
-        Some(_) => return Err("\"topic\" must be a string starting with '/'".into()),
-        None => return Err("no \"topic\"".into()),
+        Some(_) => return Err(JsonLineError::BadTopic),
+        None => return Err(JsonLineError::NoTopic),
     };
     let kind = match v.remove("type") {
         Some(Value::String(t)) => {
-            MessageKind::from_type_name(&t).ok_or_else(|| format!("unknown type {t}"))?
+            MessageKind::from_type_name(&t).ok_or(JsonLineError::UnknownType(t))?
         }
-        Some(_) => return Err("\"type\" must be a string".into()),
+        Some(_) => return Err(JsonLineError::TypeNotAString),
         None => topics::standard_kind(&topic)
-            .ok_or_else(|| format!("{topic} is not a standard topic: name its \"type\""))?,
+            .ok_or_else(|| JsonLineError::NotAStandardTopic(topic.clone()))?,
     };
     v.entry("stamp_ns").or_insert(Value::from(receive_ns));
-    let message = kind
-        .from_value(Value::Object(v))
-        .map_err(|e| format!("{topic}: not a valid {}: {e}", kind.type_name()))?;
+    let message = match kind.from_value(Value::Object(v)) {
+        Ok(m) => m,
+        Err(source) => {
+            return Err(JsonLineError::Invalid {
+                topic,
+                type_name: kind.type_name(),
+                source,
+            })
+        }
+    };
     Ok(Item {
         topic,
         log_time_ns: receive_ns,
@@ -104,13 +116,16 @@ mod tests {
         assert_eq!((i.topic.as_str(), i.log_time_ns), ("/radar/front", 9));
         assert!(parse_json_line("{]", 0)
             .unwrap_err()
+            .to_string()
             .contains("not a JSON object"));
         assert!(parse_json_line(r#"{"topic":"/x","speed_mps":1}"#, 0)
             .unwrap_err()
+            .to_string()
             .contains("name its \"type\""));
         assert!(
             parse_json_line(r#"{"topic":"/radar/speed","speed_mps":"fast"}"#, 0)
                 .unwrap_err()
+                .to_string()
                 .contains("not a valid RadarSpeed")
         );
     }

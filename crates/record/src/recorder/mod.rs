@@ -90,7 +90,7 @@ pub struct RecordReport {
 fn join_source(name: String, handle: SourceThread, failed: &mut Vec<String>) {
     if let Err(e) = handle
         .join()
-        .unwrap_or_else(|_| Err("the source's thread panicked".to_owned()))
+        .unwrap_or(Err(crate::error::SourceError::Panicked))
     {
         failed.push(format!("{name}: {e}"));
     }
@@ -178,7 +178,7 @@ pub fn record(
     Ok(rec.finish(opts, stopped_by))
 }
 
-type SourceThread = std::thread::JoinHandle<Result<(), String>>;
+type SourceThread = std::thread::JoinHandle<Result<(), crate::error::SourceError>>;
 
 /// A recording in progress: the sources' threads and queues, the open output file and the
 /// counts.

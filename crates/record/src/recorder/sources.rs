@@ -16,6 +16,7 @@ use railfuse_catalog::messages::*;
 use super::message::Item;
 use super::source_spec::SourceSpec;
 use super::stream::{StreamDecoder, StreamFormat};
+use crate::error::SourceError;
 
 pub type Stats = Arc<Mutex<SourceStats>>;
 
@@ -122,12 +123,12 @@ pub fn run(
     tx: SyncSender<Item>,
     stats: Stats,
     stop: Arc<AtomicBool>,
-) -> Result<(), String> {
+) -> Result<(), SourceError> {
     let result = run_until_end(spec, tx, &stats, stop);
     let mut s = stats.lock().expect("stats");
     s.connected = false;
     if let Err(e) = &result {
-        s.last_error = Some(e.clone());
+        s.last_error = Some(e.to_string());
     }
     result
 }
@@ -137,7 +138,7 @@ fn run_until_end(
     tx: SyncSender<Item>,
     stats: &Stats,
     stop: Arc<AtomicBool>,
-) -> Result<(), String> {
+) -> Result<(), SourceError> {
     let tick = Duration::from_millis(200);
     stats.lock().expect("stats").connected = true;
     match spec {
@@ -146,7 +147,7 @@ fn run_until_end(
                 .and_then(|s| s.set_read_timeout(Some(tick)).map(|()| s))
             {
                 Ok(s) => s,
-                Err(e) => return Err(format!("cannot bind {addr}: {e}")),
+                Err(source) => return Err(SourceError::Bind { addr, source }),
             };
             let mut buf = vec![0u8; 65_536];
             let mut items = Vec::new();
@@ -186,7 +187,7 @@ fn run_until_end(
             let listener =
                 match TcpListener::bind(addr).and_then(|l| l.set_nonblocking(true).map(|()| l)) {
                     Ok(l) => l,
-                    Err(e) => return Err(format!("cannot bind {addr}: {e}")),
+                    Err(source) => return Err(SourceError::Bind { addr, source }),
                 };
             std::thread::scope(|scope| {
                 while !stop.load(Ordering::Relaxed) {
@@ -218,13 +219,20 @@ fn run_until_end(
             topic,
         } => {
             let open = || {
-                let conn = TcpStream::connect(&addr)
-                    .map_err(|e| format!("cannot connect to {addr}: {e}"))?;
+                let conn = TcpStream::connect(&addr).map_err(|source| SourceError::Connect {
+                    addr: addr.clone(),
+                    source,
+                })?;
                 let _ = conn.set_read_timeout(Some(tick));
                 Ok(conn)
             };
             let run = |conn| {
-                pump(conn, format, topic.as_deref(), &tx, stats, &stop).map_err(|e| e.to_string())
+                pump(conn, format, topic.as_deref(), &tx, stats, &stop).map_err(|source| {
+                    SourceError::Connect {
+                        addr: addr.clone(),
+                        source,
+                    }
+                })
             };
             with_reconnects(stats, &stop, open, run);
         }
@@ -237,16 +245,19 @@ fn run_until_end(
                 stats,
                 &stop,
             )
-            .map_err(|e| format!("standard input: {e}"))?;
+            .map_err(SourceError::Stdin)?;
         }
         SourceSpec::File {
             path,
             format,
             topic,
         } => {
-            let f = std::fs::File::open(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-            pump(f, format, topic.as_deref(), &tx, stats, &stop)
-                .map_err(|e| format!("{}: {e}", path.display()))?;
+            let on_path = |source| SourceError::Path {
+                path: path.clone(),
+                source,
+            };
+            let f = std::fs::File::open(&path).map_err(on_path)?;
+            pump(f, format, topic.as_deref(), &tx, stats, &stop).map_err(on_path)?;
         }
         SourceSpec::Serial {
             path,
@@ -254,11 +265,13 @@ fn run_until_end(
             format,
             topic,
         } => {
-            let open =
-                || super::serial::open(&path, baud).map_err(|e| format!("{}: {e}", path.display()));
+            let on_path = |source| SourceError::Path {
+                path: path.clone(),
+                source,
+            };
+            let open = || super::serial::open(&path, baud).map_err(on_path);
             let run = |port| {
-                pump_with(port, format, topic.as_deref(), &tx, stats, &stop, true)
-                    .map_err(|e| format!("{}: {e}", path.display()))
+                pump_with(port, format, topic.as_deref(), &tx, stats, &stop, true).map_err(on_path)
             };
             with_reconnects(stats, &stop, open, run);
         }
@@ -280,8 +293,8 @@ fn run_until_end(
 fn with_reconnects<C>(
     stats: &Stats,
     stop: &AtomicBool,
-    mut open: impl FnMut() -> Result<C, String>,
-    mut run: impl FnMut(C) -> Result<(), String>,
+    mut open: impl FnMut() -> Result<C, SourceError>,
+    mut run: impl FnMut(C) -> Result<(), SourceError>,
 ) {
     const FIRST: Duration = Duration::from_millis(250);
     let (mut backoff, mut connected_before) = (FIRST, false);
@@ -320,20 +333,20 @@ fn simulated(
     tx: &SyncSender<Item>,
     stats: &Stats,
     stop: &AtomicBool,
-) -> Result<(), String> {
+) -> Result<(), SourceError> {
     let preset = crate::Scenario::preset(scenario)
-        .ok_or_else(|| format!("unknown scenario '{scenario}'"))?;
-    let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
+        .ok_or_else(|| SourceError::UnknownScenario(scenario.to_owned()))?;
+    let dir = tempfile::tempdir().map_err(SourceError::TempFile)?;
     let path = dir.path().join("sim.mcap");
-    crate::simulate(&preset, seed, duration_s, &[], &path).map_err(|e| e.to_string())?;
-    let mut reader = LogReader::open(&path).map_err(|e| e.to_string())?;
+    crate::simulate(&preset, seed, duration_s, &[], &path)?;
+    let mut reader = LogReader::open(&path)?;
     let (wall0, mut sim0, live0) = (Instant::now(), None, now_ns());
     let mut items = Vec::with_capacity(1);
     while let Some(rec) = reader.next() {
         if stop.load(Ordering::Relaxed) {
             break;
         }
-        let LogRecord::Message(m) = rec.map_err(|e| e.to_string())? else {
+        let LogRecord::Message(m) = rec? else {
             continue;
         };
         let t0 = *sim0.get_or_insert(m.log_time_ns);
@@ -350,7 +363,10 @@ fn simulated(
         };
         let mut message = kind
             .decode(m.data)
-            .map_err(|e| format!("{}: {}: {e}", path.display(), m.channel.topic))?;
+            .map_err(|source| SourceError::SimulatedMessage {
+                topic: m.channel.topic.clone(),
+                source,
+            })?;
         let stamp = message.stamp_ns_mut();
         *stamp = shift(*stamp);
         stats.lock().expect("stats").received += 1;

@@ -153,7 +153,7 @@ impl StreamDecoder {
                 }
                 Err(e) => {
                     stats.malformed += 1;
-                    stats.last_error = Some(e);
+                    stats.last_error = Some(e.to_string());
                 }
             },
             StreamFormat::Nmea => {

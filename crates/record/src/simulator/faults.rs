@@ -10,6 +10,7 @@
 //! `:reported` the device also says so itself: `device_fault` / `device_recovered` events
 //! naming its topic, which federated detectors honour.
 
+use crate::error::FaultSpecError;
 use railfuse_catalog::messages::{Event, EventKind};
 use serde::{Deserialize, Serialize};
 
@@ -46,24 +47,20 @@ pub const DEVICES: &[&str] = &[
 ];
 
 impl std::str::FromStr for FaultSpec {
-    type Err = String;
+    type Err = FaultSpecError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, FaultSpecError> {
         let parts: Vec<&str> = s.split(':').collect();
         let (device, mode, start, end, reported) = match parts[..] {
             [d, m, a, b] => (d, m, a, b, false),
             [d, m, a, b, "reported"] => (d, m, a, b, true),
-            _ => {
-                return Err(format!(
-                "'{s}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260"
-            ))
-            }
+            _ => return Err(FaultSpecError::Shape(s.to_owned())),
         };
         if !DEVICES.contains(&device) {
-            return Err(format!(
-                "'{s}': unknown device '{device}' (devices: {})",
-                DEVICES.join(", ")
-            ));
+            return Err(FaultSpecError::UnknownDevice {
+                spec: s.to_owned(),
+                device: device.to_owned(),
+            });
         }
         let mode = match mode {
             "dropout" => FaultMode::Dropout,
@@ -71,20 +68,19 @@ impl std::str::FromStr for FaultSpec {
             m => match m.strip_prefix("bias=").map(str::parse::<f64>) {
                 Some(Ok(b)) if b.is_finite() => FaultMode::Bias(b),
                 _ => {
-                    return Err(format!(
-                        "'{s}': unknown mode '{m}' (dropout, stuck, bias=VALUE)"
-                    ))
+                    return Err(FaultSpecError::UnknownMode {
+                        spec: s.to_owned(),
+                        mode: m.to_owned(),
+                    })
                 }
             },
         };
         let time = |t: &str| t.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0);
         let (Some(start_s), Some(end_s)) = (time(start), time(end)) else {
-            return Err(format!(
-                "'{s}': START and END are seconds from the start of the run"
-            ));
+            return Err(FaultSpecError::Times(s.to_owned()));
         };
         if end_s <= start_s {
-            return Err(format!("'{s}': the window ends before it starts"));
+            return Err(FaultSpecError::EmptyWindow(s.to_owned()));
         }
         Ok(FaultSpec {
             device: device.to_owned(),
@@ -296,14 +292,17 @@ mod tests {
         assert!("radar:melt:1:2"
             .parse::<FaultSpec>()
             .unwrap_err()
+            .to_string()
             .contains("unknown mode"));
         assert!("warp:dropout:1:2"
             .parse::<FaultSpec>()
             .unwrap_err()
+            .to_string()
             .contains("unknown device"));
         assert!("radar:dropout:5:2"
             .parse::<FaultSpec>()
             .unwrap_err()
+            .to_string()
             .contains("ends before"));
         assert!(
             "radar:stuck:1:2:reported"

@@ -1,6 +1,7 @@
 //! Scenario presets: every parameter of a simulated run, serialisable so that each log
 //! carries the exact parameters that made it (in its run metadata).
 
+use crate::error::ScenarioError;
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use serde::{Deserialize, Serialize};
 
@@ -78,17 +79,15 @@ impl Scenario {
         &self,
         duration_s: Option<f64>,
         faults: &[super::FaultSpec],
-    ) -> Result<(), String> {
+    ) -> Result<(), ScenarioError> {
         if let Some(d) = duration_s.filter(|d| !(d.is_finite() && *d > 0.0)) {
-            return Err(format!(
-                "duration must be a positive number of seconds, not {d}"
-            ));
+            return Err(ScenarioError::Duration(d));
         }
         let name = self.name();
         let Some(line) = self.line() else {
             return match faults.is_empty() {
                 true => Ok(()),
-                false => Err(format!("fault: scenario '{name}' is source 000's bare simulation with no device models to break; use default or seed001")),
+                false => Err(ScenarioError::NoDevices(name.to_owned())),
             };
         };
         for f in faults {
@@ -100,10 +99,10 @@ impl Scenario {
                 _ => true,
             };
             if !has {
-                return Err(format!(
-                    "fault: scenario '{name}' has no {} to fail",
-                    f.device
-                ));
+                return Err(ScenarioError::NoSuchDevice {
+                    scenario: name.to_owned(),
+                    device: f.device.clone(),
+                });
             }
         }
         Ok(())

@@ -1,0 +1,147 @@
+//! The experiments of the source documents, re-run: each source's scenario simulated over
+//! many seeds, re-fused with the source's pipelines, and scored against the truth. What it
+//! owns:
+//!
+//! - [`run`]: simulate, re-fuse and evaluate one run (one scenario, seed, set of faults);
+//! - [`Envelope`]: the worst case over seeds of one pipeline's figures;
+//! - [`sources`]: the experiments of sources 000 and 001 and their typed results, each
+//!   source's claim beside railfuse's figure of the same kind.
+//!
+//! Printing the results (Markdown, JSON) is the CLI's job.
+
+pub mod sources;
+
+use std::path::Path;
+
+use railfuse_catalog::topics;
+use railfuse_record::simulator::FaultSpec;
+use railfuse_record::{simulate, Scenario};
+use railfuse_refuse::eval::PipelineEval;
+use railfuse_refuse::replay::{refuse, RefuseOptions};
+use railfuse_refuse::spec::Pipelines;
+use serde::Serialize;
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error("unknown scenario '{0}'")]
+    UnknownScenario(String),
+    #[error(transparent)]
+    Scenario(#[from] railfuse_record::error::ScenarioError),
+    #[error(transparent)]
+    Simulate(#[from] railfuse_catalog::Error),
+    #[error(transparent)]
+    Refuse(#[from] railfuse_refuse::Error),
+}
+
+/// One run, evaluated: every pipeline's figures and the run's length.
+#[derive(Debug, Clone)]
+pub struct Run {
+    pub pipelines: Vec<PipelineEval>,
+    pub duration_s: f64,
+}
+
+/// Simulates `scenario` with `seed` and `faults` into `dir`, re-fuses the log with
+/// `pipelines`, evaluates against the truth, and removes both logs.
+pub fn run(
+    dir: &Path,
+    scenario: &str,
+    seed: u64,
+    faults: &[FaultSpec],
+    pipelines: &Pipelines,
+    tag: &str,
+) -> Result<Run> {
+    let preset =
+        Scenario::preset(scenario).ok_or_else(|| Error::UnknownScenario(scenario.to_owned()))?;
+    preset.check(None, faults)?;
+    let raw = dir.join(format!("{scenario}-{tag}-seed{seed}.mcap"));
+    let fused = dir.join(format!("{scenario}-{tag}-seed{seed}.fused.mcap"));
+    let sim = simulate(&preset, seed, None, faults, &raw)?;
+    let result = refuse(&RefuseOptions {
+        input: &raw,
+        output: &fused,
+        config: pipelines,
+        config_source: pipelines.path.display().to_string(),
+        reference: topics::GROUND_TRUTH,
+        progress: None,
+    });
+    std::fs::remove_file(&raw).ok();
+    std::fs::remove_file(&fused).ok();
+    let (_, eval) = result?;
+    Ok(Run {
+        pipelines: eval.pipelines,
+        duration_s: sim.duration_s,
+    })
+}
+
+/// Worst case over seeds of one pipeline's figures: signed error extremes, mean RMSE, the
+/// lowest output rate and the mean share of states whose NEES lies in its 95 % interval.
+#[derive(Debug, Default, Clone, Copy, Serialize)]
+pub struct Envelope {
+    pub runs: u32,
+    pub position_min_m: f64,
+    pub position_max_m: f64,
+    pub position_rmse_sum_m: f64,
+    pub speed_min_mps: f64,
+    pub speed_max_mps: f64,
+    pub speed_rmse_sum_mps: f64,
+    pub min_rate_hz: f64,
+    pub nees_inside_sum: f64,
+}
+
+impl Envelope {
+    /// Adds one run of pipeline `p` (a run without errors, with no reference, is left out).
+    pub fn add(&mut self, p: &PipelineEval, duration_s: f64) {
+        let (Some(pos), Some(spd)) = (&p.position_error_m, &p.speed_error_mps) else {
+            return;
+        };
+        let rate = p.states as f64 / duration_s;
+        if self.runs == 0 {
+            self.position_min_m = pos.min;
+            self.position_max_m = pos.max;
+            self.speed_min_mps = spd.min;
+            self.speed_max_mps = spd.max;
+            self.min_rate_hz = rate;
+        }
+        self.runs += 1;
+        self.position_min_m = self.position_min_m.min(pos.min);
+        self.position_max_m = self.position_max_m.max(pos.max);
+        self.speed_min_mps = self.speed_min_mps.min(spd.min);
+        self.speed_max_mps = self.speed_max_mps.max(spd.max);
+        self.position_rmse_sum_m += pos.rmse;
+        self.speed_rmse_sum_mps += spd.rmse;
+        self.min_rate_hz = self.min_rate_hz.min(rate);
+        self.nees_inside_sum += p.nees.as_ref().map_or(0.0, |n| n.inside_95);
+    }
+
+    /// The run named `name` of `run`, if it was evaluated.
+    pub fn add_named(&mut self, run: &Run, name: &str) {
+        if let Some(p) = run.pipelines.iter().find(|p| p.name == name) {
+            self.add(p, run.duration_s);
+        }
+    }
+
+    /// Largest |position error|, m.
+    pub fn position_abs_m(&self) -> f64 {
+        self.position_max_m.max(-self.position_min_m)
+    }
+
+    /// Largest |speed error|, m/s.
+    pub fn speed_abs_mps(&self) -> f64 {
+        self.speed_max_mps.max(-self.speed_min_mps)
+    }
+
+    pub fn position_rmse_m(&self) -> f64 {
+        self.position_rmse_sum_m / f64::from(self.runs.max(1))
+    }
+
+    pub fn speed_rmse_mps(&self) -> f64 {
+        self.speed_rmse_sum_mps / f64::from(self.runs.max(1))
+    }
+
+    /// Mean share of states whose NEES lies inside its 95 % interval.
+    pub fn nees_inside_95(&self) -> f64 {
+        self.nees_inside_sum / f64::from(self.runs.max(1))
+    }
+}

@@ -1,0 +1,148 @@
+//! Errors of the recording side, each naming the source, file, spec or field it is about.
+
+use std::io;
+use std::path::PathBuf;
+
+use crate::simulator::faults::DEVICES;
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// Any error of this crate.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Log(#[from] railfuse_catalog::Error),
+    #[error(transparent)]
+    Mapping(#[from] MappingError),
+    #[error(transparent)]
+    Scenario(#[from] ScenarioError),
+    #[error(transparent)]
+    Source(#[from] SourceError),
+}
+
+/// Why a source stopped for good, or one connection attempt failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    #[error("cannot bind {addr}: {source}")]
+    Bind {
+        addr: std::net::SocketAddr,
+        #[source]
+        source: io::Error,
+    },
+    #[error("cannot connect to {addr}: {source}")]
+    Connect {
+        addr: String,
+        #[source]
+        source: io::Error,
+    },
+    /// A file or serial device.
+    #[error("{}: {source}", path.display())]
+    Path {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+    #[error("standard input: {0}")]
+    Stdin(#[source] io::Error),
+    #[error("unknown scenario '{0}'")]
+    UnknownScenario(String),
+    #[error("simulated source: {0}")]
+    Simulation(#[from] railfuse_catalog::Error),
+    #[error("simulated source: {topic}: {source}")]
+    SimulatedMessage {
+        topic: String,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("simulated source: temporary file: {0}")]
+    TempFile(#[source] io::Error),
+    #[error("the source's thread panicked")]
+    Panicked,
+}
+
+/// What is wrong with one JSON line (or one CSV row made into a message).
+#[derive(Debug, thiserror::Error)]
+pub enum JsonLineError {
+    #[error("not a JSON object: {0}")]
+    NotAnObject(#[source] serde_json::Error),
+    #[error("no \"topic\"")]
+    NoTopic,
+    #[error("\"topic\" must be a string starting with '/'")]
+    BadTopic,
+    #[error("\"type\" must be a string")]
+    TypeNotAString,
+    #[error("unknown type {0}")]
+    UnknownType(String),
+    #[error("{0} is not a standard topic: name its \"type\"")]
+    NotAStandardTopic(String),
+    #[error("{topic}: not a valid {type_name}: {source}")]
+    Invalid {
+        topic: String,
+        type_name: &'static str,
+        #[source]
+        source: serde_json::Error,
+    },
+}
+
+/// A `--fault DEVICE:MODE:START:END[:reported]` that does not parse.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FaultSpecError {
+    #[error("'{0}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260")]
+    Shape(String),
+    #[error("'{spec}': unknown device '{device}' (devices: {})", DEVICES.join(", "))]
+    UnknownDevice { spec: String, device: String },
+    #[error("'{spec}': unknown mode '{mode}' (dropout, stuck, bias=VALUE)")]
+    UnknownMode { spec: String, mode: String },
+    #[error("'{0}': START and END are seconds from the start of the run")]
+    Times(String),
+    #[error("'{0}': the window ends before it starts")]
+    EmptyWindow(String),
+}
+
+/// A simulation the scenario cannot run.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ScenarioError {
+    #[error("duration must be a positive number of seconds, not {0}")]
+    Duration(f64),
+    #[error(
+        "fault: scenario '{0}' is source 000's bare simulation with no device models to break; \
+         use default or seed001"
+    )]
+    NoDevices(String),
+    #[error("fault: scenario '{scenario}' has no {device} to fail")]
+    NoSuchDevice { scenario: String, device: String },
+}
+
+/// A CSV column mapping that does not fit its file.
+#[derive(Debug, thiserror::Error)]
+pub enum MappingError {
+    #[error("{}: {source}", path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+    #[error("{}: {}", path.display(), source.to_string().trim())]
+    Toml {
+        path: PathBuf,
+        #[source]
+        source: toml::de::Error,
+    },
+    #[error("{}: time_unit '{unit}': s, ms, us or ns", path.display())]
+    TimeUnit { path: PathBuf, unit: String },
+    #[error("{}: delimiter '{delimiter}' must be one character", path.display())]
+    Delimiter { path: PathBuf, delimiter: String },
+    #[error("{}: {source}", path.display())]
+    Csv {
+        path: PathBuf,
+        #[source]
+        source: csv::Error,
+    },
+    #[error("{}: {what} '{column}' is not a column of {}", mapping.display(), input.display())]
+    NoColumn {
+        mapping: PathBuf,
+        input: PathBuf,
+        what: String,
+        column: String,
+    },
+}
