@@ -722,7 +722,8 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
         s(&out),
     ]);
     assert!(
-        !bad.status.success() && stderr(&bad).contains("channel /radar/speed: column 'v' is not a column of"),
+        !bad.status.success()
+            && stderr(&bad).contains("channel /radar/speed: column 'v' is not a column of"),
         "{}",
         stderr(&bad)
     );

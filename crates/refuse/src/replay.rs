@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use mcap::records::op;
 use railfuse_catalog::log::format::{self, Records};
-use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner};
+use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
 use railfuse_catalog::log::{
     read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
 };
@@ -97,7 +97,7 @@ struct Output {
 pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
     let summary = read_summary(opts.input)?;
     let mut replay = Replay::new(opts, summary)?;
-    let mut items = ReadAhead::new(Scanner::open(opts.input)?, 4);
+    let mut items = ReadAhead::new(Scanner::open(opts.input)?, READ_AHEAD_BYTES);
     while let Some(item) = items.next() {
         if let Some(progress) = opts.progress {
             progress(items.position());

@@ -10,7 +10,7 @@ use std::sync::Arc;
 use mcap::records::{op, AttachmentHeader, MessageHeader, Metadata, Record};
 
 use super::format::{self, Records, FRAME};
-use super::scan::{Chunk, Item, ReadAhead, Scanner};
+use super::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
 
 use crate::error::{Error, Result};
 use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
@@ -161,7 +161,7 @@ impl LogReader {
         let scanner = Scanner::open(&path)?;
         Ok(Self {
             path,
-            items: ReadAhead::new(scanner, 3),
+            items: ReadAhead::new(scanner, READ_AHEAD_BYTES),
             schemas: HashMap::new(),
             channels: HashMap::new(),
             done: false,

@@ -365,23 +365,89 @@ fn parses_exactly(opcode: u8, body: &[u8]) -> bool {
     }
 }
 
-/// A [`Scanner`] running on its own thread, a few items ahead of the caller: reading and
-/// decompressing overlap the caller's work. Memory is bounded by `depth` chunks in flight.
+/// A [`Scanner`] running on its own thread, ahead of the caller: reading and decompressing
+/// overlap the caller's work. Memory is bounded by a budget of bytes in flight (raw and
+/// decompressed), not by a count of items, so that many small chunks keep the reader far
+/// enough ahead to absorb the caller's bursts while a few big ones cannot exhaust memory.
 pub struct ReadAhead {
-    items: std::sync::mpsc::Receiver<(Result<Item>, u64)>,
+    items: std::sync::mpsc::Receiver<(Result<Item>, u64, usize)>,
+    budget: std::sync::Arc<Budget>,
     position: u64,
     size: u64,
 }
 
+/// Bytes read ahead and not yet handed to the caller.
+struct Budget {
+    /// Bytes in flight, and whether the caller has gone.
+    state: std::sync::Mutex<(usize, bool)>,
+    freed: std::sync::Condvar,
+    limit: usize,
+}
+
+impl Budget {
+    /// Waits until `bytes` more fit (one item always fits when nothing is in flight); false
+    /// when the caller has gone.
+    fn take(&self, bytes: usize) -> bool {
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        while !state.1 && state.0 > 0 && state.0 + bytes > self.limit {
+            state = self.freed.wait(state).unwrap_or_else(|e| e.into_inner());
+        }
+        state.0 += bytes;
+        !state.1
+    }
+
+    fn give_back(&self, bytes: usize) {
+        let mut state = self.state.lock().unwrap_or_else(|e| e.into_inner());
+        state.0 = state.0.saturating_sub(bytes);
+        self.freed.notify_one();
+    }
+
+    fn close(&self) {
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).1 = true;
+        self.freed.notify_one();
+    }
+}
+
+impl Drop for ReadAhead {
+    fn drop(&mut self) {
+        self.budget.close();
+    }
+}
+
+impl Item {
+    /// Bytes it holds.
+    fn weight(&self) -> usize {
+        match self {
+            Item::Record { body, .. } => body.len(),
+            Item::Chunk(c) => c.raw.len() + c.records.len(),
+            Item::Damage(_) => 0,
+        }
+    }
+}
+
+/// The default read-ahead budget: a few dozen typical chunks.
+pub const READ_AHEAD_BYTES: usize = 2 << 20;
+
 impl ReadAhead {
-    pub fn new(mut scanner: Scanner, depth: usize) -> Self {
-        let (tx, items) = std::sync::mpsc::sync_channel(depth);
+    /// Reads `scanner` ahead by up to `budget` bytes.
+    pub fn new(mut scanner: Scanner, budget: usize) -> Self {
+        // The count bound only backs up the byte budget (many tiny records).
+        let (tx, items) = std::sync::mpsc::sync_channel(4096);
         let size = scanner.size();
+        let budget = std::sync::Arc::new(Budget {
+            state: std::sync::Mutex::new((0, false)),
+            freed: std::sync::Condvar::new(),
+            limit: budget,
+        });
+        let reader_budget = budget.clone();
         std::thread::Builder::new()
             .name("log-reader".into())
             .spawn(move || {
                 while let Some(item) = scanner.next() {
-                    if tx.send((item, scanner.position())).is_err() {
+                    let weight = item.as_ref().map_or(0, Item::weight);
+                    let sent = reader_budget.take(weight)
+                        && tx.send((item, scanner.position(), weight)).is_ok();
+                    if !sent {
                         break; // the reader was dropped
                     }
                 }
@@ -389,6 +455,7 @@ impl ReadAhead {
             .expect("a thread to read ahead");
         Self {
             items,
+            budget,
             position: 0,
             size,
         }
@@ -408,8 +475,10 @@ impl Iterator for ReadAhead {
     type Item = Result<Item>;
 
     fn next(&mut self) -> Option<Result<Item>> {
-        let (item, position) = self.items.recv().ok()?;
+        let (item, position, weight) = self.items.recv().ok()?;
         self.position = position;
+        // Handed over: the caller's to keep or drop from here on.
+        self.budget.give_back(weight);
         Some(item)
     }
 }
