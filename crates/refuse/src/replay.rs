@@ -103,7 +103,7 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
             progress(items.position());
         }
         match item? {
-            Item::Chunk(chunk) => replay.chunk(chunk)?,
+            Item::Chunk(chunk) => items.recycle(replay.chunk(chunk)?),
             Item::Record { opcode, body, .. } => replay.top_level(opcode, &body)?,
             Item::Damage(_) => unreachable!("a strict scanner reports damage as an error"),
         }
@@ -245,8 +245,8 @@ impl<'a> Replay<'a> {
 
     /// An input chunk: its messages go to the pipelines and the evaluation; the chunk itself
     /// is copied byte for byte unless it holds a replaced channel, and the fused records it
-    /// gave rise to follow it in a chunk of their own.
-    fn chunk(&mut self, chunk: Chunk) -> Result<()> {
+    /// gave rise to follow it in a chunk of their own. Returns its records buffer, to reuse.
+    fn chunk(&mut self, chunk: Chunk) -> Result<Vec<u8>> {
         let mut rewrite = false;
         for record in Records::new(&chunk.records) {
             let record = record.map_err(|e| self.damaged(chunk.offset, e))?;
@@ -262,13 +262,14 @@ impl<'a> Replay<'a> {
                 _ => {}
             }
         }
-        if rewrite {
+        let records = if rewrite {
             self.rewrite(&chunk)?;
+            chunk.records
         } else {
-            self.writer.copy_chunk(chunk)?;
-        }
+            self.writer.copy_chunk(chunk)?
+        };
         self.writer.close_chunk()?;
-        Ok(())
+        Ok(records)
     }
 
     /// Writes a chunk's records but those of replaced channels.

@@ -147,41 +147,84 @@ pub fn parse_chunk_header(body: &[u8]) -> Result<(ChunkHeader, usize), String> {
 /// Decompresses a chunk's records and checks them against the chunk's size and CRC. `limit`
 /// bounds the size a damaged or hostile header can make us allocate.
 pub fn decompress(header: &ChunkHeader, data: &[u8], limit: usize) -> Result<Vec<u8>, String> {
-    let size = usize::try_from(header.uncompressed_size).unwrap_or(usize::MAX);
-    if size > limit {
-        return Err(format!(
-            "chunk claims {size} bytes uncompressed, over the {limit}-byte limit"
-        ));
+    let mut records = Vec::new();
+    Decompressor::new().decompress(header, data, limit, &mut records)?;
+    Ok(records)
+}
+
+/// Decompresses chunk after chunk with one zstd context, into buffers the caller reuses.
+pub struct Decompressor {
+    zstd: Option<zstd::bulk::Decompressor<'static>>,
+}
+
+impl Default for Decompressor {
+    fn default() -> Self {
+        Self::new()
     }
-    let records = match header.compression.as_str() {
-        "" => data.to_vec(),
-        "zstd" => zstd::bulk::decompress(data, size).map_err(|e| format!("zstd: {e}"))?,
-        "lz4" => {
-            use std::io::Read;
-            let mut out = Vec::with_capacity(size);
-            lz4::Decoder::new(data)
-                .and_then(|d| d.take(size as u64 + 1).read_to_end(&mut out))
-                .map_err(|e| format!("lz4: {e}"))?;
-            out
+}
+
+impl Decompressor {
+    pub fn new() -> Self {
+        // A context that cannot be made is made again, and reported, at the first zstd chunk.
+        Self {
+            zstd: zstd::bulk::Decompressor::new().ok(),
         }
-        other => return Err(format!("unknown chunk compression '{other}'")),
-    };
-    if records.len() != size {
-        return Err(format!(
-            "chunk decompresses to {} bytes, not {size}",
-            records.len()
-        ));
     }
-    if header.uncompressed_crc != 0 {
-        let crc = crc32fast::hash(&records);
-        if crc != header.uncompressed_crc {
+
+    /// [`decompress`] into `records` (cleared first, its capacity reused).
+    pub fn decompress(
+        &mut self,
+        header: &ChunkHeader,
+        data: &[u8],
+        limit: usize,
+        records: &mut Vec<u8>,
+    ) -> Result<(), String> {
+        let size = usize::try_from(header.uncompressed_size).unwrap_or(usize::MAX);
+        if size > limit {
             return Err(format!(
-                "chunk CRC mismatch (stored {:08x}, computed {crc:08x})",
-                header.uncompressed_crc
+                "chunk claims {size} bytes uncompressed, over the {limit}-byte limit"
             ));
         }
+        records.clear();
+        match header.compression.as_str() {
+            "" => records.extend_from_slice(data),
+            "zstd" => {
+                let zstd = match &mut self.zstd {
+                    Some(z) => z,
+                    None => self
+                        .zstd
+                        .insert(zstd::bulk::Decompressor::new().map_err(|e| format!("zstd: {e}"))?),
+                };
+                records.reserve(size);
+                zstd.decompress_to_buffer(data, records)
+                    .map_err(|e| format!("zstd: {e}"))?;
+            }
+            "lz4" => {
+                use std::io::Read;
+                records.reserve(size);
+                lz4::Decoder::new(data)
+                    .and_then(|d| d.take(size as u64 + 1).read_to_end(records))
+                    .map_err(|e| format!("lz4: {e}"))?;
+            }
+            other => return Err(format!("unknown chunk compression '{other}'")),
+        }
+        if records.len() != size {
+            return Err(format!(
+                "chunk decompresses to {} bytes, not {size}",
+                records.len()
+            ));
+        }
+        if header.uncompressed_crc != 0 {
+            let crc = crc32fast::hash(records);
+            if crc != header.uncompressed_crc {
+                return Err(format!(
+                    "chunk CRC mismatch (stored {:08x}, computed {crc:08x})",
+                    header.uncompressed_crc
+                ));
+            }
+        }
+        Ok(())
     }
-    Ok(records)
 }
 
 #[cfg(test)]

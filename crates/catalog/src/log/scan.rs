@@ -77,9 +77,15 @@ pub struct Scanner {
     done: bool,
     ahead: Vec<u8>,
     ahead_at: u64,
+    decompressor: format::Decompressor,
+    /// Buffers handed back by the caller, for the next chunks' records.
+    spares: Vec<Vec<u8>>,
 }
 
 const READ_AHEAD: usize = 64 << 10;
+
+/// Spare buffers kept for reuse.
+const SPARES: usize = 8;
 
 impl Scanner {
     /// Reads strictly: damage is an error.
@@ -118,6 +124,8 @@ impl Scanner {
             salvage,
             done: false,
             ahead: Vec::new(),
+            decompressor: format::Decompressor::new(),
+            spares: Vec::new(),
             ahead_at: 0,
         };
         // The header record comes first; it carries nothing railfuse needs.
@@ -209,7 +217,7 @@ impl Scanner {
         let item = if opcode == op::CHUNK {
             let mut raw = vec![0u8; FRAME + len as usize];
             self.read_at(&mut raw, at)?;
-            let (header, records) = check_chunk(&raw[FRAME..])?;
+            let (header, records) = self.check_chunk(&raw[FRAME..])?;
             Item::Chunk(Chunk {
                 offset: at,
                 header,
@@ -227,6 +235,39 @@ impl Scanner {
         };
         self.pos = start + len;
         Ok(Some(item))
+    }
+
+    /// A buffer of the caller's to reuse for a later chunk's records.
+    pub fn recycle(&mut self, buffer: Vec<u8>) {
+        if self.spares.len() < SPARES {
+            self.spares.push(buffer);
+        }
+    }
+
+    /// A chunk record body's header and decompressed, CRC-checked records; also every record
+    /// in it must be whole.
+    fn check_chunk(&mut self, body: &[u8]) -> Result<(ChunkHeader, Vec<u8>), String> {
+        let (header, start) = format::parse_chunk_header(body)?;
+        let mut records = self.spares.pop().unwrap_or_default();
+        let checked = self
+            .decompressor
+            .decompress(
+                &header,
+                &body[start..],
+                super::RECORD_LENGTH_LIMIT,
+                &mut records,
+            )
+            .and_then(|()| match Records::new(&records).find(|r| r.is_err()) {
+                Some(Err(e)) => Err(format!("chunk content is torn: {e}")),
+                _ => Ok(()),
+            });
+        match checked {
+            Ok(()) => Ok((header, records)),
+            Err(e) => {
+                self.recycle(records);
+                Err(e)
+            }
+        }
     }
 
     /// Opcode and body length of the record at `at`, checked against the file's size.
@@ -289,7 +330,7 @@ impl Scanner {
             return false;
         }
         match opcode {
-            op::CHUNK => check_chunk(&body).is_ok(),
+            op::CHUNK => self.check_chunk(&body).is_ok(),
             op::MESSAGE_INDEX => {
                 body.len() >= 6 && {
                     let n = u32::from_le_bytes(body[2..6].try_into().expect("4 bytes")) as usize;
@@ -330,17 +371,6 @@ impl Scanner {
     }
 }
 
-/// A chunk record body's header and decompressed, CRC-checked records; also every record in
-/// it must be whole.
-fn check_chunk(body: &[u8]) -> Result<(ChunkHeader, Vec<u8>), String> {
-    let (header, start) = format::parse_chunk_header(body)?;
-    let records = format::decompress(&header, &body[start..], super::RECORD_LENGTH_LIMIT)?;
-    if let Some(Err(e)) = Records::new(&records).find(|r| r.is_err()) {
-        return Err(format!("chunk content is torn: {e}"));
-    }
-    Ok((header, records))
-}
-
 /// Whether `body` parses as an `opcode` record and the parse uses every byte.
 fn parses_exactly(opcode: u8, body: &[u8]) -> bool {
     use mcap::records::Record;
@@ -372,6 +402,8 @@ fn parses_exactly(opcode: u8, body: &[u8]) -> bool {
 pub struct ReadAhead {
     items: std::sync::mpsc::Receiver<(Result<Item>, u64, usize)>,
     budget: std::sync::Arc<Budget>,
+    /// Buffers going back to the reader for reuse.
+    spares: std::sync::mpsc::Sender<Vec<u8>>,
     position: u64,
     size: u64,
 }
@@ -440,10 +472,17 @@ impl ReadAhead {
             limit: budget,
         });
         let reader_budget = budget.clone();
+        let (spares, returned) = std::sync::mpsc::channel();
         std::thread::Builder::new()
             .name("log-reader".into())
             .spawn(move || {
-                while let Some(item) = scanner.next() {
+                loop {
+                    for buffer in returned.try_iter() {
+                        scanner.recycle(buffer);
+                    }
+                    let Some(item) = scanner.next() else {
+                        break;
+                    };
                     let weight = item.as_ref().map_or(0, Item::weight);
                     let sent = reader_budget.take(weight)
                         && tx.send((item, scanner.position(), weight)).is_ok();
@@ -456,9 +495,16 @@ impl ReadAhead {
         Self {
             items,
             budget,
+            spares,
             position: 0,
             size,
         }
+    }
+
+    /// Gives a chunk's records buffer back, for a later chunk (saves allocating and
+    /// faulting in fresh memory for every chunk).
+    pub fn recycle(&self, buffer: Vec<u8>) {
+        let _ = self.spares.send(buffer); // the reader may have finished
     }
 
     /// Bytes of the file read up to the item last returned.

@@ -98,6 +98,8 @@ pub struct LogWriter {
     partial: PathBuf,
     chunk_size: usize,
     jobs: Option<SyncSender<Job>>,
+    /// Chunk buffers the worker is done with, for the next chunks.
+    spares: Receiver<Vec<u8>>,
     worker: Option<JoinHandle<Result<()>>>,
     schema_ids: HashMap<String, u16>,
     /// Framed schema and channel records, repeated in the summary.
@@ -127,16 +129,18 @@ impl LogWriter {
         };
         put_record(&mut start, op::HEADER, &format::body(&header));
         let (jobs, rx) = sync_channel(4);
+        let (spare_tx, spares) = std::sync::mpsc::channel();
         let mut file_side = FileSide::new(file, partial.clone(), options.zstd_level);
         let worker = std::thread::Builder::new()
             .name("log-writer".into())
-            .spawn(move || file_side.run(start, rx))
+            .spawn(move || file_side.run(start, rx, spare_tx))
             .map_err(|e| Error::io(&partial, e))?;
         Ok(Self {
             path,
             partial,
             chunk_size: options.chunk_size as usize,
             jobs: Some(jobs),
+            spares,
             worker: Some(worker),
             schema_ids: HashMap::new(),
             schemas: BTreeMap::new(),
@@ -346,6 +350,8 @@ impl LogWriter {
             return Ok(());
         }
         let open = std::mem::take(&mut self.open);
+        self.open.records = self.spares.try_recv().unwrap_or_default();
+        self.open.records.clear();
         self.open
             .records
             .reserve(self.chunk_size + (self.chunk_size >> 3));
@@ -360,8 +366,11 @@ impl LogWriter {
 
     /// Copies an input chunk byte for byte. The schemas and channels it defines are taken
     /// into the summary; its messages count in the statistics and get a message index. The
-    /// chunk is taken, so its bytes go to the file without another copy.
-    pub fn copy_chunk(&mut self, chunk: Chunk) -> Result<()> {
+    /// chunk is taken, so its bytes go to the file without another copy; its decompressed
+    /// records come back, for the caller to reuse ([`ReadAhead::recycle`]).
+    ///
+    /// [`ReadAhead::recycle`]: super::scan::ReadAhead::recycle
+    pub fn copy_chunk(&mut self, chunk: Chunk) -> Result<Vec<u8>> {
         let mut index = Index::new();
         for record in Records::new(&chunk.records) {
             let record = record.map_err(|e| Error::mcap(&self.partial, e))?;
@@ -397,7 +406,8 @@ impl LogWriter {
             raw: chunk.raw,
             header: chunk.header,
             index,
-        })
+        })?;
+        Ok(chunk.records)
     }
 
     /// Copies a message record as it was (channel, sequence, times, payload).
@@ -587,6 +597,7 @@ struct FileSide {
     metadata_indexes: Vec<u8>,
     attachment_indexes: Vec<u8>,
     scratch: Vec<u8>,
+    compressed: Vec<u8>,
 }
 
 impl FileSide {
@@ -601,10 +612,16 @@ impl FileSide {
             metadata_indexes: Vec::new(),
             attachment_indexes: Vec::new(),
             scratch: Vec::new(),
+            compressed: Vec::new(),
         }
     }
 
-    fn run(&mut self, start: Vec<u8>, jobs: Receiver<Job>) -> Result<()> {
+    fn run(
+        &mut self,
+        start: Vec<u8>,
+        jobs: Receiver<Job>,
+        spares: std::sync::mpsc::Sender<Vec<u8>>,
+    ) -> Result<()> {
         self.put(&start)?;
         while let Ok(job) = jobs.recv() {
             match job {
@@ -637,9 +654,11 @@ impl FileSide {
                     start,
                     end,
                 } => {
-                    let compressed = self
-                        .compressor
-                        .compress(&records)
+                    let mut compressed = std::mem::take(&mut self.compressed);
+                    compressed.clear();
+                    compressed.reserve(zstd::zstd_safe::compress_bound(records.len()));
+                    self.compressor
+                        .compress_to_buffer(&records, &mut compressed)
                         .map_err(|e| self.error(e))?;
                     let header = ChunkHeader {
                         message_start_time: start,
@@ -658,6 +677,8 @@ impl FileSide {
                     raw.extend_from_slice(&compressed);
                     let result = self.put_chunk(&raw, &header, index);
                     self.scratch = raw;
+                    self.compressed = compressed;
+                    let _ = spares.send(records); // the writer may be gone
                     result?;
                 }
                 Job::Copy { raw, header, index } => self.put_chunk(&raw, &header, index)?,
