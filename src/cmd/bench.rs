@@ -32,6 +32,9 @@ pub struct Args {
     /// Folder for the benchmark files.
     #[arg(long, default_value = "target/bench")]
     pub dir: PathBuf,
+    /// Runs of refuse per log; the median time and the highest peak memory are reported.
+    #[arg(long, default_value_t = 3)]
+    pub repeat: u32,
     /// Measure the recorder instead: UDP ingest rate and CPU/memory at a field load held for
     /// this many seconds.
     #[arg(long, value_name = "SECONDS")]
@@ -100,7 +103,16 @@ pub fn run(a: Args) -> Result<()> {
         let raw = a.dir.join(format!("bench-{tag}.mcap"));
         let preset = railfuse_record::Scenario::preset(scenario).expect("a built-in preset");
         let sim = railfuse_record::simulate(&preset, 1, duration, &[], &raw)?;
-        let ours = refuse_child(&raw, config, &a.dir.join(format!("bench-{tag}.fused.mcap")))?;
+        let fused = a.dir.join(format!("bench-{tag}.fused.mcap"));
+        // The median of several runs: the machine's other load moves single timings.
+        let mut all = (0..a.repeat.max(1))
+            .map(|_| refuse_child(&raw, config, &fused))
+            .collect::<Result<Vec<_>>>()?;
+        all.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
+        let ours = Measured {
+            wall_s: all[all.len() / 2].wall_s,
+            peak_rss_kib: all.iter().filter_map(|m| m.peak_rss_kib).max(),
+        };
         let rate = sim.messages as f64 / ours.wall_s;
         // The peer runs the Kalman job only (source 001's federated filters it has not).
         let theirs = match (&python, scenario) {

@@ -18,7 +18,7 @@ use std::path::Path;
 use nalgebra::RowSVector;
 use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::messages::{
-    BalisePassage, GnssFix, Imu, LoopPosition, MessageKind, Odometer, RadarSpeed, TrackMap,
+    BalisePassage, GnssFix, LoopPosition, MessageKind, RadarSpeed, TrackMap,
 };
 use serde::{Deserialize, Serialize};
 
@@ -198,12 +198,23 @@ impl SensorModel {
                     m.valid,
                 ));
             }
+            // The high-rate channels: only the fields used are decoded (no sensor id string).
             SensorModel::OdometerSpeed => {
-                let m: Odometer = msg.decode(path)?;
+                #[derive(serde::Deserialize)]
+                struct Speed {
+                    stamp_ns: u64,
+                    speed_mps: f64,
+                }
+                let m: Speed = msg.decode_fields(path)?;
                 out.push(one(m.stamp_ns, Quantity::Speed, m.speed_mps, None, true));
             }
             SensorModel::ImuAcceleration => {
-                let m: Imu = msg.decode(path)?;
+                #[derive(serde::Deserialize)]
+                struct SpecificForce {
+                    stamp_ns: u64,
+                    specific_force_mps2: [f64; 3],
+                }
+                let m: SpecificForce = msg.decode_fields(path)?;
                 out.push(one(
                     m.stamp_ns,
                     Quantity::Acceleration,
