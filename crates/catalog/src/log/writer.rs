@@ -603,7 +603,8 @@ struct FileSide {
 impl FileSide {
     fn new(file: File, path: PathBuf, level: u32) -> Self {
         Self {
-            out: BufWriter::with_capacity(1 << 16, file),
+            // Small: chunks (tens of KiB and more) go to the file without a copy into it.
+            out: BufWriter::with_capacity(16 << 10, file),
             path,
             offset: 0,
             crc: crc32fast::Hasher::new(),
@@ -668,20 +669,20 @@ impl FileSide {
                         compression: "zstd".into(),
                         compressed_size: compressed.len() as u64,
                     };
-                    let mut raw = std::mem::take(&mut self.scratch);
-                    raw.clear();
-                    let head = format::body(&header);
-                    raw.push(op::CHUNK);
-                    raw.extend_from_slice(&((head.len() + compressed.len()) as u64).to_le_bytes());
-                    raw.extend_from_slice(&head);
-                    raw.extend_from_slice(&compressed);
-                    let result = self.put_chunk(&raw, &header, index);
-                    self.scratch = raw;
+                    // The frame and header, then the compressed records: no copy to join them.
+                    let mut head = std::mem::take(&mut self.scratch);
+                    head.clear();
+                    let body = format::body(&header);
+                    head.push(op::CHUNK);
+                    head.extend_from_slice(&((body.len() + compressed.len()) as u64).to_le_bytes());
+                    head.extend_from_slice(&body);
+                    let result = self.put_chunk(&[&head, &compressed], &header, index);
+                    self.scratch = head;
                     self.compressed = compressed;
                     let _ = spares.send(records); // the writer may be gone
                     result?;
                 }
-                Job::Copy { raw, header, index } => self.put_chunk(&raw, &header, index)?,
+                Job::Copy { raw, header, index } => self.put_chunk(&[&raw], &header, index)?,
                 Job::Flush(done) => {
                     self.out.flush().map_err(|e| self.error(e))?;
                     let _ = done.send(());
@@ -710,9 +711,11 @@ impl FileSide {
     }
 
     /// A chunk record, then its message indexes, and its entry for the chunk index.
-    fn put_chunk(&mut self, raw: &[u8], header: &ChunkHeader, index: Index) -> Result<()> {
+    fn put_chunk(&mut self, parts: &[&[u8]], header: &ChunkHeader, index: Index) -> Result<()> {
         let chunk_start = self.offset;
-        self.put(raw)?;
+        for part in parts {
+            self.put(part)?;
+        }
         let indexes_start = self.offset;
         let mut offsets = BTreeMap::new();
         let mut records = Vec::new();
@@ -732,7 +735,7 @@ impl FileSide {
             message_start_time: header.message_start_time,
             message_end_time: header.message_end_time,
             chunk_start_offset: chunk_start,
-            chunk_length: raw.len() as u64,
+            chunk_length: indexes_start - chunk_start,
             message_index_offsets: offsets,
             message_index_length: records.len() as u64,
             compression: header.compression.clone(),
