@@ -140,56 +140,10 @@ impl<'a> Replay<'a> {
         let names: BTreeSet<String> = opts.config.names().map(str::to_owned).collect();
         let known = summary.as_ref().map(|s| &s.channels);
         let mut writer = LogWriter::create(opts.output)?;
-        // Output channels take the highest ids the input does not use, so copied records keep
-        // theirs (replaced channels' ids too: their records may sit in chunks copied whole).
-        let used: BTreeSet<u16> = known.into_iter().flatten().map(|c| c.id).collect();
-        let used_schemas: BTreeSet<u16> = known
-            .into_iter()
-            .flatten()
-            .filter_map(|c| c.schema.as_ref().map(|s| s.id))
-            .collect();
-        let mut free = (1..=u16::MAX)
-            .rev()
-            .filter(|id| !used.contains(id) && !used_schemas.contains(id));
-        let mut next = || {
-            free.next()
-                .ok_or_else(|| Error::Log(ids_exhausted(opts.output)))
-        };
-        let (state_schema, diag_schema) = (next()?, next()?);
         // Fused states of kept pipelines may trail the reference by a chunk in file order.
         let lag = eval::lag_allowance_s(summary.as_ref().and_then(|s| s.longest_chunk_ns));
         let mut eval = Evaluator::new(opts.output, opts.reference, lag);
-        let mut outputs = Vec::new();
-        for p in &opts.config.pipeline {
-            let state_topic = topics::fused_state(&p.name);
-            let diag_topic = topics::fused_diagnostics(&p.name);
-            let state =
-                writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &state_topic)?;
-            let diagnostics = writer.add_channel_with_ids::<FusedDiagnostics>(
-                diag_schema,
-                next()?,
-                &diag_topic,
-            )?;
-            eval.channel(state.0, &state_topic, FusedState::SCHEMA_NAME);
-            eval.channel(diagnostics.0, &diag_topic, FusedDiagnostics::SCHEMA_NAME);
-            let smoothed = match p.estimator.smoother() {
-                true => {
-                    let topic = topics::fused_smoothed(&p.name);
-                    let id =
-                        writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &topic)?;
-                    eval.channel(id.0, &topic, FusedState::SCHEMA_NAME);
-                    Some(id)
-                }
-                false => None,
-            };
-            outputs.push(Output {
-                state,
-                diagnostics,
-                smoothed,
-                states: 0,
-                smoothed_states: 0,
-            });
-        }
+        let outputs = register_outputs(opts, known.map(Vec::as_slice), &mut writer, &mut eval)?;
         let pipelines = opts
             .config
             .pipeline
@@ -611,6 +565,61 @@ impl<'a> Replay<'a> {
         }
         Ok(())
     }
+}
+
+/// Registers every pipeline's fused channels with the writer and the evaluation. They take
+/// the highest ids the input (`known`, its summary's channels) does not use, so copied
+/// records keep theirs (replaced channels' ids too: their records may sit in chunks copied
+/// whole).
+fn register_outputs(
+    opts: &RefuseOptions<'_>,
+    known: Option<&[Arc<ChannelInfo>]>,
+    writer: &mut LogWriter,
+    eval: &mut Evaluator,
+) -> Result<Vec<Output>> {
+    let used: BTreeSet<u16> = known.into_iter().flatten().map(|c| c.id).collect();
+    let used_schemas: BTreeSet<u16> = known
+        .into_iter()
+        .flatten()
+        .filter_map(|c| c.schema.as_ref().map(|s| s.id))
+        .collect();
+    let mut free = (1..=u16::MAX)
+        .rev()
+        .filter(|id| !used.contains(id) && !used_schemas.contains(id));
+    let mut next = || {
+        free.next()
+            .ok_or_else(|| Error::Log(ids_exhausted(opts.output)))
+    };
+    let (state_schema, diag_schema) = (next()?, next()?);
+    let mut outputs = Vec::new();
+    for p in &opts.config.pipeline {
+        let state_topic = topics::fused_state(&p.name);
+        let diag_topic = topics::fused_diagnostics(&p.name);
+        let state =
+            writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &state_topic)?;
+        let diagnostics =
+            writer.add_channel_with_ids::<FusedDiagnostics>(diag_schema, next()?, &diag_topic)?;
+        eval.channel(state.0, &state_topic, FusedState::SCHEMA_NAME);
+        eval.channel(diagnostics.0, &diag_topic, FusedDiagnostics::SCHEMA_NAME);
+        let smoothed = match p.estimator.smoother() {
+            true => {
+                let topic = topics::fused_smoothed(&p.name);
+                let id =
+                    writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &topic)?;
+                eval.channel(id.0, &topic, FusedState::SCHEMA_NAME);
+                Some(id)
+            }
+            false => None,
+        };
+        outputs.push(Output {
+            state,
+            diagnostics,
+            smoothed,
+            states: 0,
+            smoothed_states: 0,
+        });
+    }
+    Ok(outputs)
 }
 
 fn copy_channel(writer: &mut LogWriter, c: &ChannelInfo) -> Result<()> {

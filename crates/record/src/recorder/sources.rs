@@ -139,80 +139,14 @@ fn run_until_end(
     stats: &Stats,
     stop: Arc<AtomicBool>,
 ) -> Result<(), SourceError> {
-    let tick = Duration::from_millis(200);
     stats.lock().expect("stats").connected = true;
     match spec {
-        SourceSpec::Udp { addr } => {
-            let sock = match UdpSocket::bind(addr)
-                .and_then(|s| s.set_read_timeout(Some(tick)).map(|()| s))
-            {
-                Ok(s) => s,
-                Err(source) => return Err(SourceError::Bind { addr, source }),
-            };
-            let mut buf = vec![0u8; 65_536];
-            let mut items = Vec::new();
-            while !stop.load(Ordering::Relaxed) {
-                match sock.recv(&mut buf) {
-                    Ok(n) => {
-                        // Each datagram holds whole lines; a fresh decoder per datagram keeps a
-                        // torn one from corrupting the next.
-                        let mut d = StreamDecoder::new(StreamFormat::JsonLines);
-                        let t = now_ns();
-                        let mut s = stats.lock().expect("stats");
-                        if n == buf.len() {
-                            s.oversized += 1;
-                            continue;
-                        }
-                        d.feed(&buf[..n], t, &mut s, &mut items);
-                        d.finish(t, &mut s, &mut items);
-                        drop(s);
-                        if !send(&tx, stats, &mut items) {
-                            return Ok(());
-                        }
-                    }
-                    Err(e)
-                        if matches!(
-                            e.kind(),
-                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
-                        ) => {}
-                    Err(e) => set_error(stats, e),
-                }
-            }
-        }
+        SourceSpec::Udp { addr } => udp(addr, &tx, stats, &stop),
         SourceSpec::TcpListen {
             addr,
             format,
             topic,
-        } => {
-            let listener =
-                match TcpListener::bind(addr).and_then(|l| l.set_nonblocking(true).map(|()| l)) {
-                    Ok(l) => l,
-                    Err(source) => return Err(SourceError::Bind { addr, source }),
-                };
-            std::thread::scope(|scope| {
-                while !stop.load(Ordering::Relaxed) {
-                    match listener.accept() {
-                        Ok((conn, _)) => {
-                            let (tx, stats, stop, topic) =
-                                (tx.clone(), stats.clone(), stop.clone(), topic.clone());
-                            scope.spawn(move || {
-                                let _ = conn.set_nonblocking(false);
-                                let _ = conn.set_read_timeout(Some(tick));
-                                if let Err(e) =
-                                    pump(conn, format, topic.as_deref(), &tx, &stats, &stop)
-                                {
-                                    set_error(&stats, e);
-                                }
-                            });
-                        }
-                        Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                            std::thread::sleep(Duration::from_millis(20))
-                        }
-                        Err(e) => set_error(stats, e),
-                    }
-                }
-            });
-        }
+        } => tcp_listen(addr, format, topic, &tx, stats, &stop),
         SourceSpec::TcpClient {
             addr,
             format,
@@ -223,7 +157,7 @@ fn run_until_end(
                     addr: addr.clone(),
                     source,
                 })?;
-                let _ = conn.set_read_timeout(Some(tick));
+                let _ = conn.set_read_timeout(Some(TICK));
                 Ok(conn)
             };
             let run = |conn| {
@@ -235,18 +169,17 @@ fn run_until_end(
                 })
             };
             with_reconnects(stats, &stop, open, run);
+            Ok(())
         }
-        SourceSpec::Stdin { format, topic } => {
-            pump(
-                std::io::stdin().lock(),
-                format,
-                topic.as_deref(),
-                &tx,
-                stats,
-                &stop,
-            )
-            .map_err(SourceError::Stdin)?;
-        }
+        SourceSpec::Stdin { format, topic } => pump(
+            std::io::stdin().lock(),
+            format,
+            topic.as_deref(),
+            &tx,
+            stats,
+            &stop,
+        )
+        .map_err(SourceError::Stdin),
         SourceSpec::File {
             path,
             format,
@@ -257,7 +190,7 @@ fn run_until_end(
                 source,
             };
             let f = std::fs::File::open(&path).map_err(on_path)?;
-            pump(f, format, topic.as_deref(), &tx, stats, &stop).map_err(on_path)?;
+            pump(f, format, topic.as_deref(), &tx, stats, &stop).map_err(on_path)
         }
         SourceSpec::Serial {
             path,
@@ -274,16 +207,95 @@ fn run_until_end(
                 pump_with(port, format, topic.as_deref(), &tx, stats, &stop, true).map_err(on_path)
             };
             with_reconnects(stats, &stop, open, run);
+            Ok(())
         }
         SourceSpec::Simulated {
             scenario,
             seed,
             speed,
             duration_s,
-        } => {
-            simulated(&scenario, seed, speed, duration_s, &tx, stats, &stop)?;
+        } => simulated(&scenario, seed, speed, duration_s, &tx, stats, &stop),
+    }
+}
+
+/// How often a blocking read wakes to see whether the recorder is stopping.
+const TICK: Duration = Duration::from_millis(200);
+
+/// JSON lines in UDP datagrams on `addr`, until `stop`.
+fn udp(
+    addr: std::net::SocketAddr,
+    tx: &SyncSender<Item>,
+    stats: &Stats,
+    stop: &AtomicBool,
+) -> Result<(), SourceError> {
+    let sock = UdpSocket::bind(addr)
+        .and_then(|s| s.set_read_timeout(Some(TICK)).map(|()| s))
+        .map_err(|source| SourceError::Bind { addr, source })?;
+    let mut buf = vec![0u8; 65_536];
+    let mut items = Vec::new();
+    while !stop.load(Ordering::Relaxed) {
+        match sock.recv(&mut buf) {
+            Ok(n) => {
+                // Each datagram holds whole lines; a fresh decoder per datagram keeps a torn
+                // one from corrupting the next.
+                let mut d = StreamDecoder::new(StreamFormat::JsonLines);
+                let t = now_ns();
+                let mut s = stats.lock().expect("stats");
+                if n == buf.len() {
+                    s.oversized += 1;
+                    continue;
+                }
+                d.feed(&buf[..n], t, &mut s, &mut items);
+                d.finish(t, &mut s, &mut items);
+                drop(s);
+                if !send(tx, stats, &mut items) {
+                    return Ok(());
+                }
+            }
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                ) => {}
+            Err(e) => set_error(stats, e),
         }
     }
+    Ok(())
+}
+
+/// A TCP listener on `addr`: each connection read on its own thread, until `stop`.
+fn tcp_listen(
+    addr: std::net::SocketAddr,
+    format: StreamFormat,
+    topic: Option<String>,
+    tx: &SyncSender<Item>,
+    stats: &Stats,
+    stop: &Arc<AtomicBool>,
+) -> Result<(), SourceError> {
+    let listener = TcpListener::bind(addr)
+        .and_then(|l| l.set_nonblocking(true).map(|()| l))
+        .map_err(|source| SourceError::Bind { addr, source })?;
+    std::thread::scope(|scope| {
+        while !stop.load(Ordering::Relaxed) {
+            match listener.accept() {
+                Ok((conn, _)) => {
+                    let (tx, stats, stop, topic) =
+                        (tx.clone(), stats.clone(), stop.clone(), topic.clone());
+                    scope.spawn(move || {
+                        let _ = conn.set_nonblocking(false);
+                        let _ = conn.set_read_timeout(Some(TICK));
+                        if let Err(e) = pump(conn, format, topic.as_deref(), &tx, &stats, &stop) {
+                            set_error(&stats, e);
+                        }
+                    });
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                    std::thread::sleep(Duration::from_millis(20))
+                }
+                Err(e) => set_error(stats, e),
+            }
+        }
+    });
     Ok(())
 }
 
