@@ -97,26 +97,186 @@ fn utc_offset(path: &Path) -> Result<Option<i128>> {
     Ok(None)
 }
 
-struct Out {
+/// An import in progress: the output channels, the report, and what decoding carries from
+/// one line to the next.
+struct EthImport {
     writer: LogWriter,
     imu: ChannelId,
     gnss: ChannelId,
     events: ChannelId,
+    report: ImportReport,
+    /// The IMU's sensor id (the node's serial number in it).
+    imu_id: String,
+    /// Node clock to UTC, when the file has a NAV-PVT with a valid time.
+    offset: Option<i128>,
+    nmea: FixAssembler,
+    /// A NAV-PVT waits for the NAV-COV of its epoch (the receiver sends it right after).
+    pairing: PvtCovPairing,
+    /// The node clock of the last line: the time of a solution left waiting at the end.
+    last_now: Option<u64>,
+    bytes: Vec<u8>,
 }
 
-impl Out {
+impl EthImport {
     fn write<M: ChannelMessage>(
         &mut self,
-        report: &mut ImportReport,
         channel: ChannelId,
         topic: &str,
         log_time: u64,
         m: &M,
     ) -> Result<()> {
         self.writer.write(channel, log_time, m)?;
-        report.messages += 1;
-        *report.per_topic.entry(topic.to_owned()).or_insert(0) += 1;
+        self.report.messages += 1;
+        *self.report.per_topic.entry(topic.to_owned()).or_insert(0) += 1;
         Ok(())
+    }
+
+    fn fix(&mut self, now: u64, fix: &GnssFix) -> Result<()> {
+        self.write(self.gnss, topics::GNSS_FIX, now, fix)
+    }
+
+    /// Line `n`: `TIME,KIND,DATA`.
+    fn line(&mut self, n: u64, text: &str) -> Result<()> {
+        let mut f = text.splitn(3, ',');
+        let (t, kind, data) = (
+            f.next().unwrap_or(""),
+            f.next().unwrap_or(""),
+            f.next().unwrap_or(""),
+        );
+        let Some(board) = board_ns(t) else {
+            self.report.skip(n, "bad timestamp", t);
+            return Ok(());
+        };
+        let now = self
+            .offset
+            .map_or(board, |o| (board as i128 + o).max(0) as u64);
+        self.last_now = Some(now);
+        match kind {
+            "I" => self.imu_sample(n, now, data),
+            "U" => self.ubx_frame(n, now, data),
+            "N" => self.nmea_sentence(n, now, data),
+            "BRK" | "ARR" | "DEP" => self.event(now, kind, data),
+            other => {
+                self.report.skip(n, "unknown line type", other);
+                Ok(())
+            }
+        }
+    }
+
+    /// `I`: six little-endian i16 (gyro x, y, z, then accelerometer x, y, z) in hex.
+    fn imu_sample(&mut self, n: u64, now: u64, data: &str) -> Result<()> {
+        if data.len() != 24 || !hex_into(data, &mut self.bytes) {
+            self.report.skip(n, "bad IMU sample", data);
+            return Ok(());
+        }
+        let b = &self.bytes;
+        let w = |i: usize| i16::from_le_bytes([b[2 * i], b[2 * i + 1]]) as f64;
+        let m = Imu {
+            stamp_ns: now,
+            sensor_id: self.imu_id.clone(),
+            angular_rate_radps: [
+                w(0) * GYRO_RADPS_PER_LSB,
+                w(1) * GYRO_RADPS_PER_LSB,
+                w(2) * GYRO_RADPS_PER_LSB,
+            ],
+            specific_force_mps2: [
+                w(3) * ACCEL_MPS2_PER_LSB,
+                w(4) * ACCEL_MPS2_PER_LSB,
+                w(5) * ACCEL_MPS2_PER_LSB,
+            ],
+        };
+        self.write(self.imu, topics::IMU, now, &m)
+    }
+
+    /// `U`: one UBX frame in hex; NAV-PVT and NAV-COV make fixes.
+    fn ubx_frame(&mut self, n: u64, now: u64, data: &str) -> Result<()> {
+        if !hex_into(data, &mut self.bytes) {
+            self.report.skip(n, "UBX frame not hex", data);
+            return Ok(());
+        }
+        let bytes = std::mem::take(&mut self.bytes);
+        let result = self.ubx_bytes(n, now, data, &bytes);
+        self.bytes = bytes;
+        result
+    }
+
+    fn ubx_bytes(&mut self, n: u64, now: u64, data: &str, bytes: &[u8]) -> Result<()> {
+        let frame = match ubx::parse_frame(bytes) {
+            Ok((frame, used)) if used == bytes.len() => frame,
+            Ok(_) => {
+                self.report.skip(n, "UBX trailing bytes", data);
+                return Ok(());
+            }
+            Err(e) => {
+                self.report.skip(n, "UBX frame rejected", e);
+                return Ok(());
+            }
+        };
+        match (frame.class, frame.id) {
+            NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
+                Ok(pvt) => {
+                    if let Some(prev) = self.pairing.pvt(pvt) {
+                        self.fix(now, &prev.to_fix(prev.utc_ns.unwrap_or(now), None))?;
+                    }
+                }
+                Err(e) => self.report.skip(n, "UBX NAV-PVT rejected", e),
+            },
+            NavCov::CLASS_ID => match NavCov::decode(&frame) {
+                Ok(cov) => match self.pairing.cov(&cov) {
+                    Some((pvt, cov)) => {
+                        self.fix(now, &pvt.to_fix(pvt.utc_ns.unwrap_or(now), cov))?;
+                    }
+                    None => self
+                        .report
+                        .skip(n, "UBX NAV-COV without its NAV-PVT", cov.itow_ms),
+                },
+                Err(e) => self.report.skip(n, "UBX NAV-COV rejected", e),
+            },
+            (0x05, _) => self.count("UBX ACK/NAK (not data)".into()),
+            (c, i) => self.count(format!("UBX {c:02x}/{i:02x} (not decoded)")),
+        }
+        Ok(())
+    }
+
+    /// `N`: one NMEA sentence. With the node clock on UTC, a GGA before any RMC takes the day
+    /// nearest it.
+    fn nmea_sentence(&mut self, n: u64, now: u64, data: &str) -> Result<()> {
+        let clock = self.offset.map(|_| now);
+        match nmea::parse(data).and_then(|s| self.nmea.feed(&s, clock)) {
+            Ok(Decoded::Fix) => {
+                while let Some(fix) = self.nmea.next_fix() {
+                    self.fix(now, &fix)?;
+                }
+            }
+            Ok(Decoded::Context | Decoded::Held) => {}
+            Ok(Decoded::Skipped) => self.count("NMEA sentence type not used (GSV, GLL, …)".into()),
+            Err(e) => self.report.skip(n, "NMEA sentence rejected", e),
+        }
+        Ok(())
+    }
+
+    /// `BRK` (correction link and operator notes), `ARR`, `DEP`: events.
+    fn event(&mut self, now: u64, kind: &str, data: &str) -> Result<()> {
+        let kind = match (kind, data.trim()) {
+            ("ARR", _) => EventKind::StationArrival,
+            ("DEP", _) => EventKind::StationDeparture,
+            (_, d) if d.contains("CONNECTED") && !d.contains("DISCONNECTED") => {
+                EventKind::CorrectionLinkUp
+            }
+            (_, d) if d.contains("DISCONNECTED") => EventKind::CorrectionLinkDown,
+            _ => EventKind::OperatorNote,
+        };
+        let e = Event {
+            stamp_ns: now,
+            kind,
+            text: data.trim().to_owned(),
+        };
+        self.write(self.events, topics::EVENTS, now, &e)
+    }
+
+    /// A line of a kind not imported, counted.
+    fn count(&mut self, what: String) {
+        *self.report.skipped.entry(what).or_insert(0) += 1;
     }
 }
 
@@ -131,19 +291,14 @@ pub fn import_with_progress(
     output: &Path,
     progress: &dyn Fn(u64),
 ) -> Result<ImportReport> {
-    let mut report = ImportReport {
-        input: input.to_owned(),
-        output: output.to_owned(),
-        format: "eth".into(),
-        ..Default::default()
-    };
     let offset = utc_offset(input)?;
-    report.time_base = match offset {
-        Some(_) => "UTC, from the first NAV-PVT with a valid time; other records by their node-clock offset to it".into(),
-        None => "node clock since start-up (no NAV-PVT with a valid time in the file)".into(),
+    let time_base = match offset {
+        Some(_) => {
+            "UTC, from the first NAV-PVT with a valid time; other records by their \
+                    node-clock offset to it"
+        }
+        None => "node clock since start-up (no NAV-PVT with a valid time in the file)",
     };
-    let to_utc =
-        |board: u64| -> u64 { offset.map_or(board, |o| (board as i128 + o).max(0) as u64) };
     let stem = input
         .file_stem()
         .and_then(|s| s.to_str())
@@ -154,177 +309,56 @@ pub fn import_with_progress(
         .find(|p| p.starts_with("SN"))
         .unwrap_or("SN?")
         .to_owned();
-
     let mut writer = LogWriter::create(output)?;
-    let imu = writer.add_channel::<Imu>(topics::IMU)?;
-    let gnss = writer.add_channel::<GnssFix>(topics::GNSS_FIX)?;
-    let events = writer.add_channel::<Event>(topics::EVENTS)?;
-    let mut out = Out {
+    let mut im = EthImport {
+        imu: writer.add_channel::<Imu>(topics::IMU)?,
+        gnss: writer.add_channel::<GnssFix>(topics::GNSS_FIX)?,
+        events: writer.add_channel::<Event>(topics::EVENTS)?,
         writer,
-        imu,
-        gnss,
-        events,
+        report: ImportReport {
+            input: input.to_owned(),
+            output: output.to_owned(),
+            format: "eth".into(),
+            time_base: time_base.into(),
+            ..Default::default()
+        },
+        imu_id: format!("asm330lhh-{node}"),
+        offset,
+        nmea: FixAssembler::default(),
+        pairing: PvtCovPairing::default(),
+        last_now: None,
+        bytes: Vec::new(),
     };
 
     let mut r = open(input)?;
-    let (mut line, mut bytes) = (Vec::new(), Vec::new());
-    let mut nmea = FixAssembler::default();
-    // A NAV-PVT waits for the NAV-COV of its epoch (the receiver sends it right after).
-    let mut pairing = PvtCovPairing::default();
-    // The node clock of the last line: the time of a solution left waiting at the end.
-    let mut last_now = None;
-    let mut n = 0u64;
+    let mut line = Vec::new();
+    let (mut n, mut consumed) = (0u64, 0u64);
     let io = |source| Error::Io {
         path: input.to_owned(),
         source,
     };
-    let mut consumed = 0u64;
     while let Some(ok) = read_line_bounded(&mut r, &mut line).map_err(io)? {
         n += 1;
-        report.lines += 1;
+        im.report.lines += 1;
         consumed += line.len() as u64 + 1;
         if n.is_multiple_of(4096) {
             progress(consumed);
         }
         if !ok {
-            report.skip(
-                n,
-                "line too long",
-                format!("over {} bytes", super::MAX_LINE),
-            );
+            let limit = format!("over {} bytes", super::MAX_LINE);
+            im.report.skip(n, "line too long", limit);
             continue;
         }
         let Ok(text) = std::str::from_utf8(&line) else {
-            report.skip(n, "not UTF-8 text", "binary bytes");
+            im.report.skip(n, "not UTF-8 text", "binary bytes");
             continue;
         };
-        if text.trim().is_empty() {
-            continue;
-        }
-        let mut f = text.splitn(3, ',');
-        let (t, kind, data) = (
-            f.next().unwrap_or(""),
-            f.next().unwrap_or(""),
-            f.next().unwrap_or(""),
-        );
-        let Some(board) = board_ns(t) else {
-            report.skip(n, "bad timestamp", t);
-            continue;
-        };
-        let now = to_utc(board);
-        last_now = Some(now);
-        match kind {
-            "I" => {
-                if data.len() != 24 || !hex_into(data, &mut bytes) {
-                    report.skip(n, "bad IMU sample", data);
-                    continue;
-                }
-                let w = |i: usize| i16::from_le_bytes([bytes[2 * i], bytes[2 * i + 1]]) as f64;
-                let m = Imu {
-                    stamp_ns: now,
-                    sensor_id: format!("asm330lhh-{node}"),
-                    angular_rate_radps: [
-                        w(0) * GYRO_RADPS_PER_LSB,
-                        w(1) * GYRO_RADPS_PER_LSB,
-                        w(2) * GYRO_RADPS_PER_LSB,
-                    ],
-                    specific_force_mps2: [
-                        w(3) * ACCEL_MPS2_PER_LSB,
-                        w(4) * ACCEL_MPS2_PER_LSB,
-                        w(5) * ACCEL_MPS2_PER_LSB,
-                    ],
-                };
-                out.write(&mut report, out.imu, topics::IMU, now, &m)?;
-            }
-            "U" => {
-                if !hex_into(data, &mut bytes) {
-                    report.skip(n, "UBX frame not hex", data);
-                    continue;
-                }
-                let frame = match ubx::parse_frame(&bytes) {
-                    Ok((frame, used)) if used == bytes.len() => frame,
-                    Ok(_) => {
-                        report.skip(n, "UBX trailing bytes", data);
-                        continue;
-                    }
-                    Err(e) => {
-                        report.skip(n, "UBX frame rejected", e);
-                        continue;
-                    }
-                };
-                match (frame.class, frame.id) {
-                    NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
-                        Ok(pvt) => {
-                            if let Some(prev) = pairing.pvt(pvt) {
-                                let fix = prev.to_fix(prev.utc_ns.unwrap_or(now), None);
-                                out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
-                            }
-                        }
-                        Err(e) => report.skip(n, "UBX NAV-PVT rejected", e),
-                    },
-                    NavCov::CLASS_ID => match NavCov::decode(&frame) {
-                        Ok(cov) => match pairing.cov(&cov) {
-                            Some((pvt, cov)) => {
-                                let fix = pvt.to_fix(pvt.utc_ns.unwrap_or(now), cov);
-                                out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
-                            }
-                            None => report.skip(n, "UBX NAV-COV without its NAV-PVT", cov.itow_ms),
-                        },
-                        Err(e) => report.skip(n, "UBX NAV-COV rejected", e),
-                    },
-                    (0x05, _) => {
-                        *report
-                            .skipped
-                            .entry("UBX ACK/NAK (not data)".into())
-                            .or_insert(0) += 1
-                    }
-                    (c, i) => {
-                        *report
-                            .skipped
-                            .entry(format!("UBX {c:02x}/{i:02x} (not decoded)"))
-                            .or_insert(0) += 1
-                    }
-                }
-            }
-            // With the node clock on UTC, a GGA before any RMC takes the day nearest it.
-            "N" => match nmea::parse(data).and_then(|s| nmea.feed(&s, offset.map(|_| now))) {
-                Ok(Decoded::Fix) => {
-                    while let Some(fix) = nmea.next_fix() {
-                        out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
-                    }
-                }
-                Ok(Decoded::Context | Decoded::Held) => {}
-                Ok(Decoded::Skipped) => {
-                    *report
-                        .skipped
-                        .entry("NMEA sentence type not used (GSV, GLL, …)".into())
-                        .or_insert(0) += 1
-                }
-                Err(e) => report.skip(n, "NMEA sentence rejected", e),
-            },
-            "BRK" | "ARR" | "DEP" => {
-                let kind = match (kind, data.trim()) {
-                    ("ARR", _) => EventKind::StationArrival,
-                    ("DEP", _) => EventKind::StationDeparture,
-                    (_, d) if d.contains("CONNECTED") && !d.contains("DISCONNECTED") => {
-                        EventKind::CorrectionLinkUp
-                    }
-                    (_, d) if d.contains("DISCONNECTED") => EventKind::CorrectionLinkDown,
-                    _ => EventKind::OperatorNote,
-                };
-                let e = Event {
-                    stamp_ns: now,
-                    kind,
-                    text: data.trim().to_owned(),
-                };
-                out.write(&mut report, out.events, topics::EVENTS, now, &e)?;
-            }
-            other => report.skip(n, "unknown line type", other),
+        if !text.trim().is_empty() {
+            im.line(n, text)?;
         }
     }
-    if let (Some(pvt), Some(now)) = (pairing.finish(), last_now) {
-        let fix = pvt.to_fix(pvt.utc_ns.unwrap_or(now), None);
-        out.write(&mut report, out.gnss, topics::GNSS_FIX, now, &fix)?;
+    if let (Some(pvt), Some(now)) = (im.pairing.finish(), im.last_now) {
+        im.fix(now, &pvt.to_fix(pvt.utc_ns.unwrap_or(now), None))?;
     }
     let run = BTreeMap::from([
         ("run_id".to_owned(), stem.clone()),
@@ -341,12 +375,12 @@ pub fn import_with_progress(
                 .unwrap_or("")
                 .to_owned(),
         ),
-        ("time_base".to_owned(), report.time_base.clone()),
+        ("time_base".to_owned(), im.report.time_base.clone()),
         ("tool_version".to_owned(), crate::TOOL_VERSION.to_owned()),
     ]);
-    out.writer.write_metadata(topics::metadata::RUN, run)?;
-    out.writer.finish()?;
-    Ok(report)
+    im.writer.write_metadata(topics::metadata::RUN, run)?;
+    im.writer.finish()?;
+    Ok(im.report)
 }
 
 #[cfg(test)]
