@@ -37,8 +37,8 @@ struct Stream {
     topics: Vec<(String, String)>,
 }
 
-/// Simulates `scenario` and decodes every message of a channel a sensor model reads.
-fn stream(scenario: &str, duration: Option<f64>) -> Stream {
+/// Simulates `scenario` and decodes every message of a channel a pipeline of `spec` reads.
+fn stream(scenario: &str, duration: Option<f64>, spec: &Pipelines) -> Stream {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");
     let preset = railfuse_record::Scenario::preset(scenario).unwrap();
@@ -56,7 +56,11 @@ fn stream(scenario: &str, duration: Option<f64>) -> Stream {
             ctx.track = Some(m.decode(Path::new("bench")).unwrap());
             continue;
         }
-        let Some(model) = SensorModel::for_schema(schema) else {
+        let read = spec
+            .pipeline
+            .iter()
+            .any(|p| p.sensor_for(&m.channel.topic).is_some());
+        let (true, Some(model)) = (read, SensorModel::for_schema(schema)) else {
             continue;
         };
         let topic = match topics.iter().position(|(t, _)| *t == m.channel.topic) {
@@ -140,7 +144,7 @@ fn config(text: &str, copies: usize) -> Pipelines {
 
 fn kalman(c: &mut Criterion) {
     let kalman_toml = include_str!("../../../samples/kalman.toml");
-    let stream = stream("default", Some(600.0));
+    let stream = stream("default", Some(600.0), &config(kalman_toml, 1));
     let mut out = Vec::new();
     let mut g = c.benchmark_group("kalman_replay");
     let one = config(kalman_toml, 1);
@@ -172,7 +176,11 @@ fn named(text: &str, name: &str) -> Pipelines {
 /// sensor states (6 states, one of them an EKF row).
 fn federated(c: &mut Criterion) {
     let toml = include_str!("../../../samples/seed001.toml");
-    let stream = stream("seed001", None);
+    let stream = stream(
+        "seed001",
+        None,
+        &Pipelines::parse(toml, Path::new("bench.toml")).unwrap(),
+    );
     let mut out = Vec::new();
     let mut g = c.benchmark_group("seed001_replay");
     g.sample_size(10);
