@@ -25,7 +25,7 @@ use toml::Spanned;
 use crate::error::{Error, Result};
 use crate::filter::federated::Feedback;
 use crate::filter::particle::ParticleSettings;
-use crate::filter::sharing::Redistribution;
+use crate::filter::sharing::{Redistribution, SharingName};
 use crate::filter::working_state::DetectorSettings;
 use crate::measurement::Quantity;
 
@@ -167,8 +167,12 @@ pub struct FederatedConfig {
     pub redistribution: Redistribution,
     #[serde(default)]
     pub detector: DetectorSettings,
-    /// β by speed band, in increasing speed; the last band has no `below_kmh`. Default: source
-    /// 001's table for devices ins/gnss/radar, source 000's for loop/radar, else equal shares.
+    /// A named β table: "even" (the default), "source_000" (devices loop and radar) or
+    /// "source_001" (devices ins, gnss and radar); a table for other devices is an error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sharing: Option<SharingName>,
+    /// β by speed band, in increasing speed; the last band has no `below_kmh`. Instead of
+    /// `sharing`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub band: Vec<BandConfig>,
 }
@@ -180,6 +184,7 @@ impl Default for FederatedConfig {
             fusion_period_s: default_fusion_period_s(),
             redistribution: default_redistribution(),
             detector: DetectorSettings::default(),
+            sharing: None,
             band: Vec::new(),
         }
     }

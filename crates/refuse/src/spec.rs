@@ -643,16 +643,20 @@ fn federated(f: &FederatedConfig, devices: &[String]) -> Result<FederatedSetting
     })
 }
 
-/// β by speed band, in device order, from the config or the default for its devices.
+/// β by speed band, in device order: the configured bands, or the named table (equal shares
+/// when none is named).
 fn sharing_table(f: &FederatedConfig, devices: &[String]) -> Result<SharingTable, String> {
     let bands = f.band.as_slice();
     if bands.is_empty() {
-        let names: Vec<&str> = devices.iter().map(String::as_str).collect();
-        return Ok(match names.as_slice() {
-            ["ins", "gnss", "radar"] => SharingTable::source_001(),
-            ["loop", "radar"] => SharingTable::source_000(),
-            _ => SharingTable::even(devices.len()),
-        });
+        let name = f.sharing.unwrap_or_default();
+        return SharingTable::named(name, devices).map_err(|e| format!("federated.{e}"));
+    }
+    if let Some(name) = f.sharing {
+        return Err(format!(
+            "federated: sharing = \"{}\" and [[pipeline.federated.band]] tables: give one or \
+             the other",
+            name.key()
+        ));
     }
     let mut out = Vec::new();
     let mut last_below = 0.0;
@@ -1013,5 +1017,68 @@ variance = "message"
             e.ends_with("the sensor's variance table has no entry for it"),
             "{e}"
         );
+    }
+
+    /// FEDERATED without its band tables, with `sharing` set to `name` (or unset).
+    fn federated_named(name: Option<&str>, devices: [&str; 3]) -> Result<Pipelines> {
+        let start = FEDERATED.find("[[pipeline.federated.band]]").unwrap();
+        let end = FEDERATED.find("[[pipeline.sensor]]").unwrap();
+        let mut text = format!("{}{}", &FEDERATED[..start], &FEDERATED[end..]);
+        if let Some(name) = name {
+            text = text.replace(
+                "fusion_period_s = 1.0",
+                &format!("fusion_period_s = 1.0\nsharing = \"{name}\""),
+            );
+        }
+        // Through placeholders, so that renaming one device cannot rename another.
+        for (i, from) in ["ins", "gnss", "radar"].iter().enumerate() {
+            text = text.replace(&format!("device = \"{from}\""), &format!("device = #{i}#"));
+        }
+        for (i, to) in devices.iter().enumerate() {
+            text = text.replace(&format!("device = #{i}#"), &format!("device = \"{to}\""));
+        }
+        Pipelines::parse(&text, Path::new("f.toml"))
+    }
+
+    fn sharing(c: &Pipelines) -> &SharingTable {
+        match &c.pipeline[0].estimator {
+            EstimatorSpec::FederatedKalman { federated } => &federated.sharing,
+            _ => panic!("a federated Kalman pipeline"),
+        }
+    }
+
+    #[test]
+    fn a_named_sharing_table_fits_the_device_names_or_is_refused_naming_them() {
+        // Source 001's table, β mapped to the pipeline's device order by name.
+        let c = federated_named(Some("source_001"), ["radar", "ins", "gnss"]).unwrap();
+        assert_eq!(sharing(&c).at(10.0), &[0.1, 0.6, 0.3]);
+        assert_eq!(sharing(&c).at(100.0), &[0.2, 0.4, 0.4]);
+        // No table named: equal shares, whatever the devices are called.
+        let c = federated_named(None, ["ins", "gnss", "radar"]).unwrap();
+        assert_eq!(sharing(&c).at(10.0), &[1.0 / 3.0; 3]);
+        // A table for other devices is an error naming both sets, never a silent fallback.
+        let e = federated_named(Some("source_001"), ["imu", "gnss", "radar"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "sharing = \"source_001\" is for the devices ins, gnss, radar, but this \
+                 pipeline's devices are imu, gnss, radar"
+            ),
+            "{e}"
+        );
+        let e = federated_named(Some("source_000"), ["ins", "gnss", "radar"])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("is for the devices loop, radar"), "{e}");
+        // Both a name and bands: refused.
+        let both = FEDERATED.replace(
+            "fusion_period_s = 1.0",
+            "fusion_period_s = 1.0\nsharing = \"even\"",
+        );
+        let e = Pipelines::parse(&both, Path::new("f.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("give one or the other"), "{e}");
     }
 }

@@ -29,6 +29,38 @@ pub enum Redistribution {
 
 const KMH: f64 = 1.0 / 3.6;
 
+/// The devices of source 000's table, in its order.
+pub const SOURCE_000_DEVICES: [&str; 2] = ["loop", "radar"];
+
+/// The devices of source 001's table, in its order.
+pub const SOURCE_001_DEVICES: [&str; 3] = ["ins", "gnss", "radar"];
+
+/// A sharing table by name: `sharing = "…"` in a federated pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SharingName {
+    /// Equal shares, whatever the speed.
+    #[default]
+    Even,
+    /// Source 000: α_loop 0.8 below 70 m/s, 0.5 above (devices loop, radar).
+    #[serde(rename = "source_000")]
+    Source000,
+    /// Source 001: β by speed band for devices ins, gnss, radar.
+    #[serde(rename = "source_001")]
+    Source001,
+}
+
+impl SharingName {
+    /// Its name in configs.
+    pub fn key(self) -> &'static str {
+        match self {
+            SharingName::Even => "even",
+            SharingName::Source000 => "source_000",
+            SharingName::Source001 => "source_001",
+        }
+    }
+}
+
 impl SharingTable {
     /// Source 001's table for devices (INS, GNSS, radar): below 50 km/h 0.6/0.3/0.1, to
     /// 150 km/h 0.5/0.4/0.1, above 0.4/0.4/0.2.
@@ -65,6 +97,44 @@ impl SharingTable {
                 },
             ],
         }
+    }
+
+    /// A named table for `devices` (the pipeline's device names, in its order): source 000's
+    /// needs exactly the devices loop and radar, source 001's ins, gnss and radar, in any
+    /// order; the error names the devices the table needs and the ones there are.
+    pub fn named(name: SharingName, devices: &[String]) -> Result<Self, String> {
+        let (table, wanted): (Self, &[&str]) = match name {
+            SharingName::Even => return Ok(Self::even(devices.len())),
+            SharingName::Source000 => (Self::source_000(), &SOURCE_000_DEVICES),
+            SharingName::Source001 => (Self::source_001(), &SOURCE_001_DEVICES),
+        };
+        let mut have: Vec<&str> = devices.iter().map(String::as_str).collect();
+        have.sort_unstable();
+        let mut need = wanted.to_vec();
+        need.sort_unstable();
+        if have != need {
+            return Err(format!(
+                "sharing = \"{}\" is for the devices {}, but this pipeline's devices are {}",
+                name.key(),
+                wanted.join(", "),
+                devices.join(", ")
+            ));
+        }
+        // The table's β in the pipeline's device order.
+        let order: Vec<usize> = devices
+            .iter()
+            .map(|d| wanted.iter().position(|w| w == d).expect("the same names"))
+            .collect();
+        Ok(Self {
+            bands: table
+                .bands
+                .into_iter()
+                .map(|b| SpeedBand {
+                    below_mps: b.below_mps,
+                    beta: order.iter().map(|&i| b.beta[i]).collect(),
+                })
+                .collect(),
+        })
     }
 
     pub fn even(devices: usize) -> Self {
