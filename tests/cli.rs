@@ -408,6 +408,28 @@ fn sensor_states_shrink_the_default_runs_errors_and_make_its_covariance_honest()
         f(&plain, ["nees", "inside_95"]) < 0.5 && f(&cal, ["nees", "inside_95"]) > 0.8,
         "{plain} {cal}"
     );
+    // Against the GNSS, silent in the tunnel: no state inside the outage is scored against a
+    // line drawn across it; they are counted as inside a gap of the reference.
+    let g: serde_json::Value = serde_json::from_slice(
+        &ok(&["eval", s(&fused), "--reference", "/gnss/fix", "--json"]).stdout,
+    )
+    .unwrap();
+    for p in g["pipelines"].as_array().unwrap() {
+        let tunnel = p["windows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|w| w["label"] == "tunnel");
+        let scored = tunnel.map_or(0, |w| {
+            w["position_error_m"]["samples"].as_u64().unwrap_or(0)
+        });
+        assert_eq!(
+            scored, 0,
+            "{}: {scored} states scored in the tunnel",
+            p["name"]
+        );
+        assert!(p["states_in_reference_gaps"].as_u64().unwrap() > 100, "{p}");
+    }
 }
 
 #[test]

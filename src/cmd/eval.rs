@@ -1,6 +1,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use railfuse_catalog::reference_track::MAX_GAP_PERIODS;
 use railfuse_catalog::topics;
 use railfuse_refuse::accuracy::{ConsistencySummary, ErrorSummary};
 use railfuse_refuse::eval::{evaluate, EvalReport};
@@ -95,4 +96,17 @@ pub fn print_eval(report: &EvalReport) {
         }
     }
     print!("{t}");
+    for p in &report.pipelines {
+        let (gaps, outside) = (p.states_in_reference_gaps, p.unmatched_states);
+        if gaps + outside > 0 {
+            println!(
+                "{}: {} of {} states not scored: {gaps} inside gaps of the reference (samples \
+                 more than {MAX_GAP_PERIODS} of its periods apart), {outside} outside its time \
+                 span",
+                p.name,
+                gaps + outside,
+                p.states
+            );
+        }
+    }
 }

@@ -1,6 +1,11 @@
 //! A short, moving window of a reference trajectory (ground truth or another pipeline), to
 //! evaluate it at the stamps of estimates that arrive a little late. Bounded: samples older
 //! than the retention span behind the newest one are dropped.
+//!
+//! The reference is interpolated only between samples at most [`MAX_GAP_PERIODS`] of its own
+//! periods apart (the median of its recent sample intervals): a GNSS receiver silent in a
+//! tunnel for 27 s is a gap, and an estimate inside it is not scored against a straight line
+//! drawn across it.
 
 use std::collections::VecDeque;
 
@@ -11,10 +16,30 @@ pub struct ReferenceSample {
     pub speed_mps: f64,
 }
 
+/// Two reference samples further apart than this many of the reference's periods bound a gap.
+pub const MAX_GAP_PERIODS: u64 = 5;
+
+/// Recent sample intervals kept to estimate the reference's period.
+const INTERVALS: usize = 31;
+
 #[derive(Debug, Clone)]
 pub struct ReferenceTrack {
     samples: VecDeque<ReferenceSample>,
     retain_ns: u64,
+    /// The latest sample intervals, for the median period.
+    intervals: VecDeque<u64>,
+    period_ns: Option<u64>,
+}
+
+/// The reference at a stamp.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Lookup {
+    /// Chainage and speed, interpolated.
+    At(f64, f64),
+    /// Between two samples further apart than [`MAX_GAP_PERIODS`] periods.
+    Gap,
+    /// Before or after the samples held.
+    Outside,
 }
 
 impl ReferenceTrack {
@@ -22,6 +47,8 @@ impl ReferenceTrack {
         Self {
             samples: VecDeque::new(),
             retain_ns: (retain_s * 1e9) as u64,
+            intervals: VecDeque::with_capacity(INTERVALS),
+            period_ns: None,
         }
     }
 
@@ -33,6 +60,15 @@ impl ReferenceTrack {
             .is_some_and(|r| sample.stamp_ns <= r.stamp_ns)
         {
             return false;
+        }
+        if let Some(last) = self.samples.back() {
+            if self.intervals.len() == INTERVALS {
+                self.intervals.pop_front();
+            }
+            self.intervals.push_back(sample.stamp_ns - last.stamp_ns);
+            let mut sorted: Vec<u64> = self.intervals.iter().copied().collect();
+            sorted.sort_unstable();
+            self.period_ns = Some(sorted[sorted.len() / 2]);
         }
         self.samples.push_back(sample);
         let keep_from = sample.stamp_ns.saturating_sub(self.retain_ns);
@@ -46,23 +82,41 @@ impl ReferenceTrack {
         self.samples.back().map(|s| s.stamp_ns)
     }
 
-    /// Chainage and speed at `stamp_ns`, linearly interpolated; `None` outside the window.
+    /// Chainage and speed at `stamp_ns`, linearly interpolated; `None` outside the window or
+    /// in a gap.
     pub fn at(&self, stamp_ns: u64) -> Option<(f64, f64)> {
-        let (first, last) = (self.samples.front()?, self.samples.back()?);
+        match self.lookup(stamp_ns) {
+            Lookup::At(s, v) => Some((s, v)),
+            Lookup::Gap | Lookup::Outside => None,
+        }
+    }
+
+    /// The reference at `stamp_ns`, or why there is none.
+    pub fn lookup(&self, stamp_ns: u64) -> Lookup {
+        let (Some(first), Some(last)) = (self.samples.front(), self.samples.back()) else {
+            return Lookup::Outside;
+        };
         if stamp_ns < first.stamp_ns || stamp_ns > last.stamp_ns {
-            return None;
+            return Lookup::Outside;
         }
         let i = self.samples.partition_point(|r| r.stamp_ns < stamp_ns);
         let b = self.samples[i];
         let a = if i == 0 { b } else { self.samples[i - 1] };
-        let f = if b.stamp_ns > a.stamp_ns {
-            (stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64
+        let span = b.stamp_ns - a.stamp_ns;
+        if self
+            .period_ns
+            .is_some_and(|p| span > p.saturating_mul(MAX_GAP_PERIODS))
+        {
+            return Lookup::Gap;
+        }
+        let f = if span > 0 {
+            (stamp_ns - a.stamp_ns) as f64 / span as f64
         } else {
             0.0
         };
-        Some((
+        Lookup::At(
             a.chainage_m + f * (b.chainage_m - a.chainage_m),
             a.speed_mps + f * (b.speed_mps - a.speed_mps),
-        ))
+        )
     }
 }

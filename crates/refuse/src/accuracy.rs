@@ -10,7 +10,7 @@
 use std::collections::VecDeque;
 
 use railfuse_catalog::messages::FusedState;
-use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
+use railfuse_catalog::reference_track::{Lookup, ReferenceSample, ReferenceTrack};
 
 use serde::Serialize;
 
@@ -223,6 +223,8 @@ pub struct AccuracyMeter {
     pub nees: Consistency,
     /// Estimates that fell outside the reference's time span.
     pub unmatched: u64,
+    /// Estimates inside a gap of the reference (see [`ReferenceTrack`]): not scored.
+    pub in_reference_gaps: u64,
     pub windows: Vec<WindowStats>,
 }
 
@@ -236,6 +238,7 @@ impl AccuracyMeter {
             speed: ErrorStats::default(),
             nees: Consistency::default(),
             unmatched: 0,
+            in_reference_gaps: 0,
             windows: Vec::new(),
         }
     }
@@ -286,8 +289,8 @@ impl AccuracyMeter {
     }
 
     fn score(&mut self, e: Estimate, spans: &[Span]) {
-        match self.reference.at(e.stamp_ns) {
-            Some((s, v)) => {
+        match self.reference.lookup(e.stamp_ns) {
+            Lookup::At(s, v) => {
                 let (de, ve) = (e.chainage_m - s, e.speed_mps - v);
                 self.position.add(de);
                 self.speed.add(ve);
@@ -328,7 +331,8 @@ impl AccuracyMeter {
                 };
                 self.nees.add(nees(&probe, de, ve), CHI2_95_2DOF);
             }
-            None => self.unmatched += 1,
+            Lookup::Gap => self.in_reference_gaps += 1,
+            Lookup::Outside => self.unmatched += 1,
         }
     }
 }
@@ -392,5 +396,37 @@ mod tests {
         assert_eq!(m.windows.len(), 1);
         assert_eq!(m.windows[0].speed.summary().unwrap().samples, 1);
         assert_eq!(m.windows[0].position.summary().unwrap().max_abs, 0.0);
+    }
+
+    #[test]
+    fn estimates_inside_a_gap_of_the_reference_are_counted_not_scored() {
+        // A 10 Hz reference (a GNSS receiver) silent from 2 s to 29 s (a tunnel).
+        let mut m = AccuracyMeter::new(0.5);
+        let est = |stamp_ns: u64| FusedState {
+            stamp_ns,
+            chainage_m: 10.0 * stamp_ns as f64 / 1e9 + 1.0,
+            speed_mps: 10.0,
+            acceleration_mps2: 0.0,
+            covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            source: String::new(),
+            sensor_states: Vec::new(),
+        };
+        let stamps = (0..=20).chain(290..=300).map(|k| k * 100_000_000u64);
+        for t in stamps {
+            m.add_reference(t, 10.0 * t as f64 / 1e9, 10.0, &[]);
+            // An estimate 50 ms after each sample, and every 100 ms through the gap.
+            m.add_estimate(&est(t + 50_000_000), &[]);
+        }
+        for k in 21..290 {
+            m.add_estimate(&est(k * 100_000_000 + 50_000_000), &[]);
+        }
+        m.finish();
+        // Scored: after each sample before the gap but the last, and within the samples
+        // after it (their last one has no sample after it).
+        assert_eq!(m.position.summary().unwrap().samples, 20 + 10);
+        assert!((m.position.summary().unwrap().max_abs - 1.0).abs() < 1e-9);
+        // 2.05 s … 28.95 s: inside the gap, never scored against a line drawn across it.
+        assert_eq!(m.in_reference_gaps, 270);
+        assert_eq!(m.unmatched, 1);
     }
 }

@@ -55,6 +55,9 @@ pub struct PipelineEval {
     pub device_fault_rejections: u64,
     /// States outside the reference's time span.
     pub unmatched_states: u64,
+    /// States inside a gap of the reference (its samples further apart than
+    /// `MAX_GAP_PERIODS` of its periods): not scored.
+    pub states_in_reference_gaps: u64,
     pub windows: Vec<WindowEval>,
 }
 
@@ -412,6 +415,7 @@ impl Evaluator {
                     lockout_recoveries: s.lockouts,
                     device_fault_rejections: s.device_fault,
                     unmatched_states: s.meter.unmatched,
+                    states_in_reference_gaps: s.meter.in_reference_gaps,
                     windows: s
                         .meter
                         .windows
