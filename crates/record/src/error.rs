@@ -99,6 +99,11 @@ pub enum FaultSpecError {
     EmptyWindow(String),
 }
 
+/// A stream format name that is not json, nmea or ubx.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("unknown stream format '{0}' (json, nmea, ubx)")]
+pub struct UnknownStreamFormat(pub String);
+
 /// A simulation the scenario cannot run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ScenarioError {

@@ -270,7 +270,8 @@ fn format_or(
     let format = if f.is_empty() {
         default
     } else {
-        f.parse().map_err(|e: String| bad(spec, e))?
+        f.parse()
+            .map_err(|e: crate::error::UnknownStreamFormat| bad(spec, e.to_string()))?
     };
     Ok((format, topic))
 }

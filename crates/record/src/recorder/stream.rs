@@ -2,6 +2,7 @@
 //! UBX (GNSS receivers). Every length is bounded and every checksum checked; what does not
 //! decode is counted in the source's statistics and skipped, never fatal.
 
+use crate::error::UnknownStreamFormat;
 use railfuse_catalog::messages::{AnyMessage, GnssFix, SourceStats};
 use railfuse_catalog::topics;
 
@@ -21,20 +22,20 @@ pub enum StreamFormat {
 }
 
 impl TryFrom<String> for StreamFormat {
-    type Error = String;
-    fn try_from(s: String) -> Result<Self, String> {
+    type Error = UnknownStreamFormat;
+    fn try_from(s: String) -> Result<Self, UnknownStreamFormat> {
         s.parse()
     }
 }
 
 impl std::str::FromStr for StreamFormat {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = UnknownStreamFormat;
+    fn from_str(s: &str) -> Result<Self, UnknownStreamFormat> {
         Ok(match s {
             "json" => StreamFormat::JsonLines,
             "nmea" => StreamFormat::Nmea,
             "ubx" => StreamFormat::Ubx,
-            _ => return Err(format!("unknown stream format '{s}' (json, nmea, ubx)")),
+            _ => return Err(UnknownStreamFormat(s.to_owned())),
         })
     }
 }
