@@ -21,10 +21,11 @@ pub struct Args {
     pub dir: PathBuf,
 }
 
-fn verdict(v: Verdict) -> &'static str {
+fn verdict(v: Verdict) -> String {
     match v {
-        Verdict::Beats => "**beats**",
-        Verdict::FallsShort => "**falls short**",
+        Verdict::Beats => "**beats**".into(),
+        Verdict::FallsShort => "**falls short**".into(),
+        Verdict::NotComparable { because } => format!("not comparable because {because}"),
     }
 }
 
@@ -58,13 +59,23 @@ fn markdown(r: &Results) -> Result<String> {
         "## Source 000 — federated particle filter for maglev positioning\n"
     )?;
     writeln!(md, "Start 20 m/s, 1 m/s², T = 1 s, 100 s, jerk variance 0.001, loop and radar variance 0.01, balise every 1 km.\n")?;
-    writeln!(md, "| pipeline | source reports | railfuse position envelope (m) | pos RMSE (m) | railfuse speed envelope (m/s) | speed RMSE (m/s) | verdict |")?;
-    writeln!(md, "|---|---|---|---|---|---|---|")?;
+    writeln!(md, "| pipeline | source reports | railfuse position envelope (m) | pos RMSE (m) | railfuse speed envelope (m/s) | speed RMSE (m/s) | inside the source's figure | verdict |")?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|")?;
+    let mut reasons = Vec::new();
     for row in &r.source_000 {
         let e = &row.envelope;
+        let cell = match row.verdict {
+            Verdict::NotComparable { because } => {
+                if !reasons.contains(&because) {
+                    reasons.push(because);
+                }
+                "not comparable (below)".to_owned()
+            }
+            v => verdict(v),
+        };
         writeln!(
             md,
-            "| `{}` | {} | {:+.3} … {:+.3} | {:.3} | {:+.3} … {:+.3} | {:.3} | {} |",
+            "| `{}` | {} | {:+.3} … {:+.3} | {:.3} | {:+.3} … {:+.3} | {:.3} | {} | {} |",
             row.pipeline,
             row.claim,
             e.position_min_m,
@@ -73,7 +84,19 @@ fn markdown(r: &Results) -> Result<String> {
             e.speed_min_mps,
             e.speed_max_mps,
             e.speed_rmse_mps(),
-            verdict(row.verdict)
+            if row.inside_reported { "yes" } else { "no" },
+            cell
+        )?;
+    }
+    for because in reasons {
+        writeln!(
+            md,
+            "\nNot comparable because {because}. With white noise no consistent filter"
+        )?;
+        writeln!(md, "spreads to ±10 m, and the rows with and without balises agree: the source's finding that")?;
+        writeln!(
+            md,
+            "balises bound the error is not reproduced by this preset."
         )?;
     }
     writeln!(md)?;
