@@ -13,6 +13,13 @@
 //! fusion counts the common process noise once per device: cheaper to keep apart (a failed
 //! device never contaminates the others) but no longer optimal.
 //!
+//! So the information-sharing coefficients β (source 000's α) change the fused estimate only
+//! where the sub-filters run on their shares between master fusions: fusion-reset feedback
+//! with a fusion period longer than the updates (1 s in sources 000 and 001). With a fusion
+//! after every update they cannot change it (it is the centralised filter whatever β is), and
+//! without reset they are not used (each sub-filter keeps its full information). Tested:
+//! `information_sharing_changes_the_estimate_only_between_fusions_of_a_reset_filter`.
+//!
 //! Local filters are Kalman filters (source 001) or particle filters (source 000); a particle
 //! sub-filter is reset by redrawing its cloud from `N(x_g, P_g/β_i)`. β comes from a
 //! [`SharingTable`] by speed band; a [`WorkingState`] detector per device takes a failed
@@ -620,5 +627,57 @@ mod tests {
         let pc = c.last().unwrap().covariance[(0, 0)];
         let pf = f.last().unwrap().covariance[(0, 0)];
         assert!((pc - pf).abs() / pc > 1e-3, "variances {pc} vs {pf}");
+    }
+
+    /// The estimates of a federated filter with `feedback`, master fusion every `period_ns`
+    /// (0: after every update), and sharing table `sharing`.
+    fn run_with(
+        feedback: Feedback,
+        period_ns: u64,
+        sharing: SharingTable,
+    ) -> Vec<StateAndCovariance<3>> {
+        let names = vec!["ins".into(), "gnss".into(), "radar".into()];
+        let mut f = Federated::new(
+            FederatedSettings {
+                fusion_period_ns: period_ns,
+                sharing,
+                ..settings(feedback)
+            },
+            model(),
+            names,
+            &initial(),
+            1_000_000_000,
+            |_, s| KalmanFilter::new(s.state, s.covariance),
+        );
+        run(&mut f)
+    }
+
+    fn largest_chainage_gap(a: &[StateAndCovariance<3>], b: &[StateAndCovariance<3>]) -> f64 {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x.state[0] - y.state[0]).abs())
+            .fold(0.0, f64::max)
+    }
+
+    /// Where β can act, and where it cannot: the docs' claim, kept true by this test.
+    #[test]
+    fn information_sharing_changes_the_estimate_only_between_fusions_of_a_reset_filter() {
+        let gap = |feedback, period| {
+            let a = run_with(feedback, period, SharingTable::source_001());
+            let b = run_with(feedback, period, SharingTable::even(3));
+            largest_chainage_gap(&a, &b)
+        };
+        // Fusion-reset with a fusion after every update is the centralised filter: β cannot
+        // change anything.
+        let every_update = gap(Feedback::FusionReset, 0);
+        assert!(every_update < 1e-9, "{every_update}");
+        // With a master period the sub-filters run on their own shares between fusions, and
+        // the estimate depends on those shares.
+        let periodic = gap(Feedback::FusionReset, 1_000_000_000);
+        assert!(periodic > 1e-3, "{periodic}");
+        // Without reset each sub-filter keeps its full information: β is not used.
+        assert_eq!(gap(Feedback::NoReset, 0), 0.0);
+        assert_eq!(gap(Feedback::NoReset, 1_000_000_000), 0.0);
+        eprintln!("β: fusion every update {every_update:e} m, fusion every 1 s {periodic:.4} m");
     }
 }
