@@ -1030,7 +1030,7 @@ variance = "message"
                 &format!("fusion_period_s = 1.0\nsharing = \"{name}\""),
             );
         }
-        // Through placeholders, so that renaming one device cannot rename another.
+        // Through numbered tokens, so that renaming one device cannot rename another.
         for (i, from) in ["ins", "gnss", "radar"].iter().enumerate() {
             text = text.replace(&format!("device = \"{from}\""), &format!("device = #{i}#"));
         }
