@@ -8,7 +8,9 @@ use railfuse_record::{simulate, Scenario, SimulationReport};
 #[derive(clap::Args)]
 pub struct Args {
     /// Scenario preset: `default` (a mixed line run with every sensor), `seed000` (source
-    /// 000's maglev simulation) or `seed001` (source 001's: INS, BeiDou, Doppler radar, 500 s).
+    /// 000's maglev simulation, its parameters exactly as stated), `seed000_loop_drift` (the
+    /// same with the loop's error growing with distance, as the source describes) or `seed001`
+    /// (source 001's: INS, BeiDou, Doppler radar, 500 s).
     #[arg(long, default_value = "default",
           value_parser = clap::builder::PossibleValuesParser::new(Scenario::NAMES))]
     pub scenario: String,

@@ -16,7 +16,7 @@ use std::path::Path;
 use railfuse_catalog::topics;
 use railfuse_record::simulator::FaultSpec;
 use railfuse_record::{simulate, Scenario};
-use railfuse_refuse::eval::PipelineEval;
+use railfuse_refuse::eval::{PipelineEval, AFTER_FIRST_BALISE};
 use railfuse_refuse::replay::{refuse, RefuseOptions};
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
@@ -88,6 +88,8 @@ pub struct Envelope {
     pub speed_rmse_sum_mps: f64,
     pub min_rate_hz: f64,
     pub nees_inside_sum: f64,
+    /// Largest |position error| after the first balise, m (runs with balises).
+    pub after_first_balise_abs_m: Option<f64>,
 }
 
 impl Envelope {
@@ -113,6 +115,16 @@ impl Envelope {
         self.speed_rmse_sum_mps += spd.rmse;
         self.min_rate_hz = self.min_rate_hz.min(rate);
         self.nees_inside_sum += p.nees.as_ref().map_or(0.0, |n| n.inside_95);
+        let after_balise = p
+            .windows
+            .iter()
+            .find(|w| w.label == AFTER_FIRST_BALISE)
+            .and_then(|w| w.position_error_m.as_ref())
+            .map(|e| e.max_abs);
+        if let Some(a) = after_balise {
+            self.after_first_balise_abs_m =
+                Some(self.after_first_balise_abs_m.map_or(a, |b| b.max(a)));
+        }
     }
 
     /// The run named `name` of `run`, if it was evaluated.

@@ -1,7 +1,8 @@
 //! Evaluation of a log's fused channels against a reference: for every pipeline's states (and
 //! its RTS-smoothed states), position and speed error RMSE, maximum and 95th percentile over
 //! the whole run and over each marked window (injected faults, tunnels, correction outages,
-//! reported device faults, from the `/events` channel); NEES of `[s, v]` and NIS of the
+//! reported device faults, from the `/events` channel; and, in a log with balises, the run
+//! after the first balise, where an absolute fix has been available); NEES of `[s, v]` and NIS of the
 //! innovations as the share of epochs inside the 95 % χ² interval.
 //!
 //! The reference is the ground-truth channel or any channel the user names: another
@@ -17,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use railfuse_catalog::log::{read_summary, LogMessage, LogReader, LogRecord};
 use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision, GnssFix,
+    BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision, GnssFix,
     GroundTruth, TrackMap,
 };
 use railfuse_catalog::topics::{self, FusedChannel};
@@ -92,7 +93,11 @@ enum Role {
     Diagnostics(usize),
     TrackMap,
     Events,
+    Balise,
 }
+
+/// The window from the first balise passage to the end of the run.
+pub const AFTER_FIRST_BALISE: &str = "after the first balise";
 
 struct Scored {
     name: String,
@@ -246,6 +251,8 @@ impl Evaluator {
             Some(Role::TrackMap)
         } else if schema == Event::SCHEMA_NAME {
             Some(Role::Events)
+        } else if schema == BalisePassage::SCHEMA_NAME {
+            Some(Role::Balise)
         } else {
             None
         };
@@ -289,6 +296,16 @@ impl Evaluator {
                     {
                         s.end_ns = Some(e.stamp_ns);
                     }
+                }
+            }
+            Some(Role::Balise) => {
+                if !self.spans.iter().any(|s| s.label == AFTER_FIRST_BALISE) {
+                    let b: BalisePassage = m.decode(path)?;
+                    self.spans.push(Span {
+                        label: AFTER_FIRST_BALISE.to_owned(),
+                        start_ns: b.stamp_ns,
+                        end_ns: None,
+                    });
                 }
             }
             Some(Role::Smoothed(_)) | None => {}

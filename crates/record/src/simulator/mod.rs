@@ -150,6 +150,9 @@ impl SimLog {
         let train = match scenario {
             Scenario::Default(p) | Scenario::Seed001(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
+            Scenario::Seed000LoopDrift(_) => {
+                "maglev (source 000 simulation, loop error growing with distance)".into()
+            }
         };
         let run = BTreeMap::from([
             (
@@ -197,7 +200,7 @@ pub fn simulate(
         Scenario::Default(p) | Scenario::Seed001(p) => {
             simulate_line(scenario, p, seed, duration_s, faults, out)
         }
-        Scenario::Seed000(p) => simulate_seed000(scenario, p, seed, duration_s, out),
+        Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => simulate_seed000(scenario, p, seed, duration_s, out),
     }
 }
 
@@ -409,6 +412,10 @@ fn simulate_seed000(
     let mut process = rng_stream(seed, 0);
     let mut loop_rng = rng_stream(seed, 1);
     let mut radar_rng = rng_stream(seed, 2);
+    let mut drift_rng = rng_stream(seed, 3);
+    // The loop's accumulated along-track error (module doc of `seed000`).
+    let mut loop_error = 0.0;
+    let mut last_s = 0.0;
     let (loop_sigma, radar_sigma) = (p.loop_variance_m2.sqrt(), p.radar_variance_m2ps2.sqrt());
     let truth_per_step = (p.truth_rate_hz * period).round().max(1.0) as u64;
     let mut x = JerkStep {
@@ -422,7 +429,12 @@ fn simulate_seed000(
     for k in 0..=steps {
         // Measurements at the sample instant k.
         let t_ns = stamp(k, 0.0);
-        let z_loop = x.s + gauss(&mut loop_rng, loop_sigma);
+        if p.loop_drift_m_per_sqrt_km > 0.0 {
+            let step_sigma = p.loop_drift_m_per_sqrt_km * ((x.s - last_s).abs() / 1000.0).sqrt();
+            loop_error += gauss(&mut drift_rng, step_sigma);
+            last_s = x.s;
+        }
+        let z_loop = x.s + loop_error + gauss(&mut loop_rng, loop_sigma);
         let z_radar = x.v + gauss(&mut radar_rng, radar_sigma);
         log.write(
             topics::LOOP_POSITION,

@@ -42,16 +42,19 @@ pub struct LineScenario {
 pub enum Scenario {
     Default(Box<LineScenario>),
     Seed000(Seed000Params),
+    /// Source 000 with the loop's error growing with distance.
+    Seed000LoopDrift(Seed000Params),
     Seed001(Box<LineScenario>),
 }
 
 impl Scenario {
-    pub const NAMES: &'static [&'static str] = &["default", "seed000", "seed001"];
+    pub const NAMES: &'static [&'static str] = &["default", "seed000", "seed000_loop_drift", "seed001"];
 
     pub fn preset(name: &str) -> Option<Scenario> {
         match name {
             "default" => Some(Scenario::Default(Box::new(LineScenario::default_run()))),
             "seed000" => Some(Scenario::Seed000(Seed000Params::source())),
+            "seed000_loop_drift" => Some(Scenario::Seed000LoopDrift(Seed000Params::loop_drift())),
             "seed001" => Some(Scenario::Seed001(Box::new(LineScenario::seed001()))),
             _ => None,
         }
@@ -61,6 +64,7 @@ impl Scenario {
         match self {
             Scenario::Default(_) => "default",
             Scenario::Seed000(_) => "seed000",
+            Scenario::Seed000LoopDrift(_) => "seed000_loop_drift",
             Scenario::Seed001(_) => "seed001",
         }
     }
@@ -69,7 +73,7 @@ impl Scenario {
     pub fn line(&self) -> Option<&LineScenario> {
         match self {
             Scenario::Default(p) | Scenario::Seed001(p) => Some(p),
-            Scenario::Seed000(_) => None,
+            Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
 

@@ -128,8 +128,12 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
     }
 
     /// Information fusion of the healthy devices; None when none is healthy or the
-    /// information is singular.
+    /// information is singular. The states are fused as offsets from the master's own
+    /// (propagated) state, `x_g = x_m + P_g Σ P_i⁻¹ (x_i − x_m)`: the same estimate, but
+    /// without multiplying kilometres of chainage by a precise sub-filter's large information
+    /// and cancelling them again.
     fn fuse(&self) -> Option<StateAndCovariance<N>> {
+        let origin = self.master.estimate.state;
         let mut info = SMatrix::<f64, N, N>::zeros();
         let mut info_state = SVector::<f64, N>::zeros();
         let mut any = false;
@@ -143,12 +147,12 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
                 continue;
             };
             info += inv;
-            info_state += inv * e.state;
+            info_state += inv * (e.state - origin);
             any = true;
         }
         let p = inverse_spd(&info).filter(|_| any)?;
         let fused = StateAndCovariance {
-            state: p * info_state,
+            state: origin + p * info_state,
             covariance: super::symmetric(p),
         };
         fused.is_finite().then_some(fused)
