@@ -64,7 +64,8 @@ impl Verdict {
 pub const SOURCE_000_SCENARIOS: &[&str] = &["seed000", "seed000_loop_drift"];
 
 /// Source 000's reported figures: both observed envelopes of one run.
-pub const SOURCE_000_NO_BALISE: &str = "observed envelope: position ±10 m, growing; speed −0.3…+0.4 m/s";
+pub const SOURCE_000_NO_BALISE: &str =
+    "observed envelope: position ±10 m, growing; speed −0.3…+0.4 m/s";
 pub const SOURCE_000_BALISE: &str = "observed bound: position within 1 m after each balise";
 
 #[derive(Debug, Clone, Serialize)]

@@ -18,8 +18,8 @@ use std::path::{Path, PathBuf};
 
 use railfuse_catalog::log::{read_summary, LogMessage, LogReader, LogRecord};
 use railfuse_catalog::messages::{
-    BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision, GnssFix,
-    GroundTruth, TrackMap,
+    BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision,
+    GnssFix, GroundTruth, TrackMap,
 };
 use railfuse_catalog::topics::{self, FusedChannel};
 use serde::Serialize;

@@ -200,7 +200,9 @@ pub fn simulate(
         Scenario::Default(p) | Scenario::Seed001(p) => {
             simulate_line(scenario, p, seed, duration_s, faults, out)
         }
-        Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => simulate_seed000(scenario, p, seed, duration_s, out),
+        Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
+            simulate_seed000(scenario, p, seed, duration_s, out)
+        }
     }
 }
 

@@ -48,7 +48,8 @@ pub enum Scenario {
 }
 
 impl Scenario {
-    pub const NAMES: &'static [&'static str] = &["default", "seed000", "seed000_loop_drift", "seed001"];
+    pub const NAMES: &'static [&'static str] =
+        &["default", "seed000", "seed000_loop_drift", "seed001"];
 
     pub fn preset(name: &str) -> Option<Scenario> {
         match name {
