@@ -42,7 +42,7 @@ pub struct Run {
     pub duration_s: f64,
 }
 
-/// Simulates `scenario` with `seed` and `faults` into `dir`, re-fuses the log with
+/// Simulates the preset `scenario` with `seed` and `faults` into `dir`, re-fuses the log with
 /// `pipelines`, evaluates against the truth, and removes both logs.
 pub fn run(
     dir: &Path,
@@ -54,10 +54,23 @@ pub fn run(
 ) -> Result<Run> {
     let preset =
         Scenario::preset(scenario).ok_or_else(|| Error::UnknownScenario(scenario.to_owned()))?;
-    preset.check(None, faults)?;
-    let raw = dir.join(format!("{scenario}-{tag}-seed{seed}.mcap"));
-    let fused = dir.join(format!("{scenario}-{tag}-seed{seed}.fused.mcap"));
-    let sim = simulate(&preset, seed, None, faults, &raw)?;
+    run_scenario(dir, &preset, seed, faults, pipelines, tag)
+}
+
+/// [`run`] on a scenario given by value (a preset with some parameters changed).
+pub fn run_scenario(
+    dir: &Path,
+    scenario: &Scenario,
+    seed: u64,
+    faults: &[FaultSpec],
+    pipelines: &Pipelines,
+    tag: &str,
+) -> Result<Run> {
+    scenario.check(None, faults)?;
+    let name = scenario.name();
+    let raw = dir.join(format!("{name}-{tag}-seed{seed}.mcap"));
+    let fused = dir.join(format!("{name}-{tag}-seed{seed}.fused.mcap"));
+    let sim = simulate(scenario, seed, None, faults, &raw)?;
     let result = refuse(&RefuseOptions {
         input: &raw,
         output: &fused,

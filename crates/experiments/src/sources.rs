@@ -4,11 +4,12 @@
 use std::path::{Path, PathBuf};
 
 use railfuse_record::simulator::FaultSpec;
+use railfuse_record::Scenario;
 use railfuse_refuse::config::embedded_path;
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
 
-use crate::{run, Envelope, Result};
+use crate::{run, run_scenario, Envelope, Result};
 
 /// Source 000's experiment: `samples/seed000.toml`.
 pub const SEED000_PIPELINES: &str = include_str!("../../../samples/seed000.toml");
@@ -24,6 +25,20 @@ pub const SOURCE_001_CASES: &[(&str, &[&str])] = &[
     ("INS biased +0.5 m/s² 200–300 s", &["imu:bias=0.5:200:300"]),
     ("GNSS dead 200–300 s", &["gnss:dropout:200:300"]),
 ];
+
+/// Simulated GNSS receivers whose bias differs from what `fkf_cal`/`kf_cal` assume (σ 2 m,
+/// τ 60 s, the preset's own): (label, bias time constant s, bias σ over the preset's).
+pub const SOURCE_001_MISMATCHES: &[(&str, f64, f64)] = &[
+    ("as modelled: τ 60 s, σ 2 m", 60.0, 1.0),
+    ("τ 20 s", 20.0, 1.0),
+    ("τ 300 s", 300.0, 1.0),
+    ("σ 1 m (×0.5)", 60.0, 0.5),
+    ("σ 4 m (×2)", 60.0, 2.0),
+];
+
+/// The pipelines scored in the mismatch table: the sensor-state filters and, for scale, the
+/// source's.
+pub const SOURCE_001_MISMATCH_PIPELINES: &[&str] = &["fkf_cal", "kf_cal", "fkf"];
 
 /// The pipelines scored in source 001's table (`kf/smoothed`: the RTS-smoothed states).
 pub const SOURCE_001_PIPELINES: &[&str] = &["fkf", "fkf_cal", "kf", "kf_cal", "kf/smoothed"];
@@ -114,6 +129,14 @@ fn verdict_000(scenario: &str, pipeline: &str, e: &Envelope) -> Verdict {
     }
 }
 
+/// One pipeline on a receiver whose bias is not what the pipeline models.
+#[derive(Debug, Clone, Serialize)]
+pub struct MismatchRow {
+    pub receiver: &'static str,
+    pub pipeline: String,
+    pub envelope: Envelope,
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct Source001Row {
     pub case: &'static str,
@@ -128,11 +151,14 @@ pub struct Results {
     pub seeds: u64,
     pub source_000: Vec<Source000Row>,
     pub source_001: Vec<Source001Row>,
+    /// Source 001 without faults, on receivers whose bias the sensor-state models get wrong.
+    pub source_001_mismatch: Vec<MismatchRow>,
 }
 
 /// Runs in all for `seeds` seeds: source 000's, then every source 001 case's.
 pub fn runs(seeds: u64) -> u64 {
-    seeds * (SOURCE_000_SCENARIOS.len() + SOURCE_001_CASES.len()) as u64
+    seeds
+        * (SOURCE_000_SCENARIOS.len() + SOURCE_001_CASES.len() + SOURCE_001_MISMATCHES.len()) as u64
 }
 
 /// Runs both experiments over `seeds` seeds in `dir`; `progress` is told the runs done.
@@ -205,11 +231,42 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
             });
         }
     }
+    // Source 001 with the simulated receiver's bias unlike the filters' model of it.
+    let mut source_001_mismatch = Vec::new();
+    for (mi, &(receiver, tau_s, scale)) in SOURCE_001_MISMATCHES.iter().enumerate() {
+        let scenario = gnss_bias_variant(tau_s, scale);
+        let mut env = vec![Envelope::default(); SOURCE_001_MISMATCH_PIPELINES.len()];
+        for seed in 0..seeds {
+            let r = run_scenario(dir, &scenario, seed, &[], &c001, &format!("bias{mi}"))?;
+            for (e, name) in env.iter_mut().zip(SOURCE_001_MISMATCH_PIPELINES) {
+                e.add_named(&r, name);
+            }
+            step();
+        }
+        for (name, e) in SOURCE_001_MISMATCH_PIPELINES.iter().zip(env) {
+            source_001_mismatch.push(MismatchRow {
+                receiver,
+                pipeline: (*name).to_owned(),
+                envelope: e,
+            });
+        }
+    }
     Ok(Results {
         seeds,
         source_000,
         source_001,
+        source_001_mismatch,
     })
+}
+
+/// The seed001 preset with its GNSS bias's time constant and σ changed.
+fn gnss_bias_variant(tau_s: f64, scale: f64) -> Scenario {
+    let mut scenario = Scenario::preset("seed001").expect("a built-in preset");
+    if let Scenario::Seed001(line) = &mut scenario {
+        line.gnss.bias_tau_s = tau_s;
+        line.gnss.bias_scale = scale;
+    }
+    scenario
 }
 
 fn embedded(name: &str) -> PathBuf {

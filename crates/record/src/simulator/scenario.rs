@@ -192,6 +192,7 @@ impl LineScenario {
                 sigma_rtk_float_m: 0.25,
                 sigma_rtk_fixed_m: 0.02,
                 bias_tau_s: 60.0,
+                bias_scale: 1.0,
                 speed_sigma_mps: 0.05,
                 reacquire_none_s: 3.0,
                 reacquire_single_s: 6.0,

@@ -20,6 +20,10 @@ pub struct GnssParams {
     pub sigma_rtk_fixed_m: f64,
     /// Correlation time of the slowly wandering position bias (single/DGPS), s.
     pub bias_tau_s: f64,
+    /// The bias's true σ over the one the receiver's reported variance assumes (1: as
+    /// reported). Experiments with a receiver worse or better than its own error model.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub bias_scale: f64,
     pub speed_sigma_mps: f64,
     /// After the sky comes back: seconds without a fix, then seconds of single-point fix
     /// before RTK float, then seconds of float before RTK fixed.
@@ -111,7 +115,7 @@ impl SimSensor for Gnss {
         let (sigma, bias_sigma) = self.sigma(fix);
         // First-order Gauss-Markov bias with stationary σ `bias_sigma`.
         let phi = (-dt / self.p.bias_tau_s).exp();
-        let q = bias_sigma * (1.0 - phi * phi).sqrt();
+        let q = bias_sigma * self.p.bias_scale * (1.0 - phi * phi).sqrt();
         self.bias = (
             phi * self.bias.0 + gauss(&mut self.rng, q),
             phi * self.bias.1 + gauss(&mut self.rng, q),
@@ -158,4 +162,12 @@ impl SimSensor for Gnss {
         let latency = seconds(self.p.latency_s);
         out.push(w.t_ns + latency, Emit::Gnss(msg));
     }
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn is_one(x: &f64) -> bool {
+    *x == 1.0
 }
