@@ -9,7 +9,7 @@ use railfuse_refuse::config::embedded_path;
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
 
-use crate::{run, run_scenario, Envelope, Result};
+use crate::{run, run_scenario, Envelope, Result, Run};
 
 /// Source 000's experiment: `samples/seed000.toml`.
 pub const SEED000_PIPELINES: &str = include_str!("../../../samples/seed000.toml");
@@ -176,14 +176,9 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
     let names000: Vec<&str> = c000.names().collect();
     let mut source_000 = Vec::new();
     for scenario in SOURCE_000_SCENARIOS {
-        let mut env = vec![Envelope::default(); names000.len()];
-        for seed in 0..seeds {
-            let r = run(dir, scenario, seed, &[], &c000, "clean")?;
-            for (e, name) in env.iter_mut().zip(&names000) {
-                e.add_named(&r, name);
-            }
-            step();
-        }
+        let env = envelopes(seeds, &names000, &mut step, |seed| {
+            run(dir, scenario, seed, &[], &c000, "clean")
+        })?;
         for (name, e) in names000.iter().zip(env) {
             source_000.push(Source000Row {
                 scenario,
@@ -206,14 +201,9 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
             .map(|f| f.parse())
             .collect::<Result<Vec<FaultSpec>, _>>()
             .expect("the built-in fault cases parse");
-        let mut env = vec![Envelope::default(); SOURCE_001_PIPELINES.len()];
-        for seed in 0..seeds {
-            let r = run(dir, "seed001", seed, &faults, &c001, &format!("case{ci}"))?;
-            for (e, name) in env.iter_mut().zip(SOURCE_001_PIPELINES) {
-                e.add_named(&r, name);
-            }
-            step();
-        }
+        let env = envelopes(seeds, SOURCE_001_PIPELINES, &mut step, |seed| {
+            run(dir, "seed001", seed, &faults, &c001, &format!("case{ci}"))
+        })?;
         for (name, e) in SOURCE_001_PIPELINES.iter().zip(env) {
             if e.runs == 0 {
                 continue;
@@ -235,14 +225,9 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
     let mut source_001_mismatch = Vec::new();
     for (mi, &(receiver, tau_s, scale)) in SOURCE_001_MISMATCHES.iter().enumerate() {
         let scenario = gnss_bias_variant(tau_s, scale);
-        let mut env = vec![Envelope::default(); SOURCE_001_MISMATCH_PIPELINES.len()];
-        for seed in 0..seeds {
-            let r = run_scenario(dir, &scenario, seed, &[], &c001, &format!("bias{mi}"))?;
-            for (e, name) in env.iter_mut().zip(SOURCE_001_MISMATCH_PIPELINES) {
-                e.add_named(&r, name);
-            }
-            step();
-        }
+        let env = envelopes(seeds, SOURCE_001_MISMATCH_PIPELINES, &mut step, |seed| {
+            run_scenario(dir, &scenario, seed, &[], &c001, &format!("bias{mi}"))
+        })?;
         for (name, e) in SOURCE_001_MISMATCH_PIPELINES.iter().zip(env) {
             source_001_mismatch.push(MismatchRow {
                 receiver,
@@ -257,6 +242,24 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
         source_001,
         source_001_mismatch,
     })
+}
+
+/// Envelopes over `seeds` runs of each of `names`, `run(seed)` giving one run.
+fn envelopes(
+    seeds: u64,
+    names: &[&str],
+    step: &mut dyn FnMut(),
+    mut run: impl FnMut(u64) -> Result<Run>,
+) -> Result<Vec<Envelope>> {
+    let mut env = vec![Envelope::default(); names.len()];
+    for seed in 0..seeds {
+        let r = run(seed)?;
+        for (e, name) in env.iter_mut().zip(names) {
+            e.add_named(&r, name);
+        }
+        step();
+    }
+    Ok(env)
 }
 
 /// The seed001 preset with its GNSS bias's time constant and σ changed.
