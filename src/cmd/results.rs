@@ -119,7 +119,12 @@ fn markdown(r: &Results) -> Result<String> {
         "## Source 001 — federated Kalman filter, INS + BeiDou + Doppler radar\n"
     )?;
     writeln!(md, "500 s maglev run to 432 km/h and back, master fusion every 1 s, β by speed band (the source's table).")?;
-    writeln!(md, "The source's targets: output ≥ 50 Hz, position error < 10 m, speed error < 1 km/h (0.278 m/s).\n")?;
+    writeln!(md, "The source's targets: output ≥ 50 Hz, position error < 10 m, speed error < 1 km/h (0.278 m/s). They are")?;
+    writeln!(md, "targets, not results, so a pipeline inside all three over every seed matches them and one outside any")?;
+    writeln!(md, "falls short; nothing beats a target. Cases: no fault at the preset's noise, half and double it (the")?;
+    writeln!(md, "filters' fixed variances scaled to match, as the source tuned its filters to each level); each device")?;
+    writeln!(md, "dead while cruising, while accelerating across the 150 km/h β band change and while braking across")?;
+    writeln!(md, "both band changes; each device stuck; the INS biased by 0.5 m/s² and the GNSS by 20 m along track.\n")?;
     writeln!(
         md,
         "| case | pipeline | output Hz (min) | max \\|position error\\| (m) | pos RMSE (m) | max \\|speed error\\| (km/h) | speed RMSE (km/h) | NEES in 95 % | verdict |"
@@ -167,9 +172,6 @@ fn markdown(r: &Results) -> Result<String> {
             .iter()
             .find(|b| b.pipeline == row.pipeline)
             .map_or(f64::NAN, |b| b.envelope.position_rmse_m());
-        let ok = e.position_abs_m() < sources::SOURCE_001_MAX_POSITION_M
-            && e.speed_abs_mps() < sources::SOURCE_001_MAX_SPEED_MPS
-            && e.min_rate_hz >= sources::SOURCE_001_MIN_RATE_HZ - 0.1;
         writeln!(
             md,
             "| {} | `{}` | {:.2} | {:.2} | {:+.0} % | {:.3} | {:.0} % | {} |",
@@ -180,11 +182,7 @@ fn markdown(r: &Results) -> Result<String> {
             (e.position_rmse_m() / base - 1.0) * 100.0,
             e.speed_abs_mps() * 3.6,
             e.nees_inside_95() * 100.0,
-            verdict(if ok {
-                Verdict::Beats
-            } else {
-                Verdict::FallsShort
-            })
+            verdict(row.verdict)
         )?;
     }
     writeln!(md)?;
