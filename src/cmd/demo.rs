@@ -1,15 +1,9 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use railfuse_refuse::config::embedded_path;
-use railfuse_refuse::spec::Pipelines;
 use railfuse_viz::{visualize, Sink};
 
 use super::refuse::refuse_and_evaluate;
-use super::DEFAULT_PIPELINES;
-
-/// Run beside the default pipeline in the demo: the same sensors with sensor states.
-const SENSOR_STATES_PIPELINES: &str = include_str!("../../samples/sensor-states.toml");
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -32,13 +26,9 @@ pub fn run(a: Args) -> Result<()> {
     );
     super::simulate::simulate_to("default", a.seed, None, &[], &raw)?;
     // The default pipeline and the same with sensor states, side by side, as one config.
-    let text = format!("{DEFAULT_PIPELINES}\n{SENSOR_STATES_PIPELINES}");
+    let (text, config) = railfuse_experiments::long_runs::side_by_side()?;
     std::fs::write(&config_path, &text)
         .with_context(|| format!("{}: cannot write", config_path.display()))?;
-    let config = Pipelines::parse(
-        &text,
-        &embedded_path("samples/kalman.toml + samples/sensor-states.toml"),
-    )?;
     let source = "embedded samples/kalman.toml + samples/sensor-states.toml".into();
     refuse_and_evaluate(
         &raw,

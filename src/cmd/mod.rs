@@ -12,4 +12,4 @@ pub mod simulate;
 pub mod viz;
 
 /// The pipeline configuration used when none is given: `samples/kalman.toml`.
-pub const DEFAULT_PIPELINES: &str = include_str!("../../samples/kalman.toml");
+pub const DEFAULT_PIPELINES: &str = railfuse_experiments::long_runs::KALMAN_PIPELINES;

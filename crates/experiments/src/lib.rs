@@ -5,10 +5,12 @@
 //! - [`run`]: simulate, re-fuse and evaluate one run (one scenario, seed, set of faults);
 //! - [`Envelope`]: the worst case over seeds of one pipeline's figures;
 //! - [`sources`]: the experiments of sources 000 and 001 and their typed results, each
-//!   source's claim beside railfuse's figure of the same kind.
+//!   source's claim beside railfuse's figure of the same kind;
+//! - [`long_runs`]: the default pipelines' covariance honesty over one-hour runs.
 //!
 //! Printing the results (Markdown, JSON) is the CLI's job.
 
+pub mod long_runs;
 pub mod sources;
 
 use std::path::Path;
@@ -54,23 +56,25 @@ pub fn run(
 ) -> Result<Run> {
     let preset =
         Scenario::preset(scenario).ok_or_else(|| Error::UnknownScenario(scenario.to_owned()))?;
-    run_scenario(dir, &preset, seed, faults, pipelines, tag)
+    run_scenario(dir, &preset, seed, None, faults, pipelines, tag)
 }
 
-/// [`run`] on a scenario given by value (a preset with some parameters changed).
+/// [`run`] on a scenario given by value (a preset with some parameters changed), for
+/// `duration_s` (the preset's whole run when `None`).
 pub fn run_scenario(
     dir: &Path,
     scenario: &Scenario,
     seed: u64,
+    duration_s: Option<f64>,
     faults: &[FaultSpec],
     pipelines: &Pipelines,
     tag: &str,
 ) -> Result<Run> {
-    scenario.check(None, faults)?;
+    scenario.check(duration_s, faults)?;
     let name = scenario.name();
     let raw = dir.join(format!("{name}-{tag}-seed{seed}.mcap"));
     let fused = dir.join(format!("{name}-{tag}-seed{seed}.fused.mcap"));
-    let sim = simulate(scenario, seed, None, faults, &raw)?;
+    let sim = simulate(scenario, seed, duration_s, faults, &raw)?;
     let result = refuse(&RefuseOptions {
         input: &raw,
         output: &fused,
@@ -101,6 +105,10 @@ pub struct Envelope {
     pub speed_rmse_sum_mps: f64,
     pub min_rate_hz: f64,
     pub nees_inside_sum: f64,
+    /// The lowest share of states inside the NEES 95 % interval in any one run.
+    pub nees_inside_min: f64,
+    /// The largest position RMSE of any one run, m.
+    pub position_rmse_max_m: f64,
     /// Largest |position error| after the first balise, m (runs with balises).
     pub after_first_balise_abs_m: Option<f64>,
 }
@@ -112,7 +120,9 @@ impl Envelope {
             return;
         };
         let rate = p.states as f64 / duration_s;
+        let nees = p.nees.as_ref().map_or(0.0, |n| n.inside_95);
         if self.runs == 0 {
+            self.nees_inside_min = nees;
             self.position_min_m = pos.min;
             self.position_max_m = pos.max;
             self.speed_min_mps = spd.min;
@@ -127,7 +137,9 @@ impl Envelope {
         self.position_rmse_sum_m += pos.rmse;
         self.speed_rmse_sum_mps += spd.rmse;
         self.min_rate_hz = self.min_rate_hz.min(rate);
-        self.nees_inside_sum += p.nees.as_ref().map_or(0.0, |n| n.inside_95);
+        self.nees_inside_sum += nees;
+        self.nees_inside_min = self.nees_inside_min.min(nees);
+        self.position_rmse_max_m = self.position_rmse_max_m.max(pos.rmse);
         let after_balise = p
             .windows
             .iter()

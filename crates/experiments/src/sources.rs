@@ -9,6 +9,7 @@ use railfuse_refuse::config::embedded_path;
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
 
+use crate::long_runs::{long_runs, LongRunRow, LONG_RUN_S};
 use crate::{run, run_scenario, Envelope, Result, Run};
 
 /// Source 000's experiment: `samples/seed000.toml`.
@@ -224,9 +225,12 @@ pub struct Results {
     pub source_001: Vec<Source001Row>,
     /// Source 001 without faults, on receivers whose bias the sensor-state models get wrong.
     pub source_001_mismatch: Vec<MismatchRow>,
+    /// The default pipelines over one-hour default runs.
+    pub long_runs: Vec<LongRunRow>,
 }
 
-/// Runs in all for `seeds` seeds: source 000's, then every source 001 case's.
+/// Runs in all for `seeds` seeds: source 000's, every source 001 case's, the mismatched
+/// receivers', the long runs.
 pub fn runs(seeds: u64) -> u64 {
     seeds
         * (SOURCE_000_SCENARIOS.len() + SOURCE_001_CASES.len() + SOURCE_001_MISMATCHES.len()) as u64
@@ -280,6 +284,7 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
                 dir,
                 &scenario,
                 seed,
+                None,
                 &faults,
                 &pipelines,
                 &format!("case{ci}"),
@@ -302,7 +307,7 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
     for (mi, &(receiver, tau_s, scale)) in SOURCE_001_MISMATCHES.iter().enumerate() {
         let scenario = gnss_bias_variant(tau_s, scale);
         let env = envelopes(seeds, SOURCE_001_MISMATCH_PIPELINES, &mut step, |seed| {
-            run_scenario(dir, &scenario, seed, &[], &c001, &format!("bias{mi}"))
+            run_scenario(dir, &scenario, seed, None, &[], &c001, &format!("bias{mi}"))
         })?;
         for (name, e) in SOURCE_001_MISMATCH_PIPELINES.iter().zip(env) {
             source_001_mismatch.push(MismatchRow {
@@ -313,11 +318,13 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
             });
         }
     }
+    let long_runs = long_runs(dir, seeds, LONG_RUN_S, &mut step)?;
     Ok(Results {
         seeds,
         source_000,
         source_001,
         source_001_mismatch,
+        long_runs,
     })
 }
 

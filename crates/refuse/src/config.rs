@@ -271,9 +271,16 @@ pub struct SensorConfig {
     /// Estimate this sensor's acceleration bias as a state (an accelerometer's bias).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub acceleration_bias: Option<AccelerationBiasConfig>,
-    /// Estimate this sensor's speed scale factor as a state (Doppler radar, worn wheels).
+    /// Estimate this sensor's speed scale factor as a state (Doppler radar, worn wheels), or
+    /// its chainage scale (`quantity = "chainage"`: a loop's survey scale).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scale_factor: Option<ScaleFactorConfig>,
+    /// The speed it reports is the mean over this window ending at its stamp (an odometer
+    /// that counts pulses over 0.2 s), s: under the constant-acceleration model that is
+    /// `v − a W / 2`, not `v`, a lag of `W/2` that otherwise shows as a position error after
+    /// every brake and start.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_window_s: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -302,6 +309,10 @@ pub struct ScaleFactorConfig {
     /// Random-walk intensity, 1/s (0: a constant scale factor).
     #[serde(default)]
     pub walk_per_s: f64,
+    /// The quantity it scales: `speed` (a radar, an odometer: the default) or `chainage` (a
+    /// loop whose surveyed chainages are off by a scale, so its error grows along the line).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quantity: Option<Quantity>,
 }
 
 impl SensorConfig {

@@ -53,14 +53,17 @@ impl Quantity {
     }
 }
 
-/// How a sensor's measurement of one quantity sees the state: `z = H x + offset`. A bias
-/// state adds to the row; a scale-factor state `k` makes a speed sensor non-linear,
-/// `z = (1 + k) v`, linearised at the estimate of the moment (an extended Kalman row):
-/// `H = [0, 1 + k̂, …, v̂, …]`, offset `−v̂ k̂`.
+/// How a sensor's measurement of one quantity `q` sees the state: `z = H x + offset`. A bias
+/// state adds to the row; a scale-factor state `k` makes it non-linear, `z = (1 + k) h_q x`
+/// (`h_q` the quantity's own row: `q`'s unit entry, and `−W/2` at the acceleration for a
+/// speed averaged over a window `W`), linearised at the estimate of the moment (an extended
+/// Kalman row): `H = h + k̂ h_q` with `h_q x̂` at `k`, offset `−k̂ h_q x̂`.
 #[derive(Debug, Clone, Copy)]
 pub struct ObservationRow<const N: usize> {
-    /// The row of the linear part (the quantity's unit entry and any bias state's).
+    /// The row of the linear part (the quantity's own row and any bias state's entry).
     pub h: RowSVector<f64, N>,
+    /// The quantity's own row, what a scale factor multiplies.
+    pub scaled: RowSVector<f64, N>,
     /// The state holding this sensor's scale factor, if the pipeline estimates one.
     pub scale_state: Option<usize>,
 }
@@ -75,10 +78,10 @@ impl<const N: usize> ObservationRow<N> {
     pub fn at(&self, x: Option<&nalgebra::SVector<f64, N>>) -> (RowSVector<f64, N>, f64) {
         match (self.scale_state, x) {
             (Some(j), Some(x)) => {
-                let (v, k) = (x[Quantity::Speed.index()], x[j]);
-                let mut h = self.h;
-                (h[Quantity::Speed.index()], h[j]) = (1.0 + k, v);
-                (h, -v * k)
+                let (q, k) = ((self.scaled * x)[0], x[j]);
+                let mut h = self.h + self.scaled * k;
+                h[j] = q;
+                (h, -q * k)
             }
             _ => (self.h, 0.0),
         }
@@ -272,4 +275,47 @@ pub(crate) fn gnss_chainage(
         ue * ue * c[0] + ue * un * (c[1] + c[3]) + un * un * c[4]
     });
     Some((chainage, variance, Some(heading)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{RowSVector, SVector};
+
+    /// A scale factor multiplies the quantity's own row, whatever it is: a loop's chainage
+    /// scale on `s`, an odometer's on its window-averaged speed `v − a W/2`; a bias entry is
+    /// left as it is. The linearised row reproduces `z = (1 + k) h_q x + b` at the estimate.
+    #[test]
+    fn a_scale_factor_scales_the_quantitys_own_row_chainage_or_windowed_speed() {
+        // x = [s, v, a, b, k]: a loop with a chainage bias (3) and a chainage scale (4).
+        let x = SVector::<f64, 5>::from([60_000.0, 30.0, 0.5, 0.2, 2e-5]);
+        let scaled = RowSVector::<f64, 5>::from([1.0, 0.0, 0.0, 0.0, 0.0]);
+        let mut h = scaled;
+        h[3] = 1.0;
+        let row = ObservationRow {
+            h,
+            scaled,
+            scale_state: Some(4),
+        };
+        let (hl, offset) = row.at(Some(&x));
+        assert_eq!(hl[0], 1.0 + 2e-5);
+        assert_eq!(hl[3], 1.0);
+        assert_eq!(hl[4], 60_000.0);
+        let z = (1.0 + x[4]) * x[0] + x[3];
+        assert!(((hl * x)[0] + offset - z).abs() < 1e-9);
+
+        // An odometer averaging over 0.2 s, with its scale factor in state 3.
+        let x = SVector::<f64, 4>::from([0.0, 20.0, -1.0, 0.004]);
+        let scaled = RowSVector::<f64, 4>::from([0.0, 1.0, -0.1, 0.0]);
+        let row = ObservationRow {
+            h: scaled,
+            scaled,
+            scale_state: Some(3),
+        };
+        let (hl, offset) = row.at(Some(&x));
+        let z = (1.0 + x[3]) * (x[1] - 0.1 * x[2]);
+        assert!(((hl * x)[0] + offset - z).abs() < 1e-12);
+        assert!((hl[2] + 0.1 * 1.004).abs() < 1e-15);
+        assert_eq!(hl[3], 20.1);
+    }
 }

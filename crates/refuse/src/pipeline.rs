@@ -156,17 +156,25 @@ impl<const N: usize> Pipeline<N> {
     /// matrix, and it gives chainage only if one of them is chainage.
     pub fn bind(&mut self, sensor: usize, binding: &SensorBinding) {
         let motion = self.layout.motion;
+        let window = self.spec.sensors[sensor].speed_window_s;
         let field = |q: Quantity, variance: VarianceValue| {
             let mut h = q.h::<N>()?;
+            // A speed averaged over the window W before the stamp: v − a W/2 (exact under the
+            // constant-acceleration model).
+            if let (Quantity::Speed, Some(w)) = (q, window) {
+                h[Quantity::Acceleration.index()] = -w / 2.0;
+            }
+            let scaled = h;
             let mut scale_state = None;
-            // The sensor's state on this quantity: a bias adds to the row, a scale factor
+            // The sensor's states on this quantity: a bias adds to the row, a scale factor
             // makes it non-linear (linearised at each update).
-            if let Some(p) = self
+            for (p, (_, state)) in self
                 .states
                 .iter()
-                .position(|(j, s)| *j == sensor && s.quantity() == q)
+                .enumerate()
+                .filter(|(_, (j, s))| *j == sensor && s.quantity() == q)
             {
-                match self.states[p].1 {
+                match state {
                     SensorState::ScaleFactor { .. } => scale_state = Some(motion + p),
                     SensorState::ChainageBias { .. } | SensorState::AccelerationBias { .. } => {
                         h[motion + p] = 1.0
@@ -175,7 +183,11 @@ impl<const N: usize> Pipeline<N> {
             }
             Some(Field {
                 quantity: q,
-                row: ObservationRow { h, scale_state },
+                row: ObservationRow {
+                    h,
+                    scaled,
+                    scale_state,
+                },
                 variance,
             })
         };
@@ -592,6 +604,8 @@ pub enum AnyPipeline {
     Four(Pipeline<4>),
     Five(Pipeline<5>),
     Six(Pipeline<6>),
+    Seven(Pipeline<7>),
+    Eight(Pipeline<8>),
 }
 
 macro_rules! each {
@@ -602,19 +616,23 @@ macro_rules! each {
             AnyPipeline::Four($p) => $e,
             AnyPipeline::Five($p) => $e,
             AnyPipeline::Six($p) => $e,
+            AnyPipeline::Seven($p) => $e,
+            AnyPipeline::Eight($p) => $e,
         }
     };
 }
 
 impl AnyPipeline {
     pub fn new(spec: PipelineSpec) -> Result<Self> {
-        const _: () = assert!(MAX_STATES == 6, "AnyPipeline has a variant per dimension");
+        const _: () = assert!(MAX_STATES == 8, "AnyPipeline has a variant per dimension");
         Ok(match spec.dimension() {
             2 => AnyPipeline::Two(Pipeline::new(spec)?),
             3 => AnyPipeline::Three(Pipeline::new(spec)?),
             4 => AnyPipeline::Four(Pipeline::new(spec)?),
             5 => AnyPipeline::Five(Pipeline::new(spec)?),
-            _ => AnyPipeline::Six(Pipeline::new(spec)?),
+            6 => AnyPipeline::Six(Pipeline::new(spec)?),
+            7 => AnyPipeline::Seven(Pipeline::new(spec)?),
+            _ => AnyPipeline::Eight(Pipeline::new(spec)?),
         })
     }
 

@@ -28,7 +28,7 @@ use crate::model::{
 };
 
 /// The most state components a pipeline may have (motion and sensor states together).
-pub const MAX_STATES: usize = 6;
+pub const MAX_STATES: usize = 8;
 
 /// The device name reserved for the master filter of a federated pipeline.
 pub const MASTER_DEVICE: &str = "master";
@@ -190,6 +190,8 @@ pub struct SensorSpec {
     pub gate_nis: Option<f64>,
     /// Its calibration states, in state order.
     pub states: Vec<SensorState>,
+    /// The window its speed is the mean over, s (config `speed_window_s`).
+    pub speed_window_s: Option<f64>,
     /// Where its table is.
     pub declared: Place,
 }
@@ -535,14 +537,33 @@ fn sensor(
         });
     }
     if let Some(k) = s.scale_factor {
-        if !measures(Quantity::Speed) {
-            return Err("scale_factor, but speed is not among its fields".into());
+        let quantity = k.quantity.unwrap_or(Quantity::Speed);
+        if quantity == Quantity::Acceleration {
+            return Err("scale_factor.quantity must be speed or chainage".into());
+        }
+        if !measures(quantity) {
+            return Err(format!(
+                "scale_factor of {}, but {} is not among its fields",
+                quantity.name(),
+                quantity.name()
+            ));
         }
         states.push(SensorState::ScaleFactor {
+            quantity,
             std: positive("scale_factor.std", k.std)?,
             walk_per_s: at_least_zero("scale_factor.walk_per_s", k.walk_per_s)?,
         });
     }
+    let speed_window_s = match s.speed_window_s {
+        None => None,
+        Some(_) if motion < 3 => {
+            return Err("speed_window_s needs the acceleration of a 3-state motion model".into())
+        }
+        Some(_) if !measures(Quantity::Speed) => {
+            return Err("speed_window_s, but speed is not among its fields".into())
+        }
+        Some(w) => Some(positive("speed_window_s", w)?),
+    };
     let (device, device_name) = match filter.is_federated() {
         false => (0, None),
         true => match s.device_name() {
@@ -561,6 +582,7 @@ fn sensor(
         variance: s.variance.clone(),
         gate_nis,
         states,
+        speed_window_s,
         declared,
     })
 }
@@ -957,17 +979,63 @@ variance = "message"
             "fields = [\"speed\"]\nchainage_bias = { std_m = 2.0, time_constant_s = 60.0 }"
         ))
         .contains("chainage is not among its fields"));
+        // A chainage scale for the loop; a speed window for a speed sensor only, on a model
+        // with acceleration.
+        let c = Pipelines::parse(
+            &with(
+                "scale_factor = { std = 1e-4, quantity = \"chainage\" }",
+                "speed_window_s = 0.2",
+            ),
+            Path::new("p.toml"),
+        )
+        .unwrap();
+        assert_eq!(
+            c.pipeline[0].sensor_states()[0].1.quantity(),
+            Quantity::Chainage
+        );
+        assert_eq!(c.pipeline[0].sensors[1].speed_window_s, Some(0.2));
+        let e = err(&with(
+            "scale_factor = { std = 1e-4, quantity = \"acceleration\" }",
+            "",
+        ));
+        assert!(e.contains("must be speed or chainage"), "{e}");
+        let e = err(&with("fields = [\"chainage\"]\nspeed_window_s = 0.2", ""));
+        assert!(
+            e.contains("speed_window_s, but speed is not among its fields"),
+            "{e}"
+        );
+        let e = err(&with("", "speed_window_s = 0.2").replace(
+            "model = \"constant_acceleration\", jerk_psd = 0.05",
+            "model = \"constant_velocity\", acceleration_psd = 0.05",
+        ));
+        assert!(e.contains("needs the acceleration"), "{e}");
+        let e = err(&with("", "speed_window_s = -0.2"));
+        assert!(e.contains("speed_window_s must be positive"), "{e}");
         let e = err(&with(
             "",
             "fields = [\"speed\"]\nacceleration_bias = { std_mps2 = 0.01, time_constant_s = 60.0 }",
         ));
         assert!(e.contains("acceleration_bias, but no acceleration"), "{e}");
-        let e = err(&with(
-            "chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }\nscale_factor = { std = 0.01 }",
-            "chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }\nscale_factor = { std = 0.01 }",
+        // The loop's bias and scale, the radar's scale and three odometers' scales:
+        // 3 + 2 + 1 + 3 = 9 states.
+        let odometer = |n: u32| {
+            format!(
+                "\n[[pipeline.sensor]]\ntopic = \"/odometer/{n}\"\nvariance = 0.1\n\
+                 scale_factor = {{ std = 0.01 }}\n"
+            )
+        };
+        let e = err(&format!(
+            "{}{}{}{}",
+            with(
+                "chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }\nscale_factor = { std = 1e-4, quantity = \"chainage\" }",
+                "scale_factor = { std = 0.01 }",
+            ),
+            odometer(1),
+            odometer(2),
+            odometer(3)
         ));
         assert!(
-            e.contains("3 motion states and 4 sensor states: at most 6"),
+            e.contains("3 motion states and 6 sensor states: at most 8"),
             "{e}"
         );
     }

@@ -7,7 +7,7 @@
 //! |---|---|---|
 //! | [`SensorState::ChainageBias`] `b` | `z = s + b + v` (a GNSS receiver's wandering position error) | first-order Gauss–Markov: `b_k = e^{−dt/τ} b_{k−1} + w`, `Var w = σ² (1 − e^{−2dt/τ})` |
 //! | [`SensorState::AccelerationBias`] `b` | `z = a + b + v` (an accelerometer's bias) | first-order Gauss–Markov, as above |
-//! | [`SensorState::ScaleFactor`] `k` | `z = (1 + k) v_train + v` (Doppler radar, worn wheels) | random walk: `k_k = k_{k−1} + w`, `Var w = q dt` |
+//! | [`SensorState::ScaleFactor`] `k` | `z = (1 + k) v_train + v` (Doppler radar, worn wheels), or `z = (1 + k) s + v` (a loop's surveyed chainages off by a scale, so that its error grows along the line) | random walk: `k_k = k_{k−1} + w`, `Var w = q dt` |
 //!
 //! They are appended after the motion states: `x = [s, v, (a), b…, k…]`, with a block-diagonal
 //! transition and process noise ([`WithSensorStates`]).
@@ -23,9 +23,13 @@ pub enum SensorState {
     ChainageBias { std_m: f64, time_constant_s: f64 },
     /// Accelerometer bias, m/s²: stationary standard deviation and correlation time.
     AccelerationBias { std_mps2: f64, time_constant_s: f64 },
-    /// Speed scale factor (dimensionless, 0.003 = reads 0.3 % high): prior standard deviation
-    /// and random-walk intensity (1/s).
-    ScaleFactor { std: f64, walk_per_s: f64 },
+    /// Scale factor of a speed or a chainage (dimensionless, 0.003 = reads 0.3 % high): the
+    /// quantity it scales, prior standard deviation and random-walk intensity (1/s).
+    ScaleFactor {
+        quantity: Quantity,
+        std: f64,
+        walk_per_s: f64,
+    },
 }
 
 impl SensorState {
@@ -40,10 +44,10 @@ impl SensorState {
 
     /// The quantity of its sensor's measurement that it enters.
     pub fn quantity(&self) -> Quantity {
-        match self {
+        match *self {
             SensorState::ChainageBias { .. } => Quantity::Chainage,
             SensorState::AccelerationBias { .. } => Quantity::Acceleration,
-            SensorState::ScaleFactor { .. } => Quantity::Speed,
+            SensorState::ScaleFactor { quantity, .. } => quantity,
         }
     }
 
@@ -127,6 +131,7 @@ mod tests {
                     time_constant_s: 60.0,
                 },
                 SensorState::ScaleFactor {
+                    quantity: Quantity::Speed,
                     std: 0.01,
                     walk_per_s: 1e-8,
                 },
