@@ -300,7 +300,9 @@ fn record_viz_streams_the_incoming_channels_to_a_running_viewer() {
     ]);
     stop_when_saved(server, &saved);
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    assert!(r["messages"].as_u64().unwrap() > 1000, "{r}");
+    // The simulator runs in real time (×40): a machine busy with other work records fewer
+    // messages in the 3 s, so only a working flow is asserted, not a rate.
+    assert!(r["messages"].as_u64().unwrap() > 100, "{r}");
     let printed = rerun_ok(&[
         "rrd",
         "print",

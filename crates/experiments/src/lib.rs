@@ -6,11 +6,13 @@
 //! - [`Envelope`]: the worst case over seeds of one pipeline's figures;
 //! - [`sources`]: the experiments of sources 000 and 001 and their typed results, each
 //!   source's claim beside railfuse's figure of the same kind;
-//! - [`long_runs`]: the default pipelines' covariance honesty over one-hour runs.
+//! - [`long_runs`]: the default pipelines' covariance honesty over one-hour runs;
+//! - [`sharing`]: what sources 000 and 001's α and β change, and under which fusion rule.
 //!
 //! Printing the results (Markdown, JSON) is the CLI's job.
 
 pub mod long_runs;
+pub mod sharing;
 pub mod sources;
 
 use std::path::Path;
@@ -35,6 +37,8 @@ pub enum Error {
     Simulate(#[from] railfuse_catalog::Error),
     #[error(transparent)]
     Refuse(#[from] railfuse_refuse::Error),
+    #[error("a pipeline variant does not read back: {0}")]
+    Toml(toml::de::Error),
 }
 
 /// One run, evaluated: every pipeline's figures and the run's length.
@@ -90,6 +94,24 @@ pub fn run_scenario(
         pipelines: eval.pipelines,
         duration_s: sim.duration_s,
     })
+}
+
+/// Envelopes over `seeds` runs of each of `names`, `run(seed)` giving one run.
+pub(crate) fn envelopes(
+    seeds: u64,
+    names: &[&str],
+    step: &mut dyn FnMut(),
+    mut run: impl FnMut(u64) -> Result<Run>,
+) -> Result<Vec<Envelope>> {
+    let mut env = vec![Envelope::default(); names.len()];
+    for seed in 0..seeds {
+        let r = run(seed)?;
+        for (e, name) in env.iter_mut().zip(names) {
+            e.add_named(&r, name);
+        }
+        step();
+    }
+    Ok(env)
 }
 
 /// Worst case over seeds of one pipeline's figures: signed error extremes, mean RMSE, the

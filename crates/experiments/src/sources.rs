@@ -10,7 +10,8 @@ use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
 
 use crate::long_runs::{long_runs, LongRunRow, LONG_RUN_S};
-use crate::{run, run_scenario, Envelope, Result, Run};
+use crate::sharing::SharingRow;
+use crate::{envelopes, run, run_scenario, Envelope, Result};
 
 /// Source 000's experiment: `samples/seed000.toml`.
 pub const SEED000_PIPELINES: &str = include_str!("../../../samples/seed000.toml");
@@ -227,13 +228,20 @@ pub struct Results {
     pub source_001_mismatch: Vec<MismatchRow>,
     /// The default pipelines over one-hour default runs.
     pub long_runs: Vec<LongRunRow>,
+    /// What α and β change.
+    pub sharing: Vec<SharingRow>,
 }
 
 /// Runs in all for `seeds` seeds: source 000's, every source 001 case's, the mismatched
-/// receivers', the long runs.
+/// receivers', the long runs, the sharing variants.
 pub fn runs(seeds: u64) -> u64 {
-    seeds
-        * (SOURCE_000_SCENARIOS.len() + SOURCE_001_CASES.len() + SOURCE_001_MISMATCHES.len()) as u64
+    let long_runs = 1;
+    let experiments = SOURCE_000_SCENARIOS.len()
+        + SOURCE_001_CASES.len()
+        + SOURCE_001_MISMATCHES.len()
+        + long_runs
+        + crate::sharing::EXPERIMENTS.len();
+    seeds * experiments as u64
 }
 
 /// Runs both experiments over `seeds` seeds in `dir`; `progress` is told the runs done.
@@ -319,31 +327,15 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
         }
     }
     let long_runs = long_runs(dir, seeds, LONG_RUN_S, &mut step)?;
+    let sharing = crate::sharing::run_all(dir, seeds, &mut step)?;
     Ok(Results {
+        sharing,
         seeds,
         source_000,
         source_001,
         source_001_mismatch,
         long_runs,
     })
-}
-
-/// Envelopes over `seeds` runs of each of `names`, `run(seed)` giving one run.
-fn envelopes(
-    seeds: u64,
-    names: &[&str],
-    step: &mut dyn FnMut(),
-    mut run: impl FnMut(u64) -> Result<Run>,
-) -> Result<Vec<Envelope>> {
-    let mut env = vec![Envelope::default(); names.len()];
-    for seed in 0..seeds {
-        let r = run(seed)?;
-        for (e, name) in env.iter_mut().zip(names) {
-            e.add_named(&r, name);
-        }
-        step();
-    }
-    Ok(env)
 }
 
 /// The seed001 preset with every sensor's noise σ times `k` (GNSS position and speed, the

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use toml::Spanned;
 
 use crate::error::{Error, Result};
-use crate::filter::federated::Feedback;
+use crate::filter::federated::{Feedback, Fusion};
 use crate::filter::particle::ParticleSettings;
 use crate::filter::sharing::{Redistribution, SharingName};
 use crate::filter::working_state::DetectorSettings;
@@ -160,6 +160,10 @@ impl Default for InitialConfig {
 pub struct FederatedConfig {
     #[serde(default = "default_feedback")]
     pub feedback: Feedback,
+    /// How the master combines the local estimates: "information" (the default: β is each
+    /// sub-filter's share of the information) or "shares" (β weights the estimates).
+    #[serde(default, skip_serializing_if = "is_information")]
+    pub fusion: Fusion,
     /// Master fusion period; 0 fuses after every accepted measurement.
     #[serde(default = "default_fusion_period_s")]
     pub fusion_period_s: f64,
@@ -181,6 +185,7 @@ impl Default for FederatedConfig {
     fn default() -> Self {
         Self {
             feedback: default_feedback(),
+            fusion: Fusion::Information,
             fusion_period_s: default_fusion_period_s(),
             redistribution: default_redistribution(),
             detector: DetectorSettings::default(),
@@ -190,6 +195,9 @@ impl Default for FederatedConfig {
     }
 }
 
+fn is_information(f: &Fusion) -> bool {
+    *f == Fusion::Information
+}
 fn default_feedback() -> Feedback {
     Feedback::FusionReset
 }

@@ -658,6 +658,7 @@ fn federated(f: &FederatedConfig, devices: &[String]) -> Result<FederatedSetting
     }
     Ok(FederatedSettings {
         feedback: f.feedback,
+        fusion: f.fusion,
         fusion_period_ns: (fusion_period_s * 1e9).round() as u64,
         sharing: sharing_table(f, devices)?,
         redistribution: f.redistribution,

@@ -20,6 +20,15 @@
 //! without reset they are not used (each sub-filter keeps its full information). Tested:
 //! `information_sharing_changes_the_estimate_only_between_fusions_of_a_reset_filter`.
 //!
+//! The sources mean their coefficients as weights: source 000's α says the loop is the better
+//! sensor at low speed, source 001's β that the INS is trusted most. [`Fusion::Shares`] does
+//! that: the master takes `x_g = Σ β_i x_i`, `P_g = Σ β_i P_i` (β renormalised over the
+//! healthy devices), which bounds the error covariance whatever the correlation between the
+//! local errors, and resets each sub-filter to `(x_g, P_g)` itself. Then β changes the fused
+//! estimate in every mode (tested:
+//! `weighting_by_shares_makes_beta_change_every_fused_estimate`), at the price of
+//! optimality: a sub-filter that sees a state component poorly still gets its β of it.
+//!
 //! Local filters are Kalman filters (source 001) or particle filters (source 000); a particle
 //! sub-filter is reset by redrawing its cloud from `N(x_g, P_g/β_i)`. β comes from a
 //! [`SharingTable`] by speed band; a [`WorkingState`] detector per device takes a failed
@@ -44,9 +53,35 @@ pub enum Feedback {
     FusionReset,
 }
 
+/// How the master combines the local estimates (module doc).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Fusion {
+    /// Information weighting, `P_g = (Σ P_i⁻¹)⁻¹`; β is the share of the fused information
+    /// each sub-filter is reset with (Carlson).
+    #[default]
+    Information,
+    /// β as the weight of each local estimate, `x_g = Σ β_i x_i`, `P_g = Σ β_i P_i` (a bound
+    /// that holds whatever the correlation between the local errors); the sub-filters are
+    /// reset to `(x_g, P_g)` itself.
+    Shares,
+}
+
+impl Fusion {
+    /// The information share a sub-filter with weight `b` is reset with: `b` under
+    /// information fusion, all of it (1) when β weights the estimates instead.
+    fn reset_share(self, b: f64) -> f64 {
+        match self {
+            Fusion::Information => b,
+            Fusion::Shares => 1.0,
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct FederatedSettings {
     pub feedback: Feedback,
+    pub fusion: Fusion,
     /// Master fusion period; 0 fuses after every accepted measurement.
     pub fusion_period_ns: u64,
     pub sharing: SharingTable,
@@ -97,7 +132,11 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             .into_iter()
             .enumerate()
             .map(|(i, name)| {
-                let share = share_of(initial, beta[i], settings.feedback);
+                let share = share_of(
+                    initial,
+                    settings.fusion.reset_share(beta[i]),
+                    settings.feedback,
+                );
                 Device {
                     name,
                     filter: make(i, &share),
@@ -133,6 +172,9 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
     /// without multiplying kilometres of chainage by a precise sub-filter's large information
     /// and cancelling them again.
     fn fuse(&self) -> Option<StateAndCovariance<N>> {
+        if self.settings.fusion == Fusion::Shares {
+            return self.fuse_by_shares();
+        }
         let origin = self.master.estimate.state;
         let mut info = SMatrix::<f64, N, N>::zeros();
         let mut info_state = SVector::<f64, N>::zeros();
@@ -154,6 +196,33 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         let fused = StateAndCovariance {
             state: origin + p * info_state,
             covariance: super::symmetric(p),
+        };
+        fused.is_finite().then_some(fused)
+    }
+
+    /// The healthy devices' estimates weighted by their β (renormalised over them):
+    /// `x_g = Σ β_i x_i`, `P_g = Σ β_i P_i`. Since `(Σ β_i e_i)(Σ β_i e_i)ᵀ ≤ Σ β_i e_i e_iᵀ` for
+    /// weights summing to one, `P_g` bounds the error covariance however the local errors
+    /// are correlated (they are: every sub-filter starts each cycle from the same reset).
+    fn fuse_by_shares(&self) -> Option<StateAndCovariance<N>> {
+        let mut state = SVector::<f64, N>::zeros();
+        let mut covariance = SMatrix::<f64, N, N>::zeros();
+        let mut total = 0.0;
+        for (d, &b) in self.devices.iter().zip(&self.beta) {
+            if !d.health.healthy() || b <= 0.0 {
+                continue;
+            }
+            let e = d.filter.estimate();
+            state += e.state * b;
+            covariance += e.covariance * b;
+            total += b;
+        }
+        if total <= 0.0 {
+            return None;
+        }
+        let fused = StateAndCovariance {
+            state: state / total,
+            covariance: super::symmetric(covariance / total),
         };
         fused.is_finite().then_some(fused)
     }
@@ -213,6 +282,7 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
     /// where wrong devices are caught (consistency test) and where they prove themselves
     /// again (their shadow sub-filters against the fused estimate).
     fn fuse_and_feed_back(&mut self) {
+        let fusion = self.settings.fusion;
         self.consistency_test();
         if let Some(fused) = self.fuse() {
             self.master.estimate = fused;
@@ -247,7 +317,11 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
         for ((d, &b), &b0) in self.devices.iter_mut().zip(&self.beta).zip(&nominal) {
             d.grace = d.grace.saturating_sub(1);
             if self.settings.feedback == Feedback::FusionReset && b > 0.0 {
-                let mut share = share_of(&self.master.estimate, b, Feedback::FusionReset);
+                let mut share = share_of(
+                    &self.master.estimate,
+                    fusion.reset_share(b),
+                    Feedback::FusionReset,
+                );
                 if d.grace > 0 {
                     // Still re-converging after a cold restart: keep the covariance wide by
                     // what the device still disagrees, so the reset does not undo the restart.
@@ -263,7 +337,7 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
                 // at the next fusion is its disagreement over one cycle only.
                 d.filter.reset(&share_of(
                     &self.master.estimate,
-                    if b0 > 0.0 { b0 } else { 1.0 },
+                    fusion.reset_share(if b0 > 0.0 { b0 } else { 1.0 }),
                     Feedback::FusionReset,
                 ));
             }
@@ -275,9 +349,10 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             return;
         }
         let dt = (t_ns - self.time_ns) as f64 / 1e9;
+        let fusion = self.settings.fusion;
         for (d, &b) in self.devices.iter_mut().zip(&self.beta) {
             let q_scale = if self.settings.feedback == Feedback::FusionReset && b > 0.0 {
-                1.0 / b
+                1.0 / fusion.reset_share(b)
             } else {
                 1.0
             };
@@ -302,7 +377,9 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             let b = self.beta[i];
             let mut share = share_of(
                 &self.master.estimate,
-                if b > 0.0 { b } else { 1.0 },
+                self.settings
+                    .fusion
+                    .reset_share(if b > 0.0 { b } else { 1.0 }),
                 self.settings.feedback,
             );
             let d = &mut self.devices[i];
@@ -373,10 +450,14 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
                 &self.healthy(),
                 self.settings.redistribution,
             );
+            let fusion = self.settings.fusion;
             for (d, &b) in self.devices.iter_mut().zip(&self.beta) {
                 if b > 0.0 {
-                    d.filter
-                        .reset(&share_of(&self.master.estimate, b, self.settings.feedback));
+                    d.filter.reset(&share_of(
+                        &self.master.estimate,
+                        fusion.reset_share(b),
+                        self.settings.feedback,
+                    ));
                 }
             }
             return Outcome::Accepted(innovation);
@@ -510,6 +591,7 @@ mod tests {
         };
         FederatedSettings {
             feedback,
+            fusion: Fusion::Information,
             fusion_period_ns: 0,
             sharing: SharingTable::source_001(),
             redistribution: Redistribution::Even,
@@ -640,9 +722,19 @@ mod tests {
         period_ns: u64,
         sharing: SharingTable,
     ) -> Vec<StateAndCovariance<3>> {
+        run_fused(feedback, Fusion::Information, period_ns, sharing)
+    }
+
+    fn run_fused(
+        feedback: Feedback,
+        fusion: Fusion,
+        period_ns: u64,
+        sharing: SharingTable,
+    ) -> Vec<StateAndCovariance<3>> {
         let names = vec!["ins".into(), "gnss".into(), "radar".into()];
         let mut f = Federated::new(
             FederatedSettings {
+                fusion,
                 fusion_period_ns: period_ns,
                 sharing,
                 ..settings(feedback)
@@ -683,5 +775,41 @@ mod tests {
         assert_eq!(gap(Feedback::NoReset, 0), 0.0);
         assert_eq!(gap(Feedback::NoReset, 1_000_000_000), 0.0);
         eprintln!("β: fusion every update {every_update:e} m, fusion every 1 s {periodic:.4} m");
+    }
+
+    /// With β weighting the local estimates (`fusion = "shares"`, the sources' weighting)
+    /// β changes the fused estimate in every mode: with a fusion after every update (where
+    /// information sharing is the centralised filter whatever β), with a master period (by
+    /// more than information sharing between its fusions), and without reset (where
+    /// information sharing does not use β at all).
+    #[test]
+    fn weighting_by_shares_makes_beta_change_every_fused_estimate() {
+        let gap = |feedback, period| {
+            let a = run_fused(feedback, Fusion::Shares, period, SharingTable::source_001());
+            let b = run_fused(feedback, Fusion::Shares, period, SharingTable::even(3));
+            largest_chainage_gap(&a, &b)
+        };
+        let information = largest_chainage_gap(
+            &run_with(
+                Feedback::FusionReset,
+                1_000_000_000,
+                SharingTable::source_001(),
+            ),
+            &run_with(Feedback::FusionReset, 1_000_000_000, SharingTable::even(3)),
+        );
+        for (feedback, period) in [
+            (Feedback::FusionReset, 0),
+            (Feedback::FusionReset, 1_000_000_000),
+            (Feedback::NoReset, 1_000_000_000),
+        ] {
+            let g = gap(feedback, period);
+            eprintln!("shares, {feedback:?}, period {period} ns: β moves the chainage {g:.4} m (information sharing: {information:.4} m)");
+            let least = match (feedback, period) {
+                (Feedback::FusionReset, 0) => 1e-3,
+                (Feedback::FusionReset, _) => 5.0 * information,
+                (Feedback::NoReset, _) => 0.1,
+            };
+            assert!(g > least, "{feedback:?}, period {period}: {g} m");
+        }
     }
 }
