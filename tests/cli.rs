@@ -402,8 +402,9 @@ fn sensor_states_shrink_the_default_runs_errors_and_make_its_covariance_honest()
             f(&plain, path)
         );
     }
-    // White-noise sensor models leave the covariance far too small; with the two errors
-    // modelled the NEES lies inside its 95 % interval most of the time.
+    // White-noise sensor models leave the covariance far too small; with the loop's survey
+    // scale, the radar's and odometers' scale factors and the odometers' window modelled the
+    // NEES lies inside its 95 % interval most of the time.
     assert!(
         f(&plain, ["nees", "inside_95"]) < 0.5 && f(&cal, ["nees", "inside_95"]) > 0.8,
         "{plain} {cal}"
