@@ -10,7 +10,6 @@ use railfuse_refuse::config::embedded_path;
 use railfuse_refuse::spec::{PipelineSpec, Pipelines};
 use serde::Serialize;
 
-use crate::sources::{SEED000_PIPELINES, SEED001_PIPELINES};
 use crate::{envelopes, run, Envelope, Error, Result};
 
 /// One source's federated pipeline in one run: (source, scenario, pipeline, its sharing
@@ -65,15 +64,21 @@ fn variant(base: &PipelineSpec, name: &str, fusion: &str, sharing: &str) -> Resu
     Ok(toml::to_string(&doc).expect("a table serialises"))
 }
 
-/// Every variant of every experiment over `seeds` seeds.
-pub fn run_all(dir: &Path, seeds: u64, step: &mut dyn FnMut()) -> Result<Vec<SharingRow>> {
+/// Every variant of every experiment over `seeds` seeds; `seed000` and `seed001` are the
+/// parsed `samples/seed000.toml` and `samples/seed001.toml`.
+pub fn run_all(
+    dir: &Path,
+    seeds: u64,
+    seed000: &Pipelines,
+    seed001: &Pipelines,
+    step: &mut dyn FnMut(),
+) -> Result<Vec<SharingRow>> {
     let mut rows = Vec::new();
     for &(source, scenario, base, table) in EXPERIMENTS {
-        let (text, sample) = match source {
-            "000" => (SEED000_PIPELINES, "samples/seed000.toml"),
-            _ => (SEED001_PIPELINES, "samples/seed001.toml"),
+        let samples = match source {
+            "000" => seed000,
+            _ => seed001,
         };
-        let samples = Pipelines::parse(text, &embedded_path(sample))?;
         let spec = samples
             .pipeline
             .iter()

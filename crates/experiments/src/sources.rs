@@ -327,7 +327,7 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
         }
     }
     let long_runs = long_runs(dir, seeds, LONG_RUN_S, &mut step)?;
-    let sharing = crate::sharing::run_all(dir, seeds, &mut step)?;
+    let sharing = crate::sharing::run_all(dir, seeds, &c000, &c001, &mut step)?;
     Ok(Results {
         sharing,
         seeds,
