@@ -144,40 +144,165 @@ fn seed000_measurements_have_the_variances_source_000_states() {
     }
 }
 
+/// Kalman, federated and particle pipelines side by side, as the viewer's layout test run.
+const THREE_PIPELINES: &str = r#"
+[[pipeline]]
+name = "kf"
+filter = "kalman"
+motion = { model = "constant_acceleration", jerk_psd = 0.2 }
+[[pipeline.sensor]]
+topic = "/loop/position"
+variance = "message"
+[[pipeline.sensor]]
+topic = "/radar/speed"
+variance = 0.1
+scale_factor = { std = 0.01 }
+
+[[pipeline]]
+name = "fkf"
+filter = "federated_kalman"
+motion = { model = "constant_acceleration", jerk_psd = 0.2 }
+federated = { fusion_period_s = 1.0 }
+[[pipeline.sensor]]
+topic = "/loop/position"
+device = "loop"
+variance = "message"
+[[pipeline.sensor]]
+topic = "/radar/speed"
+device = "radar"
+variance = 0.1
+
+[[pipeline]]
+name = "pf"
+filter = "particle"
+motion = { model = "constant_acceleration", jerk_psd = 0.2 }
+particle = { particles = 300, seed = 7 }
+[[pipeline.sensor]]
+topic = "/loop/position"
+variance = "message"
+[[pipeline.sensor]]
+topic = "/radar/speed"
+variance = 0.1
+"#;
+
+/// Data rows per entity path, from `rerun rrd print -v` (one line per chunk: "with N rows … -
+/// /path - data columns: […]"); style chunks (series names, colours) are not data.
+fn rows_per_entity(printed: &str) -> std::collections::BTreeMap<String, u64> {
+    let data = [
+        "Scalars:scalars",
+        "Points2D:positions",
+        "LineStrips2D:strips",
+        "TextLog:text",
+    ];
+    let mut rows = std::collections::BTreeMap::new();
+    for line in printed
+        .lines()
+        .filter(|l| l.starts_with("Chunk(") && data.iter().any(|d| l.contains(d)))
+    {
+        let n = line
+            .split(" with ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|n| n.parse::<u64>().ok());
+        let path = line.split(" - ").nth(1).map(str::trim);
+        if let (Some(n), Some(path)) = (n, path) {
+            *rows.entry(path.to_owned()).or_default() += n;
+        }
+    }
+    rows
+}
+
 #[test]
-fn rerun_verifies_the_recording_and_shows_the_logged_entities() {
+fn rerun_verifies_the_recording_with_its_layout_and_every_pipelines_entities() {
     let d = tempfile::tempdir().unwrap();
-    let (fused, rrd) = (d.path().join("f.mcap"), d.path().join("run.rrd"));
+    let (config, fused, rrd) = (
+        d.path().join("three.toml"),
+        d.path().join("f.mcap"),
+        d.path().join("run.rrd"),
+    );
+    std::fs::write(&config, THREE_PIPELINES).unwrap();
     ok(&[
         "refuse",
         s(&sample("short-run.mcap")),
         "-c",
-        s(&sample("kalman.toml")),
+        s(&config),
         "-o",
         s(&fused),
     ]);
     ok(&["viz", s(&fused), "--save", s(&rrd)]);
     rerun_ok(&["rrd", "verify", s(&rrd)]);
     let printed = rerun_ok(&["rrd", "print", "-v", s(&rrd)]);
-    for entity in [
+    let rows = rows_per_entity(&printed);
+    // Every pipeline's series, its place on the map and its diagnostics, with data in them.
+    let mut expected: Vec<String> = [
         "/map/track",
+        "/map/km_marks",
         "/map/balises",
-        "/map/truth",
-        "/map/gnss",
-        "/map/fused/kalman",
+        "/map/stations",
+        "/map/legend",
+        "/map/truth/train",
+        "/map/truth/path",
+        "/map/gnss/rtk_fixed",
         "/speed/truth",
         "/speed/radar",
         "/speed/odometer_1",
-        "/speed/fused/kalman",
-        "/chainage_error/kalman",
-        "/speed_error/kalman",
         "/events",
+        "/diagnostics/kf/sensor_states/radar_speed/scale_factor",
+        "/diagnostics/fkf/sharing",
+        "/diagnostics/pf/effective_sample_size",
+    ]
+    .map(str::to_owned)
+    .to_vec();
+    for p in ["kf", "fkf", "pf"] {
+        expected.extend([
+            format!("/speed/fused/{p}"),
+            format!("/chainage_error/{p}"),
+            format!("/speed_error/{p}"),
+            format!("/map/fused/{p}/position"),
+            format!("/map/fused/{p}/extent"),
+            format!("/diagnostics/{p}/nis/loop_position"),
+            format!("/diagnostics/{p}/nis/chi2_bounds"),
+        ]);
+    }
+    for entity in &expected {
+        assert!(
+            rows.get(entity).is_some_and(|&n| n > 0),
+            "no rows on {entity}: {rows:?}"
+        );
+    }
+    // A short run is kept at full rate: one error row per fused state.
+    let states = python_ok("check_mcap.py", &[s(&fused)]);
+    for p in ["kf", "fkf", "pf"] {
+        let n = states["topics"][format!("/fused/{p}/state")]
+            .as_u64()
+            .unwrap();
+        let logged = rows[&format!("/chainage_error/{p}")];
+        // States before the truth starts or after it ends have no error to draw.
+        assert!(
+            logged <= n && logged + 50 >= n,
+            "{p}: {logged} error rows for {n} states"
+        );
+    }
+    // The layout travels in the file: a blueprint store with the views by name, and every
+    // pipeline's diagnostics tab.
+    let data = rerun_ok(&["rrd", "print", "-vvv", s(&rrd)]);
+    assert!(data.contains("Blueprint"), "no blueprint store");
+    for view in [
+        "Map (east →, north ↑)",
+        "Speed (m/s)",
+        "Chainage error: fused − truth, ±3σ (m)",
+        "Speed error: fused − truth, ±3σ (m/s)",
+        "β per device",
+        "effective sample size",
+        "Events",
     ] {
-        assert!(printed.contains(entity), "rrd print lacks {entity}");
+        assert!(data.contains(view), "blueprint lacks the view {view:?}");
+    }
+    for p in ["kf", "fkf", "pf"] {
+        assert!(data.contains(&format!("{p}: NIS")), "no NIS view for {p}");
     }
     // The log_time timeline carries the MCAP log time of the simulated run (2026-06-01), not
     // the wall clock of the viz run.
-    let data = rerun_ok(&["rrd", "print", "-vvv", s(&rrd)]);
     assert!(
         data.contains("index_name: log_time"),
         "no log_time timeline"
@@ -226,7 +351,7 @@ fn sensor_states_reach_the_fused_file_and_the_viewer() {
     ok(&["viz", s(&fused), "--save", s(&rrd)]);
     rerun_ok(&["rrd", "verify", s(&rrd)]);
     assert!(rerun_ok(&["rrd", "print", "-v", s(&rrd)])
-        .contains("/sensor_states/sf/radar_speed/scale_factor"));
+        .contains("/diagnostics/sf/sensor_states/radar_speed/scale_factor"));
 }
 
 fn free_port() -> u16 {
@@ -311,12 +436,60 @@ fn record_viz_streams_the_incoming_channels_to_a_running_viewer() {
         "true",
         s(&saved),
     ]);
-    for entity in ["/map/track", "/map/truth", "/speed/truth", "/speed/radar"] {
+    for entity in [
+        "/map/track",
+        "/map/truth/train",
+        "/speed/truth",
+        "/speed/radar",
+    ] {
         assert!(
             printed.contains(entity),
             "the viewer did not receive {entity}"
         );
     }
+}
+
+#[test]
+fn refuse_viz_streams_the_fused_channels_while_refusing() {
+    let d = tempfile::tempdir().unwrap();
+    let (server, url, saved) = rerun_server(d.path());
+    let fused = d.path().join("f.mcap");
+    ok(&[
+        "refuse",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+        "--viz",
+        &url,
+    ]);
+    stop_when_saved(server, &saved);
+    let printed = rerun_ok(&[
+        "rrd",
+        "print",
+        "-v",
+        "--continue-on-error",
+        "true",
+        s(&saved),
+    ]);
+    let rows = rows_per_entity(&printed);
+    // The pipeline's output as it was made, against the truth the replay read.
+    for entity in [
+        "/map/track",
+        "/speed/truth",
+        "/speed/radar",
+        "/chainage_error/kalman",
+        "/speed_error/kalman",
+        "/diagnostics/kalman/nis/loop_position",
+        "/map/fused/kalman/position",
+    ] {
+        assert!(
+            rows.get(entity).is_some_and(|&n| n > 0),
+            "the viewer did not receive {entity}: {rows:?}"
+        );
+    }
+    assert!(printed.contains("Blueprint"), "no layout was sent");
 }
 
 #[test]

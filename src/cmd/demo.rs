@@ -37,9 +37,14 @@ pub fn run(a: Args) -> Result<()> {
         source,
         railfuse_catalog::topics::GROUND_TRUTH,
     )?;
-    let viz = visualize(&fused, &Sink::Save(rrd.clone()), &|_| {})?;
+    let viz = visualize(
+        &fused,
+        &Sink::Save(rrd.clone()),
+        &Default::default(),
+        &|_| {},
+    )?;
     eprintln!(
-        "logged {} records on {} Rerun entities -> {}",
+        "logged {} rows on {} Rerun entities -> {}",
         viz.logged,
         viz.entities.len(),
         rrd.display()

@@ -227,12 +227,8 @@ pub fn run(a: Args) -> Result<()> {
     let tap: Option<railfuse_record::recorder::TapHook> = match &a.viz {
         None => None,
         Some(target) => {
-            let sink = if target == "spawn" {
-                railfuse_viz::Sink::Spawn
-            } else {
-                railfuse_viz::Sink::Connect(target.clone())
-            };
-            let mut live = railfuse_viz::LiveViz::open(&sink)?;
+            let sink = super::viz::live_sink(target);
+            let mut live = railfuse_viz::LiveViz::open(&sink, &Default::default())?;
             let mut failed = false;
             Some(Box::new(
                 move |item: &railfuse_record::recorder::message::Item| {

@@ -4,7 +4,10 @@ use std::time::Instant;
 use anyhow::Result;
 use railfuse_catalog::topics;
 use railfuse_refuse::eval::EvalReport;
-use railfuse_refuse::replay::{refuse, RefuseOptions, RefuseReport};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Mutex;
+
+use railfuse_refuse::replay::{refuse, Observer, RefuseOptions, RefuseReport};
 use railfuse_refuse::spec::Pipelines;
 
 use super::eval::print_eval;
@@ -26,12 +29,33 @@ pub struct Args {
     /// Print the report as JSON (with wall time, throughput and peak memory).
     #[arg(long)]
     pub json: bool,
+    /// Stream the fused channels, and what the pipelines read, to a Rerun viewer while
+    /// re-fusing: `spawn` starts one, or give a viewer URL (rerun+http://127.0.0.1:9876/proxy).
+    /// A viewer that goes away is reported once; the re-fusion goes on.
+    #[arg(long, value_name = "spawn|URL")]
+    pub viz: Option<String>,
 }
 
 pub fn run(a: Args) -> Result<()> {
     let config = Pipelines::load(&a.config)?;
     let source = a.config.display().to_string();
-    let (report, eval, stats) = refuse_with(&a.input, &a.output, &config, source, &a.reference)?;
+    let live = match &a.viz {
+        Some(target) => Some(LiveView::open(target)?),
+        None => None,
+    };
+    let observer = live.as_ref().map(LiveView::observer);
+    let (report, eval, stats) = refuse_with(
+        &a.input,
+        &a.output,
+        &config,
+        source,
+        &a.reference,
+        observer.as_ref().map(|o| o as Observer<'_>),
+    )?;
+    drop(observer);
+    if let Some(live) = live {
+        live.finish();
+    }
     if a.json {
         println!(
             "{}",
@@ -54,12 +78,57 @@ pub struct RunStats {
     pub peak_rss_kib: Option<u64>,
 }
 
+/// A viewer fed as the replay goes (`--viz`).
+struct LiveView {
+    viz: Mutex<railfuse_viz::LiveViz>,
+    failed: AtomicBool,
+}
+
+impl LiveView {
+    fn open(target: &str) -> Result<Self> {
+        let sink = super::viz::live_sink(target);
+        Ok(LiveView {
+            viz: Mutex::new(railfuse_viz::LiveViz::open(&sink, &Default::default())?),
+            failed: AtomicBool::new(false),
+        })
+    }
+
+    fn observer(&self) -> impl Fn(&str, &str, u64, &[u8]) + Sync + '_ {
+        move |topic, schema, log_time_ns, json| {
+            if self.failed.load(Ordering::Relaxed) {
+                return;
+            }
+            let sent = match self.viz.lock() {
+                Ok(mut viz) => viz.message(topic, schema, log_time_ns, json),
+                Err(_) => return,
+            };
+            // A viewer that goes away must not stop the re-fusion: say so once.
+            if let Err(e) = sent {
+                eprintln!("\nviewer: {e}; re-fusing continues without it");
+                self.failed.store(true, Ordering::Relaxed);
+            }
+        }
+    }
+
+    fn finish(self) {
+        if self.failed.load(Ordering::Relaxed) {
+            return;
+        }
+        if let Ok(mut viz) = self.viz.into_inner() {
+            if let Err(e) = viz.finish() {
+                eprintln!("viewer: {e}");
+            }
+        }
+    }
+}
+
 pub fn refuse_with(
     input: &Path,
     output: &Path,
     config: &Pipelines,
     source: String,
     reference: &str,
+    observer: Option<Observer<'_>>,
 ) -> Result<(RefuseReport, EvalReport, RunStats)> {
     let started = Instant::now();
     let size = std::fs::metadata(input).map_or(0, |m| m.len());
@@ -72,6 +141,7 @@ pub fn refuse_with(
         config_source: source,
         reference,
         progress: Some(&progress),
+        observer,
     })?;
     bar.finish();
     let elapsed_s = started.elapsed().as_secs_f64();
@@ -137,7 +207,7 @@ pub fn refuse_and_evaluate(
     source: String,
     reference: &str,
 ) -> Result<(RefuseReport, EvalReport)> {
-    let (report, eval, _) = refuse_with(input, output, config, source, reference)?;
+    let (report, eval, _) = refuse_with(input, output, config, source, reference, None)?;
     print_eval(&eval);
     Ok((report, eval))
 }

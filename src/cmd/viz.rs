@@ -1,14 +1,14 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use railfuse_viz::{visualize, Sink};
+use railfuse_viz::{visualize, Sink, VizOptions};
 
 #[derive(clap::Args)]
 #[command(group(clap::ArgGroup::new("sink").required(true).args(["save", "connect", "spawn"])))]
 pub struct Args {
     /// The MCAP log (raw or fused).
     pub input: PathBuf,
-    /// Write a Rerun recording (.rrd).
+    /// Write a Rerun recording (.rrd), its layout included.
     #[arg(long, value_name = "OUT.rrd")]
     pub save: Option<PathBuf>,
     /// Stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy
@@ -17,9 +17,67 @@ pub struct Args {
     /// Start a Rerun viewer and stream to it.
     #[arg(long)]
     pub spawn: bool,
+    #[command(flatten)]
+    pub show: ShowArgs,
+}
+
+/// What to show: shared by `viz` and the live views of `record` and `refuse`.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct ShowArgs {
+    /// Show from this many seconds after the log's first message.
+    #[arg(long, value_name = "SECONDS")]
+    pub from: Option<f64>,
+    /// Show up to this many seconds after the log's first message.
+    #[arg(long, value_name = "SECONDS")]
+    pub to: Option<f64>,
+    /// Raw topics to show, comma-separated (default: all; the track map and the truth are
+    /// always read, the errors are measured against them). Naming /imu shows the IMU in a
+    /// fused run too.
+    #[arg(long, value_delimiter = ',', value_name = "TOPIC,…")]
+    pub topics: Vec<String>,
+    /// Pipelines to show, comma-separated (default: all).
+    #[arg(long, value_delimiter = ',', value_name = "NAME,…")]
+    pub pipelines: Vec<String>,
+    /// Keep every sample: runs longer than 30 minutes are otherwise decimated to min/max
+    /// envelopes of 4096 bins, which look the same on a screen.
+    #[arg(long)]
+    pub full_rate: bool,
+}
+
+impl ShowArgs {
+    pub fn options(&self) -> Result<VizOptions> {
+        if let (Some(from), Some(to)) = (self.from, self.to) {
+            anyhow::ensure!(from < to, "--from {from} must be before --to {to}");
+        }
+        for (flag, v) in [("--from", self.from), ("--to", self.to)] {
+            if let Some(v) = v {
+                anyhow::ensure!(
+                    v.is_finite() && v >= 0.0,
+                    "{flag} {v}: expected seconds ≥ 0"
+                );
+            }
+        }
+        Ok(VizOptions {
+            from_s: self.from,
+            to_s: self.to,
+            topics: self.topics.clone(),
+            pipelines: self.pipelines.clone(),
+            full_rate: self.full_rate,
+        })
+    }
+}
+
+/// `spawn` or a viewer URL, as `--viz` takes it.
+pub fn live_sink(target: &str) -> Sink {
+    if target == "spawn" {
+        Sink::Spawn
+    } else {
+        Sink::Connect(target.to_owned())
+    }
 }
 
 pub fn run(a: Args) -> Result<()> {
+    let options = a.show.options()?;
     let sink = match (a.save, a.connect) {
         (Some(p), _) => Sink::Save(p),
         (None, Some(url)) => Sink::Connect(url),
@@ -27,15 +85,21 @@ pub fn run(a: Args) -> Result<()> {
     };
     let size = std::fs::metadata(&a.input).map_or(0, |m| m.len());
     let bar = crate::progress::Progress::bytes("viz", size);
-    let report = visualize(&a.input, &sink, &|done| bar.set(done))?;
+    let report = visualize(&a.input, &sink, &options, &|done| bar.set(done))?;
     bar.finish();
     let target = match &sink {
         Sink::Save(p) => p.display().to_string(),
         Sink::Connect(u) => u.clone(),
         Sink::Spawn => "a spawned viewer".into(),
     };
+    let density = match report.bin_s {
+        Some(bin) => {
+            format!(", plots decimated to {bin:.2} s min/max bins (--full-rate keeps every sample)")
+        }
+        None => String::new(),
+    };
     eprintln!(
-        "read {} messages, logged {} records on {} entities -> {target}",
+        "read {} messages, logged {} rows on {} entities{density} -> {target}",
         report.messages,
         report.logged,
         report.entities.len()

@@ -86,6 +86,7 @@ pub fn run_scenario(
         config_source: pipelines.path.display().to_string(),
         reference: topics::GROUND_TRUTH,
         progress: None,
+        observer: None,
     });
     std::fs::remove_file(&raw).ok();
     std::fs::remove_file(&fused).ok();

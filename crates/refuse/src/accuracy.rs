@@ -120,9 +120,7 @@ impl ErrorStats {
     }
 }
 
-/// Two-sided 95 % interval of χ² with 1 and 2 degrees of freedom (2.5 % and 97.5 % points).
-pub const CHI2_95_1DOF: (f64, f64) = (0.000982069, 5.023886);
-pub const CHI2_95_2DOF: (f64, f64) = (0.05063562, 7.377759);
+pub use railfuse_catalog::messages::fused::{CHI2_95_1DOF, CHI2_95_2DOF};
 
 /// Share of a normalised squared error (NEES or NIS) inside its 95 % χ² interval.
 #[derive(Debug, Clone, Default)]

@@ -38,6 +38,27 @@ pub struct RefuseOptions<'a> {
     pub reference: &'a str,
     /// Told the bytes of the input read so far, as the replay goes.
     pub progress: Option<&'a (dyn Fn(u64) + Sync)>,
+    /// Told every message the replay reads (the pipelines' sensors, the reference, the map,
+    /// the events) or writes (fused states, diagnostics, smoothed states), as it goes: a live
+    /// view of the re-fusion.
+    pub observer: Option<Observer<'a>>,
+}
+
+/// Called with a message's topic, schema name, log time (ns) and JSON payload.
+pub type Observer<'a> = &'a (dyn Fn(&str, &str, u64, &[u8]) + Sync);
+
+/// Tells the observer, if there is one, about a message this run writes.
+fn observe<M: ChannelMessage>(
+    observer: Option<Observer<'_>>,
+    topic: &str,
+    log_time_ns: u64,
+    m: &M,
+) {
+    if let Some(observe) = observer {
+        if let Ok(json) = serde_json::to_vec(m) {
+            observe(topic, M::SCHEMA_NAME, log_time_ns, &json);
+        }
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -426,6 +447,14 @@ impl<'a> Replay<'a> {
             publish_time_ns: h.publish_time,
             data: m.data,
         };
+        if let Some(observe) = self.opts.observer {
+            observe(
+                &msg.channel.topic,
+                msg.channel.schema_name(),
+                h.log_time,
+                m.data,
+            );
+        }
         if route.evaluated {
             self.eval.message(&msg)?;
         }
@@ -474,7 +503,17 @@ impl<'a> Replay<'a> {
     /// Writes and scores what pipeline `pi` released.
     fn emit(&mut self, pi: usize) -> Result<()> {
         let out = &mut self.outputs[pi];
+        let observer = self.opts.observer;
+        let name = self.pipelines[pi].name();
         for f in self.fused.drain(..) {
+            if observer.is_some() {
+                if let Some(state) = &f.state {
+                    observe(observer, &topics::fused_state(name), f.log_time_ns, state);
+                }
+                if let Some(d) = &f.diagnostics {
+                    observe(observer, &topics::fused_diagnostics(name), f.log_time_ns, d);
+                }
+            }
             if let Some(state) = &f.state {
                 self.writer.write(out.state, f.log_time_ns, state)?;
                 self.eval.fused_state(out.state.0, state);
@@ -555,6 +594,12 @@ impl<'a> Replay<'a> {
         };
         for state in smoothed.map_err(spill)? {
             let state = state.map_err(spill)?;
+            observe(
+                self.opts.observer,
+                &topics::fused_smoothed(&name),
+                state.stamp_ns,
+                &state,
+            );
             self.writer.write(channel, state.stamp_ns, &state)?;
             if !self.reference_is_ours() {
                 self.eval

@@ -1,29 +1,72 @@
 //! Rerun entity paths, in one place so the layout is visible at a glance.
+//!
+//! - `map/…`: the plan view (east right, north up): the track and its furniture (static), GNSS
+//!   fixes by fix type, the true path and train, each pipeline's position and 3σ extent.
+//! - `speed/…`, `chainage_error/…`, `speed_error/…`: time series shared by every pipeline.
+//! - `diagnostics/<pipeline>/…`: one pipeline's NIS, gate decisions, β, effective sample size
+//!   and sensor states.
+//! - `sensors/…`: raw sensors on their own (position sensors' errors, the IMU).
+//! - `events`: a text log.
+
+use railfuse_catalog::messages::{FixType, GateDecision};
 
 pub const TRACK: &str = "map/track";
+pub const KM_MARKS: &str = "map/km_marks";
 pub const BALISES: &str = "map/balises";
 pub const STATIONS: &str = "map/stations";
-pub const TRUTH_POSITION: &str = "map/truth";
-pub const GNSS_POSITION: &str = "map/gnss";
+pub const TUNNELS: &str = "map/tunnels";
+pub const LEGEND: &str = "map/legend";
+/// The true path so far (a trail of points).
+pub const TRUTH_PATH: &str = "map/truth/path";
+/// Where the train truly is at the time cursor.
+pub const TRUTH_TRAIN: &str = "map/truth/train";
 pub const EVENTS: &str = "events";
 
 pub const SPEED_TRUTH: &str = "speed/truth";
 pub const SPEED_RADAR: &str = "speed/radar";
 pub const SPEED_GNSS: &str = "speed/gnss";
-pub const LOOP_CHAINAGE_ERROR: &str = "chainage_error/loop";
-pub const BALISE_CHAINAGE_ERROR: &str = "chainage_error/balise";
+pub const LOOP_CHAINAGE_ERROR: &str = "sensors/chainage_error/loop";
+pub const BALISE_CHAINAGE_ERROR: &str = "sensors/chainage_error/balise";
+pub const IMU_SPECIFIC_FORCE: &str = "sensors/imu/specific_force";
+pub const IMU_ANGULAR_RATE: &str = "sensors/imu/angular_rate";
+
+/// GNSS fixes of one fix type on the map: one entity per type, so each has its colour and name.
+pub fn gnss_fixes(fix: FixType) -> String {
+    format!("map/gnss/{}", fix_type_name(fix))
+}
+
+/// The field's name of a fix type, as the legend shows it.
+pub fn fix_type_name(fix: FixType) -> &'static str {
+    match fix {
+        FixType::None => "no_fix",
+        FixType::Single => "single",
+        FixType::Dgps => "dgps",
+        FixType::RtkFloat => "rtk_float",
+        FixType::RtkFixed => "rtk_fixed",
+    }
+}
 
 /// `speed/<odometer topic tail>`, e.g. `speed/odometer_1`.
 pub fn speed_of(topic: &str) -> String {
-    format!("speed/{}", topic.trim_start_matches('/').replace('/', "_"))
+    format!("speed/{}", topic_tail(topic))
+}
+
+/// A topic as one entity path part: `/odometer/1` → `odometer_1`.
+pub fn topic_tail(topic: &str) -> String {
+    topic.trim_start_matches('/').replace('/', "_")
 }
 
 /// The fused position of a pipeline on the map.
 pub fn fused_position(pipeline: &str) -> String {
-    format!("map/fused/{pipeline}")
+    format!("map/fused/{pipeline}/position")
 }
 
-/// A fused pipeline's speed: three series, the value and its +3σ and −3σ bounds.
+/// A pipeline's along-track ±3σ extent on the map.
+pub fn fused_extent(pipeline: &str) -> String {
+    format!("map/fused/{pipeline}/extent")
+}
+
+/// A fused pipeline's speed.
 pub fn fused_speed(pipeline: &str) -> String {
     format!("speed/fused/{pipeline}")
 }
@@ -38,16 +81,56 @@ pub fn speed_error(pipeline: &str) -> String {
     format!("speed_error/{pipeline}")
 }
 
-/// One sensor state a pipeline estimates (a radar's scale factor, a receiver's bias), with
-/// its ±3σ bounds: `sensor_states/<pipeline>/<topic tail>/<kind>`.
-pub fn sensor_state(pipeline: &str, topic: &str, kind: &str) -> String {
+/// Everything one pipeline says about itself.
+pub fn diagnostics(pipeline: &str) -> String {
+    format!("diagnostics/{pipeline}")
+}
+
+/// NIS of one measurement topic in one pipeline.
+pub fn nis(pipeline: &str, topic: &str) -> String {
+    format!("diagnostics/{pipeline}/nis/{}", topic_tail(topic))
+}
+
+/// The χ² bounds drawn over a pipeline's NIS.
+pub fn nis_bounds(pipeline: &str) -> String {
+    format!("diagnostics/{pipeline}/nis/chi2_bounds")
+}
+
+/// Markers of one gate decision (all but plain acceptance) in a pipeline's NIS plot.
+pub fn gate_decisions(pipeline: &str, decision: GateDecision) -> String {
     format!(
-        "sensor_states/{pipeline}/{}/{kind}",
-        topic.trim_start_matches('/').replace('/', "_")
+        "diagnostics/{pipeline}/nis/{}",
+        gate_decision_name(decision)
     )
+}
+
+pub fn gate_decision_name(decision: GateDecision) -> &'static str {
+    match decision {
+        GateDecision::Accepted => "accepted",
+        GateDecision::AcceptedAfterLockout => "accepted_after_lockout",
+        GateDecision::RejectedGate => "rejected_gate",
+        GateDecision::RejectedInvalid => "rejected_invalid",
+        GateDecision::RejectedLate => "rejected_late",
+        GateDecision::BeforeInitialisation => "before_initialisation",
+        GateDecision::RejectedDeviceFault => "rejected_device_fault",
+    }
 }
 
 /// A federated pipeline's information-sharing coefficients β, one series per device.
 pub fn sharing(pipeline: &str) -> String {
-    format!("sharing/{pipeline}")
+    format!("diagnostics/{pipeline}/sharing")
+}
+
+/// A particle pipeline's effective sample size.
+pub fn effective_sample_size(pipeline: &str) -> String {
+    format!("diagnostics/{pipeline}/effective_sample_size")
+}
+
+/// One sensor state a pipeline estimates (a radar's scale factor, a receiver's bias), with
+/// its ±3σ bounds.
+pub fn sensor_state(pipeline: &str, topic: &str, kind: &str) -> String {
+    format!(
+        "diagnostics/{pipeline}/sensor_states/{}/{kind}",
+        topic_tail(topic)
+    )
 }

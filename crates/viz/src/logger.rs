@@ -1,15 +1,23 @@
-use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+//! Turns railfuse messages into Rerun entities: one streaming pass over a file
+//! ([`visualize`]), or message by message while recording or re-fusing ([`LiveViz`]).
 
-use railfuse_catalog::log::{LogReader, LogRecord};
+use std::collections::{BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use railfuse_catalog::geodesy::GeodeticOrigin;
+use railfuse_catalog::log::{ChannelInfo, LogMessage, LogReader, LogRecord, SchemaInfo};
+use railfuse_catalog::messages::fused::CHI2_95_1DOF;
 use railfuse_catalog::messages::*;
 use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
 use railfuse_catalog::topics::{self, FusedChannel};
-use rerun::{
-    Color, LineStrips2D, Points2D, Radius, RecordingStream, Scalars, SeriesLines, TextLog,
-};
+use rerun::components::{MarkerShape, TextLogLevel};
+use rerun::{Color, Points2D, Radius, RecordingStream, SeriesLines, SeriesPoints, TextLog};
 
-use crate::{entities as ent, Error};
+use crate::blueprint::{Layout, PipelineLayout, NIS_AXIS_MAX};
+use crate::series::{Columns, Decimation, PointsId, SegmentsId, SeriesId, TIMELINE};
+use crate::{entities as ent, map, palette, Error};
 
 /// Where the recording goes.
 #[derive(Debug, Clone)]
@@ -22,71 +30,77 @@ pub enum Sink {
     Spawn,
 }
 
+/// What to show, and how densely.
 #[derive(Debug, Clone, Default)]
-pub struct VizReport {
-    pub messages: u64,
-    /// Records logged to Rerun (a message can give several: a value and its bounds, a map point).
-    pub logged: u64,
-    pub entities: BTreeSet<String>,
+pub struct VizOptions {
+    /// Seconds from the log's first message: nothing earlier is shown.
+    pub from_s: Option<f64>,
+    /// Seconds from the log's first message: nothing later is shown.
+    pub to_s: Option<f64>,
+    /// Raw topics to show (empty: all). The track map and the truth are always read: the
+    /// errors are measured against them.
+    pub topics: Vec<String>,
+    /// Pipelines to show (empty: all).
+    pub pipelines: Vec<String>,
+    /// Keep every sample however long the run.
+    pub full_rate: bool,
 }
 
-// Colours as RGB(A) tuples: rerun's Color constructors are not const.
-const TRUTH_COLOR: (u8, u8, u8) = (235, 235, 235);
-const BAND_COLOR: (u8, u8, u8, u8) = (200, 60, 60, 160);
-/// Pipeline colours, by the order pipelines first appear.
-const PIPELINE_COLORS: [(u8, u8, u8); 4] = [
-    (30, 120, 230),
-    (230, 120, 20),
-    (40, 170, 80),
-    (160, 60, 200),
-];
+/// Runs longer than this are decimated unless `full_rate` is asked for: a screen shows a
+/// half-hour run's 100 Hz series as a blur of ~180 000 samples per plot either way.
+pub const DECIMATE_AFTER_S: f64 = 1800.0;
 
-fn rgb((r, g, b): (u8, u8, u8)) -> Color {
-    Color::from_rgb(r, g, b)
-}
+/// Bins a decimated run is cut into: a min/max pair per bin is at least one per pixel column
+/// of a 4K-wide plot.
+pub const SCREEN_BINS: u64 = 4096;
 
-fn pipeline_color(index: usize) -> Color {
-    rgb(PIPELINE_COLORS[index % PIPELINE_COLORS.len()])
-}
+/// The true path on the map keeps a point a second: a trail, not a plot.
+const TRAIL_EVERY_NS: u64 = 1_000_000_000;
 
-fn band_color() -> Color {
-    let (r, g, b, a) = BAND_COLOR;
-    Color::from_unmultiplied_rgba(r, g, b, a)
-}
+/// How often live views send what they have buffered.
+const LIVE_FLUSH: Duration = Duration::from_millis(250);
 
-fn fix_color(fix: FixType) -> Color {
-    match fix {
-        FixType::None => Color::from_rgb(128, 128, 128),
-        FixType::Single => Color::from_rgb(220, 50, 50),
-        FixType::Dgps => Color::from_rgb(230, 150, 30),
-        FixType::RtkFloat => Color::from_rgb(230, 210, 40),
-        FixType::RtkFixed => Color::from_rgb(40, 170, 80),
+impl VizOptions {
+    /// Full rate, or bins sized to the run (`span_ns`: first to last message).
+    pub fn decimation(&self, span_ns: Option<u64>) -> Decimation {
+        match span_ns {
+            Some(span) if !self.full_rate && span as f64 / 1e9 > DECIMATE_AFTER_S => {
+                Decimation::Bins {
+                    bin_ns: span.div_ceil(SCREEN_BINS),
+                }
+            }
+            _ => Decimation::Full,
+        }
+    }
+
+    fn shows_topic(&self, topic: &str) -> bool {
+        self.topics.is_empty() || self.topics.iter().any(|t| t == topic)
+    }
+
+    fn shows_pipeline(&self, pipeline: &str) -> bool {
+        self.pipelines.is_empty() || self.pipelines.iter().any(|p| p == pipeline)
     }
 }
 
-struct Logger {
-    rec: RecordingStream,
-    /// The file the messages come from, for error messages (shared: cheap to lend).
-    path: std::sync::Arc<Path>,
-    map: Option<TrackMap>,
-    truth: ReferenceTrack,
-    pipelines: Vec<String>,
-    /// The last β per federated pipeline, to log the weights only when they change.
-    shares: std::collections::HashMap<String, Vec<f64>>,
-    /// Sensor-state entities whose series style is logged.
-    sensor_states: std::collections::HashSet<String>,
-    report: VizReport,
+#[derive(Debug, Clone, Default)]
+pub struct VizReport {
+    pub messages: u64,
+    /// Rows logged to Rerun (a row can hold several values: an error and its bounds).
+    pub logged: u64,
+    pub entities: BTreeSet<String>,
+    /// Plots were decimated to bins of this many seconds.
+    pub bin_s: Option<f64>,
 }
 
 /// How long to wait for a viewer to take the last of the data.
-const VIEWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(30);
+const VIEWER_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// Opens the Rerun recording stream for a sink (checking first that a viewer listens).
 fn open_stream(sink: &Sink) -> Result<RecordingStream, Error> {
     if let Sink::Connect(url) = sink {
         probe_viewer(url)?;
     }
-    let app = rerun::RecordingStreamBuilder::new("railfuse");
+    let app = rerun::RecordingStreamBuilder::new(crate::APPLICATION_ID);
     let rec = match sink {
         Sink::Save(p) => app.save(p),
         Sink::Connect(url) => app.connect_grpc_opts(url.clone()),
@@ -113,21 +127,94 @@ fn open_stream(sink: &Sink) -> Result<RecordingStream, Error> {
     Ok(rec)
 }
 
-/// Streams messages to Rerun as they are recorded (`railfuse record --viz`): the same entity
-/// layout as `railfuse viz`, fed one message at a time.
+/// Logs the whole file to the sink, streaming. `progress` is told the bytes read so far.
+pub fn visualize(
+    path: &Path,
+    sink: &Sink,
+    options: &VizOptions,
+    progress: &dyn Fn(u64),
+) -> Result<VizReport, Error> {
+    let mut reader = LogReader::open(path)?;
+    let summary = railfuse_catalog::log::read_summary(path)?;
+    // Fused states may trail the truth in file order by a chunk (railfuse writes the fused
+    // chunk of an input chunk right after it): the truth is kept that much longer.
+    let longest_chunk_ns = summary
+        .as_ref()
+        .and_then(|s| s.longest_chunk_ns)
+        .unwrap_or(0);
+    let span = summary.as_ref().and_then(|s| s.message_span_ns);
+    let mut logger = Logger::new(
+        open_stream(sink)?,
+        path.to_owned(),
+        options.clone(),
+        options.decimation(span.map(|(a, b)| b.saturating_sub(a))),
+        longest_chunk_ns,
+    );
+    logger.start_ns = span.map(|s| s.0);
+    // Pipelines in a fixed order, so each keeps its colour from run to run: refuse gives a
+    // config's first pipeline the highest channel ids, so descending ids is config order.
+    for c in summary.iter().flat_map(|s| s.channels.iter().rev()) {
+        if let Some((p, FusedChannel::State)) = topics::parse_fused(&c.topic) {
+            logger.pipeline(p);
+        }
+    }
+    let streaming = !matches!(sink, Sink::Save(_));
+    if streaming {
+        logger.send_blueprint()?;
+    }
+    while let Some(record) = reader.next() {
+        if let LogRecord::Message(m) = record? {
+            logger.report.messages += 1;
+            logger.message(&m)?;
+            if logger.report.messages.is_multiple_of(4096) {
+                progress(reader.bytes_read());
+                if streaming {
+                    logger.send_blueprint_if_changed()?;
+                }
+            }
+        }
+    }
+    logger.finish()?;
+    // A viewer that never takes the data must not hang the command; a file always does.
+    let flushed = match sink {
+        Sink::Save(_) => logger.rec.flush_blocking(),
+        Sink::Connect(_) | Sink::Spawn => logger.rec.flush_with_timeout(VIEWER_TIMEOUT),
+    };
+    flushed.map_err(|e| {
+        Error::Rerun(format!(
+            "the Rerun viewer did not take the data within {} s: {e}",
+            VIEWER_TIMEOUT.as_secs()
+        ))
+    })?;
+    Ok(logger.report())
+}
+
+/// Streams messages to Rerun as they are recorded or re-fused (`record --viz`,
+/// `refuse --viz`): the layout of `railfuse viz`, fed one message at a time.
+///
+/// Dropping it finishes it (what is buffered goes out, waiting for the viewer at most 30 s).
 pub struct LiveViz {
     logger: Logger,
-    channels: std::collections::HashMap<
-        (String, String),
-        std::sync::Arc<railfuse_catalog::log::ChannelInfo>,
-    >,
+    channels: HashMap<(String, String), Arc<ChannelInfo>>,
+    last_flush: Instant,
+    finished: bool,
 }
 
 impl LiveViz {
-    pub fn open(sink: &Sink) -> Result<Self, Error> {
+    pub fn open(sink: &Sink, options: &VizOptions) -> Result<Self, Error> {
+        let mut logger = Logger::new(
+            open_stream(sink)?,
+            PathBuf::from("<live>"),
+            options.clone(),
+            Decimation::Full,
+            0,
+        );
+        logger.send_blueprint()?;
         Ok(Self {
-            logger: Logger::new(open_stream(sink)?, PathBuf::from("<live>"), 0),
+            logger,
             channels: Default::default(),
+            last_flush: Instant::now(),
+            finished: false,
         })
     }
 
@@ -144,12 +231,12 @@ impl LiveViz {
             .channels
             .entry((topic.to_owned(), schema.to_owned()))
             .or_insert_with(|| {
-                std::sync::Arc::new(railfuse_catalog::log::ChannelInfo {
+                Arc::new(ChannelInfo {
                     id: n,
                     topic: topic.to_owned(),
                     message_encoding: "json".into(),
                     metadata: Default::default(),
-                    schema: Some(std::sync::Arc::new(railfuse_catalog::log::SchemaInfo {
+                    schema: Some(Arc::new(SchemaInfo {
                         id: n,
                         name: schema.to_owned(),
                         encoding: "jsonschema".into(),
@@ -157,355 +244,819 @@ impl LiveViz {
                     })),
                 })
             });
-        let m = railfuse_catalog::log::LogMessage {
+        let m = LogMessage {
             channel,
             sequence: 0,
             log_time_ns,
             publish_time_ns: log_time_ns,
             data: json,
         };
+        self.logger.start_ns.get_or_insert(log_time_ns);
+        self.logger.report.messages += 1;
+        self.logger.message(&m)?;
+        if self.last_flush.elapsed() >= LIVE_FLUSH {
+            self.last_flush = Instant::now();
+            self.logger.columns.flush(&self.logger.rec)?;
+            self.logger.send_blueprint_if_changed()?;
+        }
+        Ok(())
+    }
+
+    /// Sends what is buffered and the final layout, and waits (bounded) for the viewer.
+    pub fn finish(&mut self) -> Result<VizReport, Error> {
+        if std::mem::replace(&mut self.finished, true) {
+            return Ok(self.logger.report());
+        }
+        self.logger.finish()?;
         self.logger
             .rec
-            .set_timestamp_nanos_since_epoch("log_time", log_time_ns as i64);
-        self.logger.message(&m)
+            .flush_with_timeout(VIEWER_TIMEOUT)
+            .map_err(|e| Error::Rerun(e.to_string()))?;
+        Ok(self.logger.report())
     }
 }
 
-/// Logs the whole file to the sink, streaming.
-/// `progress` is told the bytes of the file read so far.
-pub fn visualize(path: &Path, sink: &Sink, progress: &dyn Fn(u64)) -> Result<VizReport, Error> {
-    let mut reader = LogReader::open(path)?;
-    // Fused states may trail the truth in file order by a chunk (railfuse writes the fused
-    // chunk of an input chunk right after it): the truth is kept that much longer.
-    let longest_chunk_ns = railfuse_catalog::log::read_summary(path)?
-        .and_then(|s| s.longest_chunk_ns)
-        .unwrap_or(0);
-    let mut logger = Logger::new(open_stream(sink)?, path.to_owned(), longest_chunk_ns);
-    while let Some(record) = reader.next() {
-        if let LogRecord::Message(m) = record? {
-            logger.report.messages += 1;
-            logger
-                .rec
-                .set_timestamp_nanos_since_epoch("log_time", m.log_time_ns as i64);
-            logger.message(&m)?;
-            if logger.report.messages.is_multiple_of(4096) {
-                progress(reader.bytes_read());
-            }
-        }
+impl Drop for LiveViz {
+    fn drop(&mut self) {
+        // Nowhere to report to: a viewer that went away was reported when it did.
+        let _ = self.finish();
     }
-    // A viewer that never takes the data must not hang the command; a file always does.
-    let flushed = match sink {
-        Sink::Save(_) => logger.rec.flush_blocking(),
-        Sink::Connect(_) | Sink::Spawn => logger.rec.flush_with_timeout(VIEWER_TIMEOUT),
-    };
-    flushed.map_err(|e| {
-        Error::Rerun(format!(
-            "the Rerun viewer did not take the data within {} s: {e}",
-            VIEWER_TIMEOUT.as_secs()
-        ))
-    })?;
-    Ok(logger.report)
+}
+
+/// Series of one fused channel (a pipeline's states, or its RTS-smoothed states).
+struct FusedSeries {
+    speed: SeriesId,
+    chainage_error: SeriesId,
+    speed_error: SeriesId,
+}
+
+/// What is logged for one pipeline.
+struct PipelineState {
+    name: String,
+    index: usize,
+    filtered: FusedSeries,
+    smoothed: Option<FusedSeries>,
+    position: PointsId,
+    extent: SegmentsId,
+    /// NIS per measurement topic.
+    nis: HashMap<String, SeriesId>,
+    /// Markers per gate decision other than plain acceptance.
+    gates: HashMap<GateDecision, SeriesId>,
+    bounds: SeriesId,
+    /// Last time the χ² bound was drawn to, and the last diagnostics time.
+    bounds_to_ns: Option<i64>,
+    last_diagnostics_ns: Option<i64>,
+    /// β per device, and how many devices.
+    sharing: Option<(SeriesId, usize)>,
+    /// β per device as last logged, and which devices were out.
+    last_beta: Vec<f64>,
+    out: BTreeSet<String>,
+    effective_sample_size: Option<SeriesId>,
+    sensor_states: HashMap<(String, String), SeriesId>,
+}
+
+struct Logger {
+    rec: RecordingStream,
+    /// The file the messages come from, for error messages (shared: cheap to lend).
+    path: Arc<Path>,
+    options: VizOptions,
+    columns: Columns,
+    map: Option<TrackMap>,
+    /// Where east/north are measured from: the map's origin, else the first fix.
+    origin: Option<GeodeticOrigin>,
+    truth: ReferenceTrack,
+    /// The first message's log time, for --from/--to.
+    start_ns: Option<u64>,
+    /// Raw series by entity, registered as they first appear.
+    raw: HashMap<String, SeriesId>,
+    truth_train: Option<PointsId>,
+    truth_path: Option<PointsId>,
+    gnss: HashMap<FixType, PointsId>,
+    pipelines: Vec<PipelineState>,
+    layout: Layout,
+    sent_layout: Option<Layout>,
+    /// Legend entries drawn into the map when the layout last changed.
+    legend: Vec<(String, Color)>,
+    entities: BTreeSet<String>,
+    report: VizReport,
 }
 
 impl Logger {
-    fn new(rec: RecordingStream, path: PathBuf, longest_chunk_ns: u64) -> Self {
+    fn new(
+        rec: RecordingStream,
+        path: PathBuf,
+        options: VizOptions,
+        decimation: Decimation,
+        longest_chunk_ns: u64,
+    ) -> Self {
+        let bin_s = match decimation {
+            Decimation::Full => None,
+            Decimation::Bins { bin_ns } => Some(bin_ns as f64 / 1e9),
+        };
         Logger {
             rec,
             path: path.into(),
+            options,
+            columns: Columns::new(decimation),
             map: None,
+            origin: None,
             truth: ReferenceTrack::new(10.0 + longest_chunk_ns as f64 / 1e9),
+            start_ns: None,
+            raw: HashMap::new(),
+            truth_train: None,
+            truth_path: None,
+            gnss: HashMap::new(),
             pipelines: Vec::new(),
-            shares: Default::default(),
-            sensor_states: Default::default(),
-            report: VizReport::default(),
+            layout: Layout::default(),
+            sent_layout: None,
+            legend: Vec::new(),
+            entities: BTreeSet::new(),
+            report: VizReport {
+                bin_s,
+                ..VizReport::default()
+            },
         }
     }
 
-    fn log<AS: ?Sized + rerun::AsComponents>(
-        &mut self,
-        entity: &str,
-        data: &AS,
-    ) -> Result<(), Error> {
-        self.rec
-            .log(entity, data)
-            .map_err(|e| Error::Rerun(e.to_string()))?;
-        self.report.logged += 1;
-        if !self.report.entities.contains(entity) {
-            self.report.entities.insert(entity.to_owned());
+    fn report(&self) -> VizReport {
+        VizReport {
+            logged: self.columns.rows_sent + self.report.logged,
+            entities: self.entities.clone(),
+            ..self.report.clone()
         }
-        Ok(())
     }
 
-    fn log_static<AS: ?Sized + rerun::AsComponents>(
-        &mut self,
-        entity: &str,
-        data: &AS,
-    ) -> Result<(), Error> {
+    fn static_(&mut self, entity: &str, data: &dyn rerun::AsComponents) -> Result<(), Error> {
         self.rec
             .log_static(entity, data)
             .map_err(|e| Error::Rerun(e.to_string()))?;
-        self.report.entities.insert(entity.to_owned());
+        self.entities.insert(entity.to_owned());
         Ok(())
     }
 
-    /// Plan-view point: Rerun's 2-D view grows y downwards, so north is negated to show it up.
-    fn plan(east: f64, north: f64) -> [f32; 2] {
-        [east as f32, -north as f32]
+    /// A series drawn as lines: `names` and `colors` per component.
+    fn line_series(
+        &mut self,
+        entity: &str,
+        names: &[String],
+        colors: &[Color],
+        widths: &[f32],
+    ) -> Result<SeriesId, Error> {
+        self.static_(
+            entity,
+            &SeriesLines::new()
+                .with_names(names.iter().cloned())
+                .with_colors(colors.iter().copied())
+                .with_widths(widths.iter().copied()),
+        )?;
+        Ok(self.columns.series(entity, names.len()))
     }
 
-    fn series_style(
+    /// A value with its ±3σ band: the value line in the pipeline's colour, the bounds lighter
+    /// and thinner, so the band reads as a band.
+    fn band_series(
         &mut self,
         entity: &str,
         name: &str,
-        color: Color,
-        width: f32,
-    ) -> Result<(), Error> {
-        self.log_static(
+        index: usize,
+        smoothed: bool,
+    ) -> Result<SeriesId, Error> {
+        let color = if smoothed {
+            palette::smoothed(index)
+        } else {
+            palette::pipeline(index)
+        };
+        self.line_series(
             entity,
-            &SeriesLines::new()
-                .with_names([name])
-                .with_colors([color])
-                .with_widths([width]),
+            &[
+                name.to_owned(),
+                format!("{name} +3σ"),
+                format!("{name} −3σ"),
+            ],
+            &[color, palette::band(index), palette::band(index)],
+            &[2.0, 0.75, 0.75],
         )
     }
 
+    /// A raw sensor's series, registered on first use.
+    fn raw_series(&mut self, entity: &str, names: &[&str]) -> Result<SeriesId, Error> {
+        if let Some(&id) = self.raw.get(entity) {
+            return Ok(id);
+        }
+        let truth = entity == ent::SPEED_TRUTH;
+        let n = self.raw.len();
+        let colors: Vec<Color> = (0..names.len())
+            .map(|i| {
+                if truth {
+                    palette::truth()
+                } else {
+                    palette::raw_sensor(n + i)
+                }
+            })
+            .collect();
+        let widths = vec![if truth { 2.5 } else { 1.0 }; names.len()];
+        let names: Vec<String> = names.iter().map(|s| (*s).to_owned()).collect();
+        let id = self.line_series(entity, &names, &colors, &widths)?;
+        self.raw.insert(entity.to_owned(), id);
+        Ok(id)
+    }
+
+    fn raw_value(&mut self, entity: &str, name: &str, t: u64, value: f64) -> Result<(), Error> {
+        let id = self.raw_series(entity, &[name])?;
+        self.columns.push(&self.rec, id, t as i64, &[value])
+    }
+
+    /// The pipeline's index, registering it (and its series) on first sight.
+    fn pipeline(&mut self, name: &str) -> Option<usize> {
+        if let Some(i) = self.pipelines.iter().position(|p| p.name == name) {
+            return Some(i);
+        }
+        if !self.options.shows_pipeline(name) {
+            return None;
+        }
+        match self.register_pipeline(name) {
+            Ok(p) => {
+                self.pipelines.push(p);
+                self.layout.pipelines.push(PipelineLayout::new(name));
+                Some(self.pipelines.len() - 1)
+            }
+            // A style that cannot be logged: the pipeline's data could not be either.
+            Err(_) => None,
+        }
+    }
+
+    fn register_pipeline(&mut self, name: &str) -> Result<PipelineState, Error> {
+        let index = self.pipelines.len();
+        let filtered = self.fused_series(name, index, false)?;
+        let position = ent::fused_position(name);
+        self.static_(
+            &position,
+            &Points2D::update_fields()
+                .with_colors([palette::pipeline(index)])
+                .with_radii([Radius::new_ui_points(6.0)])
+                .with_labels([name])
+                .with_show_labels(false),
+        )?;
+        let extent = ent::fused_extent(name);
+        self.static_(
+            &extent,
+            &rerun::LineStrips2D::update_fields()
+                .with_colors([palette::band(index)])
+                .with_radii([Radius::new_ui_points(3.0)]),
+        )?;
+        let bounds = self.line_series(
+            &ent::nis_bounds(name),
+            &["χ²₁ 2.5 %".into(), "χ²₁ 97.5 %".into()],
+            &[palette::bound(), palette::bound()],
+            &[1.0, 1.0],
+        )?;
+        Ok(PipelineState {
+            name: name.to_owned(),
+            index,
+            filtered,
+            smoothed: None,
+            position: self.columns.points(&position, None),
+            extent: self.columns.segments(&extent),
+            nis: HashMap::new(),
+            gates: HashMap::new(),
+            bounds,
+            bounds_to_ns: None,
+            last_diagnostics_ns: None,
+            sharing: None,
+            last_beta: Vec::new(),
+            out: BTreeSet::new(),
+            effective_sample_size: None,
+            sensor_states: HashMap::new(),
+        })
+    }
+
+    fn fused_series(
+        &mut self,
+        pipeline: &str,
+        index: usize,
+        smoothed: bool,
+    ) -> Result<FusedSeries, Error> {
+        let (key, label) = if smoothed {
+            (
+                format!("{pipeline}/smoothed"),
+                format!("{pipeline} RTS-smoothed"),
+            )
+        } else {
+            (pipeline.to_owned(), pipeline.to_owned())
+        };
+        let color = if smoothed {
+            palette::smoothed(index)
+        } else {
+            palette::pipeline(index)
+        };
+        Ok(FusedSeries {
+            speed: self.line_series(&ent::fused_speed(&key), &[label.clone()], &[color], &[1.5])?,
+            chainage_error: self.band_series(
+                &ent::chainage_error(&key),
+                &label,
+                index,
+                smoothed,
+            )?,
+            speed_error: self.band_series(&ent::speed_error(&key), &label, index, smoothed)?,
+        })
+    }
+
+    /// Whether a message at this log time is inside --from/--to.
+    fn in_window(&self, t: u64) -> bool {
+        let Some(start) = self.start_ns else {
+            return true;
+        };
+        let s = t.saturating_sub(start) as f64 / 1e9;
+        self.options.from_s.is_none_or(|f| s >= f) && self.options.to_s.is_none_or(|e| s <= e)
+    }
+
     /// One message to the entities of its kind.
-    fn message(&mut self, m: &railfuse_catalog::log::LogMessage<'_>) -> Result<(), Error> {
+    fn message(&mut self, m: &LogMessage<'_>) -> Result<(), Error> {
         let path = &*self.path.clone();
         let topic = m.channel.topic.as_str();
-        match m.channel.kind() {
+        let kind = m.channel.kind();
+        // The references are read whatever the selection; the rest only when shown.
+        let reference = matches!(kind, Some(MessageKind::TrackMap | MessageKind::GroundTruth));
+        if !reference && !self.in_window(m.log_time_ns) {
+            return Ok(());
+        }
+        if let Some((pipeline, channel)) = topics::parse_fused(topic) {
+            let Some(p) = self.pipeline(pipeline) else {
+                return Ok(());
+            };
+            return match channel {
+                FusedChannel::State => self.fused(p, false, &m.decode(path)?),
+                FusedChannel::Smoothed => self.fused(p, true, &m.decode(path)?),
+                FusedChannel::Diagnostics => self.diagnostics(p, &m.decode(path)?),
+            };
+        }
+        if !reference && !self.options.shows_topic(topic) {
+            return Ok(());
+        }
+        match kind {
             Some(MessageKind::TrackMap) => self.track_map(m.decode(path)?)?,
-            Some(MessageKind::GroundTruth) => {
-                let t: GroundTruth = m.decode(path)?;
-                self.truth.push(ReferenceSample {
-                    stamp_ns: t.stamp_ns,
-                    chainage_m: t.chainage_m,
-                    speed_mps: t.speed_mps,
-                });
-                self.log(
-                    ent::TRUTH_POSITION,
-                    &Points2D::new([Self::plan(t.east_m, t.north_m)])
-                        .with_colors([rgb(TRUTH_COLOR)])
-                        .with_radii([Radius::new_ui_points(7.0)]),
-                )?;
-                self.log(ent::SPEED_TRUTH, &Scalars::single(t.speed_mps))?;
-            }
+            Some(MessageKind::GroundTruth) => self.truth(&m.decode(path)?)?,
             Some(MessageKind::GnssFix) => self.gnss(&m.decode(path)?)?,
             Some(MessageKind::RadarSpeed) => {
                 let r: RadarSpeed = m.decode(path)?;
                 if r.valid {
-                    self.log(ent::SPEED_RADAR, &Scalars::single(r.speed_mps))?;
+                    self.raw_value(ent::SPEED_RADAR, "radar", r.stamp_ns, r.speed_mps)?;
                 }
             }
             Some(MessageKind::Odometer) => {
                 let o: Odometer = m.decode(path)?;
-                self.log(&ent::speed_of(topic), &Scalars::single(o.speed_mps))?;
+                self.raw_value(&ent::speed_of(topic), topic, o.stamp_ns, o.speed_mps)?;
             }
             Some(MessageKind::LoopPosition) => {
                 let l: LoopPosition = m.decode(path)?;
-                if let Some((s, _)) = self.truth.at(l.stamp_ns) {
-                    self.log(ent::LOOP_CHAINAGE_ERROR, &Scalars::single(l.chainage_m - s))?;
-                }
+                self.position_sensor(ent::LOOP_CHAINAGE_ERROR, "loop", l.stamp_ns, l.chainage_m)?;
             }
             Some(MessageKind::BalisePassage) => {
                 let b: BalisePassage = m.decode(path)?;
-                if let Some((s, _)) = self.truth.at(b.stamp_ns) {
-                    self.log(
-                        ent::BALISE_CHAINAGE_ERROR,
-                        &Scalars::single(b.chainage_m - s),
-                    )?;
-                }
-            }
-            Some(MessageKind::Event) => {
-                let e: Event = m.decode(path)?;
-                self.log(
-                    ent::EVENTS,
-                    &TextLog::new(format!("{:?}: {}", e.kind, e.text)),
+                self.position_sensor(
+                    ent::BALISE_CHAINAGE_ERROR,
+                    "balise",
+                    b.stamp_ns,
+                    b.chainage_m,
                 )?;
             }
-            Some(MessageKind::FusedState) => {
-                // A pipeline's RTS-smoothed states are a series of their own.
-                let series = match topics::parse_fused(topic) {
-                    Some((pipeline, FusedChannel::State)) => pipeline.to_owned(),
-                    Some((pipeline, FusedChannel::Smoothed)) => format!("{pipeline}/smoothed"),
-                    _ => return Ok(()),
-                };
-                let f: FusedState = m.decode(path)?;
-                // Fused states are released after the reorder window: plot them at the
-                // instant they describe, so they line up with the truth.
-                self.rec
-                    .set_timestamp_nanos_since_epoch("log_time", f.stamp_ns as i64);
-                self.fused(&series, &f)?;
-            }
-            Some(MessageKind::FusedDiagnostics) => {
-                if let Some((pipeline, FusedChannel::Diagnostics)) = topics::parse_fused(topic) {
-                    self.sharing(pipeline, m.decode(path)?)?;
-                }
-            }
+            Some(MessageKind::Imu) if self.imu_shown() => self.imu(&m.decode(path)?)?,
+            Some(MessageKind::Event) => self.event(&m.decode(path)?)?,
             _ => {}
         }
         Ok(())
     }
 
-    /// The track, balises and stations on the plan view (static).
-    fn track_map(&mut self, map: TrackMap) -> Result<(), Error> {
-        let strip: Vec<[f32; 2]> = map
-            .vertices
-            .iter()
-            .map(|v| Self::plan(v.east_m, v.north_m))
-            .collect();
-        self.log_static(
-            ent::TRACK,
-            &LineStrips2D::new([strip])
-                .with_colors([Color::from_rgb(170, 170, 170)])
-                .with_radii([Radius::new_ui_points(1.5)]),
+    /// The IMU is drawn for raw logs, or when asked for by topic: in a fused run its 200 Hz
+    /// would cost more than every other channel together and say little.
+    fn imu_shown(&self) -> bool {
+        self.pipelines.is_empty() || !self.options.topics.is_empty()
+    }
+
+    fn imu(&mut self, i: &Imu) -> Result<(), Error> {
+        self.layout.imu = true;
+        let t = i.stamp_ns as i64;
+        let f = self.raw_series(ent::IMU_SPECIFIC_FORCE, &["forward", "left", "up"])?;
+        self.columns.push(&self.rec, f, t, &i.specific_force_mps2)?;
+        let w = self.raw_series(
+            ent::IMU_ANGULAR_RATE,
+            &["roll rate", "pitch rate", "yaw rate"],
         )?;
-        let at = |c: f64| map.locate(c).map(|(e, n, _)| Self::plan(e, n));
-        let balises: Vec<_> = map
-            .balises
-            .iter()
-            .filter_map(|b| at(b.chainage_m))
-            .collect();
-        // Balise ids would crowd the plan view: they show on hover as instance data.
-        self.log_static(
-            ent::BALISES,
-            &Points2D::new(balises)
-                .with_colors([Color::from_rgb(250, 200, 0)])
-                .with_radii([Radius::new_ui_points(4.0)]),
-        )?;
-        let stations: Vec<_> = map
-            .stations
-            .iter()
-            .filter_map(|s| at(s.chainage_m))
-            .collect();
-        let names: Vec<_> = map.stations.iter().map(|s| s.name.clone()).collect();
-        self.log_static(
-            ent::STATIONS,
-            &Points2D::new(stations)
-                .with_labels(names)
-                .with_colors([Color::from_rgb(255, 255, 255)])
-                .with_radii([Radius::new_ui_points(6.0)]),
-        )?;
-        self.series_style(ent::SPEED_TRUTH, "truth", rgb(TRUTH_COLOR), 2.0)?;
-        self.map = Some(map);
+        self.columns.push(&self.rec, w, t, &i.angular_rate_radps)
+    }
+
+    fn position_sensor(
+        &mut self,
+        entity: &str,
+        name: &str,
+        t: u64,
+        chainage_m: f64,
+    ) -> Result<(), Error> {
+        if let Some((s, _)) = self.truth.at(t) {
+            self.layout.position_sensors = true;
+            self.raw_value(entity, name, t, chainage_m - s)?;
+        }
         Ok(())
     }
 
-    /// A GNSS fix on the plan view (coloured by fix type) and its speed.
-    fn gnss(&mut self, g: &GnssFix) -> Result<(), Error> {
-        if let (Some(map), Some(lat), Some(lon)) = (&self.map, g.latitude_deg, g.longitude_deg) {
-            let (e, n, _) =
-                map.origin
-                    .to_enu(lat, lon, g.altitude_m.unwrap_or(map.origin.altitude_m));
-            let label = format!("{:?}", g.fix_type);
-            self.log(
-                ent::GNSS_POSITION,
-                &Points2D::new([Self::plan(e, n)])
-                    .with_colors([fix_color(g.fix_type)])
-                    .with_radii([Radius::new_ui_points(4.0)])
-                    .with_labels([label]),
+    fn track_map(&mut self, map: TrackMap) -> Result<(), Error> {
+        for e in map::log_track_map(&self.rec, &map)? {
+            self.entities.insert(e.to_owned());
+        }
+        self.origin = Some(map.origin.clone());
+        self.map = Some(map);
+        self.legend.clear();
+        Ok(())
+    }
+
+    fn truth(&mut self, t: &GroundTruth) -> Result<(), Error> {
+        self.truth.push(ReferenceSample {
+            stamp_ns: t.stamp_ns,
+            chainage_m: t.chainage_m,
+            speed_mps: t.speed_mps,
+        });
+        if !self.in_window(t.stamp_ns) {
+            return Ok(());
+        }
+        if !self.layout.truth {
+            self.layout.truth = true;
+            self.static_(
+                ent::TRUTH_TRAIN,
+                &Points2D::update_fields()
+                    .with_colors([palette::truth()])
+                    .with_radii([Radius::new_ui_points(8.0)])
+                    .with_labels(["train (truth)"]),
             )?;
+            self.static_(
+                ent::TRUTH_PATH,
+                &Points2D::update_fields()
+                    .with_colors([palette::truth()])
+                    .with_radii([Radius::new_ui_points(1.0)]),
+            )?;
+            self.truth_train = Some(self.columns.points(ent::TRUTH_TRAIN, None));
+            self.truth_path = Some(self.columns.points(ent::TRUTH_PATH, Some(TRAIL_EVERY_NS)));
+        }
+        let (p, ts) = (map::plan(t.east_m, t.north_m), t.stamp_ns as i64);
+        for id in [self.truth_train, self.truth_path].into_iter().flatten() {
+            self.columns.point(&self.rec, id, ts, p)?;
+        }
+        self.raw_value(ent::SPEED_TRUTH, "truth", t.stamp_ns, t.speed_mps)
+    }
+
+    /// A GNSS fix on the map (by fix type) and its speed.
+    fn gnss(&mut self, g: &GnssFix) -> Result<(), Error> {
+        if let (Some(lat), Some(lon)) = (g.latitude_deg, g.longitude_deg) {
+            let alt = g.altitude_m.unwrap_or(0.0);
+            let origin = self.origin.get_or_insert_with(|| GeodeticOrigin {
+                latitude_deg: lat,
+                longitude_deg: lon,
+                altitude_m: alt,
+            });
+            let (e, n, _) = origin.to_enu(lat, lon, g.altitude_m.unwrap_or(origin.altitude_m));
+            let id = match self.gnss.get(&g.fix_type) {
+                Some(&id) => id,
+                None => {
+                    let entity = ent::gnss_fixes(g.fix_type);
+                    self.static_(
+                        &entity,
+                        &Points2D::update_fields()
+                            .with_colors([palette::fix_type(g.fix_type)])
+                            .with_radii([Radius::new_ui_points(2.5)]),
+                    )?;
+                    self.layout.gnss_fixes.push(entity.clone());
+                    let id = self.columns.points(&entity, None);
+                    self.gnss.insert(g.fix_type, id);
+                    id
+                }
+            };
+            self.columns
+                .point(&self.rec, id, g.stamp_ns as i64, map::plan(e, n))?;
         }
         if let Some(v) = g.speed_mps {
-            self.log(ent::SPEED_GNSS, &Scalars::single(v))?;
+            self.raw_value(ent::SPEED_GNSS, "GNSS", g.stamp_ns, v)?;
         }
         Ok(())
     }
 
-    /// A federated pipeline's β per device, logged when it changes, and devices going out.
-    fn sharing(&mut self, pipeline: &str, d: FusedDiagnostics) -> Result<(), Error> {
-        let Some(sharing) = d.sharing else {
-            return Ok(());
-        };
-        let beta: Vec<f64> = sharing.iter().map(|s| s.beta).collect();
-        if self.shares.get(pipeline) == Some(&beta) {
-            return Ok(());
-        }
-        let entity = ent::sharing(pipeline);
-        if !self.shares.contains_key(pipeline) {
-            let names: Vec<String> = sharing.iter().map(|s| format!("β {}", s.device)).collect();
-            let colors: Vec<Color> = (0..names.len()).map(pipeline_color).collect();
-            self.log_static(
-                &entity,
-                &SeriesLines::new().with_names(names).with_colors(colors),
-            )?;
-        }
+    fn text(&mut self, t_ns: u64, text: String, level: &str) -> Result<(), Error> {
         self.rec
-            .set_timestamp_nanos_since_epoch("log_time", d.stamp_ns as i64);
-        self.log(&entity, &Scalars::new(beta.clone()))?;
-        for s in sharing.iter().filter(|s| s.fault.is_some()) {
-            self.log(
+            .set_timestamp_nanos_since_epoch(TIMELINE, t_ns as i64);
+        self.rec
+            .log(
                 ent::EVENTS,
-                &TextLog::new(format!(
-                    "{pipeline}: {} out ({})",
-                    s.device,
-                    s.fault.as_deref().unwrap_or_default()
-                )),
-            )?;
-        }
-        self.shares.insert(pipeline.to_owned(), beta);
+                &TextLog::new(text).with_level(TextLogLevel::from(level)),
+            )
+            .map_err(|e| Error::Rerun(e.to_string()))?;
+        self.entities.insert(ent::EVENTS.to_owned());
+        self.report.logged += 1;
         Ok(())
     }
 
-    fn fused(&mut self, pipeline: &str, f: &FusedState) -> Result<(), Error> {
-        let index = match self.pipelines.iter().position(|p| p == pipeline) {
-            Some(i) => i,
-            None => {
-                self.pipelines.push(pipeline.to_owned());
-                let color = pipeline_color(self.pipelines.len() - 1);
-                for base in [
-                    ent::fused_speed(pipeline),
-                    ent::chainage_error(pipeline),
-                    ent::speed_error(pipeline),
-                ] {
-                    let style = SeriesLines::new()
-                        .with_names([
-                            pipeline.to_owned(),
-                            format!("{pipeline} +3σ"),
-                            format!("{pipeline} −3σ"),
-                        ])
-                        .with_colors([color, band_color(), band_color()])
-                        .with_widths([1.5, 1.0, 1.0]);
-                    self.log_static(&base, &style)?;
-                }
-                self.pipelines.len() - 1
-            }
+    fn event(&mut self, e: &Event) -> Result<(), Error> {
+        let (what, level) = describe(e.kind);
+        let text = if e.text.is_empty() {
+            what.to_owned()
+        } else {
+            format!("{what}: {}", e.text)
         };
-        let color = pipeline_color(index);
-        let (s3, v3) = (3.0 * f.chainage_std_m(), 3.0 * f.speed_std_mps());
-        if let Some((e, n, _)) = self.map.as_ref().and_then(|m| m.locate(f.chainage_m)) {
-            self.log(
-                &ent::fused_position(pipeline),
-                &Points2D::new([Self::plan(e, n)])
-                    .with_colors([color])
-                    .with_radii([Radius::new_ui_points(5.0)]),
-            )?;
+        self.text(e.stamp_ns, text, level)
+    }
+
+    fn fused(&mut self, p: usize, smoothed: bool, f: &FusedState) -> Result<(), Error> {
+        let t = f.stamp_ns as i64;
+        if smoothed && self.pipelines[p].smoothed.is_none() {
+            let (name, index) = (self.pipelines[p].name.clone(), self.pipelines[p].index);
+            self.pipelines[p].smoothed = Some(self.fused_series(&name, index, true)?);
         }
-        self.band(&ent::fused_speed(pipeline), f.speed_mps, v3)?;
-        if let Some((s, v)) = self.truth.at(f.stamp_ns) {
-            self.band(&ent::chainage_error(pipeline), f.chainage_m - s, s3)?;
-            self.band(&ent::speed_error(pipeline), f.speed_mps - v, v3)?;
+        let (s3, v3) = (3.0 * f.chainage_std_m(), 3.0 * f.speed_std_mps());
+        let truth = self.truth.at(f.stamp_ns);
+        let state = &self.pipelines[p];
+        let series = if smoothed {
+            state.smoothed.as_ref()
+        } else {
+            Some(&state.filtered)
+        };
+        let Some(series) = series else { return Ok(()) };
+        let (speed, chainage_error, speed_error) =
+            (series.speed, series.chainage_error, series.speed_error);
+        let (position, extent) = (state.position, state.extent);
+        self.columns.push(&self.rec, speed, t, &[f.speed_mps])?;
+        if let Some((s, v)) = truth {
+            let e = f.chainage_m - s;
+            self.columns
+                .push(&self.rec, chainage_error, t, &[e, e + s3, e - s3])?;
+            let e = f.speed_mps - v;
+            self.columns
+                .push(&self.rec, speed_error, t, &[e, e + v3, e - v3])?;
+        }
+        if smoothed {
+            return Ok(());
+        }
+        if let Some(m) = &self.map {
+            if let (Some(here), Some(behind), Some(ahead)) = (
+                map::at(m, f.chainage_m),
+                map::at(m, f.chainage_m - s3),
+                map::at(m, f.chainage_m + s3),
+            ) {
+                self.columns.point(&self.rec, position, t, here)?;
+                self.columns
+                    .segment(&self.rec, extent, t, [behind, ahead])?;
+            }
         }
         for st in &f.sensor_states {
-            let entity = ent::sensor_state(pipeline, &st.topic, &st.kind);
-            if self.sensor_states.insert(entity.clone()) {
-                let name = format!("{} {}", st.topic, st.kind);
-                let style = SeriesLines::new()
-                    .with_names([name.clone(), format!("{name} +3σ"), format!("{name} −3σ")])
-                    .with_colors([color, band_color(), band_color()]);
-                self.log_static(&entity, &style)?;
-            }
-            self.band(&entity, st.value, 3.0 * st.std)?;
+            let key = (st.topic.clone(), st.kind.clone());
+            let id = match self.pipelines[p].sensor_states.get(&key) {
+                Some(&id) => id,
+                None => {
+                    let (name, index) = (self.pipelines[p].name.clone(), self.pipelines[p].index);
+                    let entity = ent::sensor_state(&name, &st.topic, &st.kind);
+                    let title = format!("{} {}", st.topic, st.kind.replace('_', " "));
+                    let id = self.band_series(&entity, &title, index, false)?;
+                    self.pipelines[p].sensor_states.insert(key, id);
+                    self.layout.pipelines[p].sensor_states.push((entity, title));
+                    id
+                }
+            };
+            let b = 3.0 * st.std;
+            self.columns
+                .push(&self.rec, id, t, &[st.value, st.value + b, st.value - b])?;
         }
         Ok(())
     }
 
-    /// A value with its ±3σ band: three series of one entity, so they share one plot.
-    fn band(&mut self, entity: &str, value: f64, three_sigma: f64) -> Result<(), Error> {
-        self.log(
-            entity,
-            &Scalars::new([value, value + three_sigma, value - three_sigma]),
-        )
+    fn diagnostics(&mut self, p: usize, d: &FusedDiagnostics) -> Result<(), Error> {
+        let t = d.stamp_ns as i64;
+        let name = self.pipelines[p].name.clone();
+        // The χ² bounds as lines under the whole NIS plot: drawn on as time goes.
+        let state = &mut self.pipelines[p];
+        state.last_diagnostics_ns = Some(t);
+        if state.bounds_to_ns.is_none_or(|b| t > b + 10_000_000_000) {
+            state.bounds_to_ns = Some(t);
+            let bounds = state.bounds;
+            self.columns
+                .push(&self.rec, bounds, t, &[CHI2_95_1DOF.0, CHI2_95_1DOF.1])?;
+        }
+        match d.decision {
+            GateDecision::Accepted => {
+                if let Some(nis) = d.nis {
+                    let id = self.nis_series(p, &d.source)?;
+                    self.columns.push(&self.rec, id, t, &[nis])?;
+                }
+            }
+            // Not yet a filter to disagree with: nothing to mark.
+            GateDecision::BeforeInitialisation => {}
+            decision => {
+                let id = self.gate_series(p, decision)?;
+                let y = d.nis.map_or(NIS_AXIS_MAX, |n| n.min(NIS_AXIS_MAX)) * 0.97;
+                self.columns.push(&self.rec, id, t, &[y])?;
+                if decision == GateDecision::AcceptedAfterLockout {
+                    self.text(
+                        d.stamp_ns,
+                        format!(
+                            "{name}: {} accepted after a gate lockout (variance widened)",
+                            d.source
+                        ),
+                        "WARN",
+                    )?;
+                }
+            }
+        }
+        if let Some(ess) = d.effective_sample_size {
+            let id = match self.pipelines[p].effective_sample_size {
+                Some(id) => id,
+                None => {
+                    let index = self.pipelines[p].index;
+                    let id = self.line_series(
+                        &ent::effective_sample_size(&name),
+                        &["effective sample size".into()],
+                        &[palette::pipeline(index)],
+                        &[1.5],
+                    )?;
+                    self.pipelines[p].effective_sample_size = Some(id);
+                    self.layout.pipelines[p].effective_sample_size = true;
+                    id
+                }
+            };
+            self.columns.push(&self.rec, id, t, &[ess])?;
+        }
+        if let Some(sharing) = &d.sharing {
+            self.sharing(p, d.stamp_ns, sharing)?;
+        }
+        Ok(())
+    }
+
+    fn nis_series(&mut self, p: usize, source: &str) -> Result<SeriesId, Error> {
+        if let Some(&id) = self.pipelines[p].nis.get(source) {
+            return Ok(id);
+        }
+        let entity = ent::nis(&self.pipelines[p].name, source);
+        let color = palette::raw_sensor(self.pipelines[p].nis.len());
+        self.static_(
+            &entity,
+            &SeriesPoints::new()
+                .with_names([source])
+                .with_colors([color])
+                .with_marker_sizes([1.0]),
+        )?;
+        let id = self.columns.series(&entity, 1);
+        self.pipelines[p].nis.insert(source.to_owned(), id);
+        Ok(id)
+    }
+
+    fn gate_series(&mut self, p: usize, decision: GateDecision) -> Result<SeriesId, Error> {
+        if let Some(&id) = self.pipelines[p].gates.get(&decision) {
+            return Ok(id);
+        }
+        let entity = ent::gate_decisions(&self.pipelines[p].name, decision);
+        let (marker, color) = match decision {
+            GateDecision::AcceptedAfterLockout => (MarkerShape::Diamond, palette::after_lockout()),
+            GateDecision::RejectedGate => (MarkerShape::Cross, palette::rejected()),
+            _ => (MarkerShape::Asterisk, palette::bound()),
+        };
+        self.static_(
+            &entity,
+            &SeriesPoints::new()
+                .with_names([ent::gate_decision_name(decision).replace('_', " ")])
+                .with_colors([color])
+                .with_markers([marker])
+                .with_marker_sizes([4.0]),
+        )?;
+        let id = self.columns.series(&entity, 1);
+        self.pipelines[p].gates.insert(decision, id);
+        Ok(id)
+    }
+
+    /// A federated pipeline's β per device, logged when it changes, and devices going out
+    /// or coming back as events.
+    fn sharing(&mut self, p: usize, t_ns: u64, sharing: &[DeviceShare]) -> Result<(), Error> {
+        let beta: Vec<f64> = sharing.iter().map(|s| s.beta).collect();
+        let name = self.pipelines[p].name.clone();
+        let id = match self.pipelines[p].sharing {
+            // β's of another set of devices cannot share the series.
+            Some((_, width)) if width != beta.len() => return Ok(()),
+            Some((id, _)) => id,
+            None => {
+                let names: Vec<String> =
+                    sharing.iter().map(|s| format!("β {}", s.device)).collect();
+                let colors: Vec<Color> = (0..names.len()).map(palette::pipeline).collect();
+                let widths = vec![1.5; names.len()];
+                let id = self.line_series(&ent::sharing(&name), &names, &colors, &widths)?;
+                self.pipelines[p].sharing = Some((id, beta.len()));
+                self.layout.pipelines[p].sharing = true;
+                id
+            }
+        };
+        if self.pipelines[p].last_beta != beta {
+            self.columns.push(&self.rec, id, t_ns as i64, &beta)?;
+            self.pipelines[p].last_beta = beta;
+        }
+        for s in sharing {
+            let was_out = self.pipelines[p].out.contains(&s.device);
+            match (&s.fault, was_out) {
+                (Some(why), false) => {
+                    self.pipelines[p].out.insert(s.device.clone());
+                    self.text(
+                        t_ns,
+                        format!("{name}: {} out of the fusion ({why})", s.device),
+                        "WARN",
+                    )?;
+                }
+                (None, true) => {
+                    self.pipelines[p].out.remove(&s.device);
+                    self.text(
+                        t_ns,
+                        format!("{name}: {} back in the fusion", s.device),
+                        "INFO",
+                    )?;
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// The legend entries for what the map shows now.
+    fn legend_entries(&self) -> Vec<(String, Color)> {
+        let mut entries = Vec::new();
+        if self.layout.truth {
+            entries.push(("truth".to_owned(), palette::truth()));
+        }
+        for p in &self.pipelines {
+            entries.push((p.name.clone(), palette::pipeline(p.index)));
+        }
+        let mut fixes: Vec<FixType> = self.gnss.keys().copied().collect();
+        fixes.sort_by_key(|f| std::cmp::Reverse(*f as u8));
+        for f in fixes {
+            entries.push((
+                format!("GNSS {}", ent::fix_type_name(f).replace('_', " ")),
+                palette::fix_type(f),
+            ));
+        }
+        if self.map.as_ref().is_some_and(|m| !m.balises.is_empty()) {
+            entries.push(("balise".to_owned(), palette::balise()));
+        }
+        entries
+    }
+
+    /// Redraws the legend when what it lists changed.
+    fn update_legend(&mut self) -> Result<(), Error> {
+        let entries = self.legend_entries();
+        if entries == self.legend {
+            return Ok(());
+        }
+        if let Some(bounds) = self.map.as_ref().and_then(map::bounds) {
+            map::log_legend(&self.rec, bounds, &entries)?;
+            self.entities.insert(ent::LEGEND.to_owned());
+        }
+        self.legend = entries;
+        Ok(())
+    }
+
+    fn send_blueprint(&mut self) -> Result<(), Error> {
+        self.update_legend()?;
+        self.layout.send(&self.rec, self.columns.span())?;
+        self.sent_layout = Some(self.layout.clone());
+        Ok(())
+    }
+
+    fn send_blueprint_if_changed(&mut self) -> Result<(), Error> {
+        if self.sent_layout.as_ref() != Some(&self.layout) {
+            self.send_blueprint()?;
+        }
+        Ok(())
+    }
+
+    /// Closes the plots (bounds drawn to the end), sends what is buffered and the layout.
+    fn finish(&mut self) -> Result<(), Error> {
+        for i in 0..self.pipelines.len() {
+            let (bounds, last) = (
+                self.pipelines[i].bounds,
+                self.pipelines[i].last_diagnostics_ns,
+            );
+            if let Some(t) = last.filter(|&t| Some(t) != self.pipelines[i].bounds_to_ns) {
+                self.columns
+                    .push(&self.rec, bounds, t, &[CHI2_95_1DOF.0, CHI2_95_1DOF.1])?;
+            }
+        }
+        self.columns.flush(&self.rec)?;
+        self.send_blueprint()
+    }
+}
+
+/// An event kind in words, and its level in the log.
+fn describe(kind: EventKind) -> (&'static str, &'static str) {
+    match kind {
+        EventKind::StationArrival => ("Station arrival", "INFO"),
+        EventKind::StationDeparture => ("Station departure", "INFO"),
+        EventKind::CorrectionLinkUp => ("RTK correction link up", "INFO"),
+        EventKind::CorrectionLinkDown => ("RTK correction link down", "WARN"),
+        EventKind::TunnelEntry => ("Tunnel entry", "INFO"),
+        EventKind::TunnelExit => ("Tunnel exit", "INFO"),
+        EventKind::OperatorNote => ("Note", "INFO"),
+        EventKind::FaultInjected => ("Fault injected", "WARN"),
+        EventKind::FaultCleared => ("Fault cleared", "INFO"),
+        EventKind::DeviceFault => ("Device reports a fault", "ERROR"),
+        EventKind::DeviceRecovered => ("Device recovered", "INFO"),
     }
 }
 
@@ -527,7 +1078,7 @@ fn probe_viewer(url: &str) -> Result<(), Error> {
         .to_socket_addrs()
         .map_err(|e| Error::Rerun(format!("{url}: {e}")))?;
     for addr in addrs {
-        if TcpStream::connect_timeout(&addr, std::time::Duration::from_secs(3)).is_ok() {
+        if TcpStream::connect_timeout(&addr, Duration::from_secs(3)).is_ok() {
             return Ok(());
         }
     }

@@ -387,6 +387,8 @@ pub struct LogSummary {
     pub channels: Vec<Arc<ChannelInfo>>,
     /// The longest time span of one chunk (log time), if the file has chunk indexes.
     pub longest_chunk_ns: Option<u64>,
+    /// Log times of the first and last message, from the statistics record, if it has one.
+    pub message_span_ns: Option<(u64, u64)>,
 }
 
 /// The channel table of a file from its summary section (one seek to the end), or `None` when
@@ -448,9 +450,15 @@ pub fn read_summary(path: &Path) -> Result<Option<LogSummary>> {
         .iter()
         .map(|c| c.message_end_time.saturating_sub(c.message_start_time))
         .max();
+    let message_span_ns = summary
+        .stats
+        .as_ref()
+        .filter(|s| s.message_count > 0)
+        .map(|s| (s.message_start_time, s.message_end_time));
     Ok(Some(LogSummary {
         channels,
         longest_chunk_ns,
+        message_span_ns,
     }))
 }
 

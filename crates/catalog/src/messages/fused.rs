@@ -40,7 +40,13 @@ impl FusedState {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+/// Two-sided 95 % interval of χ² with 1 and 2 degrees of freedom (2.5 % and 97.5 % points):
+/// where a consistent filter's NIS of a scalar measurement, and NEES of chainage and speed, lie
+/// 95 % of the time.
+pub const CHI2_95_1DOF: (f64, f64) = (0.000982069, 5.023886);
+pub const CHI2_95_2DOF: (f64, f64) = (0.05063562, 7.377759);
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum GateDecision {
     /// Used in the update.

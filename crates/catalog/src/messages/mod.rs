@@ -5,7 +5,7 @@ mod balise;
 mod eddy_current;
 mod events;
 mod examples;
-mod fused;
+pub mod fused;
 mod gnss;
 mod ground_truth;
 mod imu;
