@@ -144,6 +144,14 @@ fn seed000_measurements_have_the_variances_source_000_states() {
     }
 }
 
+/// `railfuse refuse` of the short sample run with a config, and any further arguments.
+fn refuse_short_run(config: &std::path::Path, out: &std::path::Path, extra: &[&str]) {
+    let run = sample("short-run.mcap");
+    let mut args = vec!["refuse", s(&run), "-c", s(config), "-o", s(out)];
+    args.extend(extra);
+    ok(&args);
+}
+
 /// Kalman, federated and particle pipelines side by side, as the viewer's layout test run.
 const THREE_PIPELINES: &str = r#"
 [[pipeline]]
@@ -221,14 +229,7 @@ fn rerun_verifies_the_recording_with_its_layout_and_every_pipelines_entities() {
         d.path().join("run.rrd"),
     );
     std::fs::write(&config, THREE_PIPELINES).unwrap();
-    ok(&[
-        "refuse",
-        s(&sample("short-run.mcap")),
-        "-c",
-        s(&config),
-        "-o",
-        s(&fused),
-    ]);
+    refuse_short_run(&config, &fused, &[]);
     ok(&["viz", s(&fused), "--save", s(&rrd)]);
     rerun_ok(&["rrd", "verify", s(&rrd)]);
     let printed = rerun_ok(&["rrd", "print", "-v", s(&rrd)]);
@@ -328,14 +329,7 @@ fn sensor_states_reach_the_fused_file_and_the_viewer() {
          [[pipeline.sensor]]\ntopic = \"/radar/speed\"\nvariance = 0.01\nscale_factor = { std = 0.01 }\n",
     )
     .unwrap();
-    ok(&[
-        "refuse",
-        s(&sample("short-run.mcap")),
-        "-c",
-        s(&config),
-        "-o",
-        s(&fused),
-    ]);
+    refuse_short_run(&config, &fused, &[]);
     // Every fused state, with its sensor state, fits the schema stored in the file.
     let py = python("check_mcap.py", &[s(&fused)]);
     assert!(
@@ -454,16 +448,7 @@ fn refuse_viz_streams_the_fused_channels_while_refusing() {
     let d = tempfile::tempdir().unwrap();
     let (server, url, saved) = rerun_server(d.path());
     let fused = d.path().join("f.mcap");
-    ok(&[
-        "refuse",
-        s(&sample("short-run.mcap")),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-        "--viz",
-        &url,
-    ]);
+    refuse_short_run(&sample("kalman.toml"), &fused, &["--viz", &url]);
     stop_when_saved(server, &saved);
     let printed = rerun_ok(&[
         "rrd",
@@ -497,14 +482,7 @@ fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
     use std::time::{Duration, Instant};
     let d = tempfile::tempdir().unwrap();
     let fused = d.path().join("f.mcap");
-    ok(&[
-        "refuse",
-        s(&sample("short-run.mcap")),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    refuse_short_run(&sample("kalman.toml"), &fused, &[]);
 
     let (server, url, saved) = rerun_server(d.path());
     let streamed = railfuse(&["viz", s(&fused), "--connect", &url]);
