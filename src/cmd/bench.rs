@@ -39,6 +39,11 @@ pub struct Args {
     /// this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub record: Option<f64>,
+    /// Measure `railfuse viz` instead: time, peak memory and recording size for the
+    /// default scenario re-fused with the demo's two pipelines (samples/kalman.toml and
+    /// samples/sensor-states.toml), at the default decimation and at full rate.
+    #[arg(long, value_name = "SECONDS")]
+    pub viz: Option<f64>,
     /// With --record: play the field load this many times faster (10 for an hour of field
     /// data in six minutes, to see whether memory grows with the amount recorded).
     #[arg(long, default_value_t = 1.0)]
@@ -54,6 +59,9 @@ struct Measured {
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
         return super::bench_record::run(&a.dir, secs, a.record_speedup);
+    }
+    if let Some(secs) = a.viz {
+        return super::bench_viz::run(&a.dir, secs, a.repeat);
     }
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;

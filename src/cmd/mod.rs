@@ -1,5 +1,6 @@
 pub mod bench;
 pub mod bench_record;
+pub mod bench_viz;
 pub mod demo;
 pub mod eval;
 pub mod import;

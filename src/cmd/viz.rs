@@ -19,6 +19,9 @@ pub struct Args {
     pub spawn: bool,
     #[command(flatten)]
     pub show: ShowArgs,
+    /// Print the report as JSON (with wall time and peak memory).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// What to show: shared by `viz` and the live views of `record` and `refuse`.
@@ -83,10 +86,30 @@ pub fn run(a: Args) -> Result<()> {
         (None, Some(url)) => Sink::Connect(url),
         (None, None) => Sink::Spawn,
     };
+    let started = std::time::Instant::now();
     let size = std::fs::metadata(&a.input).map_or(0, |m| m.len());
     let bar = crate::progress::Progress::bytes("viz", size);
     let report = visualize(&a.input, &sink, &options, &|done| bar.set(done))?;
     bar.finish();
+    if a.json {
+        let recording_bytes = match &sink {
+            Sink::Save(p) => std::fs::metadata(p).ok().map(|m| m.len()),
+            _ => None,
+        };
+        let v = serde_json::json!({
+            "messages": report.messages,
+            "rows": report.logged,
+            "entities": report.entities,
+            "bin_s": report.bin_s,
+            "recording_bytes": recording_bytes,
+            "run": {
+                "elapsed_s": started.elapsed().as_secs_f64(),
+                "peak_rss_kib": super::refuse::peak_rss_kib(),
+            },
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
     let target = match &sink {
         Sink::Save(p) => p.display().to_string(),
         Sink::Connect(u) => u.clone(),
