@@ -39,7 +39,10 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
         "{:<22} {:>8} {:>12} {:>10} {:>14} {:>9}",
         "viz", "wall s", "peak RSS MiB", "rows", "recording MB", "bin s"
     );
-    for (label, extra) in [("default decimation", None), ("--full-rate", Some("--full-rate"))] {
+    for (label, extra) in [
+        ("default decimation", None),
+        ("--full-rate", Some("--full-rate")),
+    ] {
         let rrd = dir.join(format!("viz-{duration_s:.0}{}.rrd", extra.unwrap_or("")));
         let mut runs = (0..repeat.max(1))
             .map(|_| viz_child(&fused, &rrd, extra))
@@ -57,7 +60,9 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
             peak.map_or("-".into(), |k| format!("{:.0}", k as f64 / 1024.0)),
             v["rows"],
             v["recording_bytes"].as_u64().unwrap_or(0) as f64 / 1e6,
-            v["bin_s"].as_f64().map_or("full".into(), |b| format!("{b:.2}")),
+            v["bin_s"]
+                .as_f64()
+                .map_or("full".into(), |b| format!("{b:.2}")),
         );
     }
     Ok(())

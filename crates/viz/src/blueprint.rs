@@ -36,6 +36,8 @@ pub struct Layout {
     pub truth: bool,
     /// Loop or balise errors against the truth.
     pub position_sensors: bool,
+    /// GNSS satellites and HDOP.
+    pub gnss_quality: bool,
     pub imu: bool,
 }
 
@@ -131,7 +133,7 @@ fn plot(name: &str, origin: &str, style: PlotStyle) -> Node {
             "PlotLegend",
             Box::new(
                 PlotLegend::new()
-                    .with_corner(Corner2D::RightTop)
+                    .with_corner(Corner2D::LeftTop)
                     .with_visible(style.legend),
             ),
         ));

@@ -27,6 +27,10 @@ pub const SPEED_RADAR: &str = "speed/radar";
 pub const SPEED_GNSS: &str = "speed/gnss";
 pub const LOOP_CHAINAGE_ERROR: &str = "sensors/chainage_error/loop";
 pub const BALISE_CHAINAGE_ERROR: &str = "sensors/chainage_error/balise";
+/// Satellites in use and HDOP of every fix.
+pub const GNSS_QUALITY: &str = "sensors/gnss/quality";
+/// Satellites of fixes without an HDOP.
+pub const GNSS_SATELLITES: &str = "sensors/gnss/quality/satellites";
 pub const IMU_SPECIFIC_FORCE: &str = "sensors/imu/specific_force";
 pub const IMU_ANGULAR_RATE: &str = "sensors/imu/angular_rate";
 

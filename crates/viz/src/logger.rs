@@ -12,7 +12,7 @@ use railfuse_catalog::messages::fused::CHI2_95_1DOF;
 use railfuse_catalog::messages::*;
 use railfuse_catalog::reference_track::{ReferenceSample, ReferenceTrack};
 use railfuse_catalog::topics::{self, FusedChannel};
-use rerun::components::{MarkerShape, TextLogLevel};
+use rerun::components::{InterpolationMode, MarkerShape, TextLogLevel};
 use rerun::{Color, Points2D, Radius, RecordingStream, SeriesLines, SeriesPoints, TextLog};
 
 use crate::blueprint::{Layout, PipelineLayout, NIS_AXIS_MAX};
@@ -735,6 +735,22 @@ impl Logger {
         if let Some(v) = g.speed_mps {
             self.raw_value(ent::SPEED_GNSS, "GNSS", g.stamp_ns, v)?;
         }
+        // Fix quality over time, fix or no fix: what a field engineer checks first.
+        self.layout.gnss_quality = true;
+        let id = self.raw_series(ent::GNSS_QUALITY, &["satellites", "HDOP"])?;
+        let hdop = g.hdop.unwrap_or(f64::NAN);
+        if hdop.is_finite() {
+            self.columns.push(
+                &self.rec,
+                id,
+                g.stamp_ns as i64,
+                &[g.satellites as f64, hdop],
+            )?;
+        } else {
+            let sats = self.raw_series(ent::GNSS_SATELLITES, &["satellites (no HDOP)"])?;
+            self.columns
+                .push(&self.rec, sats, g.stamp_ns as i64, &[g.satellites as f64])?;
+        }
         Ok(())
     }
 
@@ -939,8 +955,17 @@ impl Logger {
                 let names: Vec<String> =
                     sharing.iter().map(|s| format!("β {}", s.device)).collect();
                 let colors: Vec<Color> = (0..names.len()).map(palette::pipeline).collect();
-                let widths = vec![1.5; names.len()];
-                let id = self.line_series(&ent::sharing(&name), &names, &colors, &widths)?;
+                let entity = ent::sharing(&name);
+                // β holds between fusions: steps, not slopes.
+                self.static_(
+                    &entity,
+                    &SeriesLines::new()
+                        .with_names(names.iter().cloned())
+                        .with_colors(colors)
+                        .with_widths(vec![1.5; names.len()])
+                        .with_interpolation_mode(InterpolationMode::StepAfter),
+                )?;
+                let id = self.columns.series(&entity, names.len());
                 self.pipelines[p].sharing = Some((id, beta.len()));
                 self.layout.pipelines[p].sharing = true;
                 id

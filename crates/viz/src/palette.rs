@@ -4,17 +4,17 @@
 use railfuse_catalog::messages::FixType;
 use rerun::Color;
 
-/// Pipeline colours by the order pipelines appear in the file (Tableau 10: distinguishable,
-/// and readable on the viewer's dark background).
+/// Pipeline colours by the order pipelines appear in the file: distinguishable on the
+/// viewer's dark background, and free of the red, yellow and green that mean fix types.
 const PIPELINES: [(u8, u8, u8); 8] = [
     (78, 121, 167),
     (242, 142, 43),
-    (89, 161, 79),
-    (225, 87, 89),
     (176, 122, 161),
     (118, 183, 178),
-    (237, 201, 72),
+    (255, 157, 167),
     (156, 117, 95),
+    (160, 203, 232),
+    (186, 176, 172),
 ];
 
 pub fn pipeline(index: usize) -> Color {
