@@ -20,6 +20,11 @@ struct Cli {
     /// No progress output (bars on a terminal, periodic lines otherwise).
     #[arg(long, short, global = true)]
     quiet: bool,
+    /// Do not add Foxglove twins (foxglove.LocationFix of GNSS fixes and fused positions,
+    /// foxglove.GeoJSON of the track, foxglove.Log of events, on /foxglove/…) to the logs this
+    /// command writes.
+    #[arg(long, global = true)]
+    no_foxglove: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -61,6 +66,7 @@ fn main() -> ExitCode {
     }
     let cli = Cli::parse();
     progress::set_quiet(cli.quiet);
+    railfuse_catalog::foxglove::set_twins_by_default(!cli.no_foxglove);
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Info(a) => cmd::info::run(a),

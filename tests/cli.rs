@@ -854,3 +854,58 @@ fn differ(a: &serde_json::Value, b: &serde_json::Value) -> f64 {
         _ => f64::INFINITY,
     }
 }
+
+/// The Foxglove twins sit beside railfuse's channels without changing them, and
+/// `--no-foxglove` leaves them out.
+#[test]
+fn foxglove_twins_are_added_beside_the_channels_and_left_out_on_request() {
+    let d = tempfile::tempdir().unwrap();
+    let topics = |path: &std::path::Path| -> Vec<(String, u64)> {
+        let info: serde_json::Value =
+            serde_json::from_slice(&ok(&["info", s(path), "--json"]).stdout).unwrap();
+        let mut t: Vec<_> = info["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| {
+                (
+                    c["topic"].as_str().unwrap().to_owned(),
+                    c["messages"].as_u64().unwrap(),
+                )
+            })
+            .collect();
+        t.sort();
+        t
+    };
+    let (with, without) = (d.path().join("with.mcap"), d.path().join("without.mcap"));
+    ok(&["simulate", "--duration", "30", "-o", s(&with)]);
+    ok(&[
+        "--no-foxglove",
+        "simulate",
+        "--duration",
+        "30",
+        "-o",
+        s(&without),
+    ]);
+    let (with, without) = (topics(&with), topics(&without));
+    assert!(
+        without.iter().all(|(t, _)| !t.starts_with("/foxglove")),
+        "{without:?}"
+    );
+    let own: Vec<_> = with
+        .iter()
+        .filter(|(t, _)| !t.starts_with("/foxglove"))
+        .cloned()
+        .collect();
+    assert_eq!(own, without, "the twins changed railfuse's own channels");
+    for twin in [
+        "/foxglove/gnss/fix",
+        "/foxglove/track/map",
+        "/foxglove/events",
+    ] {
+        assert!(
+            with.iter().any(|(t, n)| t == twin && *n > 0),
+            "no {twin}: {with:?}"
+        );
+    }
+}

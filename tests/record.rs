@@ -543,7 +543,11 @@ fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
             .as_array()
             .unwrap()
             .iter()
-            .filter(|c| c["topic"] != "/recorder/diagnostics")
+            // What the recorder received: not its diagnostics, nor the Foxglove twins it adds.
+            .filter(|c| {
+                let topic = c["topic"].as_str().unwrap();
+                topic != "/recorder/diagnostics" && !topic.starts_with("/foxglove/")
+            })
             .map(|c| c["messages"].as_u64().unwrap())
             .sum::<u64>();
     }

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use mcap::records::op;
+use railfuse_catalog::foxglove::TwinKind;
 use railfuse_catalog::log::format::{self, Records};
 use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
 use railfuse_catalog::log::{
@@ -107,11 +108,18 @@ enum ContextKind {
 
 struct Output {
     state: ChannelId,
+    /// The pipeline's position as a Foxglove LocationFix, when twins are on, and the stamp of
+    /// the last one written.
+    location: Option<ChannelId>,
+    last_location_ns: Option<u64>,
     diagnostics: ChannelId,
     smoothed: Option<ChannelId>,
     states: u64,
     smoothed_states: u64,
 }
+
+/// The shortest interval between two Foxglove positions of one pipeline.
+const LOCATION_TWIN_EVERY_NS: u64 = 100_000_000;
 
 /// Replays `opts.input` through the pipelines into `opts.output` and evaluates the result
 /// against `opts.reference` in the same pass.
@@ -214,8 +222,13 @@ impl<'a> Replay<'a> {
         self.is_replaced(self.opts.reference)
     }
 
+    /// An earlier run's output of a pipeline this run re-runs: its fused channels and their
+    /// Foxglove twins.
     fn is_replaced(&self, topic: &str) -> bool {
-        topics::fused_pipeline_of(topic).is_some_and(|n| self.names.contains(n))
+        let own = topic
+            .strip_prefix(railfuse_catalog::foxglove::TOPIC_PREFIX)
+            .unwrap_or(topic);
+        topics::fused_pipeline_of(own).is_some_and(|n| self.names.contains(n))
     }
 
     /// An input chunk: its messages go to the pipelines and the evaluation; the chunk itself
@@ -514,6 +527,21 @@ impl<'a> Replay<'a> {
                     observe(observer, &topics::fused_diagnostics(name), f.log_time_ns, d);
                 }
             }
+            // A map needs no more than 10 positions a second: the fused state keeps every one.
+            if let (Some(state), Some(channel), Some(map)) =
+                (&f.state, out.location, &self.context.track)
+            {
+                let due = out
+                    .last_location_ns
+                    .is_none_or(|last| state.stamp_ns >= last + LOCATION_TWIN_EVERY_NS);
+                let twin = due
+                    .then(|| railfuse_catalog::foxglove::fused_location(name, state, map))
+                    .flatten();
+                if let Some(twin) = twin {
+                    self.writer.write_twin(channel, f.log_time_ns, &twin)?;
+                    out.last_location_ns = Some(state.stamp_ns);
+                }
+            }
             if let Some(state) = &f.state {
                 self.writer.write(out.state, f.log_time_ns, state)?;
                 self.eval.fused_state(out.state.0, state);
@@ -635,7 +663,7 @@ fn register_outputs(
         free.next()
             .ok_or_else(|| Error::Log(ids_exhausted(opts.output)))
     };
-    let (state_schema, diag_schema) = (next()?, next()?);
+    let (state_schema, diag_schema, location_schema) = (next()?, next()?, next()?);
     let mut outputs = Vec::new();
     for p in &opts.config.pipeline {
         let state_topic = topics::fused_state(&p.name);
@@ -656,8 +684,19 @@ fn register_outputs(
             }
             false => None,
         };
+        let location = match railfuse_catalog::foxglove::twins_by_default() {
+            true => Some(writer.add_twin_channel_with_ids(
+                TwinKind::LocationFix,
+                location_schema,
+                next()?,
+                &railfuse_catalog::foxglove::twin_topic(&state_topic),
+            )?),
+            false => None,
+        };
         outputs.push(Output {
             state,
+            location,
+            last_location_ns: None,
             diagnostics,
             smoothed,
             states: 0,

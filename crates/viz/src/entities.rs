@@ -36,18 +36,7 @@ pub const IMU_ANGULAR_RATE: &str = "sensors/imu/angular_rate";
 
 /// GNSS fixes of one fix type on the map: one entity per type, so each has its colour and name.
 pub fn gnss_fixes(fix: FixType) -> String {
-    format!("map/gnss/{}", fix_type_name(fix))
-}
-
-/// The field's name of a fix type, as the legend shows it.
-pub fn fix_type_name(fix: FixType) -> &'static str {
-    match fix {
-        FixType::None => "no_fix",
-        FixType::Single => "single",
-        FixType::Dgps => "dgps",
-        FixType::RtkFloat => "rtk_float",
-        FixType::RtkFixed => "rtk_fixed",
-    }
+    format!("map/gnss/{}", fix.name())
 }
 
 /// `speed/<odometer topic tail>`, e.g. `speed/odometer_1`.

@@ -769,13 +769,12 @@ impl Logger {
     }
 
     fn event(&mut self, e: &Event) -> Result<(), Error> {
-        let (what, level) = describe(e.kind);
-        let text = if e.text.is_empty() {
-            what.to_owned()
-        } else {
-            format!("{what}: {}", e.text)
+        let level = match e.kind.describe().1 {
+            Severity::Info => "INFO",
+            Severity::Warning => "WARN",
+            Severity::Error => "ERROR",
         };
-        self.text(e.stamp_ns, text, level)
+        self.text(e.stamp_ns, e.line(), level)
     }
 
     fn fused(&mut self, p: usize, smoothed: bool, f: &FusedState) -> Result<(), Error> {
@@ -1013,7 +1012,7 @@ impl Logger {
         fixes.sort_by_key(|f| std::cmp::Reverse(*f as u8));
         for f in fixes {
             entries.push((
-                format!("GNSS {}", ent::fix_type_name(f).replace('_', " ")),
+                format!("GNSS {}", f.name().replace('_', " ")),
                 palette::fix_type(f),
             ));
         }
@@ -1065,23 +1064,6 @@ impl Logger {
         }
         self.columns.flush(&self.rec)?;
         self.send_blueprint()
-    }
-}
-
-/// An event kind in words, and its level in the log.
-fn describe(kind: EventKind) -> (&'static str, &'static str) {
-    match kind {
-        EventKind::StationArrival => ("Station arrival", "INFO"),
-        EventKind::StationDeparture => ("Station departure", "INFO"),
-        EventKind::CorrectionLinkUp => ("RTK correction link up", "INFO"),
-        EventKind::CorrectionLinkDown => ("RTK correction link down", "WARN"),
-        EventKind::TunnelEntry => ("Tunnel entry", "INFO"),
-        EventKind::TunnelExit => ("Tunnel exit", "INFO"),
-        EventKind::OperatorNote => ("Note", "INFO"),
-        EventKind::FaultInjected => ("Fault injected", "WARN"),
-        EventKind::FaultCleared => ("Fault cleared", "INFO"),
-        EventKind::DeviceFault => ("Device reports a fault", "ERROR"),
-        EventKind::DeviceRecovered => ("Device recovered", "INFO"),
     }
 }
 

@@ -262,6 +262,7 @@ mod tests {
         let opts = WriterOptions {
             chunk_size: 64 << 10,
             zstd_level: 1,
+            ..WriterOptions::default()
         };
         let mut w = LogWriter::create_with(path, &opts).unwrap();
         let ch = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();

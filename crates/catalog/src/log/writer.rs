@@ -34,6 +34,9 @@ pub struct WriterOptions {
     pub chunk_size: u64,
     /// zstd level (1 is fast and already shrinks JSON about tenfold).
     pub zstd_level: u32,
+    /// Write Foxglove twins of GNSS fixes, the track map and events beside them
+    /// ([`crate::foxglove`]).
+    pub foxglove: bool,
 }
 
 impl Default for WriterOptions {
@@ -41,6 +44,7 @@ impl Default for WriterOptions {
         Self {
             chunk_size: 1 << 20,
             zstd_level: 1,
+            foxglove: crate::foxglove::twins_by_default(),
         }
     }
 }
@@ -106,6 +110,11 @@ pub struct LogWriter {
     schemas: BTreeMap<u16, Vec<u8>>,
     channels: BTreeMap<u16, Vec<u8>>,
     sequences: HashMap<u16, u32>,
+    /// Topics by channel id, to name twin channels.
+    topics: HashMap<u16, String>,
+    /// Foxglove twins: on, and the twin channel of each source channel.
+    foxglove: bool,
+    twins: HashMap<u16, ChannelId>,
     open: OpenChunk,
     stats: Statistics,
     buf: Vec<u8>,
@@ -146,6 +155,9 @@ impl LogWriter {
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
             sequences: HashMap::new(),
+            topics: HashMap::new(),
+            foxglove: options.foxglove,
+            twins: HashMap::new(),
             open: OpenChunk::default(),
             stats: Statistics::default(),
             buf: Vec::with_capacity(1024),
@@ -187,14 +199,19 @@ impl LogWriter {
 
     /// Registers a channel of message kind `kind` on `topic`.
     pub fn add_channel_of(&mut self, kind: MessageKind, topic: &str) -> Result<ChannelId> {
-        let schema_id = match self.schema_ids.get(kind.schema_name()) {
+        self.add_channel_named(kind.schema_name(), &kind.schema_bytes(), topic)
+    }
+
+    /// Registers a channel on `topic` with the schema of that name (written on first use),
+    /// both on the lowest free ids.
+    fn add_channel_named(&mut self, schema: &str, data: &[u8], topic: &str) -> Result<ChannelId> {
+        let schema_id = match self.schema_ids.get(schema) {
             Some(&id) => id,
             None => {
                 let id = (1..=u16::MAX)
                     .find(|i| !self.schemas.contains_key(i))
                     .unwrap_or(0);
-                let data = kind.schema_bytes();
-                self.copy_schema(id, kind.schema_name(), super::SCHEMA_ENCODING, &data)?;
+                self.copy_schema(id, schema, super::SCHEMA_ENCODING, data)?;
                 id
             }
         };
@@ -256,6 +273,7 @@ impl LogWriter {
         if self.channels.contains_key(&id) {
             return Ok(());
         }
+        self.topics.insert(id, topic.to_owned());
         let channel = Channel {
             id,
             schema_id,
@@ -280,9 +298,29 @@ impl LogWriter {
         buf.clear();
         serde_json::to_writer(&mut buf, msg).map_err(|e| Error::write(&self.partial, e))?;
         let sequence = self.next_sequence(channel.0);
-        let result = self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &buf);
+        let result = self
+            .write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &buf)
+            .and_then(|()| self.twin_after(M::KIND, channel, log_time_ns, &buf));
         self.buf = buf;
         result
+    }
+
+    /// The Foxglove twin of a message just written, if twins are on and its kind has one.
+    fn twin_after(
+        &mut self,
+        kind: MessageKind,
+        channel: ChannelId,
+        log_time_ns: u64,
+        json: &[u8],
+    ) -> Result<()> {
+        match self
+            .foxglove
+            .then(|| crate::foxglove::Twin::of(kind, json))
+            .flatten()
+        {
+            Some(twin) => self.write_twin_of(channel, log_time_ns, &twin),
+            None => Ok(()),
+        }
     }
 
     /// Writes a message of any kind (the channel must be of its kind).
@@ -293,13 +331,67 @@ impl LogWriter {
         msg: &AnyMessage,
     ) -> Result<()> {
         let sequence = self.next_sequence(channel.0);
-        self.write_raw(
-            channel.0,
-            sequence,
-            log_time_ns,
-            msg.stamp_ns(),
-            &msg.to_json(),
-        )
+        let json = msg.to_json();
+        self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &json)?;
+        self.twin_after(msg.kind(), channel, log_time_ns, &json)
+    }
+
+    /// Writes the Foxglove twin of a message of `source` on its twin channel (registered on
+    /// first use, `/foxglove` + the source's topic).
+    pub fn write_twin_of(
+        &mut self,
+        source: ChannelId,
+        log_time_ns: u64,
+        twin: &crate::foxglove::Twin,
+    ) -> Result<()> {
+        let channel = match self.twins.get(&source.0) {
+            Some(&c) => c,
+            None => {
+                let kind = twin.kind();
+                let topic = self.topics.get(&source.0).map_or("", String::as_str);
+                let topic = crate::foxglove::twin_topic(topic);
+                let c = self.add_channel_named(kind.schema_name(), kind.schema_bytes(), &topic)?;
+                self.twins.insert(source.0, c);
+                c
+            }
+        };
+        self.write_twin(channel, log_time_ns, twin)
+    }
+
+    /// Registers a channel for Foxglove twins with explicit ids (beside copied input records).
+    pub fn add_twin_channel_with_ids(
+        &mut self,
+        kind: crate::foxglove::TwinKind,
+        schema_id: u16,
+        channel_id: u16,
+        topic: &str,
+    ) -> Result<ChannelId> {
+        self.copy_schema(
+            schema_id,
+            kind.schema_name(),
+            super::SCHEMA_ENCODING,
+            kind.schema_bytes(),
+        )?;
+        self.copy_channel(
+            channel_id,
+            schema_id,
+            topic,
+            super::MESSAGE_ENCODING,
+            &BTreeMap::new(),
+        )?;
+        Ok(ChannelId(channel_id))
+    }
+
+    /// Writes a Foxglove twin on its own channel.
+    pub fn write_twin(
+        &mut self,
+        channel: ChannelId,
+        log_time_ns: u64,
+        twin: &crate::foxglove::Twin,
+    ) -> Result<()> {
+        let json = serde_json::to_vec(twin).map_err(|e| Error::write(&self.partial, e))?;
+        let sequence = self.next_sequence(channel.0);
+        self.write_raw(channel.0, sequence, log_time_ns, twin.stamp_ns(), &json)
     }
 
     fn next_sequence(&mut self, channel: u16) -> u32 {

@@ -19,6 +19,17 @@ impl FixType {
     pub fn has_position(self) -> bool {
         self != FixType::None
     }
+
+    /// The name as it is written in a message (`rtk_fixed`).
+    pub fn name(self) -> &'static str {
+        match self {
+            FixType::None => "none",
+            FixType::Single => "single",
+            FixType::Dgps => "dgps",
+            FixType::RtkFloat => "rtk_float",
+            FixType::RtkFixed => "rtk_fixed",
+        }
+    }
 }
 
 /// One GNSS solution (e.g. UBX-NAV-PVT, NMEA GGA+RMC).

@@ -18,7 +18,7 @@ mod track_map;
 
 pub use balise::BalisePassage;
 pub use eddy_current::EddyCurrentBlock;
-pub use events::{Event, EventKind};
+pub use events::{Event, EventKind, Severity};
 pub use fused::{DeviceShare, FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 pub use gnss::{FixType, GnssFix};
 pub use ground_truth::GroundTruth;

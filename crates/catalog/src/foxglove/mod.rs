@@ -1,0 +1,372 @@
+//! Twins of railfuse messages in Foxglove's well-known JSON schemas, written beside railfuse's
+//! own channels (which stay as they are) so that a log also opens in Foxglove: GNSS fixes and
+//! each pipeline's position as `foxglove.LocationFix` (its Map panel), the track map as
+//! `foxglove.GeoJSON`, events as `foxglove.Log`. The twin of `/gnss/fix` is on
+//! `/foxglove/gnss/fix`: every twin's topic is its source's under [`TOPIC_PREFIX`].
+//!
+//! The schemas are copies of `@foxglove/schemas` 2.1.0 (npm; `dist/jsonschema`); the interop
+//! tests validate the twins against the package itself.
+
+use serde::Serialize;
+use serde_json::json;
+
+use crate::messages::{Event, FixType, FusedState, GnssFix, MessageKind, Severity, TrackMap};
+
+static TWINS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
+
+/// Whether writers add twins unless told otherwise (on, until [`set_twins_by_default`]).
+pub fn twins_by_default() -> bool {
+    TWINS.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Turns twins off (or on) for every writer this process opens from now on: the CLI's
+/// `--no-foxglove`.
+pub fn set_twins_by_default(on: bool) {
+    TWINS.store(on, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Where twins live: `/foxglove` + the source's topic.
+pub const TOPIC_PREFIX: &str = "/foxglove";
+
+/// The twin topic of a railfuse topic.
+pub fn twin_topic(topic: &str) -> String {
+    format!("{TOPIC_PREFIX}{topic}")
+}
+
+/// A message in one of Foxglove's schemas.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum Twin {
+    LocationFix(LocationFix),
+    GeoJson(GeoJson),
+    Log(Log),
+}
+
+/// The Foxglove schemas railfuse writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TwinKind {
+    LocationFix,
+    GeoJson,
+    Log,
+}
+
+impl TwinKind {
+    /// The schema name Foxglove recognises.
+    pub fn schema_name(self) -> &'static str {
+        match self {
+            TwinKind::LocationFix => "foxglove.LocationFix",
+            TwinKind::GeoJson => "foxglove.GeoJSON",
+            TwinKind::Log => "foxglove.Log",
+        }
+    }
+
+    /// Its JSON schema, as the package publishes it.
+    pub fn schema_bytes(self) -> &'static [u8] {
+        match self {
+            TwinKind::LocationFix => include_bytes!("LocationFix.json"),
+            TwinKind::GeoJson => include_bytes!("GeoJSON.json"),
+            TwinKind::Log => include_bytes!("Log.json"),
+        }
+    }
+}
+
+impl Twin {
+    pub fn kind(&self) -> TwinKind {
+        match self {
+            Twin::LocationFix(_) => TwinKind::LocationFix,
+            Twin::GeoJson(_) => TwinKind::GeoJson,
+            Twin::Log(_) => TwinKind::Log,
+        }
+    }
+
+    /// Its own timestamp, ns (the map has none: 0).
+    pub fn stamp_ns(&self) -> u64 {
+        let t = match self {
+            Twin::LocationFix(f) => f.timestamp,
+            Twin::Log(l) => l.timestamp,
+            Twin::GeoJson(_) => return 0,
+        };
+        t.sec * 1_000_000_000 + t.nsec as u64
+    }
+
+    /// The twin of a railfuse message given as its kind and JSON payload, if its kind has one
+    /// (fixes without a position have none).
+    pub fn of(kind: MessageKind, json: &[u8]) -> Option<Twin> {
+        match kind {
+            MessageKind::GnssFix => location_fix(&serde_json::from_slice(json).ok()?),
+            MessageKind::TrackMap => {
+                Some(Twin::GeoJson(geojson(&serde_json::from_slice(json).ok()?)))
+            }
+            MessageKind::Event => Some(Twin::Log(log(&serde_json::from_slice(json).ok()?))),
+            _ => None,
+        }
+    }
+}
+
+/// `foxglove.Time`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Time {
+    pub sec: u64,
+    pub nsec: u32,
+}
+
+impl Time {
+    pub fn from_ns(ns: u64) -> Self {
+        Time {
+            sec: ns / 1_000_000_000,
+            nsec: (ns % 1_000_000_000) as u32,
+        }
+    }
+}
+
+/// `foxglove.Color`, components 0–1.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Color {
+    pub r: f64,
+    pub g: f64,
+    pub b: f64,
+    pub a: f64,
+}
+
+/// `foxglove.LocationFix`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LocationFix {
+    pub timestamp: Time,
+    pub frame_id: String,
+    pub latitude: f64,
+    pub longitude: f64,
+    pub altitude: f64,
+    /// East/north/up, row-major, m².
+    pub position_covariance: [f64; 9],
+    /// 0 unknown, 1 approximated, 2 diagonal known, 3 known.
+    pub position_covariance_type: u8,
+    /// Clockwise from north, rad.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub heading: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub color: Option<Color>,
+}
+
+/// `foxglove.GeoJSON`: the GeoJSON text.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GeoJson {
+    pub geojson: String,
+}
+
+/// `foxglove.Log`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Log {
+    pub timestamp: Time,
+    /// 2 info, 3 warning, 4 error.
+    pub level: u8,
+    pub message: String,
+    pub name: String,
+    pub file: String,
+    pub line: u32,
+}
+
+/// A fix with a position, coloured by its fix type the way receivers show it.
+pub fn location_fix(g: &GnssFix) -> Option<Twin> {
+    let (latitude, longitude) = (g.latitude_deg?, g.longitude_deg?);
+    let (r, gr, b) = match g.fix_type {
+        FixType::None => return None,
+        FixType::Single => (0.86, 0.2, 0.2),
+        FixType::Dgps => (0.9, 0.59, 0.12),
+        FixType::RtkFloat => (0.9, 0.82, 0.16),
+        FixType::RtkFixed => (0.16, 0.75, 0.35),
+    };
+    let (position_covariance, position_covariance_type) = match g.position_covariance_enu_m2 {
+        Some(c) if c.iter().all(|v| v.is_finite()) => (c, 3),
+        _ => ([0.0; 9], 0),
+    };
+    Some(Twin::LocationFix(LocationFix {
+        timestamp: Time::from_ns(g.stamp_ns),
+        frame_id: format!("gnss ({})", g.fix_type.name()),
+        latitude,
+        longitude,
+        altitude: g.altitude_m.unwrap_or(0.0),
+        position_covariance,
+        position_covariance_type,
+        heading: g.course_rad.filter(|c| c.is_finite()),
+        color: Some(Color {
+            r,
+            g: gr,
+            b,
+            a: 1.0,
+        }),
+    }))
+}
+
+/// A pipeline's fused position on the map, its along-track variance as an approximated
+/// east/north covariance (nothing across the track: a 1-D pipeline knows none).
+pub fn fused_location(pipeline: &str, f: &FusedState, map: &TrackMap) -> Option<Twin> {
+    let (east, north, heading) = map.locate(f.chainage_m)?;
+    let (latitude, longitude, altitude) = map.origin.to_geodetic(east, north, 0.0);
+    let var = f.covariance[0].max(0.0);
+    let (s, c) = heading.sin_cos();
+    let cov = [
+        var * s * s,
+        var * s * c,
+        0.0,
+        var * s * c,
+        var * c * c,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    [latitude, longitude, altitude]
+        .iter()
+        .all(|v| v.is_finite())
+        .then(|| {
+            Twin::LocationFix(LocationFix {
+                timestamp: Time::from_ns(f.stamp_ns),
+                frame_id: pipeline.to_owned(),
+                latitude,
+                longitude,
+                altitude,
+                position_covariance: cov,
+                position_covariance_type: 1,
+                heading: Some(heading),
+                color: None,
+            })
+        })
+}
+
+/// The track as a GeoJSON feature collection: the centre line, tunnels, stations and balises.
+pub fn geojson(map: &TrackMap) -> GeoJson {
+    let lon_lat = |east: f64, north: f64| {
+        let (lat, lon, _) = map.origin.to_geodetic(east, north, 0.0);
+        json!([lon, lat])
+    };
+    let at = |chainage: f64| map.locate(chainage).map(|(e, n, _)| lon_lat(e, n));
+    let line: Vec<_> = map
+        .vertices
+        .iter()
+        .map(|v| lon_lat(v.east_m, v.north_m))
+        .collect();
+    let mut features = vec![json!({
+        "type": "Feature",
+        "properties": { "name": map.name, "kind": "track" },
+        "geometry": { "type": "LineString", "coordinates": line },
+    })];
+    for t in &map.tunnels {
+        let inner = map
+            .vertices
+            .iter()
+            .filter(|v| v.chainage_m > t.start_chainage_m && v.chainage_m < t.end_chainage_m)
+            .map(|v| lon_lat(v.east_m, v.north_m));
+        let coords: Vec<_> = at(t.start_chainage_m)
+            .into_iter()
+            .chain(inner)
+            .chain(at(t.end_chainage_m))
+            .collect();
+        features.push(json!({
+            "type": "Feature",
+            "properties": { "name": format!("tunnel {}", t.name), "kind": "tunnel" },
+            "geometry": { "type": "LineString", "coordinates": coords },
+        }));
+    }
+    let points = map
+        .stations
+        .iter()
+        .map(|s| (s.name.clone(), "station", s.chainage_m))
+        .chain(
+            map.balises
+                .iter()
+                .map(|b| (b.balise_id.clone(), "balise", b.chainage_m)),
+        );
+    for (name, kind, chainage) in points {
+        if let Some(p) = at(chainage) {
+            features.push(json!({
+                "type": "Feature",
+                "properties": { "name": name, "kind": kind, "chainage_m": chainage },
+                "geometry": { "type": "Point", "coordinates": p },
+            }));
+        }
+    }
+    let collection = json!({ "type": "FeatureCollection", "features": features });
+    GeoJson {
+        geojson: collection.to_string(),
+    }
+}
+
+/// An event as a log line.
+pub fn log(e: &Event) -> Log {
+    Log {
+        timestamp: Time::from_ns(e.stamp_ns),
+        level: match e.kind.describe().1 {
+            Severity::Info => 2,
+            Severity::Warning => 3,
+            Severity::Error => 4,
+        },
+        message: e.line(),
+        name: "railfuse".into(),
+        file: String::new(),
+        line: 0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::messages::{AnyMessage, EventKind};
+
+    fn example(kind: MessageKind) -> AnyMessage {
+        kind.example()
+    }
+
+    #[test]
+    fn a_fix_without_a_position_has_no_twin_and_one_with_has_its_colour_and_time() {
+        let AnyMessage::GnssFix(mut fix) = example(MessageKind::GnssFix) else {
+            panic!("a GNSS example")
+        };
+        fix.stamp_ns = 1_700_000_000_123_456_789;
+        let Some(Twin::LocationFix(l)) = location_fix(&fix) else {
+            panic!("a fix with a position has a twin")
+        };
+        assert_eq!(
+            l.timestamp,
+            Time {
+                sec: 1_700_000_000,
+                nsec: 123_456_789
+            }
+        );
+        assert_eq!(Twin::LocationFix(l).stamp_ns(), fix.stamp_ns);
+        fix.fix_type = FixType::None;
+        assert!(location_fix(&fix).is_none());
+    }
+
+    #[test]
+    fn events_keep_their_words_and_severity() {
+        let e = Event {
+            stamp_ns: 5,
+            kind: EventKind::DeviceFault,
+            text: "radar".into(),
+        };
+        let l = log(&e);
+        assert_eq!(
+            (l.level, l.message.as_str()),
+            (4, "Device reports a fault: radar")
+        );
+    }
+
+    #[test]
+    fn the_track_is_a_line_string_in_longitude_latitude_order() {
+        let AnyMessage::TrackMap(map) = example(MessageKind::TrackMap) else {
+            panic!("a map example")
+        };
+        let g: serde_json::Value = serde_json::from_str(&geojson(&map).geojson).unwrap();
+        let line = &g["features"][0]["geometry"];
+        assert_eq!(line["type"], "LineString");
+        let first = &line["coordinates"][0];
+        let (lon, lat, _) = {
+            let (lat, lon, alt) =
+                map.origin
+                    .to_geodetic(map.vertices[0].east_m, map.vertices[0].north_m, 0.0);
+            (lon, lat, alt)
+        };
+        assert!((first[0].as_f64().unwrap() - lon).abs() < 1e-9);
+        assert!((first[1].as_f64().unwrap() - lat).abs() < 1e-9);
+    }
+}
