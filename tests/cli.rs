@@ -909,3 +909,62 @@ fn foxglove_twins_are_added_beside_the_channels_and_left_out_on_request() {
         );
     }
 }
+
+/// `viz --pipelines`, `--topics` and `--from/--to` choose what reaches the recording; a window
+/// the wrong way round is one clear line.
+#[test]
+fn viz_shows_the_chosen_pipelines_topics_and_window() {
+    let d = tempfile::tempdir().unwrap();
+    let fused = d.path().join("f.mcap");
+    ok(&[
+        "refuse",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("models.toml")),
+        "-o",
+        s(&fused),
+    ]);
+    let viz = |extra: &[&str]| -> serde_json::Value {
+        let rrd = d.path().join("v.rrd");
+        let mut args = vec!["viz", s(&fused), "--save", s(&rrd), "--json"];
+        args.extend(extra);
+        serde_json::from_slice(&ok(&args).stdout).unwrap()
+    };
+    let has =
+        |v: &serde_json::Value, e: &str| v["entities"].as_array().unwrap().iter().any(|x| x == e);
+    let all = viz(&[]);
+    for p in ["ca", "cv", "singer", "pf"] {
+        assert!(has(&all, &format!("chainage_error/{p}")), "{all}");
+    }
+    let one = viz(&["--pipelines", "pf"]);
+    assert!(
+        has(&one, "chainage_error/pf") && !has(&one, "chainage_error/ca"),
+        "{one}"
+    );
+    let radar_only = viz(&["--topics", "/radar/speed"]);
+    assert!(has(&radar_only, "speed/radar") && !has(&radar_only, "speed/odometer_1"));
+    // The truth is always read: the errors still have their reference.
+    assert!(has(&radar_only, "chainage_error/ca"), "{radar_only}");
+    // A third of the 90 s run gives about a third of the rows.
+    let (rows, window) = (
+        all["rows"].as_u64().unwrap() as f64,
+        viz(&["--from", "30", "--to", "60"])["rows"]
+            .as_u64()
+            .unwrap() as f64,
+    );
+    assert!(
+        window > 0.2 * rows && window < 0.5 * rows,
+        "{window} of {rows}"
+    );
+    let bad = railfuse(&[
+        "viz",
+        s(&fused),
+        "--save",
+        "x.rrd",
+        "--from",
+        "60",
+        "--to",
+        "30",
+    ]);
+    assert_one_clear_line(&bad, &["--from 60 must be before --to 30"]);
+}
