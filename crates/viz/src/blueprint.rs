@@ -122,8 +122,9 @@ fn plot(name: &str, origin: &str, style: PlotStyle) -> Node {
     let mut node = view("TimeSeries", name, origin);
     if let Node::View { properties, .. } = &mut node {
         // Not linked to the other plots: Rerun 0.36 opens linked time axes on a one-minute
-        // window around the cursor, which hides the run (seen in the viewer). Each plot opens
-        // on the whole run instead; they zoom one by one.
+        // window around the cursor, which hides the run (seen in the viewer; rerun-io/rerun
+        // #11209 and #11621 report linked axes misbehaving). Each plot opens on the whole run
+        // instead; they zoom one by one.
         let mut axis = TimeAxis::new();
         if let Some((first, last)) = style.span {
             axis = axis.with_view_range(TimeRange {
