@@ -364,6 +364,52 @@ fn foxglove_twins_validate_against_foxglove_s_published_schemas() {
     );
 }
 
+/// A 2-D pipeline's state (east/north with its covariance) is drawn on the map as its 3σ
+/// ellipse; an along-track one as its ±3σ stretch of track.
+#[test]
+fn a_2d_pipeline_is_drawn_with_its_covariance_ellipse() {
+    use railfuse_catalog::log::LogWriter;
+    use railfuse_catalog::messages::{
+        AnyMessage, FusedState, MessageKind, PlanePosition, TrackMap,
+    };
+    let d = tempfile::tempdir().unwrap();
+    let (log, rrd) = (d.path().join("2d.mcap"), d.path().join("2d.rrd"));
+    let mut w = LogWriter::create(&log).unwrap();
+    let AnyMessage::TrackMap(map) = MessageKind::TrackMap.example() else {
+        panic!("a map example")
+    };
+    let map_channel = w.add_channel::<TrackMap>("/track/map").unwrap();
+    w.write(map_channel, 1_000, &map).unwrap();
+    let states = w.add_channel::<FusedState>("/fused/p2/state").unwrap();
+    for k in 0..50u64 {
+        let t = 1_000_000_000 + k * 100_000_000;
+        let state = FusedState {
+            stamp_ns: t,
+            chainage_m: k as f64,
+            speed_mps: 10.0,
+            acceleration_mps2: 0.0,
+            covariance: [1.0, 0.0, 0.0, 0.0, 0.1, 0.0, 0.0, 0.0, 0.01],
+            source: "/gnss/fix".into(),
+            sensor_states: Vec::new(),
+            plane: Some(PlanePosition {
+                east_m: k as f64,
+                north_m: 0.5,
+                covariance_en_m2: [4.0, 1.0, 1.0, 1.0],
+                latitude_deg: 44.6,
+                longitude_deg: 10.9,
+            }),
+        };
+        w.write(states, t, &state).unwrap();
+    }
+    w.finish().unwrap();
+    ok(&["viz", s(&log), "--save", s(&rrd)]);
+    rerun_ok(&["rrd", "verify", s(&rrd)]);
+    let rows = rows_per_entity(&rerun_ok(&["rrd", "print", "-v", s(&rrd)]));
+    assert_eq!(rows.get("/map/fused/p2/ellipse"), Some(&50), "{rows:?}");
+    assert_eq!(rows.get("/map/fused/p2/position"), Some(&50), "{rows:?}");
+    assert_eq!(rows.get("/map/fused/p2/extent"), None, "{rows:?}");
+}
+
 #[test]
 fn sensor_states_reach_the_fused_file_and_the_viewer() {
     let d = tempfile::tempdir().unwrap();

@@ -326,6 +326,7 @@ impl AccuracyMeter {
                     covariance: cov,
                     source: String::new(),
                     sensor_states: Vec::new(),
+                    plane: None,
                 };
                 self.nees.add(nees(&probe, de, ve), CHI2_95_2DOF);
             }
@@ -368,6 +369,7 @@ mod tests {
             covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
             source: String::new(),
             sensor_states: Vec::new(),
+            plane: None,
         };
         let spans = [Span {
             label: "tunnel".into(),
@@ -408,6 +410,7 @@ mod tests {
             covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
             source: String::new(),
             sensor_states: Vec::new(),
+            plane: None,
         };
         let stamps = (0..=20).chain(290..=300).map(|k| k * 100_000_000u64);
         for t in stamps {

@@ -594,6 +594,7 @@ pub fn fused_state<const N: usize>(
         covariance,
         source: source.to_owned(),
         sensor_states,
+        plane: None,
     }
 }
 

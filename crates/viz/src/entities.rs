@@ -59,6 +59,11 @@ pub fn fused_extent(pipeline: &str) -> String {
     format!("map/fused/{pipeline}/extent")
 }
 
+/// A 2-D pipeline's 3σ covariance ellipse on the map.
+pub fn fused_ellipse(pipeline: &str) -> String {
+    format!("map/fused/{pipeline}/ellipse")
+}
+
 /// A fused pipeline's speed.
 pub fn fused_speed(pipeline: &str) -> String {
     format!("speed/fused/{pipeline}")

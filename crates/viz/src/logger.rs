@@ -16,7 +16,7 @@ use rerun::components::{InterpolationMode, MarkerShape, TextLogLevel};
 use rerun::{Color, Points2D, Radius, RecordingStream, SeriesLines, SeriesPoints, TextLog};
 
 use crate::blueprint::{Layout, PipelineLayout, NIS_AXIS_MAX};
-use crate::series::{Columns, Decimation, PointsId, SegmentsId, SeriesId, TIMELINE};
+use crate::series::{Columns, Decimation, OutlinesId, PointsId, SegmentsId, SeriesId, TIMELINE};
 use crate::{entities as ent, map, palette, Error};
 
 /// Where the recording goes.
@@ -298,6 +298,8 @@ struct PipelineState {
     smoothed: Option<FusedSeries>,
     position: PointsId,
     extent: SegmentsId,
+    /// 2-D pipelines' covariance ellipse, registered when the first 2-D state comes.
+    ellipse: Option<OutlinesId>,
     /// NIS per measurement topic.
     nis: HashMap<String, SeriesId>,
     /// Markers per gate decision other than plain acceptance.
@@ -517,6 +519,7 @@ impl Logger {
             smoothed: None,
             position: self.columns.points(&position, None),
             extent: self.columns.segments(&extent),
+            ellipse: None,
             nis: HashMap::new(),
             gates: HashMap::new(),
             bounds,
@@ -807,7 +810,37 @@ impl Logger {
         if smoothed {
             return Ok(());
         }
-        if let Some(m) = &self.map {
+        if let Some(plane) = &f.plane {
+            // A 2-D pipeline: where it is in the plane, with its 3σ ellipse.
+            let ellipse = match self.pipelines[p].ellipse {
+                Some(id) => id,
+                None => {
+                    let entity = ent::fused_ellipse(&self.pipelines[p].name);
+                    let index = self.pipelines[p].index;
+                    self.static_(
+                        &entity,
+                        &rerun::LineStrips2D::update_fields()
+                            .with_colors([palette::band(index)])
+                            .with_radii([Radius::new_ui_points(1.5)]),
+                    )?;
+                    let id = self.columns.outlines(&entity);
+                    self.pipelines[p].ellipse = Some(id);
+                    id
+                }
+            };
+            let outline: Vec<[f32; 2]> = plane
+                .ellipse_3sigma(36)
+                .into_iter()
+                .map(|(e, n)| map::plan(e, n))
+                .collect();
+            self.columns.point(
+                &self.rec,
+                position,
+                t,
+                map::plan(plane.east_m, plane.north_m),
+            )?;
+            self.columns.outline(&self.rec, ellipse, t, outline)?;
+        } else if let Some(m) = &self.map {
             if let (Some(here), Some(behind), Some(ahead)) = (
                 map::at(m, f.chainage_m),
                 map::at(m, f.chainage_m - s3),

@@ -49,12 +49,17 @@ pub struct PointsId(usize);
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SegmentsId(usize);
 
+/// Index of map outlines (a closed polygon per row: a covariance ellipse) in a [`Columns`] store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OutlinesId(usize);
+
 /// Every buffered series and map track of one recording.
 pub struct Columns {
     decimation: Decimation,
     series: Vec<Series>,
     points: Vec<Track<[f32; 2]>>,
     segments: Vec<Track<[[f32; 2]; 2]>>,
+    outlines: Vec<Track<Vec<[f32; 2]>>>,
     /// Rows handed to Rerun, for the report.
     pub rows_sent: u64,
     /// First and last time of any row.
@@ -198,6 +203,15 @@ impl MapRow for [[f32; 2]; 2] {
     }
 }
 
+impl MapRow for Vec<[f32; 2]> {
+    fn columns(rows: Vec<Self>) -> rerun::SerializationResult<Vec<SerializedComponentColumn>> {
+        Ok(LineStrips2D::update_fields()
+            .with_strips(rows)
+            .columns_of_unit_batches()?
+            .collect())
+    }
+}
+
 fn send_track<T: MapRow>(rec: &RecordingStream, tr: &mut Track<T>) -> Result<u64, Error> {
     let n = tr.times.len();
     if n == 0 {
@@ -217,6 +231,7 @@ impl Columns {
             series: Vec::new(),
             points: Vec::new(),
             segments: Vec::new(),
+            outlines: Vec::new(),
             rows_sent: 0,
             span: None,
         }
@@ -309,6 +324,28 @@ impl Columns {
         Ok(())
     }
 
+    /// Registers map outlines over time.
+    pub fn outlines(&mut self, entity: &str) -> OutlinesId {
+        self.outlines.push(Track::new(entity, None));
+        OutlinesId(self.outlines.len() - 1)
+    }
+
+    /// An outline on the map at log time `t`.
+    pub fn outline(
+        &mut self,
+        rec: &RecordingStream,
+        id: OutlinesId,
+        t: i64,
+        o: Vec<[f32; 2]>,
+    ) -> Result<(), Error> {
+        self.saw(t);
+        let tr = &mut self.outlines[id.0];
+        if tr.place(self.decimation, t, o) {
+            self.rows_sent += send_track(rec, tr)?;
+        }
+        Ok(())
+    }
+
     /// A segment on the map at log time `t`.
     pub fn segment(
         &mut self,
@@ -337,6 +374,9 @@ impl Columns {
             self.rows_sent += send_track(rec, tr)?;
         }
         for tr in &mut self.segments {
+            self.rows_sent += send_track(rec, tr)?;
+        }
+        for tr in &mut self.outlines {
             self.rows_sent += send_track(rec, tr)?;
         }
         Ok(())

@@ -197,26 +197,37 @@ pub fn location_fix(g: &GnssFix) -> Option<Twin> {
     }))
 }
 
-/// A pipeline's fused position on the map, its along-track variance as an approximated
-/// east/north covariance (nothing across the track: a 1-D pipeline knows none).
+/// A pipeline's fused position. A 2-D pipeline gives its own position and east/north
+/// covariance; an along-track one its chainage on the map, with the along-track variance as an
+/// approximated east/north covariance (nothing across the track: a 1-D pipeline knows none).
 pub fn fused_location(pipeline: &str, f: &FusedState, map: &TrackMap) -> Option<Twin> {
-    let (east, north, heading) = map.locate(f.chainage_m)?;
-    let (latitude, longitude, altitude) = map.origin.to_geodetic(east, north, 0.0);
-    let var = f.covariance[0].max(0.0);
-    let (s, c) = heading.sin_cos();
-    let cov = [
-        var * s * s,
-        var * s * c,
-        0.0,
-        var * s * c,
-        var * c * c,
-        0.0,
-        0.0,
-        0.0,
-        0.0,
-    ];
+    let (latitude, longitude, altitude, cov, cov_type, heading) = match &f.plane {
+        Some(p) => {
+            let [ee, en, ne, nn] = p.covariance_en_m2;
+            let cov = [ee, en, 0.0, ne, nn, 0.0, 0.0, 0.0, 0.0];
+            let heading = map.locate(f.chainage_m).map(|(_, _, h)| h);
+            (
+                p.latitude_deg,
+                p.longitude_deg,
+                map.origin.altitude_m,
+                cov,
+                3,
+                heading,
+            )
+        }
+        None => {
+            let (east, north, heading) = map.locate(f.chainage_m)?;
+            let (latitude, longitude, altitude) = map.origin.to_geodetic(east, north, 0.0);
+            let var = f.covariance[0].max(0.0);
+            let (s, c) = heading.sin_cos();
+            let (ee, en, nn) = (var * s * s, var * s * c, var * c * c);
+            let cov = [ee, en, 0.0, en, nn, 0.0, 0.0, 0.0, 0.0];
+            (latitude, longitude, altitude, cov, 1, Some(heading))
+        }
+    };
     [latitude, longitude, altitude]
         .iter()
+        .chain(&cov)
         .all(|v| v.is_finite())
         .then(|| {
             Twin::LocationFix(LocationFix {
@@ -226,8 +237,8 @@ pub fn fused_location(pipeline: &str, f: &FusedState, map: &TrackMap) -> Option<
                 longitude,
                 altitude,
                 position_covariance: cov,
-                position_covariance_type: 1,
-                heading: Some(heading),
+                position_covariance_type: cov_type,
+                heading,
                 color: None,
             })
         })

@@ -16,6 +16,42 @@ pub struct FusedState {
     /// bias, a speed sensor's scale factor); absent when it estimates none.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub sensor_states: Vec<SensorStateEstimate>,
+    /// 2-D pipelines: where in the plane, with its uncertainty there (absent for along-track
+    /// pipelines, whose position is the chainage on the map).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane: Option<PlanePosition>,
+}
+
+/// A 2-D pipeline's position in the map's local east/north plane.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct PlanePosition {
+    pub east_m: f64,
+    pub north_m: f64,
+    /// Covariance of `[east, north]`, row-major 2×2, m².
+    pub covariance_en_m2: [f64; 4],
+    pub latitude_deg: f64,
+    pub longitude_deg: f64,
+}
+
+impl PlanePosition {
+    /// The 3σ covariance ellipse as a closed polygon of `n` points (east, north): the
+    /// eigenvectors of the 2×2 covariance scaled by 3√λ.
+    pub fn ellipse_3sigma(&self, n: usize) -> Vec<(f64, f64)> {
+        let [a, b, _, d] = self.covariance_en_m2;
+        // Symmetric 2×2: eigenvalues from the trace and determinant, the major axis's angle
+        // from the off-diagonal.
+        let (mean, diff) = ((a + d) / 2.0, ((a - d) / 2.0).hypot(b));
+        let (major, minor) = ((mean + diff).max(0.0).sqrt(), (mean - diff).max(0.0).sqrt());
+        let angle = 0.5 * (2.0 * b).atan2(a - d);
+        let (s, c) = angle.sin_cos();
+        (0..=n)
+            .map(|k| {
+                let t = std::f64::consts::TAU * k as f64 / n as f64;
+                let (u, v) = (3.0 * major * t.cos(), 3.0 * minor * t.sin());
+                (self.east_m + u * c - v * s, self.north_m + u * s + v * c)
+            })
+            .collect()
+    }
 }
 
 /// One estimated sensor calibration state.
@@ -111,4 +147,41 @@ pub struct DeviceShare {
     /// Why the device is out of the fusion (timeout, stuck, gate_failures, reported), if it is.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fault: Option<String>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_3_sigma_ellipse_follows_the_covariance_s_axes() {
+        // σ_e = 2 m, σ_n = 1 m, no correlation: the ellipse reaches 6 m east and 3 m north.
+        let p = PlanePosition {
+            east_m: 10.0,
+            north_m: 20.0,
+            covariance_en_m2: [4.0, 0.0, 0.0, 1.0],
+            latitude_deg: 0.0,
+            longitude_deg: 0.0,
+        };
+        let pts = p.ellipse_3sigma(4);
+        assert!(
+            (pts[0].0 - 16.0).abs() < 1e-9 && (pts[0].1 - 20.0).abs() < 1e-9,
+            "{pts:?}"
+        );
+        assert!(
+            (pts[1].0 - 10.0).abs() < 1e-9 && (pts[1].1 - 23.0).abs() < 1e-9,
+            "{pts:?}"
+        );
+        // Fully correlated east and north: the major axis (σ √2) on the diagonal.
+        let q = PlanePosition {
+            covariance_en_m2: [1.0, 1.0, 1.0, 1.0],
+            ..p
+        };
+        let (e, n) = q.ellipse_3sigma(4)[0];
+        assert!(((e - 10.0) - (n - 20.0)).abs() < 1e-9, "{e} {n}");
+        assert!(
+            ((e - 10.0).hypot(n - 20.0) - 3.0 * 2f64.sqrt()).abs() < 1e-9,
+            "{e} {n}"
+        );
+    }
 }

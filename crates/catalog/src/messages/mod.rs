@@ -19,7 +19,9 @@ mod track_map;
 pub use balise::BalisePassage;
 pub use eddy_current::EddyCurrentBlock;
 pub use events::{Event, EventKind, Severity};
-pub use fused::{DeviceShare, FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
+pub use fused::{
+    DeviceShare, FusedDiagnostics, FusedState, GateDecision, PlanePosition, SensorStateEstimate,
+};
 pub use gnss::{FixType, GnssFix};
 pub use ground_truth::GroundTruth;
 pub use imu::Imu;
