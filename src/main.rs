@@ -44,6 +44,9 @@ enum Command {
     Import(cmd::import::Args),
     /// Salvage every intact record of a damaged log (crash, power cut) into a complete log.
     Recover(cmd::recover::Args),
+    /// Tune a pipeline's noise values (process noise, sensor variances, sensor states, gates)
+    /// over one or many logs, and write the tuned configuration.
+    Tune(cmd::tune::Args),
     /// Accuracy of a fused log's pipelines against a reference, whole run and marked windows.
     Eval(cmd::eval::Args),
     /// Log a (raw or fused) log to the Rerun viewer or an .rrd file.
@@ -72,6 +75,7 @@ fn main() -> ExitCode {
         Command::Info(a) => cmd::info::run(a),
         Command::Refuse(a) => cmd::refuse::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::Tune(a) => cmd::tune::run(a),
         Command::Recover(a) => cmd::recover::run(a),
         Command::Import(a) => cmd::import::run(a),
         Command::Record(a) => cmd::record::run(*a),

@@ -117,6 +117,20 @@ impl Progress {
         }
     }
 
+    /// Work done so far, with a word on how it goes (the best value of a search).
+    pub fn set_with(&self, done: u64, detail: &str) {
+        if let Some(bar) = &self.bar {
+            bar.set_message(detail.to_owned());
+        }
+        if let Some(plain) = &self.plain {
+            let due = plain.lock().expect("progress").last.elapsed() >= PLAIN_EVERY;
+            if due {
+                eprintln!("{detail}");
+            }
+        }
+        self.set(done);
+    }
+
     /// Clears the bar (the command's own report follows).
     pub fn finish(&self) {
         if let Some(bar) = &self.bar {

@@ -10,6 +10,7 @@ pub mod recover;
 pub mod refuse;
 pub mod results;
 pub mod simulate;
+pub mod tune;
 pub mod viz;
 
 /// The pipeline configuration used when none is given: `samples/kalman.toml`.

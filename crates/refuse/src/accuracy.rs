@@ -107,6 +107,19 @@ impl ErrorStats {
         self.hist.add(e.abs());
     }
 
+    /// Takes in the errors of `other` (another log's, to pool them).
+    pub fn merge(&mut self, other: &ErrorStats) {
+        self.n += other.n;
+        self.sum += other.sum;
+        self.sum_sq += other.sum_sq;
+        self.max_abs = self.max_abs.max(other.max_abs);
+        self.min = self.min.min(other.min);
+        self.max = self.max.max(other.max);
+        for (a, b) in self.hist.counts.iter_mut().zip(&other.hist.counts) {
+            *a += b;
+        }
+    }
+
     pub fn summary(&self) -> Option<ErrorSummary> {
         (self.n > 0).then(|| ErrorSummary {
             samples: self.n,
@@ -149,6 +162,13 @@ impl Consistency {
         if value >= bounds.0 && value <= bounds.1 {
             self.inside += 1;
         }
+    }
+
+    /// Takes in the epochs of `other` (another log's, to pool them).
+    pub fn merge(&mut self, other: &Consistency) {
+        self.n += other.n;
+        self.inside += other.inside;
+        self.sum += other.sum;
     }
 
     pub fn summary(&self) -> Option<ConsistencySummary> {

@@ -96,6 +96,10 @@ pub struct PipelineConfig {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub federated: Option<FederatedConfig>,
     pub sensor: Vec<Spanned<SensorConfig>>,
+    /// What `railfuse tune` may change in this pipeline and what it minimises; refuse
+    /// ignores it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tune: Option<TuneConfig>,
 }
 
 fn default_reorder_window_s() -> f64 {
@@ -321,6 +325,89 @@ pub struct ScaleFactorConfig {
     /// loop whose surveyed chainages are off by a scale, so its error grows along the line).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quantity: Option<Quantity>,
+}
+
+/// `[pipeline.tune]`: the noise values `railfuse tune` chooses, within their bounds, and what
+/// it minimises over the logs.
+///
+/// ```toml
+/// [pipeline.tune]
+/// reference = "/truth/state"   # or an RTK GNSS channel, or another pipeline's state
+/// objective = "rmse"           # position_weight · RMSE(s) + speed_weight · RMSE(v); or "nll"
+/// optimiser = "nelder_mead"    # grid, nelder_mead, pso
+/// [pipeline.tune.params]
+/// "motion.jerk_psd" = { min = 0.001, max = 10.0 }
+/// "sensor[/radar/speed].variance" = { min = 1e-4, max = 1.0 }
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct TuneConfig {
+    /// The reference topic (ground truth, an RTK GNSS channel, another pipeline's state or
+    /// smoothed states); without one the objective is the innovations' likelihood.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub objective: Option<ObjectiveKind>,
+    /// Weights of the `rmse` objective: position (per m) and speed (per m/s) RMSE; 1 and 1
+    /// when not given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub position_weight: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_weight: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub optimiser: Option<OptimiserKind>,
+    /// The most evaluations (replays of every log) the search may make.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_evaluations: Option<usize>,
+    /// Seed of the randomised searches (particle swarm).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// Parameter path → bounds. Paths name a number of the pipeline's table:
+    /// `motion.jerk_psd`, `sensor[/radar/speed].variance`, `sensor[/gnss].variance.chainage`,
+    /// `sensor[/odometer/1].gate_nis`, `sensor[/gnss].chainage_bias.std_m`, ….
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub params: BTreeMap<String, ParamBounds>,
+}
+
+/// What tuning minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObjectiveKind {
+    /// Weighted position and speed RMSE against the reference, pooled over the logs.
+    Rmse,
+    /// Negative log-likelihood of the innovations of every measurement that reached the gate.
+    Nll,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OptimiserKind {
+    Grid,
+    NelderMead,
+    /// Particle swarm.
+    Pso,
+}
+
+/// Bounds of one tuned value, in its own units.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParamBounds {
+    pub min: f64,
+    pub max: f64,
+    /// `log` (the default when both bounds are positive: noise values span decades) or
+    /// `linear`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale: Option<Scale>,
+    /// Grid search: points along this parameter (default 5).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub steps: Option<usize>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Scale {
+    Linear,
+    Log,
 }
 
 impl SensorConfig {

@@ -79,7 +79,7 @@ pub struct SpanReport {
 }
 
 #[derive(Clone, Copy, PartialEq)]
-enum ReferenceKind {
+pub(crate) enum ReferenceKind {
     Truth,
     Fused,
     Gnss,
@@ -128,7 +128,7 @@ impl Scored {
 }
 
 /// A reference sample from a reference message, if it gives one.
-fn reference_sample(
+pub(crate) fn reference_sample(
     kind: ReferenceKind,
     m: &railfuse_catalog::log::LogMessage<'_>,
     path: &Path,
@@ -559,7 +559,7 @@ impl ReferenceWalk {
 }
 
 /// The reference kind a schema gives.
-fn reference_kind(schema: &str) -> Option<ReferenceKind> {
+pub(crate) fn reference_kind(schema: &str) -> Option<ReferenceKind> {
     match schema {
         s if s == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
         s if s == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),

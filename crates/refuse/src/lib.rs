@@ -13,7 +13,8 @@
 //! - [`pipeline`]: one configured estimator fed in sensor-time order;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
-//! - [`replay`]: the `refuse` run, streaming input to output.
+//! - [`replay`]: the `refuse` run, streaming input to output;
+//! - [`tune`]: offline tuning of a pipeline's noise values over logs decoded once.
 
 pub mod accuracy;
 pub mod config;
@@ -25,5 +26,6 @@ pub mod model;
 pub mod pipeline;
 pub mod replay;
 pub mod spec;
+pub mod tune;
 
 pub use error::{Error, Result};

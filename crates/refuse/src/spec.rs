@@ -340,6 +340,20 @@ impl PipelineSpec {
         self.source.to_toml()
     }
 
+    /// The same pipeline without its RTS smoother (tuning scores the filter's own states).
+    pub fn without_smoother(&self) -> Self {
+        let mut p = self.clone();
+        if let EstimatorSpec::Kalman { smoother, .. } = &mut p.estimator {
+            *smoother = false;
+        }
+        p
+    }
+
+    /// Its `[pipeline.tune]` table, if it has one.
+    pub fn tune(&self) -> Option<&crate::config::TuneConfig> {
+        self.source.tune.as_ref()
+    }
+
     /// The same pipeline under another name (benchmarks, side-by-side runs).
     pub fn renamed(&self, name: &str) -> Self {
         let mut p = self.clone();

@@ -1,0 +1,461 @@
+//! Offline tuning of a pipeline's noise values: choose the process-noise intensity, sensor
+//! variances, sensor-state σ and τ and gate thresholds named in `[pipeline.tune]` (or on the
+//! command line), within their bounds, to minimise over all the logs together
+//!
+//! - with a reference (ground truth, an RTK GNSS channel, another pipeline's or smoothed
+//!   states): `w_s · RMSE(chainage) + w_v · RMSE(speed)`, errors pooled over the logs;
+//! - without one: the negative log-likelihood of the innovations,
+//!   `½ Σ (ln 2πS + ν²/S)` over every measurement that reached the gate (rejected ones too,
+//!   so a tighter gate cannot buy a better score by discarding data).
+//!
+//! Each log is decoded once ([`recording::Recording`]); every evaluation replays all of them
+//! from memory, the logs in parallel, and parallel searches evaluate their candidates in
+//! parallel too (rayon). The tuned file is the configuration file with only the tuned numbers
+//! changed ([`params::TunableConfig`]).
+
+pub mod params;
+pub mod recording;
+pub mod search;
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Mutex;
+use std::time::Instant;
+
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::config::{ObjectiveKind, OptimiserKind, ParamBounds, PipelinesFile, Scale};
+use crate::error::{Error, Result};
+use crate::spec::{PipelineSpec, Pipelines};
+
+use params::{Param, ParamPath, TunableConfig};
+use recording::{Metrics, Recording, Score};
+use search::{Ending, Evaluations, SearchProgress, SearchSettings, TraceRow};
+
+/// Evaluations a search may make when nothing says otherwise (a grid makes all its points).
+pub const DEFAULT_BUDGET: usize = 200;
+
+/// What to tune, on what, and how; the command line's choices override the table's.
+#[derive(Default)]
+pub struct TuneRequest {
+    pub config: PathBuf,
+    pub pipeline: String,
+    pub logs: Vec<PathBuf>,
+    pub reference: Option<String>,
+    /// `PATH=MIN..MAX[,log|,linear][,steps=N]` from the command line, beside (and over) the
+    /// table's.
+    pub params: Vec<String>,
+    pub objective: Option<ObjectiveKind>,
+    pub optimiser: Option<OptimiserKind>,
+    pub max_evaluations: Option<usize>,
+    pub seed: Option<u64>,
+}
+
+/// The objective: what is minimised.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Objective {
+    pub kind: ObjectiveKind,
+    pub position_weight: f64,
+    pub speed_weight: f64,
+}
+
+impl Objective {
+    /// The value of a pooled score; infinite when it cannot be scored (no matched states, no
+    /// innovations, a state or innovation that is not a number).
+    pub fn value(&self, s: &Score) -> f64 {
+        if s.non_finite > 0 {
+            return f64::INFINITY;
+        }
+        let v = match self.kind {
+            ObjectiveKind::Rmse => {
+                let p = s.position.summary().map(|x| x.rmse);
+                let v = s.speed.summary().map(|x| x.rmse);
+                match (p, v) {
+                    (Some(p), Some(v)) => self.position_weight * p + self.speed_weight * v,
+                    _ => f64::INFINITY,
+                }
+            }
+            ObjectiveKind::Nll => match s.innovations {
+                0 => f64::INFINITY,
+                _ => s.nll,
+            },
+        };
+        if v.is_nan() {
+            f64::INFINITY
+        } else {
+            v
+        }
+    }
+}
+
+/// One candidate evaluated on every log.
+#[derive(Debug, Clone)]
+pub struct Evaluation {
+    pub objective: f64,
+    pub logs: Vec<Score>,
+    pub pooled: Score,
+}
+
+/// A tuning run ready to search: the configuration, its parameters and the decoded logs.
+pub struct Tuner {
+    config: TunableConfig,
+    pub params: Vec<Param>,
+    pub recordings: Vec<Recording>,
+    pub objective: Objective,
+    pub reference: Option<String>,
+    pub optimiser: OptimiserKind,
+    pub budget: usize,
+    pub seed: u64,
+    invalid: AtomicU64,
+    first_invalid: Mutex<Option<String>>,
+}
+
+/// A tuned value, before and after.
+#[derive(Debug, Clone, Serialize)]
+pub struct ParamReport {
+    pub name: String,
+    pub min: f64,
+    pub max: f64,
+    pub scale: params::ScaleName,
+    pub before: f64,
+    pub after: f64,
+    /// It ended within 0.1 % of the range of a bound: the bound, not the data, may have
+    /// chosen it.
+    pub on_bound: bool,
+}
+
+/// One log's figures before and after.
+#[derive(Debug, Clone, Serialize)]
+pub struct LogReport {
+    pub path: PathBuf,
+    pub sensor_messages: usize,
+    pub before: Metrics,
+    pub after: Metrics,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct TuneReport {
+    pub config: PathBuf,
+    pub pipeline: String,
+    pub objective: Objective,
+    pub reference: Option<String>,
+    pub optimiser: OptimiserKind,
+    pub objective_before: f64,
+    pub objective_after: f64,
+    pub params: Vec<ParamReport>,
+    /// All logs pooled.
+    pub before: Metrics,
+    pub after: Metrics,
+    pub logs: Vec<LogReport>,
+    pub evaluations: usize,
+    pub ending: Ending,
+    pub search_s: f64,
+    pub evaluations_per_s: f64,
+    pub threads: usize,
+    /// Candidates the configuration refused (a value its validation rejects): scored as
+    /// infinitely bad.
+    pub invalid_candidates: u64,
+    pub first_invalid: Option<String>,
+}
+
+/// What a tuning run gives.
+pub struct TuneOutcome {
+    pub report: TuneReport,
+    pub trace: Vec<TraceRow>,
+    /// The configuration file with the tuned values written in, comments kept.
+    pub tuned_toml: String,
+}
+
+impl Tuner {
+    /// Reads the configuration, resolves the parameters and decodes every log (in parallel).
+    pub fn open(req: &TuneRequest) -> Result<Self> {
+        let (file, text) = PipelinesFile::load(&req.config)?;
+        drop(file);
+        let pipelines = Pipelines::parse(&text, &req.config)?;
+        let spec = pipelines
+            .pipeline
+            .iter()
+            .find(|p| p.name == req.pipeline)
+            .cloned()
+            .ok_or_else(|| {
+                let names: Vec<&str> = pipelines.names().collect();
+                Error::Tune {
+                    path: req.config.clone(),
+                    pipeline: req.pipeline.clone(),
+                    message: format!("no [[pipeline]] of that name (it has {})", names.join(", ")),
+                }
+            })?;
+        let fail = |message: String| Error::Tune {
+            path: req.config.clone(),
+            pipeline: req.pipeline.clone(),
+            message,
+        };
+        let table = spec.tune().cloned().unwrap_or_default();
+        let mut bounds: Vec<(String, ParamBounds)> = table.params.into_iter().collect();
+        for arg in &req.params {
+            let (name, b) = parse_param_arg(arg).map_err(fail)?;
+            match bounds.iter_mut().find(|(n, _)| *n == name) {
+                Some(slot) => slot.1 = b,
+                None => bounds.push((name, b)),
+            }
+        }
+        if bounds.is_empty() {
+            return Err(fail(
+                "nothing to tune: give [pipeline.tune.params] in the file or --params".into(),
+            ));
+        }
+        let mut config = TunableConfig::new(&text, &req.config, &req.pipeline)?;
+        let mut params = Vec::new();
+        for (name, b) in &bounds {
+            let path: ParamPath = name.parse().map_err(fail)?;
+            params.push(config.param(&path, b)?);
+        }
+        let reference = req.reference.clone().or(table.reference);
+        let kind = match (req.objective.or(table.objective), &reference) {
+            (Some(ObjectiveKind::Rmse), None) => {
+                return Err(fail(
+                    "the rmse objective needs a reference: --reference TOPIC or reference in \
+                     [pipeline.tune]"
+                        .into(),
+                ))
+            }
+            (Some(k), _) => k,
+            (None, Some(_)) => ObjectiveKind::Rmse,
+            (None, None) => ObjectiveKind::Nll,
+        };
+        let objective = Objective {
+            kind,
+            position_weight: table.position_weight.unwrap_or(1.0),
+            speed_weight: table.speed_weight.unwrap_or(1.0),
+        };
+        if !(objective.position_weight >= 0.0 && objective.speed_weight >= 0.0)
+            || objective.position_weight + objective.speed_weight <= 0.0
+        {
+            return Err(fail("the weights must be ≥ 0 and not both 0".into()));
+        }
+        if req.logs.is_empty() {
+            return Err(fail("no logs to tune on".into()));
+        }
+        let optimiser = req
+            .optimiser
+            .or(table.optimiser)
+            .unwrap_or(OptimiserKind::NelderMead);
+        let grid_points: usize = params.iter().map(|p| p.steps).product();
+        let budget = req
+            .max_evaluations
+            .or(table.max_evaluations)
+            .unwrap_or(match optimiser {
+                OptimiserKind::Grid => grid_points,
+                _ => DEFAULT_BUDGET,
+            });
+        if budget == 0 {
+            return Err(fail("max_evaluations must be at least 1".into()));
+        }
+        let recordings = req
+            .logs
+            .par_iter()
+            .map(|log| Recording::load(log, &spec, reference.as_deref()))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            config,
+            params,
+            recordings,
+            objective,
+            reference,
+            optimiser,
+            budget,
+            seed: req.seed.or(table.seed).unwrap_or(1),
+            invalid: AtomicU64::new(0),
+            first_invalid: Mutex::new(None),
+        })
+    }
+
+    /// The file's own values.
+    pub fn start(&self) -> Vec<f64> {
+        self.params.iter().map(|p| p.start).collect()
+    }
+
+    /// The pipeline with `values`.
+    pub fn spec_with(&self, values: &[f64]) -> Result<PipelineSpec> {
+        self.config.spec_with(&self.params, values)
+    }
+
+    /// Replays every log with `values` (the logs in parallel) and scores them.
+    pub fn evaluate(&self, values: &[f64]) -> Result<Evaluation> {
+        let spec = self.spec_with(values)?;
+        let logs = self
+            .recordings
+            .par_iter()
+            .map(|r| r.replay(&spec))
+            .collect::<Result<Vec<_>>>()?;
+        let mut pooled = Score::default();
+        logs.iter().for_each(|s| pooled.merge(s));
+        Ok(Evaluation {
+            objective: self.objective.value(&pooled),
+            logs,
+            pooled,
+        })
+    }
+
+    /// The objective at `values`; a candidate the configuration refuses scores infinity.
+    fn objective_at(&self, values: &[f64]) -> Result<f64> {
+        match self.evaluate(values) {
+            Ok(e) => Ok(e.objective),
+            Err(e @ (Error::ConfigInvalid { .. } | Error::ConfigSyntax { .. })) => {
+                self.invalid.fetch_add(1, Ordering::Relaxed);
+                self.first_invalid
+                    .lock()
+                    .expect("lock")
+                    .get_or_insert_with(|| e.to_string());
+                Ok(f64::INFINITY)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// Searches, then writes the best values into the configuration text.
+    pub fn run(
+        &self,
+        stop: Option<&AtomicBool>,
+        progress: Option<&(dyn Fn(SearchProgress) + Sync)>,
+    ) -> Result<TuneOutcome> {
+        let start = self.start();
+        let before = self.evaluate(&start)?;
+        let values_of = |u: &[f64]| -> Vec<f64> {
+            self.params
+                .iter()
+                .zip(u)
+                .map(|(p, &u)| p.from_unit(u))
+                .collect()
+        };
+        let objective = |values: &[f64]| self.objective_at(values);
+        let book = Evaluations::new(&values_of, &objective, self.budget, stop, progress);
+        book.record(start.clone(), before.objective);
+        let settings = SearchSettings {
+            optimiser: self.optimiser,
+            steps: self.params.iter().map(|p| p.steps).collect(),
+            start: self.params.iter().map(|p| p.to_unit(p.start)).collect(),
+            seed: self.seed,
+        };
+        let started = Instant::now();
+        let ending = search::search(&settings, &book)?;
+        let search_s = started.elapsed().as_secs_f64();
+        let (trace, best) = book.finish();
+        let best = best.map_or(start.clone(), |b| b.values);
+        let after = self.evaluate(&best)?;
+        let mut tuned = self.config.clone();
+        tuned.set(&self.params, &best)?;
+        let evaluations = trace.len();
+        let report = TuneReport {
+            config: self.config.path.clone(),
+            pipeline: self.config.pipeline.clone(),
+            objective: self.objective,
+            reference: self.reference.clone(),
+            optimiser: self.optimiser,
+            objective_before: before.objective,
+            objective_after: after.objective,
+            params: self
+                .params
+                .iter()
+                .zip(&best)
+                .map(|(p, &after)| ParamReport {
+                    name: p.path.to_string(),
+                    min: p.min,
+                    max: p.max,
+                    scale: p.scale,
+                    before: p.start,
+                    after,
+                    on_bound: p.on_bound(after),
+                })
+                .collect(),
+            before: before.pooled.metrics(),
+            after: after.pooled.metrics(),
+            logs: self
+                .recordings
+                .iter()
+                .zip(before.logs.iter().zip(&after.logs))
+                .map(|(r, (b, a))| LogReport {
+                    path: r.path.clone(),
+                    sensor_messages: r.messages(),
+                    before: b.metrics(),
+                    after: a.metrics(),
+                })
+                .collect(),
+            evaluations,
+            ending,
+            search_s,
+            evaluations_per_s: (evaluations.saturating_sub(1)) as f64 / search_s.max(1e-9),
+            threads: rayon::current_num_threads(),
+            invalid_candidates: self.invalid.load(Ordering::Relaxed),
+            first_invalid: self.first_invalid.lock().expect("lock").clone(),
+        };
+        Ok(TuneOutcome {
+            report,
+            trace,
+            tuned_toml: tuned.text(),
+        })
+    }
+}
+
+/// `PATH=MIN..MAX[,log|,linear][,steps=N]` (the `--params` syntax).
+pub fn parse_param_arg(arg: &str) -> std::result::Result<(String, ParamBounds), String> {
+    let bad = |why: &str| {
+        format!("--params '{arg}': {why} (expected PATH=MIN..MAX[,log|,linear][,steps=N])")
+    };
+    let (path, rest) = arg.split_once('=').ok_or_else(|| bad("no '='"))?;
+    let mut parts = rest.split(',');
+    let range = parts.next().unwrap_or_default();
+    let (min, max) = range.split_once("..").ok_or_else(|| bad("no MIN..MAX"))?;
+    let number = |s: &str| {
+        s.trim()
+            .parse::<f64>()
+            .map_err(|_| bad(&format!("'{s}' is not a number")))
+    };
+    let mut b = ParamBounds {
+        min: number(min)?,
+        max: number(max)?,
+        scale: None,
+        steps: None,
+    };
+    for option in parts {
+        match option.trim() {
+            "log" => b.scale = Some(Scale::Log),
+            "linear" => b.scale = Some(Scale::Linear),
+            s => match s.strip_prefix("steps=").map(str::parse::<usize>) {
+                Some(Ok(n)) => b.steps = Some(n),
+                _ => return Err(bad(&format!("unknown option '{s}'"))),
+            },
+        }
+    }
+    Ok((path.trim().to_owned(), b))
+}
+
+/// The trace as CSV: evaluation, elapsed time, objective, best so far, then each parameter.
+pub fn write_trace_csv(
+    out: impl std::io::Write,
+    params: &[Param],
+    trace: &[TraceRow],
+) -> csv::Result<()> {
+    let mut w = csv::Writer::from_writer(out);
+    let mut header = vec![
+        "evaluation".to_owned(),
+        "elapsed_s".into(),
+        "objective".into(),
+        "best".into(),
+    ];
+    header.extend(params.iter().map(|p| p.path.to_string()));
+    w.write_record(&header)?;
+    for r in trace {
+        let mut row = vec![
+            r.evaluation.to_string(),
+            format!("{:.6}", r.elapsed_s),
+            r.objective.to_string(),
+            r.best.to_string(),
+        ];
+        row.extend(r.values.iter().map(f64::to_string));
+        w.write_record(&row)?;
+    }
+    w.flush()?;
+    Ok(())
+}

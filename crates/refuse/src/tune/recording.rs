@@ -1,0 +1,390 @@
+//! A log decoded once for tuning: every message of the pipeline's sensors as measurements,
+//! the device fault reports, and the reference samples, in file order. An evaluation replays
+//! them from memory through a candidate pipeline, exactly as `refuse` feeds it (same sensor
+//! models, same track-map context, same log times, same reorder window), and scores it as
+//! `eval` does: the figures of a candidate equal those of `refuse` with the same file.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::messages::{
+    ChannelMessage, Event, EventKind, FusedState, GateDecision, TrackMap,
+};
+use railfuse_catalog::reference_track::ReferenceSample;
+use serde::Serialize;
+
+use crate::accuracy::{AccuracyMeter, Consistency, ErrorStats, CHI2_95_1DOF};
+use crate::error::{Error, Result};
+use crate::eval::{self, reference_kind, reference_sample};
+use crate::measurement::{Measurement, SensorContext, SensorModel};
+use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
+use crate::spec::PipelineSpec;
+
+/// One thing that happened in the log, in file order.
+#[derive(Debug, Clone)]
+enum Step {
+    /// A message of sensor `sensor` at `log_time_ns`: `measurements[range]`.
+    Sensor {
+        sensor: usize,
+        log_time_ns: u64,
+        start: u32,
+        end: u32,
+    },
+    /// A device fault report (`failed`) or recovery, naming device `device`.
+    Device { device: usize, failed: bool },
+}
+
+/// A log, decoded for one pipeline's sensors.
+#[derive(Debug)]
+pub struct Recording {
+    pub path: PathBuf,
+    /// Per sensor of the pipeline: its channel's schema.
+    schemas: Vec<String>,
+    steps: Vec<Step>,
+    measurements: Vec<Measurement>,
+    devices: Vec<String>,
+    /// The reference, in file order; empty without one.
+    reference: Vec<ReferenceSample>,
+    pub reference_topic: Option<String>,
+    /// The last log time of the file (the pipelines are flushed there).
+    end_ns: u64,
+    /// How far a state may lag the reference, s.
+    lag_s: f64,
+    /// Sensor messages that did not decode (skipped, as `refuse` skips them).
+    pub undecodable: u64,
+}
+
+/// What one replay of a log did, and how well.
+#[derive(Debug, Clone, Default)]
+pub struct Score {
+    pub position: ErrorStats,
+    pub speed: ErrorStats,
+    /// NEES of `[s, v]` against the reference.
+    pub nees: Consistency,
+    /// NIS of every measurement that reached the gate.
+    pub nis: Consistency,
+    /// −log-likelihood of those innovations, `½ Σ (ln 2πS + ν²/S)`.
+    pub nll: f64,
+    pub innovations: u64,
+    pub states: u64,
+    /// States the reference did not cover (outside it, or in one of its gaps).
+    pub unscored: u64,
+    /// A state or innovation that was not a finite number.
+    pub non_finite: u64,
+    pub counts: PipelineCounts,
+}
+
+impl Score {
+    /// Pools `other` (another log's score) into this one.
+    pub fn merge(&mut self, other: &Score) {
+        self.position.merge(&other.position);
+        self.speed.merge(&other.speed);
+        self.nees.merge(&other.nees);
+        self.nis.merge(&other.nis);
+        self.nll += other.nll;
+        self.innovations += other.innovations;
+        self.states += other.states;
+        self.unscored += other.unscored;
+        self.non_finite += other.non_finite;
+        let (a, b) = (&mut self.counts, &other.counts);
+        a.accepted += b.accepted;
+        a.accepted_after_lockout += b.accepted_after_lockout;
+        a.rejected_gate += b.rejected_gate;
+        a.rejected_invalid += b.rejected_invalid;
+        a.rejected_late += b.rejected_late;
+        a.rejected_device_fault += b.rejected_device_fault;
+        a.before_initialisation += b.before_initialisation;
+    }
+
+    /// The figures of this score, as reported.
+    pub fn metrics(&self) -> Metrics {
+        Metrics {
+            position_rmse_m: self.position.summary().map(|s| s.rmse),
+            speed_rmse_mps: self.speed.summary().map(|s| s.rmse),
+            position_max_m: self.position.summary().map(|s| s.max_abs),
+            nees_inside_95: self.nees.summary().map(|s| s.inside_95),
+            nis_inside_95: self.nis.summary().map(|s| s.inside_95),
+            nis_mean: self.nis.summary().map(|s| s.mean),
+            nll: (self.innovations > 0).then_some(self.nll),
+            innovations: self.innovations,
+            states: self.states,
+            gated: self.counts.rejected_gate,
+        }
+    }
+}
+
+/// The figures of a score.
+#[derive(Debug, Clone, Serialize)]
+pub struct Metrics {
+    pub position_rmse_m: Option<f64>,
+    pub speed_rmse_mps: Option<f64>,
+    pub position_max_m: Option<f64>,
+    /// Share of epochs whose NEES lies in the 95 % χ²₂ interval (0.95 when consistent).
+    pub nees_inside_95: Option<f64>,
+    /// Share of innovations whose NIS lies in the 95 % χ²₁ interval.
+    pub nis_inside_95: Option<f64>,
+    /// Mean NIS (1 when consistent).
+    pub nis_mean: Option<f64>,
+    pub nll: Option<f64>,
+    pub innovations: u64,
+    pub states: u64,
+    pub gated: u64,
+}
+
+impl Recording {
+    /// Reads `path` once: the measurements of `spec`'s sensors and, when `reference` is
+    /// given, its samples. Every sensor's channel must be in the log, and the reference too.
+    pub fn load(path: &Path, spec: &PipelineSpec, reference: Option<&str>) -> Result<Self> {
+        let mut reader = LogReader::open(path)?;
+        let n = spec.sensors.len();
+        let mut schemas: Vec<Option<String>> = vec![None; n];
+        let mut topics_seen = Vec::new();
+        // Channel id → what it is to this recording.
+        enum Role {
+            Sensor(usize, SensorModel),
+            Map,
+            Events,
+            Reference(eval::ReferenceKind),
+        }
+        let mut roles: HashMap<u16, Role> = HashMap::new();
+        let mut context = SensorContext::default();
+        let mut rec = Self {
+            path: path.to_owned(),
+            schemas: Vec::new(),
+            steps: Vec::new(),
+            measurements: Vec::new(),
+            devices: Vec::new(),
+            reference: Vec::new(),
+            reference_topic: reference.map(str::to_owned),
+            end_ns: 0,
+            lag_s: eval::lag_allowance_s(None) + spec.reorder_window_ns as f64 / 1e9,
+            undecodable: 0,
+        };
+        let mut reference_channel = false;
+        let mut out = Vec::new();
+        while let Some(record) = reader.next() {
+            match record? {
+                LogRecord::Channel(c) => {
+                    topics_seen.push(c.topic.clone());
+                    let schema = c.schema_name();
+                    let role = if Some(c.topic.as_str()) == reference {
+                        reference_channel = true;
+                        let kind = reference_kind(schema).ok_or_else(|| Error::TuneLog {
+                            input: path.to_owned(),
+                            message: format!(
+                                "reference {} has schema '{schema}', not ground truth, a GNSS \
+                                 fix or a fused state",
+                                c.topic
+                            ),
+                        })?;
+                        Some(Role::Reference(kind))
+                    } else if let Some(si) = spec.sensor_for(&c.topic) {
+                        let binding = spec.bind(path, si, schema)?;
+                        schemas[si] = Some(schema.to_owned());
+                        Some(Role::Sensor(si, binding.model))
+                    } else if schema == TrackMap::SCHEMA_NAME {
+                        Some(Role::Map)
+                    } else if schema == Event::SCHEMA_NAME {
+                        Some(Role::Events)
+                    } else {
+                        None
+                    };
+                    if let Some(r) = role {
+                        roles.insert(c.id, r);
+                    }
+                }
+                LogRecord::Message(m) => {
+                    rec.end_ns = rec.end_ns.max(m.log_time_ns);
+                    match roles.get(&m.channel.id) {
+                        Some(Role::Sensor(si, model)) => {
+                            if model.decode(&m, path, &context, &mut out).is_err() {
+                                rec.undecodable += 1;
+                                continue;
+                            }
+                            let start = rec.measurements.len() as u32;
+                            rec.measurements.extend_from_slice(&out);
+                            rec.steps.push(Step::Sensor {
+                                sensor: *si,
+                                log_time_ns: m.log_time_ns,
+                                start,
+                                end: rec.measurements.len() as u32,
+                            });
+                        }
+                        Some(Role::Map) => context.track = Some(m.decode(path)?),
+                        Some(Role::Events) => {
+                            let e: Event = m.decode(path)?;
+                            let failed = match e.kind {
+                                EventKind::DeviceFault => true,
+                                EventKind::DeviceRecovered => false,
+                                _ => continue,
+                            };
+                            let device = match rec.devices.iter().position(|d| *d == e.text) {
+                                Some(i) => i,
+                                None => {
+                                    rec.devices.push(e.text.clone());
+                                    rec.devices.len() - 1
+                                }
+                            };
+                            rec.steps.push(Step::Device { device, failed });
+                        }
+                        Some(Role::Reference(kind)) => {
+                            if let Some((t, s, v)) =
+                                reference_sample(*kind, &m, path, context.track.as_ref())?
+                            {
+                                rec.reference.push(ReferenceSample {
+                                    stamp_ns: t,
+                                    chainage_m: s,
+                                    speed_mps: v,
+                                });
+                            }
+                        }
+                        None => {}
+                    }
+                }
+                _ => {}
+            }
+        }
+        if let Some(si) = schemas.iter().position(Option::is_none) {
+            let have: Vec<&str> = topics_seen.iter().map(String::as_str).collect();
+            return Err(spec.channel_error(
+                path,
+                si,
+                format!("is not in the file (it has {})", have.join(", ")),
+            ));
+        }
+        if let Some(topic) = reference {
+            let message = match reference_channel {
+                false => format!("has no reference channel {topic}"),
+                true if rec.reference.is_empty() => {
+                    format!("reference channel {topic} has no usable samples")
+                }
+                true => String::new(),
+            };
+            if !message.is_empty() {
+                return Err(Error::TuneLog {
+                    input: path.to_owned(),
+                    message,
+                });
+            }
+        }
+        rec.schemas = schemas.into_iter().flatten().collect();
+        rec.measurements.shrink_to_fit();
+        rec.steps.shrink_to_fit();
+        Ok(rec)
+    }
+
+    /// Sensor messages held.
+    pub fn messages(&self) -> usize {
+        self.steps
+            .iter()
+            .filter(|s| matches!(s, Step::Sensor { .. }))
+            .count()
+    }
+
+    /// Replays the log through `spec` (its sensors those the recording was made for) and
+    /// scores it. The smoother, if the pipeline has one, is not run: states are scored.
+    pub fn replay(&self, spec: &PipelineSpec) -> Result<Score> {
+        let mut pipeline = AnyPipeline::new(spec.without_smoother())?;
+        for (si, schema) in self.schemas.iter().enumerate() {
+            pipeline.bind(si, &spec.bind(&self.path, si, schema)?);
+        }
+        let mut scorer = Scorer::new(self);
+        let mut fused = Vec::new();
+        for step in &self.steps {
+            match *step {
+                Step::Sensor {
+                    sensor,
+                    log_time_ns,
+                    start,
+                    end,
+                } => {
+                    let m = &self.measurements[start as usize..end as usize];
+                    pipeline.push(sensor, m, log_time_ns, &mut fused);
+                    scorer.take(&mut fused);
+                }
+                Step::Device { device, failed } => {
+                    pipeline.device_event(&self.devices[device], failed)
+                }
+            }
+        }
+        pipeline.finish(self.end_ns, &mut fused);
+        scorer.take(&mut fused);
+        Ok(scorer.finish(pipeline.counts().clone()))
+    }
+}
+
+/// Scores fused output as it comes, walking the reference in step with the states.
+struct Scorer<'a> {
+    rec: &'a Recording,
+    meter: AccuracyMeter,
+    next_reference: usize,
+    score: Score,
+}
+
+impl<'a> Scorer<'a> {
+    fn new(rec: &'a Recording) -> Self {
+        Self {
+            rec,
+            meter: AccuracyMeter::new(rec.lag_s),
+            next_reference: 0,
+            score: Score::default(),
+        }
+    }
+
+    fn take(&mut self, fused: &mut Vec<Fused>) {
+        for f in fused.drain(..) {
+            if let Some(d) = &f.diagnostics {
+                if let GateDecision::Accepted | GateDecision::RejectedGate = d.decision {
+                    if let (Some(nu), Some(s)) = (d.innovation, d.innovation_variance) {
+                        if nu.is_finite() && s.is_finite() && s > 0.0 {
+                            self.score.nll +=
+                                0.5 * ((std::f64::consts::TAU * s).ln() + nu * nu / s);
+                            self.score.innovations += 1;
+                            self.score.nis.add(nu * nu / s, CHI2_95_1DOF);
+                        } else {
+                            self.score.non_finite += 1;
+                        }
+                    }
+                }
+            }
+            if let Some(state) = &f.state {
+                self.state(state);
+            }
+        }
+    }
+
+    fn state(&mut self, state: &FusedState) {
+        self.score.states += 1;
+        if !(state.chainage_m.is_finite() && state.speed_mps.is_finite()) {
+            self.score.non_finite += 1;
+            return;
+        }
+        let reference = &self.rec.reference;
+        if reference.is_empty() {
+            return;
+        }
+        while self.next_reference < reference.len()
+            && self
+                .meter
+                .reference_newest_ns()
+                .is_none_or(|n| n < state.stamp_ns)
+        {
+            let r = reference[self.next_reference];
+            self.meter
+                .add_reference(r.stamp_ns, r.chainage_m, r.speed_mps, &[]);
+            self.next_reference += 1;
+        }
+        self.meter.add_estimate(state, &[]);
+    }
+
+    fn finish(mut self, counts: PipelineCounts) -> Score {
+        self.meter.finish();
+        self.score.position = self.meter.position;
+        self.score.speed = self.meter.speed;
+        self.score.nees = self.meter.nees;
+        self.score.unscored = self.meter.unmatched + self.meter.in_reference_gaps;
+        self.score.counts = counts;
+        self.score
+    }
+}
