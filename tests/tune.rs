@@ -1,0 +1,348 @@
+//! `railfuse tune` end to end: on simulated logs, its starting figures are `refuse`'s, every
+//! optimiser improves a deliberately bad start, a seed fixes the result, and bad requests get
+//! one clear line.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::*;
+use serde_json::Value;
+
+fn simulate(dir: &Path, seed: u32, duration_s: u32) -> PathBuf {
+    let log = dir.join(format!("run{seed}.mcap"));
+    ok(&[
+        "simulate",
+        "--seed",
+        &seed.to_string(),
+        "--duration",
+        &duration_s.to_string(),
+        "-o",
+        s(&log),
+    ]);
+    log
+}
+
+/// samples/kalman.toml with its motion noise 100x too high and the radar's and odometers'
+/// variances 100x too low.
+fn bad_config(dir: &Path) -> PathBuf {
+    let text = std::fs::read_to_string(sample("kalman.toml")).unwrap();
+    let bad = text
+        .replace("jerk_psd = 0.2", "jerk_psd = 20.0")
+        .replace("variance = 0.1\n", "variance = 0.001\n");
+    assert_ne!(text, bad);
+    let path = dir.join("bad.toml");
+    std::fs::write(&path, bad).unwrap();
+    path
+}
+
+const PARAMS: [&str; 4] = [
+    "--params=motion.jerk_psd=0.001..100",
+    "--params=sensor[/radar/speed].variance=1e-4..1",
+    "--params=sensor[/odometer/1].variance=1e-4..1",
+    "--params=sensor[/odometer/2].variance=1e-4..1",
+];
+
+fn tune(log: &Path, config: &Path, out: &Path, extra: &[&str]) -> Value {
+    let mut args = vec![
+        "tune",
+        s(log),
+        "-c",
+        s(config),
+        "--pipeline",
+        "kalman",
+        "-o",
+        s(out),
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    serde_json::from_slice(&ok(&args).stdout).unwrap()
+}
+
+#[test]
+fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() {
+    let d = tempfile::tempdir().unwrap();
+    let log = simulate(d.path(), 2, 240);
+    // The figures tune starts from are those refuse + eval give for the same file.
+    let fused = d.path().join("fused.mcap");
+    let refused: Value = serde_json::from_slice(
+        &ok(&[
+            "refuse",
+            s(&log),
+            "-c",
+            s(&sample("kalman.toml")),
+            "-o",
+            s(&fused),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    let eval = &refused["eval"]["pipelines"][0];
+    let start = tune(
+        &log,
+        &sample("kalman.toml"),
+        &d.path().join("same.toml"),
+        &[
+            "--reference",
+            "/truth",
+            "--params=motion.jerk_psd=0.01..10",
+            "--max-evals",
+            "3",
+        ],
+    );
+    let before = &start["before"];
+    let close = |a: &Value, b: &Value| (a.as_f64().unwrap() - b.as_f64().unwrap()).abs() < 1e-12;
+    assert!(
+        close(
+            &before["position_rmse_m"],
+            &eval["position_error_m"]["rmse"]
+        ),
+        "{before} {eval}"
+    );
+    assert!(close(
+        &before["speed_rmse_mps"],
+        &eval["speed_error_mps"]["rmse"]
+    ));
+    assert!(close(&before["nees_inside_95"], &eval["nees"]["inside_95"]));
+    assert!(close(&before["nis_inside_95"], &eval["nis"]["inside_95"]));
+    assert_eq!(before["gated"], eval["gated"]);
+
+    let bad = bad_config(d.path());
+    for optimiser in ["grid", "nelder-mead", "pso"] {
+        let out = d.path().join(format!("{optimiser}.toml"));
+        // The grid: 3 points a parameter, 81 in all.
+        let steps = if optimiser == "grid" { ",steps=3" } else { "" };
+        let params: Vec<String> = PARAMS.iter().map(|p| format!("{p}{steps}")).collect();
+        let mut extra = vec![
+            "--reference",
+            "/truth",
+            "--optimiser",
+            optimiser,
+            "--max-evals",
+            "81",
+        ];
+        extra.extend(params.iter().map(String::as_str));
+        let r = tune(&log, &bad, &out, &extra);
+        let (b, a) = (
+            r["objective_before"].as_f64().unwrap(),
+            r["objective_after"].as_f64().unwrap(),
+        );
+        assert!(a < 0.5 * b, "{optimiser}: {b} -> {a}");
+        assert!(
+            r["after"]["position_rmse_m"].as_f64() < r["before"]["position_rmse_m"].as_f64(),
+            "{optimiser}: {r}"
+        );
+        // The tuned file is the bad one with only the tuned numbers changed.
+        let (old, new) = (
+            std::fs::read_to_string(&bad).unwrap(),
+            std::fs::read_to_string(&out).unwrap(),
+        );
+        let changed: Vec<(&str, &str)> = old
+            .lines()
+            .zip(new.lines())
+            .filter(|(a, b)| a != b)
+            .collect();
+        assert_eq!(old.lines().count(), new.lines().count());
+        assert!(!changed.is_empty() && changed.len() <= 4, "{changed:?}");
+        for (a, b) in &changed {
+            assert!(
+                a.contains("variance") && b.contains("variance")
+                    || a.contains("jerk_psd") && b.contains("jerk_psd"),
+                "{a} -> {b}"
+            );
+        }
+        // Re-fusing with the tuned file gives the figures the report promised.
+        let check = d.path().join(format!("{optimiser}.fused.mcap"));
+        let refused: Value = serde_json::from_slice(
+            &ok(&["refuse", s(&log), "-c", s(&out), "-o", s(&check), "--json"]).stdout,
+        )
+        .unwrap();
+        assert!(close(
+            &refused["eval"]["pipelines"][0]["position_error_m"]["rmse"],
+            &r["after"]["position_rmse_m"]
+        ));
+        // The trace: one row per evaluation, its best never rising, the first the file's.
+        let trace = std::fs::read_to_string(out.with_extension("trace.csv")).unwrap();
+        let rows: Vec<Vec<f64>> = trace
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+            .collect();
+        assert_eq!(rows.len() as u64, r["evaluations"].as_u64().unwrap());
+        assert!(rows.len() <= 81);
+        // (serde_json reads floats to within an ulp, not exactly.)
+        assert!((rows[0][2] - b).abs() < 1e-12);
+        assert!(rows.windows(2).all(|w| w[1][3] <= w[0][3]));
+        assert!((rows.last().unwrap()[3] - a).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn the_same_seed_gives_the_same_tuning_on_one_thread_or_two() {
+    let d = tempfile::tempdir().unwrap();
+    let log = simulate(d.path(), 3, 120);
+    let bad = bad_config(d.path());
+    let run = |name: &str, seed: &str, threads: &str| {
+        let out = d.path().join(format!("{name}.toml"));
+        let mut extra = vec![
+            "--reference",
+            "/truth",
+            "--optimiser",
+            "pso",
+            "--max-evals",
+            "40",
+            "--seed",
+            seed,
+            "--threads",
+            threads,
+        ];
+        extra.extend(PARAMS);
+        let r = tune(&log, &bad, &out, &extra);
+        let trace = std::fs::read_to_string(out.with_extension("trace.csv")).unwrap();
+        // Everything but the elapsed time.
+        let trace: Vec<String> = trace
+            .lines()
+            .map(|l| {
+                let mut f: Vec<&str> = l.split(',').collect();
+                f.remove(1);
+                f.join(",")
+            })
+            .collect();
+        (std::fs::read_to_string(&out).unwrap(), trace, r)
+    };
+    let (a, ta, ra) = run("a", "7", "1");
+    let (b, tb, _) = run("b", "7", "2");
+    let (c, tc, _) = run("c", "8", "2");
+    assert_eq!(a, b);
+    assert_eq!(ta, tb);
+    assert_ne!(ta, tc, "another seed searches elsewhere");
+    assert_ne!(a, c);
+    assert_eq!(ra["threads"], 1);
+}
+
+#[test]
+fn likelihood_tuning_without_a_reference_makes_the_innovations_consistent() {
+    let d = tempfile::tempdir().unwrap();
+    let log = simulate(d.path(), 4, 180);
+    let bad = bad_config(d.path());
+    let mut extra = vec!["--max-evals", "120"];
+    extra.extend(&PARAMS[1..]);
+    let r = tune(&log, &bad, &d.path().join("nll.toml"), &extra);
+    assert_eq!(r["objective"]["kind"], "nll");
+    assert!(
+        r["before"]["position_rmse_m"].is_null(),
+        "no reference, no errors"
+    );
+    let nis = |m: &Value| m["nis_mean"].as_f64().unwrap();
+    // Variances 100x too small: the NIS averages far above 1; tuned, it comes near it.
+    assert!(nis(&r["before"]) > 5.0, "{r}");
+    assert!(
+        (nis(&r["after"]) - 1.0).abs() < 0.5 * (nis(&r["before"]) - 1.0),
+        "{r}"
+    );
+    assert!(r["objective_after"].as_f64() < r["objective_before"].as_f64());
+}
+
+#[test]
+fn bad_tuning_requests_get_one_clear_line_each() {
+    let d = tempfile::tempdir().unwrap();
+    let log = simulate(d.path(), 5, 30);
+    let out = d.path().join("t.toml");
+    let kalman = sample("kalman.toml");
+    let seed001 = d.path().join("seed001.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed001",
+        "--duration",
+        "20",
+        "-o",
+        s(&seed001),
+    ]);
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["--params", "motion.jerk_pds=0.01..1"],
+            "motion.jerk_pds: not found: there is no 'jerk_pds' here",
+        ),
+        (
+            vec!["--params", "motion.jerk_psd=1..10"],
+            "bounds 1 … 10 do not contain the file's value 0.2",
+        ),
+        (
+            vec!["--params", "sensor[/loop/position].variance=0.01..1"],
+            "is \"message\"",
+        ),
+        (vec!["--params", "motion.jerk_psd=0.01"], "no MIN..MAX"),
+        (
+            vec![
+                "--params",
+                "motion.jerk_psd=0.01..1",
+                "--reference",
+                "/nope",
+            ],
+            "has no reference channel /nope",
+        ),
+        (
+            vec!["--params", "motion.jerk_psd=0.01..1", "--objective", "rmse"],
+            "the rmse objective needs a reference",
+        ),
+        (vec![], "nothing to tune"),
+    ];
+    for (extra, expected) in cases {
+        let mut args = vec![
+            "tune",
+            s(&log),
+            "-c",
+            s(&kalman),
+            "--pipeline",
+            "kalman",
+            "-o",
+            s(&out),
+        ];
+        args.extend(extra.iter());
+        let o = railfuse(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(err.contains(expected), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+    // A log without the pipeline's sensors, and a pipeline the file does not have.
+    let o = railfuse(&[
+        "tune",
+        s(&seed001),
+        "-c",
+        s(&kalman),
+        "--pipeline",
+        "kalman",
+        "--params",
+        "motion.jerk_psd=0.01..1",
+        "-o",
+        s(&out),
+    ]);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success() && err.contains("/loop/position") && err.contains("is not in the file"),
+        "{err}"
+    );
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    let o = railfuse(&[
+        "tune",
+        s(&log),
+        "-c",
+        s(&kalman),
+        "--pipeline",
+        "nope",
+        "--params",
+        "motion.jerk_psd=0.01..1",
+        "-o",
+        s(&out),
+    ]);
+    assert!(
+        stderr(&o).contains("no [[pipeline]] of that name (it has kalman)"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists(), "nothing written on a refused request");
+}
