@@ -334,7 +334,7 @@ pub struct ScaleFactorConfig {
 /// [pipeline.tune]
 /// reference = "/truth/state"   # or an RTK GNSS channel, or another pipeline's state
 /// objective = "rmse"           # position_weight · RMSE(s) + speed_weight · RMSE(v); or "nll"
-/// optimiser = "nelder_mead"    # grid, nelder_mead, pso
+/// optimiser = "nelder_mead"    # grid, nelder_mead, pso, em
 /// [pipeline.tune.params]
 /// "motion.jerk_psd" = { min = 0.001, max = 10.0 }
 /// "sensor[/radar/speed].variance" = { min = 1e-4, max = 1.0 }
@@ -386,6 +386,9 @@ pub enum OptimiserKind {
     NelderMead,
     /// Particle swarm.
     Pso,
+    /// Expectation–maximisation: the maximum-likelihood motion noise and sensor variances of
+    /// a linear-Gaussian Kalman pipeline.
+    Em,
 }
 
 /// Bounds of one tuned value, in its own units.

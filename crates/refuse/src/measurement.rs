@@ -51,6 +51,22 @@ impl Quantity {
         (self.index() < N)
             .then(|| RowSVector::from_fn(|_, j| if j == self.index() { 1.0 } else { 0.0 }))
     }
+
+    /// The row of the motion states a sensor of this quantity sees: [`h`](Self::h), and for a
+    /// speed that is the mean over the window `W` before its stamp, `v − a W/2` (exact under
+    /// the constant-acceleration model).
+    pub fn motion_row<const N: usize>(
+        self,
+        speed_window_s: Option<f64>,
+    ) -> Option<RowSVector<f64, N>> {
+        let mut h = self.h::<N>()?;
+        if let (Quantity::Speed, Some(w)) = (self, speed_window_s) {
+            if Quantity::Acceleration.index() < N {
+                h[Quantity::Acceleration.index()] = -w / 2.0;
+            }
+        }
+        Some(h)
+    }
 }
 
 /// How a sensor's measurement of one quantity `q` sees the state: `z = H x + offset`. A bias

@@ -158,12 +158,7 @@ impl<const N: usize> Pipeline<N> {
         let motion = self.layout.motion;
         let window = self.spec.sensors[sensor].speed_window_s;
         let field = |q: Quantity, variance: VarianceValue| {
-            let mut h = q.h::<N>()?;
-            // A speed averaged over the window W before the stamp: v − a W/2 (exact under the
-            // constant-acceleration model).
-            if let (Quantity::Speed, Some(w)) = (q, window) {
-                h[Quantity::Acceleration.index()] = -w / 2.0;
-            }
+            let mut h = q.motion_row::<N>(window)?;
             let scaled = h;
             let mut scale_state = None;
             // The sensor's states on this quantity: a bias adds to the row, a scale factor

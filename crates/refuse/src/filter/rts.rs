@@ -166,6 +166,21 @@ impl<const N: usize> EpochRecorder<N> {
     }
 }
 
+/// The smoother gain `J = P_k|k Fᵀ_{k+1} (P_{k+1|k})⁻¹`; None when the prediction's
+/// covariance is singular.
+pub fn smoother_gain<const N: usize>(
+    filtered_covariance: &SMatrix<f64, N, N>,
+    transition_next: &SMatrix<f64, N, N>,
+    predicted_covariance_next: &SMatrix<f64, N, N>,
+) -> Option<SMatrix<f64, N, N>> {
+    let p = predicted_covariance_next;
+    let inv = p
+        .cholesky()
+        .map(|c| c.inverse())
+        .or_else(|| p.try_inverse())?;
+    Some(filtered_covariance * transition_next.transpose() * inv)
+}
+
 /// One RTS step: epoch k's smoothed estimate from its filtered one and epoch k+1's.
 pub fn rts_step<const N: usize>(
     filtered: &StateAndCovariance<N>,
@@ -174,14 +189,9 @@ pub fn rts_step<const N: usize>(
     smoothed_next: &StateAndCovariance<N>,
 ) -> StateAndCovariance<N> {
     let p_pred = prior_next.covariance;
-    let inv = p_pred
-        .cholesky()
-        .map(|c| c.inverse())
-        .or_else(|| p_pred.try_inverse());
-    let Some(inv) = inv else {
+    let Some(c) = smoother_gain(&filtered.covariance, transition_next, &p_pred) else {
         return filtered.clone();
     };
-    let c = filtered.covariance * transition_next.transpose() * inv;
     StateAndCovariance {
         state: filtered.state + c * (smoothed_next.state - prior_next.state),
         covariance: symmetric(

@@ -13,6 +13,7 @@
 //! parallel too (rayon). The tuned file is the configuration file with only the tuned numbers
 //! changed ([`params::TunableConfig`]).
 
+mod em;
 pub mod params;
 pub mod recording;
 pub mod search;
@@ -109,6 +110,8 @@ pub struct Tuner {
     pub seed: u64,
     invalid: AtomicU64,
     first_invalid: Mutex<Option<String>>,
+    /// The EM problem, when the optimiser is EM.
+    em: Option<em::PipelineEm>,
 }
 
 /// A tuned value, before and after.
@@ -153,6 +156,9 @@ pub struct TuneReport {
     pub search_s: f64,
     pub evaluations_per_s: f64,
     pub threads: usize,
+    /// EM: the log-likelihood of each iteration's E-step (it never falls).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub em_log_likelihood: Option<Vec<f64>>,
     /// Candidates the configuration refused (a value its validation rejects): scored as
     /// infinitely bad.
     pub invalid_candidates: u64,
@@ -257,7 +263,14 @@ impl Tuner {
             .par_iter()
             .map(|log| Recording::load(log, &spec, reference.as_deref()))
             .collect::<Result<Vec<_>>>()?;
+        let em = match optimiser {
+            OptimiserKind::Em => {
+                Some(em::PipelineEm::new(&spec, &params, &recordings).map_err(fail)?)
+            }
+            _ => None,
+        };
         Ok(Self {
+            em,
             config,
             params,
             recordings,
@@ -339,10 +352,39 @@ impl Tuner {
             seed: self.seed,
         };
         let started = Instant::now();
-        let ending = search::search(&settings, &book)?;
+        let (ending, em_answer, em_log_likelihood) = match &self.em {
+            // EM's answer is its last iterate (the likelihood's maximum), whatever the objective
+            // says of the iterates on the way.
+            Some(em) => {
+                let units = |v: &[f64]| -> Vec<f64> {
+                    self.params
+                        .iter()
+                        .zip(v)
+                        .map(|(p, &v)| p.to_unit(v))
+                        .collect()
+                };
+                let mut ending = Ending::Converged;
+                let (values, ll) = em.run(&self.params, &start, self.budget - 1, |v| {
+                    book.batch(&[units(v)]).map(|_| ()).inspect_err(|e| {
+                        ending = match e {
+                            Error::Interrupted => Ending::Interrupted,
+                            _ => Ending::Budget,
+                        }
+                    })
+                })?;
+                let rounded = self
+                    .params
+                    .iter()
+                    .zip(&values)
+                    .map(|(p, &v)| p.round(v))
+                    .collect();
+                (ending, Some(rounded), Some(ll))
+            }
+            None => (search::search(&settings, &book)?, None, None),
+        };
         let search_s = started.elapsed().as_secs_f64();
         let (trace, best) = book.finish();
-        let best = best.map_or(start.clone(), |b| b.values);
+        let best = em_answer.unwrap_or_else(|| best.map_or(start.clone(), |b| b.values));
         let after = self.evaluate(&best)?;
         let mut tuned = self.config.clone();
         tuned.set(&self.params, &best)?;
@@ -387,6 +429,7 @@ impl Tuner {
             search_s,
             evaluations_per_s: (evaluations.saturating_sub(1)) as f64 / search_s.max(1e-9),
             threads: rayon::current_num_threads(),
+            em_log_likelihood,
             invalid_candidates: self.invalid.load(Ordering::Relaxed),
             first_invalid: self.first_invalid.lock().expect("lock").clone(),
         };

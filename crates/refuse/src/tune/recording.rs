@@ -23,7 +23,7 @@ use crate::spec::PipelineSpec;
 
 /// One thing that happened in the log, in file order.
 #[derive(Debug, Clone)]
-enum Step {
+pub(super) enum Step {
     /// A message of sensor `sensor` at `log_time_ns`: `measurements[range]`.
     Sensor {
         sensor: usize,
@@ -40,9 +40,9 @@ enum Step {
 pub struct Recording {
     pub path: PathBuf,
     /// Per sensor of the pipeline: its channel's schema.
-    schemas: Vec<String>,
-    steps: Vec<Step>,
-    measurements: Vec<Measurement>,
+    pub(super) schemas: Vec<String>,
+    pub(super) steps: Vec<Step>,
+    pub(super) measurements: Vec<Measurement>,
     devices: Vec<String>,
     /// The reference, in file order; empty without one.
     reference: Vec<ReferenceSample>,

@@ -207,6 +207,7 @@ pub fn search(s: &SearchSettings, book: &Evaluations<'_>) -> Result<Ending> {
         OptimiserKind::Grid => grid(s, book),
         OptimiserKind::NelderMead => nelder_mead(s, book),
         OptimiserKind::Pso => swarm(s, book),
+        OptimiserKind::Em => unreachable!("EM is run by the tuner, not searched"),
     };
     match ended {
         Ok(()) => Ok(Ending::Converged),
