@@ -48,6 +48,19 @@ pub struct Args {
     /// data in six minutes, to see whether memory grows with the amount recorded).
     #[arg(long, default_value_t = 1.0)]
     pub record_speedup: f64,
+    /// Measure EM instead: railfuse's against pykalman's `KalmanFilter.em` on the same
+    /// constant-acceleration data (10 000 steps, 20 iterations, Q and R estimated).
+    #[arg(long)]
+    pub em: bool,
+    /// With --em: steps of the run.
+    #[arg(long, default_value_t = 10_000)]
+    pub em_steps: usize,
+    /// With --em: EM iterations.
+    #[arg(long, default_value_t = 20)]
+    pub em_iterations: usize,
+    /// With --em: print JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// One measured `refuse` run.
@@ -59,6 +72,10 @@ struct Measured {
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
         return super::bench_record::run(&a.dir, secs, a.record_speedup);
+    }
+    if a.em {
+        let python = a.python.clone().or_else(find_python);
+        return super::bench_em::run(python, &a.dir, a.em_steps, a.em_iterations, a.json);
     }
     if let Some(secs) = a.viz {
         return super::bench_viz::run(&a.dir, secs, a.repeat);
@@ -204,7 +221,7 @@ fn peer_child(python: &Path, script: &Path, raw: &Path, config: &Path, dir: &Pat
     Ok(wall_s)
 }
 
-fn find_python() -> Option<PathBuf> {
+pub fn find_python() -> Option<PathBuf> {
     if let Some(p) = std::env::var_os("RAILFUSE_PYTHON") {
         return Some(PathBuf::from(p));
     }

@@ -20,7 +20,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::rts::smoother_gain;
-use super::symmetric;
+use super::{sqrt_psd, symmetric};
 
 /// A state-space model the E-step can run: its epochs, their transitions, and how each
 /// epoch's measurements update the predicted estimate.
@@ -182,6 +182,26 @@ impl<const N: usize, const M: usize> LinearGaussian<N, M> {
         s.log_likelihood
     }
 
+    /// `n` measurements of a run drawn from the model (seeded), starting from state `x`.
+    pub fn sample(&self, n: usize, seed: u64, mut x: SVector<f64, N>) -> Vec<SVector<f64, M>> {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, StandardNormal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        // A rank-deficient Q (a jerk held over each step) has no Cholesky factor.
+        let (lq, lr) = (
+            sqrt_psd(&self.process_noise),
+            sqrt_psd(&self.measurement_noise),
+        );
+        (0..n)
+            .map(|_| {
+                let w = SVector::<f64, N>::from_fn(|_, _| StandardNormal.sample(&mut rng));
+                let v = SVector::<f64, M>::from_fn(|_, _| StandardNormal.sample(&mut rng));
+                x = self.transition * x + lq * w;
+                self.observation * x + lr * v
+            })
+            .collect()
+    }
+
     /// `iterations` EM steps; the log-likelihood before each.
     pub fn em(
         &mut self,
@@ -199,44 +219,27 @@ impl<const N: usize, const M: usize> LinearGaussian<N, M> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, Normal};
+    use crate::model::{ConstantAcceleration, ProcessNoise, TransitionModel};
 
-    /// Constant acceleration, dt = 0.1 s, position and speed measured.
+    /// Constant acceleration with white jerk, dt = 0.1 s, position and speed measured.
     fn ca(q: f64, r: [f64; 2]) -> LinearGaussian<3, 2> {
-        let dt: f64 = 0.1;
-        let f = SMatrix::<f64, 3, 3>::new(1.0, dt, dt * dt / 2.0, 0.0, 1.0, dt, 0.0, 0.0, 1.0);
-        let g = SVector::<f64, 3>::new(dt.powi(3) / 6.0, dt * dt / 2.0, dt);
+        let m = ConstantAcceleration {
+            noise: ProcessNoise::WhiteJerkPsd(q),
+        };
         LinearGaussian {
-            transition: f,
+            transition: m.transition(0.1),
             observation: SMatrix::<f64, 2, 3>::new(1.0, 0.0, 0.0, 0.0, 1.0, 0.0),
-            process_noise: g * g.transpose() * q + SMatrix::identity() * 1e-9,
+            process_noise: m.process_noise(0.1),
             measurement_noise: SMatrix::<f64, 2, 2>::new(r[0], 0.0, 0.0, r[1]),
             initial_mean: SVector::zeros(),
             initial_covariance: SMatrix::identity(),
         }
     }
 
-    fn simulate(m: &LinearGaussian<3, 2>, n: usize, seed: u64) -> Vec<SVector<f64, 2>> {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let unit = Normal::new(0.0, 1.0).unwrap();
-        let lq = m.process_noise.cholesky().unwrap().l();
-        let lr = m.measurement_noise.cholesky().unwrap().l();
-        let mut x = SVector::<f64, 3>::new(0.0, 10.0, 0.0);
-        (0..n)
-            .map(|_| {
-                let w = SVector::<f64, 3>::from_fn(|_, _| unit.sample(&mut rng));
-                let v = SVector::<f64, 2>::from_fn(|_, _| unit.sample(&mut rng));
-                x = m.transition * x + lq * w;
-                m.observation * x + lr * v
-            })
-            .collect()
-    }
-
     #[test]
     fn em_raises_the_likelihood_and_recovers_the_measurement_noise() {
         let truth = ca(0.5, [0.04, 0.01]);
-        let z = simulate(&truth, 20_000, 1);
+        let z = truth.sample(20_000, 1, SVector::<f64, 3>::new(0.0, 10.0, 0.0));
         let mut m = ca(5.0, [1.0, 1.0]);
         let ll = m.em(&z, 60, true, true);
         assert!(

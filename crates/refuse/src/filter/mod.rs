@@ -178,3 +178,23 @@ pub trait Estimator<const N: usize> {
 pub fn symmetric<const N: usize>(p: SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
     (p + p.transpose()) * 0.5
 }
+
+/// A square root `L` of a positive semi-definite `Q` (`L Lᵀ = Q`): Cholesky that passes over
+/// zero pivots, so that rank-deficient noise (a jerk held over the step is rank one) is
+/// handled exactly instead of failing.
+pub fn sqrt_psd<const N: usize>(q: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
+    let mut l = SMatrix::<f64, N, N>::zeros();
+    let scale = q.diagonal().amax().max(f64::MIN_POSITIVE);
+    for j in 0..N {
+        let d = q[(j, j)] - (0..j).map(|k| l[(j, k)] * l[(j, k)]).sum::<f64>();
+        if d <= 1e-13 * scale {
+            continue;
+        }
+        let djj = d.sqrt();
+        l[(j, j)] = djj;
+        for i in j + 1..N {
+            l[(i, j)] = (q[(i, j)] - (0..j).map(|k| l[(i, k)] * l[(j, k)]).sum::<f64>()) / djj;
+        }
+    }
+    l
+}

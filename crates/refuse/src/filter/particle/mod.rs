@@ -21,6 +21,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
+use super::sqrt_psd;
 use super::{symmetric, EstimatorDiagnostics, Innovation, LocalFilter, StateAndCovariance};
 use crate::model::TransitionModel;
 
@@ -144,26 +145,6 @@ impl<const N: usize> ParticleFilter<N> {
             }
         }
     }
-}
-
-/// A square root `L` of a positive semi-definite `Q` (`L Lᵀ = Q`): Cholesky that passes over
-/// zero pivots, so that rank-deficient noise (a jerk held over the step is rank one) is
-/// handled exactly instead of failing.
-pub fn sqrt_psd<const N: usize>(q: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
-    let mut l = SMatrix::<f64, N, N>::zeros();
-    let scale = q.diagonal().amax().max(f64::MIN_POSITIVE);
-    for j in 0..N {
-        let d = q[(j, j)] - (0..j).map(|k| l[(j, k)] * l[(j, k)]).sum::<f64>();
-        if d <= 1e-13 * scale {
-            continue;
-        }
-        let djj = d.sqrt();
-        l[(j, j)] = djj;
-        for i in j + 1..N {
-            l[(i, j)] = (q[(i, j)] - (0..j).map(|k| l[(i, k)] * l[(j, k)]).sum::<f64>()) / djj;
-        }
-    }
-    l
 }
 
 impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
