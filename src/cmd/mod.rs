@@ -10,6 +10,7 @@ pub mod record;
 pub mod recover;
 pub mod refuse;
 pub mod results;
+pub mod results_tuning;
 pub mod simulate;
 pub mod tune;
 pub mod viz;

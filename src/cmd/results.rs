@@ -14,9 +14,19 @@ pub struct Args {
     /// Seeds per experiment (0, 1, … N−1).
     #[arg(long, default_value_t = 10)]
     pub seeds: u64,
-    /// Where to write the table (Markdown).
-    #[arg(short, long, default_value = "docs/results.md")]
-    pub output: PathBuf,
+    /// Where to write the table (Markdown); default docs/results.md, or docs/tuning.md with
+    /// --tuning.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Run the tuning experiments instead: recovery of seed000's known noise values by EM and
+    /// each optimiser, the default pipeline tuned and scored on held-out runs, and EM against
+    /// pykalman's (needs the test venv's Python, or --python).
+    #[arg(long)]
+    pub tuning: bool,
+    /// Python with pykalman, for --tuning (default: $RAILFUSE_PYTHON, then
+    /// .venv-interop/bin/python).
+    #[arg(long)]
+    pub python: Option<PathBuf>,
     /// Folder for the simulated and fused logs.
     #[arg(long, default_value = "target/results")]
     pub dir: PathBuf,
@@ -34,15 +44,18 @@ fn verdict(v: Verdict) -> String {
 pub fn run(a: Args) -> Result<()> {
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
+    if a.tuning {
+        return super::results_tuning::run(&a);
+    }
+    let output = a.output.clone().unwrap_or_else(|| "docs/results.md".into());
     let seeds = a.seeds.max(1);
     let bar = crate::progress::Progress::steps("results", sources::runs(seeds));
     let results = sources::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
     let md = markdown(&results)?;
-    std::fs::write(&a.output, &md)
-        .with_context(|| format!("{}: cannot write", a.output.display()))?;
+    std::fs::write(&output, &md).with_context(|| format!("{}: cannot write", output.display()))?;
     print!("{md}");
-    eprintln!("-> {}", a.output.display());
+    eprintln!("-> {}", output.display());
     Ok(())
 }
 

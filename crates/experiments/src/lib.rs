@@ -7,13 +7,16 @@
 //! - [`sources`]: the experiments of sources 000 and 001 and their typed results, each
 //!   source's claim beside railfuse's figure of the same kind;
 //! - [`long_runs`]: the default pipelines' covariance honesty over one-hour runs;
-//! - [`sharing`]: what sources 000 and 001's α and β change, and under which fusion rule.
+//! - [`sharing`]: what sources 000 and 001's α and β change, and under which fusion rule;
+//! - [`tuning`]: what `railfuse tune` recovers of known noise values, and what tuning buys on
+//!   runs it never saw.
 //!
 //! Printing the results (Markdown, JSON) is the CLI's job.
 
 pub mod long_runs;
 pub mod sharing;
 pub mod sources;
+pub mod tuning;
 
 use std::path::Path;
 
@@ -39,6 +42,12 @@ pub enum Error {
     Refuse(#[from] railfuse_refuse::Error),
     #[error("a pipeline variant does not read back: {0}")]
     Toml(toml::de::Error),
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// One run, evaluated: every pipeline's figures and the run's length.
