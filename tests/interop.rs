@@ -796,3 +796,31 @@ fn every_message_kind_validates_against_its_schema_in_the_python_reader() {
         );
     }
 }
+
+#[test]
+fn em_estimates_equal_pykalman_s_on_the_same_data_and_start() {
+    let d = tempfile::tempdir().unwrap();
+    let python = client("RAILFUSE_PYTHON", "python");
+    let out = ok(&[
+        "bench",
+        "--em",
+        "--em-steps",
+        "2000",
+        "--em-iterations",
+        "5",
+        "--json",
+        "--python",
+        s(&python),
+        "--dir",
+        s(d.path()),
+    ]);
+    let c: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let (q, r) = (
+        c["q_relative_difference"].as_f64().unwrap(),
+        c["r_relative_difference"].as_f64().unwrap(),
+    );
+    assert!(q < 1e-6 && r < 1e-6, "{c}");
+    // EM moved the estimates far from the start (10x off), so agreeing means something.
+    let r00 = c["railfuse_r"][0][0].as_f64().unwrap();
+    assert!((r00 / 0.01 - 1.0).abs() < 0.1, "{c}");
+}

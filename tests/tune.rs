@@ -346,3 +346,99 @@ fn bad_tuning_requests_get_one_clear_line_each() {
     );
     assert!(!out.exists(), "nothing written on a refused request");
 }
+
+#[test]
+fn em_recovers_seed000_s_known_noise_from_a_start_ten_times_off() {
+    // seed000 states its noise: jerk variance 0.001, loop and radar variances 0.01.
+    let d = tempfile::tempdir().unwrap();
+    let logs: Vec<PathBuf> = (1..=3)
+        .map(|seed| {
+            let log = d.path().join(format!("s{seed}.mcap"));
+            ok(&[
+                "simulate",
+                "--scenario",
+                "seed000",
+                "--seed",
+                &seed.to_string(),
+                "--duration",
+                "1000",
+                "-o",
+                s(&log),
+            ]);
+            log
+        })
+        .collect();
+    let text = std::fs::read_to_string(sample("seed000.toml")).unwrap();
+    let bad = text
+        .replace("jerk_variance = 0.001", "jerk_variance = 0.01")
+        .replace("variance = 0.01\n", "variance = 0.1\n");
+    let config = d.path().join("bad.toml");
+    std::fs::write(&config, bad).unwrap();
+    let mut args = vec!["tune"];
+    args.extend(logs.iter().map(|l| s(l)));
+    let out = d.path().join("em.toml");
+    args.extend([
+        "-c",
+        s(&config),
+        "--pipeline",
+        "kf_no_balise",
+        "--optimiser",
+        "em",
+        "--params=motion.jerk_variance=1e-6..1",
+        "--params=sensor[/loop/position].variance=1e-5..1",
+        "--params=sensor[/radar/speed].variance=1e-5..1",
+        "-o",
+        s(&out),
+        "--json",
+    ]);
+    let r: Value = serde_json::from_slice(&ok(&args).stdout).unwrap();
+    let found = |name: &str| {
+        r["params"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap()["after"]
+            .as_f64()
+            .unwrap()
+    };
+    // Three 1000 s runs: the variances to 5 %, the jerk (seen only through the motion) to 15 %.
+    let jerk = found("motion.jerk_variance") / 0.001 - 1.0;
+    let lp = found("sensor[/loop/position].variance") / 0.01 - 1.0;
+    let radar = found("sensor[/radar/speed].variance") / 0.01 - 1.0;
+    assert!(
+        jerk.abs() < 0.15 && lp.abs() < 0.05 && radar.abs() < 0.05,
+        "{jerk} {lp} {radar}"
+    );
+    // The likelihood never falls from one EM iteration to the next.
+    let ll: Vec<f64> = r["em_log_likelihood"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect();
+    assert!(
+        ll.len() > 3 && ll.windows(2).all(|w| w[1] >= w[0] - 1e-6 * w[0].abs()),
+        "{ll:?}"
+    );
+    // EM refuses what it cannot estimate, in one line.
+    let o = railfuse(&[
+        "tune",
+        s(&logs[0]),
+        "-c",
+        s(&config),
+        "--pipeline",
+        "kf_no_balise",
+        "--optimiser",
+        "em",
+        "--params=initial.speed_std_mps=0.1..10",
+        "-o",
+        s(&out),
+    ]);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success() && err.contains("em: estimates the motion noise"),
+        "{err}"
+    );
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+}
