@@ -175,6 +175,18 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
         assert!((rows[0][2] - b).abs() < 1e-12);
         assert!(rows.windows(2).all(|w| w[1][3] <= w[0][3]));
         assert!((rows.last().unwrap()[3] - a).abs() < 1e-12);
+        // The same trace as an MCAP channel, which viz lays out: objective, best, each value.
+        let mcap = out.with_extension("trace.mcap");
+        let trace: Vec<railfuse_catalog::messages::TuneEvaluation> =
+            messages(&mcap, "/tune/kalman/trace");
+        assert_eq!(trace.len(), rows.len());
+        assert!(trace.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
+        assert_eq!(trace[0].values.len(), 4);
+        assert_eq!(trace[0].values[0].name, "motion.jerk_psd");
+        assert_eq!(trace[0].values[0].value, 20.0);
+        let rrd = d.path().join(format!("{optimiser}.rrd"));
+        let viz = ok(&["viz", s(&mcap), "--save", s(&rrd)]);
+        assert!(stderr(&viz).contains("on 6 entities"), "{}", stderr(&viz));
     }
 }
 

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use railfuse_refuse::config::{ObjectiveKind, OptimiserKind};
 use railfuse_refuse::tune::recording::Metrics;
 use railfuse_refuse::tune::search::SearchProgress;
-use railfuse_refuse::tune::{write_trace_csv, TuneOutcome, TuneRequest, Tuner};
+use railfuse_refuse::tune::{write_trace_csv, write_trace_mcap, TuneOutcome, TuneRequest, Tuner};
 
 use crate::table::Table;
 
@@ -54,6 +54,10 @@ pub struct Args {
     /// The convergence trace as CSV (default: OUTPUT with `.trace.csv`).
     #[arg(long)]
     pub trace: Option<PathBuf>,
+    /// The convergence trace as an MCAP log for `railfuse viz` (default: OUTPUT with
+    /// `.trace.mcap`).
+    #[arg(long)]
+    pub trace_mcap: Option<PathBuf>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -127,7 +131,14 @@ fn write_outputs(a: &Args, tuner: &Tuner, outcome: &TuneOutcome) -> Result<()> {
         .with_context(|| format!("{}: writing the trace", trace.display()))?;
     write_trace_csv(std::io::BufWriter::new(file), &tuner.params, &outcome.trace)
         .with_context(|| format!("{}: writing the trace", trace.display()))?;
+    write_trace_mcap(&trace_mcap_path(a), &outcome.report, &outcome.trace)?;
     Ok(())
+}
+
+fn trace_mcap_path(a: &Args) -> PathBuf {
+    a.trace_mcap
+        .clone()
+        .unwrap_or_else(|| a.output.with_extension("trace.mcap"))
 }
 
 fn print_report(a: &Args, o: &TuneOutcome) {
@@ -229,8 +240,9 @@ fn print_report(a: &Args, o: &TuneOutcome) {
         .clone()
         .unwrap_or_else(|| a.output.with_extension("trace.csv"));
     println!(
-        "wrote {} and the trace {}",
+        "wrote {} and the trace {} and {} (railfuse viz shows it)",
         a.output.display(),
-        trace.display()
+        trace.display(),
+        trace_mcap_path(a).display()
     );
 }

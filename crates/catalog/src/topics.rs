@@ -34,6 +34,16 @@ pub fn standard_kind(topic: &str) -> Option<MessageKind> {
     })
 }
 
+/// `/tune/<pipeline>/trace`: the convergence trace of a tuning run of one pipeline.
+pub fn tune_trace(pipeline: &str) -> String {
+    format!("/tune/{pipeline}/trace")
+}
+
+/// The pipeline of a `/tune/<pipeline>/trace` topic.
+pub fn tune_trace_pipeline(topic: &str) -> Option<&str> {
+    topic.strip_prefix("/tune/")?.strip_suffix("/trace")
+}
+
 /// Prefix of every fused channel.
 pub const FUSED_PREFIX: &str = "/fused/";
 

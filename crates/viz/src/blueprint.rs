@@ -39,6 +39,8 @@ pub struct Layout {
     /// GNSS satellites and HDOP.
     pub gnss_quality: bool,
     pub imu: bool,
+    /// Tuning traces: per tuned pipeline, its value entities with their names.
+    pub tune: Vec<(String, Vec<(String, String)>)>,
 }
 
 /// One pipeline's diagnostic views.
@@ -273,6 +275,9 @@ impl Layout {
             y_range: None,
             legend: true,
         };
+        if !self.tune.is_empty() && self.pipelines.is_empty() && !self.truth {
+            return self.tune_tree(main);
+        }
         let mut map = view("2D", "Map (east →, north ↑)", "/map");
         if let Node::View { trails, .. } = &mut map {
             trails.extend(self.gnss_fixes.iter().map(|e| format!("/{e}")));
@@ -357,6 +362,41 @@ impl Layout {
             vec![top, events],
             &[4.0, 1.0],
         )
+    }
+
+    /// A tuning trace: per pipeline, the objective and the best so far over the search, and
+    /// each tuned value on its own (their scales differ by decades).
+    fn tune_tree(&self, main: PlotStyle) -> Node {
+        let tabs = self
+            .tune
+            .iter()
+            .map(|(pipeline, values)| {
+                let objective = plot(
+                    &format!("{pipeline}: objective of each evaluation, and the best so far"),
+                    &format!("/{}", ent::tune_objective(pipeline)),
+                    main,
+                );
+                let small = PlotStyle {
+                    legend: false,
+                    ..main
+                };
+                let plots = values
+                    .iter()
+                    .map(|(entity, name)| plot(name, &format!("/{entity}"), small))
+                    .collect();
+                let mut grid = container(ContainerKind::Grid, None, plots, &[]);
+                if let Node::Container { grid_columns, .. } = &mut grid {
+                    *grid_columns = Some(2);
+                }
+                container(
+                    ContainerKind::Vertical,
+                    Some(pipeline),
+                    vec![objective, grid],
+                    &[1.0, 1.0],
+                )
+            })
+            .collect();
+        container(ContainerKind::Tabs, Some("Tuning"), tabs, &[])
     }
 
     /// The blueprint as log messages of its own store, and the command that activates it.

@@ -7,6 +7,7 @@
 //!   and sensor states.
 //! - `sensors/…`: raw sensors on their own (position sensors' errors, the IMU).
 //! - `events`: a text log.
+//! - `tune/<pipeline>/…`: a tuning run's convergence trace (objective, best, each value).
 
 use railfuse_catalog::messages::{FixType, GateDecision};
 
@@ -33,6 +34,16 @@ pub const GNSS_QUALITY: &str = "sensors/gnss/quality";
 pub const GNSS_SATELLITES: &str = "sensors/gnss/quality/satellites";
 pub const IMU_SPECIFIC_FORCE: &str = "sensors/imu/specific_force";
 pub const IMU_ANGULAR_RATE: &str = "sensors/imu/angular_rate";
+
+/// A tuning run's objective and best-so-far, by evaluation time.
+pub fn tune_objective(pipeline: &str) -> String {
+    format!("tune/{pipeline}/objective")
+}
+
+/// One tuned value of a tuning run (`k`: its place in the run's parameter list).
+pub fn tune_value(pipeline: &str, k: usize) -> String {
+    format!("tune/{pipeline}/values/{k}")
+}
 
 /// GNSS fixes of one fix type on the map: one entity per type, so each has its colour and name.
 pub fn gnss_fixes(fix: FixType) -> String {

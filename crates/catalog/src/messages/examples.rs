@@ -59,6 +59,10 @@ impl MessageKind {
                 "east_m": 1200.0, "north_m": 310.0, "latitude_deg": 44.61,
                 "longitude_deg": 10.92, "heading_rad": 0.3
             }),
+            MessageKind::TuneEvaluation => json!({
+                "stamp_ns": T, "evaluation": 3, "objective": 0.31, "best": 0.29,
+                "values": [{"name": "motion.jerk_psd", "value": 0.05}]
+            }),
             MessageKind::Event => json!({
                 "stamp_ns": T, "kind": "tunnel_entry", "text": "T1"
             }),

@@ -1,5 +1,5 @@
-//! One module per sensor kind, plus the static track map, ground truth, events and the fused
-//! channels. Each type implements [`ChannelMessage`], which ties it to its schema name.
+//! One module per sensor kind, plus the static track map, ground truth, events, the fused
+//! channels and tuning traces. Each type implements [`ChannelMessage`], which ties it to its schema name.
 
 mod balise;
 mod eddy_current;
@@ -15,6 +15,7 @@ mod radar;
 mod recorder;
 mod registry;
 mod track_map;
+mod tuning;
 
 pub use balise::BalisePassage;
 pub use eddy_current::EddyCurrentBlock;
@@ -31,6 +32,7 @@ pub use radar::RadarSpeed;
 pub use recorder::{RecorderDiagnostics, SourceStats};
 pub use registry::{AnyMessage, MessageKind};
 pub use track_map::{Station, TrackBalise, TrackMap, TrackVertex, Tunnel};
+pub use tuning::{TuneEvaluation, TunedValue};
 
 use serde::{de::DeserializeOwned, Serialize};
 

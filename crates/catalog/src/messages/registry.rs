@@ -123,6 +123,7 @@ registry!(
     FusedState,
     FusedDiagnostics,
     RecorderDiagnostics,
+    TuneEvaluation,
 );
 
 impl MessageKind {

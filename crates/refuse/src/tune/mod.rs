@@ -152,6 +152,8 @@ pub struct TuneReport {
     pub after: Metrics,
     pub logs: Vec<LogReport>,
     pub evaluations: usize,
+    /// When the search started, ns since the Unix epoch (the trace's times count from it).
+    pub started_unix_ns: u64,
     pub ending: Ending,
     pub search_s: f64,
     pub evaluations_per_s: f64,
@@ -333,6 +335,9 @@ impl Tuner {
         stop: Option<&AtomicBool>,
         progress: Option<&(dyn Fn(SearchProgress) + Sync)>,
     ) -> Result<TuneOutcome> {
+        let started_unix_ns = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos() as u64);
         let start = self.start();
         let before = self.evaluate(&start)?;
         let values_of = |u: &[f64]| -> Vec<f64> {
@@ -425,6 +430,7 @@ impl Tuner {
                 })
                 .collect(),
             evaluations,
+            started_unix_ns,
             ending,
             search_s,
             evaluations_per_s: (evaluations.saturating_sub(1)) as f64 / search_s.max(1e-9),
@@ -500,5 +506,52 @@ pub fn write_trace_csv(
         w.write_record(&row)?;
     }
     w.flush()?;
+    Ok(())
+}
+
+/// The trace as an MCAP log `viz` shows: one `railfuse.TuneEvaluation` per evaluation on
+/// `/tune/<pipeline>/trace`, stamped by when it was entered, and the report as metadata.
+pub fn write_trace_mcap(
+    path: &std::path::Path,
+    report: &TuneReport,
+    trace: &[TraceRow],
+) -> Result<()> {
+    use railfuse_catalog::log::LogWriter;
+    use railfuse_catalog::messages::{TuneEvaluation, TunedValue};
+    let finite = |x: f64| x.is_finite().then_some(x);
+    let mut w = LogWriter::create(path)?;
+    let channel =
+        w.add_channel::<TuneEvaluation>(&railfuse_catalog::topics::tune_trace(&report.pipeline))?;
+    let mut last = 0;
+    for r in trace {
+        // A batch is entered at one instant: 1 µs apart keeps its evaluations in order.
+        let stamp_ns = (report.started_unix_ns + (r.elapsed_s * 1e9) as u64).max(last + 1000);
+        last = stamp_ns;
+        let m = TuneEvaluation {
+            stamp_ns,
+            evaluation: r.evaluation as u64,
+            objective: finite(r.objective),
+            best: finite(r.best),
+            values: report
+                .params
+                .iter()
+                .zip(&r.values)
+                .map(|(p, &value)| TunedValue {
+                    name: p.name.clone(),
+                    value,
+                })
+                .collect(),
+        };
+        w.write(channel, stamp_ns, &m)?;
+    }
+    let json = serde_json::to_string(report).expect("a report serialises");
+    w.write_metadata(
+        "railfuse.tune",
+        std::collections::BTreeMap::from([
+            ("pipeline".to_owned(), report.pipeline.clone()),
+            ("report".to_owned(), json),
+        ]),
+    )?;
+    w.finish()?;
     Ok(())
 }
