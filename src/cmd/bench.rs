@@ -48,6 +48,10 @@ pub struct Args {
     /// data in six minutes, to see whether memory grows with the amount recorded).
     #[arg(long, default_value_t = 1.0)]
     pub record_speedup: f64,
+    /// Measure tuning instead: decoding a default-scenario log of this many seconds once, and
+    /// evaluations per second of the default pipeline on it, on one core and on every core.
+    #[arg(long, value_name = "SECONDS")]
+    pub tune: Option<f64>,
     /// Measure EM instead: railfuse's against pykalman's `KalmanFilter.em` on the same
     /// constant-acceleration data (10 000 steps, 20 iterations, Q and R estimated).
     #[arg(long)]
@@ -72,6 +76,9 @@ struct Measured {
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
         return super::bench_record::run(&a.dir, secs, a.record_speedup);
+    }
+    if let Some(secs) = a.tune {
+        return super::bench_tune::run(&a.dir, secs, a.repeat);
     }
     if a.em {
         let python = a.python.clone().or_else(find_python);
