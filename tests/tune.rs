@@ -313,48 +313,38 @@ fn bad_tuning_requests_get_one_clear_line_each() {
             s(&out),
         ];
         args.extend(extra.iter());
-        let o = railfuse(&args);
-        let err = stderr(&o);
-        assert!(!o.status.success(), "{args:?}");
-        assert!(err.contains(expected), "{args:?}: {err}");
-        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-        assert!(!err.contains("panicked"), "{err}");
+        refused(&args, &[expected]);
     }
     // A log without the pipeline's sensors, and a pipeline the file does not have.
-    let o = railfuse(&[
-        "tune",
-        s(&seed001),
-        "-c",
-        s(&kalman),
-        "--pipeline",
-        "kalman",
-        "--params",
-        "motion.jerk_psd=0.01..1",
-        "-o",
-        s(&out),
-    ]);
-    let err = stderr(&o);
-    assert!(
-        !o.status.success() && err.contains("/loop/position") && err.contains("is not in the file"),
-        "{err}"
+    refused(
+        &[
+            "tune",
+            s(&seed001),
+            "-c",
+            s(&kalman),
+            "--pipeline",
+            "kalman",
+            "--params",
+            "motion.jerk_psd=0.01..1",
+            "-o",
+            s(&out),
+        ],
+        &["/loop/position", "is not in the file"],
     );
-    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
-    let o = railfuse(&[
-        "tune",
-        s(&log),
-        "-c",
-        s(&kalman),
-        "--pipeline",
-        "nope",
-        "--params",
-        "motion.jerk_psd=0.01..1",
-        "-o",
-        s(&out),
-    ]);
-    assert!(
-        stderr(&o).contains("no [[pipeline]] of that name (it has kalman)"),
-        "{}",
-        stderr(&o)
+    refused(
+        &[
+            "tune",
+            s(&log),
+            "-c",
+            s(&kalman),
+            "--pipeline",
+            "nope",
+            "--params",
+            "motion.jerk_psd=0.01..1",
+            "-o",
+            s(&out),
+        ],
+        &["no [[pipeline]] of that name (it has kalman)"],
     );
     assert!(!out.exists(), "nothing written on a refused request");
 }
@@ -434,23 +424,30 @@ fn em_recovers_seed000_s_known_noise_from_a_start_ten_times_off() {
         "{ll:?}"
     );
     // EM refuses what it cannot estimate, in one line.
-    let o = railfuse(&[
-        "tune",
-        s(&logs[0]),
-        "-c",
-        s(&config),
-        "--pipeline",
-        "kf_no_balise",
-        "--optimiser",
-        "em",
-        "--params=initial.speed_std_mps=0.1..10",
-        "-o",
-        s(&out),
-    ]);
-    let err = stderr(&o);
-    assert!(
-        !o.status.success() && err.contains("em: estimates the motion noise"),
-        "{err}"
+    refused(
+        &[
+            "tune",
+            s(&logs[0]),
+            "-c",
+            s(&config),
+            "--pipeline",
+            "kf_no_balise",
+            "--optimiser",
+            "em",
+            "--params=initial.speed_std_mps=0.1..10",
+            "-o",
+            s(&out),
+        ],
+        &["em: estimates the motion noise"],
     );
+}
+
+/// `railfuse args` fails with one line on stderr holding every one of `expected`.
+fn refused(args: &[&str], expected: &[&str]) {
+    let o = railfuse(args);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{args:?}");
+    assert!(expected.iter().all(|e| err.contains(e)), "{args:?}: {err}");
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(!err.contains("panicked"), "{err}");
 }

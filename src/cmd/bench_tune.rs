@@ -6,8 +6,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use rayon::prelude::*;
 use railfuse_refuse::tune::{TuneRequest, Tuner};
+use rayon::prelude::*;
 
 use super::refuse::peak_rss_kib;
 use super::DEFAULT_PIPELINES;
@@ -43,7 +43,10 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
         peak_rss_kib().map_or("-".into(), |k| format!("{:.0}", k as f64 / 1024.0)),
         rss_before.map_or("-".into(), |k| format!("{:.0}", k as f64 / 1024.0)),
     );
-    println!("{:<10} {:>12} {:>16} {:>18}", "threads", "evaluations", "evaluations/s", "sensor msg/s");
+    println!(
+        "{:<10} {:>12} {:>16} {:>18}",
+        "threads", "evaluations", "evaluations/s", "sensor msg/s"
+    );
     let start = tuner.start();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut thread_counts = vec![1];
@@ -51,7 +54,9 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
         thread_counts.push(cores);
     }
     for threads in thread_counts {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()?;
         let n = (repeat.max(1) as usize) * threads * 2;
         let started = Instant::now();
         // Independent candidates, as a grid or a swarm evaluates them.
