@@ -391,8 +391,7 @@ impl Tuner {
         let (trace, best) = book.finish();
         let best = em_answer.unwrap_or_else(|| best.map_or(start.clone(), |b| b.values));
         let after = self.evaluate(&best)?;
-        let mut tuned = self.config.clone();
-        tuned.set(&self.params, &best)?;
+        let tuned_toml = self.tuned_text(&best)?;
         let evaluations = trace.len();
         let report = TuneReport {
             config: self.config.path.clone(),
@@ -442,8 +441,15 @@ impl Tuner {
         Ok(TuneOutcome {
             report,
             trace,
-            tuned_toml: tuned.text(),
+            tuned_toml,
         })
+    }
+
+    /// The configuration text with `values` written in, comments kept.
+    pub fn tuned_text(&self, values: &[f64]) -> Result<String> {
+        let mut c = self.config.clone();
+        c.set(&self.params, values)?;
+        Ok(c.text())
     }
 }
 

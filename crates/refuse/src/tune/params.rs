@@ -136,6 +136,13 @@ impl Param {
         format!("{v:.5e}").parse().unwrap_or(v)
     }
 
+    /// The values a grid search takes along this parameter.
+    pub fn grid(&self) -> Vec<f64> {
+        (0..self.steps)
+            .map(|i| self.from_unit(i as f64 / (self.steps - 1) as f64))
+            .collect()
+    }
+
     /// Whether `v` sits on a bound (within 0.1 % of the range): a sign the bound, not the
     /// data, chose it.
     pub fn on_bound(&self, v: f64) -> bool {
