@@ -451,3 +451,49 @@ fn refused(args: &[&str], expected: &[&str]) {
     assert_eq!(err.trim_end().lines().count(), 1, "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn ctrl_c_ends_the_search_and_writes_the_best_found() {
+    let d = tempfile::tempdir().unwrap();
+    let log = simulate(d.path(), 7, 120);
+    let bad = bad_config(d.path());
+    let out = d.path().join("stopped.toml");
+    let mut args = vec![
+        "tune".to_owned(),
+        s(&log).to_owned(),
+        "-c".into(),
+        s(&bad).to_owned(),
+        "--pipeline".into(),
+        "kalman".into(),
+        "--reference".into(),
+        "/truth".into(),
+        "--optimiser".into(),
+        "pso".into(),
+        "--max-evals".into(),
+        "10000000".into(),
+        "-o".into(),
+        s(&out).to_owned(),
+        "--json".into(),
+    ];
+    args.extend(PARAMS.iter().map(|p| p.to_string()));
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
+        .args(&args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    // SAFETY: signalling our own child by its pid.
+    unsafe {
+        libc::kill(child.id() as i32, libc::SIGINT);
+    }
+    let o = child.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["ending"], "interrupted");
+    assert!(r["evaluations"].as_u64().unwrap() < 10_000_000);
+    assert!(r["objective_after"].as_f64() <= r["objective_before"].as_f64());
+    let tuned = std::fs::read_to_string(&out).unwrap();
+    assert!(tuned.contains("[[pipeline.sensor]]"));
+    assert!(out.with_extension("trace.csv").exists() && out.with_extension("trace.mcap").exists());
+}
