@@ -109,7 +109,8 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
     assert_eq!(before["gated"], eval["gated"]);
 
     let bad = bad_config(d.path());
-    for optimiser in ["grid", "nelder-mead", "pso"] {
+    // (tests/run builds with the `bayesian` feature)
+    for optimiser in ["grid", "nelder-mead", "pso", "bayesian"] {
         let out = d.path().join(format!("{optimiser}.toml"));
         // The grid: 3 points a parameter, 81 in all.
         let steps = if optimiser == "grid" { ",steps=3" } else { "" };
@@ -224,6 +225,22 @@ fn the_same_seed_gives_the_same_tuning_on_one_thread_or_two() {
         (std::fs::read_to_string(&out).unwrap(), trace, r)
     };
     let (a, ta, ra) = run("a", "7", "1");
+    // Bayesian optimisation too: its design and model are seeded.
+    let bayes = |name: &str| {
+        let out = d.path().join(format!("{name}.toml"));
+        let mut extra = vec![
+            "--reference",
+            "/truth",
+            "--optimiser",
+            "bayesian",
+            "--max-evals",
+            "25",
+        ];
+        extra.extend(PARAMS);
+        tune(&log, &bad, &out, &extra);
+        std::fs::read_to_string(&out).unwrap()
+    };
+    assert_eq!(bayes("bo1"), bayes("bo2"));
     let (b, tb, _) = run("b", "7", "2");
     let (c, tc, _) = run("c", "8", "2");
     assert_eq!(a, b);

@@ -28,13 +28,20 @@ pub const SEED000_TRUTH: [(&str, f64); 3] = [
 /// The recovery runs' length: ten times the source's 100 s, for estimates worth comparing.
 pub const RECOVERY_DURATION_S: f64 = 1000.0;
 
-/// The methods compared, and the evaluations each may make.
-pub const METHODS: [(OptimiserKind, &str, usize); 4] = [
-    (OptimiserKind::Em, "EM", 200),
-    (OptimiserKind::Grid, "grid (9 points a value)", 729),
-    (OptimiserKind::NelderMead, "Nelder–Mead", 200),
-    (OptimiserKind::Pso, "particle swarm", 200),
-];
+/// The methods compared, and the evaluations each may make (Bayesian optimisation when this
+/// build has it).
+pub fn methods() -> Vec<(OptimiserKind, &'static str, usize)> {
+    let mut m = vec![
+        (OptimiserKind::Em, "EM", 200),
+        (OptimiserKind::Grid, "grid (9 points a value)", 729),
+        (OptimiserKind::NelderMead, "Nelder–Mead", 200),
+        (OptimiserKind::Pso, "particle swarm", 200),
+    ];
+    if railfuse_refuse::tune::BAYESIAN {
+        m.push((OptimiserKind::Bayesian, "Bayesian (EGO)", 60));
+    }
+    m
+}
 
 #[derive(Debug, Clone, Serialize)]
 pub struct RecoveryRow {
@@ -107,7 +114,7 @@ fn simulate_to(dir: &Path, scenario: &str, seed: u64, duration_s: f64) -> Result
 
 /// Steps [`run_all`] reports through `progress`.
 pub fn runs(seeds: u64) -> u64 {
-    seeds * METHODS.len() as u64 + 1
+    seeds * methods().len() as u64 + 1
 }
 
 /// Runs both experiments over seeds 1 … `seeds` (held out: trained on them, tested on the
@@ -124,7 +131,8 @@ pub fn run_all(
         path: config.clone(),
         source,
     })?;
-    let mut recovery: Vec<RecoveryRow> = METHODS
+    let methods = methods();
+    let mut recovery: Vec<RecoveryRow> = methods
         .iter()
         .map(|(_, name, _)| RecoveryRow {
             method: (*name).to_owned(),
@@ -135,7 +143,7 @@ pub fn run_all(
         .collect();
     for seed in 1..=seeds {
         let log = simulate_to(dir, "seed000", seed, RECOVERY_DURATION_S)?;
-        for ((optimiser, _, budget), row) in METHODS.iter().zip(&mut recovery) {
+        for ((optimiser, _, budget), row) in methods.iter().zip(&mut recovery) {
             let started = Instant::now();
             let tuner = Tuner::open(&TuneRequest {
                 config: config.clone(),

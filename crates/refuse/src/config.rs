@@ -334,7 +334,7 @@ pub struct ScaleFactorConfig {
 /// [pipeline.tune]
 /// reference = "/truth/state"   # or an RTK GNSS channel, or another pipeline's state
 /// objective = "rmse"           # position_weight · RMSE(s) + speed_weight · RMSE(v); or "nll"
-/// optimiser = "nelder_mead"    # grid, nelder_mead, pso, em
+/// optimiser = "nelder_mead"    # grid, nelder_mead, pso, bayesian, em
 /// [pipeline.tune.params]
 /// "motion.jerk_psd" = { min = 0.001, max = 10.0 }
 /// "sensor[/radar/speed].variance" = { min = 1e-4, max = 1.0 }
@@ -386,6 +386,9 @@ pub enum OptimiserKind {
     NelderMead,
     /// Particle swarm.
     Pso,
+    /// Bayesian optimisation: efficient global optimisation (egobox), a Gaussian-process model
+    /// of the objective sampled where the expected improvement is largest.
+    Bayesian,
     /// Expectation–maximisation: the maximum-likelihood motion noise and sensor variances of
     /// a linear-Gaussian Kalman pipeline.
     Em,

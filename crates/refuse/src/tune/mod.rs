@@ -34,6 +34,9 @@ use params::{Param, ParamPath, TunableConfig};
 use recording::{Metrics, Recording, Score};
 use search::{Ending, Evaluations, SearchProgress, SearchSettings, TraceRow};
 
+/// Whether this build has Bayesian optimisation (the `bayesian` feature).
+pub const BAYESIAN: bool = cfg!(feature = "bayesian");
+
 /// Evaluations a search may make when nothing says otherwise (a grid makes all its points).
 pub const DEFAULT_BUDGET: usize = 200;
 
@@ -249,6 +252,9 @@ impl Tuner {
             .optimiser
             .or(table.optimiser)
             .unwrap_or(OptimiserKind::NelderMead);
+        if optimiser == OptimiserKind::Bayesian && !BAYESIAN {
+            return Err(fail(search::WITHOUT_BAYESIAN.into()));
+        }
         let grid_points: usize = params.iter().map(|p| p.steps).product();
         let budget = req
             .max_evaluations

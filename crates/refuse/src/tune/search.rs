@@ -4,6 +4,10 @@
 //! evaluations in the order they are asked for (so a parallel batch gives the same trace and
 //! the same best on every run), keeps the best, stops at the budget or on Ctrl-C, and tells the
 //! progress callback.
+//!
+//! Bayesian optimisation is egobox's efficient global optimisation (EGO): a Gaussian-process
+//! model of the objective over the unit box, fitted to every evaluation so far, sampled next
+//! where the expected improvement is largest; it starts from a Latin-hypercube design.
 
 use std::borrow::Borrow;
 use std::collections::HashMap;
@@ -49,7 +53,7 @@ pub struct Evaluations<'a> {
     values_of: &'a (dyn Fn(&[f64]) -> Vec<f64> + Sync),
     /// The objective at those values.
     objective: &'a (dyn Fn(&[f64]) -> Result<f64> + Sync),
-    budget: usize,
+    pub budget: usize,
     asked: AtomicUsize,
     rows: Mutex<Vec<TraceRow>>,
     /// Objective by candidate (bit patterns of its values): a simplex that comes back to a
@@ -207,6 +211,10 @@ pub fn search(s: &SearchSettings, book: &Evaluations<'_>) -> Result<Ending> {
         OptimiserKind::Grid => grid(s, book),
         OptimiserKind::NelderMead => nelder_mead(s, book),
         OptimiserKind::Pso => swarm(s, book),
+        #[cfg(feature = "bayesian")]
+        OptimiserKind::Bayesian => bayesian(s, book),
+        #[cfg(not(feature = "bayesian"))]
+        OptimiserKind::Bayesian => unreachable!("refused by the tuner: {}", WITHOUT_BAYESIAN),
         OptimiserKind::Em => unreachable!("EM is run by the tuner, not searched"),
     };
     match ended {
@@ -309,5 +317,55 @@ fn swarm(s: &SearchSettings, book: &Evaluations<'_>) -> Result<()> {
         .configure(|state| state.max_iters(u64::MAX))
         .run()
         .map_err(unwrap)?;
+    Ok(())
+}
+
+/// Points EGO's first design holds: enough to fit a Gaussian process in `n` dimensions.
+pub fn initial_design(dimensions: usize) -> usize {
+    (2 * dimensions + 1).max(5)
+}
+
+/// Why a build without the `bayesian` feature refuses `--optimiser bayesian`.
+pub const WITHOUT_BAYESIAN: &str =
+    "this railfuse was built without Bayesian optimisation: build it with `--features bayesian`";
+
+/// egobox's EGO over the unit box, its first design a seeded Latin hypercube (the file's
+/// values are already in the book as evaluation 0).
+#[cfg(feature = "bayesian")]
+fn bayesian(s: &SearchSettings, book: &Evaluations<'_>) -> Result<()> {
+    use egobox_ego::EgorBuilder;
+    use ndarray::{Array1, Array2, ArrayView2};
+    let n = s.start.len();
+    let limits = Array2::from_shape_fn((n, 2), |(_, j)| j as f64);
+    let failure = std::sync::Mutex::new(None::<Error>);
+    let objective = |x: &ArrayView2<f64>| -> std::result::Result<Array2<f64>, String> {
+        let points: Vec<Vec<f64>> = x.rows().into_iter().map(|r| r.to_vec()).collect();
+        match book.batch(&points) {
+            // An infinite objective (a refused candidate) would break the model: a large
+            // finite one keeps EGO away from it.
+            Ok(v) => Ok(Array2::from_shape_fn((v.len(), 1), |(i, _)| {
+                v[i].min(1e300)
+            })),
+            Err(e) => {
+                let why = e.to_string();
+                *failure.lock().expect("failure lock") = Some(e);
+                Err(why)
+            }
+        }
+    };
+    let design = initial_design(n);
+    let result = EgorBuilder::optimize(objective)
+        .configure(|c| {
+            c.n_doe(design)
+                .max_iters(book.budget)
+                .seed(s.seed)
+                .stop_on_error(true)
+        })
+        .min_within(&limits)
+        .and_then(|egor| egor.run());
+    if let Some(e) = failure.into_inner().expect("failure lock") {
+        return Err(e);
+    }
+    let _: Array1<f64> = result.map_err(|e| Error::TuneSearch(e.to_string()))?.x_opt;
     Ok(())
 }
