@@ -5,6 +5,7 @@ use railfuse_catalog::reference_track::MAX_GAP_PERIODS;
 use railfuse_catalog::topics;
 use railfuse_refuse::accuracy::{ConsistencySummary, ErrorSummary};
 use railfuse_refuse::eval::{evaluate, EvalReport};
+use railfuse_refuse::safety::summary::SafetyEval;
 
 use crate::table::Table;
 
@@ -97,6 +98,11 @@ pub fn print_eval(report: &EvalReport) {
     }
     print!("{t}");
     for p in &report.pipelines {
+        if let Some(safety) = &p.safety {
+            print_safety(&p.name, safety);
+        }
+    }
+    for p in &report.pipelines {
         let (gaps, outside) = (p.states_in_reference_gaps, p.unmatched_states);
         if gaps + outside > 0 {
             println!(
@@ -107,6 +113,58 @@ pub fn print_eval(report: &EvalReport) {
                 gaps + outside,
                 p.states
             );
+        }
+    }
+}
+
+/// S7 of a pipeline with safety checks: availability, containment, each check's record, and
+/// whether each injected fault was caught.
+fn print_safety(name: &str, e: &SafetyEval) {
+    let c = &e.containment;
+    let held = match e.containment_share {
+        Some(share) => format!(
+            "U_safe held the reference in {} of {} ({:.4} %)",
+            c.contained,
+            c.checked,
+            100.0 * share
+        ),
+        None => "U_safe not checked (no reference)".to_owned(),
+    };
+    println!(
+        "{name}: safety: {} of {} epochs usable ({:.2} %); {held}",
+        e.usable_epochs,
+        e.epochs,
+        100.0 * e.availability
+    );
+    let mut t = Table::new(&[
+        "  check",
+        "failed epochs",
+        "first failure",
+        "episodes",
+        "failed s",
+    ]);
+    for k in e.checks.iter().filter(|k| k.failed_epochs > 0) {
+        t.row(vec![
+            format!("  {}", k.check),
+            k.failed_epochs.to_string(),
+            k.first_failure_epochs.to_string(),
+            k.episodes.to_string(),
+            format!("{:.1}", k.failed_s),
+        ]);
+    }
+    print!("{t}");
+    for f in &e.faults {
+        match (f.flagged, f.delay_s, &f.by) {
+            (true, Some(d), Some(by)) => {
+                println!(
+                    "  {} at {:.1} s: flagged after {d:.2} s by {by}",
+                    f.label, f.start_s
+                )
+            }
+            _ => println!(
+                "  {} at {:.1} s: not flagged while it lasted",
+                f.label, f.start_s
+            ),
         }
     }
 }

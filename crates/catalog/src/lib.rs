@@ -21,9 +21,11 @@ pub mod foxglove;
 pub mod geodesy;
 pub mod inspect;
 pub mod log;
+pub mod map_matching;
 pub mod messages;
 pub mod reference_track;
 pub mod topics;
+pub mod track_geojson;
 
 pub use error::{Error, Result};
 pub use messages::ChannelMessage;

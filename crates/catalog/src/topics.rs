@@ -62,12 +62,19 @@ pub fn fused_smoothed(pipeline: &str) -> String {
     format!("{FUSED_PREFIX}{pipeline}/smoothed")
 }
 
+/// `/fused/<pipeline>/safety`: the safety checks and safe interval of each epoch of a
+/// pipeline with safety checks.
+pub fn fused_safety(pipeline: &str) -> String {
+    format!("{FUSED_PREFIX}{pipeline}/safety")
+}
+
 /// The channels each pipeline writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FusedChannel {
     State,
     Diagnostics,
     Smoothed,
+    Safety,
 }
 
 /// The pipeline and channel of a fused topic (`/fused/<pipeline>/<channel>`), if it is one.
@@ -77,6 +84,7 @@ pub fn parse_fused(topic: &str) -> Option<(&str, FusedChannel)> {
         "state" => FusedChannel::State,
         "diagnostics" => FusedChannel::Diagnostics,
         "smoothed" => FusedChannel::Smoothed,
+        "safety" => FusedChannel::Safety,
         _ => return None,
     };
     (!pipeline.is_empty()).then_some((pipeline, channel))
@@ -109,6 +117,7 @@ mod tests {
             (fused_state("kf"), FusedChannel::State),
             (fused_diagnostics("kf"), FusedChannel::Diagnostics),
             (fused_smoothed("kf"), FusedChannel::Smoothed),
+            (fused_safety("kf"), FusedChannel::Safety),
         ] {
             assert_eq!(parse_fused(&topic), Some(("kf", channel)));
             assert_eq!(fused_pipeline_of(&topic), Some("kf"));

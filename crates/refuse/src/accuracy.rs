@@ -196,6 +196,38 @@ pub fn nees(state: &FusedState, position_error: f64, speed_error: f64) -> f64 {
         / det
 }
 
+/// What waits for its reference: a state to score, or a safe interval to check.
+#[derive(Debug, Clone)]
+enum Waiting {
+    State(Estimate),
+    /// A safe interval `[low, high]` along the track at a stamp (source 002's U_safe).
+    Interval {
+        stamp_ns: u64,
+        low_m: f64,
+        high_m: f64,
+    },
+}
+
+impl Waiting {
+    fn stamp_ns(&self) -> u64 {
+        match self {
+            Waiting::State(e) => e.stamp_ns,
+            Waiting::Interval { stamp_ns, .. } => *stamp_ns,
+        }
+    }
+}
+
+/// How often safe intervals held the reference.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct Containment {
+    /// Intervals checked against the reference.
+    pub checked: u64,
+    /// Of those, intervals that held it.
+    pub contained: u64,
+    /// Intervals in a gap of the reference or outside its time span: not checked.
+    pub unchecked: u64,
+}
+
 /// An estimate waiting for its reference.
 #[derive(Debug, Clone)]
 struct Estimate {
@@ -234,8 +266,10 @@ pub struct WindowStats {
 #[derive(Debug, Clone)]
 pub struct AccuracyMeter {
     reference: ReferenceTrack,
-    /// Estimates newer than the newest reference sample, waiting for it to catch up.
-    waiting: VecDeque<Estimate>,
+    /// Estimates and intervals newer than the newest reference sample, waiting for it to
+    /// catch up.
+    waiting: VecDeque<Waiting>,
+    pub containment: Containment,
     pub position: ErrorStats,
     pub speed: ErrorStats,
     pub nees: Consistency,
@@ -252,6 +286,7 @@ impl AccuracyMeter {
         Self {
             reference: ReferenceTrack::new(lag_s + 2.0),
             waiting: VecDeque::new(),
+            containment: Containment::default(),
             position: ErrorStats::default(),
             speed: ErrorStats::default(),
             nees: Consistency::default(),
@@ -275,9 +310,19 @@ impl AccuracyMeter {
         }) {
             return;
         }
-        while self.waiting.front().is_some_and(|e| e.stamp_ns <= stamp_ns) {
-            let e = self.waiting.pop_front().expect("peeked");
-            self.score(e, spans);
+        while self
+            .waiting
+            .front()
+            .is_some_and(|e| e.stamp_ns() <= stamp_ns)
+        {
+            match self.waiting.pop_front().expect("peeked") {
+                Waiting::State(e) => self.score(e, spans),
+                Waiting::Interval {
+                    stamp_ns,
+                    low_m,
+                    high_m,
+                } => self.check_interval(stamp_ns, low_m, high_m),
+            }
         }
     }
 
@@ -296,14 +341,40 @@ impl AccuracyMeter {
         };
         match self.reference.newest_ns() {
             Some(newest) if newest >= s.stamp_ns => self.score(e, spans),
-            _ => self.waiting.push_back(e),
+            _ => self.waiting.push_back(Waiting::State(e)),
         }
     }
 
-    /// Estimates still waiting at the end of the log had no reference after them.
+    /// A safe interval `[low, high]` at `stamp_ns`: does it hold the reference's chainage?
+    pub fn add_interval(&mut self, stamp_ns: u64, low_m: f64, high_m: f64) {
+        match self.reference.newest_ns() {
+            Some(newest) if newest >= stamp_ns => self.check_interval(stamp_ns, low_m, high_m),
+            _ => self.waiting.push_back(Waiting::Interval {
+                stamp_ns,
+                low_m,
+                high_m,
+            }),
+        }
+    }
+
+    fn check_interval(&mut self, stamp_ns: u64, low_m: f64, high_m: f64) {
+        match self.reference.lookup(stamp_ns) {
+            Lookup::At(s, _) => {
+                self.containment.checked += 1;
+                self.containment.contained += u64::from((low_m..=high_m).contains(&s));
+            }
+            Lookup::Gap | Lookup::Outside => self.containment.unchecked += 1,
+        }
+    }
+
+    /// What still waits at the end of the log had no reference after it.
     pub fn finish(&mut self) {
-        self.unmatched += self.waiting.len() as u64;
-        self.waiting.clear();
+        for w in self.waiting.drain(..) {
+            match w {
+                Waiting::State(_) => self.unmatched += 1,
+                Waiting::Interval { .. } => self.containment.unchecked += 1,
+            }
+        }
     }
 
     fn score(&mut self, e: Estimate, spans: &[Span]) {

@@ -42,6 +42,8 @@ pub enum FilterKind {
     Particle,
     FederatedKalman,
     FederatedParticle,
+    /// Source 002: the EKF in the plane with safety checks and a safe interval.
+    EkfSafety,
 }
 
 impl FilterKind {
@@ -60,6 +62,7 @@ impl FilterKind {
             FilterKind::Particle => "particle",
             FilterKind::FederatedKalman => "federated_kalman",
             FilterKind::FederatedParticle => "federated_particle",
+            FilterKind::EkfSafety => "ekf_safety",
         }
     }
 }
@@ -95,6 +98,9 @@ pub struct PipelineConfig {
     pub particle: Option<ParticleSettings>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub federated: Option<FederatedConfig>,
+    /// `ekf_safety` pipelines: the sensors' roles and the safety checks' thresholds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub safety: Option<crate::safety::SafetySettings>,
     pub sensor: Vec<Spanned<SensorConfig>>,
     /// What `railfuse tune` may change in this pipeline and what it minimises; refuse
     /// ignores it.

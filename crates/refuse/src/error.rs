@@ -8,6 +8,9 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 pub enum Error {
     #[error(transparent)]
     Log(#[from] railfuse_catalog::Error),
+    /// A track map that cannot be used (the message names the file and the cause).
+    #[error("{0}")]
+    Map(String),
     #[error("{path}: {source}")]
     ConfigRead {
         path: PathBuf,

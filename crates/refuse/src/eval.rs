@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use railfuse_catalog::log::{read_summary, LogMessage, LogReader, LogRecord};
 use railfuse_catalog::messages::{
     BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision,
-    GnssFix, GroundTruth, TrackMap,
+    GnssFix, GroundTruth, SafetyStatus, TrackMap,
 };
 use railfuse_catalog::topics::{self, FusedChannel};
 use serde::Serialize;
@@ -29,6 +29,7 @@ use crate::accuracy::{
 };
 use crate::error::Result;
 use crate::measurement::gnss_chainage;
+use crate::safety::summary::{SafetyEval, SafetyTally};
 
 #[derive(Debug, Clone, Serialize)]
 pub struct WindowEval {
@@ -60,6 +61,9 @@ pub struct PipelineEval {
     /// `MAX_GAP_PERIODS` of its periods): not scored.
     pub states_in_reference_gaps: u64,
     pub windows: Vec<WindowEval>,
+    /// Pipelines with safety checks: S7, availability, containment and caught faults.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safety: Option<SafetyEval>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -91,6 +95,7 @@ enum Role {
     State(usize),
     Smoothed(usize),
     Diagnostics(usize),
+    Safety(usize),
     TrackMap,
     Events,
     Balise,
@@ -109,6 +114,7 @@ struct Scored {
     gated: u64,
     lockouts: u64,
     device_fault: u64,
+    safety: Option<SafetyTally>,
 }
 
 impl Scored {
@@ -123,6 +129,7 @@ impl Scored {
             gated: 0,
             lockouts: 0,
             device_fault: 0,
+            safety: None,
         }
     }
 }
@@ -245,6 +252,9 @@ impl Evaluator {
                 (FusedChannel::Diagnostics, s) if s == FusedDiagnostics::SCHEMA_NAME => {
                     Some(Role::Diagnostics(self.index_of(p.to_owned(), p)))
                 }
+                (FusedChannel::Safety, s) if s == SafetyStatus::SCHEMA_NAME => {
+                    Some(Role::Safety(self.index_of(p.to_owned(), p)))
+                }
                 _ => None,
             }
         } else if schema == TrackMap::SCHEMA_NAME {
@@ -278,6 +288,7 @@ impl Evaluator {
             }
             Some(Role::State(_)) => self.fused_state(m.channel.id, &m.decode(path)?),
             Some(Role::Diagnostics(_)) => self.fused_diagnostics(m.channel.id, &m.decode(path)?),
+            Some(Role::Safety(_)) => self.safety_status(m.channel.id, &m.decode(path)?),
             Some(Role::TrackMap) => self.map = Some(m.decode(path)?),
             Some(Role::Events) => {
                 let e: Event = m.decode(path)?;
@@ -378,6 +389,21 @@ impl Evaluator {
         }
     }
 
+    /// A safety status on channel `id` (a `/fused/<name>/safety` channel): tallied for S7,
+    /// and its safe interval checked against the reference.
+    pub fn safety_status(&mut self, id: u16, status: &SafetyStatus) {
+        let Some(Role::Safety(i)) = self.roles.get(&id).copied() else {
+            return;
+        };
+        let s = &mut self.scored[i];
+        s.safety
+            .get_or_insert_with(SafetyTally::default)
+            .add(status, &self.spans);
+        if let Some(u) = status.safe_interval.filter(|_| status.usable) {
+            s.meter.add_interval(status.stamp_ns, u.low_m, u.high_m);
+        }
+    }
+
     /// A metadata record (pipeline records name each pipeline's filter).
     pub fn metadata(&mut self, name: &str, metadata: &BTreeMap<String, String>) {
         if name == topics::metadata::PIPELINE {
@@ -419,7 +445,9 @@ impl Evaluator {
             .filter(|s| s.states > 0 || s.gated > 0 || s.nis.summary().is_some())
             .map(|mut s| {
                 s.meter.finish();
+                let safety = s.safety.take().map(|t| t.finish(s.meter.containment, t0));
                 PipelineEval {
+                    safety,
                     filter: filters.get(&s.pipeline).cloned(),
                     name: s.name,
                     pipeline: s.pipeline,

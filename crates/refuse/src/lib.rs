@@ -10,7 +10,9 @@
 //! - [`measurement`]: sensor models, how each channel's messages become measurements;
 //! - [`config`]: the pipeline TOML as written;
 //! - [`spec`]: the pipelines validated, and each sensor bound to its channel;
-//! - [`pipeline`]: one configured estimator fed in sensor-time order;
+//! - [`pipeline`]: one configured estimator fed in sensor-time order ([`reorder`]: the
+//!   reorder window);
+//! - [`safety`]: source 002's EKF in the plane with its safety checks and safe interval;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
 //! - [`replay`]: the `refuse` run, streaming input to output;
@@ -24,7 +26,9 @@ pub mod filter;
 pub mod measurement;
 pub mod model;
 pub mod pipeline;
+pub mod reorder;
 pub mod replay;
+pub mod safety;
 pub mod spec;
 pub mod tune;
 

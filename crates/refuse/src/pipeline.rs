@@ -8,11 +8,10 @@
 //! the estimate of the moment (`H = [0, 1 + k̂, …, v̂]`, offset `−v̂ k̂`), an extended Kalman
 //! filter step.
 
-use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap};
-
 use nalgebra::{SMatrix, SVector};
-use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
+use railfuse_catalog::messages::{
+    FusedDiagnostics, FusedState, GateDecision, SafetyStatus, SensorStateEstimate,
+};
 use serde::Serialize;
 
 use crate::config::VarianceValue;
@@ -23,8 +22,10 @@ use crate::filter::{
     Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
     StateAndCovariance,
 };
-use crate::measurement::{Measurement, ObservationRow, Quantity};
+use crate::measurement::{Measurement, ObservationRow, Quantity, SensorContext};
 use crate::model::SensorState;
+use crate::reorder::ReorderQueue;
+use crate::safety::SafetyPipeline;
 use crate::spec::{EstimatorSpec, PipelineSpec, SensorBinding, MAX_STATES};
 
 /// What a pipeline did with its measurements.
@@ -49,6 +50,8 @@ pub struct Fused {
     pub log_time_ns: u64,
     pub state: Option<FusedState>,
     pub diagnostics: Option<FusedDiagnostics>,
+    /// Pipelines with safety checks: the epoch's checks and safe interval.
+    pub safety: Option<SafetyStatus>,
 }
 
 struct Field<const N: usize> {
@@ -96,10 +99,8 @@ pub struct Pipeline<const N: usize> {
     smoother: Option<EpochRecorder<N>>,
     time_ns: u64,
     window_ns: u64,
-    /// Min-heap on (sensor stamp, arrival order) of measurements not yet released.
-    order: BinaryHeap<Reverse<(u64, u64)>>,
-    pending: HashMap<u64, Pending>,
-    seq: u64,
+    /// Measurements not yet released.
+    order: ReorderQueue<Pending>,
     /// The latest valid speed measurement before the first position: the initial speed.
     speed_before_init: Option<(f64, f64)>,
     /// Per sensor: whether it may give chainage (until its channel is seen, it may).
@@ -143,9 +144,7 @@ impl<const N: usize> Pipeline<N> {
             estimator: None,
             smoother,
             time_ns: 0,
-            order: BinaryHeap::new(),
-            pending: HashMap::new(),
-            seq: 0,
+            order: ReorderQueue::default(),
             speed_before_init: None,
             next_output_ns: 0,
             counts: PipelineCounts::default(),
@@ -211,10 +210,8 @@ impl<const N: usize> Pipeline<N> {
             else {
                 continue;
             };
-            self.seq += 1;
-            self.order.push(Reverse((m.stamp_ns, self.seq)));
-            self.pending.insert(
-                self.seq,
+            self.order.push(
+                m.stamp_ns,
                 Pending {
                     sensor,
                     field,
@@ -247,15 +244,7 @@ impl<const N: usize> Pipeline<N> {
     }
 
     fn release(&mut self, up_to_ns: u64, log_time_ns: u64, out: &mut Vec<Fused>) {
-        while let Some(&Reverse((stamp, seq))) = self.order.peek() {
-            if stamp > up_to_ns {
-                break;
-            }
-            self.order.pop();
-            let p = self
-                .pending
-                .remove(&seq)
-                .expect("every queued key has its measurement");
+        while let Some((_, p)) = self.order.pop_until(up_to_ns) {
             self.process(p, log_time_ns, out);
         }
     }
@@ -350,6 +339,9 @@ impl<const N: usize> Pipeline<N> {
                 t0,
                 |i, s| ParticleFilter::new(particle.stream(i as u64 + 1), s),
             )),
+            EstimatorSpec::EkfSafety { .. } => {
+                unreachable!("AnyPipeline::new makes a SafetyPipeline of an ekf_safety spec")
+            }
         }
     }
 
@@ -370,6 +362,7 @@ impl<const N: usize> Pipeline<N> {
                 log_time_ns,
                 state: Some(state),
                 diagnostics: None,
+                safety: None,
             });
             self.next_output_ns += period;
         }
@@ -399,6 +392,7 @@ impl<const N: usize> Pipeline<N> {
             log_time_ns,
             state,
             diagnostics: Some(diagnostics),
+            safety: None,
         });
     }
 
@@ -420,6 +414,8 @@ impl<const N: usize> Pipeline<N> {
             nis: None,
             decision: GateDecision::Accepted,
             device: sensor.device_name.clone(),
+            axis: None,
+            reason: None,
             effective_sample_size: None,
             resampled: None,
             sharing: None,
@@ -593,8 +589,10 @@ pub fn fused_state<const N: usize>(
     }
 }
 
-/// A pipeline of any state dimension up to [`MAX_STATES`].
+/// A pipeline of any state dimension up to [`MAX_STATES`], or source 002's pipeline with
+/// safety checks (which reads whole messages, not scalar measurements).
 pub enum AnyPipeline {
+    Safety(Box<SafetyPipeline>),
     Two(Pipeline<2>),
     Three(Pipeline<3>),
     Four(Pipeline<4>),
@@ -604,8 +602,9 @@ pub enum AnyPipeline {
     Eight(Pipeline<8>),
 }
 
+/// `$e` on the pipeline of whatever dimension, or `$safety` on a safety pipeline.
 macro_rules! each {
-    ($self:expr, $p:ident => $e:expr) => {
+    ($self:expr, $p:ident => $e:expr, $s:ident => $safety:expr) => {
         match $self {
             AnyPipeline::Two($p) => $e,
             AnyPipeline::Three($p) => $e,
@@ -614,6 +613,7 @@ macro_rules! each {
             AnyPipeline::Six($p) => $e,
             AnyPipeline::Seven($p) => $e,
             AnyPipeline::Eight($p) => $e,
+            AnyPipeline::Safety($s) => $safety,
         }
     };
 }
@@ -621,6 +621,12 @@ macro_rules! each {
 impl AnyPipeline {
     pub fn new(spec: PipelineSpec) -> Result<Self> {
         const _: () = assert!(MAX_STATES == 8, "AnyPipeline has a variant per dimension");
+        if let EstimatorSpec::EkfSafety { settings, roles } = &spec.estimator {
+            let (settings, roles) = (settings.clone(), *roles);
+            return Ok(AnyPipeline::Safety(Box::new(SafetyPipeline::new(
+                spec, *settings, roles,
+            )?)));
+        }
         Ok(match spec.dimension() {
             2 => AnyPipeline::Two(Pipeline::new(spec)?),
             3 => AnyPipeline::Three(Pipeline::new(spec)?),
@@ -633,7 +639,7 @@ impl AnyPipeline {
     }
 
     pub fn spec(&self) -> &PipelineSpec {
-        each!(self, p => &p.spec)
+        each!(self, p => &p.spec, s => &s.spec)
     }
 
     pub fn name(&self) -> &str {
@@ -641,9 +647,20 @@ impl AnyPipeline {
     }
 
     pub fn counts(&self) -> &PipelineCounts {
-        each!(self, p => &p.counts)
+        each!(self, p => &p.counts, s => &s.counts)
     }
 
+    /// The safety pipeline, which is fed whole messages ([`SafetyPipeline::push`]) instead of
+    /// [`push`](Self::push)'s scalar measurements.
+    pub fn as_safety(&mut self) -> Option<&mut SafetyPipeline> {
+        match self {
+            AnyPipeline::Safety(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// Scalar measurements of sensor `sensor` (pipelines along the track; a safety pipeline
+    /// takes whole messages through [`as_safety`](Self::as_safety) and ignores these).
     pub fn push(
         &mut self,
         sensor: usize,
@@ -651,25 +668,32 @@ impl AnyPipeline {
         log_time_ns: u64,
         out: &mut Vec<Fused>,
     ) {
-        each!(self, p => p.push(sensor, measurements, log_time_ns, out))
+        each!(self, p => p.push(sensor, measurements, log_time_ns, out), _s => ())
     }
 
-    pub fn finish(&mut self, log_time_ns: u64, out: &mut Vec<Fused>) {
-        each!(self, p => p.finish(log_time_ns, out))
+    /// The end of the log; `context` is the replay's (a safety pipeline's map).
+    pub fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
+        each!(self, p => p.finish(log_time_ns, out), s => s.finish(log_time_ns, context, out))
     }
 
+    /// A device's own fault report (federated pipelines act on it; a safety pipeline
+    /// diagnoses its sensors from their messages).
     pub fn device_event(&mut self, device: &str, failed: bool) {
-        each!(self, p => p.device_event(device, failed))
+        each!(self, p => p.device_event(device, failed), _s => ())
     }
 
     pub fn bind(&mut self, sensor: usize, binding: &SensorBinding) {
-        each!(self, p => p.bind(sensor, binding))
+        each!(
+            self,
+            p => p.bind(sensor, binding),
+            s => s.bind(sensor, binding.fields.first().map(|f| f.1))
+        )
     }
 
     pub fn smoothed(
         &mut self,
     ) -> Option<std::io::Result<Box<dyn Iterator<Item = std::io::Result<FusedState>>>>> {
-        each!(self, p => p.smoothed())
+        each!(self, p => p.smoothed(), _s => None)
     }
 }
 
@@ -726,7 +750,7 @@ mod tests {
             s + 170_000_000,
             &mut out,
         );
-        p.finish(s + 200_000_000, &mut out);
+        p.finish(s + 200_000_000, &SensorContext::default(), &mut out);
         let diags: Vec<FusedDiagnostics> =
             out.iter().filter_map(|f| f.diagnostics.clone()).collect();
         let stamps: Vec<u64> = diags.iter().map(|d| d.stamp_ns).collect();
@@ -755,7 +779,7 @@ mod tests {
             &mut out,
         );
         p.push(0, &m(50, Quantity::Chainage, 1e6, None), 50, &mut out); // far outside the gate
-        p.finish(60, &mut out);
+        p.finish(60, &SensorContext::default(), &mut out);
         assert_eq!(p.counts().accepted, 1);
         assert_eq!(p.counts().rejected_invalid, 4);
         assert_eq!(p.counts().rejected_gate, 1);

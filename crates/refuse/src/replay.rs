@@ -18,7 +18,7 @@ use railfuse_catalog::log::{
     read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
 };
 use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, TrackMap,
+    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, SafetyStatus, TrackMap,
 };
 use railfuse_catalog::topics;
 use serde::Serialize;
@@ -114,6 +114,8 @@ struct Output {
     last_location_ns: Option<u64>,
     diagnostics: ChannelId,
     smoothed: Option<ChannelId>,
+    /// Pipelines with safety checks: `/fused/<name>/safety`.
+    safety: Option<ChannelId>,
     states: u64,
     smoothed_states: u64,
 }
@@ -453,8 +455,9 @@ impl<'a> Replay<'a> {
             return Ok(true); // passes through untouched
         }
         let input = self.opts.input;
+        let channel = self.channels[&h.channel_id].clone();
         let msg = LogMessage {
-            channel: &self.channels[&h.channel_id],
+            channel: &channel,
             sequence: h.sequence,
             log_time_ns: h.log_time,
             publish_time_ns: h.publish_time,
@@ -504,7 +507,21 @@ impl<'a> Replay<'a> {
             std::mem::take(&mut self.routes.get_mut(&h.channel_id).expect("routed").sensors);
         let result = (|| {
             for &(pi, si) in &sensors {
-                self.pipelines[pi].push(si, &self.measurements, h.log_time, &mut self.fused);
+                match self.pipelines[pi].as_safety() {
+                    // A pipeline with safety checks reads the whole message.
+                    Some(safety) => {
+                        if let Err(e) = safety.push(si, &msg, input, &self.context, &mut self.fused)
+                        {
+                            self.report.undecodable_messages += 1;
+                            self.report
+                                .first_undecodable
+                                .get_or_insert_with(|| e.to_string());
+                        }
+                    }
+                    None => {
+                        self.pipelines[pi].push(si, &self.measurements, h.log_time, &mut self.fused)
+                    }
+                }
                 self.emit(pi)?;
             }
             Ok(())
@@ -553,6 +570,14 @@ impl<'a> Replay<'a> {
                 self.eval.fused_diagnostics(out.diagnostics.0, d);
                 self.report.fused_messages += 1;
             }
+            if let (Some(safety), Some(channel)) = (&f.safety, out.safety) {
+                if observer.is_some() {
+                    observe(observer, &topics::fused_safety(name), f.log_time_ns, safety);
+                }
+                self.writer.write(channel, f.log_time_ns, safety)?;
+                self.eval.safety_status(channel.0, safety);
+                self.report.fused_messages += 1;
+            }
         }
         Ok(())
     }
@@ -563,7 +588,7 @@ impl<'a> Replay<'a> {
         let input = self.opts.input;
         self.check_every_sensor_bound(&[])?;
         for pi in 0..self.pipelines.len() {
-            self.pipelines[pi].finish(self.last_log_time, &mut self.fused);
+            self.pipelines[pi].finish(self.last_log_time, &self.context, &mut self.fused);
             self.emit(pi)?;
             self.write_smoothed(pi)?;
             let p = &self.pipelines[pi];
@@ -664,6 +689,7 @@ fn register_outputs(
             .ok_or_else(|| Error::Log(ids_exhausted(opts.output)))
     };
     let (state_schema, diag_schema, location_schema) = (next()?, next()?, next()?);
+    let safety_schema = next()?;
     let mut outputs = Vec::new();
     for p in &opts.config.pipeline {
         let state_topic = topics::fused_state(&p.name);
@@ -684,6 +710,16 @@ fn register_outputs(
             }
             false => None,
         };
+        let safety = match p.estimator.kind() {
+            crate::config::FilterKind::EkfSafety => {
+                let topic = topics::fused_safety(&p.name);
+                let id =
+                    writer.add_channel_with_ids::<SafetyStatus>(safety_schema, next()?, &topic)?;
+                eval.channel(id.0, &topic, SafetyStatus::SCHEMA_NAME);
+                Some(id)
+            }
+            _ => None,
+        };
         let location = match railfuse_catalog::foxglove::twins_by_default() {
             true => Some(writer.add_twin_channel_with_ids(
                 TwinKind::LocationFix,
@@ -699,6 +735,7 @@ fn register_outputs(
             last_location_ns: None,
             diagnostics,
             smoothed,
+            safety,
             states: 0,
             smoothed_states: 0,
         });

@@ -146,6 +146,11 @@ pub enum EstimatorSpec {
         federated: FederatedSettings,
         particle: ParticleSettings,
     },
+    /// Source 002's EKF in the plane with safety checks.
+    EkfSafety {
+        settings: Box<crate::safety::SafetySettings>,
+        roles: crate::safety::Roles,
+    },
 }
 
 impl EstimatorSpec {
@@ -155,6 +160,7 @@ impl EstimatorSpec {
             EstimatorSpec::Particle { .. } => FilterKind::Particle,
             EstimatorSpec::FederatedKalman { .. } => FilterKind::FederatedKalman,
             EstimatorSpec::FederatedParticle { .. } => FilterKind::FederatedParticle,
+            EstimatorSpec::EkfSafety { .. } => FilterKind::EkfSafety,
         }
     }
 
@@ -622,6 +628,12 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
             c.filter.name()
         ));
     }
+    if c.safety.is_some() && c.filter != FilterKind::EkfSafety {
+        return Err(format!(
+            "a [safety] section, but filter = \"{}\"",
+            c.filter.name()
+        ));
+    }
     if c.federated.is_some() && !c.filter.is_federated() {
         return Err(format!(
             "a [federated] section, but filter = \"{}\"",
@@ -649,6 +661,57 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
             federated: federated()?,
             particle: particle()?,
         },
+        FilterKind::EkfSafety => safety(c)?,
+    })
+}
+
+/// An `ekf_safety` pipeline: its settings checked, its three sensors found by role.
+fn safety(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
+    let settings = c.safety.clone().unwrap_or_default();
+    settings.check()?;
+    if !matches!(c.motion, MotionConfig::ConstantAcceleration { .. }) {
+        return Err(
+            "an ekf_safety pipeline runs constant acceleration per axis: set motion = \
+                    { model = \"constant_acceleration\", jerk_psd = … }"
+                .into(),
+        );
+    }
+    let find = |role: &str, topic: &str| {
+        c.sensor
+            .iter()
+            .position(|s| s.get_ref().topic == topic)
+            .ok_or_else(|| {
+                format!("safety.{role} is {topic}, which is not one of the pipeline's sensors")
+            })
+    };
+    let roles = crate::safety::Roles {
+        gnss: find("gnss", &settings.gnss)?,
+        axle_1: find("axle_1", &settings.axle_1)?,
+        axle_2: find("axle_2", &settings.axle_2)?,
+    };
+    if let Some(s) = c.sensor.iter().map(|s| s.get_ref()).find(|s| {
+        s.chainage_bias.is_some()
+            || s.acceleration_bias.is_some()
+            || s.scale_factor.is_some()
+            || s.speed_window_s.is_some()
+            || s.fields.is_some()
+    }) {
+        return Err(format!(
+            "sensor {}: an ekf_safety pipeline's sensors take a topic, a variance and a gate \
+             only (no fields, sensor states or speed window)",
+            s.topic
+        ));
+    }
+    if c.sensor.len() != 3 {
+        return Err(format!(
+            "an ekf_safety pipeline has exactly three sensors (safety.gnss, axle_1, axle_2), \
+             not {}",
+            c.sensor.len()
+        ));
+    }
+    Ok(EstimatorSpec::EkfSafety {
+        settings: Box::new(settings),
+        roles,
     })
 }
 

@@ -49,6 +49,8 @@ pub struct PipelineLayout {
     pub name: String,
     pub sharing: bool,
     pub effective_sample_size: bool,
+    /// Safety checks: the safe-interval plot.
+    pub safety: bool,
     /// Sensor-state entities with their titles.
     pub sensor_states: Vec<(String, String)>,
 }
@@ -59,6 +61,7 @@ impl PipelineLayout {
             name: name.to_owned(),
             sharing: false,
             effective_sample_size: false,
+            safety: false,
             sensor_states: Vec::new(),
         }
     }
@@ -501,6 +504,16 @@ impl PipelineLayout {
                 "effective sample size",
                 &format!("/{}", ent::effective_sample_size(p)),
                 small,
+            ));
+        }
+        if self.safety {
+            others.push(plot(
+                "safe interval U_safe − reference (m), usable (1) or not (0)",
+                &format!("/{}", ent::safety(p)),
+                PlotStyle {
+                    legend: true,
+                    ..small
+                },
             ));
         }
         for (entity, title) in &self.sensor_states {

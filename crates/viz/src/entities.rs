@@ -130,6 +130,12 @@ pub fn sharing(pipeline: &str) -> String {
     format!("diagnostics/{pipeline}/sharing")
 }
 
+/// A pipeline with safety checks: its safe interval U_safe around the reference (the
+/// reference at 0, so the eye sees whether 0 stays inside), and whether each epoch was usable.
+pub fn safety(pipeline: &str) -> String {
+    format!("diagnostics/{pipeline}/safety")
+}
+
 /// A particle pipeline's effective sample size.
 pub fn effective_sample_size(pipeline: &str) -> String {
     format!("diagnostics/{pipeline}/effective_sample_size")

@@ -314,6 +314,9 @@ struct PipelineState {
     last_beta: Vec<f64>,
     out: BTreeSet<String>,
     effective_sample_size: Option<SeriesId>,
+    /// Safety checks: U_safe's ends and the usable flag, and the last first failure shown.
+    safety: Option<SeriesId>,
+    last_failure: Option<Option<String>>,
     sensor_states: HashMap<(String, String), SeriesId>,
 }
 
@@ -529,6 +532,8 @@ impl Logger {
             last_beta: Vec::new(),
             out: BTreeSet::new(),
             effective_sample_size: None,
+            safety: None,
+            last_failure: None,
             sensor_states: HashMap::new(),
         })
     }
@@ -591,6 +596,7 @@ impl Logger {
                 FusedChannel::State => self.fused(p, false, &m.decode(path)?),
                 FusedChannel::Smoothed => self.fused(p, true, &m.decode(path)?),
                 FusedChannel::Diagnostics => self.diagnostics(p, &m.decode(path)?),
+                FusedChannel::Safety => self.safety(p, &m.decode(path)?),
             };
         }
         if !reference && !self.options.shows_topic(topic) {
@@ -937,6 +943,58 @@ impl Logger {
             let b = 3.0 * st.std;
             self.columns
                 .push(&self.rec, id, t, &[st.value, st.value + b, st.value - b])?;
+        }
+        Ok(())
+    }
+
+    /// One epoch's safety status: U_safe's ends relative to the reference and the usable
+    /// flag as series; each change of the first failing check as a log line.
+    fn safety(&mut self, p: usize, s: &SafetyStatus) -> Result<(), Error> {
+        let t = s.stamp_ns as i64;
+        let id = match self.pipelines[p].safety {
+            Some(id) => id,
+            None => {
+                let (name, index) = (self.pipelines[p].name.clone(), self.pipelines[p].index);
+                let id = self.line_series(
+                    &ent::safety(&name),
+                    &[
+                        "U_safe high − reference".into(),
+                        "U_safe low − reference".into(),
+                        "usable".into(),
+                    ],
+                    &[
+                        palette::band(index),
+                        palette::band(index),
+                        palette::pipeline(index),
+                    ],
+                    &[1.0, 1.0, 1.5],
+                )?;
+                self.pipelines[p].safety = Some(id);
+                self.layout.pipelines[p].safety = true;
+                id
+            }
+        };
+        let truth = self.truth.at(s.stamp_ns).map(|(c, _)| c);
+        let (high, low) = match (s.safe_interval, truth) {
+            (Some(u), Some(c)) => (u.high_m - c, u.low_m - c),
+            _ => (f64::NAN, f64::NAN),
+        };
+        let usable = if s.usable { 1.0 } else { 0.0 };
+        self.columns.push(&self.rec, id, t, &[high, low, usable])?;
+        if self.pipelines[p].last_failure.as_ref() != Some(&s.first_failure) {
+            self.pipelines[p].last_failure = Some(s.first_failure.clone());
+            let name = self.pipelines[p].name.clone();
+            let (text, level) = match (&s.first_failure, &s.reason) {
+                (Some(check), reason) => (
+                    format!(
+                        "{name}: not usable: {check}: {}",
+                        reason.as_deref().unwrap_or("")
+                    ),
+                    "WARN",
+                ),
+                (None, _) => (format!("{name}: usable again, every check passes"), "INFO"),
+            };
+            self.text(s.stamp_ns, text, level)?;
         }
         Ok(())
     }

@@ -77,9 +77,21 @@ impl MessageKind {
             MessageKind::FusedDiagnostics => json!({
                 "stamp_ns": T, "source": "/radar/speed", "measurement": 22.4,
                 "measurement_variance": 0.1, "innovation": -0.1, "innovation_variance": 0.11,
-                "nis": 0.09, "decision": "accepted", "device": "radar",
+                "nis": 0.09, "decision": "accepted", "device": "radar", "axis": "east",
+                "reason": "fix type none, below single",
                 "effective_sample_size": 812.5, "resampled": true,
                 "sharing": [{"device": "radar", "beta": 0.5, "fault": "silent for 1.2 s"}]
+            }),
+            MessageKind::SafetyStatus => json!({
+                "stamp_ns": T, "usable": false,
+                "checks": [
+                    {"check": "s1_gnss", "passed": true},
+                    {"check": "s4_map", "passed": false, "value": 3.1, "limit": 2.4,
+                     "reason": "fix 3.10 m beside the track, limit 2.40 m"}
+                ],
+                "first_failure": "s4_map", "reason": "fix 3.10 m beside the track, limit 2.40 m",
+                "safe_interval": {"chainage_m": 1250.0, "chainage_std_m": 0.4, "low_m": 1247.9,
+                                  "high_m": 1252.1}
             }),
             MessageKind::RecorderDiagnostics => json!({
                 "stamp_ns": T, "bytes_written": 1_048_576,

@@ -127,6 +127,12 @@ pub struct FusedDiagnostics {
     /// Federated filters: the device (sub-filter) the measurement belongs to.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub device: Option<String>,
+    /// Filters in the plane: the axis (`east`, `north`) this scalar update was on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub axis: Option<String>,
+    /// Why the measurement was not used, where the decision alone does not say.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
     /// Particle filters: effective sample size after the update.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub effective_sample_size: Option<f64>,

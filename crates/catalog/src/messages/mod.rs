@@ -14,6 +14,7 @@ mod odometer;
 mod radar;
 mod recorder;
 mod registry;
+mod safety;
 mod track_map;
 mod tuning;
 
@@ -31,7 +32,8 @@ pub use odometer::Odometer;
 pub use radar::RadarSpeed;
 pub use recorder::{RecorderDiagnostics, SourceStats};
 pub use registry::{AnyMessage, MessageKind};
-pub use track_map::{Station, TrackBalise, TrackMap, TrackVertex, Tunnel};
+pub use safety::{SafeInterval, SafetyCheck, SafetyStatus};
+pub use track_map::{Station, TrackBalise, TrackLine, TrackMap, TrackVertex, Tunnel};
 pub use tuning::{TuneEvaluation, TunedValue};
 
 use serde::{de::DeserializeOwned, Serialize};

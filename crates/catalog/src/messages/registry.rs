@@ -122,6 +122,7 @@ registry!(
     Event,
     FusedState,
     FusedDiagnostics,
+    SafetyStatus,
     RecorderDiagnostics,
     TuneEvaluation,
 );

@@ -30,9 +30,18 @@ pub struct Station {
     pub chainage_m: f64,
 }
 
+/// Another track of the map beside the main line (a parallel track through a station, a
+/// loop line), its chainage on the main line's scale.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TrackLine {
+    pub name: String,
+    /// Vertices in increasing chainage.
+    pub vertices: Vec<TrackVertex>,
+}
+
 /// The static track map: centre line as a polyline in local east/north around `origin`, with
 /// chainage at every vertex, and the surveyed infrastructure. Written once, at the start of a
-/// log, so the map travels inside the file.
+/// log, so the map travels inside the file. Map matching is in [`crate::map_matching`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct TrackMap {
     pub stamp_ns: u64,
@@ -48,54 +57,49 @@ pub struct TrackMap {
     /// Distance between cross-induction loop crossings, m, where the line has a loop.
     #[serde(default)]
     pub loop_crossing_spacing_m: Option<f64>,
+    /// Other tracks beside the main line (absent where there are none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub other_tracks: Vec<TrackLine>,
 }
 
 impl TrackMap {
-    /// East, north and heading (clockwise from north) at a chainage, interpolated along the
-    /// polyline; clamped to the ends.
+    /// East, north and heading (clockwise from north) of the main line at a chainage,
+    /// interpolated along the polyline; clamped to the ends.
     pub fn locate(&self, chainage_m: f64) -> Option<(f64, f64, f64)> {
-        let v = &self.vertices;
-        if v.len() < 2 {
-            return None;
-        }
-        let i = v
-            .partition_point(|p| p.chainage_m <= chainage_m)
-            .clamp(1, v.len() - 1);
-        let (a, b) = (v[i - 1], v[i]);
-        let len = b.chainage_m - a.chainage_m;
-        let f = if len > 0.0 {
-            ((chainage_m - a.chainage_m) / len).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
-        Some((a.east_m + f * de, a.north_m + f * dn, de.atan2(dn)))
+        crate::map_matching::locate_on(&self.vertices, chainage_m)
     }
 
-    /// Chainage and track heading of the point of the centre line nearest to (east, north):
-    /// map matching of a position fix. Clamped to the ends of the line.
+    /// Chainage and track heading of the point of the main line nearest to (east, north): map
+    /// matching of a position fix without memory (see [`crate::map_matching::MapMatcher`]
+    /// for matching along a run). Clamped to the ends of the line.
     pub fn project(&self, east_m: f64, north_m: f64) -> Option<(f64, f64)> {
-        let mut best: Option<(f64, f64, f64)> = None;
-        for w in self.vertices.windows(2) {
-            let (a, b) = (w[0], w[1]);
-            let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
-            let len2 = de * de + dn * dn;
-            let f = if len2 > 0.0 {
-                (((east_m - a.east_m) * de + (north_m - a.north_m) * dn) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let (pe, pn) = (a.east_m + f * de, a.north_m + f * dn);
-            let d2 = (east_m - pe).powi(2) + (north_m - pn).powi(2);
-            if best.is_none_or(|(bd, _, _)| d2 < bd) {
-                best = Some((
-                    d2,
-                    a.chainage_m + f * (b.chainage_m - a.chainage_m),
-                    de.atan2(dn),
-                ));
-            }
+        let m = crate::map_matching::nearest_on(
+            &self.vertices,
+            0..self.vertices.len(),
+            east_m,
+            north_m,
+        )?;
+        Some((m.chainage_m, m.heading_rad))
+    }
+
+    /// The vertices of track `track`: 0 the main line, then the other tracks in order.
+    pub fn track(&self, track: usize) -> Option<&[TrackVertex]> {
+        match track {
+            0 => Some(&self.vertices),
+            i => self.other_tracks.get(i - 1).map(|t| t.vertices.as_slice()),
         }
-        best.map(|(_, s, h)| (s, h))
+    }
+
+    /// How many tracks the map has, the main line included.
+    pub fn track_count(&self) -> usize {
+        1 + self.other_tracks.len()
+    }
+
+    /// Latitude and longitude (degrees) of the main line at a chainage.
+    pub fn lat_lon_at(&self, chainage_m: f64) -> Option<(f64, f64)> {
+        let (e, n, _) = self.locate(chainage_m)?;
+        let (lat, lon, _) = self.origin.to_geodetic(e, n, 0.0);
+        Some((lat, lon))
     }
 
     pub fn length_m(&self) -> f64 {
@@ -106,52 +110,5 @@ impl TrackMap {
         self.tunnels
             .iter()
             .find(|t| (t.start_chainage_m..=t.end_chainage_m).contains(&chainage_m))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn projection_inverts_locate_on_a_bent_line() {
-        let origin = GeodeticOrigin {
-            latitude_deg: 44.6,
-            longitude_deg: 10.9,
-            altitude_m: 30.0,
-        };
-        let vertices = vec![
-            TrackVertex {
-                chainage_m: 0.0,
-                east_m: 0.0,
-                north_m: 0.0,
-            },
-            TrackVertex {
-                chainage_m: 100.0,
-                east_m: 100.0,
-                north_m: 0.0,
-            },
-            TrackVertex {
-                chainage_m: 200.0,
-                east_m: 100.0,
-                north_m: 100.0,
-            },
-        ];
-        let map = TrackMap {
-            stamp_ns: 0,
-            name: "t".into(),
-            origin,
-            vertices,
-            balises: vec![],
-            tunnels: vec![],
-            stations: vec![],
-            sleeper_spacing_m: 0.6,
-            loop_crossing_spacing_m: None,
-        };
-        for s in [5.0, 99.0, 150.0, 199.0] {
-            let (e, n, h) = map.locate(s).unwrap();
-            let (s2, h2) = map.project(e + 0.5 * h.cos(), n - 0.5 * h.sin()).unwrap();
-            assert!((s2 - s).abs() < 1e-9 && (h2 - h).abs() < 1e-12, "{s}: {s2}");
-        }
     }
 }

@@ -408,6 +408,7 @@ fn simulate_seed000(
         stations: vec![],
         sleeper_spacing_m: 1.032,
         loop_crossing_spacing_m: None,
+        other_tracks: Vec::new(),
     };
     let mut log = SimLog::create(out, scenario, seed, &[])?;
     log.write(topics::TRACK_MAP, start, &map)?;

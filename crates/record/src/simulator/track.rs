@@ -161,6 +161,7 @@ impl Track {
                 stations,
                 sleeper_spacing_m: p.sleeper_spacing_m,
                 loop_crossing_spacing_m: p.loop_crossing_spacing_m,
+                other_tracks: Vec::new(),
             },
             curvature,
         }

@@ -33,6 +33,17 @@ impl<const N: usize> KalmanFilter<N> {
         self.predict_scaled(model.transition(dt), model.process_noise(dt));
     }
 
+    /// Predict with a known input: `x⁻ = F x + B u` (`bu` is `B u`), `P⁻ = F P Fᵀ + Q`.
+    pub fn predict_with_input(
+        &mut self,
+        model: &(impl TransitionModel<N> + ?Sized),
+        dt: f64,
+        bu: &SVector<f64, N>,
+    ) {
+        self.predict_scaled(model.transition(dt), model.process_noise(dt));
+        self.estimate.state += bu;
+    }
+
     fn predict_scaled(&mut self, f: SMatrix<f64, N, N>, q: SMatrix<f64, N, N>) {
         let e = &mut self.estimate;
         e.state = f * e.state;

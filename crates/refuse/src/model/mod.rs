@@ -6,15 +6,18 @@
 //! | [`ConstantVelocity`] | `[s, v]` | white acceleration |
 //! | [`ConstantAcceleration`] | `[s, v, a]` | white jerk, or a jerk held over each step |
 //! | [`Singer`] | `[s, v, a]` | acceleration as a first-order Gauss–Markov process |
+//! | [`AccelerationInput`] | `[d, v, a]` on one axis | a measured acceleration `U` and its error |
 //!
 //! [`WithSensorStates`] appends sensor calibration states (a GNSS position bias, a speed
 //! sensor's scale factor) to any of them.
 
+mod acceleration_input;
 mod constant_acceleration;
 mod constant_velocity;
 mod sensor_states;
 mod singer;
 
+pub use acceleration_input::AccelerationInput;
 pub use constant_acceleration::{ConstantAcceleration, ProcessNoise};
 pub use constant_velocity::ConstantVelocity;
 pub use sensor_states::{SensorState, WithSensorStates};

@@ -285,6 +285,16 @@ impl Recording {
     /// Replays the log through `spec` (its sensors those the recording was made for) and
     /// scores it. The smoother, if the pipeline has one, is not run: states are scored.
     pub fn replay(&self, spec: &PipelineSpec) -> Result<Score> {
+        if spec.estimator.kind() == crate::config::FilterKind::EkfSafety {
+            return Err(Error::TuneLog {
+                input: self.path.clone(),
+                message: format!(
+                    "pipeline '{}' is an ekf_safety pipeline, which reads whole messages: tune \
+                     replays scalar measurements only",
+                    spec.name
+                ),
+            });
+        }
         let mut pipeline = AnyPipeline::new(spec.without_smoother())?;
         for (si, schema) in self.schemas.iter().enumerate() {
             pipeline.bind(si, &spec.bind(&self.path, si, schema)?);
@@ -308,7 +318,7 @@ impl Recording {
                 }
             }
         }
-        pipeline.finish(self.end_ns, &mut fused);
+        pipeline.finish(self.end_ns, &Default::default(), &mut fused);
         scorer.take(&mut fused);
         Ok(scorer.finish(pipeline.counts().clone()))
     }

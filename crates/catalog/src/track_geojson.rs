@@ -1,0 +1,301 @@
+//! A track map from a GeoJSON file (RFC 7946): the surveyed centre lines as `LineString`
+//! features in WGS-84 longitude/latitude, so a map drawn in any GIS can drive map matching
+//! where the log carries no `/track/map`.
+//!
+//! ```json
+//! { "type": "FeatureCollection", "features": [
+//!   { "type": "Feature", "properties": { "name": "main line", "start_chainage_m": 0 },
+//!     "geometry": { "type": "LineString", "coordinates": [[10.92, 44.65], [10.93, 44.66]] } },
+//!   { "type": "Feature", "properties": { "name": "platform 2", "chainage_m": [480, 1510] },
+//!     "geometry": { "type": "LineString", "coordinates": [[10.921, 44.651], [10.93, 44.659]] } } ] }
+//! ```
+//!
+//! - The main line is the feature whose `role` is `"main"`, else the first; the others are
+//!   tracks beside it ([`TrackMap::other_tracks`]).
+//! - Chainage: `chainage_m`, one value per vertex, or `start_chainage_m` (default 0) with the
+//!   chainage of each vertex after it measured along the line in the local plane.
+//! - The local east/north/up frame has its origin at the main line's first vertex (height
+//!   its third coordinate, else 0).
+//!
+//! The map is checked as [`TrackMap::check`] checks a logged one, and coordinates must be
+//! finite, latitude within ±90° and longitude within ±180°.
+
+use std::path::Path;
+
+use geojson::{Feature, GeoJson, GeometryValue, JsonObject};
+
+use crate::geodesy::GeodeticOrigin;
+use crate::messages::{TrackLine, TrackMap, TrackVertex};
+
+/// Why a GeoJSON track map was refused; shown after the file's name.
+#[derive(Debug, thiserror::Error)]
+pub enum GeoJsonMapError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: not GeoJSON: {cause}")]
+    NotGeoJson { path: String, cause: String },
+    #[error("{path}: {cause}")]
+    Invalid { path: String, cause: String },
+}
+
+/// Reads and checks a GeoJSON track map.
+pub fn read_track_map(path: &Path) -> Result<TrackMap, GeoJsonMapError> {
+    let shown = path.display().to_string();
+    // A map is small; anything past this is not a track map.
+    const MAX_BYTES: u64 = 256 << 20;
+    let size = std::fs::metadata(path)
+        .map_err(|source| GeoJsonMapError::Io {
+            path: shown.clone(),
+            source,
+        })?
+        .len();
+    if size > MAX_BYTES {
+        return Err(GeoJsonMapError::Invalid {
+            path: shown,
+            cause: format!("{size} bytes, more than a track map's limit of {MAX_BYTES}"),
+        });
+    }
+    let text = std::fs::read_to_string(path).map_err(|source| GeoJsonMapError::Io {
+        path: shown.clone(),
+        source,
+    })?;
+    parse_track_map(&text, &shown)
+}
+
+/// Parses and checks a GeoJSON track map; `path` names it in errors.
+pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapError> {
+    let invalid = |cause: String| GeoJsonMapError::Invalid {
+        path: path.to_owned(),
+        cause,
+    };
+    let doc: GeoJson = text
+        .parse()
+        .map_err(|e: geojson::Error| GeoJsonMapError::NotGeoJson {
+            path: path.to_owned(),
+            cause: e.to_string(),
+        })?;
+    let features: Vec<Feature> = match doc {
+        GeoJson::FeatureCollection(c) => c.features,
+        GeoJson::Feature(f) => vec![f],
+        GeoJson::Geometry(g) => vec![Feature {
+            geometry: Some(g),
+            ..Feature::default()
+        }],
+    };
+    let mut lines = Vec::new();
+    for (i, f) in features.iter().enumerate() {
+        let Some(GeometryValue::LineString { coordinates }) = f.geometry.as_ref().map(|g| &g.value)
+        else {
+            continue; // stations, balises drawn as points: not track
+        };
+        let props = f.properties.clone().unwrap_or_default();
+        let name = props
+            .get("name")
+            .and_then(|v| v.as_str())
+            .map_or_else(|| format!("feature {i}"), str::to_owned);
+        let mut points = Vec::with_capacity(coordinates.len());
+        for (k, p) in coordinates.iter().enumerate() {
+            let c = p.as_slice();
+            let lon = c.first().copied().unwrap_or(f64::NAN);
+            let (lat, alt) = (c.get(1).copied().unwrap_or(f64::NAN), c.get(2).copied());
+            if !(lat.is_finite() && lon.is_finite() && alt.is_none_or(f64::is_finite))
+                || lat.abs() > 90.0
+                || lon.abs() > 180.0
+            {
+                return Err(invalid(format!(
+                    "track '{name}': vertex {k} is not a WGS-84 position ({c:?}: longitude within ±180°, latitude within ±90°)"
+                )));
+            }
+            points.push((lat, lon, alt.unwrap_or(0.0)));
+        }
+        let main = props.get("role").and_then(|v| v.as_str()) == Some("main");
+        lines.push((name, points, props, main));
+    }
+    if lines.is_empty() {
+        return Err(invalid(
+            "no LineString feature: a track map needs its centre line".into(),
+        ));
+    }
+    let main = lines.iter().position(|l| l.3).unwrap_or(0);
+    let first = lines[main].1.first().copied().ok_or_else(|| {
+        invalid(format!(
+            "track '{}': no vertices, at least 2 are needed",
+            lines[main].0
+        ))
+    })?;
+    let origin = GeodeticOrigin {
+        latitude_deg: first.0,
+        longitude_deg: first.1,
+        altitude_m: first.2,
+    };
+    let mut tracks = Vec::new();
+    for (name, points, props, _) in &lines {
+        let vertices = vertices(&origin, points, props)
+            .map_err(|c| invalid(format!("track '{name}': {c}")))?;
+        tracks.push(TrackLine {
+            name: name.clone(),
+            vertices,
+        });
+    }
+    let main_line = tracks.remove(main);
+    let map = TrackMap {
+        stamp_ns: 0,
+        name: main_line.name,
+        origin,
+        vertices: main_line.vertices,
+        balises: vec![],
+        tunnels: vec![],
+        stations: vec![],
+        sleeper_spacing_m: 0.6,
+        loop_crossing_spacing_m: None,
+        other_tracks: tracks,
+    };
+    map.check().map_err(|e| invalid(e.to_string()))?;
+    Ok(map)
+}
+
+/// The vertices in the local plane, with their chainage.
+fn vertices(
+    origin: &GeodeticOrigin,
+    points: &[(f64, f64, f64)],
+    props: &JsonObject,
+) -> Result<Vec<TrackVertex>, String> {
+    let plane: Vec<(f64, f64)> = points
+        .iter()
+        .map(|&(lat, lon, alt)| {
+            let (e, n, _) = origin.to_enu(lat, lon, alt);
+            (e, n)
+        })
+        .collect();
+    let chainage: Vec<f64> = match props.get("chainage_m") {
+        Some(v) => {
+            let given = v
+                .as_array()
+                .ok_or("chainage_m must be an array of numbers")?;
+            if given.len() != plane.len() {
+                return Err(format!(
+                    "chainage_m has {} values for {} vertices",
+                    given.len(),
+                    plane.len()
+                ));
+            }
+            given
+                .iter()
+                .map(|x| x.as_f64().ok_or("chainage_m must be an array of numbers"))
+                .collect::<Result<_, _>>()?
+        }
+        None => {
+            let start = match props.get("start_chainage_m") {
+                Some(v) => v.as_f64().ok_or("start_chainage_m must be a number")?,
+                None => 0.0,
+            };
+            let mut s = start;
+            let mut out = Vec::with_capacity(plane.len());
+            for (k, &(e, n)) in plane.iter().enumerate() {
+                if k > 0 {
+                    let (pe, pn) = plane[k - 1];
+                    s += (e - pe).hypot(n - pn);
+                }
+                out.push(s);
+            }
+            out
+        }
+    };
+    Ok(plane
+        .iter()
+        .zip(chainage)
+        .map(|(&(east_m, north_m), chainage_m)| TrackVertex {
+            chainage_m,
+            east_m,
+            north_m,
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn collection(features: &str) -> String {
+        format!(r#"{{"type":"FeatureCollection","features":[{features}]}}"#)
+    }
+
+    fn line(props: &str, coords: &str) -> String {
+        format!(
+            r#"{{"type":"Feature","properties":{{{props}}},"geometry":{{"type":"LineString","coordinates":{coords}}}}}"#
+        )
+    }
+
+    #[test]
+    fn a_line_due_north_gets_its_chainage_along_the_ground() {
+        // 0.01° of latitude is about 1.11 km.
+        let text = collection(&line(
+            r#""name":"north line","start_chainage_m":1000"#,
+            "[[10.9, 44.6], [10.9, 44.61]]",
+        ));
+        let m = parse_track_map(&text, "m.geojson").unwrap();
+        assert_eq!(m.name, "north line");
+        let v = &m.vertices;
+        assert_eq!(v[0].chainage_m, 1000.0);
+        assert!(
+            (v[1].chainage_m - 1000.0 - 1111.0).abs() < 5.0,
+            "{}",
+            v[1].chainage_m
+        );
+        assert!(
+            v[1].east_m.abs() < 1e-6 && (v[1].north_m - (v[1].chainage_m - 1000.0)).abs() < 1e-6
+        );
+        let (lat, lon) = m.lat_lon_at(v[1].chainage_m).unwrap();
+        assert!((lat - 44.61).abs() < 1e-9 && (lon - 10.9).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_feature_marked_main_is_the_main_line_and_the_rest_are_other_tracks() {
+        let text = collection(&format!(
+            "{},{},{}",
+            line(
+                r#""name":"siding","chainage_m":[10,500]"#,
+                "[[10.9001, 44.6], [10.9001, 44.6045]]"
+            ),
+            r#"{"type":"Feature","properties":{"name":"station"},"geometry":{"type":"Point","coordinates":[10.9,44.6]}}"#,
+            line(
+                r#""name":"main","role":"main""#,
+                "[[10.9, 44.6], [10.9, 44.61]]"
+            ),
+        ));
+        let m = parse_track_map(&text, "m.geojson").unwrap();
+        assert_eq!(m.name, "main");
+        assert_eq!(m.other_tracks.len(), 1);
+        assert_eq!(m.other_tracks[0].vertices[1].chainage_m, 500.0);
+        assert!((m.other_tracks[0].vertices[0].east_m - 7.9).abs() < 0.1);
+    }
+
+    #[test]
+    fn bad_maps_name_the_file_and_the_cause() {
+        let cases = [
+            ("not json", "not GeoJSON"),
+            (&collection(""), "no LineString feature"),
+            (&collection(&line("", "[[10.9, 44.6]]")), "at least 2 are needed"),
+            (&collection(&line("", "[[10.9, 44.6], [10.9, 95.0]]")), "vertex 1 is not a WGS-84 position"),
+            (&collection(&line(r#""chainage_m":[0]"#, "[[10.9, 44.6], [10.9, 44.7]]")), "1 values for 2 vertices"),
+            (&collection(&line(r#""chainage_m":[5, 5]"#, "[[10.9, 44.6], [10.9, 44.7]]")), "chainage does not increase"),
+            (
+                &collection(&line(
+                    "",
+                    "[[10.9, 44.6], [10.91, 44.6], [10.91, 44.61], [10.905, 44.61], [10.905, 44.59]]",
+                )),
+                "crosses itself",
+            ),
+        ];
+        for (text, want) in cases {
+            let e = parse_track_map(text, "bad.geojson")
+                .unwrap_err()
+                .to_string();
+            assert!(e.starts_with("bad.geojson: ") && e.contains(want), "{e}");
+        }
+    }
+}

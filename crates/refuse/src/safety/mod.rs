@@ -1,0 +1,660 @@
+//! Source 002: an EKF positioning pipeline whose output is used only when a chain of safety
+//! checks passes, and then only as an interval along the track that contains the true position
+//! with a stated confidence (`filter = "ekf_safety"`, settings in `[pipeline.safety]`).
+//!
+//! Sensors: GNSS, the track map, axle sensor 1 (fused) and axle sensor 2 (only checked
+//! against). Every epoch (a fix or an axle-1 sample) runs, in order:
+//!
+//! | step | module | what |
+//! |---|---|---|
+//! | S1 | [`diagnosis`] | each sensor diagnosed: GNSS fix type, staleness, jumps, non-finite values; each axle's staleness, range, stuck pulses, slip/slide; the map's matching |
+//! | S2 | [`plane_filter`] | the constant-acceleration filter per axis (east, north), GNSS coordinates and axle-1 speed resolved with the map heading, axle-1's smoothed acceleration as the input U ([`acceleration_input`]) |
+//! | S3 | [`divergence`] | the three divergence tests on the innovations |
+//! | S4 | [`map_check`] | the fix's lateral deviation from the track below λσ |
+//! | S5 | [`odometry_check`] | the filter's distance against axle 2's over windows ΔT |
+//! | S6 | [`safe_interval`] | when all pass, `U_safe = [d − ησ − m, d + ησ + m]` |
+//! | S7 | [`summary`] | per check: how often, how long, how often first; availability, containment, caught faults (in `eval`) |
+//!
+//! Each epoch writes the fused state (along the track, with east/north and lat/lon in its
+//! `plane`), a diagnostics record per scalar update, and `/fused/<name>/safety`
+//! ([`SafetyStatus`]). A fault or a failed test means "do not use the position now", with
+//! the first failure and its reason.
+
+pub mod acceleration_input;
+pub mod diagnosis;
+pub mod divergence;
+pub mod map_check;
+pub mod odometry_check;
+pub mod plane_filter;
+pub mod safe_interval;
+pub mod settings;
+pub mod summary;
+
+use std::path::Path;
+
+use nalgebra::Matrix2;
+use railfuse_catalog::log::LogMessage;
+use railfuse_catalog::map_matching::{curvature_on, MapMatcher};
+use railfuse_catalog::messages::{
+    FusedDiagnostics, FusedState, GateDecision, GnssFix, Odometer, PlanePosition, SafetyCheck,
+    SafetyStatus, SensorStateEstimate, TrackMap,
+};
+
+use crate::config::VarianceValue;
+use crate::error::Result;
+use crate::filter::Innovation;
+use crate::measurement::SensorContext;
+use crate::model::{AccelerationInput, ConstantAcceleration, MotionModel, ProcessNoise};
+use crate::pipeline::{Fused, PipelineCounts};
+use crate::reorder::ReorderQueue;
+use crate::spec::PipelineSpec;
+use acceleration_input::AxleAcceleration;
+use diagnosis::{Diagnosis, FixVerdict};
+use divergence::{DivergenceTests, InnovationKind};
+use odometry_check::OdometryCheck;
+use plane_filter::{Axis, PlaneFilter, PlaneMotion};
+pub use settings::SafetySettings;
+
+/// The sensors of the pipeline by role: indices into its `[[pipeline.sensor]]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Roles {
+    pub gnss: usize,
+    pub axle_1: usize,
+    pub axle_2: usize,
+}
+
+/// A message waiting in the reorder window.
+#[derive(Debug, Clone)]
+enum Input {
+    Fix(GnssFix),
+    Axle(usize, Odometer),
+}
+
+/// Half the chainage span over which the map's curvature is taken, m.
+const CURVATURE_HALF_SPAN_M: f64 = 10.0;
+/// Variance added to every resolved speed measurement, (m/s)²: keeps an axis the track runs
+/// almost across from a near-zero R.
+const SPEED_VARIANCE_FLOOR: f64 = 1e-6;
+
+/// An `ekf_safety` pipeline.
+pub struct SafetyPipeline {
+    pub spec: PipelineSpec,
+    settings: SafetySettings,
+    roles: Roles,
+    /// A map given in the settings (a GeoJSON file); else the log's, from the context.
+    own_map: Option<TrackMap>,
+    fix_matcher: MapMatcher,
+    state_matcher: MapMatcher,
+    filter: Option<PlaneFilter>,
+    time_ns: u64,
+    input: AxleAcceleration,
+    diagnosis: Diagnosis,
+    divergence: DivergenceTests,
+    odometry: OdometryCheck,
+    map_check: Option<SafetyCheck>,
+    queue: ReorderQueue<Input>,
+    variances: Vec<Option<VarianceValue>>,
+    pub counts: PipelineCounts,
+}
+
+impl SafetyPipeline {
+    pub fn new(spec: PipelineSpec, settings: SafetySettings, roles: Roles) -> Result<Self> {
+        let own_map = match &settings.map {
+            Some(path) => Some(
+                railfuse_catalog::track_geojson::read_track_map(path)
+                    .map_err(|e| crate::Error::Map(e.to_string()))?,
+            ),
+            None => None,
+        };
+        let window = settings.map_search_window_m;
+        Ok(Self {
+            variances: vec![None; spec.sensors.len()],
+            spec,
+            settings,
+            roles,
+            own_map,
+            fix_matcher: MapMatcher::new(window),
+            state_matcher: MapMatcher::new(window),
+            filter: None,
+            time_ns: 0,
+            input: AxleAcceleration::default(),
+            diagnosis: Diagnosis::default(),
+            divergence: DivergenceTests::default(),
+            odometry: OdometryCheck::default(),
+            map_check: None,
+            queue: ReorderQueue::default(),
+            counts: PipelineCounts::default(),
+        })
+    }
+
+    /// Sensor `sensor` is bound to its channel with this variance.
+    pub fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
+        self.variances[sensor] = variance;
+    }
+
+    /// One message of sensor `sensor`, received at `log_time_ns`; releases what the reorder
+    /// window lets go. Returns an error only for a message that does not decode.
+    pub fn push(
+        &mut self,
+        sensor: usize,
+        msg: &LogMessage<'_>,
+        input: &Path,
+        context: &SensorContext,
+        out: &mut Vec<Fused>,
+    ) -> Result<()> {
+        let item = if sensor == self.roles.gnss {
+            let fix: GnssFix = msg.decode(input)?;
+            (fix.stamp_ns, Input::Fix(fix))
+        } else {
+            let m: Odometer = msg.decode(input)?;
+            let k = usize::from(sensor == self.roles.axle_2);
+            (m.stamp_ns, Input::Axle(k, m))
+        };
+        self.queue.push(item.0, item.1);
+        let up_to = msg.log_time_ns.saturating_sub(self.spec.reorder_window_ns);
+        self.release(up_to, msg.log_time_ns, context, out);
+        Ok(())
+    }
+
+    /// Releases everything still queued (the end of the log).
+    pub fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
+        self.release(u64::MAX, log_time_ns, context, out);
+    }
+
+    fn release(
+        &mut self,
+        up_to: u64,
+        log_time_ns: u64,
+        context: &SensorContext,
+        out: &mut Vec<Fused>,
+    ) {
+        while let Some((stamp, item)) = self.queue.pop_until(up_to) {
+            if stamp < self.time_ns {
+                self.counts.rejected_late += 1;
+                continue;
+            }
+            let map = self.own_map.as_ref().or(context.track.as_ref()).cloned();
+            let epoch = match item {
+                Input::Fix(fix) => self.fix(&fix, map.as_ref()),
+                Input::Axle(0, m) => self.axle_1(&m, map.as_ref()),
+                Input::Axle(_, m) => {
+                    self.axle_2(&m);
+                    None
+                }
+            };
+            if let Some(epoch) = epoch {
+                out.extend(epoch.into_fused(log_time_ns));
+            }
+        }
+    }
+
+    fn variance(&self, sensor: usize, reported: Option<f64>) -> Option<f64> {
+        match self.variances[sensor]? {
+            VarianceValue::Fixed(v) => Some(v),
+            VarianceValue::FromMessage(_) => reported,
+        }
+    }
+
+    fn topic(&self, sensor: usize) -> &str {
+        &self.spec.sensors[sensor].topic
+    }
+
+    /// The motion model of the plane filter.
+    fn motion(&self) -> PlaneMotion {
+        match (self.settings.acceleration_input, self.spec.motion) {
+            (true, _) => PlaneMotion::Input {
+                known: AccelerationInput {
+                    input_std_mps2: self.settings.input_std_mps2,
+                    correlation_time_s: self.settings.input_window_s / 2.0,
+                },
+                unknown: AccelerationInput {
+                    input_std_mps2: self.settings.max_acceleration_mps2,
+                    correlation_time_s: self.settings.input_window_s / 2.0,
+                },
+            },
+            (false, MotionModel::ConstantAcceleration(m)) => PlaneMotion::ConstantAcceleration(m),
+            // The spec admits only constant acceleration; its noise stands in otherwise.
+            (false, _) => PlaneMotion::ConstantAcceleration(ConstantAcceleration {
+                noise: ProcessNoise::WhiteJerkPsd(0.1),
+            }),
+        }
+    }
+
+    /// Predicts the filter to `t_ns` with the input at the filter's place on the map.
+    fn predict_to(&mut self, t_ns: u64, map: &TrackMap) {
+        let Some(f) = &mut self.filter else { return };
+        let dt = railfuse_catalog::seconds_between(self.time_ns, t_ns);
+        if dt <= 0.0 {
+            return;
+        }
+        let (e, n) = f.position();
+        let matched = self.state_matcher.match_point(map, e, n, None);
+        let input = matched.zip(self.input.acceleration()).map(|(m, a)| {
+            let vertices = map.track(m.track).unwrap_or(&map.vertices);
+            let kappa = curvature_on(vertices, m.chainage_m, CURVATURE_HALF_SPAN_M);
+            let (x, _) = f.along_track(m.heading_rad);
+            acceleration_input::resolve(a, x[1], m.heading_rad, kappa)
+        });
+        f.predict(dt, input);
+        self.time_ns = t_ns;
+        if !f.is_finite() {
+            // NaN never reaches a fused channel: start again from the next fix.
+            self.filter = None;
+            self.counts.rejected_invalid += 1;
+        }
+    }
+
+    fn fix(&mut self, fix: &GnssFix, map: Option<&TrackMap>) -> Option<Epoch> {
+        let sensor = self.roles.gnss;
+        let topic = self.topic(sensor).to_owned();
+        let mut epoch = Epoch::new(fix.stamp_ns, &topic);
+        let Some(map) = map else {
+            self.diagnosis.map(Some(
+                "no track map (neither the log's /track/map nor safety.map)".into(),
+            ));
+            self.counts.before_initialisation += 1;
+            return None;
+        };
+        let enu = match (fix.latitude_deg, fix.longitude_deg) {
+            (Some(lat), Some(lon)) => {
+                let (e, n, _) =
+                    map.origin
+                        .to_enu(lat, lon, fix.altitude_m.unwrap_or(map.origin.altitude_m));
+                Some((e, n))
+            }
+            _ => None,
+        };
+        let cov = fix.position_covariance_enu_m2;
+        let r = (
+            self.variance(sensor, cov.map(|c| c[0])),
+            self.variance(sensor, cov.map(|c| c[4])),
+        );
+        let worst = match r {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            _ => None,
+        };
+        let verdict = self.diagnosis.fix(fix, enu, worst, &self.settings);
+        let (FixVerdict::Usable, Some((e, n)), (Some(re), Some(rn))) = (&verdict, enu, r) else {
+            let why = match verdict {
+                FixVerdict::NoPosition(w) | FixVerdict::Fault(w) => w,
+                FixVerdict::Usable => "no variance".into(),
+            };
+            self.counts.rejected_invalid += 1;
+            epoch.refused(&topic, &why);
+            return self.filter.is_some().then(|| self.finish_epoch(epoch, map));
+        };
+        // Map matching of the fix (S1 map), near where the filter expects the train.
+        let expected = self.filter.as_ref().and_then(|f| {
+            let (fe, fn_) = f.position();
+            self.state_matcher
+                .clone()
+                .match_point(map, fe, fn_, None)
+                .map(|m| m.chainage_m)
+        });
+        let matched = self.fix_matcher.match_point(map, e, n, expected);
+        let map_fault = match matched {
+            None => Some("the fix matches no track".to_owned()),
+            Some(m) if m.lateral_m.abs() > self.settings.max_map_distance_m => Some(format!(
+                "the fix is {:.1} m from the nearest track (limit {} m)",
+                m.lateral_m.abs(),
+                self.settings.max_map_distance_m
+            )),
+            Some(_) => None,
+        };
+        self.diagnosis.map(map_fault.clone());
+        let Some(m) = matched.filter(|_| map_fault.is_none()) else {
+            self.counts.rejected_invalid += 1;
+            epoch.refused(&topic, map_fault.as_deref().unwrap_or("no match"));
+            return self.filter.is_some().then(|| self.finish_epoch(epoch, map));
+        };
+        if self.filter.is_none() {
+            let speed = self.diagnosis.axles[0]
+                .speed_mps
+                .unwrap_or(self.spec.initial.speed_mps);
+            let gm = |b: Option<settings::BiasSettings>| {
+                b.map(|b| plane_filter::GaussMarkov {
+                    std: b.std,
+                    time_constant_s: b.time_constant_s,
+                })
+            };
+            self.filter = Some(PlaneFilter::new(
+                self.motion(),
+                gm(self.settings.gnss_bias),
+                gm(self.settings.axle_1_bias),
+                (e, n),
+                re.max(rn),
+                (speed, m.heading_rad),
+                self.spec.initial.speed_variance,
+                self.spec.initial.acceleration_variance,
+            ));
+            self.time_ns = fix.stamp_ns;
+            self.counts.accepted += 1;
+            epoch.used(&topic, "east", e, re, None);
+            epoch.used(&topic, "north", n, rn, None);
+            return Some(self.finish_epoch(epoch, map));
+        }
+        self.predict_to(fix.stamp_ns, map);
+        // S4 on the predicted position.
+        let p = self.filter.as_ref()?.position_covariance();
+        self.map_check = Some(map_check::map_check(
+            m.lateral_m,
+            m.heading_rad,
+            &p,
+            &Matrix2::new(re, 0.0, 0.0, rn),
+            self.settings.map_std_m,
+            self.settings.lambda,
+        ));
+        self.update_axes(
+            InnovationKind::Position,
+            &mut epoch,
+            [(Axis::East, e, re), (Axis::North, n, rn)],
+        );
+        Some(self.finish_epoch(epoch, map))
+    }
+
+    fn axle_1(&mut self, m: &Odometer, map: Option<&TrackMap>) -> Option<Epoch> {
+        let sensor = self.roles.axle_1;
+        let topic = self.topic(sensor).to_owned();
+        let variances = [
+            self.variance(sensor, None).unwrap_or(f64::NAN),
+            self.variance(self.roles.axle_2, None).unwrap_or(f64::NAN),
+        ];
+        let filter_speed = self.filter_speed(map);
+        self.diagnosis
+            .axle(0, m, variances, filter_speed, &self.settings);
+        // A faulty axle's speeds must not drive the filter either: without U the prediction
+        // takes the train's whole acceleration range as its uncertainty.
+        match self.diagnosis.checks(m.stamp_ns, &self.settings)[1].passed {
+            true => self
+                .input
+                .push(m.stamp_ns, m.speed_mps, self.settings.input_window_s),
+            false => self.input.clear(),
+        }
+        let map = map?;
+        if self.filter.is_none() {
+            self.counts.before_initialisation += 1;
+            return None;
+        }
+        self.predict_to(m.stamp_ns, map);
+        let mut epoch = Epoch::new(m.stamp_ns, &topic);
+        let healthy = self.diagnosis.checks(m.stamp_ns, &self.settings)[1].passed;
+        let r = variances[0];
+        if !healthy || !r.is_finite() {
+            self.counts.rejected_invalid += 1;
+            epoch.refused(&topic, "axle sensor 1 diagnosed faulty (S1)");
+            return self.filter.is_some().then(|| self.finish_epoch(epoch, map));
+        }
+        let (e, n) = self.filter.as_ref()?.position();
+        let place = self.state_matcher.match_point(map, e, n, None)?;
+        let h = place.heading_rad;
+        let v = m.speed_mps;
+        let resolved = Axis::BOTH.map(|axis| {
+            let u = axis.component(h);
+            let var = r * u * u
+                + (v * self.settings.heading_std_rad).powi(2) * (1.0 - u * u)
+                + SPEED_VARIANCE_FLOOR;
+            (axis, v * u, var)
+        });
+        self.update_axes(InnovationKind::Speed, &mut epoch, resolved);
+        Some(self.finish_epoch(epoch, map))
+    }
+
+    /// One measurement on each axis: its innovations go to S3, and both axes are updated
+    /// unless one of them is beyond S3b's limit (a fault, which must not pull the filter).
+    fn update_axes(
+        &mut self,
+        kind: InnovationKind,
+        epoch: &mut Epoch,
+        measured: [(Axis, f64, f64); 2],
+    ) {
+        let Some(f) = self.filter.as_mut() else {
+            return;
+        };
+        let innovations = measured.map(|(axis, z, r)| match kind {
+            InnovationKind::Position => f.position_innovation(axis, r, z),
+            InnovationKind::Speed => f.speed_innovation(axis, r, z),
+        });
+        let s = &self.settings;
+        self.divergence
+            .update(kind, &innovations, s.divergence_window);
+        let limit = match kind {
+            InnovationKind::Position => s.innovation_limit_m,
+            InnovationKind::Speed => s.innovation_limit_mps,
+        };
+        let too_big = innovations.iter().any(|i| !(i.residual.abs() <= limit));
+        let topic = epoch.source.clone();
+        for ((axis, z, r), i) in measured.into_iter().zip(innovations) {
+            if too_big {
+                epoch.gated(&topic, axis.name(), z, r, i);
+                continue;
+            }
+            match kind {
+                InnovationKind::Position => f.update_position(axis, r, z),
+                InnovationKind::Speed => f.update_speed(axis, r, z),
+            };
+            epoch.used(&topic, axis.name(), z, r, Some(i));
+        }
+        match too_big {
+            true => self.counts.rejected_gate += 1,
+            false => self.counts.accepted += 1,
+        }
+    }
+
+    fn axle_2(&mut self, m: &Odometer) {
+        let variances = [
+            self.variance(self.roles.axle_1, None).unwrap_or(f64::NAN),
+            self.variance(self.roles.axle_2, None).unwrap_or(f64::NAN),
+        ];
+        let speed = self.filter.as_ref().map(|f| {
+            let (e, n) = (f.east.estimate.state[1], f.north.estimate.state[1]);
+            e.hypot(n)
+        });
+        self.diagnosis.axle(1, m, variances, speed, &self.settings);
+        self.odometry.axle_2(m);
+    }
+
+    /// The estimated receiver bias and axle speed error per axis, where modelled.
+    fn sensor_states(&self, f: &PlaneFilter) -> Vec<SensorStateEstimate> {
+        let mut out = Vec::new();
+        let std = |k: &crate::filter::KalmanFilter<5>, i: usize| {
+            k.estimate.covariance[(i, i)].max(0.0).sqrt()
+        };
+        for (axis, k) in [("east", &f.east), ("north", &f.north)] {
+            let roles = [
+                (
+                    self.settings.gnss_bias.is_some(),
+                    self.roles.gnss,
+                    "position_bias",
+                    3,
+                ),
+                (
+                    self.settings.axle_1_bias.is_some(),
+                    self.roles.axle_1,
+                    "speed_bias",
+                    4,
+                ),
+            ];
+            for (on, sensor, kind, i) in roles {
+                if on {
+                    out.push(SensorStateEstimate {
+                        topic: self.topic(sensor).to_owned(),
+                        kind: format!("{axis}_{kind}"),
+                        value: k.estimate.state[i],
+                        std: std(k, i),
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    fn filter_speed(&self, map: Option<&TrackMap>) -> Option<f64> {
+        let (f, map) = (self.filter.as_ref()?, map?);
+        let (e, n) = f.position();
+        let m = self.state_matcher.clone().match_point(map, e, n, None)?;
+        Some(f.along_track(m.heading_rad).0[1])
+    }
+
+    /// The fused state and the safety status of an epoch whose updates are done.
+    fn finish_epoch(&mut self, mut epoch: Epoch, map: &TrackMap) -> Epoch {
+        let s = &self.settings;
+        let Some(f) = &self.filter else {
+            return epoch;
+        };
+        let (e, n) = f.position();
+        let Some(place) = self.state_matcher.match_point(map, e, n, None) else {
+            return epoch;
+        };
+        let (x, p) = f.along_track(place.heading_rad);
+        let chainage_std = p[(0, 0)].max(0.0).sqrt();
+        let mut covariance = [0.0; 9];
+        for (k, c) in covariance.iter_mut().enumerate() {
+            *c = p[(k / 3, k % 3)];
+        }
+        let pos_cov = f.position_covariance();
+        let (lat, lon, _) = map.origin.to_geodetic(e, n, 0.0);
+        epoch.state = Some(FusedState {
+            stamp_ns: epoch.stamp_ns,
+            chainage_m: place.chainage_m,
+            speed_mps: x[1],
+            acceleration_mps2: x[2],
+            covariance,
+            source: epoch.source.clone(),
+            sensor_states: self.sensor_states(f),
+            plane: Some(PlanePosition {
+                east_m: e,
+                north_m: n,
+                covariance_en_m2: [pos_cov[(0, 0)], 0.0, 0.0, pos_cov[(1, 1)]],
+                latitude_deg: lat,
+                longitude_deg: lon,
+            }),
+        });
+        let mut checks: Vec<SafetyCheck> = self.diagnosis.checks(epoch.stamp_ns, s).into();
+        checks.extend(self.divergence.checks(&pos_cov, s));
+        checks.push(
+            self.map_check
+                .clone()
+                .unwrap_or_else(|| diagnosis::verdict("s4_map", Some("no fix checked yet".into()))),
+        );
+        let odometry = self.odometry.epoch(
+            epoch.stamp_ns,
+            place.chainage_m,
+            p[(0, 0)],
+            s.odometry_window_s,
+            s.odometry_sigmas,
+            s.axle_2_scale_std,
+        );
+        checks.push(odometry.cloned().unwrap_or_else(|| {
+            diagnosis::verdict(
+                "s5_odometry",
+                Some("no odometry window completed yet".into()),
+            )
+        }));
+        let first = checks.iter().find(|c| !c.passed);
+        let usable = first.is_none();
+        epoch.safety = Some(SafetyStatus {
+            stamp_ns: epoch.stamp_ns,
+            usable,
+            first_failure: first.map(|c| c.check.clone()),
+            reason: first.and_then(|c| c.reason.clone()),
+            safe_interval: usable.then(|| {
+                safe_interval::safe_interval(
+                    place.chainage_m,
+                    chainage_std,
+                    s.eta,
+                    s.map_margin * s.map_std_m,
+                )
+            }),
+            checks,
+        });
+        epoch
+    }
+}
+
+/// What one epoch produced.
+struct Epoch {
+    stamp_ns: u64,
+    source: String,
+    diagnostics: Vec<FusedDiagnostics>,
+    state: Option<FusedState>,
+    safety: Option<SafetyStatus>,
+}
+
+impl Epoch {
+    fn new(stamp_ns: u64, source: &str) -> Self {
+        Self {
+            stamp_ns,
+            source: source.to_owned(),
+            diagnostics: Vec::new(),
+            state: None,
+            safety: None,
+        }
+    }
+
+    fn record(
+        &mut self,
+        topic: &str,
+        axis: Option<&str>,
+        (z, r): (Option<f64>, Option<f64>),
+        i: Option<Innovation>,
+        decision: GateDecision,
+        reason: Option<&str>,
+    ) {
+        self.diagnostics.push(FusedDiagnostics {
+            stamp_ns: self.stamp_ns,
+            source: topic.to_owned(),
+            measurement: z.filter(|z| z.is_finite()),
+            measurement_variance: r.filter(|r| r.is_finite()),
+            innovation: i.map(|i| i.residual).filter(|x| x.is_finite()),
+            innovation_variance: i.map(|i| i.variance).filter(|x| x.is_finite()),
+            nis: i.map(|i| i.nis).filter(|x| x.is_finite()),
+            decision,
+            device: None,
+            axis: axis.map(str::to_owned),
+            reason: reason.map(str::to_owned),
+            effective_sample_size: None,
+            resampled: None,
+            sharing: None,
+        });
+    }
+
+    fn used(&mut self, topic: &str, axis: &str, z: f64, r: f64, i: Option<Innovation>) {
+        let d = GateDecision::Accepted;
+        self.record(topic, Some(axis), (Some(z), Some(r)), i, d, None);
+    }
+
+    fn gated(&mut self, topic: &str, axis: &str, z: f64, r: f64, i: Innovation) {
+        let (d, why) = (
+            GateDecision::RejectedGate,
+            "an innovation beyond the S3b limit",
+        );
+        self.record(topic, Some(axis), (Some(z), Some(r)), Some(i), d, Some(why));
+    }
+
+    fn refused(&mut self, topic: &str, why: &str) {
+        let d = GateDecision::RejectedInvalid;
+        self.record(topic, None, (None, None), None, d, Some(why));
+    }
+
+    fn into_fused(self, log_time_ns: u64) -> Vec<Fused> {
+        let mut out: Vec<Fused> = self
+            .diagnostics
+            .into_iter()
+            .map(|d| Fused {
+                log_time_ns,
+                state: None,
+                diagnostics: Some(d),
+                safety: None,
+            })
+            .collect();
+        if self.state.is_some() || self.safety.is_some() {
+            out.push(Fused {
+                log_time_ns,
+                state: self.state,
+                diagnostics: None,
+                safety: self.safety,
+            });
+        }
+        out
+    }
+}
