@@ -182,3 +182,166 @@ fn bad_maps_and_roles_get_one_clear_line() {
         assert_eq!(err.trim().lines().count(), 1, "{err}");
     }
 }
+
+#[test]
+fn the_seed002_line_has_parallel_tracks_a_surveyed_map_and_multipath_at_stations() {
+    use railfuse_catalog::messages::{GnssFix, TrackMap};
+    let d = tempfile::tempdir().unwrap();
+    let run = d.path().join("s2.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed002",
+        "--seed",
+        "3",
+        "--duration",
+        "60",
+        "-o",
+        s(&run),
+    ]);
+    let map: TrackMap = messages(&run, "/track/map").remove(0);
+    assert_eq!(map.check(), Ok(()));
+    assert!(
+        map.other_tracks.len() >= 2,
+        "a parallel track at each station"
+    );
+    let truth: Vec<GroundTruth> = messages(&run, "/truth");
+    // The published map is not the true line: its survey error is centimetres to decimetres.
+    let offsets: Vec<f64> = truth
+        .iter()
+        .step_by(100)
+        .filter_map(|g| {
+            let mut m = railfuse_catalog::map_matching::MapMatcher::new(500.0);
+            m.match_point(&map, g.east_m, g.north_m, Some(g.chainage_m))
+                .map(|x| x.lateral_m)
+        })
+        .collect();
+    let rms = (offsets.iter().map(|x| x * x).sum::<f64>() / offsets.len() as f64).sqrt();
+    assert!((0.02..0.3).contains(&rms), "survey error rms {rms}");
+    // At the first station (the run starts there) fixes are pulled towards the parallel track,
+    // which lies to the left: a negative lateral offset of metres.
+    let fixes: Vec<GnssFix> = messages(&run, "/gnss/fix");
+    let first = fixes.iter().find(|f| f.latitude_deg.is_some()).unwrap();
+    let (e, n, _) = map.origin.to_enu(
+        first.latitude_deg.unwrap(),
+        first.longitude_deg.unwrap(),
+        first.altitude_m.unwrap(),
+    );
+    let lateral = railfuse_catalog::map_matching::MapMatcher::new(500.0)
+        .match_point(&map, e, n, None)
+        .unwrap()
+        .lateral_m;
+    assert!(lateral < -1.5, "multipath at the station: {lateral}");
+}
+
+#[test]
+fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accuracy() {
+    use railfuse_catalog::geodesy::GeodeticOrigin;
+    use railfuse_catalog::messages::GnssFix;
+    use railfuse_refuse::safety::diagnosis::{Diagnosis, FixVerdict};
+    use railfuse_refuse::safety::SafetySettings;
+    let d = tempfile::tempdir().unwrap();
+    let settings = SafetySettings::default();
+    let (mut refused, mut usable) = (0, 0);
+    for name in [
+        "20221019_1252_R90120_Formigine_SN1_sample.csv",
+        "20221020_1030_R90117_Modena_SN1_sample.csv",
+        "20221020_1030_R90117_Modena_SN2_sample.csv",
+    ] {
+        let out = d.path().join(format!("{name}.mcap"));
+        let src = sample("eth-pbl-railway").join(name);
+        ok(&[
+            "import",
+            "--format",
+            "eth",
+            s(&src),
+            "-o",
+            s(&out),
+            "--quiet",
+        ]);
+        let mut diagnosis = Diagnosis::default();
+        for fix in messages::<GnssFix>(&out, "/gnss/fix") {
+            // The plane around the fix itself: S1 needs no map for this.
+            let enu = fix.latitude_deg.zip(fix.longitude_deg).map(|(lat, lon)| {
+                let origin = GeodeticOrigin {
+                    latitude_deg: lat,
+                    longitude_deg: lon,
+                    altitude_m: fix.altitude_m.unwrap_or(0.0),
+                };
+                let (e, n, _) = origin.to_enu(lat, lon, origin.altitude_m);
+                (e, n)
+            });
+            let variance = fix.position_covariance_enu_m2.map(|c| c[0].max(c[4]));
+            match diagnosis.fix(&fix, enu, variance, &settings) {
+                FixVerdict::NoPosition(why) => {
+                    assert!(why.contains("fix type none"), "{why}");
+                    refused += 1;
+                }
+                FixVerdict::Usable => {
+                    // Taken with the accuracy the receiver reported (dm to m here).
+                    let v = variance.unwrap();
+                    assert!(v > 0.0 && v < 25.0, "{v}");
+                    usable += 1;
+                }
+                FixVerdict::Fault(why) => panic!("{name}: a real fix diagnosed faulty: {why}"),
+            }
+        }
+    }
+    assert!(
+        refused >= 2 && usable >= 2,
+        "refused {refused}, usable {usable}"
+    );
+}
+
+#[test]
+fn a_map_far_from_the_run_fuses_nothing_and_says_why() {
+    let d = tempfile::tempdir().unwrap();
+    let run = d.path().join("run.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "default",
+        "--seed",
+        "4",
+        "--duration",
+        "20",
+        "-o",
+        s(&run),
+    ]);
+    // A valid line, 900 km from the run.
+    let map = d.path().join("far.geojson");
+    std::fs::write(
+        &map,
+        r#"{"type":"Feature","properties":{"name":"elsewhere"},"geometry":{"type":"LineString",
+            "coordinates":[[2.35,48.85],[2.36,48.86]]}}"#,
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(sample("seed002.toml"))
+        .unwrap()
+        .replacen(
+            "[pipeline.safety]\n",
+            &format!("[pipeline.safety]\nmap = {:?}\n", s(&map)),
+            1,
+        );
+    let cfg = d.path().join("far.toml");
+    std::fs::write(&cfg, text).unwrap();
+    let fused = d.path().join("far.fused.mcap");
+    ok(&["refuse", s(&run), "-c", s(&cfg), "-o", s(&fused)]);
+    let states: Vec<FusedState> = messages(&fused, "/fused/ekf_safety/state");
+    assert!(
+        states.is_empty(),
+        "{} states fused against a far-away map",
+        states.len()
+    );
+    let diags: Vec<railfuse_catalog::messages::FusedDiagnostics> =
+        messages(&fused, "/fused/ekf_safety/diagnostics");
+    let far = diags
+        .iter()
+        .filter(|d| {
+            d.reason
+                .as_deref()
+                .is_some_and(|r| r.contains("from the nearest track"))
+        })
+        .count();
+    assert!(far > 100, "{far} fixes refused as far from the track");
+}

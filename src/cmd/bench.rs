@@ -65,12 +65,18 @@ pub struct Args {
     /// With --em: print JSON.
     #[arg(long)]
     pub json: bool,
+    /// Measure source 002's ekf_safety instead: epochs per second of samples/seed002.toml's
+    /// two pipelines on a seed002 run of this many seconds (the whole refuse command).
+    #[arg(long, value_name = "SECONDS")]
+    pub safety: Option<f64>,
 }
 
 /// One measured `refuse` run.
 struct Measured {
     wall_s: f64,
     peak_rss_kib: Option<u64>,
+    /// Epochs of each pipeline with safety checks.
+    safety_epochs: Vec<u64>,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -86,6 +92,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let Some(secs) = a.viz {
         return super::bench_viz::run(&a.dir, secs, a.repeat);
+    }
+    if let Some(secs) = a.safety {
+        return safety(&a.dir, secs, a.repeat);
     }
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
@@ -144,6 +153,7 @@ pub fn run(a: Args) -> Result<()> {
         let ours = Measured {
             wall_s: all[all.len() / 2].wall_s,
             peak_rss_kib: all.iter().filter_map(|m| m.peak_rss_kib).max(),
+            safety_epochs: Vec::new(),
         };
         let rate = sim.messages as f64 / ours.wall_s;
         // The peer runs the Kalman job only (source 001's federated filters it has not).
@@ -184,6 +194,38 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
+/// `railfuse bench --safety`: a seed002 run of `secs` s through samples/seed002.toml, the
+/// median of `repeat` refuse runs; epochs (fixes and axle-1 samples) per second per pipeline.
+fn safety(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let config = dir.join("seed002.toml");
+    std::fs::write(&config, railfuse_experiments::safety::SEED002_PIPELINES)?;
+    let raw = dir.join(format!("bench-seed002-{secs:.0}s.mcap"));
+    let fused = raw.with_extension("fused.mcap");
+    let preset = railfuse_record::Scenario::preset("seed002").expect("a built-in preset");
+    let sim = railfuse_record::simulate(&preset, 1, Some(secs), &[], &raw)?;
+    let mut all = (0..repeat.max(1))
+        .map(|_| refuse_child(&raw, &config, &fused))
+        .collect::<Result<Vec<_>>>()?;
+    all.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
+    let m = &all[all.len() / 2];
+    let epochs: u64 = m.safety_epochs.iter().sum();
+    println!(
+        "seed002 {:.0} s, {} messages: refuse {:.3} s (median of {}), {} epochs in {} pipelines: \
+         {:.0} epochs/s per pipeline, {:.2} M msg/s, peak RSS {} KiB",
+        sim.duration_s,
+        sim.messages,
+        m.wall_s,
+        all.len(),
+        epochs,
+        m.safety_epochs.len(),
+        epochs as f64 / m.safety_epochs.len().max(1) as f64 / m.wall_s,
+        sim.messages as f64 / m.wall_s / 1e6,
+        all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
+    );
+    Ok(())
+}
+
 /// `railfuse refuse` in a child process, timed from spawn to exit, so its peak memory is its
 /// own and the time is what a user waits.
 fn refuse_child(raw: &Path, config: &Path, fused: &Path) -> Result<Measured> {
@@ -202,9 +244,16 @@ fn refuse_child(raw: &Path, config: &Path, fused: &Path) -> Result<Measured> {
     }
     let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
     let stats: RunStats = serde_json::from_value(v["run"].clone())?;
+    let safety_epochs = v["eval"]["pipelines"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|p| p["safety"]["epochs"].as_u64())
+        .collect();
     Ok(Measured {
         wall_s,
         peak_rss_kib: stats.peak_rss_kib,
+        safety_epochs,
     })
 }
 

@@ -15,7 +15,7 @@ pub struct Args {
     #[arg(long, default_value_t = 10)]
     pub seeds: u64,
     /// Where to write the table (Markdown); default docs/results.md, or docs/tuning.md with
-    /// --tuning.
+    /// --tuning, docs/safety.md with --safety.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Run the tuning experiments instead: recovery of seed000's known noise values by EM and
@@ -23,6 +23,11 @@ pub struct Args {
     /// pykalman's (needs the test venv's Python, or --python).
     #[arg(long)]
     pub tuning: bool,
+    /// Run source 002's safety experiment instead (samples/seed002.toml on the seed002 and
+    /// default scenarios, fault-free and faulted): availability, containment of the truth in
+    /// U_safe, faults flagged; written to docs/safety.md.
+    #[arg(long, conflicts_with = "tuning")]
+    pub safety: bool,
     /// Python with pykalman, for --tuning (default: $RAILFUSE_PYTHON, then
     /// .venv-interop/bin/python).
     #[arg(long)]
@@ -44,6 +49,9 @@ fn verdict(v: Verdict) -> String {
 pub fn run(a: Args) -> Result<()> {
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
+    if a.safety {
+        return super::results_safety::run(&a);
+    }
     if a.tuning {
         return super::results_tuning::run(&a);
     }

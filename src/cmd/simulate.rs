@@ -9,8 +9,10 @@ use railfuse_record::{simulate, Scenario, SimulationReport};
 pub struct Args {
     /// Scenario preset: `default` (a mixed line run with every sensor), `seed000` (source
     /// 000's maglev simulation, its parameters exactly as stated), `seed000_loop_drift` (the
-    /// same with the loop's error growing with distance, as the source describes) or `seed001`
-    /// (source 001's: INS, BeiDou, Doppler radar, 500 s).
+    /// same with the loop's error growing with distance, as the source describes), `seed001`
+    /// (source 001's: INS, BeiDou, Doppler radar, 500 s) or `seed002` (source 002's: the
+    /// default line with parallel tracks and multipath at four stations, cuttings, a surveyed
+    /// map with its own error).
     #[arg(long, default_value = "default",
           value_parser = clap::builder::PossibleValuesParser::new(Scenario::NAMES))]
     pub scenario: String,
@@ -21,7 +23,8 @@ pub struct Args {
     #[arg(long)]
     pub duration: Option<f64>,
     /// Make a device fail for a window: DEVICE:MODE:START:END with DEVICE one of gnss, imu,
-    /// radar, odometer1, odometer2, loop, balise; MODE dropout, stuck or bias=VALUE (SI units);
+    /// radar, odometer1, odometer2, loop, balise; MODE dropout, stuck or bias=VALUE (SI units:
+    /// a GNSS position jump along the track in m, an axle slipping beyond spec in m/s);
     /// START and END in seconds from the start; `:reported` adds the device's own fault and
     /// recovery events. Repeatable.
     #[arg(long = "fault", value_name = "DEVICE:MODE:START:END[:reported]")]

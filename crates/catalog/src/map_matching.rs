@@ -33,6 +33,9 @@ pub struct MapMatch {
     pub north_m: f64,
     /// Index of the segment (vertices `segment`, `segment + 1`) it lies on.
     pub segment: usize,
+    /// The point lies beyond an end of the track (its match is the end vertex): it is not
+    /// beside this track at all.
+    pub beyond_end: bool,
 }
 
 /// The nearest point to (east, north) on the segments of `vertices` that start in `segments`
@@ -45,7 +48,8 @@ pub fn nearest_on(
     north_m: f64,
 ) -> Option<MapMatch> {
     let end = segments.end.min(vertices.len().saturating_sub(1));
-    let mut best: Option<(f64, MapMatch)> = None;
+    // The nearest segment and the fraction along it; heading and offset only for that one.
+    let mut best: Option<(f64, usize, f64)> = None;
     for i in segments.start..end {
         let (a, b) = (vertices[i], vertices[i + 1]);
         let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
@@ -57,25 +61,27 @@ pub fn nearest_on(
         };
         let (pe, pn) = (a.east_m + f * de, a.north_m + f * dn);
         let d2 = (east_m - pe).powi(2) + (north_m - pn).powi(2);
-        if best.as_ref().is_none_or(|(bd, _)| d2 < *bd) {
-            let heading = de.atan2(dn);
-            // Right of the track direction (sin h, cos h) is (cos h, −sin h).
-            let lateral = (east_m - pe) * heading.cos() - (north_m - pn) * heading.sin();
-            best = Some((
-                d2,
-                MapMatch {
-                    track: 0,
-                    chainage_m: a.chainage_m + f * (b.chainage_m - a.chainage_m),
-                    lateral_m: lateral,
-                    heading_rad: heading,
-                    east_m: pe,
-                    north_m: pn,
-                    segment: i,
-                },
-            ));
+        if best.is_none_or(|(bd, _, _)| d2 < bd) {
+            best = Some((d2, i, f));
         }
     }
-    best.map(|(_, m)| m)
+    let (_, i, f) = best?;
+    let (a, b) = (vertices[i], vertices[i + 1]);
+    let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
+    let (pe, pn) = (a.east_m + f * de, a.north_m + f * dn);
+    let heading = de.atan2(dn);
+    // Right of the track direction (sin h, cos h) is (cos h, −sin h).
+    let (sin, cos) = heading.sin_cos();
+    Some(MapMatch {
+        track: 0,
+        chainage_m: a.chainage_m + f * (b.chainage_m - a.chainage_m),
+        lateral_m: (east_m - pe) * cos - (north_m - pn) * sin,
+        heading_rad: heading,
+        east_m: pe,
+        north_m: pn,
+        segment: i,
+        beyond_end: (i == 0 && f <= 0.0) || (i + 2 == vertices.len() && f >= 1.0),
+    })
 }
 
 /// East, north and heading of a track at a chainage, interpolated along its polyline;
@@ -150,8 +156,11 @@ impl MapMatcher {
 
     /// Matches (east, north). `expected_m` is where the caller expects the train along the
     /// track (a filter's predicted chainage); without it the last match's chainage is used.
-    /// After a first match, only the same track within the window is searched; the whole
-    /// map is searched on the first call, or when the window holds no segment.
+    /// After a first match only the same track within the window is searched. The main line
+    /// is taken first, or when the window holds no segment or the point lies beyond the
+    /// current track's end (a parallel track ends at its turnouts); another track only when
+    /// the point lies beyond the main line's ends, the nearest then. A train is taken to be
+    /// on the track it was on: a fix beside it is a deviation to check, not a change of track.
     pub fn match_point(
         &mut self,
         map: &TrackMap,
@@ -166,16 +175,22 @@ impl MapMatcher {
             let vertices = map.track(track)?;
             let centre = expected_m.filter(|s| s.is_finite()).unwrap_or(last_s);
             let segs = segments_between(vertices, centre - self.window_m, centre + self.window_m);
-            nearest_on(vertices, segs, east_m, north_m).map(|m| MapMatch { track, ..m })
+            nearest_on(vertices, segs, east_m, north_m)
+                .map(|m| MapMatch { track, ..m })
+                .filter(|m| !m.beyond_end)
         });
-        let found = near.or_else(|| {
-            (0..map.track_count())
-                .filter_map(|t| {
-                    let v = map.track(t)?;
-                    nearest_on(v, 0..v.len(), east_m, north_m).map(|m| MapMatch { track: t, ..m })
+        let on = |t: usize| {
+            let v = map.track(t)?;
+            nearest_on(v, 0..v.len(), east_m, north_m).map(|m| MapMatch { track: t, ..m })
+        };
+        let found = near
+            .or_else(|| on(0).filter(|m| !m.beyond_end))
+            .or_else(|| {
+                (0..map.track_count()).filter_map(on).min_by(|a, b| {
+                    let d = |m: &MapMatch| (m.east_m - east_m).hypot(m.north_m - north_m);
+                    d(a).total_cmp(&d(b))
                 })
-                .min_by(|a, b| a.lateral_m.abs().total_cmp(&b.lateral_m.abs()))
-        })?;
+            })?;
         self.last = Some((found.track, found.chainage_m));
         Some(found)
     }
@@ -441,14 +456,20 @@ mod tests {
         let r = matcher.match_point(&m, 700.0, 3.5, Some(700.0)).unwrap();
         assert_eq!(r.track, 0);
         assert!((r.lateral_m + 3.5).abs() < 1e-12);
-        // Without memory the same fix lands on the other track.
-        assert_eq!(
-            MapMatcher::new(200.0)
-                .match_point(&m, 700.0, 3.5, None)
-                .unwrap()
-                .track,
-            1
+        // Without memory too: the main line comes first while the fix is beside it.
+        let fresh = MapMatcher::new(200.0)
+            .match_point(&m, 700.0, 3.5, None)
+            .unwrap();
+        assert_eq!(fresh.track, 0);
+        // Beyond the main line's end, the other track that is there.
+        let short_main = map(
+            vec![vertex(0.0, 0.0, 0.0), vertex(600.0, 600.0, 0.0)],
+            m.other_tracks.clone(),
         );
+        let r = MapMatcher::new(200.0)
+            .match_point(&short_main, 900.0, 4.0, None)
+            .unwrap();
+        assert_eq!(r.track, 1, "{r:?}");
     }
 
     #[test]

@@ -8,12 +8,14 @@
 //!   source's claim beside railfuse's figure of the same kind;
 //! - [`long_runs`]: the default pipelines' covariance honesty over one-hour runs;
 //! - [`sharing`]: what sources 000 and 001's α and β change, and under which fusion rule;
+//! - [`safety`]: source 002's safety checks: availability, containment and flagged faults;
 //! - [`tuning`]: what `railfuse tune` recovers of known noise values, and what tuning buys on
 //!   runs it never saw.
 //!
 //! Printing the results (Markdown, JSON) is the CLI's job.
 
 pub mod long_runs;
+pub mod safety;
 pub mod sharing;
 pub mod sources;
 pub mod tuning;

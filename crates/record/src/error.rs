@@ -111,7 +111,7 @@ pub enum ScenarioError {
     Duration(f64),
     #[error(
         "fault: scenario '{0}' is source 000's bare simulation with no device models to break; \
-         use default or seed001"
+         use default, seed001 or seed002"
     )]
     NoDevices(String),
     #[error("fault: scenario '{scenario}' has no {device} to fail")]

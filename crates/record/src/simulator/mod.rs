@@ -6,6 +6,7 @@ pub mod faults;
 mod scenario;
 pub mod seed000;
 pub mod sensors;
+pub mod site;
 mod track;
 mod world;
 
@@ -148,7 +149,7 @@ impl SimLog {
         duration_s: f64,
     ) -> railfuse_catalog::Result<SimulationReport> {
         let train = match scenario {
-            Scenario::Default(p) | Scenario::Seed001(p) => p.train.clone(),
+            Scenario::Default(p) | Scenario::Seed001(p) | Scenario::Seed002(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
             Scenario::Seed000LoopDrift(_) => {
                 "maglev (source 000 simulation, loop error growing with distance)".into()
@@ -197,7 +198,7 @@ pub fn simulate(
     out: &Path,
 ) -> railfuse_catalog::Result<SimulationReport> {
     match scenario {
-        Scenario::Default(p) | Scenario::Seed001(p) => {
+        Scenario::Default(p) | Scenario::Seed001(p) | Scenario::Seed002(p) => {
             simulate_line(scenario, p, seed, duration_s, faults, out)
         }
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
@@ -224,7 +225,13 @@ fn simulate_line(
     let map = &track.map;
     let mut log = SimLog::create(out, scenario, seed, faults)?;
     log.fault_specs = faults.to_vec();
-    log.write(topics::TRACK_MAP, start, map)?;
+    // The published map: the true one, or as a site's surveyors drew it.
+    let published = p
+        .site
+        .as_ref()
+        .map(|site| site.surveyed(map, &mut rng_stream(seed, 20)));
+    log.write(topics::TRACK_MAP, start, published.as_ref().unwrap_or(map))?;
+    let station_chainages: Vec<f64> = map.stations.iter().map(|s| s.chainage_m).collect();
 
     let mut driver = Driver::new(
         p.driver.clone(),
@@ -299,10 +306,16 @@ fn simulate_line(
             }
             _ => {}
         }
-        let corrections = !p
-            .correction_outages_s
-            .iter()
-            .any(|&(a, len)| t >= a && t < a + len);
+        let site = p
+            .site
+            .as_ref()
+            .map(|site| site.at(driver.s, &station_chainages))
+            .unwrap_or_default();
+        let corrections = !site.in_cutting
+            && !p
+                .correction_outages_s
+                .iter()
+                .any(|&(a, len)| t >= a && t < a + len);
         if corrections != had_corrections {
             let kind = if corrections {
                 EventKind::CorrectionLinkUp
@@ -324,6 +337,11 @@ fn simulate_line(
             curvature: track.curvature(driver.s),
             in_tunnel: tunnel_name.is_some(),
             corrections,
+            // Left of heading h (clockwise from north) is (−cos h, sin h).
+            gnss_multipath: (
+                -site.multipath_left_m * heading_rad.cos(),
+                site.multipath_left_m * heading_rad.sin(),
+            ),
         };
         for s in &mut sensors {
             s.step(&world, &mut outbox);

@@ -11,6 +11,7 @@ use super::sensors::{
     balise::BaliseParams, gnss::GnssParams, imu::ImuParams, induction_loop::LoopParams,
     odometer::OdometerParams, radar::RadarParams,
 };
+use super::site::SiteParams;
 use super::track::{Segment, TrackParams};
 
 /// 2026-06-01T08:00:00Z: simulated runs start here, so logs are reproducible to the byte.
@@ -35,6 +36,10 @@ pub struct LineScenario {
     pub induction_loop: Option<LoopParams>,
     /// None: no balise reader on the train.
     pub balise: Option<BaliseParams>,
+    /// Parallel tracks, multipath and the map's survey error (source 002's line); None: an
+    /// open line with an exact map.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub site: Option<SiteParams>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -45,11 +50,19 @@ pub enum Scenario {
     /// Source 000 with the loop's error growing with distance.
     Seed000LoopDrift(Seed000Params),
     Seed001(Box<LineScenario>),
+    /// Source 002's safety experiment: curves, parallel tracks and multipath at stations,
+    /// cuttings, a surveyed map.
+    Seed002(Box<LineScenario>),
 }
 
 impl Scenario {
-    pub const NAMES: &'static [&'static str] =
-        &["default", "seed000", "seed000_loop_drift", "seed001"];
+    pub const NAMES: &'static [&'static str] = &[
+        "default",
+        "seed000",
+        "seed000_loop_drift",
+        "seed001",
+        "seed002",
+    ];
 
     pub fn preset(name: &str) -> Option<Scenario> {
         match name {
@@ -57,6 +70,7 @@ impl Scenario {
             "seed000" => Some(Scenario::Seed000(Seed000Params::source())),
             "seed000_loop_drift" => Some(Scenario::Seed000LoopDrift(Seed000Params::loop_drift())),
             "seed001" => Some(Scenario::Seed001(Box::new(LineScenario::seed001()))),
+            "seed002" => Some(Scenario::Seed002(Box::new(LineScenario::seed002()))),
             _ => None,
         }
     }
@@ -67,13 +81,14 @@ impl Scenario {
             Scenario::Seed000(_) => "seed000",
             Scenario::Seed000LoopDrift(_) => "seed000_loop_drift",
             Scenario::Seed001(_) => "seed001",
+            Scenario::Seed002(_) => "seed002",
         }
     }
 
     /// The line-run parameters, for the presets that are line runs.
     pub fn line(&self) -> Option<&LineScenario> {
         match self {
-            Scenario::Default(p) | Scenario::Seed001(p) => Some(p),
+            Scenario::Default(p) | Scenario::Seed001(p) | Scenario::Seed002(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -239,6 +254,7 @@ impl LineScenario {
                 miss_probability: 0.01,
                 reported_variance_m2: 0.04,
             }),
+            site: None,
         }
     }
 
@@ -310,6 +326,37 @@ impl LineScenario {
             odometers: vec![],
             induction_loop: None,
             balise: None,
+            site: None,
+        }
+    }
+
+    /// Source 002's experiment: the default line with what its safety checks are for. Four
+    /// stations, each with a parallel track 4.5 m to the left for 400 m either side and
+    /// station buildings whose multipath pulls fixes up to 3 m towards it within 300 m; two
+    /// cuttings (no RTK corrections, up to 2 m of multipath); the published map surveyed every
+    /// 20 m with a lateral error of 0.1 m σ wandering over 200 m. The tunnel, the correction
+    /// outage, both axles' slip, slide and distinct wheel wear are the default run's.
+    pub fn seed002() -> Self {
+        let base = Self::default_run();
+        LineScenario {
+            train: "simulated EMU, 4 cars (source 002 line)".into(),
+            track: TrackParams {
+                name: "Modena test line with stations and cuttings (source 002 simulation)".into(),
+                ..base.track.clone()
+            },
+            stations: 4,
+            site: Some(SiteParams {
+                station_track_half_length_m: 400.0,
+                station_track_offset_m: 4.5,
+                station_multipath_m: 300.0,
+                station_multipath_bias_m: 3.0,
+                cuttings: vec![(3000.0, 3600.0), (9500.0, 10_200.0), (14_000.0, 14_500.0)],
+                cutting_multipath_bias_m: 2.0,
+                map_survey_std_m: 0.1,
+                map_survey_correlation_m: 200.0,
+                map_survey_spacing_m: 20.0,
+            }),
+            ..base
         }
     }
 }

@@ -25,6 +25,9 @@ pub struct World {
     pub in_tunnel: bool,
     /// RTK correction data reaches the GNSS receiver.
     pub corrections: bool,
+    /// The pull of multipath on a fix here (east, north, m), which the receiver does not
+    /// report: 0 away from buildings and cuttings.
+    pub gnss_multipath: (f64, f64),
 }
 
 impl World {

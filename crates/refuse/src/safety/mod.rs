@@ -82,7 +82,7 @@ pub struct SafetyPipeline {
     settings: SafetySettings,
     roles: Roles,
     /// A map given in the settings (a GeoJSON file); else the log's, from the context.
-    own_map: Option<TrackMap>,
+    own_map: Option<std::sync::Arc<TrackMap>>,
     fix_matcher: MapMatcher,
     state_matcher: MapMatcher,
     filter: Option<PlaneFilter>,
@@ -100,10 +100,10 @@ pub struct SafetyPipeline {
 impl SafetyPipeline {
     pub fn new(spec: PipelineSpec, settings: SafetySettings, roles: Roles) -> Result<Self> {
         let own_map = match &settings.map {
-            Some(path) => Some(
+            Some(path) => Some(std::sync::Arc::new(
                 railfuse_catalog::track_geojson::read_track_map(path)
                     .map_err(|e| crate::Error::Map(e.to_string()))?,
-            ),
+            )),
             None => None,
         };
         let window = settings.map_search_window_m;
@@ -173,10 +173,12 @@ impl SafetyPipeline {
                 self.counts.rejected_late += 1;
                 continue;
             }
-            let map = self.own_map.as_ref().or(context.track.as_ref()).cloned();
+            // The map is shared, never copied per epoch.
+            let own = self.own_map.clone();
+            let map = own.as_deref().or(context.track.as_ref());
             let epoch = match item {
-                Input::Fix(fix) => self.fix(&fix, map.as_ref()),
-                Input::Axle(0, m) => self.axle_1(&m, map.as_ref()),
+                Input::Fix(fix) => self.fix(&fix, map),
+                Input::Axle(0, m) => self.axle_1(&m, map),
                 Input::Axle(_, m) => {
                     self.axle_2(&m);
                     None
@@ -281,7 +283,7 @@ impl SafetyPipeline {
             };
             self.counts.rejected_invalid += 1;
             epoch.refused(&topic, &why);
-            return self.filter.is_some().then(|| self.finish_epoch(epoch, map));
+            return Some(self.finish_epoch(epoch, map));
         };
         // Map matching of the fix (S1 map), near where the filter expects the train.
         let expected = self.filter.as_ref().and_then(|f| {
@@ -294,18 +296,25 @@ impl SafetyPipeline {
         let matched = self.fix_matcher.match_point(map, e, n, expected);
         let map_fault = match matched {
             None => Some("the fix matches no track".to_owned()),
-            Some(m) if m.lateral_m.abs() > self.settings.max_map_distance_m => Some(format!(
-                "the fix is {:.1} m from the nearest track (limit {} m)",
-                m.lateral_m.abs(),
-                self.settings.max_map_distance_m
-            )),
-            Some(_) => None,
+            Some(m) => {
+                let distance = (m.east_m - e).hypot(m.north_m - n);
+                if distance > self.settings.max_map_distance_m {
+                    Some(format!(
+                        "the fix is {distance:.1} m from the nearest track (limit {} m)",
+                        self.settings.max_map_distance_m
+                    ))
+                } else if m.beyond_end {
+                    Some("the fix lies beyond the ends of the map".to_owned())
+                } else {
+                    None
+                }
+            }
         };
         self.diagnosis.map(map_fault.clone());
         let Some(m) = matched.filter(|_| map_fault.is_none()) else {
             self.counts.rejected_invalid += 1;
             epoch.refused(&topic, map_fault.as_deref().unwrap_or("no match"));
-            return self.filter.is_some().then(|| self.finish_epoch(epoch, map));
+            return Some(self.finish_epoch(epoch, map));
         };
         if self.filter.is_none() {
             let speed = self.diagnosis.axles[0]
@@ -382,7 +391,7 @@ impl SafetyPipeline {
         if !healthy || !r.is_finite() {
             self.counts.rejected_invalid += 1;
             epoch.refused(&topic, "axle sensor 1 diagnosed faulty (S1)");
-            return self.filter.is_some().then(|| self.finish_epoch(epoch, map));
+            return Some(self.finish_epoch(epoch, map));
         }
         let (e, n) = self.filter.as_ref()?.position();
         let place = self.state_matcher.match_point(map, e, n, None)?;

@@ -142,8 +142,9 @@ impl SimSensor for Gnss {
             course_rad: None,
         };
         if fix.has_position() {
-            let e = w.east_m + self.bias.0 + gauss(&mut self.rng, sigma);
-            let n = w.north_m + self.bias.1 + gauss(&mut self.rng, sigma);
+            let (me, mn) = w.gnss_multipath;
+            let e = w.east_m + self.bias.0 + me + gauss(&mut self.rng, sigma);
+            let n = w.north_m + self.bias.1 + mn + gauss(&mut self.rng, sigma);
             let u = gauss(&mut self.rng, 1.8 * sigma);
             let (lat, lon, alt) = self.origin.to_geodetic(e, n, u);
             let var = sigma * sigma + bias_sigma * bias_sigma;

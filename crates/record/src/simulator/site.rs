@@ -1,0 +1,215 @@
+//! What stands beside the line, for source 002's safety experiment (`--scenario seed002`):
+//! parallel tracks through the stations, GNSS multipath near station buildings and in
+//! cuttings (fixes pulled sideways, towards the parallel track, without the receiver knowing;
+//! no RTK corrections in a cutting), and the published map's own survey error.
+//!
+//! The simulator drives the true track; the log's `/track/map` is the surveyed one: the
+//! centre line resampled every `map_survey_spacing_m` with a lateral error that wanders along
+//! the line (first-order Gauss–Markov in chainage: σ, correlation length), and the parallel
+//! tracks beside each station.
+
+use railfuse_catalog::messages::{TrackLine, TrackMap, TrackVertex};
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use super::sensors::gauss;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SiteParams {
+    /// A parallel track beside each station: this far either side of it (m), offset this
+    /// far to the left of the direction of increasing chainage (m).
+    pub station_track_half_length_m: f64,
+    pub station_track_offset_m: f64,
+    /// Multipath near station buildings: within this distance of a station (m), fixes are
+    /// pulled up to this far to the left (m), rising and falling smoothly.
+    pub station_multipath_m: f64,
+    pub station_multipath_bias_m: f64,
+    /// Cuttings (start, end chainage, m): no RTK corrections reach the receiver, and fixes
+    /// are pulled up to `cutting_multipath_bias_m` to the left.
+    pub cuttings: Vec<(f64, f64)>,
+    pub cutting_multipath_bias_m: f64,
+    /// The published map's survey error, lateral: σ (m), correlation length along the line
+    /// (m), and the spacing of the surveyed vertices (m).
+    pub map_survey_std_m: f64,
+    pub map_survey_correlation_m: f64,
+    pub map_survey_spacing_m: f64,
+}
+
+/// What the site does to a fix at one place.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SiteEffect {
+    /// The multipath pull, m to the left of the direction of increasing chainage.
+    pub multipath_left_m: f64,
+    /// In a cutting: no RTK corrections.
+    pub in_cutting: bool,
+}
+
+/// A smooth bump: 0 outside `[a, b]`, rising to 1 in the middle (a raised cosine).
+fn bump(s: f64, a: f64, b: f64) -> f64 {
+    if s <= a || s >= b || b <= a {
+        return 0.0;
+    }
+    let x = (s - a) / (b - a);
+    0.5 - 0.5 * (std::f64::consts::TAU * x).cos()
+}
+
+impl SiteParams {
+    /// The site's effect at chainage `s`, with stations at `stations` (chainages).
+    pub fn at(&self, s: f64, stations: &[f64]) -> SiteEffect {
+        let near_station = stations
+            .iter()
+            .map(|&c| {
+                bump(
+                    s,
+                    c - self.station_multipath_m,
+                    c + self.station_multipath_m,
+                )
+            })
+            .fold(0.0, f64::max);
+        let cutting = self
+            .cuttings
+            .iter()
+            .map(|&(a, b)| bump(s, a, b))
+            .fold(0.0, f64::max);
+        SiteEffect {
+            multipath_left_m: near_station * self.station_multipath_bias_m
+                + cutting * self.cutting_multipath_bias_m,
+            in_cutting: self.cuttings.iter().any(|&(a, b)| s >= a && s < b),
+        }
+    }
+
+    /// The map as surveyed: the true centre line resampled with its lateral survey error,
+    /// and a parallel track beside each station.
+    pub fn surveyed(&self, truth: &TrackMap, rng: &mut impl Rng) -> TrackMap {
+        let length = truth.length_m();
+        let step = self.map_survey_spacing_m.max(1.0);
+        let phi = (-step / self.map_survey_correlation_m.max(step)).exp();
+        let mut error = gauss(rng, self.map_survey_std_m);
+        let mut vertices = Vec::new();
+        let mut s = 0.0;
+        loop {
+            let (e, n, h) = truth.locate(s).expect("a built track has vertices");
+            // Left of heading h (clockwise from north) is (−cos h, sin h).
+            vertices.push(TrackVertex {
+                chainage_m: s,
+                east_m: e - error * h.cos(),
+                north_m: n + error * h.sin(),
+            });
+            if s >= length {
+                break;
+            }
+            s = (s + step).min(length);
+            error = phi * error + gauss(rng, self.map_survey_std_m * (1.0 - phi * phi).sqrt());
+        }
+        let other_tracks = truth
+            .stations
+            .iter()
+            .map(|st| {
+                let (a, b) = (
+                    (st.chainage_m - self.station_track_half_length_m).max(0.0),
+                    (st.chainage_m + self.station_track_half_length_m).min(length),
+                );
+                let n = ((b - a) / step).ceil().max(1.0) as usize;
+                let vertices = (0..=n)
+                    .map(|k| {
+                        let c = a + (b - a) * k as f64 / n as f64;
+                        let (e, nn, h) = truth.locate(c).expect("a built track has vertices");
+                        let off = self.station_track_offset_m;
+                        TrackVertex {
+                            chainage_m: c,
+                            east_m: e - off * h.cos(),
+                            north_m: nn + off * h.sin(),
+                        }
+                    })
+                    .collect();
+                TrackLine {
+                    name: format!("{} track 2", st.name),
+                    vertices,
+                }
+            })
+            .collect();
+        TrackMap {
+            vertices,
+            other_tracks,
+            ..truth.clone()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn params() -> SiteParams {
+        SiteParams {
+            station_track_half_length_m: 400.0,
+            station_track_offset_m: 4.5,
+            station_multipath_m: 300.0,
+            station_multipath_bias_m: 3.0,
+            cuttings: vec![(2000.0, 2600.0)],
+            cutting_multipath_bias_m: 2.0,
+            map_survey_std_m: 0.1,
+            map_survey_correlation_m: 200.0,
+            map_survey_spacing_m: 20.0,
+        }
+    }
+
+    #[test]
+    fn multipath_peaks_at_stations_and_in_cuttings_and_vanishes_elsewhere() {
+        let p = params();
+        let stations = [0.0, 5000.0];
+        assert!((p.at(5000.0, &stations).multipath_left_m - 3.0).abs() < 1e-9);
+        assert_eq!(p.at(1000.0, &stations), SiteEffect::default());
+        let c = p.at(2300.0, &stations);
+        assert!((c.multipath_left_m - 2.0).abs() < 1e-9 && c.in_cutting);
+    }
+
+    #[test]
+    fn the_surveyed_map_wanders_by_its_survey_error_and_has_station_tracks() {
+        use railfuse_catalog::geodesy::GeodeticOrigin;
+        use railfuse_catalog::messages::Station;
+        let truth = TrackMap {
+            stamp_ns: 0,
+            name: "t".into(),
+            origin: GeodeticOrigin {
+                latitude_deg: 44.6,
+                longitude_deg: 10.9,
+                altitude_m: 0.0,
+            },
+            vertices: vec![
+                TrackVertex {
+                    chainage_m: 0.0,
+                    east_m: 0.0,
+                    north_m: 0.0,
+                },
+                TrackVertex {
+                    chainage_m: 20_000.0,
+                    east_m: 0.0,
+                    north_m: 20_000.0,
+                },
+            ],
+            balises: vec![],
+            tunnels: vec![],
+            stations: vec![Station {
+                name: "A".into(),
+                chainage_m: 10_000.0,
+            }],
+            sleeper_spacing_m: 0.6,
+            loop_crossing_spacing_m: None,
+            other_tracks: vec![],
+        };
+        let m = params().surveyed(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(3));
+        assert_eq!(m.check(), Ok(()));
+        // Due north: the survey error is all in east.
+        let err: Vec<f64> = m.vertices.iter().map(|v| v.east_m).collect();
+        let rms = (err.iter().map(|e| e * e).sum::<f64>() / err.len() as f64).sqrt();
+        assert!((0.05..0.2).contains(&rms), "{rms}");
+        let side = &m.other_tracks[0];
+        assert!(
+            (side.vertices[0].east_m + 4.5).abs() < 1e-9,
+            "left of north is west"
+        );
+        assert_eq!(side.vertices[0].chainage_m, 9600.0);
+    }
+}
