@@ -345,3 +345,47 @@ fn a_map_far_from_the_run_fuses_nothing_and_says_why() {
         .count();
     assert!(far > 100, "{far} fixes refused as far from the track");
 }
+
+#[test]
+fn a_map_offset_is_caught_by_the_map_check_where_the_train_runs_over_it() {
+    let d = tempfile::tempdir().unwrap();
+    // 10 m: beyond λσ across the track (σ about 1.5 m with the receiver-bias state, which a
+    // fix alone cannot tell from a lateral position error).
+    let run = simulate(
+        d.path(),
+        "offset.mcap",
+        &["--fault", "map:offset=10:300:315"],
+    );
+    let fused = refuse(&run);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let start = truth[0].stamp_ns;
+    let cal: Vec<SafetyStatus> = messages(&fused, "/fused/ekf_safety_cal/safety");
+    let inside: Vec<&SafetyStatus> = cal
+        .iter()
+        .filter(|s| s.stamp_ns >= start + 301_000_000_000 && s.stamp_ns < start + 314_000_000_000)
+        .collect();
+    let s4 = inside
+        .iter()
+        .filter(|s| s.checks.iter().any(|c| c.check == "s4_map" && !c.passed))
+        .count();
+    assert!(
+        s4 * 2 > inside.len(),
+        "S4 failed in {s4} of {} epochs over the offset",
+        inside.len()
+    );
+    let (_, contained) = availability_and_containment(&cal, &truth);
+    assert!(contained == 1.0, "containment {contained}");
+    // A bad map fault spec says what the map takes.
+    let out = railfuse(&[
+        "simulate",
+        "--fault",
+        "map:stuck:1:2",
+        "-o",
+        s(&d.path().join("x.mcap")),
+    ]);
+    assert!(
+        !out.status.success() && stderr(&out).contains("offset=METRES"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -26,7 +26,7 @@ pub struct Case {
 }
 
 /// The cases: each preset fault-free, then source 002's faults on its line (a GNSS position
-/// jump, a stuck axle, an axle slipping far beyond spec), each for 10–30 s while running.
+/// jump, a stuck axle, an axle slipping far beyond spec, a map offset), each for 10–30 s.
 pub const CASES: &[Case] = &[
     Case {
         scenario: "seed002",
@@ -62,6 +62,16 @@ pub const CASES: &[Case] = &[
         scenario: "seed002",
         label: "axle 2 stuck (200–230 s)",
         faults: &["odometer2:stuck:200:230"],
+    },
+    Case {
+        scenario: "seed002",
+        label: "map offset 3 m where the train runs 300–330 s",
+        faults: &["map:offset=3:300:330"],
+    },
+    Case {
+        scenario: "seed002",
+        label: "map offset 10 m where the train runs 300–330 s",
+        faults: &["map:offset=10:300:330"],
     },
 ];
 

@@ -91,7 +91,9 @@ pub enum FaultSpecError {
     Shape(String),
     #[error("'{spec}': unknown device '{device}' (devices: {})", DEVICES.join(", "))]
     UnknownDevice { spec: String, device: String },
-    #[error("'{spec}': unknown mode '{mode}' (dropout, stuck, bias=VALUE)")]
+    #[error(
+        "'{spec}': unknown mode '{mode}' (dropout, stuck, bias=VALUE; the map: offset=METRES)"
+    )]
     UnknownMode { spec: String, mode: String },
     #[error("'{0}': START and END are seconds from the start of the run")]
     Times(String),

@@ -9,6 +9,10 @@
 //! the run), e.g. `radar:dropout:200:260`, `gnss:bias=30:150:250`, `imu:stuck:100:160`. With
 //! `:reported` the device also says so itself: `device_fault` / `device_recovered` events
 //! naming its topic, which federated detectors honour.
+//!
+//! The track map is a device too: `map:offset=D:START:END` publishes the stretch of line the
+//! train covers between START and END shifted D m to the left (a survey blunder, a map of the
+//! wrong track), which a map check must catch.
 
 use crate::error::FaultSpecError;
 use railfuse_catalog::messages::{Event, EventKind};
@@ -22,6 +26,8 @@ pub enum FaultMode {
     Dropout,
     Stuck,
     Bias(f64),
+    /// The map only: a stretch published this far to the left, m.
+    Offset(f64),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -44,6 +50,7 @@ pub const DEVICES: &[&str] = &[
     "odometer2",
     "loop",
     "balise",
+    "map",
 ];
 
 impl std::str::FromStr for FaultSpec {
@@ -62,18 +69,22 @@ impl std::str::FromStr for FaultSpec {
                 device: device.to_owned(),
             });
         }
-        let mode = match mode {
-            "dropout" => FaultMode::Dropout,
-            "stuck" => FaultMode::Stuck,
-            m => match m.strip_prefix("bias=").map(str::parse::<f64>) {
-                Some(Ok(b)) if b.is_finite() => FaultMode::Bias(b),
-                _ => {
-                    return Err(FaultSpecError::UnknownMode {
-                        spec: s.to_owned(),
-                        mode: m.to_owned(),
-                    })
-                }
-            },
+        let value = |prefix: &str| {
+            mode.strip_prefix(prefix)
+                .and_then(|v| v.parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+        };
+        let mode = match (device, mode) {
+            ("map", _) => value("offset=").map(FaultMode::Offset),
+            (_, "dropout") => Some(FaultMode::Dropout),
+            (_, "stuck") => Some(FaultMode::Stuck),
+            _ => value("bias=").map(FaultMode::Bias),
+        };
+        let Some(mode) = mode else {
+            return Err(FaultSpecError::UnknownMode {
+                spec: s.to_owned(),
+                mode: parts[1].to_owned(),
+            });
         };
         let time = |t: &str| t.parse::<f64>().ok().filter(|t| t.is_finite() && *t >= 0.0);
         let (Some(start_s), Some(end_s)) = (time(start), time(end)) else {
@@ -102,6 +113,7 @@ fn topic_of(device: &str) -> &'static str {
         "odometer1" => topics::ODOMETER_1,
         "odometer2" => topics::ODOMETER_2,
         "loop" => topics::LOOP_POSITION,
+        "map" => topics::TRACK_MAP,
         _ => topics::BALISE,
     }
 }
@@ -208,6 +220,8 @@ impl FaultInjector {
                     None => e,
                 }),
                 (true, FaultMode::Bias(b)) => Some(biased(e, b)),
+                // The map is published once, offset where the fault says (simulate_line).
+                (true, FaultMode::Offset(_)) => Some(e),
             };
         }
         emit
@@ -219,6 +233,7 @@ fn describe(m: FaultMode) -> String {
         FaultMode::Dropout => "dropout".into(),
         FaultMode::Stuck => "stuck".into(),
         FaultMode::Bias(b) => format!("bias {b}"),
+        FaultMode::Offset(d) => format!("offset {d} m"),
     }
 }
 

@@ -225,11 +225,17 @@ fn simulate_line(
     let map = &track.map;
     let mut log = SimLog::create(out, scenario, seed, faults)?;
     log.fault_specs = faults.to_vec();
-    // The published map: the true one, or as a site's surveyors drew it.
-    let published = p
+    // The published map: the true one, or as a site's surveyors drew it, with any stretch a
+    // `map:offset` fault shifts.
+    let mut published = p
         .site
         .as_ref()
         .map(|site| site.surveyed(map, &mut rng_stream(seed, 20)));
+    let offsets = map_offsets(p, map, faults);
+    if !offsets.is_empty() {
+        let base = published.as_ref().unwrap_or(map);
+        published = Some(site::with_offsets(base, &offsets, 10.0));
+    }
     log.write(topics::TRACK_MAP, start, published.as_ref().unwrap_or(map))?;
     let station_chainages: Vec<f64> = map.stations.iter().map(|s| s.chainage_m).collect();
 
@@ -362,6 +368,46 @@ fn simulate_line(
         log.write_emit(log_time, emit)?;
     }
     log.finish(scenario, map, (t_ns - start) as f64 / 1e9)
+}
+
+/// The chainage stretches `map:offset` faults shift, with their offsets: where the train is
+/// at each fault's start and end, from a dry run of the driver (deterministic: the same
+/// stations, the same steps).
+fn map_offsets(p: &LineScenario, map: &TrackMap, faults: &[FaultSpec]) -> Vec<(f64, f64, f64)> {
+    let wanted: Vec<(f64, f64, f64)> = faults
+        .iter()
+        .filter_map(|f| match f.mode {
+            faults::FaultMode::Offset(d) if f.device == "map" => Some((f.start_s, f.end_s, d)),
+            _ => None,
+        })
+        .collect();
+    if wanted.is_empty() {
+        return Vec::new();
+    }
+    let last = wanted.iter().map(|w| w.1).fold(0.0, f64::max);
+    let mut driver = Driver::new(
+        p.driver.clone(),
+        map.stations.iter().map(|s| s.chainage_m).collect(),
+    );
+    let dt = 1e-3;
+    let mut at = Vec::new();
+    let mut t = 0.0;
+    while t <= last && driver.phase != Phase::Finished {
+        at.push(driver.s);
+        driver.step(t, dt);
+        t += dt;
+    }
+    let s_at = |t: f64| {
+        at.get((t / dt) as usize)
+            .or(at.last())
+            .copied()
+            .unwrap_or(0.0)
+    };
+    wanted
+        .iter()
+        .map(|&(a, b, d)| (s_at(a), s_at(b), d))
+        .filter(|(a, b, _)| b > a)
+        .collect()
 }
 
 fn truth(w: &World, origin: &GeodeticOrigin) -> GroundTruth {

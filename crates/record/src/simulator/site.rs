@@ -136,6 +136,46 @@ impl SiteParams {
     }
 }
 
+/// `map` with each stretch `(from, to, left)` of its main line shifted `left` m to the left
+/// (`map:offset` faults), easing in and out over [`OFFSET_RAMP_M`] at each end as a blunder
+/// joined to the good survey would: the line resampled every `spacing_m`, and at the ends of
+/// each stretch and its ramps.
+pub fn with_offsets(map: &TrackMap, stretches: &[(f64, f64, f64)], spacing_m: f64) -> TrackMap {
+    let length = map.length_m();
+    let r = OFFSET_RAMP_M;
+    let mut marks: Vec<f64> = stretches
+        .iter()
+        .flat_map(|&(a, b, _)| [a - r, a, b, b + r])
+        .collect();
+    let n = (length / spacing_m).ceil() as usize;
+    marks.extend((0..=n).map(|k| (k as f64 * spacing_m).min(length)));
+    marks.retain(|s| (0.0..=length).contains(s));
+    marks.sort_by(f64::total_cmp);
+    marks.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+    let vertices = marks
+        .iter()
+        .map(|&s| {
+            let (e, n, h) = map.locate(s).expect("a built track has vertices");
+            let left: f64 = stretches
+                .iter()
+                .map(|&(a, b, d)| d * ((s - (a - r)) / r).min(((b + r) - s) / r).clamp(0.0, 1.0))
+                .sum();
+            TrackVertex {
+                chainage_m: s,
+                east_m: e - left * h.cos(),
+                north_m: n + left * h.sin(),
+            }
+        })
+        .collect();
+    TrackMap {
+        vertices,
+        ..map.clone()
+    }
+}
+
+/// The length over which a map offset eases in and out, m.
+pub const OFFSET_RAMP_M: f64 = 100.0;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -153,6 +193,47 @@ mod tests {
             map_survey_correlation_m: 200.0,
             map_survey_spacing_m: 20.0,
         }
+    }
+
+    #[test]
+    fn an_offset_stretch_moves_only_between_its_ends() {
+        use railfuse_catalog::geodesy::GeodeticOrigin;
+        let v = |c: f64| TrackVertex {
+            chainage_m: c,
+            east_m: c,
+            north_m: 0.0,
+        };
+        let truth = TrackMap {
+            stamp_ns: 0,
+            name: "t".into(),
+            origin: GeodeticOrigin {
+                latitude_deg: 44.6,
+                longitude_deg: 10.9,
+                altitude_m: 0.0,
+            },
+            vertices: vec![v(0.0), v(1000.0)],
+            balises: vec![],
+            tunnels: vec![],
+            stations: vec![],
+            sleeper_spacing_m: 0.6,
+            loop_crossing_spacing_m: None,
+            other_tracks: vec![],
+        };
+        let m = with_offsets(&truth, &[(300.0, 455.0, 5.0)], 50.0);
+        let at = |c: f64| {
+            m.vertices
+                .iter()
+                .find(|x| x.chainage_m == c)
+                .unwrap()
+                .north_m
+        };
+        // Eastbound: left is north; full offset from 300 to 455, easing over 100 m each side.
+        assert_eq!(
+            (at(200.0), at(250.0), at(300.0), at(400.0)),
+            (0.0, 2.5, 5.0, 5.0)
+        );
+        assert_eq!((at(455.0), at(555.0), at(600.0)), (5.0, 0.0, 0.0));
+        assert_eq!(m.check(), Ok(()));
     }
 
     #[test]
