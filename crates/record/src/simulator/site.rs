@@ -44,6 +44,17 @@ pub struct SiteEffect {
     pub in_cutting: bool,
 }
 
+/// The point `left_m` to the left of `map`'s main line at `chainage_m`, with that chainage.
+fn left_of(map: &TrackMap, chainage_m: f64, left_m: f64) -> TrackVertex {
+    let (e, n, h) = map.locate(chainage_m).expect("a built track has vertices");
+    // Left of heading h (clockwise from north) is (−cos h, sin h).
+    TrackVertex {
+        chainage_m,
+        east_m: e - left_m * h.cos(),
+        north_m: n + left_m * h.sin(),
+    }
+}
+
 /// A smooth bump: 0 outside `[a, b]`, rising to 1 in the middle (a raised cosine).
 fn bump(s: f64, a: f64, b: f64) -> f64 {
     if s <= a || s >= b || b <= a {
@@ -88,13 +99,7 @@ impl SiteParams {
         let mut vertices = Vec::new();
         let mut s = 0.0;
         loop {
-            let (e, n, h) = truth.locate(s).expect("a built track has vertices");
-            // Left of heading h (clockwise from north) is (−cos h, sin h).
-            vertices.push(TrackVertex {
-                chainage_m: s,
-                east_m: e - error * h.cos(),
-                north_m: n + error * h.sin(),
-            });
+            vertices.push(left_of(truth, s, error));
             if s >= length {
                 break;
             }
@@ -113,13 +118,7 @@ impl SiteParams {
                 let vertices = (0..=n)
                     .map(|k| {
                         let c = a + (b - a) * k as f64 / n as f64;
-                        let (e, nn, h) = truth.locate(c).expect("a built track has vertices");
-                        let off = self.station_track_offset_m;
-                        TrackVertex {
-                            chainage_m: c,
-                            east_m: e - off * h.cos(),
-                            north_m: nn + off * h.sin(),
-                        }
+                        left_of(truth, c, self.station_track_offset_m)
                     })
                     .collect();
                 TrackLine {
@@ -155,16 +154,11 @@ pub fn with_offsets(map: &TrackMap, stretches: &[(f64, f64, f64)], spacing_m: f6
     let vertices = marks
         .iter()
         .map(|&s| {
-            let (e, n, h) = map.locate(s).expect("a built track has vertices");
             let left: f64 = stretches
                 .iter()
                 .map(|&(a, b, d)| d * ((s - (a - r)) / r).min(((b + r) - s) / r).clamp(0.0, 1.0))
                 .sum();
-            TrackVertex {
-                chainage_m: s,
-                east_m: e - left * h.cos(),
-                north_m: n + left * h.sin(),
-            }
+            left_of(map, s, left)
         })
         .collect();
     TrackMap {
