@@ -508,7 +508,7 @@ impl PipelineLayout {
         }
         if self.safety {
             others.push(plot(
-                "safe interval U_safe − reference (m), usable (1) or not (0)",
+                "safety: usable (1) or not (0)",
                 &format!("/{}", ent::safety(p)),
                 PlotStyle {
                     legend: true,

@@ -130,10 +130,15 @@ pub fn sharing(pipeline: &str) -> String {
     format!("diagnostics/{pipeline}/sharing")
 }
 
-/// A pipeline with safety checks: its safe interval U_safe around the reference (the
-/// reference at 0, so the eye sees whether 0 stays inside), and whether each epoch was usable.
+/// A pipeline with safety checks: whether each epoch was usable (1) or not (0).
 pub fn safety(pipeline: &str) -> String {
     format!("diagnostics/{pipeline}/safety")
+}
+
+/// A pipeline's safe interval U_safe relative to the reference, drawn in the chainage-error
+/// plot beside the ±3σ band (the reference is 0 there: the eye sees whether 0 stays inside).
+pub fn safe_interval(pipeline: &str) -> String {
+    format!("{}/u_safe", chainage_error(pipeline))
 }
 
 /// A particle pipeline's effective sample size.

@@ -315,7 +315,7 @@ struct PipelineState {
     out: BTreeSet<String>,
     effective_sample_size: Option<SeriesId>,
     /// Safety checks: U_safe's ends and the usable flag, and the last first failure shown.
-    safety: Option<SeriesId>,
+    safety: Option<(SeriesId, SeriesId)>,
     last_failure: Option<Option<String>>,
     sensor_states: HashMap<(String, String), SeriesId>,
 }
@@ -951,27 +951,25 @@ impl Logger {
     /// flag as series; each change of the first failing check as a log line.
     fn safety(&mut self, p: usize, s: &SafetyStatus) -> Result<(), Error> {
         let t = s.stamp_ns as i64;
-        let id = match self.pipelines[p].safety {
-            Some(id) => id,
+        let (interval, flag) = match self.pipelines[p].safety {
+            Some(ids) => ids,
             None => {
                 let (name, index) = (self.pipelines[p].name.clone(), self.pipelines[p].index);
-                let id = self.line_series(
-                    &ent::safety(&name),
-                    &[
-                        "U_safe high − reference".into(),
-                        "U_safe low − reference".into(),
-                        "usable".into(),
-                    ],
-                    &[
-                        palette::band(index),
-                        palette::band(index),
-                        palette::pipeline(index),
-                    ],
-                    &[1.0, 1.0, 1.5],
+                let interval = self.line_series(
+                    &ent::safe_interval(&name),
+                    &[format!("{name} U_safe high"), format!("{name} U_safe low")],
+                    &[palette::smoothed(index), palette::smoothed(index)],
+                    &[1.0, 1.0],
                 )?;
-                self.pipelines[p].safety = Some(id);
+                let flag = self.line_series(
+                    &ent::safety(&name),
+                    &["usable".into()],
+                    &[palette::pipeline(index)],
+                    &[1.5],
+                )?;
+                self.pipelines[p].safety = Some((interval, flag));
                 self.layout.pipelines[p].safety = true;
-                id
+                (interval, flag)
             }
         };
         let truth = self.truth.at(s.stamp_ns).map(|(c, _)| c);
@@ -979,8 +977,9 @@ impl Logger {
             (Some(u), Some(c)) => (u.high_m - c, u.low_m - c),
             _ => (f64::NAN, f64::NAN),
         };
+        self.columns.push(&self.rec, interval, t, &[high, low])?;
         let usable = if s.usable { 1.0 } else { 0.0 };
-        self.columns.push(&self.rec, id, t, &[high, low, usable])?;
+        self.columns.push(&self.rec, flag, t, &[usable])?;
         if self.pipelines[p].last_failure.as_ref() != Some(&s.first_failure) {
             self.pipelines[p].last_failure = Some(s.first_failure.clone());
             let name = self.pipelines[p].name.clone();
