@@ -79,7 +79,7 @@ fn markdown(r: &SafetyResults) -> Result<String> {
     writeln!(md, "updates (a consistent filter exceeds it with probability 7e-6), S3b 15 m and 2 m/s, S3c σ ≤ 2 m, S4")?;
     writeln!(
         md,
-        "λ = 4 with σ_map = 0.1 m, S5 ΔT = 5 s at 4 σ, GNSS stale after 10 s, an axle after 0.5 s."
+        "λ = 4 with σ_map = 0.1 m, S5 ΔT = 5 s at 4 σ, GNSS stale after 60 s, an axle after 0.5 s."
     )?;
     Ok(md)
 }

@@ -58,8 +58,10 @@ pub struct SafetySettings {
     // S1: sensor diagnosis.
     /// The least fix type that gives a position (`single`, `dgps`, `rtk_float`, `rtk_fixed`).
     pub min_fix_type: FixType,
-    /// Longest gap between usable fixes before the GNSS counts as failed (s). Long, because
-    /// dead reckoning on axle 1 is what the filter is for; S3c ends it when σ grows too big.
+    /// Longest gap between usable fixes before the GNSS counts as failed (s). Long (a tunnel
+    /// of a few hundred metres), because dead reckoning on axle 1 is what the filter is for:
+    /// S3c, the position σ, is what ends it. On seed002 this takes availability from about
+    /// 93 % at 10 s to 94–96 % with the truth still inside U_safe at every usable epoch.
     pub gnss_timeout_s: f64,
     /// Longest gap between samples of an axle sensor before it counts as failed (s).
     pub axle_timeout_s: f64,
@@ -139,7 +141,7 @@ impl Default for SafetySettings {
             gnss_bias: None,
             axle_1_bias: None,
             min_fix_type: FixType::Single,
-            gnss_timeout_s: 10.0,
+            gnss_timeout_s: 60.0,
             axle_timeout_s: 0.5,
             max_speed_mps: 100.0,
             stuck_samples: 10,
