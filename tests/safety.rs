@@ -62,6 +62,29 @@ fn refuse(run: &Path) -> std::path::PathBuf {
     fused
 }
 
+/// A seed-1 default run with `fault`, re-fused: of `ekf_safety_cal`'s epochs between `from_s`
+/// and `to_s` (from the run's start), how many and how many with `check` failing; and its
+/// containment over the whole run.
+fn check_failing_in(fault: &str, from_s: u64, to_s: u64, check: &str) -> (usize, usize, f64) {
+    let d = tempfile::tempdir().unwrap();
+    let run = simulate(d.path(), "faulted.mcap", &["--fault", fault]);
+    let fused = refuse(&run);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let start = truth[0].stamp_ns;
+    let cal: Vec<SafetyStatus> = messages(&fused, "/fused/ekf_safety_cal/safety");
+    let (a, b) = (start + from_s * 1_000_000_000, start + to_s * 1_000_000_000);
+    let window: Vec<&SafetyStatus> = cal
+        .iter()
+        .filter(|s| s.stamp_ns >= a && s.stamp_ns < b)
+        .collect();
+    let failing = window
+        .iter()
+        .filter(|s| s.checks.iter().any(|c| c.check == check && !c.passed))
+        .count();
+    let (_, contained) = availability_and_containment(&cal, &truth);
+    (window.len(), failing, contained)
+}
+
 #[test]
 fn the_safe_interval_holds_the_truth_and_an_injected_jump_is_flagged_at_once() {
     let d = tempfile::tempdir().unwrap();
@@ -105,28 +128,11 @@ fn the_safe_interval_holds_the_truth_and_an_injected_jump_is_flagged_at_once() {
 
 #[test]
 fn a_stuck_axle_is_diagnosed_and_nothing_is_usable_while_it_lasts() {
-    let d = tempfile::tempdir().unwrap();
-    let run = simulate(
-        d.path(),
-        "stuck.mcap",
-        &["--fault", "odometer1:stuck:200:230"],
-    );
-    let fused = refuse(&run);
-    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
-    let start = truth[0].stamp_ns;
-    let cal: Vec<SafetyStatus> = messages(&fused, "/fused/ekf_safety_cal/safety");
-    let window: Vec<&SafetyStatus> = cal
-        .iter()
-        .filter(|s| s.stamp_ns >= start + 201_000_000_000 && s.stamp_ns < start + 229_000_000_000)
-        .collect();
-    assert!(!window.is_empty());
+    let (epochs, flagged, contained) =
+        check_failing_in("odometer1:stuck:200:230", 201, 229, "s1_axle_1");
+    assert!(epochs > 0);
     // Stuck while the train moves (it stands at a station part of the time).
-    let flagged = window
-        .iter()
-        .filter(|s| s.checks.iter().any(|c| c.check == "s1_axle_1" && !c.passed))
-        .count();
     assert!(flagged > 0, "axle 1 never diagnosed stuck");
-    let (_, contained) = availability_and_containment(&cal, &truth);
     assert!(contained == 1.0, "containment {contained}");
 }
 
@@ -348,33 +354,15 @@ fn a_map_far_from_the_run_fuses_nothing_and_says_why() {
 
 #[test]
 fn a_map_offset_is_caught_by_the_map_check_where_the_train_runs_over_it() {
-    let d = tempfile::tempdir().unwrap();
     // 10 m: beyond λσ across the track (σ about 1.5 m with the receiver-bias state, which a
     // fix alone cannot tell from a lateral position error).
-    let run = simulate(
-        d.path(),
-        "offset.mcap",
-        &["--fault", "map:offset=10:300:315"],
-    );
-    let fused = refuse(&run);
-    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
-    let start = truth[0].stamp_ns;
-    let cal: Vec<SafetyStatus> = messages(&fused, "/fused/ekf_safety_cal/safety");
-    let inside: Vec<&SafetyStatus> = cal
-        .iter()
-        .filter(|s| s.stamp_ns >= start + 301_000_000_000 && s.stamp_ns < start + 314_000_000_000)
-        .collect();
-    let s4 = inside
-        .iter()
-        .filter(|s| s.checks.iter().any(|c| c.check == "s4_map" && !c.passed))
-        .count();
+    let (epochs, s4, contained) = check_failing_in("map:offset=10:300:315", 301, 314, "s4_map");
     assert!(
-        s4 * 2 > inside.len(),
-        "S4 failed in {s4} of {} epochs over the offset",
-        inside.len()
+        s4 * 2 > epochs,
+        "S4 failed in {s4} of {epochs} epochs over the offset"
     );
-    let (_, contained) = availability_and_containment(&cal, &truth);
     assert!(contained == 1.0, "containment {contained}");
+    let d = tempfile::tempdir().unwrap();
     // A bad map fault spec says what the map takes.
     let out = railfuse(&[
         "simulate",

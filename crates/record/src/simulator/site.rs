@@ -173,7 +173,29 @@ pub const OFFSET_RAMP_M: f64 = 100.0;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use railfuse_catalog::geodesy::GeodeticOrigin;
+    use railfuse_catalog::messages::Station;
     use rand::SeedableRng;
+
+    /// A track map of these vertices and stations near Modena.
+    fn line(vertices: Vec<TrackVertex>, stations: Vec<Station>) -> TrackMap {
+        TrackMap {
+            stamp_ns: 0,
+            name: "t".into(),
+            origin: GeodeticOrigin {
+                latitude_deg: 44.6,
+                longitude_deg: 10.9,
+                altitude_m: 0.0,
+            },
+            vertices,
+            balises: vec![],
+            tunnels: vec![],
+            stations,
+            sleeper_spacing_m: 0.6,
+            loop_crossing_spacing_m: None,
+            other_tracks: vec![],
+        }
+    }
 
     fn params() -> SiteParams {
         SiteParams {
@@ -191,28 +213,12 @@ mod tests {
 
     #[test]
     fn an_offset_stretch_moves_only_between_its_ends() {
-        use railfuse_catalog::geodesy::GeodeticOrigin;
         let v = |c: f64| TrackVertex {
             chainage_m: c,
             east_m: c,
             north_m: 0.0,
         };
-        let truth = TrackMap {
-            stamp_ns: 0,
-            name: "t".into(),
-            origin: GeodeticOrigin {
-                latitude_deg: 44.6,
-                longitude_deg: 10.9,
-                altitude_m: 0.0,
-            },
-            vertices: vec![v(0.0), v(1000.0)],
-            balises: vec![],
-            tunnels: vec![],
-            stations: vec![],
-            sleeper_spacing_m: 0.6,
-            loop_crossing_spacing_m: None,
-            other_tracks: vec![],
-        };
+        let truth = line(vec![v(0.0), v(1000.0)], vec![]);
         let m = with_offsets(&truth, &[(300.0, 455.0, 5.0)], 50.0);
         let at = |c: f64| {
             m.vertices
@@ -242,17 +248,8 @@ mod tests {
 
     #[test]
     fn the_surveyed_map_wanders_by_its_survey_error_and_has_station_tracks() {
-        use railfuse_catalog::geodesy::GeodeticOrigin;
-        use railfuse_catalog::messages::Station;
-        let truth = TrackMap {
-            stamp_ns: 0,
-            name: "t".into(),
-            origin: GeodeticOrigin {
-                latitude_deg: 44.6,
-                longitude_deg: 10.9,
-                altitude_m: 0.0,
-            },
-            vertices: vec![
+        let truth = line(
+            vec![
                 TrackVertex {
                     chainage_m: 0.0,
                     east_m: 0.0,
@@ -264,16 +261,11 @@ mod tests {
                     north_m: 20_000.0,
                 },
             ],
-            balises: vec![],
-            tunnels: vec![],
-            stations: vec![Station {
+            vec![Station {
                 name: "A".into(),
                 chainage_m: 10_000.0,
             }],
-            sleeper_spacing_m: 0.6,
-            loop_crossing_spacing_m: None,
-            other_tracks: vec![],
-        };
+        );
         let m = params().surveyed(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(3));
         assert_eq!(m.check(), Ok(()));
         // Due north: the survey error is all in east.
