@@ -621,11 +621,15 @@ macro_rules! each {
 impl AnyPipeline {
     pub fn new(spec: PipelineSpec) -> Result<Self> {
         const _: () = assert!(MAX_STATES == 8, "AnyPipeline has a variant per dimension");
-        if let EstimatorSpec::EkfSafety { settings, roles } = &spec.estimator {
-            let (settings, roles) = (settings.clone(), *roles);
-            return Ok(AnyPipeline::Safety(Box::new(SafetyPipeline::new(
-                spec, *settings, roles,
-            )?)));
+        if let EstimatorSpec::EkfSafety {
+            settings,
+            roles,
+            motion,
+        } = &spec.estimator
+        {
+            let (settings, roles, motion) = (settings.clone(), *roles, *motion);
+            let safety = SafetyPipeline::new(spec, *settings, roles, motion)?;
+            return Ok(AnyPipeline::Safety(Box::new(safety)));
         }
         Ok(match spec.dimension() {
             2 => AnyPipeline::Two(Pipeline::new(spec)?),

@@ -150,6 +150,8 @@ pub enum EstimatorSpec {
     EkfSafety {
         settings: Box<crate::safety::SafetySettings>,
         roles: crate::safety::Roles,
+        /// Per axis, when the acceleration input is off.
+        motion: crate::model::ConstantAcceleration,
     },
 }
 
@@ -669,13 +671,13 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
 fn safety(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
     let settings = c.safety.clone().unwrap_or_default();
     settings.check()?;
-    if !matches!(c.motion, MotionConfig::ConstantAcceleration { .. }) {
+    let MotionModel::ConstantAcceleration(motion) = motion_model(&c.motion)? else {
         return Err(
             "an ekf_safety pipeline runs constant acceleration per axis: set motion = \
                     { model = \"constant_acceleration\", jerk_psd = … }"
                 .into(),
         );
-    }
+    };
     let find = |role: &str, topic: &str| {
         c.sensor
             .iter()
@@ -712,6 +714,7 @@ fn safety(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
     Ok(EstimatorSpec::EkfSafety {
         settings: Box::new(settings),
         roles,
+        motion,
     })
 }
 

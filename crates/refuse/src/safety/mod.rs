@@ -44,7 +44,7 @@ use crate::config::VarianceValue;
 use crate::error::Result;
 use crate::filter::Innovation;
 use crate::measurement::SensorContext;
-use crate::model::{AccelerationInput, ConstantAcceleration, MotionModel, ProcessNoise};
+use crate::model::{AccelerationInput, ConstantAcceleration};
 use crate::pipeline::{Fused, PipelineCounts};
 use crate::reorder::ReorderQueue;
 use crate::spec::PipelineSpec;
@@ -81,6 +81,7 @@ pub struct SafetyPipeline {
     pub spec: PipelineSpec,
     settings: SafetySettings,
     roles: Roles,
+    plain_motion: ConstantAcceleration,
     /// A map given in the settings (a GeoJSON file); else the log's, from the context.
     own_map: Option<std::sync::Arc<TrackMap>>,
     fix_matcher: MapMatcher,
@@ -98,7 +99,13 @@ pub struct SafetyPipeline {
 }
 
 impl SafetyPipeline {
-    pub fn new(spec: PipelineSpec, settings: SafetySettings, roles: Roles) -> Result<Self> {
+    /// `plain_motion` moves each axis when the acceleration input is off.
+    pub fn new(
+        spec: PipelineSpec,
+        settings: SafetySettings,
+        roles: Roles,
+        plain_motion: ConstantAcceleration,
+    ) -> Result<Self> {
         let own_map = match &settings.map {
             Some(path) => Some(std::sync::Arc::new(
                 railfuse_catalog::track_geojson::read_track_map(path)
@@ -112,6 +119,7 @@ impl SafetyPipeline {
             spec,
             settings,
             roles,
+            plain_motion,
             own_map,
             fix_matcher: MapMatcher::new(window),
             state_matcher: MapMatcher::new(window),
@@ -203,8 +211,8 @@ impl SafetyPipeline {
 
     /// The motion model of the plane filter.
     fn motion(&self) -> PlaneMotion {
-        match (self.settings.acceleration_input, self.spec.motion) {
-            (true, _) => PlaneMotion::Input {
+        match self.settings.acceleration_input {
+            true => PlaneMotion::Input {
                 known: AccelerationInput {
                     input_std_mps2: self.settings.input_std_mps2,
                     correlation_time_s: self.settings.input_window_s / 2.0,
@@ -214,11 +222,7 @@ impl SafetyPipeline {
                     correlation_time_s: self.settings.input_window_s / 2.0,
                 },
             },
-            (false, MotionModel::ConstantAcceleration(m)) => PlaneMotion::ConstantAcceleration(m),
-            // The spec admits only constant acceleration; its noise stands in otherwise.
-            (false, _) => PlaneMotion::ConstantAcceleration(ConstantAcceleration {
-                noise: ProcessNoise::WhiteJerkPsd(0.1),
-            }),
+            false => PlaneMotion::ConstantAcceleration(self.plain_motion),
         }
     }
 
@@ -373,7 +377,8 @@ impl SafetyPipeline {
             .axle(0, m, variances, filter_speed, &self.settings);
         // A faulty axle's speeds must not drive the filter either: without U the prediction
         // takes the train's whole acceleration range as its uncertainty.
-        match self.diagnosis.checks(m.stamp_ns, &self.settings)[1].passed {
+        let healthy = self.diagnosis.checks(m.stamp_ns, &self.settings)[1].passed;
+        match healthy {
             true => self
                 .input
                 .push(m.stamp_ns, m.speed_mps, self.settings.input_window_s),
@@ -386,7 +391,6 @@ impl SafetyPipeline {
         }
         self.predict_to(m.stamp_ns, map);
         let mut epoch = Epoch::new(m.stamp_ns, &topic);
-        let healthy = self.diagnosis.checks(m.stamp_ns, &self.settings)[1].passed;
         let r = variances[0];
         if !healthy || !r.is_finite() {
             self.counts.rejected_invalid += 1;
