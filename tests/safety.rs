@@ -242,60 +242,58 @@ fn the_seed002_line_has_parallel_tracks_a_surveyed_map_and_multipath_at_stations
 
 #[test]
 fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accuracy() {
-    use railfuse_catalog::geodesy::GeodeticOrigin;
-    use railfuse_catalog::messages::GnssFix;
-    use railfuse_refuse::safety::diagnosis::{Diagnosis, FixVerdict};
-    use railfuse_refuse::safety::SafetySettings;
+    use railfuse_catalog::messages::{FusedDiagnostics, GateDecision};
+    // Real recordings of GNSS and an IMU alone: no track map, no axles. S1 still judges each
+    // fix from the CLI; nothing is fused or declared usable without the map.
     let d = tempfile::tempdir().unwrap();
-    let settings = SafetySettings::default();
-    let (mut refused, mut usable) = (0, 0);
+    let config = sample("gnss-s1.toml");
+    let (mut refused, mut accepted) = (0, 0);
     for name in [
         "20221019_1252_R90120_Formigine_SN1_sample.csv",
         "20221020_1030_R90117_Modena_SN1_sample.csv",
         "20221020_1030_R90117_Modena_SN2_sample.csv",
     ] {
-        let out = d.path().join(format!("{name}.mcap"));
+        let log = d.path().join(format!("{name}.mcap"));
+        let fused = d.path().join(format!("{name}.fused.mcap"));
         let src = sample("eth-pbl-railway").join(name);
-        ok(&[
-            "import",
-            "--format",
-            "eth",
-            s(&src),
-            "-o",
-            s(&out),
-            "--quiet",
-        ]);
-        let mut diagnosis = Diagnosis::default();
-        for fix in messages::<GnssFix>(&out, "/gnss/fix") {
-            // The plane around the fix itself: S1 needs no map for this.
-            let enu = fix.latitude_deg.zip(fix.longitude_deg).map(|(lat, lon)| {
-                let origin = GeodeticOrigin {
-                    latitude_deg: lat,
-                    longitude_deg: lon,
-                    altitude_m: fix.altitude_m.unwrap_or(0.0),
-                };
-                let (e, n, _) = origin.to_enu(lat, lon, origin.altitude_m);
-                (e, n)
-            });
-            let variance = fix.position_covariance_enu_m2.map(|c| c[0].max(c[4]));
-            match diagnosis.fix(&fix, enu, variance, &settings) {
-                FixVerdict::NoPosition(why) => {
-                    assert!(why.contains("fix type none"), "{why}");
-                    refused += 1;
+        ok(&["import", "--format", "eth", s(&src), "-o", s(&log), "--quiet"]);
+        let out = ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
+        let printed = String::from_utf8_lossy(&out.stdout).into_owned() + &stderr(&out);
+        let status = messages::<SafetyStatus>(&fused, "/fused/gnss_s1/safety");
+        let diagnostics = messages::<FusedDiagnostics>(&fused, "/fused/gnss_s1/diagnostics");
+        assert_eq!(status.len(), diagnostics.len(), "{name}: one status per fix");
+        assert!(!status.is_empty(), "{name}: no fix judged");
+        let states = messages::<FusedState>(&fused, "/fused/gnss_s1/state");
+        assert!(states.is_empty(), "{name}: fused without a map");
+        for (st, diag) in status.iter().zip(&diagnostics) {
+            assert!(!st.usable && st.safe_interval.is_none(), "{name}: {st:?}");
+            assert_eq!(diag.decision, GateDecision::RejectedInvalid);
+            let gnss = &st.checks[0];
+            assert_eq!(gnss.check, "s1_gnss");
+            let map = st.checks.iter().find(|c| c.check == "s1_map").unwrap();
+            assert!(map.reason.as_deref().unwrap().contains("no track map"), "{map:?}");
+            if gnss.passed {
+                // Taken with the accuracy the receiver reported (decimetres to a metre here).
+                let sigma = gnss.value.expect("the reported σ");
+                assert!(sigma > 0.05 && sigma < 5.0, "{name}: σ {sigma}");
+                let r = diag.measurement_variance.unwrap();
+                assert!((r.sqrt() - sigma).abs() < 1e-9, "{r} vs {sigma}");
+                assert!(diag.reason.as_deref().unwrap().contains("usable fix, not fused"));
+                accepted += 1;
+            } else {
+                // Refused with its reason; S1 counts GNSS as failed (no usable fix yet).
+                assert_eq!(st.first_failure.as_deref(), Some("s1_gnss"));
+                for why in [diag.reason.as_deref(), gnss.reason.as_deref()] {
+                    assert!(why.unwrap().contains("fix type none"), "{name}: {why:?}");
                 }
-                FixVerdict::Usable => {
-                    // Taken with the accuracy the receiver reported (dm to m here).
-                    let v = variance.unwrap();
-                    assert!(v > 0.0 && v < 25.0, "{v}");
-                    usable += 1;
-                }
-                FixVerdict::Fault(why) => panic!("{name}: a real fix diagnosed faulty: {why}"),
+                assert!(printed.contains("s1_gnss"), "{name}: S7 without it:\n{printed}");
+                refused += 1;
             }
         }
     }
     assert!(
-        refused >= 2 && usable >= 2,
-        "refused {refused}, usable {usable}"
+        refused >= 2 && accepted >= 2,
+        "refused {refused}, accepted {accepted}"
     );
 }
 

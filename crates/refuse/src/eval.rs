@@ -442,7 +442,11 @@ impl Evaluator {
         let pipelines = self
             .scored
             .into_iter()
-            .filter(|s| s.states > 0 || s.gated > 0 || s.nis.summary().is_some())
+            // A pipeline that judged epochs without fusing any (S1 on a log of GNSS alone)
+            // still has its S7 to report.
+            .filter(|s| {
+                s.states > 0 || s.gated > 0 || s.nis.summary().is_some() || s.safety.is_some()
+            })
             .map(|mut s| {
                 s.meter.finish();
                 let safety = s.safety.take().map(|t| t.finish(s.meter.containment, t0));

@@ -12,6 +12,7 @@
 //! - [`spec`]: the pipelines validated, and each sensor bound to its channel;
 //! - [`pipeline`]: one configured estimator fed in sensor-time order ([`reorder`]: the
 //!   reorder window);
+//! - [`prefilter`]: source 003's RLS, adaptive RLS and PU-RLS pre-filters of one channel;
 //! - [`safety`]: source 002's EKF in the plane with its safety checks and safe interval;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
@@ -26,6 +27,7 @@ pub mod filter;
 pub mod measurement;
 pub mod model;
 pub mod pipeline;
+pub mod prefilter;
 pub mod reorder;
 pub mod replay;
 pub mod safety;

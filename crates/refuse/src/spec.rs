@@ -686,10 +686,11 @@ fn safety(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
                 format!("safety.{role} is {topic}, which is not one of the pipeline's sensors")
             })
     };
+    let axle = |role: &str, topic: &Option<String>| topic.as_ref().map(|t| find(role, t)).transpose();
     let roles = crate::safety::Roles {
         gnss: find("gnss", &settings.gnss)?,
-        axle_1: find("axle_1", &settings.axle_1)?,
-        axle_2: find("axle_2", &settings.axle_2)?,
+        axle_1: axle("axle_1", &settings.axle_1)?,
+        axle_2: axle("axle_2", &settings.axle_2)?,
     };
     if let Some(s) = c.sensor.iter().map(|s| s.get_ref()).find(|s| {
         s.chainage_bias.is_some()
@@ -704,10 +705,11 @@ fn safety(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
             s.topic
         ));
     }
-    if c.sensor.len() != 3 {
+    let roles_given = 1 + usize::from(roles.axle_1.is_some()) + usize::from(roles.axle_2.is_some());
+    if c.sensor.len() != roles_given {
         return Err(format!(
-            "an ekf_safety pipeline has exactly three sensors (safety.gnss, axle_1, axle_2), \
-             not {}",
+            "an ekf_safety pipeline has one sensor per role it names (safety.gnss, axle_1, \
+             axle_2: {roles_given} here), not {}",
             c.sensor.len()
         ));
     }

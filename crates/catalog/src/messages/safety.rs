@@ -31,7 +31,9 @@ pub struct SafetyCheck {
     /// `s3c_covariance`, `s4_map`, `s5_odometry`.
     pub check: String,
     pub passed: bool,
-    /// The tested quantity and its limit, where the check compares one with the other.
+    /// The tested quantity and its limit, where the check compares one with the other. For
+    /// `s1_gnss`, which has no limit: the σ (m) the receiver reported for the last fix S1
+    /// accepted.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub value: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]

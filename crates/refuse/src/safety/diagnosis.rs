@@ -36,6 +36,8 @@ pub struct Diagnosis {
     pub axles: [AxleState; 2],
     map_fault: Option<String>,
     first_fix_ns: Option<u64>,
+    /// Why the latest fix without a usable position was refused, until a usable one comes.
+    last_refusal: Option<String>,
 }
 
 /// How a fix was judged.
@@ -60,11 +62,13 @@ impl Diagnosis {
         s: &SafetySettings,
     ) -> FixVerdict {
         if fix.fix_type < s.min_fix_type || !fix.fix_type.has_position() {
-            return FixVerdict::NoPosition(format!(
+            let why = format!(
                 "fix type {}, below {}",
                 fix.fix_type.name(),
                 s.min_fix_type.name()
-            ));
+            );
+            self.last_refusal = Some(why.clone());
+            return FixVerdict::NoPosition(why);
         }
         let (Some((e, n)), Some(var)) = (enu, variance_m2) else {
             return self.gnss_fails("a fix of its type without a position or its variance".into());
@@ -93,6 +97,7 @@ impl Diagnosis {
             variance_m2: var,
         });
         self.gnss_fault = None;
+        self.last_refusal = None;
         FixVerdict::Usable
     }
 
@@ -162,6 +167,11 @@ impl Diagnosis {
         }
     }
 
+    /// Axle `k` has no sensor in the pipeline: it fails S1 for the whole run, and says so.
+    pub fn absent_axle(&mut self, k: usize, role: &str) {
+        self.axles[k].fault = Some(format!("no axle sensor configured (safety.{role})"));
+    }
+
     /// The map matching of a fix failed or put it too far from every track; `None` clears.
     pub fn map(&mut self, fault: Option<String>) {
         self.map_fault = fault;
@@ -179,18 +189,26 @@ impl Diagnosis {
                 _ => None,
             }
         };
-        let gnss = self
-            .gnss_fault
-            .clone()
-            .or_else(|| stale(self.last_fix.map(|f| f.stamp_ns), s.gnss_timeout_s, "fix"));
+        let gnss = self.gnss_fault.clone().or_else(|| {
+            let why = stale(self.last_fix.map(|f| f.stamp_ns), s.gnss_timeout_s, "fix")?;
+            Some(match &self.last_refusal {
+                Some(r) => format!("{why} (the latest: {r})"),
+                None => why,
+            })
+        });
         let axle = |k: usize| {
             let a = &self.axles[k];
             a.fault
                 .clone()
                 .or_else(|| stale(a.last_stamp_ns, s.axle_timeout_s, "sample"))
         };
+        // The accuracy the receiver reported for the fix S1 last accepted, to read beside it.
+        let gnss = SafetyCheck {
+            value: self.last_fix.map(|f| f.variance_m2.sqrt()),
+            ..verdict("s1_gnss", gnss)
+        };
         [
-            verdict("s1_gnss", gnss),
+            gnss,
             verdict("s1_axle_1", axle(0)),
             verdict("s1_axle_2", axle(1)),
             verdict("s1_map", self.map_fault.clone()),

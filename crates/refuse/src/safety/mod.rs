@@ -36,9 +36,10 @@ use nalgebra::Matrix2;
 use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::map_matching::{curvature_on, MapMatcher};
 use railfuse_catalog::messages::{
-    FusedDiagnostics, FusedState, GateDecision, GnssFix, Odometer, PlanePosition, SafetyCheck,
-    SafetyStatus, SensorStateEstimate, TrackMap,
+    FusedDiagnostics, FusedState, GateDecision, GnssFix, Odometer, PlanePosition, SafeInterval,
+    SafetyCheck, SafetyStatus, SensorStateEstimate, TrackMap,
 };
+use railfuse_catalog::geodesy::GeodeticOrigin;
 
 use crate::config::VarianceValue;
 use crate::error::Result;
@@ -59,8 +60,8 @@ pub use settings::SafetySettings;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Roles {
     pub gnss: usize,
-    pub axle_1: usize,
-    pub axle_2: usize,
+    pub axle_1: Option<usize>,
+    pub axle_2: Option<usize>,
 }
 
 /// A message waiting in the reorder window.
@@ -93,6 +94,8 @@ pub struct SafetyPipeline {
     divergence: DivergenceTests,
     odometry: OdometryCheck,
     map_check: Option<SafetyCheck>,
+    /// Without a map, S1 still judges the fixes, in a plane around the first of them.
+    local_origin: Option<GeodeticOrigin>,
     queue: ReorderQueue<Input>,
     variances: Vec<Option<VarianceValue>>,
     pub counts: PipelineCounts,
@@ -114,6 +117,15 @@ impl SafetyPipeline {
             None => None,
         };
         let window = settings.map_search_window_m;
+        let mut diagnosis = Diagnosis::default();
+        for (k, (role, sensor)) in [("axle_1", roles.axle_1), ("axle_2", roles.axle_2)]
+            .into_iter()
+            .enumerate()
+        {
+            if sensor.is_none() {
+                diagnosis.absent_axle(k, role);
+            }
+        }
         Ok(Self {
             variances: vec![None; spec.sensors.len()],
             spec,
@@ -126,10 +138,11 @@ impl SafetyPipeline {
             filter: None,
             time_ns: 0,
             input: AxleAcceleration::default(),
-            diagnosis: Diagnosis::default(),
+            diagnosis,
             divergence: DivergenceTests::default(),
             odometry: OdometryCheck::default(),
             map_check: None,
+            local_origin: None,
             queue: ReorderQueue::default(),
             counts: PipelineCounts::default(),
         })
@@ -155,7 +168,7 @@ impl SafetyPipeline {
             (fix.stamp_ns, Input::Fix(fix))
         } else {
             let m: Odometer = msg.decode(input)?;
-            let k = usize::from(sensor == self.roles.axle_2);
+            let k = usize::from(Some(sensor) == self.roles.axle_2);
             (m.stamp_ns, Input::Axle(k, m))
         };
         self.queue.push(item.0, item.1);
@@ -255,11 +268,7 @@ impl SafetyPipeline {
         let topic = self.topic(sensor).to_owned();
         let mut epoch = Epoch::new(fix.stamp_ns, &topic);
         let Some(map) = map else {
-            self.diagnosis.map(Some(
-                "no track map (neither the log's /track/map nor safety.map)".into(),
-            ));
-            self.counts.before_initialisation += 1;
-            return None;
+            return Some(self.fix_without_map(fix, epoch));
         };
         let enu = match (fix.latitude_deg, fix.longitude_deg) {
             (Some(lat), Some(lon)) => {
@@ -365,13 +374,51 @@ impl SafetyPipeline {
         Some(self.finish_epoch(epoch, map))
     }
 
+    /// S1 on a fix of a log without a track map (a real recording of GNSS alone, say): the fix
+    /// is judged and its verdict written, but nothing can be fused or declared usable, since
+    /// S2 resolves along the map and S4 checks against it.
+    fn fix_without_map(&mut self, fix: &GnssFix, mut epoch: Epoch) -> Epoch {
+        let no_map = "no track map (neither the log's /track/map nor safety.map)";
+        let sensor = self.roles.gnss;
+        let topic = epoch.source.clone();
+        let position = fix.latitude_deg.zip(fix.longitude_deg);
+        let enu = position.and_then(|(lat, lon)| {
+            let alt = fix.altitude_m.unwrap_or(0.0);
+            let origin = *self.local_origin.get_or_insert(GeodeticOrigin {
+                latitude_deg: lat,
+                longitude_deg: lon,
+                altitude_m: alt,
+            });
+            let (e, n, _) = origin.to_enu(lat, lon, alt);
+            (e.is_finite() && n.is_finite()).then_some((e, n))
+        });
+        let cov = fix.position_covariance_enu_m2;
+        let worst = self
+            .variance(sensor, cov.map(|c| c[0]))
+            .zip(self.variance(sensor, cov.map(|c| c[4])))
+            .map(|(a, b)| a.max(b));
+        let why = match self.diagnosis.fix(fix, enu, worst, &self.settings) {
+            FixVerdict::NoPosition(w) | FixVerdict::Fault(w) => w,
+            FixVerdict::Usable => format!("a usable fix, not fused: {no_map}"),
+        };
+        self.diagnosis.map(Some(no_map.into()));
+        self.counts.rejected_invalid += 1;
+        epoch.refused_with_variance(&topic, worst, &why);
+        let checks = self.diagnosis.checks(epoch.stamp_ns, &self.settings).into();
+        epoch.safety = Some(status(epoch.stamp_ns, checks, None));
+        epoch
+    }
+
+    /// The configured speed variances of axles 1 and 2 (NaN for an axle not configured).
+    fn axle_variances(&self) -> [f64; 2] {
+        [self.roles.axle_1, self.roles.axle_2]
+            .map(|s| s.and_then(|s| self.variance(s, None)).unwrap_or(f64::NAN))
+    }
+
     fn axle_1(&mut self, m: &Odometer, map: Option<&TrackMap>) -> Option<Epoch> {
-        let sensor = self.roles.axle_1;
+        let sensor = self.roles.axle_1?;
         let topic = self.topic(sensor).to_owned();
-        let variances = [
-            self.variance(sensor, None).unwrap_or(f64::NAN),
-            self.variance(self.roles.axle_2, None).unwrap_or(f64::NAN),
-        ];
+        let variances = self.axle_variances();
         let filter_speed = self.filter_speed(map);
         self.diagnosis
             .axle(0, m, variances, filter_speed, &self.settings);
@@ -454,10 +501,7 @@ impl SafetyPipeline {
     }
 
     fn axle_2(&mut self, m: &Odometer) {
-        let variances = [
-            self.variance(self.roles.axle_1, None).unwrap_or(f64::NAN),
-            self.variance(self.roles.axle_2, None).unwrap_or(f64::NAN),
-        ];
+        let variances = self.axle_variances();
         let speed = self.filter.as_ref().map(|f| {
             let (e, n) = (f.east.estimate.state[1], f.north.estimate.state[1]);
             e.hypot(n)
@@ -476,7 +520,7 @@ impl SafetyPipeline {
             let roles = [
                 (
                     self.settings.gnss_bias.is_some(),
-                    self.roles.gnss,
+                    Some(self.roles.gnss),
                     "position_bias",
                     3,
                 ),
@@ -488,7 +532,7 @@ impl SafetyPipeline {
                 ),
             ];
             for (on, sensor, kind, i) in roles {
-                if on {
+                if let (true, Some(sensor)) = (on, sensor) {
                     out.push(SensorStateEstimate {
                         topic: self.topic(sensor).to_owned(),
                         kind: format!("{axis}_{kind}"),
@@ -563,24 +607,28 @@ impl SafetyPipeline {
                 Some("no odometry window completed yet".into()),
             )
         }));
-        let first = checks.iter().find(|c| !c.passed);
-        let usable = first.is_none();
-        epoch.safety = Some(SafetyStatus {
-            stamp_ns: epoch.stamp_ns,
-            usable,
-            first_failure: first.map(|c| c.check.clone()),
-            reason: first.and_then(|c| c.reason.clone()),
-            safe_interval: usable.then(|| {
-                safe_interval::safe_interval(
-                    place.chainage_m,
-                    chainage_std,
-                    s.eta,
-                    s.map_margin * s.map_std_m,
-                )
-            }),
-            checks,
-        });
+        let interval = safe_interval::safe_interval(
+            place.chainage_m,
+            chainage_std,
+            s.eta,
+            s.map_margin * s.map_std_m,
+        );
+        epoch.safety = Some(status(epoch.stamp_ns, checks, Some(interval)));
         epoch
+    }
+}
+
+/// An epoch's safety status from its checks: usable when all passed, and then with `U_safe`.
+fn status(stamp_ns: u64, checks: Vec<SafetyCheck>, interval: Option<SafeInterval>) -> SafetyStatus {
+    let first = checks.iter().find(|c| !c.passed);
+    let usable = first.is_none();
+    SafetyStatus {
+        stamp_ns,
+        usable,
+        first_failure: first.map(|c| c.check.clone()),
+        reason: first.and_then(|c| c.reason.clone()),
+        safe_interval: interval.filter(|_| usable),
+        checks,
     }
 }
 
@@ -645,8 +693,13 @@ impl Epoch {
     }
 
     fn refused(&mut self, topic: &str, why: &str) {
+        self.refused_with_variance(topic, None, why);
+    }
+
+    /// Refused, with the variance the sensor reported for it (the accuracy it claimed).
+    fn refused_with_variance(&mut self, topic: &str, variance: Option<f64>, why: &str) {
         let d = GateDecision::RejectedInvalid;
-        self.record(topic, None, (None, None), None, d, Some(why));
+        self.record(topic, None, (None, variance), None, d, Some(why));
     }
 
     fn into_fused(self, log_time_ns: u64) -> Vec<Fused> {

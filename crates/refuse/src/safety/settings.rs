@@ -20,10 +20,13 @@ pub struct SafetySettings {
     /// The GNSS receiver's topic (one of the pipeline's sensors).
     pub gnss: String,
     /// Axle sensor 1: fused (its speed, resolved on the axes with the map heading, and its
-    /// smoothed acceleration as the input U).
-    pub axle_1: String,
+    /// smoothed acceleration as the input U). Without it (a log of GNSS alone) S1 still judges
+    /// every fix, but no epoch is usable.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axle_1: Option<String>,
     /// Axle sensor 2: never fused, only the independent distance of the odometry check (S5).
-    pub axle_2: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axle_2: Option<String>,
     /// A GeoJSON track map (see `railfuse_catalog::track_geojson`); without it, the log's
     /// `/track/map`.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -131,8 +134,8 @@ impl Default for SafetySettings {
     fn default() -> Self {
         Self {
             gnss: "/gnss/fix".into(),
-            axle_1: "/odometer/1".into(),
-            axle_2: "/odometer/2".into(),
+            axle_1: None,
+            axle_2: None,
             map: None,
             acceleration_input: true,
             input_window_s: 1.0,
@@ -235,12 +238,19 @@ impl SafetySettings {
                 "safety.min_fix_type \"none\" gives no position: use \"single\" or better".into(),
             );
         }
-        let roles = [&self.gnss, &self.axle_1, &self.axle_2];
-        if roles[0] == roles[1] || roles[0] == roles[2] || roles[1] == roles[2] {
+        let roles: Vec<&str> = [Some(&self.gnss), self.axle_1.as_ref(), self.axle_2.as_ref()]
+            .into_iter()
+            .flatten()
+            .map(String::as_str)
+            .collect();
+        if (1..roles.len()).any(|i| roles[..i].contains(&roles[i])) {
             return Err(format!(
-                "safety.gnss, axle_1 and axle_2 must be three topics, not {}, {} and {}",
-                self.gnss, self.axle_1, self.axle_2
+                "safety.gnss, axle_1 and axle_2 must be different topics, not {}",
+                roles.join(", ")
             ));
+        }
+        if self.axle_1_bias.is_some() && self.axle_1.is_none() {
+            return Err("safety.axle_1_bias needs safety.axle_1".into());
         }
         Ok(())
     }
