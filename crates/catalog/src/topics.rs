@@ -68,6 +68,11 @@ pub fn fused_safety(pipeline: &str) -> String {
     format!("{FUSED_PREFIX}{pipeline}/safety")
 }
 
+/// `/fused/<pipeline>/imu_error_model`: what a GNSS/INS pipeline learnt of its IMU's errors.
+pub fn fused_imu_error_model(pipeline: &str) -> String {
+    format!("{FUSED_PREFIX}{pipeline}/imu_error_model")
+}
+
 /// The channels each pipeline writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FusedChannel {
@@ -75,6 +80,7 @@ pub enum FusedChannel {
     Diagnostics,
     Smoothed,
     Safety,
+    ImuErrorModel,
 }
 
 /// The pipeline and channel of a fused topic (`/fused/<pipeline>/<channel>`), if it is one.
@@ -85,6 +91,7 @@ pub fn parse_fused(topic: &str) -> Option<(&str, FusedChannel)> {
         "diagnostics" => FusedChannel::Diagnostics,
         "smoothed" => FusedChannel::Smoothed,
         "safety" => FusedChannel::Safety,
+        "imu_error_model" => FusedChannel::ImuErrorModel,
         _ => return None,
     };
     (!pipeline.is_empty()).then_some((pipeline, channel))
@@ -118,6 +125,7 @@ mod tests {
             (fused_diagnostics("kf"), FusedChannel::Diagnostics),
             (fused_smoothed("kf"), FusedChannel::Smoothed),
             (fused_safety("kf"), FusedChannel::Safety),
+            (fused_imu_error_model("kf"), FusedChannel::ImuErrorModel),
         ] {
             assert_eq!(parse_fused(&topic), Some(("kf", channel)));
             assert_eq!(fused_pipeline_of(&topic), Some("kf"));

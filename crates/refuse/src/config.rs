@@ -44,6 +44,8 @@ pub enum FilterKind {
     FederatedParticle,
     /// Source 002: the EKF in the plane with safety checks and a safe interval.
     EkfSafety,
+    /// Source 003: GNSS and a MEMS IMU in an error-state filter in the plane.
+    GnssIns,
 }
 
 impl FilterKind {
@@ -56,6 +58,10 @@ impl FilterKind {
     pub fn is_particle(self) -> bool {
         matches!(self, FilterKind::Particle | FilterKind::FederatedParticle)
     }
+    /// The pipeline reads whole messages (in the plane), not scalar measurements.
+    pub fn reads_whole_messages(self) -> bool {
+        matches!(self, FilterKind::EkfSafety | FilterKind::GnssIns)
+    }
     pub fn name(self) -> &'static str {
         match self {
             FilterKind::Kalman => "kalman",
@@ -63,6 +69,7 @@ impl FilterKind {
             FilterKind::FederatedKalman => "federated_kalman",
             FilterKind::FederatedParticle => "federated_particle",
             FilterKind::EkfSafety => "ekf_safety",
+            FilterKind::GnssIns => "gnss_ins",
         }
     }
 }
@@ -101,6 +108,10 @@ pub struct PipelineConfig {
     /// `ekf_safety` pipelines: the sensors' roles and the safety checks' thresholds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub safety: Option<crate::safety::SafetySettings>,
+    /// `gnss_ins` pipelines: the sensors' roles, the GNSS gate, the pre-filters, the IMU's
+    /// error model and the learning.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gnss_ins: Option<crate::gnss_ins::GnssInsSettings>,
     pub sensor: Vec<Spanned<SensorConfig>>,
     /// What `railfuse tune` may change in this pipeline and what it minimises; refuse
     /// ignores it.

@@ -13,6 +13,8 @@
 //! - [`pipeline`]: one configured estimator fed in sensor-time order ([`reorder`]: the
 //!   reorder window);
 //! - [`prefilter`]: source 003's RLS, adaptive RLS and PU-RLS pre-filters of one channel;
+//! - [`gnss_ins`]: source 003's GNSS/MEMS-IMU error-state filter in the plane, its GNSS
+//!   gate, pre-filters, AKF and IMU error learning;
 //! - [`safety`]: source 002's EKF in the plane with its safety checks and safe interval;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
@@ -24,6 +26,7 @@ pub mod config;
 pub mod error;
 pub mod eval;
 pub mod filter;
+pub mod gnss_ins;
 pub mod measurement;
 pub mod model;
 pub mod pipeline;

@@ -19,9 +19,10 @@ use crate::error::{Error, Result};
 use crate::filter::federated::Federated;
 use crate::filter::rts::EpochRecorder;
 use crate::filter::{
-    Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
+    Centralised, Estimator, Innovation, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
     StateAndCovariance,
 };
+use crate::gnss_ins::GnssInsPipeline;
 use crate::measurement::{Measurement, ObservationRow, Quantity, SensorContext};
 use crate::model::SensorState;
 use crate::reorder::ReorderQueue;
@@ -41,8 +42,38 @@ pub struct PipelineCounts {
     pub before_initialisation: u64,
 }
 
+/// The diagnostics record of one measurement of a pipeline that reads whole messages
+/// (`ekf_safety`, `gnss_ins`): its value and variance, its innovation, what was decided and
+/// why, and the axis of the plane it is on.
+pub fn measurement_record(
+    stamp_ns: u64,
+    topic: &str,
+    axis: Option<&str>,
+    (z, r): (Option<f64>, Option<f64>),
+    i: Option<Innovation>,
+    decision: GateDecision,
+    reason: Option<&str>,
+) -> FusedDiagnostics {
+    FusedDiagnostics {
+        stamp_ns,
+        source: topic.to_owned(),
+        measurement: z.filter(|z| z.is_finite()),
+        measurement_variance: r.filter(|r| r.is_finite()),
+        innovation: i.map(|i| i.residual).filter(|x| x.is_finite()),
+        innovation_variance: i.map(|i| i.variance).filter(|x| x.is_finite()),
+        nis: i.map(|i| i.nis).filter(|x| x.is_finite()),
+        decision,
+        device: None,
+        axis: axis.map(str::to_owned),
+        reason: reason.map(str::to_owned),
+        effective_sample_size: None,
+        resampled: None,
+        sharing: None,
+    }
+}
+
 /// Output of one processed measurement or output tick.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Fused {
     /// Replay time at which the filter released it: the log time of the message that pushed
     /// the replay past the reorder window (non-decreasing, so fused channels stay in
@@ -52,6 +83,8 @@ pub struct Fused {
     pub diagnostics: Option<FusedDiagnostics>,
     /// Pipelines with safety checks: the epoch's checks and safe interval.
     pub safety: Option<SafetyStatus>,
+    /// GNSS/INS pipelines: what they learnt of the IMU's errors.
+    pub imu_error_model: Option<railfuse_catalog::messages::ImuErrorModel>,
 }
 
 struct Field<const N: usize> {
@@ -339,8 +372,8 @@ impl<const N: usize> Pipeline<N> {
                 t0,
                 |i, s| ParticleFilter::new(particle.stream(i as u64 + 1), s),
             )),
-            EstimatorSpec::EkfSafety { .. } => {
-                unreachable!("AnyPipeline::new makes a SafetyPipeline of an ekf_safety spec")
+            EstimatorSpec::EkfSafety { .. } | EstimatorSpec::GnssIns { .. } => {
+                unreachable!("AnyPipeline::new makes a message pipeline of these specs")
             }
         }
     }
@@ -361,8 +394,7 @@ impl<const N: usize> Pipeline<N> {
             out.push(Fused {
                 log_time_ns,
                 state: Some(state),
-                diagnostics: None,
-                safety: None,
+                ..Default::default()
             });
             self.next_output_ns += period;
         }
@@ -392,7 +424,7 @@ impl<const N: usize> Pipeline<N> {
             log_time_ns,
             state,
             diagnostics: Some(diagnostics),
-            safety: None,
+            ..Default::default()
         });
     }
 
@@ -589,10 +621,61 @@ pub fn fused_state<const N: usize>(
     }
 }
 
-/// A pipeline of any state dimension up to [`MAX_STATES`], or source 002's pipeline with
-/// safety checks (which reads whole messages, not scalar measurements).
+/// A pipeline that reads whole messages rather than scalar measurements: source 002's
+/// `ekf_safety` and source 003's `gnss_ins`, both in the plane.
+pub trait MessagePipeline {
+    fn spec(&self) -> &PipelineSpec;
+    fn counts(&self) -> &PipelineCounts;
+    /// Sensor `sensor` is bound to its channel with this variance setting.
+    fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>);
+    /// One message of sensor `sensor`; an error only for a message that does not decode.
+    fn push(
+        &mut self,
+        sensor: usize,
+        msg: &railfuse_catalog::log::LogMessage<'_>,
+        input: &std::path::Path,
+        context: &SensorContext,
+        out: &mut Vec<Fused>,
+    ) -> Result<()>;
+    /// The end of the log: everything still queued.
+    fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>);
+}
+
+/// [`MessagePipeline`] by the pipeline's own methods of the same names.
+macro_rules! message_pipeline {
+    ($ty:ty) => {
+        impl MessagePipeline for $ty {
+            fn spec(&self) -> &PipelineSpec {
+                &self.spec
+            }
+            fn counts(&self) -> &PipelineCounts {
+                &self.counts
+            }
+            fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
+                <$ty>::bind(self, sensor, variance)
+            }
+            fn push(
+                &mut self,
+                sensor: usize,
+                msg: &railfuse_catalog::log::LogMessage<'_>,
+                input: &std::path::Path,
+                context: &SensorContext,
+                out: &mut Vec<Fused>,
+            ) -> Result<()> {
+                <$ty>::push(self, sensor, msg, input, context, out)
+            }
+            fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
+                <$ty>::finish(self, log_time_ns, context, out)
+            }
+        }
+    };
+}
+message_pipeline!(SafetyPipeline);
+message_pipeline!(GnssInsPipeline);
+
+/// A pipeline of any state dimension up to [`MAX_STATES`], or one that reads whole messages.
 pub enum AnyPipeline {
-    Safety(Box<SafetyPipeline>),
+    Messages(Box<dyn MessagePipeline>),
     Two(Pipeline<2>),
     Three(Pipeline<3>),
     Four(Pipeline<4>),
@@ -613,7 +696,7 @@ macro_rules! each {
             AnyPipeline::Six($p) => $e,
             AnyPipeline::Seven($p) => $e,
             AnyPipeline::Eight($p) => $e,
-            AnyPipeline::Safety($s) => $safety,
+            AnyPipeline::Messages($s) => $safety,
         }
     };
 }
@@ -621,15 +704,22 @@ macro_rules! each {
 impl AnyPipeline {
     pub fn new(spec: PipelineSpec) -> Result<Self> {
         const _: () = assert!(MAX_STATES == 8, "AnyPipeline has a variant per dimension");
-        if let EstimatorSpec::EkfSafety {
-            settings,
-            roles,
-            motion,
-        } = &spec.estimator
-        {
-            let (settings, roles, motion) = (settings.clone(), *roles, *motion);
-            let safety = SafetyPipeline::new(spec, *settings, roles, motion)?;
-            return Ok(AnyPipeline::Safety(Box::new(safety)));
+        match &spec.estimator {
+            EstimatorSpec::EkfSafety {
+                settings,
+                roles,
+                motion,
+            } => {
+                let (settings, roles, motion) = (settings.clone(), *roles, *motion);
+                let safety = SafetyPipeline::new(spec, *settings, roles, motion)?;
+                return Ok(AnyPipeline::Messages(Box::new(safety)));
+            }
+            EstimatorSpec::GnssIns { settings, roles } => {
+                let (settings, roles) = (settings.clone(), *roles);
+                let p = GnssInsPipeline::new(spec, *settings, roles)?;
+                return Ok(AnyPipeline::Messages(Box::new(p)));
+            }
+            _ => {}
         }
         Ok(match spec.dimension() {
             2 => AnyPipeline::Two(Pipeline::new(spec)?),
@@ -643,7 +733,7 @@ impl AnyPipeline {
     }
 
     pub fn spec(&self) -> &PipelineSpec {
-        each!(self, p => &p.spec, s => &s.spec)
+        each!(self, p => &p.spec, s => s.spec())
     }
 
     pub fn name(&self) -> &str {
@@ -651,20 +741,21 @@ impl AnyPipeline {
     }
 
     pub fn counts(&self) -> &PipelineCounts {
-        each!(self, p => &p.counts, s => &s.counts)
+        each!(self, p => &p.counts, s => s.counts())
     }
 
-    /// The safety pipeline, which is fed whole messages ([`SafetyPipeline::push`]) instead of
+    /// A pipeline fed whole messages ([`MessagePipeline::push`]) instead of
     /// [`push`](Self::push)'s scalar measurements.
-    pub fn as_safety(&mut self) -> Option<&mut SafetyPipeline> {
+    pub fn as_message_pipeline(&mut self) -> Option<&mut dyn MessagePipeline> {
         match self {
-            AnyPipeline::Safety(s) => Some(s),
+            AnyPipeline::Messages(s) => Some(s.as_mut()),
             _ => None,
         }
     }
 
-    /// Scalar measurements of sensor `sensor` (pipelines along the track; a safety pipeline
-    /// takes whole messages through [`as_safety`](Self::as_safety) and ignores these).
+    /// Scalar measurements of sensor `sensor` (pipelines along the track; a message pipeline
+    /// takes whole messages through [`as_message_pipeline`](Self::as_message_pipeline) and
+    /// ignores these).
     pub fn push(
         &mut self,
         sensor: usize,

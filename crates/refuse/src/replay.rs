@@ -18,11 +18,13 @@ use railfuse_catalog::log::{
     read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
 };
 use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, SafetyStatus, TrackMap,
+    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, SafetyStatus,
+    TrackMap,
 };
 use railfuse_catalog::topics;
 use serde::Serialize;
 
+use crate::config::FilterKind;
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalReport, Evaluator};
 use crate::measurement::{Measurement, SensorContext, SensorModel};
@@ -116,6 +118,8 @@ struct Output {
     smoothed: Option<ChannelId>,
     /// Pipelines with safety checks: `/fused/<name>/safety`.
     safety: Option<ChannelId>,
+    /// GNSS/INS pipelines: `/fused/<name>/imu_error_model`.
+    imu_error_model: Option<ChannelId>,
     states: u64,
     smoothed_states: u64,
 }
@@ -507,11 +511,10 @@ impl<'a> Replay<'a> {
             std::mem::take(&mut self.routes.get_mut(&h.channel_id).expect("routed").sensors);
         let result = (|| {
             for &(pi, si) in &sensors {
-                match self.pipelines[pi].as_safety() {
-                    // A pipeline with safety checks reads the whole message.
-                    Some(safety) => {
-                        if let Err(e) = safety.push(si, &msg, input, &self.context, &mut self.fused)
-                        {
+                match self.pipelines[pi].as_message_pipeline() {
+                    // A pipeline in the plane reads the whole message.
+                    Some(p) => {
+                        if let Err(e) = p.push(si, &msg, input, &self.context, &mut self.fused) {
                             self.report.undecodable_messages += 1;
                             self.report
                                 .first_undecodable
@@ -576,6 +579,10 @@ impl<'a> Replay<'a> {
                 }
                 self.writer.write(channel, f.log_time_ns, safety)?;
                 self.eval.safety_status(channel.0, safety);
+                self.report.fused_messages += 1;
+            }
+            if let (Some(model), Some(channel)) = (&f.imu_error_model, out.imu_error_model) {
+                self.writer.write(channel, f.log_time_ns, model)?;
                 self.report.fused_messages += 1;
             }
         }
@@ -690,6 +697,16 @@ fn register_outputs(
     };
     let (state_schema, diag_schema, location_schema) = (next()?, next()?, next()?);
     let safety_schema = next()?;
+    // Only when needed, so that the other pipelines' channel ids stay as they were.
+    let any_gnss_ins = opts
+        .config
+        .pipeline
+        .iter()
+        .any(|p| p.estimator.kind() == FilterKind::GnssIns);
+    let model_schema = match any_gnss_ins {
+        true => Some(next()?),
+        false => None,
+    };
     let mut outputs = Vec::new();
     for p in &opts.config.pipeline {
         let state_topic = topics::fused_state(&p.name);
@@ -710,8 +727,15 @@ fn register_outputs(
             }
             false => None,
         };
+        let imu_error_model = match (p.estimator.kind(), model_schema) {
+            (FilterKind::GnssIns, Some(schema)) => {
+                let topic = topics::fused_imu_error_model(&p.name);
+                Some(writer.add_channel_with_ids::<ImuErrorModel>(schema, next()?, &topic)?)
+            }
+            _ => None,
+        };
         let safety = match p.estimator.kind() {
-            crate::config::FilterKind::EkfSafety => {
+            FilterKind::EkfSafety => {
                 let topic = topics::fused_safety(&p.name);
                 let id =
                     writer.add_channel_with_ids::<SafetyStatus>(safety_schema, next()?, &topic)?;
@@ -736,6 +760,7 @@ fn register_outputs(
             diagnostics,
             smoothed,
             safety,
+            imu_error_model,
             states: 0,
             smoothed_states: 0,
         });

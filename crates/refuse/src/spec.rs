@@ -14,8 +14,8 @@ use std::path::{Path, PathBuf};
 use toml::Spanned;
 
 use crate::config::{
-    line_column, FederatedConfig, FilterKind, InitialConfig, MotionConfig, PipelineConfig,
-    PipelinesFile, SensorConfig, Variance, VarianceValue,
+    line_column, FederatedConfig, FilterKind, FromMessage, InitialConfig, MotionConfig,
+    PipelineConfig, PipelinesFile, SensorConfig, Variance, VarianceValue,
 };
 use crate::error::{Error, Result};
 use crate::filter::federated::FederatedSettings;
@@ -153,6 +153,11 @@ pub enum EstimatorSpec {
         /// Per axis, when the acceleration input is off.
         motion: crate::model::ConstantAcceleration,
     },
+    /// Source 003's GNSS/INS in the plane.
+    GnssIns {
+        settings: Box<crate::gnss_ins::GnssInsSettings>,
+        roles: crate::gnss_ins::Roles,
+    },
 }
 
 impl EstimatorSpec {
@@ -163,6 +168,7 @@ impl EstimatorSpec {
             EstimatorSpec::FederatedKalman { .. } => FilterKind::FederatedKalman,
             EstimatorSpec::FederatedParticle { .. } => FilterKind::FederatedParticle,
             EstimatorSpec::EkfSafety { .. } => FilterKind::EkfSafety,
+            EstimatorSpec::GnssIns { .. } => FilterKind::GnssIns,
         }
     }
 
@@ -636,6 +642,12 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
             c.filter.name()
         ));
     }
+    if c.gnss_ins.is_some() && c.filter != FilterKind::GnssIns {
+        return Err(format!(
+            "a [gnss_ins] section, but filter = \"{}\"",
+            c.filter.name()
+        ));
+    }
     if c.federated.is_some() && !c.filter.is_federated() {
         return Err(format!(
             "a [federated] section, but filter = \"{}\"",
@@ -664,6 +676,62 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
             particle: particle()?,
         },
         FilterKind::EkfSafety => safety(c)?,
+        FilterKind::GnssIns => gnss_ins(c)?,
+    })
+}
+
+/// The sensor of role `role` on `topic`, by its place among the pipeline's sensors.
+fn sensor_of(c: &PipelineConfig, role: &str, topic: &str) -> Result<usize, String> {
+    c.sensor
+        .iter()
+        .position(|s| s.get_ref().topic == topic)
+        .ok_or_else(|| format!("{role} is {topic}, which is not one of the pipeline's sensors"))
+}
+
+/// A sensor of a whole-message pipeline with a setting such a pipeline does not read.
+fn along_track_only(c: &PipelineConfig, filter: &str) -> Result<(), String> {
+    match c.sensor.iter().map(|s| s.get_ref()).find(|s| {
+        s.chainage_bias.is_some()
+            || s.acceleration_bias.is_some()
+            || s.scale_factor.is_some()
+            || s.speed_window_s.is_some()
+            || s.fields.is_some()
+    }) {
+        Some(s) => Err(format!(
+            "sensor {}: an {filter} pipeline's sensors take a topic, a variance and a gate \
+             only (no fields, sensor states or speed window)",
+            s.topic
+        )),
+        None => Ok(()),
+    }
+}
+
+/// A `gnss_ins` pipeline: its settings checked, its two sensors found by role.
+fn gnss_ins(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
+    let settings = c.gnss_ins.clone().unwrap_or_default();
+    settings.check()?;
+    let roles = crate::gnss_ins::Roles {
+        gnss: sensor_of(c, "gnss_ins.gnss", &settings.gnss)?,
+        imu: sensor_of(c, "gnss_ins.imu", &settings.imu)?,
+    };
+    along_track_only(c, "gnss_ins")?;
+    if c.sensor.len() != 2 {
+        return Err(format!(
+            "a gnss_ins pipeline has two sensors (gnss_ins.gnss and gnss_ins.imu), not {}",
+            c.sensor.len()
+        ));
+    }
+    let imu = c.sensor[roles.imu].get_ref();
+    if imu.variance != Variance::FromMessage(FromMessage::Message) {
+        return Err(format!(
+            "sensor {}: a gnss_ins pipeline's IMU takes variance = \"message\"; its error \
+             model is [pipeline.gnss_ins.imu_noise]",
+            imu.topic
+        ));
+    }
+    Ok(EstimatorSpec::GnssIns {
+        settings: Box::new(settings),
+        roles,
     })
 }
 
@@ -678,33 +746,15 @@ fn safety(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
                 .into(),
         );
     };
-    let find = |role: &str, topic: &str| {
-        c.sensor
-            .iter()
-            .position(|s| s.get_ref().topic == topic)
-            .ok_or_else(|| {
-                format!("safety.{role} is {topic}, which is not one of the pipeline's sensors")
-            })
+    let axle = |role: &str, topic: &Option<String>| {
+        topic.as_ref().map(|t| sensor_of(c, role, t)).transpose()
     };
-    let axle = |role: &str, topic: &Option<String>| topic.as_ref().map(|t| find(role, t)).transpose();
     let roles = crate::safety::Roles {
-        gnss: find("gnss", &settings.gnss)?,
-        axle_1: axle("axle_1", &settings.axle_1)?,
-        axle_2: axle("axle_2", &settings.axle_2)?,
+        gnss: sensor_of(c, "safety.gnss", &settings.gnss)?,
+        axle_1: axle("safety.axle_1", &settings.axle_1)?,
+        axle_2: axle("safety.axle_2", &settings.axle_2)?,
     };
-    if let Some(s) = c.sensor.iter().map(|s| s.get_ref()).find(|s| {
-        s.chainage_bias.is_some()
-            || s.acceleration_bias.is_some()
-            || s.scale_factor.is_some()
-            || s.speed_window_s.is_some()
-            || s.fields.is_some()
-    }) {
-        return Err(format!(
-            "sensor {}: an ekf_safety pipeline's sensors take a topic, a variance and a gate \
-             only (no fields, sensor states or speed window)",
-            s.topic
-        ));
-    }
+    along_track_only(c, "ekf_safety")?;
     let roles_given = 1 + usize::from(roles.axle_1.is_some()) + usize::from(roles.axle_2.is_some());
     if c.sensor.len() != roles_given {
         return Err(format!(
@@ -824,7 +874,6 @@ fn sharing_table(f: &FederatedConfig, devices: &[String]) -> Result<SharingTable
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::FromMessage;
 
     const GOOD: &str = r#"
 [[pipeline]]

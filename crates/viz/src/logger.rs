@@ -597,6 +597,8 @@ impl Logger {
                 FusedChannel::Smoothed => self.fused(p, true, &m.decode(path)?),
                 FusedChannel::Diagnostics => self.diagnostics(p, &m.decode(path)?),
                 FusedChannel::Safety => self.safety(p, &m.decode(path)?),
+                // The learnt IMU model is read with `railfuse eval`, not drawn.
+                FusedChannel::ImuErrorModel => Ok(()),
             };
         }
         if !reference && !self.options.shows_topic(topic) {

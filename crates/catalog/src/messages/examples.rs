@@ -93,6 +93,13 @@ impl MessageKind {
                 "safe_interval": {"chainage_m": 1250.0, "chainage_std_m": 0.4, "low_m": 1247.9,
                                   "high_m": 1252.1}
             }),
+            MessageKind::ImuErrorModel => json!({
+                "stamp_ns": T, "accel_bias_mps2": 0.0021, "gyro_bias_radps": 1.1e-4,
+                "standstill_samples": 9600, "standstill_s": 6.0,
+                "speed_residual_mps2": 0.012, "speed_residual_std_mps2": 0.08,
+                "heading_residual_radps": -2e-5, "heading_residual_std_radps": 4e-4,
+                "learnt_s": 240.0, "applied": false
+            }),
             MessageKind::RecorderDiagnostics => json!({
                 "stamp_ns": T, "bytes_written": 1_048_576,
                 "sources": [{

@@ -23,7 +23,7 @@ pub struct FusedState {
 }
 
 /// A 2-D pipeline's position in the map's local east/north plane.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct PlanePosition {
     pub east_m: f64,
     pub north_m: f64,
@@ -31,6 +31,14 @@ pub struct PlanePosition {
     pub covariance_en_m2: [f64; 4],
     pub latitude_deg: f64,
     pub longitude_deg: f64,
+    /// Pipelines that estimate it (GNSS/INS): east and north velocity, m/s, with their
+    /// covariance (row-major 2×2, (m/s)²), and the heading, clockwise from north.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocity_en_mps: Option<[f64; 2]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub velocity_covariance_en: Option<[f64; 4]>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heading_rad: Option<f64>,
 }
 
 impl PlanePosition {
@@ -168,6 +176,7 @@ mod tests {
             covariance_en_m2: [4.0, 0.0, 0.0, 1.0],
             latitude_deg: 0.0,
             longitude_deg: 0.0,
+            ..Default::default()
         };
         let pts = p.ellipse_3sigma(4);
         assert!(

@@ -9,6 +9,7 @@ pub mod fused;
 mod gnss;
 mod ground_truth;
 mod imu;
+mod imu_error_model;
 mod induction_loop;
 mod odometer;
 mod radar;
@@ -27,6 +28,7 @@ pub use fused::{
 pub use gnss::{FixType, GnssFix};
 pub use ground_truth::GroundTruth;
 pub use imu::Imu;
+pub use imu_error_model::ImuErrorModel;
 pub use induction_loop::LoopPosition;
 pub use odometer::Odometer;
 pub use radar::RadarSpeed;

@@ -123,6 +123,7 @@ registry!(
     FusedState,
     FusedDiagnostics,
     SafetyStatus,
+    ImuErrorModel,
     RecorderDiagnostics,
     TuneEvaluation,
 );

@@ -242,7 +242,11 @@ mod tests {
             };
             v = (v + a * 0.1).max(0.0);
             x += v * 0.1;
-            let sigma = if (150.0..200.0).contains(&t) { 3.0 } else { 0.8 };
+            let sigma = if (150.0..200.0).contains(&t) {
+                3.0
+            } else {
+                0.8
+            };
             out.push((
                 i * 100_000_000,
                 x,
@@ -270,11 +274,23 @@ mod tests {
         for seed in [1, 2, 3] {
             let p = rmse(pu, seed);
             for lambda in [0.9, 0.95, 0.98, 0.995] {
-                let r = rmse(PreFilterSettings::Rls { lambda, delta: 1e-2 }, seed);
-                assert!(p < r, "seed {seed}: PU-RLS {p:.3} m vs RLS λ {lambda} {r:.3} m");
+                let r = rmse(
+                    PreFilterSettings::Rls {
+                        lambda,
+                        delta: 1e-2,
+                    },
+                    seed,
+                );
+                assert!(
+                    p < r,
+                    "seed {seed}: PU-RLS {p:.3} m vs RLS λ {lambda} {r:.3} m"
+                );
             }
             let raw = rmse(PreFilterSettings::None, seed);
-            assert!(p < 0.6 * raw, "seed {seed}: PU-RLS {p:.3} m vs raw {raw:.3} m");
+            assert!(
+                p < 0.6 * raw,
+                "seed {seed}: PU-RLS {p:.3} m vs raw {raw:.3} m"
+            );
         }
     }
 

@@ -118,7 +118,8 @@ impl<const D: usize> Swarm<D> {
         if let Some(w) = worst {
             let rng = &mut self.rng;
             let (low, high) = (self.low, self.high);
-            let position = std::array::from_fn(|j| low[j] + rng.random::<f64>() * (high[j] - low[j]));
+            let position =
+                std::array::from_fn(|j| low[j] + rng.random::<f64>() * (high[j] - low[j]));
             self.particles[w] = Particle {
                 position,
                 speed: [0.0; D],
@@ -171,11 +172,17 @@ mod tests {
             swarm.generation(|x| (x[0] - target[0]).powi(2) + 100.0 * (x[1] - target[1]).powi(2));
             if n == 99 {
                 let b = swarm.best();
-                assert!((b[0] - 3.0).abs() < 0.05 && (b[1] - 0.9).abs() < 0.01, "{b:?}");
+                assert!(
+                    (b[0] - 3.0).abs() < 0.05 && (b[1] - 0.9).abs() < 0.01,
+                    "{b:?}"
+                );
             }
         }
         let b = swarm.best();
-        assert!((b[0] - 15.0).abs() < 0.05 && (b[1] - 0.2).abs() < 0.01, "{b:?}");
+        assert!(
+            (b[0] - 15.0).abs() < 0.05 && (b[1] - 0.2).abs() < 0.01,
+            "{b:?}"
+        );
         assert_eq!(swarm.generations(), 200);
     }
 

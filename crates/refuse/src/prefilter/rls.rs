@@ -208,7 +208,10 @@ mod tests {
         };
         let (forgets, remembers) = (run(0.9, &mut rng), run(1.0, &mut rng));
         assert!(forgets < 1e-3, "λ 0.9 left {forgets}");
-        assert!(remembers > 0.5, "λ 1 should still average the old coefficients");
+        assert!(
+            remembers > 0.5,
+            "λ 1 should still average the old coefficients"
+        );
     }
 
     #[test]
@@ -237,10 +240,17 @@ mod tests {
         // Memory ~50 samples: noise 0.5 m down to about 0.1–0.15 m, and no lag on the ramp.
         assert!(rmse < 0.2, "rmse {rmse}");
         let last = last.unwrap();
-        assert!((last.rate - (12.0 + 0.6 * t)).abs() < 0.5, "rate {}", last.rate);
+        assert!(
+            (last.rate - (12.0 + 0.6 * t)).abs() < 0.5,
+            "rate {}",
+            last.rate
+        );
         // The error covariance it reports matches the error it makes (within a factor).
         let reported = last.variance.sqrt();
-        assert!(reported > 0.5 * rmse && reported < 2.0 * rmse, "{reported} vs {rmse}");
+        assert!(
+            reported > 0.5 * rmse && reported < 2.0 * rmse,
+            "{reported} vs {rmse}"
+        );
     }
 
     #[test]

@@ -38,7 +38,10 @@ pub fn unscented<const N: usize, const M: usize>(
         .collect();
     let y = centre * w0 + sides.iter().fold(SVector::zeros(), |acc, s| acc + s * wi);
     let outer = |s: &SVector<f64, M>| (s - y) * (s - y).transpose();
-    let pyy = outer(&centre) * w0 + sides.iter().fold(SMatrix::zeros(), |acc, s| acc + outer(s) * wi);
+    let pyy = outer(&centre) * w0
+        + sides
+            .iter()
+            .fold(SMatrix::zeros(), |acc, s| acc + outer(s) * wi);
     (y, symmetric(pyy))
 }
 

@@ -33,13 +33,13 @@ pub mod summary;
 use std::path::Path;
 
 use nalgebra::Matrix2;
+use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::map_matching::{curvature_on, MapMatcher};
 use railfuse_catalog::messages::{
     FusedDiagnostics, FusedState, GateDecision, GnssFix, Odometer, PlanePosition, SafeInterval,
     SafetyCheck, SafetyStatus, SensorStateEstimate, TrackMap,
 };
-use railfuse_catalog::geodesy::GeodeticOrigin;
 
 use crate::config::VarianceValue;
 use crate::error::Result;
@@ -584,6 +584,7 @@ impl SafetyPipeline {
                 covariance_en_m2: [pos_cov[(0, 0)], 0.0, 0.0, pos_cov[(1, 1)]],
                 latitude_deg: lat,
                 longitude_deg: lon,
+                ..Default::default()
             }),
         });
         let mut checks: Vec<SafetyCheck> = self.diagnosis.checks(epoch.stamp_ns, s).into();
@@ -661,22 +662,10 @@ impl Epoch {
         decision: GateDecision,
         reason: Option<&str>,
     ) {
-        self.diagnostics.push(FusedDiagnostics {
-            stamp_ns: self.stamp_ns,
-            source: topic.to_owned(),
-            measurement: z.filter(|z| z.is_finite()),
-            measurement_variance: r.filter(|r| r.is_finite()),
-            innovation: i.map(|i| i.residual).filter(|x| x.is_finite()),
-            innovation_variance: i.map(|i| i.variance).filter(|x| x.is_finite()),
-            nis: i.map(|i| i.nis).filter(|x| x.is_finite()),
-            decision,
-            device: None,
-            axis: axis.map(str::to_owned),
-            reason: reason.map(str::to_owned),
-            effective_sample_size: None,
-            resampled: None,
-            sharing: None,
-        });
+        let stamp = self.stamp_ns;
+        let d =
+            crate::pipeline::measurement_record(stamp, topic, axis, (z, r), i, decision, reason);
+        self.diagnostics.push(d);
     }
 
     fn used(&mut self, topic: &str, axis: &str, z: f64, r: f64, i: Option<Innovation>) {
@@ -710,15 +699,15 @@ impl Epoch {
                 log_time_ns,
                 state: None,
                 diagnostics: Some(d),
-                safety: None,
+                ..Default::default()
             })
             .collect();
         if self.state.is_some() || self.safety.is_some() {
             out.push(Fused {
                 log_time_ns,
                 state: self.state,
-                diagnostics: None,
                 safety: self.safety,
+                ..Default::default()
             });
         }
         out

@@ -285,13 +285,15 @@ impl Recording {
     /// Replays the log through `spec` (its sensors those the recording was made for) and
     /// scores it. The smoother, if the pipeline has one, is not run: states are scored.
     pub fn replay(&self, spec: &PipelineSpec) -> Result<Score> {
-        if spec.estimator.kind() == crate::config::FilterKind::EkfSafety {
+        let kind = spec.estimator.kind();
+        if kind.reads_whole_messages() {
             return Err(Error::TuneLog {
                 input: self.path.clone(),
                 message: format!(
-                    "pipeline '{}' is an ekf_safety pipeline, which reads whole messages: tune \
+                    "pipeline '{}' is an {} pipeline, which reads whole messages: tune \
                      replays scalar measurements only",
-                    spec.name
+                    spec.name,
+                    kind.name()
                 ),
             });
         }

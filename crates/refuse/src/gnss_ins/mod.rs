@@ -1,0 +1,741 @@
+//! Source 003's `gnss_ins` pipeline: an RTK/single-point GNSS receiver and a MEMS IMU fused in
+//! an error-state Kalman filter in the east/north plane.
+//!
+//! | step | module | what |
+//! |---|---|---|
+//! | gate | [`quality_gate`] | each fix judged on fix type, satellites and HDOP: RTK fixed taken as the reference, weaker fixes pre-filtered, the rest refused with the reason |
+//! | pre-filter | [`crate::prefilter`] | RLS, adaptive RLS or PU-RLS per GNSS axis (position, velocity); the unscented transform for speed and course to velocity |
+//! | navigation | [`planar_ins`] | heading from the yaw rate, speed from the forward specific force, both bias-corrected, dead-reckoned at the IMU's rate |
+//! | fusion | [`error_state`] | the error-state filter `[δe, δn, δv, δψ, δb_a, δb_g]`, Joseph form, its estimate put into the navigation after each fix |
+//! | AKF | [`adaptive_noise`] | R from the innovations, the source's other baseline |
+//! | learning | [`error_learning`] | while GNSS is good the residual error rates are learnt; through a loss they keep correcting the navigation |
+//!
+//! Bad input is refused and counted, never fused: fixes the gate refuses or whose
+//! coordinates are absurd; IMU samples that are not finite, saturated or from a stuck axis;
+//! anything older than the filter's time. A standing train (a fix slower than
+//! `standstill_speed_mps`) gets zero-speed and zero-turn-rate updates, and its IMU's static
+//! bias is measured whether or not the filter has started.
+
+pub mod adaptive_noise;
+pub mod error_learning;
+pub mod error_state;
+pub mod planar_ins;
+pub mod quality_gate;
+pub mod settings;
+mod static_bias;
+
+use std::path::Path;
+
+use nalgebra::{SMatrix, SVector};
+use railfuse_catalog::geodesy::GeodeticOrigin;
+use railfuse_catalog::log::LogMessage;
+use railfuse_catalog::map_matching::MapMatcher;
+use railfuse_catalog::messages::{
+    FusedState, GateDecision, GnssFix, Imu, PlanePosition, SensorStateEstimate, TrackMap,
+};
+use railfuse_catalog::seconds_between;
+
+use crate::config::VarianceValue;
+use crate::error::Result;
+use crate::filter::Innovation;
+use crate::measurement::SensorContext;
+use crate::pipeline::{measurement_record, Fused, PipelineCounts};
+use crate::prefilter::unscented::velocity_from_speed_and_course;
+use crate::prefilter::PreFilter;
+use crate::reorder::ReorderQueue;
+use crate::spec::PipelineSpec;
+use adaptive_noise::AdaptiveNoise;
+use error_learning::ErrorLearning;
+use error_state::{
+    position_rows, velocity_rows, ErrorMeasurement, ErrorStateFilter, BA, BG, PSI, V,
+};
+use planar_ins::Navigation;
+use quality_gate::GateVerdict;
+pub use settings::GnssInsSettings;
+use static_bias::{ImuHealth, StaticBias};
+
+/// Which of the pipeline's sensors is which.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Roles {
+    pub gnss: usize,
+    pub imu: usize,
+}
+
+#[derive(Debug, Clone)]
+enum Input {
+    Fix(GnssFix),
+    Imu(Imu),
+}
+
+/// σ of the zero-speed pseudo-measurement of a standing train, m/s: a creeping train at the
+/// standstill threshold is slower than this.
+const STANDSTILL_SPEED_STD_MPS: f64 = 0.02;
+/// Half-width of the map matcher's search window along the track, m.
+const MAP_WINDOW_M: f64 = 200.0;
+
+/// A `gnss_ins` pipeline.
+pub struct GnssInsPipeline {
+    pub spec: PipelineSpec,
+    settings: GnssInsSettings,
+    roles: Roles,
+    gnss_variance: Option<VarianceValue>,
+    queue: ReorderQueue<Input>,
+    origin: Option<GeodeticOrigin>,
+    nav: Option<Navigation>,
+    filter: Option<ErrorStateFilter>,
+    time_ns: u64,
+    /// The latest healthy IMU reading: forward specific force, yaw rate.
+    held: Option<(f64, f64)>,
+    last_acceleration: f64,
+    /// The latest interval between IMU samples, s.
+    imu_interval_s: f64,
+    health: ImuHealth,
+    standstill: StaticBias,
+    standing: bool,
+    /// Position east, north; velocity east, north.
+    prefilters: [PreFilter; 4],
+    akf: Option<[AdaptiveNoise; 2]>,
+    learning: ErrorLearning,
+    last_fused_ns: Option<u64>,
+    in_loss: bool,
+    matcher: MapMatcher,
+    distance_m: f64,
+    next_output_ns: u64,
+    next_model_ns: u64,
+    pub counts: PipelineCounts,
+}
+
+/// What one step wrote.
+#[derive(Default)]
+struct Out {
+    items: Vec<Fused>,
+}
+
+impl GnssInsPipeline {
+    pub fn new(spec: PipelineSpec, settings: GnssInsSettings, roles: Roles) -> Result<Self> {
+        let p = settings.prefilter;
+        let prefilters = [p.position, p.position, p.velocity, p.velocity]
+            .iter()
+            .enumerate()
+            .map(|(k, s)| PreFilter::new(s, k as u64))
+            .collect::<Vec<_>>()
+            .try_into()
+            .expect("four pre-filters");
+        let akf = settings
+            .adaptive
+            .map(|a| [AdaptiveNoise::new(a), AdaptiveNoise::new(a)]);
+        Ok(Self {
+            spec,
+            roles,
+            gnss_variance: None,
+            queue: ReorderQueue::default(),
+            origin: None,
+            nav: None,
+            filter: None,
+            time_ns: 0,
+            held: None,
+            last_acceleration: 0.0,
+            imu_interval_s: 0.01,
+            health: ImuHealth::new(settings.stuck_samples),
+            standstill: StaticBias::default(),
+            standing: false,
+            prefilters,
+            akf,
+            learning: ErrorLearning::default(),
+            last_fused_ns: None,
+            in_loss: false,
+            matcher: MapMatcher::new(MAP_WINDOW_M),
+            distance_m: 0.0,
+            next_output_ns: 0,
+            next_model_ns: 0,
+            counts: PipelineCounts::default(),
+            settings,
+        })
+    }
+
+    /// Sensor `sensor` is bound with this variance setting (the GNSS receiver's; the IMU's
+    /// error model is `imu_noise`).
+    pub fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
+        if sensor == self.roles.gnss {
+            self.gnss_variance = variance;
+        }
+    }
+
+    /// One message of sensor `sensor`, received at `log_time_ns`.
+    pub fn push(
+        &mut self,
+        sensor: usize,
+        msg: &LogMessage<'_>,
+        input: &Path,
+        context: &SensorContext,
+        out: &mut Vec<Fused>,
+    ) -> Result<()> {
+        let item = if sensor == self.roles.gnss {
+            let fix: GnssFix = msg.decode(input)?;
+            (fix.stamp_ns, Input::Fix(fix))
+        } else {
+            let imu: Imu = msg.decode(input)?;
+            (imu.stamp_ns, Input::Imu(imu))
+        };
+        self.queue.push(item.0, item.1);
+        let up_to = msg.log_time_ns.saturating_sub(self.spec.reorder_window_ns);
+        self.release(up_to, msg.log_time_ns, context, out);
+        Ok(())
+    }
+
+    pub fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
+        self.release(u64::MAX, log_time_ns, context, out);
+    }
+
+    fn release(&mut self, up_to: u64, log_time_ns: u64, ctx: &SensorContext, out: &mut Vec<Fused>) {
+        while let Some((stamp, item)) = self.queue.pop_until(up_to) {
+            let mut o = Out::default();
+            if self.nav.is_some() && stamp < self.time_ns {
+                self.counts.rejected_late += 1;
+                let topic = match &item {
+                    Input::Fix(_) => self.topic(self.roles.gnss),
+                    Input::Imu(_) => self.topic(self.roles.imu),
+                }
+                .to_owned();
+                o.diagnostics(
+                    stamp,
+                    &topic,
+                    GateDecision::RejectedLate,
+                    "older than the filter's time",
+                );
+            } else {
+                match item {
+                    Input::Fix(fix) => self.fix(&fix, ctx.track.as_ref(), &mut o),
+                    Input::Imu(imu) => self.imu(&imu, ctx.track.as_ref(), &mut o),
+                }
+            }
+            out.extend(o.items.into_iter().map(|mut f| {
+                f.log_time_ns = log_time_ns;
+                f
+            }));
+        }
+    }
+
+    fn topic(&self, sensor: usize) -> &str {
+        &self.spec.sensors[sensor].topic
+    }
+
+    // --- IMU --------------------------------------------------------------------------
+
+    fn imu(&mut self, m: &Imu, map: Option<&TrackMap>, o: &mut Out) {
+        let topic = self.topic(self.roles.imu).to_owned();
+        if let Err(why) = self.health.judge(m, &self.settings) {
+            self.counts.rejected_invalid += 1;
+            // One record per episode: a stuck axis at 200 Hz must not flood the channel.
+            if self.health.first_of_episode() {
+                o.diagnostics(m.stamp_ns, &topic, GateDecision::RejectedInvalid, &why);
+            }
+            return;
+        }
+        let (forward, yaw_rate) = (m.specific_force_mps2[0], m.angular_rate_radps[2]);
+        if self.standing {
+            self.standstill.push(m);
+        }
+        self.held = Some((forward, yaw_rate));
+        if self.nav.is_none() {
+            return self.static_model(m.stamp_ns, o);
+        }
+        let dt = seconds_between(self.time_ns, m.stamp_ns);
+        if dt > 0.0 {
+            self.imu_interval_s = dt;
+        }
+        self.advance(m.stamp_ns, forward, yaw_rate, dt);
+        if m.stamp_ns >= self.next_output_ns {
+            self.output(m.stamp_ns, &topic, map, o);
+        }
+    }
+
+    /// Dead-reckons navigation and error covariance by `dt` with one IMU reading; through a
+    /// GNSS loss the learnt error model keeps correcting.
+    fn advance(&mut self, t_ns: u64, forward: f64, yaw_rate: f64, dt: f64) {
+        let (Some(nav), Some(filter)) = (self.nav.as_mut(), self.filter.as_mut()) else {
+            return;
+        };
+        if dt <= 0.0 {
+            return;
+        }
+        filter.predict(nav, &self.settings.imu_noise, dt);
+        self.last_acceleration = nav.propagate(forward, yaw_rate, dt);
+        self.distance_m += nav.speed_mps * dt;
+        let lost = self
+            .last_fused_ns
+            .is_none_or(|l| seconds_between(l, t_ns) > self.settings.learning.loss_after_s);
+        self.in_loss = lost;
+        if lost {
+            if let Some((dv, dpsi)) = self.learning.correction(dt, &self.settings.learning) {
+                nav.speed_mps += dv;
+                nav.heading_rad = (nav.heading_rad + dpsi).rem_euclid(std::f64::consts::TAU);
+            }
+        }
+        self.time_ns = t_ns;
+        if !(nav.is_finite() && filter.kf.estimate.is_finite()) {
+            // NaN never reaches a fused channel: start again from the next good fix.
+            self.nav = None;
+            self.filter = None;
+            self.counts.rejected_invalid += 1;
+        }
+    }
+
+    // --- GNSS -------------------------------------------------------------------------
+
+    fn fix(&mut self, fix: &GnssFix, map: Option<&TrackMap>, o: &mut Out) {
+        let topic = self.topic(self.roles.gnss).to_owned();
+        let t = fix.stamp_ns;
+        let refuse = |s: &mut Self, o: &mut Out, why: &str| {
+            s.counts.rejected_invalid += 1;
+            o.diagnostics(t, &topic, GateDecision::RejectedInvalid, why);
+        };
+        let verdict = quality_gate::judge(fix, &self.settings.gate);
+        if let GateVerdict::Refused(why) = &verdict {
+            refuse(self, o, why);
+            return self.after_fix(t, &topic, map, o);
+        }
+        let Some((e, n)) = self.plane(fix, map) else {
+            refuse(
+                self,
+                o,
+                "absurd coordinates (not finite, off the globe or too far from the origin)",
+            );
+            return self.after_fix(t, &topic, map, o);
+        };
+        let cov = fix.position_covariance_enu_m2;
+        let variance = |c: Option<f64>| match self.gnss_variance? {
+            VarianceValue::Fixed(v) => Some(v),
+            VarianceValue::FromMessage(_) => c,
+        };
+        let (Some(re), Some(rn)) = (variance(cov.map(|c| c[0])), variance(cov.map(|c| c[4])))
+        else {
+            refuse(self, o, "a fix without its variance");
+            return self.after_fix(t, &topic, map, o);
+        };
+        if !(re > 0.0 && rn > 0.0 && re.is_finite() && rn.is_finite()) {
+            refuse(self, o, "a fix with a variance that is not positive");
+            return self.after_fix(t, &topic, map, o);
+        }
+        let speed = fix.speed_mps.filter(|v| v.is_finite() && *v >= 0.0);
+        self.standing = speed.is_some_and(|v| v < self.settings.standstill_speed_mps);
+        // The pre-filters follow every gated fix, so that a single-point fix after an RTK
+        // stretch meets a current trend; only the pre-filtered class fuses their output.
+        let filtered = [(0, e, re), (1, n, rn)].map(|(k, z, r)| self.prefilters[k].step(t, z, r));
+        let use_filtered = verdict == GateVerdict::PreFiltered;
+        let (pe, pn, rpe, rpn) = match use_filtered {
+            true => (
+                filtered[0].value,
+                filtered[1].value,
+                filtered[0].variance,
+                filtered[1].variance,
+            ),
+            false => (e, n, re, rn),
+        };
+        let velocity = self.gnss_velocity(fix, speed);
+        if self.nav.is_none() {
+            self.start(fix, (e, n, re.max(rn)), speed, &topic, o);
+            return self.after_fix(t, &topic, map, o);
+        }
+        // Bring the navigation to the fix with the latest reading.
+        if let Some((forward, yaw_rate)) = self.held {
+            self.advance(t, forward, yaw_rate, seconds_between(self.time_ns, t));
+        }
+        let (Some(nav), Some(_)) = (self.nav, self.filter.as_ref()) else {
+            return self.after_fix(t, &topic, map, o);
+        };
+        let position = ErrorMeasurement {
+            residual: SVector::<f64, 2>::new(pe - nav.east_m, pn - nav.north_m),
+            rows: position_rows(),
+            covariance: SMatrix::<f64, 2, 2>::new(rpe, 0.0, 0.0, rpn),
+        };
+        let mut fused_any = self.update(0, position, t, &topic, ["east", "north"], o);
+        if self.standing {
+            fused_any |= self.standstill_update(t, &topic, o);
+        } else if let Some((v, cov)) = velocity {
+            let nav = self.nav.expect("started");
+            let filtered = [(2, v[0], cov[(0, 0)]), (3, v[1], cov[(1, 1)])]
+                .map(|(k, z, r)| self.prefilters[k].step(t, z, r));
+            let (ve, vn) = (filtered[0].value, filtered[1].value);
+            let r = match self.settings.prefilter.velocity {
+                crate::prefilter::PreFilterSettings::None => cov,
+                _ => {
+                    SMatrix::<f64, 2, 2>::new(filtered[0].variance, 0.0, 0.0, filtered[1].variance)
+                }
+            };
+            let (nve, nvn) = nav.velocity();
+            let m = ErrorMeasurement {
+                residual: SVector::<f64, 2>::new(ve - nve, vn - nvn),
+                rows: velocity_rows(&nav),
+                covariance: r,
+            };
+            fused_any |= self.update(1, m, t, &topic, ["velocity_east", "velocity_north"], o);
+        }
+        if fused_any {
+            self.inject_and_learn(t);
+            self.counts.accepted += 1;
+        }
+        self.after_fix(t, &topic, map, o);
+    }
+
+    /// The fix's position in the plane, the origin set by the map or else by the first fix.
+    fn plane(&mut self, fix: &GnssFix, map: Option<&TrackMap>) -> Option<(f64, f64)> {
+        let (lat, lon) = (fix.latitude_deg?, fix.longitude_deg?);
+        if !(lat.is_finite() && lon.is_finite() && lat.abs() <= 90.0 && lon.abs() <= 180.0) {
+            return None;
+        }
+        let alt = fix.altitude_m.filter(|a| a.is_finite()).unwrap_or(0.0);
+        let origin = *self.origin.get_or_insert_with(|| match map {
+            Some(m) => m.origin,
+            None => GeodeticOrigin {
+                latitude_deg: lat,
+                longitude_deg: lon,
+                altitude_m: alt,
+            },
+        });
+        let (e, n, _) = origin.to_enu(lat, lon, alt);
+        let far = e.hypot(n) > self.settings.max_distance_m;
+        (e.is_finite() && n.is_finite() && !far).then_some((e, n))
+    }
+
+    /// East/north velocity and its covariance from the fix's speed and course.
+    fn gnss_velocity(
+        &self,
+        fix: &GnssFix,
+        speed: Option<f64>,
+    ) -> Option<(SVector<f64, 2>, SMatrix<f64, 2, 2>)> {
+        let s = &self.settings;
+        let (v, c) = (speed?, fix.course_rad.filter(|c| c.is_finite())?);
+        if !s.velocity || v < s.min_course_speed_mps {
+            return None;
+        }
+        let sv = s.speed_std_mps;
+        let sc = sv / v;
+        Some(match s.unscented_velocity {
+            true => velocity_from_speed_and_course(v, sv * sv, c, sc * sc),
+            false => {
+                // First order: J diag(σv², σc²) Jᵀ with J = ∂(v sin c, v cos c)/∂(v, c).
+                let j = SMatrix::<f64, 2, 2>::new(c.sin(), v * c.cos(), c.cos(), -v * c.sin());
+                let r = j * SMatrix::<f64, 2, 2>::new(sv * sv, 0.0, 0.0, sc * sc) * j.transpose();
+                (SVector::<f64, 2>::new(v * c.sin(), v * c.cos()), r)
+            }
+        })
+    }
+
+    /// The filter starts at a moving fix: position from it, heading from its course.
+    fn start(
+        &mut self,
+        fix: &GnssFix,
+        (e, n, r): (f64, f64, f64),
+        speed: Option<f64>,
+        topic: &str,
+        o: &mut Out,
+    ) {
+        let s = &self.settings;
+        let moving = speed.filter(|v| *v >= s.init_speed_mps);
+        let (Some(v), Some(course)) = (moving, fix.course_rad.filter(|c| c.is_finite())) else {
+            self.counts.before_initialisation += 1;
+            o.diagnostics(
+                fix.stamp_ns,
+                topic,
+                GateDecision::BeforeInitialisation,
+                "waiting for a moving fix with a course",
+            );
+            return;
+        };
+        let bias = self.standstill.estimate();
+        let n_ = &s.imu_noise;
+        let nav = Navigation {
+            east_m: e,
+            north_m: n,
+            speed_mps: v,
+            heading_rad: course,
+            accel_bias_mps2: bias.map_or(0.0, |b| b.forward_mps2),
+            gyro_bias_radps: bias.map_or(0.0, |b| b.yaw_rate_radps),
+        };
+        let heading_std = s.speed_std_mps / v + 0.02;
+        let p = SMatrix::<f64, 6, 6>::from_diagonal(&SVector::<f64, 6>::from_column_slice(&[
+            r,
+            r,
+            s.speed_std_mps.powi(2),
+            heading_std.powi(2),
+            n_.accel_bias_std_mps2.powi(2),
+            n_.gyro_bias_std_radps.powi(2),
+        ]));
+        self.nav = Some(nav);
+        self.filter = Some(ErrorStateFilter::new(p));
+        self.time_ns = fix.stamp_ns;
+        self.last_fused_ns = Some(fix.stamp_ns);
+        self.counts.accepted += 1;
+        o.record(
+            fix.stamp_ns,
+            topic,
+            Some("east"),
+            (Some(e), Some(r)),
+            None,
+            GateDecision::Accepted,
+            None,
+        );
+    }
+
+    /// A pair of measurements (`kind` 0 position, 1 velocity) through the AKF (if on) and the
+    /// filter; returns whether it was fused.
+    fn update(
+        &mut self,
+        kind: usize,
+        mut m: ErrorMeasurement,
+        t: u64,
+        topic: &str,
+        axes: [&str; 2],
+        o: &mut Out,
+    ) -> bool {
+        let filter = self.filter.as_mut().expect("started");
+        let projected = filter.projected(&m.rows);
+        if let Some(akf) = self.akf.as_mut() {
+            m.covariance = akf[kind].noise(m.covariance);
+            akf[kind].push(m.residual, projected);
+        }
+        let gate = self.spec.sensors[self.roles.gnss].gate_nis;
+        let s = projected + m.covariance;
+        let nis = s
+            .try_inverse()
+            .map(|si| (m.residual.transpose() * si * m.residual)[0]);
+        if let (Some(g), Some(nis)) = (gate, nis) {
+            // Two degrees of freedom: the gate is per scalar in the config, so doubled.
+            if nis > 2.0 * g {
+                self.counts.rejected_gate += 1;
+                for (k, axis) in axes.iter().enumerate() {
+                    let i = Innovation::new(m.residual[k], s[(k, k)]);
+                    o.record(
+                        t,
+                        topic,
+                        Some(axis),
+                        (Some(m.residual[k]), Some(m.covariance[(k, k)])),
+                        Some(i),
+                        GateDecision::RejectedGate,
+                        Some("NIS beyond the gate"),
+                    );
+                }
+                return false;
+            }
+        }
+        let Some(_) = filter.update_pair(&m) else {
+            self.counts.rejected_invalid += 1;
+            o.diagnostics(
+                t,
+                topic,
+                GateDecision::RejectedInvalid,
+                "a measurement covariance that is not positive definite",
+            );
+            return false;
+        };
+        for (k, axis) in axes.iter().enumerate() {
+            let i = Innovation::new(m.residual[k], s[(k, k)]);
+            o.record(
+                t,
+                topic,
+                Some(axis),
+                (Some(m.residual[k]), Some(m.covariance[(k, k)])),
+                Some(i),
+                GateDecision::Accepted,
+                None,
+            );
+        }
+        true
+    }
+
+    /// A standing train: zero speed, and the mean yaw rate since the last fix is the gyro's
+    /// bias (the earth's rate, 0.004 °/s at these latitudes, is below what a MEMS gyro shows).
+    fn standstill_update(&mut self, t: u64, topic: &str, o: &mut Out) -> bool {
+        let nav = self.nav.expect("started");
+        let filter = self.filter.as_mut().expect("started");
+        let mut speed_row = nalgebra::RowSVector::<f64, 6>::zeros();
+        speed_row[V] = 1.0;
+        let r = STANDSTILL_SPEED_STD_MPS.powi(2);
+        let i = filter.kf.update(&speed_row, r, -nav.speed_mps);
+        o.record(
+            t,
+            topic,
+            Some("standstill_speed"),
+            (Some(0.0), Some(r)),
+            Some(i),
+            GateDecision::Accepted,
+            None,
+        );
+        if let Some(rate) = self.standstill.since_last_take() {
+            let mut bias_row = nalgebra::RowSVector::<f64, 6>::zeros();
+            bias_row[BG] = 1.0;
+            let r = self.settings.imu_noise.gyro_noise_density.powi(2) / rate.seconds.max(1e-3);
+            let i = filter
+                .kf
+                .update(&bias_row, r, rate.mean_yaw_rate - nav.gyro_bias_radps);
+            o.record(
+                t,
+                topic,
+                Some("standstill_yaw_rate"),
+                (Some(rate.mean_yaw_rate), Some(r)),
+                Some(i),
+                GateDecision::Accepted,
+                None,
+            );
+        }
+        true
+    }
+
+    fn inject_and_learn(&mut self, t: u64) {
+        let (Some(nav), Some(filter)) = (self.nav.as_mut(), self.filter.as_mut()) else {
+            return;
+        };
+        let dx = filter.kf.estimate.state;
+        filter.inject(nav);
+        if let Some(last) = self.last_fused_ns {
+            let dt = seconds_between(last, t);
+            self.learning
+                .learn(dx[V], dx[PSI], dt, &self.settings.learning);
+        }
+        self.last_fused_ns = Some(t);
+        self.in_loss = false;
+    }
+
+    /// After every fix: a state (once started) and, once a second, the learnt IMU model.
+    fn after_fix(&mut self, t: u64, topic: &str, map: Option<&TrackMap>, o: &mut Out) {
+        if self.nav.is_some() {
+            self.output(t, topic, map, o);
+        }
+    }
+
+    // --- output -----------------------------------------------------------------------
+
+    fn output(&mut self, t: u64, topic: &str, map: Option<&TrackMap>, o: &mut Out) {
+        let (Some(nav), Some(filter)) = (self.nav, self.filter.as_ref()) else {
+            return;
+        };
+        let p = filter.kf.estimate.covariance;
+        let (s, c) = nav.heading_rad.sin_cos();
+        let along = SVector::<f64, 6>::from_column_slice(&[s, c, 0.0, 0.0, 0.0, 0.0]);
+        let chainage_var = (along.transpose() * p * along)[0];
+        let chainage_speed = (along.transpose() * p.column(V))[0];
+        let chainage_m =
+            match map.and_then(|m| self.matcher.match_point(m, nav.east_m, nav.north_m, None)) {
+                Some(m) => m.chainage_m,
+                None => self.distance_m,
+            };
+        // The acceleration is the last reading's: its white noise over one IMU interval.
+        let white = self.settings.imu_noise.accel_noise_density.powi(2) / self.imu_interval_s;
+        let accel_var = p[(BA, BA)] + white;
+        let covariance = [
+            chainage_var,
+            chainage_speed,
+            0.0,
+            chainage_speed,
+            p[(V, V)],
+            0.0,
+            0.0,
+            0.0,
+            accel_var,
+        ];
+        let v = nav.speed_mps;
+        let j = SMatrix::<f64, 2, 2>::new(s, v * c, c, -v * s);
+        let pv = SMatrix::<f64, 2, 2>::new(p[(V, V)], p[(V, PSI)], p[(PSI, V)], p[(PSI, PSI)]);
+        let vc = j * pv * j.transpose();
+        let origin = self.origin.expect("set by the first fix");
+        let (lat, lon, _) = origin.to_geodetic(nav.east_m, nav.north_m, 0.0);
+        let (ve, vn) = nav.velocity();
+        let imu_topic = self.topic(self.roles.imu).to_owned();
+        let state = FusedState {
+            stamp_ns: t,
+            chainage_m,
+            speed_mps: v,
+            acceleration_mps2: self.last_acceleration,
+            covariance,
+            source: topic.to_owned(),
+            sensor_states: vec![
+                SensorStateEstimate {
+                    topic: imu_topic.clone(),
+                    kind: "accel_bias".into(),
+                    value: nav.accel_bias_mps2,
+                    std: p[(BA, BA)].max(0.0).sqrt(),
+                },
+                SensorStateEstimate {
+                    topic: imu_topic,
+                    kind: "gyro_bias".into(),
+                    value: nav.gyro_bias_radps,
+                    std: p[(BG, BG)].max(0.0).sqrt(),
+                },
+            ],
+            plane: Some(PlanePosition {
+                east_m: nav.east_m,
+                north_m: nav.north_m,
+                covariance_en_m2: [p[(0, 0)], p[(0, 1)], p[(1, 0)], p[(1, 1)]],
+                latitude_deg: lat,
+                longitude_deg: lon,
+                velocity_en_mps: Some([ve, vn]),
+                velocity_covariance_en: Some([vc[(0, 0)], vc[(0, 1)], vc[(1, 0)], vc[(1, 1)]]),
+                heading_rad: Some(nav.heading_rad),
+            }),
+        };
+        o.items.push(Fused {
+            state: Some(state),
+            ..Default::default()
+        });
+        let period = (self.settings.output_period_s * 1e9) as u64;
+        self.next_output_ns = t + period;
+        self.write_model(t, (nav.accel_bias_mps2, nav.gyro_bias_radps), o);
+    }
+
+    /// The learnt IMU model, once a second.
+    fn write_model(&mut self, t: u64, biases: (f64, f64), o: &mut Out) {
+        if t < self.next_model_ns {
+            return;
+        }
+        let standstill = self
+            .standstill
+            .estimate()
+            .map_or((0, 0.0), |s| (s.samples, s.seconds));
+        let model = self.learning.message(t, biases, standstill, self.in_loss);
+        o.items.push(Fused {
+            imu_error_model: Some(model),
+            ..Default::default()
+        });
+        self.next_model_ns = t + 1_000_000_000;
+    }
+
+    /// Before the filter starts: the static offsets of a standing train, once measured.
+    fn static_model(&mut self, t: u64, o: &mut Out) {
+        if let Some(s) = self.standstill.estimate() {
+            self.write_model(t, (s.forward_mps2, s.yaw_rate_radps), o);
+        }
+    }
+}
+
+impl Out {
+    #[allow(clippy::too_many_arguments)]
+    fn record(
+        &mut self,
+        stamp_ns: u64,
+        topic: &str,
+        axis: Option<&str>,
+        (z, r): (Option<f64>, Option<f64>),
+        i: Option<Innovation>,
+        decision: GateDecision,
+        reason: Option<&str>,
+    ) {
+        let d = measurement_record(stamp_ns, topic, axis, (z, r), i, decision, reason);
+        self.items.push(Fused {
+            diagnostics: Some(d),
+            ..Default::default()
+        });
+    }
+
+    fn diagnostics(&mut self, stamp_ns: u64, topic: &str, decision: GateDecision, why: &str) {
+        self.record(
+            stamp_ns,
+            topic,
+            None,
+            (None, None),
+            None,
+            decision,
+            Some(why),
+        );
+    }
+}
