@@ -93,3 +93,55 @@ fn a_stuck_imu_is_refused_counted_and_said_once() {
     let states: Vec<FusedState> = messages(&fused, "/fused/kf/state");
     assert!(states.iter().all(|s| s.speed_mps.is_finite()));
 }
+
+#[test]
+fn real_eth_samples_no_fix_refused_and_the_standing_imus_offsets_measured() {
+    // Real ETR103 recordings (GNSS and a 1.6 kHz IMU, the train standing): the gate refuses
+    // the no-fix NAV-PVT with its reason; after the 3-D fix of a standing train the IMU's
+    // static offsets are measured; the filter waits for the train to move.
+    let d = tempfile::tempdir().unwrap();
+    let import = |name: &str| {
+        let log = d.path().join(format!("{name}.mcap"));
+        let src = sample("eth-pbl-railway").join(name);
+        ok(&[
+            "import",
+            "--format",
+            "eth",
+            s(&src),
+            "-o",
+            s(&log),
+            "--quiet",
+        ]);
+        let fused = d.path().join(format!("{name}.fused.mcap"));
+        ok(&[
+            "refuse",
+            s(&log),
+            "-c",
+            s(&sample("seed003.toml")),
+            "-o",
+            s(&fused),
+        ]);
+        fused
+    };
+    let sn1 = import("20221020_1030_R90117_Modena_SN1_sample.csv");
+    let refused: Vec<FusedDiagnostics> = messages(&sn1, "/fused/pu_rls/diagnostics");
+    assert_eq!(refused.len(), 2, "{refused:?}");
+    for r in &refused {
+        assert_eq!(r.reason.as_deref(), Some("fix type none, below single"));
+    }
+    let sn2 = import("20221020_1030_R90117_Modena_SN2_sample.csv");
+    let waiting: Vec<FusedDiagnostics> = messages(&sn2, "/fused/kf/diagnostics");
+    assert!(
+        waiting
+            .iter()
+            .any(|w| w.reason.as_deref() == Some("waiting for a moving fix with a course")),
+        "{waiting:?}"
+    );
+    assert!(messages::<FusedState>(&sn2, "/fused/kf/state").is_empty());
+    let models: Vec<ImuErrorModel> = messages(&sn2, "/fused/kf/imu_error_model");
+    let last = models.last().expect("the standing IMU's offsets");
+    assert!(last.standstill_samples > 100, "{last:?}");
+    // A MEMS gyro standing still: its bias, well under a degree per second.
+    assert!(last.gyro_bias_radps.abs() < 1f64.to_radians(), "{last:?}");
+    assert!(last.accel_bias_mps2.is_finite() && !last.applied);
+}

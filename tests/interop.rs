@@ -397,6 +397,7 @@ fn a_2d_pipeline_is_drawn_with_its_covariance_ellipse() {
                 covariance_en_m2: [4.0, 1.0, 1.0, 1.0],
                 latitude_deg: 44.6,
                 longitude_deg: 10.9,
+                ..Default::default()
             }),
         };
         w.write(states, t, &state).unwrap();

@@ -256,12 +256,24 @@ fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accurac
         let log = d.path().join(format!("{name}.mcap"));
         let fused = d.path().join(format!("{name}.fused.mcap"));
         let src = sample("eth-pbl-railway").join(name);
-        ok(&["import", "--format", "eth", s(&src), "-o", s(&log), "--quiet"]);
+        ok(&[
+            "import",
+            "--format",
+            "eth",
+            s(&src),
+            "-o",
+            s(&log),
+            "--quiet",
+        ]);
         let out = ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
         let printed = String::from_utf8_lossy(&out.stdout).into_owned() + &stderr(&out);
         let status = messages::<SafetyStatus>(&fused, "/fused/gnss_s1/safety");
         let diagnostics = messages::<FusedDiagnostics>(&fused, "/fused/gnss_s1/diagnostics");
-        assert_eq!(status.len(), diagnostics.len(), "{name}: one status per fix");
+        assert_eq!(
+            status.len(),
+            diagnostics.len(),
+            "{name}: one status per fix"
+        );
         assert!(!status.is_empty(), "{name}: no fix judged");
         let states = messages::<FusedState>(&fused, "/fused/gnss_s1/state");
         assert!(states.is_empty(), "{name}: fused without a map");
@@ -271,14 +283,21 @@ fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accurac
             let gnss = &st.checks[0];
             assert_eq!(gnss.check, "s1_gnss");
             let map = st.checks.iter().find(|c| c.check == "s1_map").unwrap();
-            assert!(map.reason.as_deref().unwrap().contains("no track map"), "{map:?}");
+            assert!(
+                map.reason.as_deref().unwrap().contains("no track map"),
+                "{map:?}"
+            );
             if gnss.passed {
                 // Taken with the accuracy the receiver reported (decimetres to a metre here).
                 let sigma = gnss.value.expect("the reported σ");
                 assert!(sigma > 0.05 && sigma < 5.0, "{name}: σ {sigma}");
                 let r = diag.measurement_variance.unwrap();
                 assert!((r.sqrt() - sigma).abs() < 1e-9, "{r} vs {sigma}");
-                assert!(diag.reason.as_deref().unwrap().contains("usable fix, not fused"));
+                assert!(diag
+                    .reason
+                    .as_deref()
+                    .unwrap()
+                    .contains("usable fix, not fused"));
                 accepted += 1;
             } else {
                 // Refused with its reason; S1 counts GNSS as failed (no usable fix yet).
@@ -286,7 +305,10 @@ fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accurac
                 for why in [diag.reason.as_deref(), gnss.reason.as_deref()] {
                     assert!(why.unwrap().contains("fix type none"), "{name}: {why:?}");
                 }
-                assert!(printed.contains("s1_gnss"), "{name}: S7 without it:\n{printed}");
+                assert!(
+                    printed.contains("s1_gnss"),
+                    "{name}: S7 without it:\n{printed}"
+                );
                 refused += 1;
             }
         }

@@ -185,6 +185,26 @@ impl GnssInsPipeline {
 
     pub fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
         self.release(u64::MAX, log_time_ns, context, out);
+        // The model as it stands at the end, whatever the once-a-second clock says.
+        let mut o = Out::default();
+        self.next_model_ns = 0;
+        match self.nav {
+            Some(nav) => self.write_model(
+                self.time_ns,
+                (nav.accel_bias_mps2, nav.gyro_bias_radps),
+                &mut o,
+            ),
+            None => self.static_model(self.standstill_end_ns(), &mut o),
+        }
+        out.extend(o.items.into_iter().map(|mut f| {
+            f.log_time_ns = log_time_ns;
+            f
+        }));
+    }
+
+    /// The stamp of the last standstill sample (0 before any).
+    fn standstill_end_ns(&self) -> u64 {
+        self.standstill.last_ns().unwrap_or(0)
     }
 
     fn release(&mut self, up_to: u64, log_time_ns: u64, ctx: &SensorContext, out: &mut Vec<Fused>) {

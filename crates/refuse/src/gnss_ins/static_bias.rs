@@ -147,6 +147,10 @@ impl StaticBias {
         self.recent_first_ns.get_or_insert(m.stamp_ns);
     }
 
+    pub fn last_ns(&self) -> Option<u64> {
+        self.last_ns
+    }
+
     /// The offsets over every standstill sample so far.
     pub fn estimate(&self) -> Option<Offsets> {
         (self.n > 0).then(|| Offsets {
