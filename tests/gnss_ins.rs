@@ -145,3 +145,50 @@ fn real_eth_samples_no_fix_refused_and_the_standing_imus_offsets_measured() {
     assert!(last.gyro_bias_radps.abs() < 1f64.to_radians(), "{last:?}");
     assert!(last.accel_bias_mps2.is_finite() && !last.applied);
 }
+
+#[test]
+fn the_seed003_receiver_gives_rtk_at_5_hz_loses_satellites_in_cuttings_and_all_for_150_s() {
+    use railfuse_catalog::messages::{FixType, GnssFix, Imu};
+    let d = tempfile::tempdir().unwrap();
+    let run = d.path().join("s3.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed003",
+        "--seed",
+        "1",
+        "-o",
+        s(&run),
+    ]);
+    let fixes: Vec<GnssFix> = messages(&run, "/gnss/fix");
+    let t0 = fixes[0].stamp_ns;
+    let at = |f: &GnssFix| (f.stamp_ns - t0) as f64 / 1e9;
+    let rate = |pred: &dyn Fn(&GnssFix) -> bool| {
+        let picked: Vec<f64> = fixes.iter().filter(|f| pred(f)).map(at).collect();
+        let gaps: Vec<f64> = picked.windows(2).map(|w| w[1] - w[0]).collect();
+        let mut sorted = gaps.clone();
+        sorted.sort_by(f64::total_cmp);
+        sorted[sorted.len() / 2]
+    };
+    // The median interval: 0.2 s between RTK fixed fixes, 0.1 s between single-point ones.
+    assert!((rate(&|f| f.fix_type == FixType::RtkFixed) - 0.2).abs() < 1e-3);
+    assert!((rate(&|f| f.fix_type == FixType::Single) - 0.1).abs() < 1e-3);
+    // The 150 s loss from 330 s: not one position in it.
+    let lost: Vec<&GnssFix> = fixes
+        .iter()
+        .filter(|f| (331.0..479.0).contains(&at(f)))
+        .collect();
+    assert!(lost.len() > 1000 && lost.iter().all(|f| f.fix_type == FixType::None));
+    // Cuttings take the sky: satellites fall well below the open line's, HDOP rises.
+    let open = fixes.iter().map(|f| f.satellites).max().unwrap();
+    let fewest = fixes
+        .iter()
+        .filter(|f| f.fix_type.has_position())
+        .map(|f| f.satellites)
+        .min()
+        .unwrap();
+    assert!(open >= 16 && fewest <= 8, "satellites {fewest}..{open}");
+    let imu: Vec<Imu> = messages(&run, "/imu");
+    let span = (imu.last().unwrap().stamp_ns - imu[0].stamp_ns) as f64 / 1e9;
+    assert!((imu.len() as f64 / span - 30.0).abs() < 0.1, "IMU at 30 Hz");
+}

@@ -149,7 +149,10 @@ impl SimLog {
         duration_s: f64,
     ) -> railfuse_catalog::Result<SimulationReport> {
         let train = match scenario {
-            Scenario::Default(p) | Scenario::Seed001(p) | Scenario::Seed002(p) => p.train.clone(),
+            Scenario::Default(p)
+            | Scenario::Seed001(p)
+            | Scenario::Seed002(p)
+            | Scenario::Seed003(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
             Scenario::Seed000LoopDrift(_) => {
                 "maglev (source 000 simulation, loop error growing with distance)".into()
@@ -198,9 +201,10 @@ pub fn simulate(
     out: &Path,
 ) -> railfuse_catalog::Result<SimulationReport> {
     match scenario {
-        Scenario::Default(p) | Scenario::Seed001(p) | Scenario::Seed002(p) => {
-            simulate_line(scenario, p, seed, duration_s, faults, out)
-        }
+        Scenario::Default(p)
+        | Scenario::Seed001(p)
+        | Scenario::Seed002(p)
+        | Scenario::Seed003(p) => simulate_line(scenario, p, seed, duration_s, faults, out),
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
             simulate_seed000(scenario, p, seed, duration_s, out)
         }
@@ -343,6 +347,11 @@ fn simulate_line(
             curvature: track.curvature(driver.s),
             in_tunnel: tunnel_name.is_some(),
             corrections,
+            gnss_outage: p
+                .gnss_outages_s
+                .iter()
+                .any(|&(a, len)| t >= a && t < a + len),
+            sky_view: site.sky_view,
             // Left of heading h (clockwise from north) is (−cos h, sin h).
             gnss_multipath: (
                 -site.multipath_left_m * heading_rad.cos(),

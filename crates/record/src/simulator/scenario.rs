@@ -27,6 +27,10 @@ pub struct LineScenario {
     pub stations: usize,
     /// Windows (start, length) in seconds from the start without RTK correction data.
     pub correction_outages_s: Vec<(f64, f64)>,
+    /// Windows (start, length) in seconds from the start in which the GNSS receiver sees no
+    /// satellite at all.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub gnss_outages_s: Vec<(f64, f64)>,
     pub truth_rate_hz: f64,
     pub gnss: GnssParams,
     pub imu: ImuParams,
@@ -53,6 +57,9 @@ pub enum Scenario {
     /// Source 002's safety experiment: curves, parallel tracks and multipath at stations,
     /// cuttings, a surveyed map.
     Seed002(Box<LineScenario>),
+    /// Source 003's hardware on that line: RTK at 5 Hz, satellites falling in cuttings, a
+    /// 150 s GNSS loss, a 30 Hz MEMS IMU.
+    Seed003(Box<LineScenario>),
 }
 
 impl Scenario {
@@ -62,6 +69,7 @@ impl Scenario {
         "seed000_loop_drift",
         "seed001",
         "seed002",
+        "seed003",
     ];
 
     pub fn preset(name: &str) -> Option<Scenario> {
@@ -71,6 +79,7 @@ impl Scenario {
             "seed000_loop_drift" => Some(Scenario::Seed000LoopDrift(Seed000Params::loop_drift())),
             "seed001" => Some(Scenario::Seed001(Box::new(LineScenario::seed001()))),
             "seed002" => Some(Scenario::Seed002(Box::new(LineScenario::seed002()))),
+            "seed003" => Some(Scenario::Seed003(Box::new(LineScenario::seed003()))),
             _ => None,
         }
     }
@@ -82,13 +91,17 @@ impl Scenario {
             Scenario::Seed000LoopDrift(_) => "seed000_loop_drift",
             Scenario::Seed001(_) => "seed001",
             Scenario::Seed002(_) => "seed002",
+            Scenario::Seed003(_) => "seed003",
         }
     }
 
     /// The line-run parameters, for the presets that are line runs.
     pub fn line(&self) -> Option<&LineScenario> {
         match self {
-            Scenario::Default(p) | Scenario::Seed001(p) | Scenario::Seed002(p) => Some(p),
+            Scenario::Default(p)
+            | Scenario::Seed001(p)
+            | Scenario::Seed002(p)
+            | Scenario::Seed003(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -198,6 +211,7 @@ impl LineScenario {
             },
             stations: 3,
             correction_outages_s: vec![(120.0, 45.0)],
+            gnss_outages_s: vec![],
             truth_rate_hz: 100.0,
             gnss: GnssParams {
                 rate_hz: 10.0,
@@ -212,6 +226,7 @@ impl LineScenario {
                 reacquire_none_s: 3.0,
                 reacquire_single_s: 6.0,
                 reacquire_float_s: 12.0,
+                rtk_rate_hz: None,
             },
             imu: ImuParams {
                 sensor_id: "imu0".into(),
@@ -299,6 +314,7 @@ impl LineScenario {
             stations: 2,
             // No differential corrections at all: BeiDou single-point fixes.
             correction_outages_s: vec![(0.0, 1e9)],
+            gnss_outages_s: vec![],
             truth_rate_hz: 100.0,
             gnss: GnssParams {
                 sigma_single_m: 2.5,
@@ -355,6 +371,52 @@ impl LineScenario {
                 map_survey_std_m: 0.1,
                 map_survey_correlation_m: 200.0,
                 map_survey_spacing_m: 20.0,
+                cutting_sky_view: 1.0,
+            }),
+            ..base
+        }
+    }
+
+    /// Source 003's experiment, on a train: its hardware on source 002's line. A
+    /// single-frequency RTK receiver (single point at 10 Hz, RTK at 5 Hz; 2.5 m single-point
+    /// σ, 2 cm fixed, 0.3 m float; Doppler speed 0.1 m/s) whose satellites fall to about a
+    /// third in the cuttings (HDOP up, RTK lost, multipath); a 150 s loss of every satellite
+    /// from 330 s; a MEMS IMU at 30 Hz with the source's table 1: bias stability 0.2 mg and
+    /// 0.007 °/s, velocity random walk 0.2 m/s/√h, angle random walk 2.4 °/√h (its white
+    /// noise at 30 Hz: 0.018 m/s² and 0.22 °/s per sample), the biases wandering over the
+    /// hour by as much again.
+    pub fn seed003() -> Self {
+        let base = Self::seed002();
+        let per_sample = |density: f64, rate_hz: f64| density * rate_hz.sqrt();
+        let rate = 30.0;
+        LineScenario {
+            train: "simulated EMU, 4 cars (source 003 hardware)".into(),
+            track: TrackParams {
+                name: "Modena test line with cuttings (source 003 simulation)".into(),
+                ..base.track.clone()
+            },
+            gnss_outages_s: vec![(330.0, 150.0)],
+            gnss: GnssParams {
+                sigma_single_m: 2.5,
+                sigma_rtk_float_m: 0.3,
+                speed_sigma_mps: 0.1,
+                rtk_rate_hz: Some(5.0),
+                ..base.gnss
+            },
+            imu: ImuParams {
+                sensor_id: "mems0".into(),
+                rate_hz: rate,
+                accel_noise_mps2: per_sample(0.2 / 60.0, rate),
+                accel_bias_mps2: 0.2e-3 * 9.80665,
+                accel_bias_walk: 0.2e-3 * 9.80665 / 60.0,
+                gyro_noise_radps: per_sample((2.4f64 / 60.0).to_radians(), rate),
+                gyro_bias_radps: 0.007f64.to_radians(),
+                gyro_bias_walk: 0.007f64.to_radians() / 60.0,
+                ..base.imu
+            },
+            site: base.site.map(|s| SiteParams {
+                cutting_sky_view: 0.35,
+                ..s
             }),
             ..base
         }

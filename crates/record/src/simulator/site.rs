@@ -28,6 +28,10 @@ pub struct SiteParams {
     /// are pulled up to `cutting_multipath_bias_m` to the left.
     pub cuttings: Vec<(f64, f64)>,
     pub cutting_multipath_bias_m: f64,
+    /// The share of the sky a receiver sees at the deepest point of a cutting (1: all of it,
+    /// as in source 002's line); the satellites in view fall with it and HDOP rises.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub cutting_sky_view: f64,
     /// The published map's survey error, lateral: σ (m), correlation length along the line
     /// (m), and the spacing of the surveyed vertices (m).
     pub map_survey_std_m: f64,
@@ -36,12 +40,32 @@ pub struct SiteParams {
 }
 
 /// What the site does to a fix at one place.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SiteEffect {
     /// The multipath pull, m to the left of the direction of increasing chainage.
     pub multipath_left_m: f64,
     /// In a cutting: no RTK corrections.
     pub in_cutting: bool,
+    /// The share of the sky in view (1 in the open).
+    pub sky_view: f64,
+}
+
+impl Default for SiteEffect {
+    fn default() -> Self {
+        Self {
+            multipath_left_m: 0.0,
+            in_cutting: false,
+            sky_view: 1.0,
+        }
+    }
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn is_one(x: &f64) -> bool {
+    *x == 1.0
 }
 
 /// The point `left_m` to the left of `map`'s main line at `chainage_m`, with that chainage.
@@ -86,6 +110,7 @@ impl SiteParams {
             multipath_left_m: near_station * self.station_multipath_bias_m
                 + cutting * self.cutting_multipath_bias_m,
             in_cutting: self.cuttings.iter().any(|&(a, b)| s >= a && s < b),
+            sky_view: 1.0 - cutting * (1.0 - self.cutting_sky_view),
         }
     }
 
@@ -205,6 +230,7 @@ mod tests {
             station_multipath_bias_m: 3.0,
             cuttings: vec![(2000.0, 2600.0)],
             cutting_multipath_bias_m: 2.0,
+            cutting_sky_view: 0.35,
             map_survey_std_m: 0.1,
             map_survey_correlation_m: 200.0,
             map_survey_spacing_m: 20.0,

@@ -25,6 +25,10 @@ pub struct World {
     pub in_tunnel: bool,
     /// RTK correction data reaches the GNSS receiver.
     pub corrections: bool,
+    /// The GNSS receiver sees no satellites (a scripted loss, as source 003's 150 s outage).
+    pub gnss_outage: bool,
+    /// The share of the sky the receiver sees (1 in the open; cuttings less).
+    pub sky_view: f64,
     /// The pull of multipath on a fix here (east, north, m), which the receiver does not
     /// report: 0 away from buildings and cuttings.
     pub gnss_multipath: (f64, f64),

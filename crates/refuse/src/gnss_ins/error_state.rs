@@ -46,13 +46,13 @@ pub struct ImuNoise {
 }
 
 impl Default for ImuNoise {
-    /// A consumer MEMS IMU of the source's class: bias stability 0.2 mg and 0.007 °/s (its
-    /// table 1), noise densities of an automotive part (150 µg/√Hz, 0.01 °/s/√Hz); an hour
-    /// for the biases to wander through their range.
+    /// The source's MEMS IMU (its table 1): bias stability 0.2 mg and 0.007 °/s, velocity
+    /// random walk 0.2 m/s/√h and angle random walk 2.4 °/√h (densities of 1/60 of those per
+    /// √s); an hour for the biases to wander through their range.
     fn default() -> Self {
         Self {
-            accel_noise_density: 150e-6 * 9.80665,
-            gyro_noise_density: 0.01f64.to_radians(),
+            accel_noise_density: 0.2 / 60.0,
+            gyro_noise_density: (2.4f64 / 60.0).to_radians(),
             accel_bias_std_mps2: 0.2e-3 * 9.80665,
             accel_bias_time_s: 3600.0,
             gyro_bias_std_radps: 0.007f64.to_radians(),

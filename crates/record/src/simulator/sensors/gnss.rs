@@ -30,6 +30,10 @@ pub struct GnssParams {
     pub reacquire_none_s: f64,
     pub reacquire_single_s: f64,
     pub reacquire_float_s: f64,
+    /// RTK solutions come at this rate, below `rate_hz` (a single-frequency board: single
+    /// point at 10 Hz, RTK at 5 Hz); None: at `rate_hz`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rtk_rate_hz: Option<f64>,
 }
 
 pub struct Gnss {
@@ -42,6 +46,7 @@ pub struct Gnss {
     corrections_since_ns: Option<u64>,
     bias: (f64, f64),
     satellites: f64,
+    epochs: u64,
 }
 
 impl Gnss {
@@ -57,6 +62,7 @@ impl Gnss {
             corrections_since_ns: Some(long_ago),
             bias: (0.0, 0.0),
             satellites: 17.0,
+            epochs: 0,
         }
     }
 
@@ -97,7 +103,7 @@ impl Gnss {
 
 impl SimSensor for Gnss {
     fn step(&mut self, w: &World, out: &mut Outbox) {
-        match (w.in_tunnel, self.sky_since_ns) {
+        match (w.in_tunnel || w.gnss_outage, self.sky_since_ns) {
             (true, Some(_)) => self.sky_since_ns = None,
             (false, None) => self.sky_since_ns = Some(w.t_ns),
             _ => {}
@@ -120,7 +126,11 @@ impl SimSensor for Gnss {
             phi * self.bias.0 + gauss(&mut self.rng, q),
             phi * self.bias.1 + gauss(&mut self.rng, q),
         );
-        let target_sats = if w.in_tunnel { 0.0 } else { 18.0 };
+        let target_sats = if w.in_tunnel || w.gnss_outage {
+            0.0
+        } else {
+            18.0 * w.sky_view
+        };
         self.satellites += 0.2 * (target_sats - self.satellites) + gauss(&mut self.rng, 0.3);
         self.satellites = self.satellites.clamp(0.0, 32.0);
         let satellites = if fix == FixType::None {
@@ -158,6 +168,15 @@ impl SimSensor for Gnss {
             if w.speed_mps > 0.5 {
                 let c = w.heading_rad + gauss(&mut self.rng, self.p.speed_sigma_mps / w.speed_mps);
                 msg.course_rad = Some(c.rem_euclid(std::f64::consts::TAU));
+            }
+        }
+        self.epochs += 1;
+        let rtk = matches!(fix, FixType::RtkFloat | FixType::RtkFixed);
+        if let (true, Some(rtk_rate)) = (rtk, self.p.rtk_rate_hz) {
+            // Every n-th epoch of the solution rate carries the RTK solution.
+            let every = (self.p.rate_hz / rtk_rate).round().max(1.0) as u64;
+            if self.epochs % every != 0 {
+                return;
             }
         }
         let latency = seconds(self.p.latency_s);
