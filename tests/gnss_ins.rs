@@ -192,3 +192,71 @@ fn the_seed003_receiver_gives_rtk_at_5_hz_loses_satellites_in_cuttings_and_all_f
     let span = (imu.last().unwrap().stamp_ns - imu[0].stamp_ns) as f64 / 1e9;
     assert!((imu.len() as f64 / span - 30.0).abs() < 0.1, "IMU at 30 Hz");
 }
+
+#[test]
+fn learnt_imu_errors_carry_the_navigation_through_the_tunnel_after_a_bias_shift() {
+    // The forward accelerometer's bias jumps by 0.05 m/s² at 100 s, far faster than the bias
+    // state's hour-long random walk lets it follow: GNSS keeps correcting the speed at a
+    // steady rate, that rate is learnt, and through the tunnel (near 7 km) it keeps
+    // correcting. Without learning the tunnel error is many times larger.
+    let d = tempfile::tempdir().unwrap();
+    let sample_text = std::fs::read_to_string(sample("seed003.toml")).unwrap();
+    let start = sample_text.find("[[pipeline]]\nname = \"kf\"").unwrap();
+    let end = sample_text.find("[[pipeline]]\nname = \"akf\"").unwrap();
+    let kf = &sample_text[start..end];
+    let off = kf
+        .replace("name = \"kf\"", "name = \"kf_unlearnt\"")
+        .replacen(
+            "imu = \"/imu\"\n",
+            "imu = \"/imu\"\nlearning = { enabled = false }\n",
+            1,
+        );
+    let config = d.path().join("learning.toml");
+    std::fs::write(&config, format!("{kf}{off}")).unwrap();
+    let run = d.path().join("run.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "default",
+        "--seed",
+        "1",
+        "--fault",
+        "imu:bias=0.05:100:500",
+        "-o",
+        s(&run),
+    ]);
+    let fused = d.path().join("run.fused.mcap");
+    ok(&["refuse", s(&run), "-c", s(&config), "-o", s(&fused)]);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let (tunnel_in, tunnel_out) = (7000.0, 7800.0);
+    let tunnel_rmse = |name: &str| {
+        let states: Vec<FusedState> = messages(&fused, &format!("/fused/{name}/state"));
+        let errors: Vec<f64> = states
+            .iter()
+            .filter_map(|st| {
+                let g = truth_at(&truth, st.stamp_ns);
+                (tunnel_in..tunnel_out)
+                    .contains(&g.chainage_m)
+                    .then(|| st.chainage_m - g.chainage_m)
+            })
+            .collect();
+        assert!(
+            errors.len() > 200,
+            "{name}: {} states in the tunnel",
+            errors.len()
+        );
+        (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt()
+    };
+    let (learnt, unlearnt) = (tunnel_rmse("kf"), tunnel_rmse("kf_unlearnt"));
+    assert!(
+        learnt < 0.3 * unlearnt,
+        "tunnel chainage RMSE {learnt:.3} m learnt, {unlearnt:.3} m without"
+    );
+    let models: Vec<ImuErrorModel> = messages(&fused, "/fused/kf/imu_error_model");
+    let applied = models
+        .iter()
+        .find(|m| m.applied)
+        .expect("applied in the tunnel");
+    // The bias reads too much acceleration: GNSS kept pulling the speed down.
+    assert!(applied.speed_residual_mps2 < -0.003, "{applied:?}");
+}

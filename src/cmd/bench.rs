@@ -69,6 +69,10 @@ pub struct Args {
     /// two pipelines on a seed002 run of this many seconds (the whole refuse command).
     #[arg(long, value_name = "SECONDS")]
     pub safety: Option<f64>,
+    /// Measure source 003's gnss_ins with PU-RLS instead: samples/seed003.toml's `pu_rls`
+    /// alone on a default run (200 Hz IMU) of this many seconds, against real time.
+    #[arg(long, value_name = "SECONDS")]
+    pub gnss_ins: Option<f64>,
 }
 
 /// One measured `refuse` run.
@@ -95,6 +99,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let Some(secs) = a.safety {
         return safety(&a.dir, secs, a.repeat);
+    }
+    if let Some(secs) = a.gnss_ins {
+        return gnss_ins(&a.dir, secs, a.repeat);
     }
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
@@ -194,20 +201,34 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
-/// `railfuse bench --safety`: a seed002 run of `secs` s through samples/seed002.toml, the
-/// median of `repeat` refuse runs; epochs (fixes and axle-1 samples) per second per pipeline.
-fn safety(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
+/// A `scenario` run of `secs` s simulated into `dir`, then refused `repeat` times with the
+/// pipelines `config` (a file name and its text) in child processes; the runs fastest first.
+fn timed_runs(
+    dir: &Path,
+    scenario: &str,
+    secs: f64,
+    (name, text): (&str, &str),
+    repeat: u32,
+) -> Result<(railfuse_record::SimulationReport, Vec<Measured>)> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let config = dir.join("seed002.toml");
-    std::fs::write(&config, railfuse_experiments::safety::SEED002_PIPELINES)?;
-    let raw = dir.join(format!("bench-seed002-{secs:.0}s.mcap"));
+    let config = dir.join(name);
+    std::fs::write(&config, text)?;
+    let raw = dir.join(format!("bench-{scenario}-{secs:.0}s.mcap"));
     let fused = raw.with_extension("fused.mcap");
-    let preset = railfuse_record::Scenario::preset("seed002").expect("a built-in preset");
+    let preset = railfuse_record::Scenario::preset(scenario).expect("a built-in preset");
     let sim = railfuse_record::simulate(&preset, 1, Some(secs), &[], &raw)?;
     let mut all = (0..repeat.max(1))
         .map(|_| refuse_child(&raw, &config, &fused))
         .collect::<Result<Vec<_>>>()?;
     all.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
+    Ok((sim, all))
+}
+
+/// `railfuse bench --safety`: a seed002 run of `secs` s through samples/seed002.toml, the
+/// median of `repeat` refuse runs; epochs (fixes and axle-1 samples) per second per pipeline.
+fn safety(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
+    let pipelines = railfuse_experiments::safety::SEED002_PIPELINES;
+    let (sim, all) = timed_runs(dir, "seed002", secs, ("seed002.toml", pipelines), repeat)?;
     let m = &all[all.len() / 2];
     let epochs: u64 = m.safety_epochs.iter().sum();
     println!(
@@ -221,6 +242,41 @@ fn safety(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
         m.safety_epochs.len(),
         epochs as f64 / m.safety_epochs.len().max(1) as f64 / m.wall_s,
         sim.messages as f64 / m.wall_s / 1e6,
+        all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
+    );
+    Ok(())
+}
+
+/// `railfuse bench --gnss-ins`: a default run of `secs` s (IMU at 200 Hz, GNSS at 10 Hz)
+/// through samples/seed003.toml's `pu_rls` pipeline alone (one core), the whole refuse
+/// command timed.
+fn gnss_ins(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
+    let all = railfuse_experiments::gnss_ins::SEED003_PIPELINES;
+    // The last pipeline of the sample, with the sample's opening comments.
+    let start = all.rfind("[[pipeline]]").expect("the sample has pipelines");
+    let pu_rls = &all[start..];
+    if !pu_rls.contains("name = \"pu_rls\"") {
+        bail!("samples/seed003.toml no longer ends with the pu_rls pipeline");
+    }
+    let (sim, all) = timed_runs(
+        dir,
+        "default",
+        secs,
+        ("seed003-pu_rls.toml", pu_rls),
+        repeat,
+    )?;
+    let m = &all[all.len() / 2];
+    // 200 Hz IMU and 10 Hz GNSS: the epochs the pipeline processes.
+    let imu_and_fixes = sim.duration_s * (200.0 + 10.0);
+    println!(
+        "default {:.0} s, {} messages: gnss_ins pu_rls refuse {:.3} s (median of {}): {:.0}x real \
+         time, about {:.0} epochs/s (IMU samples and fixes), peak RSS {} KiB",
+        sim.duration_s,
+        sim.messages,
+        m.wall_s,
+        all.len(),
+        sim.duration_s / m.wall_s,
+        imu_and_fixes / m.wall_s,
         all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
     );
     Ok(())

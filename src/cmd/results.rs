@@ -15,7 +15,7 @@ pub struct Args {
     #[arg(long, default_value_t = 10)]
     pub seeds: u64,
     /// Where to write the table (Markdown); default docs/results.md, or docs/tuning.md with
-    /// --tuning, docs/safety.md with --safety.
+    /// --tuning, docs/safety.md with --safety, docs/gnss_ins.md with --gnss-ins.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Run the tuning experiments instead: recovery of seed000's known noise values by EM and
@@ -28,6 +28,11 @@ pub struct Args {
     /// U_safe, faults flagged; written to docs/safety.md.
     #[arg(long, conflicts_with = "tuning")]
     pub safety: bool,
+    /// Run source 003's GNSS/INS experiment instead (samples/seed003.toml on the seed003 and
+    /// default scenarios): velocity and position errors in the plane and through the 150 s
+    /// GNSS loss, beside the source's figures; written to docs/gnss_ins.md.
+    #[arg(long, conflicts_with_all = ["tuning", "safety"])]
+    pub gnss_ins: bool,
     /// Python with pykalman, for --tuning (default: $RAILFUSE_PYTHON, then
     /// .venv-interop/bin/python).
     #[arg(long)]
@@ -51,6 +56,9 @@ pub fn run(a: Args) -> Result<()> {
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
     if a.safety {
         return super::results_safety::run(&a);
+    }
+    if a.gnss_ins {
+        return super::results_gnss_ins::run(&a);
     }
     if a.tuning {
         return super::results_tuning::run(&a);

@@ -9,11 +9,13 @@
 //! - [`long_runs`]: the default pipelines' covariance honesty over one-hour runs;
 //! - [`sharing`]: what sources 000 and 001's α and β change, and under which fusion rule;
 //! - [`safety`]: source 002's safety checks: availability, containment and flagged faults;
+//! - [`gnss_ins`]: source 003's GNSS/INS pipelines scored in the plane beside its figures;
 //! - [`tuning`]: what `railfuse tune` recovers of known noise values, and what tuning buys on
 //!   runs it never saw.
 //!
 //! Printing the results (Markdown, JSON) is the CLI's job.
 
+pub mod gnss_ins;
 pub mod long_runs;
 pub mod safety;
 pub mod sharing;

@@ -12,8 +12,12 @@
 //!   know pulls the forward accelerometer; a mounting error turns the heading). Learnt here
 //!   as the mean rate of the speed and heading corrections and applied through the loss.
 //!
-//! Rates are exponential means with a time constant of `window_s`: each GNSS update adds the
-//! correction it made, divided by the time since the previous update.
+//! Rates are exponential means with a time constant of `window_s`: each reference (RTK
+//! fixed) update adds the correction it made, divided by the time since the previous one. A
+//! learnt rate is applied only where it stands out of its own noise (`|mean| > 3` standard
+//! errors over the samples in the window): a 30 Hz MEMS IMU's heading corrections scatter by
+//! 3.6 mrad/s per update, and a mean of 0.19 mrad/s within that noise, applied through a
+//! 150 s loss, put the train 50 m off the track (seed003 seed 2).
 
 use railfuse_catalog::messages::ImuErrorModel;
 use serde::{Deserialize, Serialize};
@@ -74,7 +78,11 @@ pub struct ErrorLearning {
     speed_rate: Ewm,
     heading_rate: Ewm,
     learnt_s: f64,
+    samples: u64,
 }
+
+/// Standard errors a learnt mean must stand out by to be applied.
+const SIGNIFICANCE: f64 = 3.0;
 
 impl ErrorLearning {
     /// A GNSS update corrected speed by `dv` and heading by `dpsi`, `dt` after the previous.
@@ -86,12 +94,27 @@ impl ErrorLearning {
         self.speed_rate.push(dv / dt, dt, s.window_s);
         self.heading_rate.push(dpsi / dt, dt, s.window_s);
         self.learnt_s += dt;
+        self.samples += 1;
+    }
+
+    /// `rate`'s mean where it stands out of its noise, else 0.
+    fn significant(&self, rate: &Ewm, s: &LearningSettings) -> f64 {
+        let in_window = self.samples as f64 * (s.window_s / self.learnt_s.max(1e-9)).min(1.0);
+        let standard_error = rate.std() / in_window.max(1.0).sqrt();
+        match rate.mean.abs() > SIGNIFICANCE * standard_error {
+            true => rate.mean,
+            false => 0.0,
+        }
     }
 
     /// The corrections (speed, heading) to apply over an IMU step of `dt` during a loss.
     pub fn correction(&self, dt: f64, s: &LearningSettings) -> Option<(f64, f64)> {
-        (s.enabled && self.learnt_s >= s.min_learning_s)
-            .then(|| (self.speed_rate.mean * dt, self.heading_rate.mean * dt))
+        (s.enabled && self.learnt_s >= s.min_learning_s).then(|| {
+            (
+                self.significant(&self.speed_rate, s) * dt,
+                self.significant(&self.heading_rate, s) * dt,
+            )
+        })
     }
 
     /// The learnt model as a message: with the biases `(accel, gyro)` and the standstill
@@ -143,6 +166,13 @@ mod tests {
         let before = l.learnt_s;
         l.learn(1.0, 0.0, 30.0, &s);
         assert_eq!(l.learnt_s, before);
+        // A mean buried in its noise is learnt but not applied.
+        let mut noisy = ErrorLearning::default();
+        for i in 0..400 {
+            let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
+            noisy.learn((0.001 + sign * 0.05) * 0.1, 0.0, 0.1, &s);
+        }
+        assert_eq!(noisy.correction(1.0, &s), Some((0.0, 0.0)));
         let off = LearningSettings {
             enabled: false,
             ..s

@@ -36,7 +36,8 @@ pub struct GnssInsSettings {
     pub unscented_velocity: bool,
     /// Below this speed the course says nothing: velocity is fused only above it, m/s.
     pub min_course_speed_mps: f64,
-    /// The AKF: R from the innovations ([`super::adaptive_noise`]); absent, the receiver's R.
+    /// The AKF: the receiver's R scaled by what the innovations show
+    /// ([`super::adaptive_noise`]); absent, the receiver's R as it is.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub adaptive: Option<AdaptiveNoiseSettings>,
     pub imu_noise: ImuNoise,
@@ -117,9 +118,11 @@ impl GnssInsSettings {
             ));
         }
         if let Some(a) = &self.adaptive {
-            if a.window < 2 || !(a.min_std > 0.0) {
+            if a.window < 2 || !(a.min_scale > 0.0 && a.min_scale <= 1.0 && a.max_scale >= 1.0) {
                 return Err(
-                    "gnss_ins.adaptive: window must be at least 2, min_std positive".into(),
+                    "gnss_ins.adaptive: window must be at least 2, min_scale in (0, 1], \
+                     max_scale at least 1"
+                        .into(),
                 );
             }
         }
