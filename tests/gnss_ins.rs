@@ -42,18 +42,35 @@ fn every_pipeline_fuses_the_plane_with_velocity_and_refuses_what_the_gate_refuse
     let d = tempfile::tempdir().unwrap();
     let fused = simulate_and_refuse(d.path(), &[]);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let eval = ok(&["eval", s(&fused), "--json"]);
+    let report: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
     for name in PIPELINES {
         let states: Vec<FusedState> = messages(&fused, &format!("/fused/{name}/state"));
         assert!(states.len() > 2000, "{name}: {} states", states.len());
-        let mut sq = 0.0;
+        let (mut sq, mut sq_east) = (0.0, 0.0);
         for st in &states {
             let p = st.plane.as_ref().expect("a plane position");
             let v = p.velocity_en_mps.expect("east/north velocity");
             assert!(p.east_m.is_finite() && v[0].is_finite() && v[1].is_finite());
             let g = truth_at(&truth, st.stamp_ns);
             sq += (p.east_m - g.east_m).powi(2) + (p.north_m - g.north_m).powi(2);
+            sq_east += (p.east_m - g.east_m).powi(2);
         }
         let rmse = (sq / states.len() as f64).sqrt();
+        // `eval` scores the plane too, and agrees (it interpolates the truth, this takes the
+        // nearest 100 Hz sample).
+        let pipeline = report["pipelines"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["name"] == name)
+            .unwrap();
+        let east = pipeline["plane"]["east_error_m"]["rmse"].as_f64().unwrap();
+        let ours = (sq_east / states.len() as f64).sqrt();
+        assert!(
+            (east - ours).abs() < 0.05,
+            "{name}: eval {east:.3} m, test {ours:.3} m"
+        );
         // RTK most of the way, single-point fixes through the correction outage, the tunnel
         // dead-reckoned: well inside a metre overall.
         assert!(rmse < 1.0, "{name}: horizontal RMSE {rmse:.3} m");

@@ -97,6 +97,7 @@ pub fn print_eval(report: &EvalReport) {
         }
     }
     print!("{t}");
+    print_plane(report);
     for p in &report.pipelines {
         if let Some(safety) = &p.safety {
             print_safety(&p.name, safety);
@@ -115,6 +116,50 @@ pub fn print_eval(report: &EvalReport) {
             );
         }
     }
+}
+
+/// The 2-D pipelines' errors in the plane against the truth, east and north.
+fn print_plane(report: &EvalReport) {
+    let planar: Vec<_> = report
+        .pipelines
+        .iter()
+        .filter_map(|p| p.plane.map(|plane| (p, plane)))
+        .collect();
+    if planar.is_empty() {
+        return;
+    }
+    println!("in the plane (errors = fused − truth, east and north):");
+    let mut t = Table::new(&[
+        "pipeline",
+        "E RMSE m",
+        "E max m",
+        "N RMSE m",
+        "N max m",
+        "vE RMSE m/s",
+        "vE max m/s",
+        "vN RMSE m/s",
+        "vN max m/s",
+    ]);
+    let f = |e: Option<ErrorSummary>, max: bool| {
+        e.map_or("-".to_owned(), |e| match max {
+            true => format!("{:.3}", e.max_abs),
+            false => format!("{:.3}", e.rmse),
+        })
+    };
+    for (p, plane) in planar {
+        t.row(vec![
+            p.name.clone(),
+            f(Some(plane.east_error_m), false),
+            f(Some(plane.east_error_m), true),
+            f(Some(plane.north_error_m), false),
+            f(Some(plane.north_error_m), true),
+            f(plane.velocity_east_error_mps, false),
+            f(plane.velocity_east_error_mps, true),
+            f(plane.velocity_north_error_mps, false),
+            f(plane.velocity_north_error_mps, true),
+        ]);
+    }
+    print!("{t}");
 }
 
 /// S7 of a pipeline with safety checks: availability, containment, each check's record, and

@@ -522,3 +522,105 @@ mod tests {
         assert_eq!(m.unmatched, 1);
     }
 }
+
+/// The truth in the plane at one stamp: east, north and east/north velocity.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneSample {
+    pub stamp_ns: u64,
+    pub east_m: f64,
+    pub north_m: f64,
+    pub velocity_en_mps: (f64, f64),
+}
+
+/// East/north errors of a 2-D pipeline's states against the truth in the plane, matched by
+/// stamp (the truth interpolated linearly between its samples). States may trail the truth
+/// by the meter's lag; older truth is dropped, so memory stays flat over any log length.
+#[derive(Debug, Clone)]
+pub struct PlaneMeter {
+    truth: VecDeque<PlaneSample>,
+    retain_ns: u64,
+    waiting: VecDeque<(u64, f64, f64, Option<[f64; 2]>)>,
+    pub east: ErrorStats,
+    pub north: ErrorStats,
+    pub velocity_east: ErrorStats,
+    pub velocity_north: ErrorStats,
+}
+
+impl PlaneMeter {
+    pub fn new(lag_s: f64) -> Self {
+        Self {
+            truth: VecDeque::new(),
+            retain_ns: ((lag_s + 2.0) * 1e9) as u64,
+            waiting: VecDeque::new(),
+            east: ErrorStats::default(),
+            north: ErrorStats::default(),
+            velocity_east: ErrorStats::default(),
+            velocity_north: ErrorStats::default(),
+        }
+    }
+
+    pub fn add_truth(&mut self, s: PlaneSample) {
+        if self.truth.back().is_some_and(|b| b.stamp_ns >= s.stamp_ns) {
+            return;
+        }
+        self.truth.push_back(s);
+        while self
+            .truth
+            .front()
+            .is_some_and(|f| f.stamp_ns + self.retain_ns < s.stamp_ns)
+        {
+            self.truth.pop_front();
+        }
+        while self.waiting.front().is_some_and(|w| w.0 <= s.stamp_ns) {
+            let w = self.waiting.pop_front().expect("peeked");
+            self.score(w);
+        }
+    }
+
+    pub fn add_state(&mut self, state: &FusedState) {
+        let Some(p) = &state.plane else { return };
+        let w = (state.stamp_ns, p.east_m, p.north_m, p.velocity_en_mps);
+        match self.truth.back() {
+            Some(b) if b.stamp_ns >= state.stamp_ns => self.score(w),
+            _ => self.waiting.push_back(w),
+        }
+    }
+
+    fn score(&mut self, (t, e, n, v): (u64, f64, f64, Option<[f64; 2]>)) {
+        let i = self.truth.partition_point(|s| s.stamp_ns < t);
+        let (Some(a), Some(b)) = (
+            i.checked_sub(1).and_then(|j| self.truth.get(j)),
+            self.truth.get(i),
+        ) else {
+            return;
+        };
+        let w = (t - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns).max(1) as f64;
+        let lerp = |x: f64, y: f64| x + w * (y - x);
+        self.east.add(e - lerp(a.east_m, b.east_m));
+        self.north.add(n - lerp(a.north_m, b.north_m));
+        if let Some([ve, vn]) = v {
+            self.velocity_east
+                .add(ve - lerp(a.velocity_en_mps.0, b.velocity_en_mps.0));
+            self.velocity_north
+                .add(vn - lerp(a.velocity_en_mps.1, b.velocity_en_mps.1));
+        }
+    }
+
+    pub fn summary(&self) -> Option<PlaneSummary> {
+        Some(PlaneSummary {
+            east_error_m: self.east.summary()?,
+            north_error_m: self.north.summary()?,
+            velocity_east_error_mps: self.velocity_east.summary(),
+            velocity_north_error_mps: self.velocity_north.summary(),
+        })
+    }
+}
+
+/// A 2-D pipeline's errors in the plane.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PlaneSummary {
+    pub east_error_m: ErrorSummary,
+    pub north_error_m: ErrorSummary,
+    pub velocity_east_error_mps: Option<ErrorSummary>,
+    pub velocity_north_error_mps: Option<ErrorSummary>,
+}

@@ -25,7 +25,8 @@ use railfuse_catalog::topics::{self, FusedChannel};
 use serde::Serialize;
 
 use crate::accuracy::{
-    AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, Span, CHI2_95_1DOF,
+    AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, PlaneMeter, PlaneSample,
+    PlaneSummary, Span, CHI2_95_1DOF,
 };
 use crate::error::Result;
 use crate::measurement::gnss_chainage;
@@ -64,6 +65,10 @@ pub struct PipelineEval {
     /// Pipelines with safety checks: S7, availability, containment and caught faults.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyEval>,
+    /// 2-D pipelines against a ground-truth reference: east/north position and velocity
+    /// errors in the plane.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plane: Option<PlaneSummary>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -115,6 +120,7 @@ struct Scored {
     lockouts: u64,
     device_fault: u64,
     safety: Option<SafetyTally>,
+    plane: PlaneMeter,
 }
 
 impl Scored {
@@ -130,6 +136,7 @@ impl Scored {
             lockouts: 0,
             device_fault: 0,
             safety: None,
+            plane: PlaneMeter::new(lag_s),
         }
     }
 }
@@ -281,6 +288,30 @@ impl Evaluator {
     pub fn message(&mut self, m: &LogMessage<'_>) -> Result<()> {
         let path = &self.path;
         match self.roles.get(&m.channel.id).copied() {
+            Some(Role::Reference(ReferenceKind::Truth)) => {
+                // The fields scored along the track and in the plane, in one parse (100 Hz).
+                #[derive(serde::Deserialize)]
+                struct Truth {
+                    stamp_ns: u64,
+                    chainage_m: f64,
+                    speed_mps: f64,
+                    east_m: f64,
+                    north_m: f64,
+                    heading_rad: f64,
+                }
+                let g: Truth = m.decode_fields(path)?;
+                self.reference_sample(g.stamp_ns, g.chainage_m, g.speed_mps);
+                let (sin, cos) = g.heading_rad.sin_cos();
+                let sample = PlaneSample {
+                    stamp_ns: g.stamp_ns,
+                    east_m: g.east_m,
+                    north_m: g.north_m,
+                    velocity_en_mps: (g.speed_mps * sin, g.speed_mps * cos),
+                };
+                for x in self.scored.iter_mut().filter(|x| !x.smoothed) {
+                    x.plane.add_truth(sample);
+                }
+            }
             Some(Role::Reference(kind)) => {
                 if let Some((t, s, v)) = reference_sample(kind, m, path, self.map.as_ref())? {
                     self.reference_sample(t, s, v);
@@ -335,6 +366,7 @@ impl Evaluator {
     pub fn fused_state(&mut self, id: u16, state: &FusedState) {
         if let Some(Role::State(i)) = self.roles.get(&id).copied() {
             self.scored[i].meter.add_estimate(state, &self.spans);
+            self.scored[i].plane.add_state(state);
             self.scored[i].states += 1;
         }
     }
@@ -452,6 +484,7 @@ impl Evaluator {
                 let safety = s.safety.take().map(|t| t.finish(s.meter.containment, t0));
                 PipelineEval {
                     safety,
+                    plane: s.plane.summary(),
                     filter: filters.get(&s.pipeline).cloned(),
                     name: s.name,
                     pipeline: s.pipeline,
