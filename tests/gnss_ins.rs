@@ -379,3 +379,45 @@ fn bad_fixes_and_imu_samples_get_their_reason_nothing_fused_from_them_and_are_co
         assert!((p.east_m - 10.0 * t).abs() < 0.5, "{} m at {t} s", p.east_m);
     }
 }
+
+#[test]
+fn a_bad_pre_filter_setting_is_one_line_naming_the_table() {
+    let d = tempfile::tempdir().unwrap();
+    let sample_text = std::fs::read_to_string(sample("seed003.toml")).unwrap();
+    let start = sample_text.find("[[pipeline]]\nname = \"kf\"").unwrap();
+    let end = sample_text.find("[[pipeline]]\nname = \"akf\"").unwrap();
+    let bad = sample_text[start..end].replacen(
+        "imu = \"/imu\"\n",
+        "imu = \"/imu\"\nprefilter.imu = { kind = \"rls\", lambda = 1.5 }\n",
+        1,
+    );
+    let config = d.path().join("bad.toml");
+    std::fs::write(&config, bad).unwrap();
+    let run = d.path().join("run.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "default",
+        "--seed",
+        "1",
+        "--duration",
+        "20",
+        "-o",
+        s(&run),
+    ]);
+    let out = common::railfuse(&[
+        "refuse",
+        s(&run),
+        "-c",
+        s(&config),
+        "-o",
+        s(&d.path().join("f.mcap")),
+    ]);
+    assert!(!out.status.success());
+    let err = common::stderr(&out);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("gnss_ins.prefilter.imu") && err.contains("lambda = 1.5"),
+        "{err}"
+    );
+}

@@ -92,8 +92,8 @@ pub struct GnssInsPipeline {
     health: ImuHealth,
     standstill: StaticBias,
     standing: bool,
-    /// Position east, north; velocity east, north.
-    prefilters: [PreFilter; 4],
+    /// Position east, north; velocity east, north; IMU forward specific force, yaw rate.
+    prefilters: [PreFilter; 6],
     akf: Option<[AdaptiveNoise; 2]>,
     learning: ErrorLearning,
     last_fused_ns: Option<u64>,
@@ -116,13 +116,13 @@ struct Out {
 impl GnssInsPipeline {
     pub fn new(spec: PipelineSpec, settings: GnssInsSettings, roles: Roles) -> Result<Self> {
         let p = settings.prefilter;
-        let prefilters = [p.position, p.position, p.velocity, p.velocity]
+        let prefilters = [p.position, p.position, p.velocity, p.velocity, p.imu, p.imu]
             .iter()
             .enumerate()
             .map(|(k, s)| PreFilter::new(s, k as u64))
             .collect::<Vec<_>>()
             .try_into()
-            .expect("four pre-filters");
+            .expect("six pre-filters");
         let akf = settings
             .adaptive
             .map(|a| [AdaptiveNoise::new(a), AdaptiveNoise::new(a)]);
@@ -255,17 +255,31 @@ impl GnssInsPipeline {
             }
             return;
         }
-        let (forward, yaw_rate) = (m.specific_force_mps2[0], m.angular_rate_radps[2]);
+        let (mut forward, mut yaw_rate) = (m.specific_force_mps2[0], m.angular_rate_radps[2]);
         if self.standing {
             self.standstill.push(m);
+        }
+        let dt = seconds_between(self.time_ns, m.stamp_ns);
+        if self.nav.is_some() && dt > 0.0 {
+            self.imu_interval_s = dt;
+        }
+        if !matches!(
+            self.settings.prefilter.imu,
+            crate::prefilter::PreFilterSettings::None
+        ) {
+            // Each sample's white-noise variance: the density squared over its interval.
+            let n = &self.settings.imu_noise;
+            let per_sample = |density: f64| density * density / self.imu_interval_s;
+            let (rf, rw) = (
+                per_sample(n.accel_noise_density),
+                per_sample(n.gyro_noise_density),
+            );
+            forward = self.prefilters[4].step(m.stamp_ns, forward, rf).value;
+            yaw_rate = self.prefilters[5].step(m.stamp_ns, yaw_rate, rw).value;
         }
         self.held = Some((forward, yaw_rate));
         if self.nav.is_none() {
             return self.static_model(m.stamp_ns, o);
-        }
-        let dt = seconds_between(self.time_ns, m.stamp_ns);
-        if dt > 0.0 {
-            self.imu_interval_s = dt;
         }
         self.advance(m.stamp_ns, forward, yaw_rate, dt);
         if m.stamp_ns >= self.next_output_ns {

@@ -9,13 +9,15 @@ use super::error_state::ImuNoise;
 use super::quality_gate::GateSettings;
 use crate::prefilter::PreFilterSettings;
 
-/// The pre-filter of each GNSS channel pair (`[pipeline.gnss_ins.prefilter]`): east and north
-/// position, and east and north velocity, each axis a filter of its own.
+/// The pre-filter of each channel pair (`[pipeline.gnss_ins.prefilter]`): the GNSS east and
+/// north position, its east and north velocity, and the IMU's forward specific force and yaw
+/// rate (the source's Filter2), each axis a filter of its own.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PreFilters {
     pub position: PreFilterSettings,
     pub velocity: PreFilterSettings,
+    pub imu: PreFilterSettings,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -94,6 +96,7 @@ impl GnssInsSettings {
         for (what, p) in [
             ("prefilter.position", &self.prefilter.position),
             ("prefilter.velocity", &self.prefilter.velocity),
+            ("prefilter.imu", &self.prefilter.imu),
         ] {
             p.check().map_err(|e| format!("gnss_ins.{what}: {e}"))?;
         }
