@@ -29,6 +29,14 @@ fn simulate_and_refuse(dir: &Path, extra: &[&str]) -> PathBuf {
     fused
 }
 
+/// The `kf` pipeline of samples/seed003.toml, alone.
+fn kf_pipeline() -> String {
+    let text = std::fs::read_to_string(sample("seed003.toml")).unwrap();
+    let start = text.find("[[pipeline]]\nname = \"kf\"").unwrap();
+    let end = text.find("[[pipeline]]\nname = \"akf\"").unwrap();
+    text[start..end].to_owned()
+}
+
 /// The truth's east/north at a stamp (nearest sample; truth runs at 100 Hz).
 fn truth_at(truth: &[GroundTruth], t: u64) -> &GroundTruth {
     let i = truth
@@ -217,10 +225,7 @@ fn learnt_imu_errors_carry_the_navigation_through_the_tunnel_after_a_bias_shift(
     // steady rate, that rate is learnt, and through the tunnel (near 7 km) it keeps
     // correcting. Without learning the tunnel error is many times larger.
     let d = tempfile::tempdir().unwrap();
-    let sample_text = std::fs::read_to_string(sample("seed003.toml")).unwrap();
-    let start = sample_text.find("[[pipeline]]\nname = \"kf\"").unwrap();
-    let end = sample_text.find("[[pipeline]]\nname = \"akf\"").unwrap();
-    let kf = &sample_text[start..end];
+    let kf = &kf_pipeline();
     let off = kf
         .replace("name = \"kf\"", "name = \"kf_unlearnt\"")
         .replacen(
@@ -340,10 +345,7 @@ fn bad_fixes_and_imu_samples_get_their_reason_nothing_fused_from_them_and_are_co
     }
     w.finish().unwrap();
     let config = d.path().join("kf.toml");
-    let sample_text = std::fs::read_to_string(sample("seed003.toml")).unwrap();
-    let start = sample_text.find("[[pipeline]]\nname = \"kf\"").unwrap();
-    let end = sample_text.find("[[pipeline]]\nname = \"akf\"").unwrap();
-    std::fs::write(&config, &sample_text[start..end]).unwrap();
+    std::fs::write(&config, kf_pipeline()).unwrap();
     let fused = d.path().join("bad.fused.mcap");
     let out = ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
     let printed = String::from_utf8_lossy(&out.stdout).into_owned() + &common::stderr(&out);
@@ -383,10 +385,7 @@ fn bad_fixes_and_imu_samples_get_their_reason_nothing_fused_from_them_and_are_co
 #[test]
 fn a_bad_pre_filter_setting_is_one_line_naming_the_table() {
     let d = tempfile::tempdir().unwrap();
-    let sample_text = std::fs::read_to_string(sample("seed003.toml")).unwrap();
-    let start = sample_text.find("[[pipeline]]\nname = \"kf\"").unwrap();
-    let end = sample_text.find("[[pipeline]]\nname = \"akf\"").unwrap();
-    let bad = sample_text[start..end].replacen(
+    let bad = kf_pipeline().replacen(
         "imu = \"/imu\"\n",
         "imu = \"/imu\"\nprefilter.imu = { kind = \"rls\", lambda = 1.5 }\n",
         1,
