@@ -92,6 +92,16 @@ fn every_pipeline_fuses_the_plane_with_velocity_and_refuses_what_the_gate_refuse
             refused_in_tunnel > 50,
             "{name}: {refused_in_tunnel} no-fix fixes refused"
         );
+        // Every gate decision is written: RTK fixed fused as the reference, the correction
+        // outage's single-point fixes through the pre-filter class.
+        let class = |c: &str| {
+            diagnostics
+                .iter()
+                .filter(|d| d.reason.as_deref() == Some(c) && d.axis.as_deref() == Some("east"))
+                .count()
+        };
+        assert!(class("reference: fix type rtk_fixed") > 2000, "{name}");
+        assert!(class("pre-filtered: fix type single") > 100, "{name}");
         let models: Vec<ImuErrorModel> =
             messages(&fused, &format!("/fused/{name}/imu_error_model"));
         assert!(models.len() > 200, "{name}: {} models", models.len());

@@ -386,7 +386,12 @@ impl GnssInsPipeline {
             rows: position_rows(),
             covariance: SMatrix::<f64, 2, 2>::new(rpe, 0.0, 0.0, rpn),
         };
-        let mut fused_any = self.update(0, position, t, &topic, ["east", "north"], o);
+        let class = match use_filtered {
+            true => format!("pre-filtered: fix type {}", fix.fix_type.name()),
+            false => format!("reference: fix type {}", fix.fix_type.name()),
+        };
+        let axes = ["east", "north"];
+        let mut fused_any = self.update(0, position, [pe, pn], t, &topic, axes, Some(&class), o);
         if self.standing {
             fused_any |= self.standstill_update(t, &topic, o);
         } else if let Some((v, cov)) = velocity {
@@ -406,7 +411,8 @@ impl GnssInsPipeline {
                 rows: velocity_rows(&nav),
                 covariance: r,
             };
-            fused_any |= self.update(1, m, t, &topic, ["velocity_east", "velocity_north"], o);
+            let axes = ["velocity_east", "velocity_north"];
+            fused_any |= self.update(1, m, [ve, vn], t, &topic, axes, None, o);
         }
         if fused_any {
             self.inject_and_learn(t, verdict == GateVerdict::Reference);
@@ -521,9 +527,11 @@ impl GnssInsPipeline {
         &mut self,
         kind: usize,
         mut m: ErrorMeasurement,
+        measured: [f64; 2],
         t: u64,
         topic: &str,
         axes: [&str; 2],
+        class: Option<&str>,
         o: &mut Out,
     ) -> bool {
         let filter = self.filter.as_mut().expect("started");
@@ -548,7 +556,7 @@ impl GnssInsPipeline {
                         t,
                         topic,
                         Some(axis),
-                        (Some(m.residual[k]), Some(m.covariance[(k, k)])),
+                        (Some(measured[k]), Some(m.covariance[(k, k)])),
                         Some(i),
                         GateDecision::RejectedGate,
                         Some("NIS beyond the gate"),
@@ -573,10 +581,10 @@ impl GnssInsPipeline {
                 t,
                 topic,
                 Some(axis),
-                (Some(m.residual[k]), Some(m.covariance[(k, k)])),
+                (Some(measured[k]), Some(m.covariance[(k, k)])),
                 Some(i),
                 GateDecision::Accepted,
-                None,
+                class,
             );
         }
         true
