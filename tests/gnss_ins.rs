@@ -381,6 +381,10 @@ fn bad_fixes_and_imu_samples_get_their_reason_nothing_fused_from_them_and_are_co
     );
     // Counted: 2 fixes and the saturated sample invalid, the old sample late.
     assert!(printed.contains("3 invalid, 1 late"), "{printed}");
+    assert!(
+        printed.contains("GNSS gate: 58 fixes taken as the reference, 0 pre-filtered, 2 refused"),
+        "{printed}"
+    );
     // Nothing fused from them: the track stays on the line the good fixes give.
     let states: Vec<FusedState> = messages(&fused, "/fused/kf/state");
     assert!(states.len() > 50, "{} states", states.len());

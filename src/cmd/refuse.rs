@@ -196,6 +196,12 @@ pub fn print_counts(report: &RefuseReport) {
             c.rejected_device_fault,
             c.before_initialisation
         );
+        if let Some(g) = &p.gnss_gate {
+            println!(
+                "{}: GNSS gate: {} fixes taken as the reference, {} pre-filtered, {} refused",
+                p.name, g.reference, g.pre_filtered, g.refused
+            );
+        }
     }
 }
 

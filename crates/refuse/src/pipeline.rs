@@ -639,6 +639,8 @@ pub trait MessagePipeline {
     ) -> Result<()>;
     /// The end of the log: everything still queued.
     fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>);
+    /// A GNSS quality gate's decisions, for pipelines that have one.
+    fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally>;
 }
 
 /// [`MessagePipeline`] by the pipeline's own methods of the same names.
@@ -666,6 +668,9 @@ macro_rules! message_pipeline {
             }
             fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
                 <$ty>::finish(self, log_time_ns, context, out)
+            }
+            fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
+                <$ty>::gate_tally(self)
             }
         }
     };
@@ -742,6 +747,11 @@ impl AnyPipeline {
 
     pub fn counts(&self) -> &PipelineCounts {
         each!(self, p => &p.counts, s => s.counts())
+    }
+
+    /// A GNSS quality gate's decisions (`gnss_ins`).
+    pub fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
+        each!(self, _p => None, s => s.gate_tally())
     }
 
     /// A pipeline fed whole messages ([`MessagePipeline::push`]) instead of

@@ -70,6 +70,9 @@ pub struct PipelineReport {
     pub counts: PipelineCounts,
     pub fused_states: u64,
     pub smoothed_states: u64,
+    /// `gnss_ins`: the GNSS quality gate's decisions.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gnss_gate: Option<crate::gnss_ins::quality_gate::GateTally>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -635,6 +638,7 @@ impl<'a> Replay<'a> {
                 counts: p.counts().clone(),
                 fused_states: out.states,
                 smoothed_states: out.smoothed_states,
+                gnss_gate: p.gate_tally(),
             });
         }
         let eval = self.eval.finish(log)?;

@@ -50,7 +50,7 @@ use error_state::{
     position_rows, velocity_rows, ErrorMeasurement, ErrorStateFilter, BA, BG, PSI, V,
 };
 use planar_ins::Navigation;
-use quality_gate::GateVerdict;
+use quality_gate::{GateTally, GateVerdict};
 pub use settings::GnssInsSettings;
 use static_bias::{ImuHealth, StaticBias};
 
@@ -105,6 +105,7 @@ pub struct GnssInsPipeline {
     next_output_ns: u64,
     next_model_ns: u64,
     pub counts: PipelineCounts,
+    gate: GateTally,
 }
 
 /// What one step wrote.
@@ -152,8 +153,14 @@ impl GnssInsPipeline {
             next_output_ns: 0,
             next_model_ns: 0,
             counts: PipelineCounts::default(),
+            gate: GateTally::default(),
             settings,
         })
+    }
+
+    /// The gate's decisions so far.
+    pub fn gate_tally(&self) -> Option<GateTally> {
+        Some(self.gate)
     }
 
     /// Sensor `sensor` is bound with this variance setting (the GNSS receiver's; the IMU's
@@ -325,6 +332,7 @@ impl GnssInsPipeline {
         let t = fix.stamp_ns;
         let refuse = |s: &mut Self, o: &mut Out, why: &str| {
             s.counts.rejected_invalid += 1;
+            s.gate.refused += 1;
             o.diagnostics(t, &topic, GateDecision::RejectedInvalid, why);
         };
         let verdict = quality_gate::judge(fix, &self.settings.gate);
@@ -354,6 +362,8 @@ impl GnssInsPipeline {
             refuse(self, o, "a fix with a variance that is not positive");
             return self.after_fix(t, &topic, map, o);
         }
+        // Counted once the fix has passed every check: its class, or (above) refused.
+        self.gate.count(&verdict);
         let speed = fix.speed_mps.filter(|v| v.is_finite() && *v >= 0.0);
         self.standing = speed.is_some_and(|v| v < self.settings.standstill_speed_mps);
         // The pre-filters follow every gated fix, so that a single-point fix after an RTK

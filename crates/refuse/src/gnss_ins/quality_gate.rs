@@ -57,6 +57,24 @@ impl GateSettings {
     }
 }
 
+/// How many fixes the gate took as the reference, sent through the pre-filter, or refused.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct GateTally {
+    pub reference: u64,
+    pub pre_filtered: u64,
+    pub refused: u64,
+}
+
+impl GateTally {
+    pub fn count(&mut self, v: &GateVerdict) {
+        match v {
+            GateVerdict::Reference => self.reference += 1,
+            GateVerdict::PreFiltered => self.pre_filtered += 1,
+            GateVerdict::Refused(_) => self.refused += 1,
+        }
+    }
+}
+
 /// What the gate made of a fix.
 #[derive(Debug, Clone, PartialEq)]
 pub enum GateVerdict {

@@ -148,6 +148,11 @@ impl SafetyPipeline {
         })
     }
 
+    /// S1 diagnoses the fixes itself; there is no quality gate to tally.
+    pub fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
+        None
+    }
+
     /// Sensor `sensor` is bound to its channel with this variance.
     pub fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
         self.variances[sensor] = variance;
