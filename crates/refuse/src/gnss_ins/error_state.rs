@@ -189,13 +189,6 @@ impl ErrorStateFilter {
         Some([a, b])
     }
 
-    /// The pair's innovations and covariance `S = H P Hᵀ + R`, without updating (for the
-    /// adaptive R and the gate).
-    pub fn innovation_covariance(&self, m: &ErrorMeasurement) -> SMatrix<f64, 2, 2> {
-        let h = SMatrix::<f64, 2, 6>::from_rows(&[m.rows[0].transpose(), m.rows[1].transpose()]);
-        h * self.kf.estimate.covariance * h.transpose() + m.covariance
-    }
-
     /// The projection `H P Hᵀ` of the covariance on the pair's rows.
     pub fn projected(&self, rows: &[SVector<f64, 6>; 2]) -> SMatrix<f64, 2, 2> {
         let h = SMatrix::<f64, 2, 6>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);

@@ -330,38 +330,20 @@ impl GnssInsPipeline {
     fn fix(&mut self, fix: &GnssFix, map: Option<&TrackMap>, o: &mut Out) {
         let topic = self.topic(self.roles.gnss).to_owned();
         let t = fix.stamp_ns;
-        let refuse = |s: &mut Self, o: &mut Out, why: &str| {
-            s.counts.rejected_invalid += 1;
-            s.gate.refused += 1;
-            o.diagnostics(t, &topic, GateDecision::RejectedInvalid, why);
-        };
         let verdict = quality_gate::judge(fix, &self.settings.gate);
-        if let GateVerdict::Refused(why) = &verdict {
-            refuse(self, o, why);
-            return self.after_fix(t, &topic, map, o);
-        }
-        let Some((e, n)) = self.plane(fix, map) else {
-            refuse(
-                self,
-                o,
-                "absurd coordinates (not finite, off the globe or too far from the origin)",
-            );
-            return self.after_fix(t, &topic, map, o);
+        let checked = match &verdict {
+            GateVerdict::Refused(why) => Err(why.clone()),
+            _ => self.check_fix(fix, map),
         };
-        let cov = fix.position_covariance_enu_m2;
-        let variance = |c: Option<f64>| match self.gnss_variance? {
-            VarianceValue::Fixed(v) => Some(v),
-            VarianceValue::FromMessage(_) => c,
+        let (e, n, re, rn) = match checked {
+            Ok(checked) => checked,
+            Err(why) => {
+                self.counts.rejected_invalid += 1;
+                self.gate.refused += 1;
+                o.diagnostics(t, &topic, GateDecision::RejectedInvalid, &why);
+                return self.after_fix(t, &topic, map, o);
+            }
         };
-        let (Some(re), Some(rn)) = (variance(cov.map(|c| c[0])), variance(cov.map(|c| c[4])))
-        else {
-            refuse(self, o, "a fix without its variance");
-            return self.after_fix(t, &topic, map, o);
-        };
-        if !(re > 0.0 && rn > 0.0 && re.is_finite() && rn.is_finite()) {
-            refuse(self, o, "a fix with a variance that is not positive");
-            return self.after_fix(t, &topic, map, o);
-        }
         // Counted once the fix has passed every check: its class, or (above) refused.
         self.gate.count(&verdict);
         let speed = fix.speed_mps.filter(|v| v.is_finite() && *v >= 0.0);
@@ -429,6 +411,32 @@ impl GnssInsPipeline {
             self.counts.accepted += 1;
         }
         self.after_fix(t, &topic, map, o);
+    }
+
+    /// The fix's place in the plane and its variance per axis, or why it cannot be used.
+    fn check_fix(
+        &mut self,
+        fix: &GnssFix,
+        map: Option<&TrackMap>,
+    ) -> Result<(f64, f64, f64, f64), String> {
+        let Some((e, n)) = self.plane(fix, map) else {
+            return Err(
+                "absurd coordinates (not finite, off the globe or too far from the origin)".into(),
+            );
+        };
+        let cov = fix.position_covariance_enu_m2;
+        let variance = |c: Option<f64>| match self.gnss_variance? {
+            VarianceValue::Fixed(v) => Some(v),
+            VarianceValue::FromMessage(_) => c,
+        };
+        let (Some(re), Some(rn)) = (variance(cov.map(|c| c[0])), variance(cov.map(|c| c[4])))
+        else {
+            return Err("a fix without its variance".into());
+        };
+        if !(re > 0.0 && rn > 0.0 && re.is_finite() && rn.is_finite()) {
+            return Err("a fix with a variance that is not positive".into());
+        }
+        Ok((e, n, re, rn))
     }
 
     /// The fix's position in the plane, the origin set by the map or else by the first fix.
@@ -556,26 +564,9 @@ impl GnssInsPipeline {
         let nis = s
             .try_inverse()
             .map(|si| (m.residual.transpose() * si * m.residual)[0]);
-        if let (Some(g), Some(nis)) = (gate, nis) {
-            // Two degrees of freedom: the gate is per scalar in the config, so doubled.
-            if nis > 2.0 * g {
-                self.counts.rejected_gate += 1;
-                for (k, axis) in axes.iter().enumerate() {
-                    let i = Innovation::new(m.residual[k], s[(k, k)]);
-                    o.record(
-                        t,
-                        topic,
-                        Some(axis),
-                        (Some(measured[k]), Some(m.covariance[(k, k)])),
-                        Some(i),
-                        GateDecision::RejectedGate,
-                        Some("NIS beyond the gate"),
-                    );
-                }
-                return false;
-            }
-        }
-        let Some(_) = filter.update_pair(&m) else {
+        // Two degrees of freedom: the gate is per scalar in the config, so doubled.
+        let gated = matches!((gate, nis), (Some(g), Some(nis)) if nis > 2.0 * g);
+        if !gated && filter.update_pair(&m).is_none() {
             self.counts.rejected_invalid += 1;
             o.diagnostics(
                 t,
@@ -584,20 +575,18 @@ impl GnssInsPipeline {
                 "a measurement covariance that is not positive definite",
             );
             return false;
+        }
+        let (decision, reason) = match gated {
+            true => (GateDecision::RejectedGate, Some("NIS beyond the gate")),
+            false => (GateDecision::Accepted, class),
         };
         for (k, axis) in axes.iter().enumerate() {
             let i = Innovation::new(m.residual[k], s[(k, k)]);
-            o.record(
-                t,
-                topic,
-                Some(axis),
-                (Some(measured[k]), Some(m.covariance[(k, k)])),
-                Some(i),
-                GateDecision::Accepted,
-                class,
-            );
+            let z = (Some(measured[k]), Some(m.covariance[(k, k)]));
+            o.record(t, topic, Some(axis), z, Some(i), decision, reason);
         }
-        true
+        self.counts.rejected_gate += u64::from(gated);
+        !gated
     }
 
     /// A standing train: zero speed, and the mean yaw rate since the last fix is the gyro's
