@@ -5,7 +5,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{messages, ok, s, sample};
+use common::{messages, ok, s, sample, truth_at};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GroundTruth, ImuErrorModel};
 
 const PIPELINES: [&str; 4] = ["kf", "akf", "rls", "pu_rls"];
@@ -35,14 +35,6 @@ fn kf_pipeline() -> String {
     let start = text.find("[[pipeline]]\nname = \"kf\"").unwrap();
     let end = text.find("[[pipeline]]\nname = \"akf\"").unwrap();
     text[start..end].to_owned()
-}
-
-/// The truth's east/north at a stamp (nearest sample; truth runs at 100 Hz).
-fn truth_at(truth: &[GroundTruth], t: u64) -> &GroundTruth {
-    let i = truth
-        .partition_point(|g| g.stamp_ns < t)
-        .min(truth.len() - 1);
-    &truth[i]
 }
 
 #[test]

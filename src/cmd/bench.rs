@@ -73,6 +73,10 @@ pub struct Args {
     /// alone on a default run (200 Hz IMU) of this many seconds, against real time.
     #[arg(long, value_name = "SECONDS")]
     pub gnss_ins: Option<f64>,
+    /// Measure source 004's eddy_current instead: samples/seed004.toml's `warped_kf` alone
+    /// on a default run (two sensors at 10 kHz) of this many seconds, against real time.
+    #[arg(long, value_name = "SECONDS")]
+    pub eddy_current: Option<f64>,
 }
 
 /// One measured `refuse` run.
@@ -102,6 +106,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let Some(secs) = a.gnss_ins {
         return gnss_ins(&a.dir, secs, a.repeat);
+    }
+    if let Some(secs) = a.eddy_current {
+        return eddy_current(&a.dir, secs, a.repeat);
     }
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
@@ -277,6 +284,40 @@ fn gnss_ins(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
         all.len(),
         sim.duration_s / m.wall_s,
         imu_and_fixes / m.wall_s,
+        all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
+    );
+    Ok(())
+}
+
+/// `railfuse bench --eddy-current`: a default run of `secs` s (two eddy-current sensors at
+/// 10 kHz) through samples/seed004.toml's `warped_kf` pipeline alone (one core), the whole
+/// refuse command timed (copying the log's other channels included).
+fn eddy_current(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
+    let all = railfuse_experiments::eddy_current::SEED004_PIPELINES;
+    let start = all.rfind("[[pipeline]]").expect("the sample has pipelines");
+    let warped_kf = &all[start..];
+    if !warped_kf.contains("name = \"warped_kf\"") {
+        bail!("samples/seed004.toml no longer ends with the warped_kf pipeline");
+    }
+    let (sim, all) = timed_runs(
+        dir,
+        "default",
+        secs,
+        ("seed004-warped_kf.toml", warped_kf),
+        repeat,
+    )?;
+    let m = &all[all.len() / 2];
+    let samples = sim.duration_s * 2.0 * 10_000.0;
+    println!(
+        "default {:.0} s, {} messages: eddy_current warped_kf refuse {:.3} s (median of {}): \
+         {:.0}x real time, {:.2} M samples/s (two sensors at 10 kHz: 0.02 M/s in real time), \
+         peak RSS {} KiB",
+        sim.duration_s,
+        sim.messages,
+        m.wall_s,
+        all.len(),
+        sim.duration_s / m.wall_s,
+        samples / m.wall_s / 1e6,
         all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
     );
     Ok(())

@@ -11,6 +11,7 @@ pub mod record;
 pub mod recover;
 pub mod refuse;
 pub mod results;
+pub mod results_eddy_current;
 pub mod results_gnss_ins;
 pub mod results_safety;
 pub mod results_tuning;

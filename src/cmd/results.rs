@@ -15,7 +15,8 @@ pub struct Args {
     #[arg(long, default_value_t = 10)]
     pub seeds: u64,
     /// Where to write the table (Markdown); default docs/results.md, or docs/tuning.md with
-    /// --tuning, docs/safety.md with --safety, docs/gnss_ins.md with --gnss-ins.
+    /// --tuning, docs/safety.md with --safety, docs/gnss_ins.md with --gnss-ins,
+    /// docs/eddy_current.md with --eddy-current.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Run the tuning experiments instead: recovery of seed000's known noise values by EM and
@@ -33,6 +34,11 @@ pub struct Args {
     /// GNSS loss, beside the source's figures; written to docs/gnss_ins.md.
     #[arg(long, conflicts_with_all = ["tuning", "safety"])]
     pub gnss_ins: bool,
+    /// Run source 004's eddy-current experiment instead (samples/seed004.toml on the seed004
+    /// preset and on a rougher track): speed error by speed band, acceleration, distance and
+    /// sleeper count errors against the goals; written to docs/eddy_current.md.
+    #[arg(long, conflicts_with_all = ["tuning", "safety", "gnss_ins"])]
+    pub eddy_current: bool,
     /// Python with pykalman, for --tuning (default: $RAILFUSE_PYTHON, then
     /// .venv-interop/bin/python).
     #[arg(long)]
@@ -59,6 +65,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     if a.gnss_ins {
         return super::results_gnss_ins::run(&a);
+    }
+    if a.eddy_current {
+        return super::results_eddy_current::run(&a);
     }
     if a.tuning {
         return super::results_tuning::run(&a);

@@ -87,3 +87,14 @@ pub fn messages<M: railfuse_catalog::messages::ChannelMessage>(path: &Path, topi
     }
     out
 }
+
+/// The truth sample nearest at or after `t` (truth runs at 100 Hz), the last one past the end.
+pub fn truth_at(
+    truth: &[railfuse_catalog::messages::GroundTruth],
+    t: u64,
+) -> &railfuse_catalog::messages::GroundTruth {
+    let i = truth
+        .partition_point(|g| g.stamp_ns < t)
+        .min(truth.len() - 1);
+    &truth[i]
+}

@@ -364,6 +364,8 @@ mod tests {
             sleeper_spacing_m: 0.6,
             loop_crossing_spacing_m: None,
             other_tracks,
+            sleeper_sections: Vec::new(),
+            switches: Vec::new(),
         }
     }
 

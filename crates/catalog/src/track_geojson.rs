@@ -153,6 +153,8 @@ pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapErr
         sleeper_spacing_m: 0.6,
         loop_crossing_spacing_m: None,
         other_tracks: tracks,
+        sleeper_sections: Vec::new(),
+        switches: Vec::new(),
     };
     map.check().map_err(|e| invalid(e.to_string()))?;
     Ok(map)

@@ -10,9 +10,8 @@ use std::path::Path;
 use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::{FusedState, GroundTruth};
 use railfuse_catalog::topics;
-use railfuse_record::{simulate, Scenario};
+use railfuse_record::Scenario;
 use railfuse_refuse::config::embedded_path;
-use railfuse_refuse::replay::{refuse, RefuseOptions};
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
 
@@ -101,24 +100,9 @@ pub fn run_all(dir: &Path, seeds: u64, step: &dyn Fn(u64)) -> Result<GnssInsResu
             })
             .collect();
         for seed in 1..=seeds {
-            let raw = dir.join(format!("{scenario}-gnss_ins-seed{seed}.mcap"));
-            let fused = dir.join(format!("{scenario}-gnss_ins-seed{seed}.fused.mcap"));
-            simulate(&preset, seed, None, &[], &raw)?;
-            let result = refuse(&RefuseOptions {
-                input: &raw,
-                output: &fused,
-                config: &pipelines,
-                config_source: pipelines.path.display().to_string(),
-                reference: topics::GROUND_TRUTH,
-                progress: None,
-                observer: None,
-            });
-            std::fs::remove_file(&raw).ok();
-            let scored = result
-                .map_err(Error::from)
-                .and_then(|_| score(&fused, outage, &mut acc));
-            std::fs::remove_file(&fused).ok();
-            scored?;
+            crate::score_fused_run(dir, &preset, seed, &pipelines, "gnss_ins", |fused| {
+                score(fused, outage, &mut acc)
+            })?;
             done += 1;
             step(done);
         }

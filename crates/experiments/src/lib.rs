@@ -9,12 +9,15 @@
 //! - [`long_runs`]: the default pipelines' covariance honesty over one-hour runs;
 //! - [`sharing`]: what sources 000 and 001's α and β change, and under which fusion rule;
 //! - [`safety`]: source 002's safety checks: availability, containment and flagged faults;
+//! - [`eddy_current`]: source 004's eddy-current speed and distance by speed band, beside its
+//!   goals;
 //! - [`gnss_ins`]: source 003's GNSS/INS pipelines scored in the plane beside its figures;
 //! - [`tuning`]: what `railfuse tune` recovers of known noise values, and what tuning buys on
 //!   runs it never saw.
 //!
 //! Printing the results (Markdown, JSON) is the CLI's job.
 
+pub mod eddy_current;
 pub mod gnss_ins;
 pub mod long_runs;
 pub mod safety;
@@ -108,6 +111,35 @@ pub fn run_scenario(
         pipelines: eval.pipelines,
         duration_s: sim.duration_s,
     })
+}
+
+/// Simulates `scenario` with `seed` into `dir`, re-fuses it with `pipelines`, hands the fused
+/// log to `score`, and removes both logs whatever happened.
+pub(crate) fn score_fused_run(
+    dir: &Path,
+    scenario: &Scenario,
+    seed: u64,
+    pipelines: &Pipelines,
+    tag: &str,
+    score: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
+    let name = scenario.name();
+    let raw = dir.join(format!("{name}-{tag}-seed{seed}.mcap"));
+    let fused = dir.join(format!("{name}-{tag}-seed{seed}.fused.mcap"));
+    simulate(scenario, seed, None, &[], &raw)?;
+    let result = refuse(&RefuseOptions {
+        input: &raw,
+        output: &fused,
+        config: pipelines,
+        config_source: pipelines.path.display().to_string(),
+        reference: topics::GROUND_TRUTH,
+        progress: None,
+        observer: None,
+    });
+    std::fs::remove_file(&raw).ok();
+    let scored = result.map_err(Error::from).and_then(|_| score(&fused));
+    std::fs::remove_file(&fused).ok();
+    scored
 }
 
 /// Envelopes over `seeds` runs of each of `names`, `run(seed)` giving one run.

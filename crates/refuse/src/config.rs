@@ -46,6 +46,8 @@ pub enum FilterKind {
     EkfSafety,
     /// Source 003: GNSS and a MEMS IMU in an error-state filter in the plane.
     GnssIns,
+    /// Source 004: speed and distance from an eddy-current sensor pair.
+    EddyCurrent,
 }
 
 impl FilterKind {
@@ -60,7 +62,10 @@ impl FilterKind {
     }
     /// The pipeline reads whole messages (in the plane), not scalar measurements.
     pub fn reads_whole_messages(self) -> bool {
-        matches!(self, FilterKind::EkfSafety | FilterKind::GnssIns)
+        matches!(
+            self,
+            FilterKind::EkfSafety | FilterKind::GnssIns | FilterKind::EddyCurrent
+        )
     }
     pub fn name(self) -> &'static str {
         match self {
@@ -70,6 +75,7 @@ impl FilterKind {
             FilterKind::FederatedParticle => "federated_particle",
             FilterKind::EkfSafety => "ekf_safety",
             FilterKind::GnssIns => "gnss_ins",
+            FilterKind::EddyCurrent => "eddy_current",
         }
     }
 }
@@ -112,6 +118,9 @@ pub struct PipelineConfig {
     /// error model and the learning.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gnss_ins: Option<crate::gnss_ins::GnssInsSettings>,
+    /// `eddy_current` pipelines: the correlator, warping, the filter, sleeper counting.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eddy_current: Option<crate::eddy_current::EddyCurrentSettings>,
     pub sensor: Vec<Spanned<SensorConfig>>,
     /// What `railfuse tune` may change in this pipeline and what it minimises; refuse
     /// ignores it.

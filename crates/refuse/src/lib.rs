@@ -15,6 +15,8 @@
 //! - [`prefilter`]: source 003's RLS, adaptive RLS and PU-RLS pre-filters of one channel;
 //! - [`gnss_ins`]: source 003's GNSS/MEMS-IMU error-state filter in the plane, its GNSS
 //!   gate, pre-filters, AKF and IMU error learning;
+//! - [`eddy_current`]: source 004's eddy-current speed and distance: filtering, correlation,
+//!   warping;
 //! - [`safety`]: source 002's EKF in the plane with its safety checks and safe interval;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
@@ -23,6 +25,7 @@
 
 pub mod accuracy;
 pub mod config;
+pub mod eddy_current;
 pub mod error;
 pub mod eval;
 pub mod filter;

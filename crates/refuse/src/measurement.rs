@@ -130,6 +130,12 @@ pub enum SensorModel {
     OdometerSpeed,
     GnssFix,
     ImuAcceleration,
+    /// Raw eddy-current blocks: whole messages for an `eddy_current` pipeline, no scalar.
+    EddyCurrent,
+    /// Another pipeline's fused states (an earlier `refuse`): its chainage and speed with
+    /// their variances, a sensor like any other (an eddy-current pipeline's speed beside a
+    /// radar's and the odometers').
+    FusedState,
 }
 
 impl SensorModel {
@@ -141,6 +147,8 @@ impl SensorModel {
         MessageKind::Odometer,
         MessageKind::GnssFix,
         MessageKind::Imu,
+        MessageKind::EddyCurrentBlock,
+        MessageKind::FusedState,
     ];
 
     pub fn for_kind(kind: MessageKind) -> Option<Self> {
@@ -151,6 +159,8 @@ impl SensorModel {
             MessageKind::Odometer => SensorModel::OdometerSpeed,
             MessageKind::GnssFix => SensorModel::GnssFix,
             MessageKind::Imu => SensorModel::ImuAcceleration,
+            MessageKind::EddyCurrentBlock => SensorModel::EddyCurrent,
+            MessageKind::FusedState => SensorModel::FusedState,
             _ => return None,
         })
     }
@@ -166,6 +176,8 @@ impl SensorModel {
             SensorModel::RadarSpeed | SensorModel::OdometerSpeed => &[Quantity::Speed],
             SensorModel::GnssFix => &[Quantity::Chainage, Quantity::Speed],
             SensorModel::ImuAcceleration => &[Quantity::Acceleration],
+            SensorModel::EddyCurrent => &[],
+            SensorModel::FusedState => &[Quantity::Chainage, Quantity::Speed],
         }
     }
 
@@ -240,6 +252,33 @@ impl SensorModel {
                     m.specific_force_mps2[0],
                     None,
                     true,
+                ));
+            }
+            // Read whole by its pipeline; nothing scalar in a block.
+            SensorModel::EddyCurrent => {}
+            SensorModel::FusedState => {
+                #[derive(serde::Deserialize)]
+                struct State {
+                    stamp_ns: u64,
+                    chainage_m: f64,
+                    speed_mps: f64,
+                    covariance: [f64; 9],
+                }
+                let m: State = msg.decode_fields(path)?;
+                let var = |v: f64| (v.is_finite() && v > 0.0).then_some(v);
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Chainage,
+                    m.chainage_m,
+                    var(m.covariance[0]),
+                    m.chainage_m.is_finite(),
+                ));
+                out.push(one(
+                    m.stamp_ns,
+                    Quantity::Speed,
+                    m.speed_mps,
+                    var(m.covariance[4]),
+                    m.speed_mps.is_finite(),
                 ));
             }
             SensorModel::GnssFix => {

@@ -15,6 +15,7 @@ use railfuse_catalog::messages::{
 use serde::Serialize;
 
 use crate::config::VarianceValue;
+use crate::eddy_current::EddyCurrentPipeline;
 use crate::error::{Error, Result};
 use crate::filter::federated::Federated;
 use crate::filter::rts::EpochRecorder;
@@ -69,6 +70,7 @@ pub fn measurement_record(
         effective_sample_size: None,
         resampled: None,
         sharing: None,
+        eddy_current: None,
     }
 }
 
@@ -372,7 +374,9 @@ impl<const N: usize> Pipeline<N> {
                 t0,
                 |i, s| ParticleFilter::new(particle.stream(i as u64 + 1), s),
             )),
-            EstimatorSpec::EkfSafety { .. } | EstimatorSpec::GnssIns { .. } => {
+            EstimatorSpec::EkfSafety { .. }
+            | EstimatorSpec::GnssIns { .. }
+            | EstimatorSpec::EddyCurrent { .. } => {
                 unreachable!("AnyPipeline::new makes a message pipeline of these specs")
             }
         }
@@ -451,6 +455,7 @@ impl<const N: usize> Pipeline<N> {
             effective_sample_size: None,
             resampled: None,
             sharing: None,
+            eddy_current: None,
         }
     }
 
@@ -677,6 +682,7 @@ macro_rules! message_pipeline {
 }
 message_pipeline!(SafetyPipeline);
 message_pipeline!(GnssInsPipeline);
+message_pipeline!(EddyCurrentPipeline);
 
 /// A pipeline of any state dimension up to [`MAX_STATES`], or one that reads whole messages.
 pub enum AnyPipeline {
@@ -722,6 +728,11 @@ impl AnyPipeline {
             EstimatorSpec::GnssIns { settings, roles } => {
                 let (settings, roles) = (settings.clone(), *roles);
                 let p = GnssInsPipeline::new(spec, *settings, roles)?;
+                return Ok(AnyPipeline::Messages(Box::new(p)));
+            }
+            EstimatorSpec::EddyCurrent { settings, motion } => {
+                let (settings, motion) = ((**settings).clone(), *motion);
+                let p = EddyCurrentPipeline::new(spec, settings, motion)?;
                 return Ok(AnyPipeline::Messages(Box::new(p)));
             }
             _ => {}

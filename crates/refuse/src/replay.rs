@@ -551,9 +551,8 @@ impl<'a> Replay<'a> {
                 }
             }
             // A map needs no more than 10 positions a second: the fused state keeps every one.
-            if let (Some(state), Some(channel), Some(map)) =
-                (&f.state, out.location, &self.context.track)
-            {
+            if let (Some(state), Some(channel)) = (&f.state, out.location) {
+                let map = self.context.track.as_ref();
                 let due = out
                     .last_location_ns
                     .is_none_or(|last| state.stamp_ns >= last + LOCATION_TWIN_EVERY_NS);

@@ -154,6 +154,10 @@ pub enum EstimatorSpec {
         motion: crate::model::ConstantAcceleration,
     },
     /// Source 003's GNSS/INS in the plane.
+    EddyCurrent {
+        settings: Box<crate::eddy_current::EddyCurrentSettings>,
+        motion: ConstantAcceleration,
+    },
     GnssIns {
         settings: Box<crate::gnss_ins::GnssInsSettings>,
         roles: crate::gnss_ins::Roles,
@@ -169,6 +173,7 @@ impl EstimatorSpec {
             EstimatorSpec::FederatedParticle { .. } => FilterKind::FederatedParticle,
             EstimatorSpec::EkfSafety { .. } => FilterKind::EkfSafety,
             EstimatorSpec::GnssIns { .. } => FilterKind::GnssIns,
+            EstimatorSpec::EddyCurrent { .. } => FilterKind::EddyCurrent,
         }
     }
 
@@ -391,6 +396,18 @@ impl PipelineSpec {
                 supported.join(", ")
             )));
         };
+        let eddy = self.estimator.kind() == crate::config::FilterKind::EddyCurrent;
+        if eddy != (model == SensorModel::EddyCurrent) {
+            return Err(fail(match eddy {
+                true => format!(
+                    "has schema '{schema}'; an eddy_current pipeline reads {}",
+                    railfuse_catalog::messages::MessageKind::EddyCurrentBlock.schema_name()
+                ),
+                false => "carries raw eddy-current blocks, which only an eddy_current \
+                          pipeline reads"
+                    .into(),
+            }));
+        }
         let gives: Vec<&str> = model.quantities().iter().map(|q| q.name()).collect();
         let wanted = s.fields.as_deref().unwrap_or(model.quantities());
         let mut fields = Vec::new();
@@ -648,6 +665,12 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
             c.filter.name()
         ));
     }
+    if c.eddy_current.is_some() && c.filter != FilterKind::EddyCurrent {
+        return Err(format!(
+            "an [eddy_current] section, but filter = \"{}\"",
+            c.filter.name()
+        ));
+    }
     if c.federated.is_some() && !c.filter.is_federated() {
         return Err(format!(
             "a [federated] section, but filter = \"{}\"",
@@ -677,6 +700,7 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
         },
         FilterKind::EkfSafety => safety(c)?,
         FilterKind::GnssIns => gnss_ins(c)?,
+        FilterKind::EddyCurrent => eddy_current(c)?,
     })
 }
 
@@ -704,6 +728,31 @@ fn along_track_only(c: &PipelineConfig, filter: &str) -> Result<(), String> {
         )),
         None => Ok(()),
     }
+}
+
+/// An `eddy_current` pipeline: its settings checked, its one sensor the block channel.
+fn eddy_current(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
+    let settings = c.eddy_current.clone().unwrap_or_default();
+    settings.check()?;
+    let MotionModel::ConstantAcceleration(motion) = motion_model(&c.motion)? else {
+        return Err(
+            "an eddy_current pipeline's filter is constant acceleration: set motion = \
+             { model = \"constant_acceleration\", jerk_psd = … }"
+                .into(),
+        );
+    };
+    sensor_of(c, "eddy_current.topic", &settings.topic)?;
+    along_track_only(c, "eddy_current")?;
+    if c.sensor.len() != 1 {
+        return Err(format!(
+            "an eddy_current pipeline has one sensor (eddy_current.topic), not {}",
+            c.sensor.len()
+        ));
+    }
+    Ok(EstimatorSpec::EddyCurrent {
+        settings: Box::new(settings),
+        motion,
+    })
 }
 
 /// A `gnss_ins` pipeline: its settings checked, its two sensors found by role.

@@ -51,8 +51,12 @@ pub struct PipelineLayout {
     pub effective_sample_size: bool,
     /// Safety checks: the safe-interval plot.
     pub safety: bool,
-    /// Sensor-state entities with their titles.
-    pub sensor_states: Vec<(String, String)>,
+    /// Values drawn with a band (sensor states, plane velocity errors, the learnt IMU
+    /// error model): entity and title, the title saying what the band is.
+    pub bands: Vec<(String, String)>,
+    /// Plain line plots (an eddy-current pipeline's correlation, accelerations, counts):
+    /// entity and title.
+    pub lines: Vec<(String, String)>,
 }
 
 impl PipelineLayout {
@@ -62,7 +66,8 @@ impl PipelineLayout {
             sharing: false,
             effective_sample_size: false,
             safety: false,
-            sensor_states: Vec::new(),
+            bands: Vec::new(),
+            lines: Vec::new(),
         }
     }
 }
@@ -516,8 +521,8 @@ impl PipelineLayout {
                 },
             ));
         }
-        for (entity, title) in &self.sensor_states {
-            others.push(plot(&format!("{title} ±3σ"), &format!("/{entity}"), small));
+        for (entity, title) in self.bands.iter().chain(&self.lines) {
+            others.push(plot(title, &format!("/{entity}"), small));
         }
         if others.is_empty() {
             return container(ContainerKind::Horizontal, Some(p), vec![nis], &[]);

@@ -146,6 +146,23 @@ pub fn effective_sample_size(pipeline: &str) -> String {
     format!("diagnostics/{pipeline}/effective_sample_size")
 }
 
+/// A 2-D pipeline's east or north velocity minus the truth, with its ±3σ bounds.
+pub fn velocity_error(pipeline: &str, axis: &str) -> String {
+    format!("diagnostics/{pipeline}/velocity_error/{axis}")
+}
+
+/// One term of a GNSS/INS pipeline's learnt IMU error model (`speed_residual`,
+/// `heading_residual`), with its spread.
+pub fn imu_error_model(pipeline: &str, term: &str) -> String {
+    format!("diagnostics/{pipeline}/imu_error_model/{term}")
+}
+
+/// An eddy-current pipeline's windows: `correlation` (ρ with and without warping),
+/// `acceleration` (the warp's and the filter's), `sleepers` (sensor a's count minus b's).
+pub fn eddy_current(pipeline: &str, what: &str) -> String {
+    format!("diagnostics/{pipeline}/eddy_current/{what}")
+}
+
 /// One sensor state a pipeline estimates (a radar's scale factor, a receiver's bias), with
 /// its ±3σ bounds.
 pub fn sensor_state(pipeline: &str, topic: &str, kind: &str) -> String {

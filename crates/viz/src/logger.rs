@@ -317,7 +317,11 @@ struct PipelineState {
     /// Safety checks: U_safe's ends and the usable flag, and the last first failure shown.
     safety: Option<(SeriesId, SeriesId)>,
     last_failure: Option<Option<String>>,
-    sensor_states: HashMap<(String, String), SeriesId>,
+    /// Values drawn with a band in the pipeline's tab, by entity.
+    bands: HashMap<String, SeriesId>,
+    /// Whether the learnt IMU error model was last applied (GNSS lost), to say when it
+    /// changes.
+    model_applied: Option<bool>,
 }
 
 struct Logger {
@@ -330,6 +334,8 @@ struct Logger {
     /// Where east/north are measured from: the map's origin, else the first fix.
     origin: Option<GeodeticOrigin>,
     truth: ReferenceTrack,
+    /// The truth's east/north velocity, for 2-D pipelines' velocity errors.
+    truth_velocity: TruthWindow,
     /// The first message's log time, for --from/--to.
     start_ns: Option<u64>,
     /// Raw series by entity, registered as they first appear.
@@ -366,6 +372,7 @@ impl Logger {
             map: None,
             origin: None,
             truth: ReferenceTrack::new(10.0 + longest_chunk_ns as f64 / 1e9),
+            truth_velocity: TruthWindow::new(10.0 + longest_chunk_ns as f64 / 1e9),
             start_ns: None,
             raw: HashMap::new(),
             truth_train: None,
@@ -426,6 +433,19 @@ impl Logger {
         index: usize,
         smoothed: bool,
     ) -> Result<SeriesId, Error> {
+        self.band_series_of(entity, name, index, smoothed, "3σ")
+    }
+
+    /// A value with a band `width` wide either side (`3σ`, `σ`): its rows are
+    /// `[value, value + width, value − width]`.
+    fn band_series_of(
+        &mut self,
+        entity: &str,
+        name: &str,
+        index: usize,
+        smoothed: bool,
+        width: &str,
+    ) -> Result<SeriesId, Error> {
         let color = if smoothed {
             palette::smoothed(index)
         } else {
@@ -435,8 +455,8 @@ impl Logger {
             entity,
             &[
                 name.to_owned(),
-                format!("{name} +3σ"),
-                format!("{name} −3σ"),
+                format!("{name} +{width}"),
+                format!("{name} −{width}"),
             ],
             &[color, palette::band(index), palette::band(index)],
             &[2.0, 0.75, 0.75],
@@ -462,6 +482,9 @@ impl Logger {
         let widths = vec![if truth { 2.5 } else { 1.0 }; names.len()];
         let names: Vec<String> = names.iter().map(|s| (*s).to_owned()).collect();
         let id = self.line_series(entity, &names, &colors, &widths)?;
+        if !truth {
+            self.columns.break_on_silence(id);
+        }
         self.raw.insert(entity.to_owned(), id);
         Ok(id)
     }
@@ -534,7 +557,8 @@ impl Logger {
             effective_sample_size: None,
             safety: None,
             last_failure: None,
-            sensor_states: HashMap::new(),
+            bands: HashMap::new(),
+            model_applied: None,
         })
     }
 
@@ -597,8 +621,7 @@ impl Logger {
                 FusedChannel::Smoothed => self.fused(p, true, &m.decode(path)?),
                 FusedChannel::Diagnostics => self.diagnostics(p, &m.decode(path)?),
                 FusedChannel::Safety => self.safety(p, &m.decode(path)?),
-                // The learnt IMU model is read with `railfuse eval`, not drawn.
-                FusedChannel::ImuErrorModel => Ok(()),
+                FusedChannel::ImuErrorModel => self.imu_error_model(p, &m.decode(path)?),
             };
         }
         if !reference && !self.options.shows_topic(topic) {
@@ -755,6 +778,9 @@ impl Logger {
             chainage_m: t.chainage_m,
             speed_mps: t.speed_mps,
         });
+        let (sin, cos) = t.heading_rad.sin_cos();
+        self.truth_velocity
+            .push(t.stamp_ns, (t.speed_mps * sin, t.speed_mps * cos));
         if !self.in_window(t.stamp_ns) {
             return Ok(());
         }
@@ -928,23 +954,91 @@ impl Logger {
                     .segment(&self.rec, extent, t, [behind, ahead])?;
             }
         }
+        let name = self.pipelines[p].name.clone();
         for st in &f.sensor_states {
-            let key = (st.topic.clone(), st.kind.clone());
-            let id = match self.pipelines[p].sensor_states.get(&key) {
-                Some(&id) => id,
-                None => {
-                    let (name, index) = (self.pipelines[p].name.clone(), self.pipelines[p].index);
-                    let entity = ent::sensor_state(&name, &st.topic, &st.kind);
-                    let title = format!("{} {}", st.topic, st.kind.replace('_', " "));
-                    let id = self.band_series(&entity, &title, index, false)?;
-                    self.pipelines[p].sensor_states.insert(key, id);
-                    self.layout.pipelines[p].sensor_states.push((entity, title));
-                    id
-                }
+            let entity = ent::sensor_state(&name, &st.topic, &st.kind);
+            let title = format!("{} {}", st.topic, st.kind.replace('_', " "));
+            self.band_value(p, &entity, &title, "3σ", t, st.value, 3.0 * st.std)?;
+        }
+        // A 2-D pipeline's velocity: east and north errors against the truth.
+        let plane = f.plane.as_ref();
+        if let (Some([ve, vn]), Some(c), Some((te, tn))) = (
+            plane.and_then(|p| p.velocity_en_mps),
+            plane.and_then(|p| p.velocity_covariance_en),
+            self.truth_velocity.at(f.stamp_ns),
+        ) {
+            for (axis, e, var) in [("east", ve - te, c[0]), ("north", vn - tn, c[3])] {
+                let entity = ent::velocity_error(&name, axis);
+                let title = format!("{axis} velocity error (m/s)");
+                self.band_value(p, &entity, &title, "3σ", t, e, 3.0 * var.max(0.0).sqrt())?;
+            }
+        }
+        Ok(())
+    }
+
+    /// One row of a banded value in a pipeline's tab (`[v, v + b, v − b]`), its plot
+    /// registered on first use under `title` with the band's `width` named.
+    #[allow(clippy::too_many_arguments)]
+    fn band_value(
+        &mut self,
+        p: usize,
+        entity: &str,
+        title: &str,
+        width: &str,
+        t: i64,
+        value: f64,
+        band: f64,
+    ) -> Result<(), Error> {
+        let id = match self.pipelines[p].bands.get(entity) {
+            Some(&id) => id,
+            None => {
+                let index = self.pipelines[p].index;
+                let id = self.band_series_of(entity, title, index, false, width)?;
+                self.pipelines[p].bands.insert(entity.to_owned(), id);
+                let title = format!("{title} ±{width}");
+                self.layout.pipelines[p]
+                    .bands
+                    .push((entity.to_owned(), title));
+                id
+            }
+        };
+        self.columns
+            .push(&self.rec, id, t, &[value, value + band, value - band])
+    }
+
+    /// A GNSS/INS pipeline's learnt IMU error model (once a second): the mean residual
+    /// rates ψ with their spread σ; when it starts or stops being applied, a log line.
+    fn imu_error_model(&mut self, p: usize, m: &ImuErrorModel) -> Result<(), Error> {
+        let (t, name) = (m.stamp_ns as i64, self.pipelines[p].name.clone());
+        let terms = [
+            (
+                "speed_residual",
+                "learnt ψ speed (m/s²)",
+                m.speed_residual_mps2,
+                m.speed_residual_std_mps2,
+            ),
+            (
+                "heading_residual",
+                "learnt ψ heading (rad/s)",
+                m.heading_residual_radps,
+                m.heading_residual_std_radps,
+            ),
+        ];
+        for (term, title, value, std) in terms {
+            let entity = ent::imu_error_model(&name, term);
+            self.band_value(p, &entity, title, "σ", t, value, std)?;
+        }
+        if self.pipelines[p].model_applied.replace(m.applied) != Some(m.applied) {
+            let text = if m.applied {
+                format!(
+                    "{name}: GNSS lost: the learnt IMU model corrects the inertial solution \
+                     (ψ speed {:+.2e} m/s², heading {:+.2e} rad/s, learnt over {:.0} s)",
+                    m.speed_residual_mps2, m.heading_residual_radps, m.learnt_s
+                )
+            } else {
+                format!("{name}: learning the IMU error model from GNSS")
             };
-            let b = 3.0 * st.std;
-            self.columns
-                .push(&self.rec, id, t, &[st.value, st.value + b, st.value - b])?;
+            self.text(m.stamp_ns, text, if m.applied { "WARN" } else { "INFO" })?;
         }
         Ok(())
     }
@@ -1057,6 +1151,71 @@ impl Logger {
         }
         if let Some(sharing) = &d.sharing {
             self.sharing(p, d.stamp_ns, sharing)?;
+        }
+        if let Some(e) = &d.eddy_current {
+            self.eddy_current(p, t, e)?;
+        }
+        Ok(())
+    }
+
+    /// An eddy-current window: its correlation with and without warping, the warp's
+    /// acceleration beside the filter's, and the two sensors' sleeper counts' difference.
+    fn eddy_current(&mut self, p: usize, t: i64, e: &EddyCurrentDiagnostics) -> Result<(), Error> {
+        let name = self.pipelines[p].name.clone();
+        let rows: [(&str, &str, [&str; 2], [f64; 2]); 3] = [
+            (
+                "correlation",
+                "correlation peak ρ",
+                ["ρ", "ρ unwarped"],
+                [
+                    e.rho.unwrap_or(f64::NAN),
+                    e.unwarped_rho.unwrap_or(f64::NAN),
+                ],
+            ),
+            (
+                "acceleration",
+                "acceleration (m/s²): warp and filter",
+                ["warp", "filter"],
+                [
+                    e.warp_acceleration_mps2.unwrap_or(f64::NAN),
+                    e.filter_acceleration_mps2.unwrap_or(f64::NAN),
+                ],
+            ),
+            (
+                "sleepers",
+                "sleepers counted: a, b",
+                ["sensor a", "sensor b"],
+                [e.sleepers_a as f64, e.sleepers_b as f64],
+            ),
+        ];
+        for (what, title, names, values) in rows {
+            let plot = ent::eddy_current(&name, what);
+            for (k, (component, value)) in names.iter().zip(values).enumerate() {
+                if !value.is_finite() {
+                    continue;
+                }
+                let entity = format!("{plot}/{}", component.replace(' ', "_"));
+                let id = match self.raw.get(&entity) {
+                    Some(&id) => id,
+                    None => {
+                        let index = self.pipelines[p].index;
+                        let color = [palette::pipeline(index), palette::smoothed(index)][k];
+                        let id = self.line_series(
+                            &entity,
+                            &[(*component).to_owned()],
+                            &[color],
+                            &[[1.5, 1.0][k]],
+                        )?;
+                        self.raw.insert(entity.clone(), id);
+                        let lines = &mut self.layout.pipelines[p].lines;
+                        if !lines.iter().any(|(e, _)| *e == plot) {
+                            lines.push((plot.clone(), title.to_owned()));
+                        }
+                        id
+                    }
+                };
+                self.columns.push(&self.rec, id, t, &[value])?;
+            }
         }
         Ok(())
     }
@@ -1253,4 +1412,45 @@ fn probe_viewer(url: &str) -> Result<(), Error> {
     Err(Error::Rerun(format!(
         "{url}: no Rerun viewer is listening there (start one with `rerun`)"
     )))
+}
+
+/// A short window of the truth's east/north velocity, interpolated linearly at a stamp: bounded,
+/// samples older than the retention span behind the newest are dropped.
+struct TruthWindow {
+    samples: std::collections::VecDeque<(u64, (f64, f64))>,
+    retain_ns: u64,
+}
+
+impl TruthWindow {
+    fn new(retain_s: f64) -> Self {
+        TruthWindow {
+            samples: std::collections::VecDeque::new(),
+            retain_ns: (retain_s * 1e9) as u64,
+        }
+    }
+
+    fn push(&mut self, t: u64, value: (f64, f64)) {
+        if self.samples.back().is_some_and(|&(last, _)| t <= last) {
+            return;
+        }
+        self.samples.push_back((t, value));
+        while self
+            .samples
+            .get(1)
+            .is_some_and(|&(s, _)| s + self.retain_ns < t)
+        {
+            self.samples.pop_front();
+        }
+    }
+
+    fn at(&self, t: u64) -> Option<(f64, f64)> {
+        let i = self.samples.partition_point(|&(s, _)| s < t);
+        let &(tb, b) = self.samples.get(i)?;
+        if tb == t {
+            return Some(b);
+        }
+        let &(ta, a) = self.samples.get(i.checked_sub(1)?)?;
+        let w = (t - ta) as f64 / (tb - ta) as f64;
+        Some((a.0 + w * (b.0 - a.0), a.1 + w * (b.1 - a.1)))
+    }
 }

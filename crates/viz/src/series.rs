@@ -72,6 +72,41 @@ struct Series {
     times: Vec<i64>,
     values: Vec<f64>,
     bin: Option<Envelope>,
+    /// A sensor's own series breaks where it fell silent (see [`Silence`]).
+    silence: Option<Silence>,
+}
+
+/// When a sensor counts as silent: longer than [`Silence::MIN_NS`] and than
+/// [`Silence::PERIODS`] of its usual interval without a sample. The line breaks there
+/// instead of drawing a straight line across a tunnel or an outage as if it were data.
+#[derive(Debug, Clone, Copy, Default)]
+struct Silence {
+    last_t: Option<i64>,
+    /// The usual interval, ns: a running mean of the intervals that were not silences.
+    typical_ns: Option<f64>,
+}
+
+impl Silence {
+    const MIN_NS: f64 = 1e9;
+    const PERIODS: f64 = 5.0;
+
+    /// A new sample at `t`: the time just after the last sample when the sensor was silent
+    /// since then.
+    fn broken_after(&mut self, t: i64) -> Option<i64> {
+        let last = self.last_t.replace(t)?;
+        let dt = (t - last) as f64;
+        if dt <= 0.0 {
+            return None;
+        }
+        let limit = self
+            .typical_ns
+            .map(|p| (Self::PERIODS * p).max(Self::MIN_NS));
+        if limit.is_some_and(|l| dt > l) {
+            return Some(last + 1);
+        }
+        self.typical_ns = Some(self.typical_ns.map_or(dt, |p| 0.9 * p + 0.1 * dt));
+        None
+    }
 }
 
 /// One bin's extremes per component, with when they happened.
@@ -258,8 +293,16 @@ impl Columns {
             times: Vec::new(),
             values: Vec::new(),
             bin: None,
+            silence: None,
         });
         SeriesId(self.series.len() - 1)
+    }
+
+    /// Makes a series break where its sensor fell silent (a receiver in a tunnel, a radar
+    /// without echo at standstill): a `Clear` just after the last sample before the silence,
+    /// which Rerun's plots draw as a gap.
+    pub fn break_on_silence(&mut self, id: SeriesId) {
+        self.series[id.0].silence = Some(Silence::default());
     }
 
     /// Registers map points over time; `every_ns` keeps at most one per that interval.
@@ -290,6 +333,16 @@ impl Columns {
         let bin = self.decimation.bin_of(t);
         let s = &mut self.series[id.0];
         debug_assert_eq!(row.len(), s.width, "{}", s.entity);
+        if let Some(gap) = s.silence.as_mut().and_then(|g| g.broken_after(t)) {
+            // The rows before the silence go out first, then the break.
+            if let Some(env) = s.bin.take() {
+                env.rows(&mut s.times, &mut s.values);
+            }
+            self.rows_sent += send_series(rec, s)?;
+            rec.set_timestamp_nanos_since_epoch(TIMELINE, gap);
+            rec.log(s.entity.as_str(), &rerun::Clear::flat())
+                .map_err(rerun_error)?;
+        }
         match (bin, &mut s.bin) {
             (None, _) => {
                 s.times.push(t);
@@ -463,6 +516,18 @@ mod tests {
         c.push(&rec, id, 2, &[1.0, 2.0, 0.0]).unwrap();
         c.flush(&rec).unwrap();
         assert_eq!(c.rows_sent, 1);
+    }
+
+    #[test]
+    fn a_silent_sensor_breaks_its_line_once_per_silence() {
+        let mut g = Silence::default();
+        let s = 1_000_000_000i64;
+        // 10 Hz for 10 s, silent for 150 s, 10 Hz again; then a 0.4 s hiccup (no break).
+        let mut times: Vec<i64> = (0..100).map(|k| k * s / 10).collect();
+        times.extend((0..100).map(|k| 160 * s + k * s / 10));
+        times.push(times.last().unwrap() + 4 * s / 10);
+        let breaks: Vec<i64> = times.iter().filter_map(|&t| g.broken_after(t)).collect();
+        assert_eq!(breaks, [99 * s / 10 + 1]);
     }
 
     #[test]

@@ -197,25 +197,26 @@ pub fn location_fix(g: &GnssFix) -> Option<Twin> {
     }))
 }
 
-/// A pipeline's fused position. A 2-D pipeline gives its own position and east/north
-/// covariance; an along-track one its chainage on the map, with the along-track variance as an
-/// approximated east/north covariance (nothing across the track: a 1-D pipeline knows none).
-pub fn fused_location(pipeline: &str, f: &FusedState, map: &TrackMap) -> Option<Twin> {
+/// A pipeline's fused position. A 2-D pipeline gives its own position, east/north covariance
+/// and heading, map or no map (altitude: the map's origin's, else 0); an along-track one its
+/// chainage on the map, with the along-track variance as an approximated east/north
+/// covariance (nothing across the track: a 1-D pipeline knows none) and the track's heading.
+pub fn fused_location(pipeline: &str, f: &FusedState, map: Option<&TrackMap>) -> Option<Twin> {
     let (latitude, longitude, altitude, cov, cov_type, heading) = match &f.plane {
         Some(p) => {
             let [ee, en, ne, nn] = p.covariance_en_m2;
             let cov = [ee, en, 0.0, ne, nn, 0.0, 0.0, 0.0, 0.0];
-            let heading = map.locate(f.chainage_m).map(|(_, _, h)| h);
             (
                 p.latitude_deg,
                 p.longitude_deg,
-                map.origin.altitude_m,
+                map.map_or(0.0, |m| m.origin.altitude_m),
                 cov,
                 3,
-                heading,
+                p.heading_rad,
             )
         }
         None => {
+            let map = map?;
             let (east, north, heading) = map.locate(f.chainage_m)?;
             let (latitude, longitude, altitude) = map.origin.to_geodetic(east, north, 0.0);
             let var = f.covariance[0].max(0.0);
@@ -346,6 +347,50 @@ mod tests {
         assert_eq!(Twin::LocationFix(l).stamp_ns(), fix.stamp_ns);
         fix.fix_type = FixType::None;
         assert!(location_fix(&fix).is_none());
+    }
+
+    #[test]
+    fn a_2d_pipelines_twin_is_its_own_position_and_heading_map_or_no_map() {
+        use crate::messages::PlanePosition;
+        let AnyMessage::TrackMap(map) = example(MessageKind::TrackMap) else {
+            panic!("a map example")
+        };
+        let (lat, lon, _) = map.origin.to_geodetic(30.0, -40.0, 0.0);
+        let state = FusedState {
+            stamp_ns: 7,
+            // A chainage the map would put elsewhere, heading another way.
+            chainage_m: 0.0,
+            speed_mps: 5.0,
+            acceleration_mps2: 0.0,
+            covariance: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            source: "/gnss/fix".into(),
+            sensor_states: Vec::new(),
+            plane: Some(PlanePosition {
+                east_m: 30.0,
+                north_m: -40.0,
+                covariance_en_m2: [4.0, 0.5, 0.5, 1.0],
+                latitude_deg: lat,
+                longitude_deg: lon,
+                heading_rad: Some(2.5),
+                ..Default::default()
+            }),
+        };
+        for m in [Some(&map), None] {
+            let Some(Twin::LocationFix(l)) = fused_location("p", &state, m) else {
+                panic!("a 2-D state has a twin, map or not")
+            };
+            assert_eq!((l.latitude, l.longitude), (lat, lon));
+            assert_eq!(l.heading, Some(2.5));
+            assert_eq!(l.position_covariance[..5], [4.0, 0.5, 0.0, 0.5, 1.0]);
+            assert_eq!(l.position_covariance_type, 3);
+        }
+        // An along-track state needs the map to be placed.
+        let along = FusedState {
+            plane: None,
+            ..state
+        };
+        assert!(fused_location("p", &along, None).is_none());
+        assert!(fused_location("p", &along, Some(&map)).is_some());
     }
 
     #[test]

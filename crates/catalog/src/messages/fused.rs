@@ -150,6 +150,36 @@ pub struct FusedDiagnostics {
     /// Federated filters: information-sharing coefficient β and health of every device.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sharing: Option<Vec<DeviceShare>>,
+    /// Eddy-current pipelines: what the correlation, the warp and the sleeper count saw.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eddy_current: Option<EddyCurrentDiagnostics>,
+}
+
+/// One correlation window of an eddy-current pipeline.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct EddyCurrentDiagnostics {
+    /// The correlation peak (Pearson's ρ) used, and without warping where warping ran.
+    pub rho: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unwarped_rho: Option<f64>,
+    /// The warp factor k ∈ (−1, 1) and the acceleration it implies, m/s².
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warp_k: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warp_acceleration_mps2: Option<f64>,
+    /// The Kalman filter's acceleration before the update, to compare with the warp's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub filter_acceleration_mps2: Option<f64>,
+    /// The delay between the sensors, s, and the pyramid level it was measured at.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_s: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub level: Option<u32>,
+    /// Sleepers counted so far on each sensor.
+    pub sleepers_a: u64,
+    pub sleepers_b: u64,
+    /// What the window was: `moving`, `standstill` or `no_lock`.
+    pub window: String,
 }
 
 /// The share and health of one device of a federated filter.

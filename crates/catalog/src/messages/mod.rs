@@ -23,7 +23,8 @@ pub use balise::BalisePassage;
 pub use eddy_current::EddyCurrentBlock;
 pub use events::{Event, EventKind, Severity};
 pub use fused::{
-    DeviceShare, FusedDiagnostics, FusedState, GateDecision, PlanePosition, SensorStateEstimate,
+    DeviceShare, EddyCurrentDiagnostics, FusedDiagnostics, FusedState, GateDecision, PlanePosition,
+    SensorStateEstimate,
 };
 pub use gnss::{FixType, GnssFix};
 pub use ground_truth::GroundTruth;
@@ -35,7 +36,9 @@ pub use radar::RadarSpeed;
 pub use recorder::{RecorderDiagnostics, SourceStats};
 pub use registry::{AnyMessage, MessageKind};
 pub use safety::{SafeInterval, SafetyCheck, SafetyStatus};
-pub use track_map::{Station, TrackBalise, TrackLine, TrackMap, TrackVertex, Tunnel};
+pub use track_map::{
+    SleeperSection, Station, TrackBalise, TrackLine, TrackMap, TrackSwitch, TrackVertex, Tunnel,
+};
 pub use tuning::{TuneEvaluation, TunedValue};
 
 use serde::{de::DeserializeOwned, Serialize};

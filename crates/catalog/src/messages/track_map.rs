@@ -30,6 +30,25 @@ pub struct Station {
     pub chainage_m: f64,
 }
 
+/// A stretch of track whose sleepers (rail clamps) lie at one nominal spacing: one page of
+/// the "electromagnetic atlas" an eddy-current sensor's sleeper count is read against.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct SleeperSection {
+    pub start_chainage_m: f64,
+    pub end_chainage_m: f64,
+    /// Mean distance between sleepers in the section, m (machine-laid track: 0.60–0.65).
+    pub spacing_m: f64,
+}
+
+/// A switch (turnout): irregular sleepers and rails an eddy-current sensor sees as a
+/// signature of its own, and a landmark that fixes the absolute position.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct TrackSwitch {
+    pub name: String,
+    pub start_chainage_m: f64,
+    pub end_chainage_m: f64,
+}
+
 /// Another track of the map beside the main line (a parallel track through a station, a
 /// loop line), its chainage on the main line's scale.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -60,6 +79,13 @@ pub struct TrackMap {
     /// Other tracks beside the main line (absent where there are none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub other_tracks: Vec<TrackLine>,
+    /// The sleeper layout, section by section in increasing chainage (absent: one spacing,
+    /// `sleeper_spacing_m`, everywhere).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sleeper_sections: Vec<SleeperSection>,
+    /// Switches on the main line, in increasing chainage.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub switches: Vec<TrackSwitch>,
 }
 
 impl TrackMap {
@@ -104,6 +130,14 @@ impl TrackMap {
 
     pub fn length_m(&self) -> f64 {
         self.vertices.last().map_or(0.0, |v| v.chainage_m)
+    }
+
+    /// The nominal sleeper spacing at a chainage: its section's, else the map's one spacing.
+    pub fn sleeper_spacing_at(&self, chainage_m: f64) -> f64 {
+        self.sleeper_sections
+            .iter()
+            .find(|s| (s.start_chainage_m..s.end_chainage_m).contains(&chainage_m))
+            .map_or(self.sleeper_spacing_m, |s| s.spacing_m)
     }
 
     pub fn in_tunnel(&self, chainage_m: f64) -> Option<&Tunnel> {

@@ -50,6 +50,7 @@ pub const DEVICES: &[&str] = &[
     "odometer2",
     "loop",
     "balise",
+    "eddy_current",
     "map",
 ];
 
@@ -114,6 +115,7 @@ fn topic_of(device: &str) -> &'static str {
         "odometer2" => topics::ODOMETER_2,
         "loop" => topics::LOOP_POSITION,
         "map" => topics::TRACK_MAP,
+        "eddy_current" => topics::EDDY_CURRENT,
         _ => topics::BALISE,
     }
 }
@@ -128,6 +130,7 @@ fn device_of(e: &Emit) -> Option<&'static str> {
         Emit::Odometer(_, _) => "odometer2",
         Emit::Loop(_) => "loop",
         Emit::Balise(_) => "balise",
+        Emit::EddyCurrent(_) => "eddy_current",
         Emit::Truth(_) | Emit::Event(_) => return None,
     })
 }
@@ -245,6 +248,7 @@ fn stamp_of(e: &Emit) -> u64 {
         Emit::Odometer(_, m) => m.stamp_ns,
         Emit::Loop(m) => m.stamp_ns,
         Emit::Balise(m) => m.stamp_ns,
+        Emit::EddyCurrent(m) => m.stamp_ns,
         Emit::Truth(m) => m.stamp_ns,
         Emit::Event(m) => m.stamp_ns,
     }
@@ -258,6 +262,7 @@ fn restamped(mut e: Emit, t: u64) -> Emit {
         Emit::Odometer(_, m) => m.stamp_ns = t,
         Emit::Loop(m) => m.stamp_ns = t,
         Emit::Balise(m) => m.stamp_ns = t,
+        Emit::EddyCurrent(m) => m.stamp_ns = t,
         Emit::Truth(m) => m.stamp_ns = t,
         Emit::Event(m) => m.stamp_ns = t,
     }
@@ -280,6 +285,12 @@ fn biased(mut e: Emit, b: f64) -> Emit {
         Emit::Odometer(_, m) => m.speed_mps += b,
         Emit::Loop(m) => m.chainage_m += b,
         Emit::Balise(m) => m.chainage_m += b,
+        // Volts on every sample of both sensors (a drifting amplifier).
+        Emit::EddyCurrent(m) => {
+            for v in m.sensor_a.iter_mut().chain(m.sensor_b.iter_mut()) {
+                *v += b as f32;
+            }
+        }
         Emit::Truth(_) | Emit::Event(_) => {}
     }
     e

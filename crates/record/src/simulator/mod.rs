@@ -1,6 +1,7 @@
 //! The train-run simulator: truth, sensors and the writing of a simulated run as a railfuse
 //! log. Deterministic for a seed: the same scenario, seed and duration give the same file.
 
+pub mod atlas;
 mod driver;
 pub mod faults;
 mod scenario;
@@ -27,8 +28,8 @@ use driver::{Driver, DriverEvent, Phase};
 use faults::FaultInjector;
 use seed000::{JerkStep, Seed000Params};
 use sensors::{
-    balise::BaliseReader, gnss::Gnss, imu::ImuSensor, induction_loop::InductionLoop,
-    odometer::OdometerSensor, radar::Radar, rng_stream,
+    balise::BaliseReader, eddy_current::EddyCurrentSensor, gnss::Gnss, imu::ImuSensor,
+    induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream,
 };
 use track::Track;
 use world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
@@ -85,6 +86,9 @@ impl SimLog {
                 if p.balise.is_some() {
                     channel!(BalisePassage, topics::BALISE);
                 }
+                if p.eddy_current.is_some() {
+                    channel!(EddyCurrentBlock, topics::EDDY_CURRENT);
+                }
                 channel!(GnssFix, topics::GNSS_FIX);
                 channel!(Imu, topics::IMU);
                 for topic in [topics::ODOMETER_1, topics::ODOMETER_2]
@@ -137,6 +141,7 @@ impl SimLog {
             Emit::Odometer(_, m) => self.write(topics::ODOMETER_2, log_time_ns, &m),
             Emit::Loop(m) => self.write(topics::LOOP_POSITION, log_time_ns, &m),
             Emit::Balise(m) => self.write(topics::BALISE, log_time_ns, &m),
+            Emit::EddyCurrent(m) => self.write(topics::EDDY_CURRENT, log_time_ns, &m),
             Emit::Truth(m) => self.write(topics::GROUND_TRUTH, log_time_ns, &m),
             Emit::Event(m) => self.write(topics::EVENTS, log_time_ns, &m),
         }
@@ -152,7 +157,8 @@ impl SimLog {
             Scenario::Default(p)
             | Scenario::Seed001(p)
             | Scenario::Seed002(p)
-            | Scenario::Seed003(p) => p.train.clone(),
+            | Scenario::Seed003(p)
+            | Scenario::Seed004(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
             Scenario::Seed000LoopDrift(_) => {
                 "maglev (source 000 simulation, loop error growing with distance)".into()
@@ -204,7 +210,8 @@ pub fn simulate(
         Scenario::Default(p)
         | Scenario::Seed001(p)
         | Scenario::Seed002(p)
-        | Scenario::Seed003(p) => simulate_line(scenario, p, seed, duration_s, faults, out),
+        | Scenario::Seed003(p)
+        | Scenario::Seed004(p) => simulate_line(scenario, p, seed, duration_s, faults, out),
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
             simulate_seed000(scenario, p, seed, duration_s, out)
         }
@@ -225,7 +232,10 @@ fn simulate_line(
         Some(d) => p.stations.max((d / 200.0).ceil() as usize + 2),
         None => p.stations,
     };
-    let track = Track::build(&p.track, stations, start, &mut rng_stream(seed, 0));
+    let mut track = Track::build(&p.track, stations, start, &mut rng_stream(seed, 0));
+    if let Some(a) = &p.atlas {
+        track.map = atlas::with_atlas(track.map, a, &mut rng_stream(seed, 30));
+    }
     let map = &track.map;
     let mut log = SimLog::create(out, scenario, seed, faults)?;
     log.fault_specs = faults.to_vec();
@@ -265,6 +275,15 @@ fn simulate_line(
             b.clone(),
             map.balises.clone(),
             rng_stream(seed, 5),
+        )));
+    }
+    if let Some(e) = &p.eddy_current {
+        sensors.push(Box::new(EddyCurrentSensor::new(
+            e.clone(),
+            map,
+            start,
+            rng_stream(seed, 31),
+            rng_stream(seed, 32),
         )));
     }
     for (i, o) in p.odometers.iter().take(2).enumerate() {
@@ -482,6 +501,8 @@ fn simulate_seed000(
         sleeper_spacing_m: 1.032,
         loop_crossing_spacing_m: None,
         other_tracks: Vec::new(),
+        sleeper_sections: Vec::new(),
+        switches: Vec::new(),
     };
     let mut log = SimLog::create(out, scenario, seed, &[])?;
     log.write(topics::TRACK_MAP, start, &map)?;

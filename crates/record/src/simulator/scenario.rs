@@ -5,11 +5,12 @@ use crate::error::ScenarioError;
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use serde::{Deserialize, Serialize};
 
+use super::atlas::AtlasParams;
 use super::driver::DriverParams;
 use super::seed000::Seed000Params;
 use super::sensors::{
-    balise::BaliseParams, gnss::GnssParams, imu::ImuParams, induction_loop::LoopParams,
-    odometer::OdometerParams, radar::RadarParams,
+    balise::BaliseParams, eddy_current::EddyCurrentParams, gnss::GnssParams, imu::ImuParams,
+    induction_loop::LoopParams, odometer::OdometerParams, radar::RadarParams,
 };
 use super::site::SiteParams;
 use super::track::{Segment, TrackParams};
@@ -44,6 +45,13 @@ pub struct LineScenario {
     /// open line with an exact map.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub site: Option<SiteParams>,
+    /// The sleeper layout and switches in the map (source 004's atlas); None: one sleeper
+    /// spacing, no switches.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub atlas: Option<AtlasParams>,
+    /// None: no eddy-current sensor pair on the bogie.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub eddy_current: Option<EddyCurrentParams>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -60,6 +68,9 @@ pub enum Scenario {
     /// Source 003's hardware on that line: RTK at 5 Hz, satellites falling in cuttings, a
     /// 150 s GNSS loss, a 30 Hz MEMS IMU.
     Seed003(Box<LineScenario>),
+    /// Source 004's eddy-current experiment: shunting moves, hard acceleration and braking,
+    /// long stops and line speed over an atlas of sleeper sections and switches.
+    Seed004(Box<LineScenario>),
 }
 
 impl Scenario {
@@ -70,6 +81,7 @@ impl Scenario {
         "seed001",
         "seed002",
         "seed003",
+        "seed004",
     ];
 
     pub fn preset(name: &str) -> Option<Scenario> {
@@ -80,6 +92,7 @@ impl Scenario {
             "seed001" => Some(Scenario::Seed001(Box::new(LineScenario::seed001()))),
             "seed002" => Some(Scenario::Seed002(Box::new(LineScenario::seed002()))),
             "seed003" => Some(Scenario::Seed003(Box::new(LineScenario::seed003()))),
+            "seed004" => Some(Scenario::Seed004(Box::new(LineScenario::seed004()))),
             _ => None,
         }
     }
@@ -92,6 +105,7 @@ impl Scenario {
             Scenario::Seed001(_) => "seed001",
             Scenario::Seed002(_) => "seed002",
             Scenario::Seed003(_) => "seed003",
+            Scenario::Seed004(_) => "seed004",
         }
     }
 
@@ -101,7 +115,8 @@ impl Scenario {
             Scenario::Default(p)
             | Scenario::Seed001(p)
             | Scenario::Seed002(p)
-            | Scenario::Seed003(p) => Some(p),
+            | Scenario::Seed003(p)
+            | Scenario::Seed004(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -129,6 +144,7 @@ impl Scenario {
                 "balise" => line.balise.is_some(),
                 "odometer1" => !line.odometers.is_empty(),
                 "odometer2" => line.odometers.len() > 1,
+                "eddy_current" => line.eddy_current.is_some(),
                 _ => true,
             };
             if !has {
@@ -199,6 +215,7 @@ impl LineScenario {
                 sleeper_spacing_m: 0.6,
                 loop_crossing_spacing_m: Some(25.0),
                 vertex_spacing_m: 10.0,
+                station_chainages_m: vec![],
             },
             driver: DriverParams {
                 max_speed_mps: 33.3,
@@ -270,6 +287,72 @@ impl LineScenario {
                 reported_variance_m2: 0.04,
             }),
             site: None,
+            atlas: Some(AtlasParams {
+                section_m: (800.0, 2500.0),
+                spacing_m: (0.60, 0.65),
+                switch_offset_m: 250.0,
+                switch_length_m: 35.0,
+                extra_switches_m: vec![],
+            }),
+            eddy_current: Some(EddyCurrentParams {
+                rate_hz: 10_000.0,
+                block_s: 0.1,
+                latency_s: 0.005,
+                spacing_m: 0.25,
+                sleeper_jitter_m: 0.008,
+                pulse_width_m: 0.04,
+                sleeper_amplitude_v: 0.8,
+                amplitude_spread: 0.1,
+                switch_amplitude_v: 1.0,
+                cable_spacing_m: 300.0,
+                cable_amplitude_v: 1.2,
+                defects_per_km: 20.0,
+                defect_amplitude_v: 0.3,
+                height_m: 0.10,
+                vibration_m: 0.002,
+                vibration_s: 0.05,
+                noise_v: 0.05,
+                range_v: 5.0,
+                lsb_v: 0.0005,
+                gain_b: 0.97,
+            }),
+        }
+    }
+
+    /// Source 004's experiment: the default train over a line with a yard at its start.
+    /// Stops 40 m and 60 m apart (shunting moves at walking to 7 m/s), a 4 km run to
+    /// 40 m/s, another 60 m shunt and a 4.3 km run; hard acceleration (1.1 m/s²) and
+    /// braking (1.0 m/s²), 45 s stops. Sleeper sections of 0.60–0.65 m, a switch 150 m
+    /// either side of each stop and two more out on the line. The eddy-current pair is the
+    /// default run's (D = 0.25 m, 10 kHz).
+    pub fn seed004() -> Self {
+        let base = Self::default_run();
+        LineScenario {
+            train: "simulated EMU, 4 cars (source 004 eddy-current experiment)".into(),
+            track: TrackParams {
+                name: "Modena test line with a yard (source 004 simulation)".into(),
+                station_chainages_m: vec![0.0, 40.0, 100.0, 4100.0, 4160.0, 8500.0],
+                tunnels: vec![],
+                ..base.track.clone()
+            },
+            driver: DriverParams {
+                max_speed_mps: 40.0,
+                acceleration_mps2: 1.1,
+                power_limit_speed_mps: 20.0,
+                braking_mps2: 1.0,
+                jerk_mps3: 1.0,
+                dwell_s: 45.0,
+                initial_dwell_s: 10.0,
+            },
+            stations: 6,
+            correction_outages_s: vec![],
+            atlas: base.atlas.clone().map(|a| AtlasParams {
+                switch_offset_m: 150.0,
+                switch_length_m: 30.0,
+                extra_switches_m: vec![2000.0, 6500.0],
+                ..a
+            }),
+            ..base
         }
     }
 
@@ -301,6 +384,7 @@ impl LineScenario {
                 sleeper_spacing_m: 1.032,
                 loop_crossing_spacing_m: None,
                 vertex_spacing_m: 10.0,
+                station_chainages_m: vec![],
             },
             driver: DriverParams {
                 max_speed_mps: 120.0,
@@ -343,6 +427,8 @@ impl LineScenario {
             induction_loop: None,
             balise: None,
             site: None,
+            atlas: None,
+            eddy_current: None,
         }
     }
 
@@ -373,6 +459,9 @@ impl LineScenario {
                 map_survey_spacing_m: 20.0,
                 cutting_sky_view: 1.0,
             }),
+            // Source 002's experiment has no eddy-current sensors.
+            atlas: None,
+            eddy_current: None,
             ..base
         }
     }

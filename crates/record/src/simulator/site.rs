@@ -219,6 +219,8 @@ mod tests {
             sleeper_spacing_m: 0.6,
             loop_crossing_spacing_m: None,
             other_tracks: vec![],
+            sleeper_sections: Vec::new(),
+            switches: Vec::new(),
         }
     }
 

@@ -59,6 +59,10 @@ pub struct TrackParams {
     /// Distance between polyline vertices along curves (straights have only their ends); the
     /// chord's sagitta is spacing² / 8R, 1 cm for 10 m on a 1200 m curve.
     pub vertex_spacing_m: f64,
+    /// Stations at these chainages instead of every `station_spacing_m` (a yard's short
+    /// moves, then the line).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub station_chainages_m: Vec<f64>,
 }
 
 /// The simulator's track: the published map plus the exact curvature profile.
@@ -76,7 +80,13 @@ impl Track {
         stamp_ns: u64,
         rng: &mut impl rand::Rng,
     ) -> Track {
-        let length = p.station_spacing_m * (stations.max(2) - 1) as f64 + 200.0;
+        let station_chainages: Vec<f64> = match p.station_chainages_m.is_empty() {
+            true => (0..stations.max(2))
+                .map(|k| k as f64 * p.station_spacing_m)
+                .collect(),
+            false => p.station_chainages_m.clone(),
+        };
+        let length = station_chainages.last().copied().unwrap_or(0.0) + 200.0;
         let mut curvature = Vec::new();
         let mut vertices = vec![TrackVertex {
             chainage_m: 0.0,
@@ -119,10 +129,12 @@ impl Track {
                 }
             }
         }
-        let stations = (0..stations.max(2))
-            .map(|k| Station {
+        let stations = station_chainages
+            .iter()
+            .enumerate()
+            .map(|(k, &chainage_m)| Station {
                 name: format!("S{k}"),
-                chainage_m: k as f64 * p.station_spacing_m,
+                chainage_m,
             })
             .collect();
         let mut balises = Vec::new();
@@ -162,6 +174,8 @@ impl Track {
                 sleeper_spacing_m: p.sleeper_spacing_m,
                 loop_crossing_spacing_m: p.loop_crossing_spacing_m,
                 other_tracks: Vec::new(),
+                sleeper_sections: Vec::new(),
+                switches: Vec::new(),
             },
             curvature,
         }
@@ -207,6 +221,7 @@ mod tests {
             sleeper_spacing_m: 0.6,
             loop_crossing_spacing_m: None,
             vertex_spacing_m: 5.0,
+            station_chainages_m: vec![],
         };
         let t = Track::build(&p, 2, 0, &mut rand_chacha::ChaCha8Rng::seed_from_u64(1));
         let last = t.map.vertices.last().unwrap();

@@ -4,7 +4,8 @@ use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
 use railfuse_catalog::messages::{
-    BalisePassage, Event, GnssFix, GroundTruth, Imu, LoopPosition, Odometer, RadarSpeed,
+    BalisePassage, EddyCurrentBlock, Event, GnssFix, GroundTruth, Imu, LoopPosition, Odometer,
+    RadarSpeed,
 };
 
 /// The true world at one simulation step.
@@ -56,6 +57,7 @@ pub enum Emit {
     Odometer(usize, Odometer),
     Loop(LoopPosition),
     Balise(BalisePassage),
+    EddyCurrent(EddyCurrentBlock),
     Truth(GroundTruth),
     Event(Event),
 }

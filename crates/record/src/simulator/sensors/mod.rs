@@ -2,6 +2,7 @@
 //! index), so adding or changing one sensor never changes what another one measures.
 
 pub mod balise;
+pub mod eddy_current;
 pub mod gnss;
 pub mod imu;
 pub mod induction_loop;

@@ -1,0 +1,721 @@
+//! Source 004's `eddy_current` pipeline: speed and distance from two eddy-current sensors a
+//! known distance `D` apart along the bogie, without touching the rail.
+//!
+//! | step | module | what |
+//! |---|---|---|
+//! | input | [`input_check`] | blocks bounded and checked: finite, same length, not clipped or dead, continuous; a gap or a change of rate or `D` starts the processing over |
+//! | filters | [`butterworth`], [`front_end`] | the fixed 1 kHz low-pass, the speed-following band-pass, the rate pyramid |
+//! | delay | [`correlation`], [`speed`] | open- or closed-loop correlator at the level that puts the delay near 64 samples; `v = D / τ` |
+//! | warp | [`warping`] | the constant-acceleration warp factor `k` that maximises the correlation: the window's mean speed and acceleration |
+//! | filter | here | a constant-acceleration Kalman filter (Joseph form) over speed and warp acceleration; the two accelerations cross-checked; zero speed at a standstill |
+//! | distance | [`sleeper_count`] | sleepers counted on both sensors in the space domain against the map's atlas, outliers rejected, switches bridged |
+//!
+//! Without the Kalman filter (`kalman = false`, the source's plain and warped correlators
+//! on their own) the state is the latest measurement held until the next one.
+
+pub mod butterworth;
+pub mod correlation;
+pub mod front_end;
+pub mod input_check;
+pub mod settings;
+pub mod sleeper_count;
+pub mod speed;
+pub mod warping;
+
+use std::path::Path;
+
+use nalgebra::{RowVector3, Vector3};
+use railfuse_catalog::log::LogMessage;
+use railfuse_catalog::messages::{
+    EddyCurrentBlock, EddyCurrentDiagnostics, FusedState, GateDecision, TrackMap,
+};
+use serde::Serialize;
+
+use crate::config::VarianceValue;
+use crate::error::Result;
+use crate::filter::{Innovation, KalmanFilter};
+use crate::measurement::SensorContext;
+use crate::model::ConstantAcceleration;
+use crate::pipeline::{measurement_record, Fused, PipelineCounts};
+use crate::spec::PipelineSpec;
+use front_end::{FrontEnd, WINDOW};
+use input_check::Continuity;
+pub use settings::EddyCurrentSettings;
+use sleeper_count::{Crossing, SleeperCounter};
+use speed::{Outcome, Request, SpeedEstimator, SpeedMeasurement};
+
+/// σ of the zero-speed and zero-acceleration updates at a standstill.
+const STANDSTILL_SPEED_STD_MPS: f64 = 0.005;
+const STANDSTILL_ACCELERATION_STD_MPS2: f64 = 0.02;
+/// A speed innovation beyond this NIS is refused (a wrong peak); the filter is restarted
+/// after this many refusals in a row (it is the filter that is wrong).
+const SPEED_GATE_NIS: f64 = 25.0;
+const GATE_RESTART: u32 = 5;
+/// σ of a counted distance, m: a sleeper's laying error, the crossing's timing, the count
+/// running a crossing behind. Counts further off than `COUNT_GATE_NIS` are not fused.
+const COUNT_STD_M: f64 = 0.1;
+const COUNT_GATE_NIS: f64 = 25.0;
+/// Switches are bridged this far either side of the map's ends, m.
+const SWITCH_MARGIN_M: f64 = 3.0;
+/// The last measurement guides the next window for this long, ns.
+const PRIOR_FOR_NS: u64 = 2_000_000_000;
+/// The filter starts over after this long without a measurement, ns.
+const FORGET_AFTER_NS: u64 = 5_000_000_000;
+/// Windows are at least this far apart, s.
+const MIN_HOP_S: f64 = 0.1;
+
+/// What the pipeline's windows were, for the summary and the results.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct WindowTally {
+    pub moving: u64,
+    pub standstill: u64,
+    pub no_lock: u64,
+    pub warped: u64,
+    /// Warp and filter accelerations disagreed.
+    pub acceleration_flags: u64,
+    pub refused_blocks: u64,
+    pub stream_breaks: u64,
+}
+
+pub struct EddyCurrentPipeline {
+    pub spec: PipelineSpec,
+    settings: EddyCurrentSettings,
+    pub counts: PipelineCounts,
+    pub tally: WindowTally,
+    continuity: Continuity,
+    front: Option<FrontEnd>,
+    spacing_d: f64,
+    estimator: SpeedEstimator,
+    model: ConstantAcceleration,
+    kf: Option<KalmanFilter<3>>,
+    kf_ns: u64,
+    gate_refusals: u32,
+    /// The latest measurement (the state of the filterless variants).
+    held: Option<SpeedMeasurement>,
+    standing: bool,
+    /// Sensor a's and b's sleeper counts; distance dead-reckoned along the way.
+    counters: [SleeperCounter; 2],
+    odometer_m: f64,
+    /// Chainage = `count_origin + counter a's distance` once the first sleeper is seen.
+    count_origin: Option<f64>,
+    last_count_ns: Option<u64>,
+    /// The level-0 sample of the next window.
+    next_window: u64,
+    /// The last state's stamp: states go out in time order (a window at a coarser level is
+    /// centred earlier than the one before it).
+    last_out_ns: u64,
+    /// The last window that measured (a speed or a standstill).
+    last_measured_ns: Option<u64>,
+}
+
+impl EddyCurrentPipeline {
+    pub fn new(
+        spec: PipelineSpec,
+        settings: EddyCurrentSettings,
+        model: ConstantAcceleration,
+    ) -> Result<Self> {
+        Ok(EddyCurrentPipeline {
+            spec,
+            model,
+            settings,
+            counts: PipelineCounts::default(),
+            tally: WindowTally::default(),
+            continuity: Continuity::default(),
+            front: None,
+            spacing_d: 0.0,
+            estimator: SpeedEstimator::default(),
+            kf: None,
+            kf_ns: 0,
+            gate_refusals: 0,
+            held: None,
+            standing: false,
+            counters: Default::default(),
+            odometer_m: 0.0,
+            count_origin: None,
+            last_count_ns: None,
+            next_window: 0,
+            last_out_ns: 0,
+            last_measured_ns: None,
+        })
+    }
+
+    pub fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
+        None
+    }
+
+    pub fn bind(&mut self, _sensor: usize, _variance: Option<VarianceValue>) {}
+
+    pub fn push(
+        &mut self,
+        _sensor: usize,
+        msg: &LogMessage<'_>,
+        input: &Path,
+        context: &SensorContext,
+        out: &mut Vec<Fused>,
+    ) -> Result<()> {
+        let block: EddyCurrentBlock = msg.decode(input)?;
+        let mut o = Vec::new();
+        self.block(&block, context.track.as_ref(), &mut o);
+        out.extend(o.into_iter().map(|mut f| {
+            f.log_time_ns = msg.log_time_ns;
+            f
+        }));
+        Ok(())
+    }
+
+    pub fn finish(&mut self, _log_time_ns: u64, _context: &SensorContext, _out: &mut Vec<Fused>) {}
+
+    fn topic(&self) -> String {
+        self.settings.topic.clone()
+    }
+
+    fn note(&self, stamp_ns: u64, decision: GateDecision, reason: &str, o: &mut Vec<Fused>) {
+        o.push(Fused {
+            diagnostics: Some(measurement_record(
+                stamp_ns,
+                &self.topic(),
+                None,
+                (None, None),
+                None,
+                decision,
+                Some(reason),
+            )),
+            ..Default::default()
+        });
+    }
+
+    /// Starts the signal processing over (a refused block, a gap, a new rate or D): the
+    /// distance over what was missed is dead-reckoned by the counters.
+    fn restart(&mut self) {
+        self.front = None;
+        self.estimator.forget();
+        for c in &mut self.counters {
+            c.restart();
+        }
+    }
+
+    fn block(&mut self, b: &EddyCurrentBlock, map: Option<&TrackMap>, o: &mut Vec<Fused>) {
+        match self.continuity.judge(b) {
+            Err(why) => {
+                self.counts.rejected_invalid += 1;
+                self.tally.refused_blocks += 1;
+                self.note(
+                    b.stamp_ns,
+                    GateDecision::RejectedInvalid,
+                    &why.to_string(),
+                    o,
+                );
+                self.restart();
+                return;
+            }
+            Ok(Some(brk)) => {
+                self.tally.stream_breaks += 1;
+                self.note(b.stamp_ns, GateDecision::Accepted, &brk.to_string(), o);
+                // Across a gap the train went on: dead-reckon it.
+                if let input_check::Break::Gap { missing_s } = &brk {
+                    let v = self.speed_now(b.stamp_ns);
+                    self.odometer_m += v * missing_s;
+                }
+                self.restart();
+            }
+            Ok(None) => {}
+        }
+        self.counts.accepted += 1;
+        if self.front.is_none() {
+            match FrontEnd::new(
+                b.sample_rate_hz,
+                b.stamp_ns,
+                self.settings.lowpass_hz,
+                self.settings.band_floor_hz,
+            ) {
+                Ok(f) => {
+                    self.next_window = f.samples + WINDOW as u64;
+                    self.front = Some(f);
+                    self.spacing_d = b.spacing_m;
+                }
+                Err(why) => {
+                    self.counts.rejected_invalid += 1;
+                    self.note(b.stamp_ns, GateDecision::RejectedInvalid, &why, o);
+                    return;
+                }
+            }
+        }
+        let fs = b.sample_rate_hz;
+        for (&a, &bb) in b.sensor_a.iter().zip(&b.sensor_b) {
+            let front = self.front.as_mut().expect("started above");
+            let (ya, yb) = front.push(a as f64, bb as f64);
+            let t = front.now_ns();
+            let samples = front.samples;
+            let v = self.speed_now(t);
+            self.odometer_m += v / fs;
+            if self.settings.count_sleepers {
+                self.count(t, ya, yb, map);
+            }
+            if samples >= self.next_window {
+                self.window(t, map, o);
+            }
+        }
+    }
+
+    /// The speed now: the filter's prediction, or the latest measurement.
+    fn speed_now(&self, t_ns: u64) -> f64 {
+        if self.standing {
+            return 0.0;
+        }
+        match (&self.kf, &self.held) {
+            (Some(kf), _) => {
+                let dt = t_ns.saturating_sub(self.kf_ns) as f64 / 1e9;
+                let x = kf.estimate.state;
+                (x[1] + x[2] * dt).max(0.0)
+            }
+            (None, Some(m)) => m.speed_mps,
+            _ => 0.0,
+        }
+    }
+
+    /// The chainage estimate at `t_ns` (for the atlas): the filter's, else the count's.
+    fn chainage_now(&self, t_ns: u64) -> f64 {
+        match &self.kf {
+            Some(kf) => {
+                let dt = t_ns.saturating_sub(self.kf_ns) as f64 / 1e9;
+                let x = kf.estimate.state;
+                x[0] + x[1] * dt + 0.5 * x[2] * dt * dt
+            }
+            None => self.count_chainage().unwrap_or(self.odometer_m),
+        }
+    }
+
+    /// The chainage by the count now (dead-reckoned since the last sleeper).
+    fn count_chainage(&self) -> Option<f64> {
+        self.count_origin
+            .map(|o| o + self.counters[0].distance_at(self.odometer_m))
+    }
+
+    fn count(&mut self, t: u64, ya: f64, yb: f64, map: Option<&TrackMap>) {
+        let s = self.chainage_now(t);
+        let (spacing, irregular) = match map {
+            Some(m) if !m.sleeper_sections.is_empty() => (
+                m.sleeper_spacing_at(s),
+                m.switches.iter().any(|w| {
+                    s > w.start_chainage_m - SWITCH_MARGIN_M
+                        && s - self.spacing_d < w.end_chainage_m + SWITCH_MARGIN_M
+                }),
+            ),
+            Some(m) => (m.sleeper_spacing_m, false),
+            None => (self.settings.sleeper_spacing_m, false),
+        };
+        let crossed = self.counters[0].sample(ya, self.odometer_m, spacing, irregular);
+        self.counters[1].sample(yb, self.odometer_m, spacing, irregular);
+        if let Some(c) = crossed {
+            if self.count_origin.is_none() && matches!(c, Crossing::Counted(_)) {
+                self.count_origin = Some(s - self.counters[0].distance_m);
+            }
+            self.last_count_ns = Some(t);
+        }
+    }
+
+    /// One correlation window ending at `t`: a measurement, the filter, a state.
+    fn window(&mut self, t: u64, map: Option<&TrackMap>, o: &mut Vec<Fused>) {
+        let front = self.front.as_ref().expect("running");
+        // What the last measurement says now; nothing when it is too old to go by.
+        let fresh = self
+            .last_measured_ns
+            .is_some_and(|m| t.saturating_sub(m) < PRIOR_FOR_NS);
+        let prior = match (&self.kf, &self.held) {
+            (Some(_), _) if fresh => Some(self.speed_now(t)),
+            (None, Some(m)) if fresh => Some(m.speed_mps),
+            _ => None,
+        }
+        .filter(|v| *v > 0.05);
+        let q = Request {
+            spacing_m: self.spacing_d,
+            prior_mps: prior,
+            correlator: self.settings.correlator,
+            warp: self.settings.warp,
+            max_acceleration_mps2: self.settings.max_acceleration_mps2,
+            min_rho: self.settings.min_rho,
+            standstill_factor: self.settings.standstill_factor,
+        };
+        let outcome = self.estimator.measure(front, &q);
+        // The next window: a quarter of this one's span later, at least 0.1 s.
+        let level = match outcome {
+            Outcome::Moving(m) => m.level,
+            _ => prior.map_or(0, |v| SpeedEstimator::level_for(front, self.spacing_d, v)),
+        };
+        let span = (WINDOW << level) as f64;
+        let hop = (span / 4.0).max(MIN_HOP_S * front.fs_hz);
+        self.next_window = front.samples + hop as u64;
+        let spacing = match map {
+            Some(m) if !m.sleeper_sections.is_empty() => m.sleeper_spacing_at(self.chainage_now(t)),
+            Some(m) => m.sleeper_spacing_m,
+            None => self.settings.sleeper_spacing_m,
+        };
+        let speed_for_band = match outcome {
+            Outcome::Moving(m) => m.speed_mps,
+            _ => self.speed_now(t),
+        };
+        if let Some(f) = self.front.as_mut() {
+            f.tune(speed_for_band, spacing);
+        }
+        let mut diag = EddyCurrentDiagnostics {
+            sleepers_a: self.counters[0].sleepers,
+            sleepers_b: self.counters[1].sleepers,
+            ..Default::default()
+        };
+        match outcome {
+            Outcome::Moving(m) => {
+                self.standing = false;
+                self.last_measured_ns = Some(t);
+                self.tally.moving += 1;
+                self.tally.warped += u64::from(m.warp_k.is_some());
+                diag.window = "moving".into();
+                diag.rho = Some(m.rho);
+                diag.unwarped_rho = m.unwarped_rho;
+                diag.warp_k = m.warp_k;
+                diag.warp_acceleration_mps2 = m.acceleration.map(|a| a.0);
+                diag.delay_s = Some(m.lag / self.front.as_ref().map_or(1.0, |f| f.rate(m.level)));
+                diag.level = Some(m.level as u32);
+                match self.settings.kalman {
+                    true => self.filter_moving(&m, &mut diag, o),
+                    false => {
+                        self.held = Some(m);
+                        self.state_of_measurement(m.stamp_ns, o);
+                        self.record(
+                            m.stamp_ns,
+                            Some(m.speed_mps),
+                            Some(m.speed_variance),
+                            None,
+                            GateDecision::Accepted,
+                            None,
+                            diag,
+                            o,
+                        );
+                    }
+                }
+            }
+            Outcome::Standstill { stamp_ns } => {
+                self.tally.standstill += 1;
+                self.last_measured_ns = Some(t);
+                self.standing = true;
+                diag.window = "standstill".into();
+                if self.settings.kalman {
+                    let i = self.filter_standstill(stamp_ns);
+                    self.record(
+                        stamp_ns,
+                        Some(0.0),
+                        Some(STANDSTILL_SPEED_STD_MPS.powi(2)),
+                        i,
+                        GateDecision::Accepted,
+                        Some("standstill: as quiet as the noise floor"),
+                        diag,
+                        o,
+                    );
+                    self.filter_state(o);
+                } else {
+                    self.held = Some(SpeedMeasurement {
+                        stamp_ns,
+                        speed_mps: 0.0,
+                        speed_variance: STANDSTILL_SPEED_STD_MPS.powi(2),
+                        acceleration: Some((0.0, STANDSTILL_ACCELERATION_STD_MPS2.powi(2))),
+                        rho: 0.0,
+                        warp_k: None,
+                        unwarped_rho: None,
+                        level: 0,
+                        lag: 0.0,
+                        acquired: false,
+                    });
+                    self.state_of_measurement(stamp_ns, o);
+                    self.record(
+                        stamp_ns,
+                        Some(0.0),
+                        None,
+                        None,
+                        GateDecision::Accepted,
+                        Some("standstill: as quiet as the noise floor"),
+                        diag,
+                        o,
+                    );
+                }
+            }
+            Outcome::NoLock { stamp_ns, best_rho } => {
+                self.tally.no_lock += 1;
+                diag.window = "no_lock".into();
+                diag.rho = Some(best_rho);
+                let why = format!(
+                    "no correlation peak of ρ ≥ {} over enough track (best ρ {best_rho:.2})",
+                    self.settings.min_rho
+                );
+                self.record(
+                    stamp_ns,
+                    None,
+                    None,
+                    None,
+                    GateDecision::RejectedInvalid,
+                    Some(&why),
+                    diag,
+                    o,
+                );
+                // The filter predicts on; the filterless variants hold their last value.
+                match self.settings.kalman {
+                    true => {
+                        // Long without a measurement: the filter knows nothing any more.
+                        if self
+                            .last_measured_ns
+                            .is_none_or(|m| t.saturating_sub(m) > FORGET_AFTER_NS)
+                        {
+                            self.kf = None;
+                        }
+                        if let Some(kf) = self.kf.as_mut() {
+                            if stamp_ns > self.kf_ns {
+                                kf.predict(&self.model, (stamp_ns - self.kf_ns) as f64 / 1e9);
+                                self.kf_ns = stamp_ns;
+                            }
+                        }
+                        self.filter_state(o);
+                    }
+                    false => {
+                        if self.held.is_some() {
+                            self.state_of_measurement(stamp_ns, o);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn record(
+        &mut self,
+        stamp_ns: u64,
+        z: Option<f64>,
+        r: Option<f64>,
+        i: Option<Innovation>,
+        decision: GateDecision,
+        reason: Option<&str>,
+        diag: EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        let mut d = measurement_record(stamp_ns, &self.topic(), None, (z, r), i, decision, reason);
+        d.eddy_current = Some(diag);
+        o.push(Fused {
+            diagnostics: Some(d),
+            ..Default::default()
+        });
+    }
+
+    /// The filterless state: the held measurement, the count's chainage.
+    fn state_of_measurement(&mut self, stamp_ns: u64, o: &mut Vec<Fused>) {
+        let Some(m) = self.held else { return };
+        let (a, va) = m.acceleration.unwrap_or((0.0, 1.0));
+        let chainage = self.count_chainage().unwrap_or(self.odometer_m);
+        let var_s = 0.25;
+        let stamp_ns = stamp_ns.max(self.last_out_ns);
+        self.last_out_ns = stamp_ns;
+        let state = FusedState {
+            stamp_ns,
+            chainage_m: chainage,
+            speed_mps: m.speed_mps,
+            acceleration_mps2: a,
+            covariance: [
+                var_s,
+                0.0,
+                0.0,
+                0.0,
+                m.speed_variance + self.settings.speed_noise_floor_mps.powi(2),
+                0.0,
+                0.0,
+                0.0,
+                va,
+            ],
+            source: self.topic(),
+            sensor_states: Vec::new(),
+            plane: None,
+        };
+        push_state(state, o);
+    }
+
+    fn filter_state(&mut self, o: &mut Vec<Fused>) {
+        let Some(kf) = &self.kf else { return };
+        let x = kf.estimate.state;
+        let p = kf.estimate.covariance;
+        let state = FusedState {
+            stamp_ns: self.kf_ns,
+            chainage_m: x[0],
+            speed_mps: x[1],
+            acceleration_mps2: x[2],
+            covariance: [
+                p[(0, 0)],
+                p[(0, 1)],
+                p[(0, 2)],
+                p[(1, 0)],
+                p[(1, 1)],
+                p[(1, 2)],
+                p[(2, 0)],
+                p[(2, 1)],
+                p[(2, 2)],
+            ],
+            source: self.topic(),
+            sensor_states: Vec::new(),
+            plane: None,
+        };
+        push_state(state, o);
+    }
+
+    /// The filter to `t` (never backwards: a window centred before the filter's time is
+    /// applied at the filter's time, its variance widened by what the acceleration could do
+    /// in between).
+    fn advance(&mut self, t: u64) -> f64 {
+        let Some(kf) = self.kf.as_mut() else {
+            return 0.0;
+        };
+        if t > self.kf_ns {
+            kf.predict(&self.model, (t - self.kf_ns) as f64 / 1e9);
+            self.kf_ns = t;
+            0.0
+        } else {
+            let late = (self.kf_ns - t) as f64 / 1e9;
+            (kf.estimate.state[2] * late).powi(2)
+        }
+    }
+
+    fn filter_moving(
+        &mut self,
+        m: &SpeedMeasurement,
+        diag: &mut EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        let r_v = m.speed_variance + self.settings.speed_noise_floor_mps.powi(2);
+        if self.kf.is_none() {
+            // Started at the first measurement: chainage from the count where there is one.
+            let s0 = self.count_chainage().unwrap_or(self.odometer_m);
+            let (a0, va) = m.acceleration.unwrap_or((0.0, 1.0));
+            self.kf = Some(KalmanFilter::new(
+                Vector3::new(s0, m.speed_mps, a0),
+                nalgebra::Matrix3::from_diagonal(&Vector3::new(1.0, r_v, va)),
+            ));
+            self.kf_ns = m.stamp_ns;
+            self.record(
+                m.stamp_ns,
+                Some(m.speed_mps),
+                Some(r_v),
+                None,
+                GateDecision::BeforeInitialisation,
+                Some("the filter starts here"),
+                diag.clone(),
+                o,
+            );
+            self.filter_state(o);
+            return;
+        }
+        let extra = self.advance(m.stamp_ns);
+        let kf = self.kf.as_mut().expect("started");
+        let a_prior = kf.estimate.state[2];
+        let p_aa = kf.estimate.covariance[(2, 2)];
+        diag.filter_acceleration_mps2 = Some(a_prior);
+        let h_v = RowVector3::new(0.0, 1.0, 0.0);
+        let innovation = kf.innovation(&h_v, r_v + extra, m.speed_mps);
+        if innovation.nis > SPEED_GATE_NIS && !m.acquired {
+            self.gate_refusals += 1;
+            self.counts.rejected_gate += 1;
+            let why = format!(
+                "speed {:.3} m/s, NIS {:.1} beyond {SPEED_GATE_NIS}",
+                m.speed_mps, innovation.nis
+            );
+            self.record(
+                m.stamp_ns,
+                Some(m.speed_mps),
+                Some(r_v),
+                Some(innovation),
+                GateDecision::RejectedGate,
+                Some(&why),
+                diag.clone(),
+                o,
+            );
+            if self.gate_refusals >= GATE_RESTART {
+                // The correlator has agreed with itself and not the filter five times: the
+                // filter is what diverged.
+                self.kf = None;
+                self.gate_refusals = 0;
+            }
+            self.filter_state(o);
+            return;
+        }
+        self.gate_refusals = 0;
+        let i = kf.update(&h_v, r_v + extra, m.speed_mps);
+        let mut reason = None;
+        if let Some((acc, var)) = m.acceleration {
+            let gap = (acc - a_prior).abs();
+            let sigma = (var + p_aa).sqrt();
+            if gap > self.settings.acceleration_check_sigma * sigma {
+                self.tally.acceleration_flags += 1;
+                reason = Some(format!(
+                    "warp acceleration {acc:+.2} m/s² and the filter's {a_prior:+.2} m/s² are {:.1} σ apart: divergence or a wrong warp; not fused",
+                    gap / sigma
+                ));
+            } else {
+                kf.update(&RowVector3::new(0.0, 0.0, 1.0), var, acc);
+            }
+        }
+        self.record(
+            m.stamp_ns,
+            Some(m.speed_mps),
+            Some(r_v),
+            Some(i),
+            GateDecision::Accepted,
+            reason.as_deref(),
+            diag.clone(),
+            o,
+        );
+        self.count_update();
+        self.filter_state(o);
+    }
+
+    /// The counted distance as a chainage measurement at the last sleeper's time.
+    fn count_update(&mut self) {
+        let (Some(origin), Some(t)) = (self.count_origin, self.last_count_ns) else {
+            return;
+        };
+        let s = origin + self.counters[0].distance_m;
+        if t < self.kf_ns {
+            return;
+        }
+        self.advance(t);
+        if let Some(kf) = self.kf.as_mut() {
+            let h = RowVector3::new(1.0, 0.0, 0.0);
+            if kf.innovation(&h, COUNT_STD_M.powi(2), s).nis <= COUNT_GATE_NIS {
+                kf.update(&h, COUNT_STD_M.powi(2), s);
+            }
+        }
+    }
+
+    fn filter_standstill(&mut self, t: u64) -> Option<Innovation> {
+        self.kf.as_ref()?;
+        self.advance(t);
+        let kf = self.kf.as_mut()?;
+        let i = kf.update(
+            &RowVector3::new(0.0, 1.0, 0.0),
+            STANDSTILL_SPEED_STD_MPS.powi(2),
+            0.0,
+        );
+        kf.update(
+            &RowVector3::new(0.0, 0.0, 1.0),
+            STANDSTILL_ACCELERATION_STD_MPS2.powi(2),
+            0.0,
+        );
+        Some(i)
+    }
+}
+
+/// A state, if every number in it is finite: NaN never reaches a fused channel.
+fn push_state(state: FusedState, o: &mut Vec<Fused>) {
+    let finite = [state.chainage_m, state.speed_mps, state.acceleration_mps2]
+        .iter()
+        .chain(&state.covariance)
+        .all(|v| v.is_finite());
+    if finite {
+        o.push(Fused {
+            state: Some(state),
+            ..Default::default()
+        });
+    }
+}

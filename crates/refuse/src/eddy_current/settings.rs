@@ -1,0 +1,87 @@
+//! `[pipeline.eddy_current]`: the table of an `eddy_current` pipeline (every field has a
+//! default; [`EddyCurrentSettings::check`] validates).
+
+use serde::{Deserialize, Serialize};
+
+use super::speed::CorrelatorKind;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EddyCurrentSettings {
+    /// The sensor pair's topic (one of the pipeline's sensors).
+    pub topic: String,
+    pub correlator: CorrelatorKind,
+    /// Constant-acceleration warping before the correlation's peak is taken.
+    pub warp: bool,
+    /// A constant-acceleration Kalman filter over the measurements; without it the state is
+    /// the latest measurement as it is.
+    pub kalman: bool,
+    /// The fixed low-pass's cutoff, Hz (the source's 1000 Hz).
+    pub lowpass_hz: f64,
+    /// The band-pass's lowest lower edge, Hz (it follows the speed down to this).
+    pub band_floor_hz: f64,
+    /// A correlation peak below this is no measurement.
+    pub min_rho: f64,
+    /// The warp search's bound on |acceleration|, m/s².
+    pub max_acceleration_mps2: f64,
+    /// Activity under this many times the noise floor is a standstill.
+    pub standstill_factor: f64,
+    /// Added to every correlation speed's variance, (m/s)²: what the lag's statistics do
+    /// not see (the sensors' slightly different responses).
+    pub speed_noise_floor_mps: f64,
+    /// Warp and filter accelerations further apart than this many σ are flagged (divergence
+    /// or a wrong warp), and the warp's is not fused.
+    pub acceleration_check_sigma: f64,
+    /// Sleeper sections without a map: the spacing, m.
+    pub sleeper_spacing_m: f64,
+    /// Distance by counting sleepers (else by integrating the speed).
+    pub count_sleepers: bool,
+}
+
+impl Default for EddyCurrentSettings {
+    fn default() -> Self {
+        EddyCurrentSettings {
+            topic: "/eddy_current/block".into(),
+            correlator: CorrelatorKind::OpenLoop,
+            warp: true,
+            kalman: true,
+            lowpass_hz: 1000.0,
+            band_floor_hz: 0.5,
+            min_rho: 0.5,
+            max_acceleration_mps2: 2.5,
+            standstill_factor: 4.0,
+            speed_noise_floor_mps: 0.005,
+            acceleration_check_sigma: 4.0,
+            sleeper_spacing_m: 0.625,
+            count_sleepers: true,
+        }
+    }
+}
+
+impl EddyCurrentSettings {
+    pub fn check(&self) -> Result<(), String> {
+        let positive = [
+            ("lowpass_hz", self.lowpass_hz),
+            ("band_floor_hz", self.band_floor_hz),
+            ("max_acceleration_mps2", self.max_acceleration_mps2),
+            ("standstill_factor", self.standstill_factor),
+            ("speed_noise_floor_mps", self.speed_noise_floor_mps),
+            ("acceleration_check_sigma", self.acceleration_check_sigma),
+            ("sleeper_spacing_m", self.sleeper_spacing_m),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!(
+                    "eddy_current.{name} must be a positive number, not {v}"
+                ));
+            }
+        }
+        if !(0.0..1.0).contains(&self.min_rho) {
+            return Err(format!(
+                "eddy_current.min_rho is a correlation in [0, 1), not {}",
+                self.min_rho
+            ));
+        }
+        Ok(())
+    }
+}

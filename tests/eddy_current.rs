@@ -1,0 +1,374 @@
+//! Source 004's `eddy_current` pipelines end to end: simulated runs re-fused from the CLI with
+//! `samples/seed004.toml`, read back from the file and scored against the truth; the
+//! Butterworth stages against scipy; bad blocks refused with their reasons.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{messages, ok, python, rerun, s, sample, stderr, truth_at};
+use railfuse_catalog::log::LogWriter;
+use railfuse_catalog::messages::{EddyCurrentBlock, FusedDiagnostics, FusedState, GroundTruth};
+use railfuse_refuse::eddy_current::butterworth::Butterworth;
+
+/// The first 200 s of seed004, seed 1: the yard's two shunts and stops, then the start and
+/// the run to 40 m/s.
+fn seed004(dir: &Path, config: &Path) -> PathBuf {
+    let run = dir.join("s4.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed004",
+        "--seed",
+        "1",
+        "--duration",
+        "200",
+        "-o",
+        s(&run),
+    ]);
+    let fused = dir.join("s4.fused.mcap");
+    ok(&["refuse", s(&run), "-c", s(config), "-o", s(&fused)]);
+    fused
+}
+
+#[test]
+fn butterworth_stages_equal_scipy_butter_and_sosfilt() {
+    let d = tempfile::tempdir().unwrap();
+    // A few sines and a deterministic pseudo-random part.
+    let input: Vec<f64> = (0..4000)
+        .map(|k| {
+            let t = k as f64 / 10_000.0;
+            let noise = ((k as u64).wrapping_mul(2654435761) % 1000) as f64 / 1000.0 - 0.5;
+            (2.0 * std::f64::consts::PI * 33.0 * t).sin()
+                + 0.5 * (2.0 * std::f64::consts::PI * 1800.0 * t).sin()
+                + 0.2 * noise
+        })
+        .collect();
+    let designs: [(&str, Vec<f64>, f64); 4] = [
+        ("lowpass", vec![1000.0], 10_000.0),
+        ("bandpass", vec![20.0, 40.0], 10_000.0),
+        ("bandpass", vec![0.6, 1.2], 10_000.0),
+        ("lowpass", vec![450.0], 1_000.0),
+    ];
+    let cases: Vec<serde_json::Value> = designs
+        .iter()
+        .map(|(kind, edges, fs)| {
+            let mut f = match *kind {
+                "lowpass" => Butterworth::lowpass(edges[0], *fs).unwrap(),
+                _ => Butterworth::bandpass(edges[0], edges[1], *fs).unwrap(),
+            };
+            let sos = f.sos();
+            let output: Vec<f64> = input.iter().map(|&x| f.step(x)).collect();
+            serde_json::json!({
+                "kind": kind, "edges_hz": edges, "fs_hz": fs, "sos": sos,
+                "input": input, "output": output,
+            })
+        })
+        .collect();
+    let file = d.path().join("cases.json");
+    std::fs::write(&file, serde_json::to_vec(&cases).unwrap()).unwrap();
+    let out = python("scipy_butterworth.py", &[s(&file)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let worst: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(worst["cases"], 4);
+    assert!(worst["sos"].as_f64().unwrap() < 1e-9, "{worst}");
+    assert!(worst["output"].as_f64().unwrap() < 1e-9, "{worst}");
+}
+
+#[test]
+fn seed004_speed_standstill_and_sleeper_count_against_the_truth() {
+    let d = tempfile::tempdir().unwrap();
+    let fused = seed004(d.path(), &sample("seed004.toml"));
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let states: Vec<FusedState> = messages(&fused, "/fused/warped_kf/state");
+    assert!(states.len() > 1000, "{} states", states.len());
+    let (mut line, mut standing) = (Vec::new(), Vec::new());
+    for st in &states {
+        assert!(st.speed_mps.is_finite() && st.chainage_m.is_finite());
+        let g = truth_at(&truth, st.stamp_ns);
+        if g.speed_mps > 15.0 {
+            line.push((st.speed_mps - g.speed_mps) / g.speed_mps);
+        }
+        if g.speed_mps == 0.0 {
+            standing.push(st.speed_mps.abs());
+        }
+    }
+    line.sort_by(|a, b| a.abs().total_cmp(&b.abs()));
+    let p95 = line[line.len() * 95 / 100].abs();
+    // Above 15 m/s the speed is within 0.5 % (the issue's goal) 95 % of the time.
+    assert!(
+        line.len() > 200 && p95 < 0.005,
+        "{} states, p95 {p95}",
+        line.len()
+    );
+    // Standing, the speed is zero.
+    let still = standing.iter().filter(|v| **v < 0.01).count();
+    assert!(
+        still * 100 >= standing.len() * 95,
+        "{still} of {}",
+        standing.len()
+    );
+    // The distance: within 0.5 % of the truth's over the run (the counted sleepers).
+    let (first, last) = (&states[0], states.last().unwrap());
+    let travelled =
+        truth_at(&truth, last.stamp_ns).chainage_m - truth_at(&truth, first.stamp_ns).chainage_m;
+    let err = (last.chainage_m - first.chainage_m) - travelled;
+    assert!(
+        travelled > 1000.0 && err.abs() < 0.005 * travelled,
+        "{err} over {travelled}"
+    );
+    // Both sensors count the same sleepers, within a few.
+    let diags: Vec<FusedDiagnostics> = messages(&fused, "/fused/warped_kf/diagnostics");
+    let e = diags
+        .iter()
+        .rev()
+        .find_map(|d| d.eddy_current.clone())
+        .unwrap();
+    assert!(e.sleepers_a > 1500, "{e:?}");
+    assert!(
+        e.sleepers_a.abs_diff(e.sleepers_b) <= e.sleepers_a / 200 + 2,
+        "{e:?}"
+    );
+    // Every kind of window occurred, and the warp ran.
+    for kind in ["moving", "standstill"] {
+        assert!(
+            diags
+                .iter()
+                .any(|d| d.eddy_current.as_ref().is_some_and(|e| e.window == kind)),
+            "no {kind} window"
+        );
+    }
+    assert!(diags.iter().any(|d| d
+        .eddy_current
+        .as_ref()
+        .is_some_and(|e| e.warp_k.is_some_and(|k| k != 0.0))));
+}
+
+#[test]
+fn the_acceleration_cross_check_flags_and_keeps_the_warps_acceleration_out() {
+    // The same run with the check set at 0.01 σ: almost every warp acceleration is flagged
+    // and left out, and the filter's acceleration gets worse against the truth.
+    let d = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(sample("seed004.toml")).unwrap();
+    let start = text.find("[[pipeline]]\nname = \"warped_kf\"").unwrap();
+    let strict = text[start..].replace(
+        "kalman = true",
+        "kalman = true\nacceleration_check_sigma = 0.01",
+    );
+    let config = d.path().join("strict.toml");
+    std::fs::write(&config, format!("{}{}", &text[..start], strict)).unwrap();
+    let strict_run = seed004(d.path(), &config);
+    let truth: Vec<GroundTruth> = messages(&strict_run, "/truth");
+    let acc_rmse = |states: &[FusedState]| {
+        let sq: f64 = states
+            .iter()
+            .map(|st| {
+                (st.acceleration_mps2 - truth_at(&truth, st.stamp_ns).acceleration_mps2).powi(2)
+            })
+            .sum();
+        (sq / states.len() as f64).sqrt()
+    };
+    let flagged = |fused: &Path| {
+        messages::<FusedDiagnostics>(fused, "/fused/warped_kf/diagnostics")
+            .iter()
+            .filter(|d| {
+                d.reason
+                    .as_deref()
+                    .is_some_and(|r| r.contains("wrong warp"))
+            })
+            .count()
+    };
+    let strict_states: Vec<FusedState> = messages(&strict_run, "/fused/warped_kf/state");
+    let (strict_flags, strict_rmse) = (flagged(&strict_run), acc_rmse(&strict_states));
+    let normal_dir = d.path().join("normal");
+    std::fs::create_dir(&normal_dir).unwrap();
+    let normal_run = seed004(&normal_dir, &sample("seed004.toml"));
+    let normal_states: Vec<FusedState> = messages(&normal_run, "/fused/warped_kf/state");
+    let (normal_flags, normal_rmse) = (flagged(&normal_run), acc_rmse(&normal_states));
+    assert!(
+        strict_flags > 10 * normal_flags.max(10),
+        "{strict_flags} against {normal_flags}"
+    );
+    // Measured: 0.190 against 0.162 m/s² (seed 1, first 200 s).
+    assert!(
+        strict_rmse > 1.1 * normal_rmse,
+        "{strict_rmse} against {normal_rmse}"
+    );
+}
+
+fn block(stamp_ns: u64, n: usize, rate: f64, spacing: f64) -> EddyCurrentBlock {
+    EddyCurrentBlock {
+        stamp_ns,
+        sample_rate_hz: rate,
+        spacing_m: spacing,
+        sensor_a: (0..n).map(|k| (k as f32 * 0.05).sin()).collect(),
+        // Two unrelated signals: nothing to correlate, so nothing here can become speed.
+        sensor_b: (0..n).map(|k| (k as f32 * 0.0731).cos()).collect(),
+    }
+}
+
+#[test]
+fn bad_blocks_are_refused_or_restart_the_stream_with_their_reason_and_never_become_speed() {
+    let d = tempfile::tempdir().unwrap();
+    let log = d.path().join("bad.mcap");
+    let mut w = LogWriter::create(&log).unwrap();
+    let ch = w
+        .add_channel::<EddyCurrentBlock>("/eddy_current/block")
+        .unwrap();
+    let t0 = 1_700_000_000_000_000_000u64;
+    let ms = 1_000_000u64;
+    let mut blocks = vec![
+        block(t0, 1000, 10_000.0, 0.25),
+        block(t0 + 100 * ms, 1000, 10_000.0, 0.25),
+    ];
+    // A 50 ms gap.
+    blocks.push(block(t0 + 250 * ms, 1000, 10_000.0, 0.25));
+    // The rate changes, then D.
+    blocks.push(block(t0 + 350 * ms, 2000, 20_000.0, 0.25));
+    blocks.push(block(t0 + 450 * ms, 2000, 20_000.0, 0.3));
+    // Clipped, dead, mismatched lengths, overlapping.
+    let mut clipped = block(t0 + 550 * ms, 2000, 20_000.0, 0.3);
+    clipped
+        .sensor_a
+        .iter_mut()
+        .for_each(|v| *v = (4.0 * *v).clamp(-2.5, 2.5));
+    blocks.push(clipped);
+    let mut dead = block(t0 + 650 * ms, 2000, 20_000.0, 0.3);
+    dead.sensor_b.iter_mut().for_each(|v| *v = 0.0);
+    blocks.push(dead);
+    let mut short = block(t0 + 750 * ms, 2000, 20_000.0, 0.3);
+    short.sensor_b.truncate(1999);
+    blocks.push(short);
+    blocks.push(block(t0 + 850 * ms, 2000, 20_000.0, 0.3));
+    blocks.push(block(t0 + 880 * ms, 2000, 20_000.0, 0.3));
+    for b in &blocks {
+        w.write(ch, b.stamp_ns, b).unwrap();
+    }
+    // A NaN sample cannot be written as JSON: a null arrives in its place.
+    let mut nan = serde_json::to_value(block(t0 + 1000 * ms, 1000, 20_000.0, 0.3)).unwrap();
+    nan["sensor_a"][3] = serde_json::Value::Null;
+    let t = t0 + 1000 * ms;
+    w.write_raw(ch.0, 99, t, t, &serde_json::to_vec(&nan).unwrap())
+        .unwrap();
+    w.finish().unwrap();
+    let config = d.path().join("ec.toml");
+    std::fs::write(
+        &config,
+        "[[pipeline]]\nname = \"ec\"\nfilter = \"eddy_current\"\n\
+         motion = { model = \"constant_acceleration\", jerk_psd = 0.5 }\n\n\
+         [[pipeline.sensor]]\ntopic = \"/eddy_current/block\"\nvariance = \"message\"\n",
+    )
+    .unwrap();
+    let fused = d.path().join("bad.fused.mcap");
+    let out = ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
+    let reasons: Vec<String> = messages::<FusedDiagnostics>(&fused, "/fused/ec/diagnostics")
+        .into_iter()
+        .filter_map(|d| d.reason)
+        .collect();
+    for expected in [
+        "a gap of 50.0 ms",
+        "sample rate changed from 10000 Hz to 20000 Hz",
+        "sensor spacing D changed from 0.25 m to 0.3 m",
+        "(clipped)",
+        "sensor b: every sample is zero",
+        "sensor a has 2000 samples and sensor b 1999",
+        "before the previous block ended",
+    ] {
+        assert!(
+            reasons.iter().any(|r| r.contains(expected)),
+            "{expected}: {reasons:?}"
+        );
+    }
+    // The NaN block is counted as undecodable, by name.
+    let text = stderr(&out);
+    assert!(text.contains("1 sensor messages did not decode"), "{text}");
+    // Nothing of this became speed: too little clean signal for a window.
+    let states: Vec<FusedState> = messages(&fused, "/fused/ec/state");
+    assert!(states.is_empty(), "{states:?}");
+}
+
+#[test]
+fn the_viewer_shows_eddy_current_speed_correlation_warp_and_counts() {
+    let d = tempfile::tempdir().unwrap();
+    let fused = seed004(d.path(), &sample("seed004.toml"));
+    let rrd = d.path().join("s4.rrd");
+    ok(&["viz", s(&fused), "--save", s(&rrd)]);
+    let verify = rerun(&["rrd", "verify", s(&rrd)]);
+    assert!(verify.status.success(), "{}", stderr(&verify));
+    let printed = String::from_utf8_lossy(&rerun(&["rrd", "print", s(&rrd)]).stdout).into_owned();
+    for entity in [
+        "/speed/fused/warped_kf",
+        "/diagnostics/warped_kf/eddy_current/acceleration/warp",
+        "/diagnostics/warped_kf/eddy_current/acceleration/filter",
+        "/diagnostics/warped_kf/eddy_current/sleepers/sensor_a",
+        "/diagnostics/plain/eddy_current/correlation",
+    ] {
+        assert!(printed.contains(entity), "{entity} missing");
+    }
+}
+
+#[test]
+fn a_federated_pipeline_fuses_the_eddy_current_speed_with_radar_and_odometers() {
+    // Refuse the fused log again: `warped_kf`'s states are a speed sensor like the radar.
+    let d = tempfile::tempdir().unwrap();
+    let fused = seed004(d.path(), &sample("seed004.toml"));
+    let config = d.path().join("fed.toml");
+    let sensors = |eddy: bool| {
+        let mut s = String::from(
+            "[[pipeline.sensor]]\ntopic = \"/radar/speed\"\ndevice = \"radar\"\nvariance = \"message\"\n\n\
+             [[pipeline.sensor]]\ntopic = \"/odometer/1\"\ndevice = \"odometer\"\nvariance = 0.04\n\n\
+             [[pipeline.sensor]]\ntopic = \"/balise\"\ndevice = \"balise\"\nvariance = \"message\"\n\n",
+        );
+        if eddy {
+            s.push_str(
+                "[[pipeline.sensor]]\ntopic = \"/fused/warped_kf/state\"\ndevice = \"eddy\"\n\
+                 fields = [\"speed\"]\nvariance = \"message\"\n\n",
+            );
+        }
+        s
+    };
+    let head = |name: &str| {
+        format!(
+            "[[pipeline]]\nname = \"{name}\"\nfilter = \"federated_kalman\"\n\
+             motion = {{ model = \"constant_acceleration\", jerk_psd = 0.5 }}\n\n[pipeline.federated]\n\n"
+        )
+    };
+    std::fs::write(
+        &config,
+        format!(
+            "{}{}{}{}",
+            head("fed_eddy"),
+            sensors(true),
+            head("fed"),
+            sensors(false)
+        ),
+    )
+    .unwrap();
+    let twice = d.path().join("twice.mcap");
+    ok(&["refuse", s(&fused), "-c", s(&config), "-o", s(&twice)]);
+    let diags: Vec<FusedDiagnostics> = messages(&twice, "/fused/fed_eddy/diagnostics");
+    let eddy_updates = diags
+        .iter()
+        .filter(|d| d.source == "/fused/warped_kf/state" && d.device.as_deref() == Some("eddy"))
+        .count();
+    assert!(eddy_updates > 500, "{eddy_updates}");
+    // With the eddy-current speed the fused speed is closer to the truth than without it.
+    let truth: Vec<GroundTruth> = messages(&twice, "/truth");
+    let rmse = |name: &str| {
+        let states: Vec<FusedState> = messages(&twice, &format!("/fused/{name}/state"));
+        let sq: f64 = states
+            .iter()
+            .map(|st| (st.speed_mps - truth_at(&truth, st.stamp_ns).speed_mps).powi(2))
+            .sum();
+        (sq / states.len() as f64).sqrt()
+    };
+    let (with, without) = (rmse("fed_eddy"), rmse("fed"));
+    assert!(
+        with < without,
+        "with the eddy-current speed {with}, without {without}"
+    );
+}
