@@ -372,3 +372,49 @@ fn a_federated_pipeline_fuses_the_eddy_current_speed_with_radar_and_odometers() 
         "with the eddy-current speed {with}, without {without}"
     );
 }
+
+#[test]
+fn a_switch_of_the_atlas_fixes_a_wrong_starting_chainage() {
+    // Told it starts 20 m further than it does, the pipeline is about 20 m off until a switch
+    // of the yard (150 m, 190 m, 250 m) is seen and found in the map; after that it is
+    // within 2 m (measured: 14.3 m off, then 0.5 m after the switch at 250 m).
+    let d = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(sample("seed004.toml")).unwrap();
+    let start = text.find("[[pipeline]]\nname = \"warped_kf\"").unwrap();
+    let config = d.path().join("offset.toml");
+    std::fs::write(
+        &config,
+        text[start..].replace("kalman = true", "kalman = true\ninitial_chainage_m = 20.0"),
+    )
+    .unwrap();
+    let fused = seed004(d.path(), &config);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let states: Vec<FusedState> = messages(&fused, "/fused/warped_kf/state");
+    let error = |st: &FusedState| st.chainage_m - truth_at(&truth, st.stamp_ns).chainage_m;
+    let before: Vec<f64> = states
+        .iter()
+        .filter(|st| truth_at(&truth, st.stamp_ns).chainage_m < 140.0)
+        .map(error)
+        .collect();
+    // Off by the wrong start (the yard's slow moves add a few metres of their own).
+    assert!(
+        before.iter().all(|e| (e - 20.0).abs() < 7.0),
+        "{:?}",
+        &before[..5]
+    );
+    let after: Vec<f64> = states
+        .iter()
+        .filter(|st| truth_at(&truth, st.stamp_ns).chainage_m > 300.0)
+        .map(error)
+        .collect();
+    assert!(
+        after.len() > 100 && after.iter().all(|e| e.abs() < 2.0),
+        "{:?}",
+        &after[..5]
+    );
+    let fixes: Vec<String> = messages::<FusedDiagnostics>(&fused, "/fused/warped_kf/diagnostics")
+        .into_iter()
+        .filter_map(|d| d.reason.filter(|r| r.starts_with("landmark")))
+        .collect();
+    assert!(!fixes.is_empty());
+}

@@ -426,3 +426,46 @@ fn a_bad_pre_filter_setting_is_one_line_naming_the_table() {
         "{err}"
     );
 }
+
+#[test]
+fn the_viewer_draws_the_plane_velocity_the_learnt_model_and_a_gap_through_the_gnss_loss() {
+    // seed003's first 500 s: the 150 s loss of every satellite from 330 s inside.
+    let d = tempfile::tempdir().unwrap();
+    let config = d.path().join("kf.toml");
+    std::fs::write(&config, kf_pipeline()).unwrap();
+    let run = d.path().join("s3.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed003",
+        "--seed",
+        "1",
+        "--duration",
+        "500",
+        "-o",
+        s(&run),
+    ]);
+    let fused = d.path().join("s3.fused.mcap");
+    ok(&["refuse", s(&run), "-c", s(&config), "-o", s(&fused)]);
+    let rrd = d.path().join("s3.rrd");
+    ok(&["viz", s(&fused), "--save", s(&rrd)]);
+    let verify = common::rerun(&["rrd", "verify", s(&rrd)]);
+    assert!(verify.status.success(), "{}", common::stderr(&verify));
+    let printed = String::from_utf8_lossy(&common::rerun(&["rrd", "print", "-v", s(&rrd)]).stdout)
+        .into_owned();
+    for entity in [
+        "/diagnostics/kf/velocity_error/east",
+        "/diagnostics/kf/velocity_error/north",
+        "/diagnostics/kf/imu_error_model/speed_residual",
+        "/diagnostics/kf/imu_error_model/heading_residual",
+    ] {
+        assert!(printed.contains(entity), "{entity} missing");
+    }
+    // The receiver's speed line breaks where it fell silent: a Clear on its entity.
+    assert!(
+        printed
+            .lines()
+            .any(|l| l.contains("- /speed/gnss -") && l.contains("Clear")),
+        "no break in /speed/gnss"
+    );
+}

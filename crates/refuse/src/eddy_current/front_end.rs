@@ -20,6 +20,13 @@ pub const LEVELS: usize = 8;
 const ACTIVITY_LEVEL: usize = 4;
 const ACTIVITY_S: f64 = 1.5;
 
+/// One sample of both sensors after the filters: (sensor a, sensor b) each.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Filtered {
+    pub low: (f64, f64),
+    pub band: (f64, f64),
+}
+
 /// One level: both sensors' samples, the latest `WINDOW`.
 #[derive(Debug, Clone, Default)]
 struct Level {
@@ -98,10 +105,13 @@ impl FrontEnd {
         }
     }
 
-    /// One sample of each sensor: returns both band-passed.
-    pub fn push(&mut self, a: f64, b: f64) -> (f64, f64) {
+    /// One sample of each sensor: both low-passed, and both band-passed.
+    pub fn push(&mut self, a: f64, b: f64) -> Filtered {
         let (la, lb) = (self.lowpass[0].step(a), self.lowpass[1].step(b));
-        let out = (self.bandpass[0].step(la), self.bandpass[1].step(lb));
+        let out = Filtered {
+            low: (la, lb),
+            band: (self.bandpass[0].step(la), self.bandpass[1].step(lb)),
+        };
         self.samples += 1;
         let (mut x, mut y) = (la, lb);
         for l in 0..LEVELS {

@@ -17,6 +17,7 @@ pub mod butterworth;
 pub mod correlation;
 pub mod front_end;
 pub mod input_check;
+pub mod landmark;
 pub mod settings;
 pub mod sleeper_count;
 pub mod speed;
@@ -75,6 +76,8 @@ pub struct WindowTally {
     pub acceleration_flags: u64,
     pub refused_blocks: u64,
     pub stream_breaks: u64,
+    /// Switches seen in the signal and found in the map.
+    pub landmarks: u64,
 }
 
 pub struct EddyCurrentPipeline {
@@ -106,6 +109,7 @@ pub struct EddyCurrentPipeline {
     last_out_ns: u64,
     /// The last window that measured (a speed or a standstill).
     last_measured_ns: Option<u64>,
+    switches: landmark::SwitchDetector,
 }
 
 impl EddyCurrentPipeline {
@@ -114,6 +118,7 @@ impl EddyCurrentPipeline {
         settings: EddyCurrentSettings,
         model: ConstantAcceleration,
     ) -> Result<Self> {
+        let start_m = settings.initial_chainage_m;
         Ok(EddyCurrentPipeline {
             spec,
             model,
@@ -130,12 +135,13 @@ impl EddyCurrentPipeline {
             held: None,
             standing: false,
             counters: Default::default(),
-            odometer_m: 0.0,
             count_origin: None,
             last_count_ns: None,
             next_window: 0,
             last_out_ns: 0,
             last_measured_ns: None,
+            switches: landmark::SwitchDetector::default(),
+            odometer_m: start_m,
         })
     }
 
@@ -243,18 +249,46 @@ impl EddyCurrentPipeline {
         let fs = b.sample_rate_hz;
         for (&a, &bb) in b.sensor_a.iter().zip(&b.sensor_b) {
             let front = self.front.as_mut().expect("started above");
-            let (ya, yb) = front.push(a as f64, bb as f64);
+            let f = front.push(a as f64, bb as f64);
             let t = front.now_ns();
             let samples = front.samples;
-            let v = self.speed_now(t);
-            self.odometer_m += v / fs;
+            let ds = self.speed_now(t) / fs;
+            self.odometer_m += ds;
             if self.settings.count_sleepers {
-                self.count(t, ya, yb, map);
+                self.count(t, f.band.0, f.band.1, map);
+            }
+            if self.settings.landmark_search_m > 0.0 {
+                let s = self.chainage_now(t);
+                let search = self.settings.landmark_search_m;
+                if let Some(fix) =
+                    self.switches
+                        .sample(f.low.0, ds, self.odometer_m, s, map, search)
+                {
+                    self.landmark(t, &fix, o);
+                }
             }
             if samples >= self.next_window {
                 self.window(t, map, o);
             }
         }
+    }
+
+    /// A switch found in the map: the chainage moved by the correction, count and filter.
+    fn landmark(&mut self, t: u64, fix: &landmark::Fix, o: &mut Vec<Fused>) {
+        self.tally.landmarks += 1;
+        let c = fix.correction_m;
+        match &mut self.count_origin {
+            Some(origin) => *origin += c,
+            None => self.odometer_m += c,
+        }
+        if let Some(kf) = self.kf.as_mut() {
+            kf.estimate.state[0] += c;
+        }
+        let why = format!(
+            "landmark: switch {} (its middle at {:.1} m): chainage corrected by {c:+.2} m",
+            fix.name, fix.chainage_m
+        );
+        self.note(t, GateDecision::Accepted, &why, o);
     }
 
     /// The speed now: the filter's prediction, or the latest measurement.

@@ -36,6 +36,11 @@ pub struct EddyCurrentSettings {
     pub sleeper_spacing_m: f64,
     /// Distance by counting sleepers (else by integrating the speed).
     pub count_sleepers: bool,
+    /// Where the run starts, m: the chainage until a switch of the map's atlas fixes it.
+    pub initial_chainage_m: f64,
+    /// A switch seen in the signal is looked for in the map this far either side of where
+    /// the pipeline thinks it is, m (0: no landmarks).
+    pub landmark_search_m: f64,
 }
 
 impl Default for EddyCurrentSettings {
@@ -54,6 +59,8 @@ impl Default for EddyCurrentSettings {
             acceleration_check_sigma: 4.0,
             sleeper_spacing_m: 0.625,
             count_sleepers: true,
+            initial_chainage_m: 0.0,
+            landmark_search_m: 50.0,
         }
     }
 }
@@ -75,6 +82,16 @@ impl EddyCurrentSettings {
                     "eddy_current.{name} must be a positive number, not {v}"
                 ));
             }
+        }
+        if !(self.initial_chainage_m.is_finite()
+            && self.landmark_search_m.is_finite()
+            && self.landmark_search_m >= 0.0)
+        {
+            return Err(format!(
+                "eddy_current.initial_chainage_m and landmark_search_m must be finite (and the \
+                 search not negative), not {} and {}",
+                self.initial_chainage_m, self.landmark_search_m
+            ));
         }
         if !(0.0..1.0).contains(&self.min_rho) {
             return Err(format!(
