@@ -112,7 +112,7 @@ mod tests {
         // The pipeline thinks it is 12 m further than it is.
         let offset = 12.0;
         let mut fixes = Vec::new();
-        let mut x = 0.0;
+        let mut x: f64 = 0.0;
         while x < 600.0 {
             let strong = (400.0..430.0).contains(&x);
             let level = if strong { 2.5 } else { 1.0 };
