@@ -91,6 +91,52 @@ pub fn run_scenario(
     tag: &str,
 ) -> Result<Run> {
     scenario.check(duration_s, faults)?;
+    let (pipelines, duration_s) = fused_run(
+        dir,
+        scenario,
+        (seed, duration_s, faults),
+        pipelines,
+        tag,
+        |_, eval| Ok(eval.pipelines),
+    )?;
+    Ok(Run {
+        pipelines,
+        duration_s,
+    })
+}
+
+/// Simulates `scenario` with `seed` into `dir`, re-fuses it with `pipelines`, hands the fused
+/// log to `score`, and removes both logs whatever happened.
+pub(crate) fn score_fused_run(
+    dir: &Path,
+    scenario: &Scenario,
+    seed: u64,
+    pipelines: &Pipelines,
+    tag: &str,
+    score: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
+    fused_run(
+        dir,
+        scenario,
+        (seed, None, &[]),
+        pipelines,
+        tag,
+        |fused, _| score(fused),
+    )
+    .map(|_| ())
+}
+
+/// One simulated run `(seed, duration, faults)` re-fused: `score` gets the fused log and the
+/// refuse run's evaluation; both logs are removed afterwards whatever happened. Also gives
+/// the run's simulated length, s.
+fn fused_run<T>(
+    dir: &Path,
+    scenario: &Scenario,
+    (seed, duration_s, faults): (u64, Option<f64>, &[FaultSpec]),
+    pipelines: &Pipelines,
+    tag: &str,
+    score: impl FnOnce(&Path, railfuse_refuse::eval::EvalReport) -> Result<T>,
+) -> Result<(T, f64)> {
     let name = scenario.name();
     let raw = dir.join(format!("{name}-{tag}-seed{seed}.mcap"));
     let fused = dir.join(format!("{name}-{tag}-seed{seed}.fused.mcap"));
@@ -105,41 +151,11 @@ pub fn run_scenario(
         observer: None,
     });
     std::fs::remove_file(&raw).ok();
+    let scored = result
+        .map_err(Error::from)
+        .and_then(|(_, eval)| score(&fused, eval));
     std::fs::remove_file(&fused).ok();
-    let (_, eval) = result?;
-    Ok(Run {
-        pipelines: eval.pipelines,
-        duration_s: sim.duration_s,
-    })
-}
-
-/// Simulates `scenario` with `seed` into `dir`, re-fuses it with `pipelines`, hands the fused
-/// log to `score`, and removes both logs whatever happened.
-pub(crate) fn score_fused_run(
-    dir: &Path,
-    scenario: &Scenario,
-    seed: u64,
-    pipelines: &Pipelines,
-    tag: &str,
-    score: impl FnOnce(&Path) -> Result<()>,
-) -> Result<()> {
-    let name = scenario.name();
-    let raw = dir.join(format!("{name}-{tag}-seed{seed}.mcap"));
-    let fused = dir.join(format!("{name}-{tag}-seed{seed}.fused.mcap"));
-    simulate(scenario, seed, None, &[], &raw)?;
-    let result = refuse(&RefuseOptions {
-        input: &raw,
-        output: &fused,
-        config: pipelines,
-        config_source: pipelines.path.display().to_string(),
-        reference: topics::GROUND_TRUTH,
-        progress: None,
-        observer: None,
-    });
-    std::fs::remove_file(&raw).ok();
-    let scored = result.map_err(Error::from).and_then(|_| score(&fused));
-    std::fs::remove_file(&fused).ok();
-    scored
+    Ok((scored?, sim.duration_s))
 }
 
 /// Envelopes over `seeds` runs of each of `names`, `run(seed)` giving one run.

@@ -595,9 +595,9 @@ impl EddyCurrentPipeline {
         push_state(state, o);
     }
 
-    /// The filter to `t` (never backwards: a window centred before the filter's time is
-    /// applied at the filter's time, its variance widened by what the acceleration could do
-    /// in between).
+    /// The filter to `t`, never backwards: for a window centred before the filter's time,
+    /// how much before (s), so its speed is compared with the state's speed then,
+    /// `v − a Δ` (constant acceleration: exact).
     fn advance(&mut self, t: u64) -> f64 {
         let Some(kf) = self.kf.as_mut() else {
             return 0.0;
@@ -607,8 +607,7 @@ impl EddyCurrentPipeline {
             self.kf_ns = t;
             0.0
         } else {
-            let late = (self.kf_ns - t) as f64 / 1e9;
-            (kf.estimate.state[2] * late).powi(2)
+            (self.kf_ns - t) as f64 / 1e9
         }
     }
 
@@ -641,13 +640,13 @@ impl EddyCurrentPipeline {
             self.filter_state(o);
             return;
         }
-        let extra = self.advance(m.stamp_ns);
+        let late_s = self.advance(m.stamp_ns);
         let kf = self.kf.as_mut().expect("started");
         let a_prior = kf.estimate.state[2];
         let p_aa = kf.estimate.covariance[(2, 2)];
         diag.filter_acceleration_mps2 = Some(a_prior);
-        let h_v = RowVector3::new(0.0, 1.0, 0.0);
-        let innovation = kf.innovation(&h_v, r_v + extra, m.speed_mps);
+        let h_v = RowVector3::new(0.0, 1.0, -late_s);
+        let innovation = kf.innovation(&h_v, r_v, m.speed_mps);
         if innovation.nis > SPEED_GATE_NIS && !m.acquired {
             self.gate_refusals += 1;
             self.counts.rejected_gate += 1;
@@ -675,7 +674,7 @@ impl EddyCurrentPipeline {
             return;
         }
         self.gate_refusals = 0;
-        let i = kf.update(&h_v, r_v + extra, m.speed_mps);
+        let i = kf.update(&h_v, r_v, m.speed_mps);
         let mut reason = None;
         if let Some((acc, var)) = m.acceleration {
             let gap = (acc - a_prior).abs();

@@ -27,6 +27,11 @@ const TARGET_LAG: f64 = 64.0;
 const ACQUIRE_LAGS: std::ops::Range<usize> = 8..(WINDOW / 2);
 /// Track a window must span at acquisition, m (three to four sleepers).
 const MIN_WINDOW_TRAVEL_M: f64 = 2.0;
+/// Levels agree on a delay within this share of it.
+const ACQUIRE_AGREEMENT: f64 = 0.05;
+
+/// A level's peak: level, peak, the window's signals and middle, whether acquired afresh.
+type Found = (usize, Peak, Vec<f64>, Vec<f64>, u64, bool);
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SpeedMeasurement {
@@ -111,15 +116,27 @@ impl SpeedEstimator {
         });
         let mut best_rho = tracked.as_ref().map_or(0.0, |t| t.1.rho);
         let found = tracked.or_else(|| {
-            // The finest level whose window spans enough track for its delay to be a real
-            // one: a window over less than a few sleepers correlates by chance.
-            (0..LEVELS).find_map(|l| {
-                let f = self.at_level(fe, q, l, None)?;
+            // Every level's peak; the delay is real where levels of different window lengths
+            // agree on it (a chance peak of one short window is not confirmed by the longer
+            // ones), and its window spans enough track. The finest such level is taken.
+            let peaks: Vec<_> = (0..LEVELS)
+                .filter_map(|l| self.at_level(fe, q, l, None))
+                .collect();
+            let delay = |f: &Found| f.1.lag / fe.rate(f.0);
+            for f in &peaks {
                 best_rho = best_rho.max(f.1.rho);
-                let speed = q.spacing_m * fe.rate(l) / f.1.lag;
-                let travel = speed * WINDOW as f64 / fe.rate(l);
-                (travel >= MIN_WINDOW_TRAVEL_M).then_some(f)
-            })
+            }
+            peaks
+                .iter()
+                .position(|f| {
+                    let travel = q.spacing_m / delay(f) * WINDOW as f64 / fe.rate(f.0);
+                    let agree = peaks
+                        .iter()
+                        .filter(|g| (delay(g) / delay(f) - 1.0).abs() < ACQUIRE_AGREEMENT)
+                        .count();
+                    travel >= MIN_WINDOW_TRAVEL_M && agree >= 2
+                })
+                .map(|i| peaks[i].clone())
         });
         let Some((level, peak, a, b, mid, acquired)) = found else {
             self.lock = None;
@@ -170,14 +187,13 @@ impl SpeedEstimator {
     /// The correlation peak at level `l` (about `prior`'s delay, or over every lag), if one
     /// reaches `min_rho`: level, peak, the window's signals and middle, and whether it was
     /// acquired afresh.
-    #[allow(clippy::type_complexity)]
     fn at_level(
         &mut self,
         fe: &FrontEnd,
         q: &Request,
         l: usize,
         prior: Option<f64>,
-    ) -> Option<(usize, Peak, Vec<f64>, Vec<f64>, u64, bool)> {
+    ) -> Option<Found> {
         let (a, b, mid) = fe.window(l)?;
         let rate = fe.rate(l);
         let (lags, share) = match prior {
