@@ -420,3 +420,37 @@ fn a_switch_of_the_atlas_fixes_a_wrong_starting_chainage() {
         .collect();
     assert!(!fixes.is_empty());
 }
+
+#[test]
+fn the_closed_loop_correlator_tracks_like_the_open_loop_one() {
+    // The same run with `correlator = "closed_loop"` on the warped pipeline: Newton–Raphson
+    // from the last delay instead of every lag, the open loop only to (re)acquire.
+    let d = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(sample("seed004.toml")).unwrap();
+    let start = text.find("[[pipeline]]\nname = \"warped_kf\"").unwrap();
+    let closed = text[start..]
+        .replace("name = \"warped_kf\"", "name = \"closed\"")
+        .replace(
+            "kalman = true",
+            "kalman = true\ncorrelator = \"closed_loop\"",
+        );
+    let config = d.path().join("closed.toml");
+    std::fs::write(&config, format!("{}{closed}", &text[start..])).unwrap();
+    let fused = seed004(d.path(), &config);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let line_rmse = |name: &str| {
+        let e: Vec<f64> = messages::<FusedState>(&fused, &format!("/fused/{name}/state"))
+            .iter()
+            .filter_map(|st| {
+                let g = truth_at(&truth, st.stamp_ns);
+                (g.speed_mps > 5.0).then(|| st.speed_mps - g.speed_mps)
+            })
+            .collect();
+        (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt()
+    };
+    let (open, closed) = (line_rmse("warped_kf"), line_rmse("closed"));
+    assert!(
+        closed < 0.1 && closed < 1.5 * open,
+        "closed loop {closed}, open loop {open}"
+    );
+}

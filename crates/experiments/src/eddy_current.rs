@@ -169,14 +169,30 @@ pub fn run_all(dir: &Path, seeds: u64, step: &dyn Fn(u64)) -> Result<EddyCurrent
     Ok(EddyCurrentResults { seeds, rows })
 }
 
-/// The sleepers of the map's atlas in (a, b]: its sections' grid points (switches have none).
+/// The sleepers of the map's atlas in (a, b] that the pipeline counts: its sections' grid
+/// points, less those within the pipeline's margin of a switch (bridged, not counted).
 pub fn sleepers_between(map: &TrackMap, a: f64, b: f64) -> u64 {
+    let margin = railfuse_refuse::eddy_current::SWITCH_MARGIN_M;
+    let bridged: Vec<(f64, f64)> = map
+        .switches
+        .iter()
+        .map(|w| (w.start_chainage_m - margin, w.end_chainage_m + margin))
+        .collect();
     map.sleeper_sections
         .iter()
         .map(|s| {
-            // Grid points start + (k + ½)·spacing inside the section and inside (a, b].
-            let lo = a.max(s.start_chainage_m);
-            let hi = b.min(s.end_chainage_m);
+            // Grid points start + (k + ½)·spacing inside the section, clear of the bridged
+            // stretches at its ends, and inside (a, b].
+            let mut lo = a.max(s.start_chainage_m);
+            let mut hi = b.min(s.end_chainage_m);
+            for &(p, q) in &bridged {
+                if (p..=q).contains(&lo) {
+                    lo = q;
+                }
+                if (p..=q).contains(&hi) {
+                    hi = p;
+                }
+            }
             if hi <= lo {
                 return 0;
             }

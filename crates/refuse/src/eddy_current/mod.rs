@@ -57,7 +57,7 @@ const GATE_RESTART: u32 = 5;
 const COUNT_STD_M: f64 = 0.1;
 const COUNT_GATE_NIS: f64 = 25.0;
 /// Switches are bridged this far either side of the map's ends, m.
-const SWITCH_MARGIN_M: f64 = 3.0;
+pub const SWITCH_MARGIN_M: f64 = 3.0;
 /// The last measurement guides the next window for this long, ns.
 const PRIOR_FOR_NS: u64 = 2_000_000_000;
 /// The filter starts over after this long without a measurement, ns.
