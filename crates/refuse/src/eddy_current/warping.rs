@@ -107,14 +107,16 @@ impl WarpSearch {
         let radius = (k_max * lag).ceil() as usize + 3;
         let unwarped = self.peak(a, b, 0.0, lag, radius)?;
         let mut best = (0.0, unwarped);
-        if k_max < 1e-3 {
+        // Below this the speed changes by less than 1 % across the window: the delay moves by
+        // less than the lag's own resolution, and warping cannot be told from noise.
+        if k_max < 0.005 {
             return Some(Warp {
                 k: 0.0,
                 peak: unwarped,
                 unwarped_rho: unwarped.rho,
             });
         }
-        const GRID: i32 = 6;
+        const GRID: i32 = 4;
         let step = k_max / GRID as f64;
         for i in -GRID..=GRID {
             let k = i as f64 * step;
