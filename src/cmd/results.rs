@@ -72,13 +72,17 @@ pub fn run(a: Args) -> Result<()> {
     if a.tuning {
         return super::results_tuning::run(&a);
     }
-    let output = a.output.clone().unwrap_or_else(|| "docs/results.md".into());
     let seeds = a.seeds.max(1);
     let bar = crate::progress::Progress::steps("results", sources::runs(seeds));
     let results = sources::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
-    let md = markdown(&results)?;
-    std::fs::write(&output, &md).with_context(|| format!("{}: cannot write", output.display()))?;
+    write_table(&a, "docs/results.md", &markdown(&results)?)
+}
+
+/// Writes a results table to `--output` (else `default`) and prints it.
+pub(super) fn write_table(a: &Args, default: &str, md: &str) -> Result<()> {
+    let output = a.output.clone().unwrap_or_else(|| default.into());
+    std::fs::write(&output, md).with_context(|| format!("{}: cannot write", output.display()))?;
     print!("{md}");
     eprintln!("-> {}", output.display());
     Ok(())

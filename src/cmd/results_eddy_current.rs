@@ -4,7 +4,7 @@
 
 use std::fmt::Write as _;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use railfuse_experiments::eddy_current::{self, EddyCurrentResults, BANDS};
 
 use super::results::Args;
@@ -16,14 +16,7 @@ pub fn run(a: &Args) -> Result<()> {
     let results = eddy_current::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
     let md = markdown(&results)?;
-    let output = a
-        .output
-        .clone()
-        .unwrap_or_else(|| "docs/eddy_current.md".into());
-    std::fs::write(&output, &md).with_context(|| format!("{}: cannot write", output.display()))?;
-    print!("{md}");
-    eprintln!("-> {}", output.display());
-    Ok(())
+    super::results::write_table(a, "docs/eddy_current.md", &md)
 }
 
 fn f(x: f64, digits: usize) -> String {

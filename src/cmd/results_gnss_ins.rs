@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use railfuse_experiments::gnss_ins::{self, GnssInsResults, PlaneErrors, SOURCE};
 
 use super::results::Args;
@@ -14,14 +14,7 @@ pub fn run(a: &Args) -> Result<()> {
     let results = gnss_ins::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
     let md = markdown(&results)?;
-    let output = a
-        .output
-        .clone()
-        .unwrap_or_else(|| "docs/gnss_ins.md".into());
-    std::fs::write(&output, &md).with_context(|| format!("{}: cannot write", output.display()))?;
-    print!("{md}");
-    eprintln!("-> {}", output.display());
-    Ok(())
+    super::results::write_table(a, "docs/gnss_ins.md", &md)
 }
 
 /// `kf`'s figure over `x`'s: how many times smaller the error got (> 1 is better).

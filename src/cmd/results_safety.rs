@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use railfuse_experiments::safety::{self, SafetyResults};
 
 use super::results::Args;
@@ -14,11 +14,7 @@ pub fn run(a: &Args) -> Result<()> {
     let results = safety::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
     let md = markdown(&results)?;
-    let output = a.output.clone().unwrap_or_else(|| "docs/safety.md".into());
-    std::fs::write(&output, &md).with_context(|| format!("{}: cannot write", output.display()))?;
-    print!("{md}");
-    eprintln!("-> {}", output.display());
-    Ok(())
+    super::results::write_table(a, "docs/safety.md", &md)
 }
 
 fn markdown(r: &SafetyResults) -> Result<String> {

@@ -3,7 +3,7 @@
 
 use std::fmt::Write as _;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use railfuse_experiments::tuning::{self, TuningResults, SEED000_TRUTH};
 use railfuse_refuse::tune::recording::Metrics;
 
@@ -22,11 +22,7 @@ pub fn run(a: &Args) -> Result<()> {
         None => None,
     };
     let md = markdown(&results, em.as_ref())?;
-    let output = a.output.clone().unwrap_or_else(|| "docs/tuning.md".into());
-    std::fs::write(&output, &md).with_context(|| format!("{}: cannot write", output.display()))?;
-    print!("{md}");
-    eprintln!("-> {}", output.display());
-    Ok(())
+    super::results::write_table(a, "docs/tuning.md", &md)
 }
 
 fn markdown(r: &TuningResults, em: Option<&EmComparison>) -> Result<String> {

@@ -30,7 +30,6 @@ use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::messages::{
     EddyCurrentBlock, EddyCurrentDiagnostics, FusedState, GateDecision, TrackMap,
 };
-use serde::Serialize;
 
 use crate::config::VarianceValue;
 use crate::error::Result;
@@ -65,26 +64,10 @@ const FORGET_AFTER_NS: u64 = 5_000_000_000;
 /// Windows are at least this far apart, s.
 const MIN_HOP_S: f64 = 0.1;
 
-/// What the pipeline's windows were, for the summary and the results.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
-pub struct WindowTally {
-    pub moving: u64,
-    pub standstill: u64,
-    pub no_lock: u64,
-    pub warped: u64,
-    /// Warp and filter accelerations disagreed.
-    pub acceleration_flags: u64,
-    pub refused_blocks: u64,
-    pub stream_breaks: u64,
-    /// Switches seen in the signal and found in the map.
-    pub landmarks: u64,
-}
-
 pub struct EddyCurrentPipeline {
     pub spec: PipelineSpec,
     settings: EddyCurrentSettings,
     pub counts: PipelineCounts,
-    pub tally: WindowTally,
     continuity: Continuity,
     front: Option<FrontEnd>,
     spacing_d: f64,
@@ -126,7 +109,6 @@ impl EddyCurrentPipeline {
             model,
             settings,
             counts: PipelineCounts::default(),
-            tally: WindowTally::default(),
             continuity: Continuity::default(),
             front: None,
             spacing_d: 0.0,
@@ -208,7 +190,6 @@ impl EddyCurrentPipeline {
         match self.continuity.judge(b) {
             Err(why) => {
                 self.counts.rejected_invalid += 1;
-                self.tally.refused_blocks += 1;
                 self.note(
                     b.stamp_ns,
                     GateDecision::RejectedInvalid,
@@ -219,7 +200,6 @@ impl EddyCurrentPipeline {
                 return;
             }
             Ok(Some(brk)) => {
-                self.tally.stream_breaks += 1;
                 self.note(b.stamp_ns, GateDecision::Accepted, &brk.to_string(), o);
                 // Across a gap the train went on: dead-reckon it.
                 if let input_check::Break::Gap { missing_s } = &brk {
@@ -279,7 +259,6 @@ impl EddyCurrentPipeline {
 
     /// A switch found in the map: the chainage moved by the correction, count and filter.
     fn landmark(&mut self, t: u64, fix: &landmark::Fix, o: &mut Vec<Fused>) {
-        self.tally.landmarks += 1;
         let c = fix.correction_m;
         match &mut self.count_origin {
             Some(origin) => *origin += c,
@@ -416,8 +395,6 @@ impl EddyCurrentPipeline {
             Outcome::Moving(m) => {
                 self.standing = false;
                 self.last_measured_ns = Some(t);
-                self.tally.moving += 1;
-                self.tally.warped += u64::from(m.warp_k.is_some());
                 diag.window = "moving".into();
                 diag.rho = Some(m.rho);
                 diag.unwarped_rho = m.unwarped_rho;
@@ -444,7 +421,6 @@ impl EddyCurrentPipeline {
                 }
             }
             Outcome::Standstill { stamp_ns } => {
-                self.tally.standstill += 1;
                 self.last_measured_ns = Some(t);
                 self.standing = true;
                 diag.window = "standstill".into();
@@ -488,7 +464,6 @@ impl EddyCurrentPipeline {
                 }
             }
             Outcome::NoLock { stamp_ns, best_rho } => {
-                self.tally.no_lock += 1;
                 diag.window = "no_lock".into();
                 diag.rho = Some(best_rho);
                 let why = format!(
@@ -696,7 +671,6 @@ impl EddyCurrentPipeline {
             let gap = (acc - a_prior).abs();
             let sigma = (var + p_aa).sqrt();
             if gap > self.settings.acceleration_check_sigma * sigma {
-                self.tally.acceleration_flags += 1;
                 reason = Some(format!(
                     "warp acceleration {acc:+.2} m/s² and the filter's {a_prior:+.2} m/s² are {:.1} σ apart: divergence or a wrong warp; not fused",
                     gap / sigma

@@ -225,9 +225,4 @@ impl SpeedEstimator {
         let p = peak.filter(|p| p.rho >= q.min_rho)?;
         Some((l, p, a, b, mid, acquired))
     }
-
-    /// Warp evaluations so far (for the benchmark's account of the work).
-    pub fn warp_evaluations(&self) -> u32 {
-        self.warp.evaluations
-    }
 }

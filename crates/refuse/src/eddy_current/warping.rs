@@ -69,13 +69,11 @@ pub struct Warp {
 pub struct WarpSearch {
     ra: Vec<f64>,
     rb: Vec<f64>,
-    pub evaluations: u32,
 }
 
 impl WarpSearch {
     /// The correlation peak under warp `k`, looked for within `radius` lags of `lag`.
     fn peak(&mut self, a: &[f64], b: &[f64], k: f64, lag: f64, radius: usize) -> Option<Peak> {
-        self.evaluations += 1;
         resample(a, k, &mut self.ra);
         resample(b, k, &mut self.rb);
         let centre = lag.round() as usize;
