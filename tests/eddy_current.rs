@@ -148,6 +148,79 @@ fn seed004_speed_standstill_and_sleeper_count_against_the_truth() {
         .is_some_and(|e| e.warp_k.is_some_and(|k| k != 0.0))));
 }
 
+/// Speed error RMSE over the states of starts (0.01–5 m/s, accelerating), m/s, and the
+/// time from each start until the state is within 10 % of the truth, s.
+fn starts(truth: &[GroundTruth], states: &[FusedState]) -> (f64, Vec<f64>) {
+    let errors: Vec<f64> = states
+        .iter()
+        .filter_map(|st| {
+            let g = truth_at(truth, st.stamp_ns);
+            let starting = (0.01..5.0).contains(&g.speed_mps) && g.acceleration_mps2 > 0.05;
+            starting.then_some(st.speed_mps - g.speed_mps)
+        })
+        .collect();
+    let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    let onsets = truth
+        .windows(2)
+        .filter(|w| w[0].speed_mps == 0.0 && w[1].speed_mps > 0.0)
+        .map(|w| w[0].stamp_ns);
+    let delays = onsets
+        .map(|t0| {
+            states
+                .iter()
+                .filter(|st| st.stamp_ns > t0)
+                .find(|st| {
+                    let v = truth_at(truth, st.stamp_ns).speed_mps;
+                    (st.speed_mps - v).abs() <= 0.1 * v
+                })
+                .map_or(f64::INFINITY, |st| (st.stamp_ns - t0) as f64 / 1e9)
+        })
+        .collect();
+    (rmse, delays)
+}
+
+#[test]
+fn a_start_from_standstill_is_measured_by_the_start_fit_within_two_and_a_half_seconds_and_better_than_without(
+) {
+    let d = tempfile::tempdir().unwrap();
+    // `warped_kf` as the sample has it, and the same without the start's fit.
+    let config = d.path().join("starts.toml");
+    let sample_text = std::fs::read_to_string(sample("seed004.toml")).unwrap();
+    let kf = &sample_text[sample_text.rfind("[[pipeline]]").unwrap()..];
+    let without = kf
+        .replace("name = \"warped_kf\"", "name = \"no_start_fit\"")
+        .replace("kalman = true", "kalman = true\nstart_fit = false");
+    assert_ne!(without, kf.replace("warped_kf", "no_start_fit"));
+    std::fs::write(&config, format!("{kf}\n{without}")).unwrap();
+    let fused = seed004(d.path(), &config);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let of = |p: &str| starts(&truth, &messages(&fused, &format!("/fused/{p}/state")));
+    let ((with, with_delays), (without, _)) = (of("warped_kf"), of("no_start_fit"));
+    // Three starts in the first 200 s: the run's start and two after the yard's stops.
+    assert_eq!(with_delays.len(), 3, "{with_delays:?}");
+    // The start's fit (x = ½ α (t − t₀)², searched on the distance grid) measures each start
+    // within 2.5 s: the trailing sensor must first pass a clamp the leading one saw moving
+    // (0.95 m: 1.7 s into a start that reaches 1.1 m/s² after a second), and a second fit
+    // must confirm the first. Without it the correlator waits for windows that agree with
+    // each other, some starts much longer.
+    assert!(with_delays.iter().all(|d| *d < 2.5), "{with_delays:?}");
+    assert!(
+        with < 0.7 * without,
+        "starts' speed RMSE {with} against {without}"
+    );
+    let windows = |p: &str| -> usize {
+        messages::<FusedDiagnostics>(&fused, &format!("/fused/{p}/diagnostics"))
+            .iter()
+            .filter(|d| {
+                d.eddy_current
+                    .as_ref()
+                    .is_some_and(|e| e.window == "moving_off")
+            })
+            .count()
+    };
+    assert!(windows("warped_kf") >= 3 && windows("no_start_fit") == 0);
+}
+
 #[test]
 fn the_acceleration_cross_check_flags_and_keeps_the_warps_acceleration_out() {
     // The same run with the check set at 0.01 σ: almost every warp acceleration is flagged

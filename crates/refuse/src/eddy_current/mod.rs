@@ -15,12 +15,15 @@
 
 pub mod butterworth;
 pub mod correlation;
+pub mod departure;
 pub mod front_end;
 pub mod input_check;
 pub mod landmark;
 pub mod settings;
 pub mod sleeper_count;
 pub mod speed;
+#[cfg(test)]
+mod test_track;
 pub mod warping;
 
 use std::path::Path;
@@ -38,6 +41,7 @@ use crate::measurement::SensorContext;
 use crate::model::ConstantAcceleration;
 use crate::pipeline::{measurement_record, Fused, PipelineCounts};
 use crate::spec::PipelineSpec;
+use departure::{Departure, Fit, Start};
 use front_end::{FrontEnd, WINDOW};
 use input_check::Continuity;
 pub use settings::EddyCurrentSettings;
@@ -63,6 +67,9 @@ const PRIOR_FOR_NS: u64 = 2_000_000_000;
 const FORGET_AFTER_NS: u64 = 5_000_000_000;
 /// Windows are at least this far apart, s.
 const MIN_HOP_S: f64 = 0.1;
+/// A start's fit hands over to the correlator once the start lies this far before the
+/// window the correlator would use, s.
+const HANDOVER_MARGIN_S: f64 = 0.3;
 
 pub struct EddyCurrentPipeline {
     pub spec: PipelineSpec,
@@ -79,6 +86,11 @@ pub struct EddyCurrentPipeline {
     /// The latest measurement (the state of the filterless variants).
     held: Option<SpeedMeasurement>,
     standing: bool,
+    /// The last window judged a standstill.
+    last_standstill_ns: Option<u64>,
+    /// A start from a standstill being fitted (warped pipelines), with the dead-reckoned
+    /// distance and the filter's chainage when it began.
+    departure: Option<(Departure, f64, Option<f64>)>,
     /// Sensor a's and b's sleeper counts; distance dead-reckoned along the way.
     counters: [SleeperCounter; 2],
     odometer_m: f64,
@@ -118,6 +130,8 @@ impl EddyCurrentPipeline {
             gate_refusals: 0,
             held: None,
             standing: false,
+            last_standstill_ns: None,
+            departure: None,
             counters: Default::default(),
             count_origin: None,
             last_count_ns: None,
@@ -180,6 +194,7 @@ impl EddyCurrentPipeline {
     fn restart(&mut self) {
         self.front = None;
         self.atlas_here = None;
+        self.departure = None;
         self.estimator.forget();
         for c in &mut self.counters {
             c.restart();
@@ -290,6 +305,16 @@ impl EddyCurrentPipeline {
         }
     }
 
+    /// The acceleration now: the filter's, or the latest measurement's (0 without either).
+    fn acceleration_now(&self) -> f64 {
+        match (&self.kf, &self.held) {
+            _ if self.standing => 0.0,
+            (Some(kf), _) => kf.estimate.state[2],
+            (None, Some(m)) => m.acceleration.map_or(0.0, |a| a.0),
+            _ => 0.0,
+        }
+    }
+
     /// The chainage estimate at `t_ns` (for the atlas): the filter's, else the count's.
     fn chainage_now(&self, t_ns: u64) -> f64 {
         match &self.kf {
@@ -340,7 +365,9 @@ impl EddyCurrentPipeline {
         let crossed = self.counters[0].sample(ya, self.odometer_m, spacing, irregular);
         self.counters[1].sample(yb, self.odometer_m, spacing, irregular);
         if let Some(c) = crossed {
-            if self.count_origin.is_none() && matches!(c, Crossing::Counted(_)) {
+            // Not while the pipeline believes the train stands (the first metre of a start,
+            // before its speed is observable): the dead-reckoned distance has not moved.
+            if self.count_origin.is_none() && !self.standing && matches!(c, Crossing::Counted(_)) {
                 self.count_origin = Some(s - self.counters[0].distance_m);
             }
             self.last_count_ns = Some(t);
@@ -349,7 +376,6 @@ impl EddyCurrentPipeline {
 
     /// One correlation window ending at `t`: a measurement, the filter, a state.
     fn window(&mut self, t: u64, map: Option<&TrackMap>, o: &mut Vec<Fused>) {
-        let front = self.front.as_ref().expect("running");
         // What the last measurement says now; nothing when it is too old to go by.
         let fresh = self
             .last_measured_ns
@@ -363,15 +389,25 @@ impl EddyCurrentPipeline {
         let q = Request {
             spacing_m: self.spacing_d,
             prior_mps: prior,
+            prior_acceleration_mps2: self.acceleration_now(),
             correlator: self.settings.correlator,
             warp: self.settings.warp,
             max_acceleration_mps2: self.settings.max_acceleration_mps2,
             min_rho: self.settings.min_rho,
             standstill_factor: self.settings.standstill_factor,
         };
-        let outcome = self.estimator.measure(front, &q);
-        // The next window: a quarter of this one's span later, at least 0.1 s.
+        let (outcome, start) = match self.departing(t, &q) {
+            Some(o) => o,
+            None => {
+                let front = self.front.as_ref().expect("running");
+                (self.estimator.measure(front, &q), None)
+            }
+        };
+        let front = self.front.as_ref().expect("running");
+        // The next window: a quarter of this one's span later, at least 0.1 s (a start's
+        // fits every 0.1 s).
         let level = match outcome {
+            _ if self.departure.is_some() || start.is_some() => 0,
             Outcome::Moving(m) => m.level,
             _ => prior.map_or(0, |v| SpeedEstimator::level_for(front, self.spacing_d, v)),
         };
@@ -395,7 +431,13 @@ impl EddyCurrentPipeline {
             Outcome::Moving(m) => {
                 self.standing = false;
                 self.last_measured_ns = Some(t);
-                diag.window = "moving".into();
+                diag.window = match start {
+                    Some(_) => "moving_off".into(),
+                    None => "moving".into(),
+                };
+                if let Some(s) = &start {
+                    self.started(s);
+                }
                 diag.rho = Some(m.rho);
                 diag.unwarped_rho = m.unwarped_rho;
                 diag.warp_k = m.warp_k;
@@ -403,7 +445,12 @@ impl EddyCurrentPipeline {
                 diag.delay_s = Some(m.lag / self.front.as_ref().map_or(1.0, |f| f.rate(m.level)));
                 diag.level = Some(m.level as u32);
                 match self.settings.kalman {
-                    true => self.filter_moving(&m, &mut diag, o),
+                    true => {
+                        self.filter_moving(&m, &mut diag, o);
+                        if let Some(s) = &start {
+                            self.start_chainage(s);
+                        }
+                    }
                     false => {
                         self.held = Some(m);
                         self.state_of_measurement(m.stamp_ns, o);
@@ -422,6 +469,7 @@ impl EddyCurrentPipeline {
             }
             Outcome::Standstill { stamp_ns } => {
                 self.last_measured_ns = Some(t);
+                self.last_standstill_ns = Some(t);
                 self.standing = true;
                 diag.window = "standstill".into();
                 if self.settings.kalman {
@@ -466,10 +514,15 @@ impl EddyCurrentPipeline {
             Outcome::NoLock { stamp_ns, best_rho } => {
                 diag.window = "no_lock".into();
                 diag.rho = Some(best_rho);
-                let why = format!(
-                    "no correlation peak of ρ ≥ {} over enough track (best ρ {best_rho:.2})",
-                    self.settings.min_rho
-                );
+                let why = match self.departure.is_some() {
+                    true => format!(
+                        "moving off: no start fitted yet (the trailing sensor must pass track the leading one saw moving; best ρ {best_rho:.2})"
+                    ),
+                    false => format!(
+                        "no correlation peak of ρ ≥ {} over enough track (best ρ {best_rho:.2})",
+                        self.settings.min_rho
+                    ),
+                };
                 self.record(
                     stamp_ns,
                     None,
@@ -490,12 +543,7 @@ impl EddyCurrentPipeline {
                         {
                             self.kf = None;
                         }
-                        if let Some(kf) = self.kf.as_mut() {
-                            if stamp_ns > self.kf_ns {
-                                kf.predict(&self.model, (stamp_ns - self.kf_ns) as f64 / 1e9);
-                                self.kf_ns = stamp_ns;
-                            }
-                        }
+                        self.advance(stamp_ns);
                         self.filter_state(o);
                     }
                     false => {
@@ -505,6 +553,88 @@ impl EddyCurrentPipeline {
                     }
                 }
             }
+        }
+    }
+
+    /// A start from a standstill (warped pipelines with `start_fit`, after a standstill, while the signal is
+    /// no longer quiet): the start's fit instead of the correlator, until the start lies
+    /// before the window the correlator would use. None: the correlator's turn.
+    fn departing(&mut self, t: u64, q: &Request) -> Option<(Outcome, Option<Start>)> {
+        let front = self.front.as_ref()?;
+        let on = self.settings.warp && self.settings.start_fit;
+        if !on || SpeedEstimator::quiet(front, q) {
+            self.departure = None;
+            return None;
+        }
+        if self.departure.is_none() && self.standing {
+            let quiet_ns = self.last_standstill_ns?;
+            let chainage = self.kf.as_ref().map(|kf| kf.estimate.state[0]);
+            self.departure = Some((Departure::new(quiet_ns), self.odometer_m, chainage));
+        }
+        let (dep, ..) = self.departure.as_mut()?;
+        let s = self.settings.clone();
+        let min_rho = s.min_rho.max(departure::MIN_RHO);
+        let fit = dep.fit(front, self.spacing_d, s.max_acceleration_mps2, min_rho);
+        let nothing = |best_rho| {
+            Some((
+                Outcome::NoLock {
+                    stamp_ns: t,
+                    best_rho,
+                },
+                None,
+            ))
+        };
+        match fit {
+            None => {
+                self.departure = None;
+                None
+            }
+            Some(Fit::Nothing { best_rho }) => nothing(best_rho),
+            Some(Fit::Unconfirmed(start)) => nothing(start.rho),
+            Some(Fit::Confirmed(start)) => {
+                let since = (start.at_ns - start.onset_ns) as f64 / 1e9;
+                let (v, a) = (start.speed_mps, start.acceleration_mps2);
+                let l = SpeedEstimator::level_for_motion(front, self.spacing_d, v, a);
+                let span = (WINDOW << l) as f64 / front.fs_hz;
+                if since > span + HANDOVER_MARGIN_S {
+                    self.departure = None;
+                }
+                let m = SpeedMeasurement {
+                    stamp_ns: start.at_ns,
+                    speed_mps: start.speed_mps,
+                    speed_variance: start.speed_variance(),
+                    acceleration: Some((start.acceleration_mps2, start.acceleration_variance())),
+                    rho: start.rho,
+                    warp_k: None,
+                    unwarped_rho: None,
+                    level: start.level,
+                    lag: self.spacing_d / start.speed_mps * front.rate(start.level),
+                    // A start is a jump the filter's gate would refuse.
+                    acquired: true,
+                };
+                Some((Outcome::Moving(m), Some(start)))
+            }
+        }
+    }
+
+    /// A start fitted: the dead-reckoned distance moves on to what the start covered (it
+    /// stood still while the speed was not yet observable).
+    fn started(&mut self, s: &Start) {
+        if let Some((_, odometer, _)) = &self.departure {
+            self.odometer_m = self.odometer_m.max(odometer + s.travelled_m);
+        }
+    }
+
+    /// The filter's chainage from where it stood plus what the start covered.
+    fn start_chainage(&mut self, s: &Start) {
+        let Some((_, _, Some(stood_at))) = &self.departure else {
+            return;
+        };
+        let z = stood_at + s.travelled_m;
+        self.advance(s.at_ns);
+        if let Some(kf) = self.kf.as_mut() {
+            let var = (0.02 + 0.02 * s.travelled_m).powi(2);
+            kf.update(&RowVector3::new(1.0, 0.0, 0.0), var, z);
         }
     }
 
@@ -534,7 +664,11 @@ impl EddyCurrentPipeline {
         let (a, va) = m.acceleration.unwrap_or((0.0, 1.0));
         let chainage = self.count_chainage().unwrap_or(self.odometer_m);
         let var_s = 0.25;
-        let stamp_ns = stamp_ns.max(self.last_out_ns);
+        // A window centred before the last state (a coarser level's) gives no state: its
+        // speed belongs to its middle, and states go out in time order.
+        if stamp_ns < self.last_out_ns {
+            return;
+        }
         self.last_out_ns = stamp_ns;
         let state = FusedState {
             stamp_ns,
@@ -594,7 +728,29 @@ impl EddyCurrentPipeline {
             return 0.0;
         };
         if t > self.kf_ns {
-            kf.predict(&self.model, (t - self.kf_ns) as f64 / 1e9);
+            let dt = (t - self.kf_ns) as f64 / 1e9;
+            let x = kf.estimate.state;
+            // Braking through zero without a measurement: the train stops where the speed
+            // reaches zero (the correlator sees the speed's magnitude; a train does not run
+            // backwards on its brakes). The prediction goes to that moment, the estimate is
+            // projected onto the constraint (its covariance left as it is: a measurement, not
+            // the constraint, should make the filter sure), and it stands from there.
+            let to_stop = match x[1] > 0.0 && x[2] < 0.0 {
+                true => -x[1] / x[2],
+                false => f64::INFINITY,
+            };
+            if to_stop < dt {
+                kf.predict(&self.model, to_stop);
+                let x = &mut kf.estimate.state;
+                (x[1], x[2]) = (0.0, 0.0);
+                kf.predict(&self.model, dt - to_stop);
+            } else {
+                kf.predict(&self.model, dt);
+            }
+            let x = &mut kf.estimate.state;
+            if x[1] < 0.0 {
+                (x[1], x[2]) = (0.0, x[2].max(0.0));
+            }
             self.kf_ns = t;
             0.0
         } else {

@@ -13,6 +13,10 @@ pub struct EddyCurrentSettings {
     pub correlator: CorrelatorKind,
     /// Constant-acceleration warping before the correlation's peak is taken.
     pub warp: bool,
+    /// Warped pipelines: a start from a standstill fitted as `x = ½ α (t − t₀)²` on the
+    /// distance grid (the warp of a window the train stood through part of), until the
+    /// correlator's window no longer reaches back to the start.
+    pub start_fit: bool,
     /// A constant-acceleration Kalman filter over the measurements; without it the state is
     /// the latest measurement as it is.
     pub kalman: bool,
@@ -49,6 +53,7 @@ impl Default for EddyCurrentSettings {
             topic: "/eddy_current/block".into(),
             correlator: CorrelatorKind::OpenLoop,
             warp: true,
+            start_fit: true,
             kalman: true,
             lowpass_hz: 1000.0,
             band_floor_hz: 0.5,

@@ -29,6 +29,12 @@ const ACQUIRE_LAGS: std::ops::Range<usize> = 8..(WINDOW / 2);
 const MIN_WINDOW_TRAVEL_M: f64 = 2.0;
 /// Levels agree on a delay within this share of it.
 const ACQUIRE_AGREEMENT: f64 = 0.05;
+/// The share by which the speed may change across a tracked window.
+const MAX_SPEED_CHANGE: f64 = 0.5;
+/// A tracked peak this good is warped even below `min_rho`: under hard acceleration at low
+/// speed the unwarped peak smears (the delay changes twofold across the window), and it is
+/// the warped correlation that must reach `min_rho`.
+const WARP_FROM_RHO: f64 = 0.2;
 
 /// A level's peak: level, peak, the window's signals and middle, whether acquired afresh.
 type Found = (usize, Peak, Vec<f64>, Vec<f64>, u64, bool);
@@ -79,6 +85,8 @@ pub struct Request {
     pub spacing_m: f64,
     /// The speed expected now (the filter's prediction, or the last measurement).
     pub prior_mps: Option<f64>,
+    /// The acceleration expected now: a window's delay is its middle's, half a window ago.
+    pub prior_acceleration_mps2: f64,
     pub correlator: CorrelatorKind,
     pub warp: bool,
     pub max_acceleration_mps2: f64,
@@ -101,18 +109,39 @@ impl SpeedEstimator {
             .clamp(0.0, (LEVELS - 1) as f64) as usize
     }
 
+    /// The level for `speed` under `acceleration`: [`level_for`](Self::level_for), or up to
+    /// two levels finer (a delay of up to 256 samples) so that the speed changes by at most
+    /// half across the window: under hard braking at walking pace a window of several seconds
+    /// spans a threefold change of speed that no warp straightens.
+    pub fn level_for_motion(fe: &FrontEnd, spacing_m: f64, speed: f64, acceleration: f64) -> usize {
+        let l = Self::level_for(fe, spacing_m, speed);
+        let longest = MAX_SPEED_CHANGE * speed / acceleration.abs().max(1e-9);
+        (l.saturating_sub(2)..=l)
+            .rev()
+            .find(|&k| (WINDOW - 1) as f64 / fe.rate(k) <= longest)
+            .unwrap_or(l.saturating_sub(2))
+    }
+
+    /// Whether the signal is as quiet as its noise floor, and the train not coming from a
+    /// speed it cannot lose within the quiet span: a standstill.
+    pub fn quiet(fe: &FrontEnd, q: &Request) -> bool {
+        fe.noise_floor
+            .is_some_and(|f| fe.activity() < q.standstill_factor * f.max(1e-12))
+            && q.prior_mps.is_none_or(|v| v < STANDSTILL_FROM_MPS)
+    }
+
     pub fn measure(&mut self, fe: &FrontEnd, q: &Request) -> Outcome {
         let now = fe.now_ns();
-        // Quiet, and not coming from a speed a train cannot lose within the quiet span.
-        let quiet = fe
-            .noise_floor
-            .is_some_and(|f| fe.activity() < q.standstill_factor * f.max(1e-12))
-            && q.prior_mps.is_none_or(|v| v < STANDSTILL_FROM_MPS);
+        let quiet = Self::quiet(fe, q);
         // Tracking: the level the expected speed asks for, lags about it; when that finds
         // nothing, acquisition over every level.
         let tracked = q.prior_mps.filter(|v| *v > 0.05).and_then(|v| {
-            let l = Self::level_for(fe, q.spacing_m, v);
-            self.at_level(fe, q, l, Some(v))
+            let l = Self::level_for_motion(fe, q.spacing_m, v, q.prior_acceleration_mps2);
+            // The speed at the window's middle: under hard braking at low speed it is
+            // several times the speed now.
+            let half = 0.5 * (WINDOW - 1) as f64 / fe.rate(l);
+            let v_mid = (v - q.prior_acceleration_mps2 * half).max(0.5 * v);
+            self.at_level(fe, q, l, Some(v_mid))
         });
         let mut best_rho = tracked.as_ref().map_or(0.0, |t| t.1.rho);
         let found = tracked.or_else(|| {
@@ -180,6 +209,13 @@ impl SpeedEstimator {
                 m.unwarped_rho = Some(w.unwarped_rho);
             }
         }
+        if m.rho < q.min_rho {
+            self.lock = None;
+            return Outcome::NoLock {
+                stamp_ns: now,
+                best_rho: m.rho,
+            };
+        }
         self.lock = Some((level, m.lag));
         Outcome::Moving(m)
     }
@@ -222,7 +258,11 @@ impl SpeedEstimator {
             let r = self.correlator.correlate(&a, &b, lags.end);
             peak = open_loop(r, lags, share);
         }
-        let p = peak.filter(|p| p.rho >= q.min_rho)?;
+        let floor = match q.warp && prior.is_some() {
+            true => WARP_FROM_RHO.min(q.min_rho),
+            false => q.min_rho,
+        };
+        let p = peak.filter(|p| p.rho >= floor)?;
         Some((l, p, a, b, mid, acquired))
     }
 }

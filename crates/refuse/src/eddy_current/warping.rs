@@ -164,37 +164,12 @@ impl WarpSearch {
 mod tests {
     use super::*;
     use crate::eddy_current::correlation::{open_loop, Correlator};
+    use crate::eddy_current::test_track::Track;
 
-    /// Two sensors `d` apart over a random "track" (a smooth random function of distance),
-    /// moving with constant acceleration from `v0`: `n` samples at `fs`.
+    /// Two sensors `d` apart moving with constant acceleration from `v0`: `n` samples at `fs`.
     fn accelerating_pair(v0: f64, a: f64, d: f64, fs: f64, n: usize) -> (Vec<f64>, Vec<f64>) {
-        use rand::SeedableRng;
-        use rand_distr::{Distribution, StandardNormal};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        // Track features every 1 cm over 20 m, smoothed over 5 cm.
-        let raw: Vec<f64> = (0..2000).map(|_| StandardNormal.sample(&mut rng)).collect();
-        let track: Vec<f64> = (0..2000)
-            .map(|i: usize| {
-                raw[i.saturating_sub(2)..(i + 3).min(2000)]
-                    .iter()
-                    .sum::<f64>()
-                    / 5.0
-            })
-            .collect();
-        let at = |x: f64| {
-            let t = x / 0.01;
-            let i = t.floor() as usize;
-            let f = t - i as f64;
-            track[i] * (1.0 - f) + track[i + 1] * f
-        };
         let x0 = 1.0 + d;
-        let pos = |k: usize| {
-            let t = k as f64 / fs;
-            x0 + v0 * t + 0.5 * a * t * t
-        };
-        let sa = (0..n).map(|k| at(pos(k))).collect();
-        let sb = (0..n).map(|k| at(pos(k) - d)).collect();
-        (sa, sb)
+        Track::new(5).sensor_pair(|t| x0 + v0 * t + 0.5 * a * t * t, d, fs, n)
     }
 
     #[test]
