@@ -5,7 +5,7 @@
 use std::fmt::Write as _;
 
 use anyhow::Result;
-use railfuse_experiments::eddy_current::{self, EddyCurrentResults, BANDS};
+use railfuse_experiments::eddy_current::{self, EddyCurrentResults, BANDS, STARTING_S};
 
 use super::results::Args;
 
@@ -123,9 +123,34 @@ fn markdown(r: &EddyCurrentResults) -> Result<String> {
             pct(row.no_lock as f64 / row.windows.max(1) as f64),
         )?;
     }
+    writeln!(
+        md,
+        "\n## Below 5 m/s: the first {STARTING_S} s of starts, and the rest\n"
+    )?;
+    writeln!(md, "A start's speed is not observable by correlation until the trailing sensor has passed a clamp the")?;
+    writeln!(md, "leading one saw moving (D plus a sleeper spacing: about 0.95 m, 1.7 s into a start that reaches 1.1 m/s²")?;
+    writeln!(md, "after a second). States within {STARTING_S} s of the train moving off, against the other states from")?;
+    writeln!(
+        md,
+        "0.01 to 5 m/s (the rest of the starts, shunting, braking to a stop).\n"
+    )?;
+    writeln!(md, "| scenario | pipeline | first {STARTING_S} s of starts: RMSE | p95 | rest of 0.01–5 m/s: RMSE | p95 |")?;
+    writeln!(md, "|---|---|---:|---:|---:|---:|")?;
+    for row in &r.rows {
+        writeln!(
+            md,
+            "| {} | `{}` | {} | {} | {} | {} |",
+            row.scenario,
+            row.pipeline,
+            f(row.starting.rmse(), 3),
+            f(row.starting.p95(), 3),
+            f(row.slow_otherwise.rmse(), 3),
+            f(row.slow_otherwise.p95(), 3),
+        )?;
+    }
     writeln!(md, "\n## Against the goals\n")?;
-    writeln!(md, "| scenario | pipeline | speed > 5 m/s: p95 relative (goal < 0.5 %) | speed < 5 m/s incl. standstill: p95 (goal < 0.05 m/s) | distance, worst run (goal < 0.2 %) |")?;
-    writeln!(md, "|---|---|---|---|---|")?;
+    writeln!(md, "| scenario | pipeline | speed > 5 m/s: p95 relative (goal < 0.5 %) | speed < 5 m/s incl. standstill: p95 (goal < 0.05 m/s) | the same outside the first {STARTING_S} s of starts | distance, worst run (goal < 0.2 %) |")?;
+    writeln!(md, "|---|---|---|---|---|---|")?;
     for row in &r.rows {
         let line = row.speed[2..]
             .iter()
@@ -136,6 +161,7 @@ fn markdown(r: &EddyCurrentResults) -> Result<String> {
             .iter()
             .map(|e| e.p95())
             .fold(f64::NAN, f64::max);
+        let observable = row.speed[0].p95().max(row.slow_otherwise.p95());
         let worst = row
             .distance_share
             .iter()
@@ -143,27 +169,36 @@ fn markdown(r: &EddyCurrentResults) -> Result<String> {
             .fold(f64::NAN, f64::max);
         writeln!(
             md,
-            "| {} | `{}` | {} {} | {} {} | {} {} |",
+            "| {} | `{}` | {} {} | {} {} | {} {} | {} {} |",
             row.scenario,
             row.pipeline,
             pct(line),
             goal(line, 0.005),
             f(slow, 3),
             goal(slow, 0.05),
+            f(observable, 3),
+            goal(observable, 0.05),
             pct(worst),
             goal(worst, 0.002),
         )?;
     }
     writeln!(md, "\nWhere it falls short, and why:\n")?;
-    writeln!(md, "- Below 5 m/s the error is the departures': standing, the signal is quiet and the speed 0; moving off,")?;
-    writeln!(md, "  the correlator needs windows of several seconds at the coarse levels of the pyramid (0.25 m between the")?;
-    writeln!(md, "  sensors is 1 s of delay at 0.25 m/s) and two of them to agree before it believes a delay, so for the")?;
-    writeln!(md, "  first seconds of a 1.1 m/s² start the speed is still 0 (or held). Those states make the p95.")?;
-    writeln!(md, "- Above 5 m/s the correlation is within a fraction of a per cent; the p95 sits in the acceleration phases")?;
+    writeln!(md, "- Below 5 m/s the p95 is the starts': a start's speed cannot be seen until the trailing sensor has")?;
+    writeln!(md, "  passed a clamp the leading one saw moving (above). The warped pipelines fit the start itself")?;
+    writeln!(md, "  (`x = ½ α (t − t₀)²` on the distance grid, `departure.rs`) and measure it from then on, about 1.7 s")?;
+    writeln!(md, "  in at 1.4 m/s; until then the state says 0. Outside those seconds (the goals table's fourth column)")?;
+    writeln!(md, "  what is left is the rest of each start, shunting and braking to a stop; where it misses, the misses")?;
     writeln!(
         md,
-        "  from 5 to 15 m/s, where a window's mean speed lags the speed at its end."
+        "  sit where the acceleration changes (the end of a start, the onset of braking)."
     )?;
+    writeln!(md, "  `plain`, without the warp, waits for windows that do not reach back to the standstill and that agree")?;
+    writeln!(md, "  with each other.")?;
+    writeln!(md, "- Above 5 m/s the correlation is within a fraction of a per cent. `warped` holds each window's")?;
+    writeln!(md, "  measurement at the window's middle; `warped_kf` gives the filter's state at its latest window, whose")?;
+    writeln!(md, "  p95 sits in the 5–15 m/s phases where the acceleration changes (the filter's acceleration lags the")?;
+    writeln!(md, "  jerk; a larger jerk PSD only adds noise elsewhere) and over switches, where windows of lower ρ are")?;
+    writeln!(md, "  biased by a few cm/s.")?;
     writeln!(md, "- The plain and warped correlators hold their last measurement: their distance on the rough track runs")?;
     writeln!(
         md,
@@ -171,8 +206,9 @@ fn markdown(r: &EddyCurrentResults) -> Result<String> {
     )?;
     writeln!(md, "- Warping: on a synthetic window from 0.5 to 2 m/s in 1.5 s it recovers the acceleration within")?;
     writeln!(md, "  0.05 m/s² and cuts the speed error more than threefold (unit test `warping_recovers_a_known_constant_")?;
-    writeln!(md, "  acceleration…`); at the pipeline level the low-speed error is the departures' lag, which warping does")?;
-    writeln!(md, "  not touch, so it shows no gain there (below).")?;
+    writeln!(md, "  acceleration…`); in the pipelines, below (windows at low speed under hard acceleration are taken up")?;
+    writeln!(md, "  to two levels finer so the speed changes by at most half across them, and warped before they are")?;
+    writeln!(md, "  judged).")?;
     writeln!(
         md,
         "\nWarping's gain under hard acceleration below 5 m/s (speed RMSE, `plain` → `warped`):\n"

@@ -33,6 +33,11 @@ pub const BANDS: [(&str, f64, f64); 4] = [
     ("> 15 m/s", 15.0, f64::INFINITY),
 ];
 
+/// The first seconds of a start from standstill, s: where the speed is not yet observable
+/// by correlation (the trailing sensor has not yet passed a clamp the leading one saw
+/// moving: about 0.95 m, 1.7 s into a 1.1 m/s² start) and a second window confirms.
+pub const STARTING_S: f64 = 2.0;
+
 /// The scenarios: the preset, and the rough track.
 pub const SCENARIOS: [&str; 2] = ["seed004", "seed004_rough"];
 
@@ -120,6 +125,12 @@ pub struct PipelineErrors {
     /// Speed below 5 m/s while |a| ≥ 0.8 m/s².
     #[serde(skip)]
     pub hard_acceleration: Errors,
+    /// Speed from 0.01 to 5 m/s within the first [`STARTING_S`] of a start from standstill,
+    /// and the rest of that band.
+    #[serde(skip)]
+    pub starting: Errors,
+    #[serde(skip)]
+    pub slow_otherwise: Errors,
     /// Per run: distance error as a share of the distance travelled, and the count error.
     pub distance_share: Vec<f64>,
     pub count_error: Vec<i64>,
@@ -264,6 +275,16 @@ fn score(fused: &Path, acc: &mut [PipelineErrors]) -> Result<()> {
             ..a.clone()
         })
     };
+    // When the train moved off from each standstill.
+    let onsets: Vec<u64> = truth
+        .windows(2)
+        .filter(|w| w[0].speed_mps == 0.0 && w[1].speed_mps > 0.0)
+        .map(|w| w[0].stamp_ns)
+        .collect();
+    let starting = |t: u64| {
+        let i = onsets.partition_point(|&o| o <= t);
+        i > 0 && (t - onsets[i - 1]) as f64 / 1e9 < STARTING_S
+    };
     for (k, a) in acc.iter_mut().enumerate() {
         a.runs += 1;
         a.states += states[k].len() as u64;
@@ -285,6 +306,12 @@ fn score(fused: &Path, acc: &mut [PipelineErrors]) -> Result<()> {
             );
             if g.speed_mps > 0.01 && g.speed_mps < 5.0 && g.acceleration_mps2.abs() >= 0.8 {
                 a.hard_acceleration.push(e, g.speed_mps);
+            }
+            if (0.01..5.0).contains(&g.speed_mps) {
+                match starting(s.stamp_ns) {
+                    true => a.starting.push(e, g.speed_mps),
+                    false => a.slow_otherwise.push(e, g.speed_mps),
+                }
             }
         }
         let (Some(first), Some(last)) = (states[k].first(), states[k].last()) else {

@@ -178,7 +178,8 @@ pub struct EddyCurrentDiagnostics {
     /// Sleepers counted so far on each sensor.
     pub sleepers_a: u64,
     pub sleepers_b: u64,
-    /// What the window was: `moving`, `standstill` or `no_lock`.
+    /// What the window was: `moving`, `moving_off` (a start from standstill fitted whole; its
+    /// acceleration is the start's), `standstill` or `no_lock`.
     pub window: String,
 }
 

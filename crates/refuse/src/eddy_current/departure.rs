@@ -83,6 +83,15 @@ impl Start {
     }
 }
 
+/// A confirmed start with where the train stood: the dead-reckoned distance and the
+/// filter's chainage (if it had one) then.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Moved {
+    pub start: Start,
+    pub stood_odometer_m: f64,
+    pub stood_chainage_m: Option<f64>,
+}
+
 /// What a window of a start gave.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Fit {
@@ -95,20 +104,24 @@ pub enum Fit {
     Confirmed(Start),
 }
 
-/// A start under way: when the train was last seen standing, and the latest fit.
+/// A start under way: when and where the train was last seen standing, and the latest fit.
 #[derive(Debug, Clone)]
 pub struct Departure {
     /// The last window judged a standstill.
     pub quiet_ns: u64,
+    pub stood_odometer_m: f64,
+    pub stood_chainage_m: Option<f64>,
     last: Option<Start>,
     ra: Vec<f64>,
     rb: Vec<f64>,
 }
 
 impl Departure {
-    pub fn new(quiet_ns: u64) -> Self {
+    pub fn new(quiet_ns: u64, stood_odometer_m: f64, stood_chainage_m: Option<f64>) -> Self {
         Departure {
             quiet_ns,
+            stood_odometer_m,
+            stood_chainage_m,
             last: None,
             ra: Vec::new(),
             rb: Vec::new(),
@@ -271,7 +284,7 @@ mod tests {
         let pos = |t: f64| 2.0 + 0.5 * acc * (t - stand).max(0.0).powi(2);
         let n = (2.5 * fs) as usize;
         let (a, b) = track.sensor_pair(pos, d, fs, n);
-        let mut dep = Departure::new(0);
+        let mut dep = Departure::new(0, 0.0, None);
         let since_true = (n - 1) as f64 / fs - stand;
         let (since, travel, rho) = dep.search(&a, &b, fs, d, 2.4, 2.5).unwrap();
         let (alpha, v) = (2.0 * travel / (since * since), 2.0 * travel / since);

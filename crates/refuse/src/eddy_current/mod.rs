@@ -41,7 +41,7 @@ use crate::measurement::SensorContext;
 use crate::model::ConstantAcceleration;
 use crate::pipeline::{measurement_record, Fused, PipelineCounts};
 use crate::spec::PipelineSpec;
-use departure::{Departure, Fit, Start};
+use departure::{Departure, Fit, Moved};
 use front_end::{FrontEnd, WINDOW};
 use input_check::Continuity;
 pub use settings::EddyCurrentSettings;
@@ -88,9 +88,8 @@ pub struct EddyCurrentPipeline {
     standing: bool,
     /// The last window judged a standstill.
     last_standstill_ns: Option<u64>,
-    /// A start from a standstill being fitted (warped pipelines), with the dead-reckoned
-    /// distance and the filter's chainage when it began.
-    departure: Option<(Departure, f64, Option<f64>)>,
+    /// A start from a standstill being fitted (warped pipelines).
+    departure: Option<Departure>,
     /// Sensor a's and b's sleeper counts; distance dead-reckoned along the way.
     counters: [SleeperCounter; 2],
     odometer_m: f64,
@@ -559,7 +558,7 @@ impl EddyCurrentPipeline {
     /// A start from a standstill (warped pipelines with `start_fit`, after a standstill, while the signal is
     /// no longer quiet): the start's fit instead of the correlator, until the start lies
     /// before the window the correlator would use. None: the correlator's turn.
-    fn departing(&mut self, t: u64, q: &Request) -> Option<(Outcome, Option<Start>)> {
+    fn departing(&mut self, t: u64, q: &Request) -> Option<(Outcome, Option<Moved>)> {
         let front = self.front.as_ref()?;
         let on = self.settings.warp && self.settings.start_fit;
         if !on || SpeedEstimator::quiet(front, q) {
@@ -569,9 +568,10 @@ impl EddyCurrentPipeline {
         if self.departure.is_none() && self.standing {
             let quiet_ns = self.last_standstill_ns?;
             let chainage = self.kf.as_ref().map(|kf| kf.estimate.state[0]);
-            self.departure = Some((Departure::new(quiet_ns), self.odometer_m, chainage));
+            self.departure = Some(Departure::new(quiet_ns, self.odometer_m, chainage));
         }
-        let (dep, ..) = self.departure.as_mut()?;
+        let dep = self.departure.as_mut()?;
+        let (stood_odometer_m, stood_chainage_m) = (dep.stood_odometer_m, dep.stood_chainage_m);
         let s = self.settings.clone();
         let min_rho = s.min_rho.max(departure::MIN_RHO);
         let fit = dep.fit(front, self.spacing_d, s.max_acceleration_mps2, min_rho);
@@ -612,22 +612,26 @@ impl EddyCurrentPipeline {
                     // A start is a jump the filter's gate would refuse.
                     acquired: true,
                 };
-                Some((Outcome::Moving(m), Some(start)))
+                let moved = Moved {
+                    start,
+                    stood_odometer_m,
+                    stood_chainage_m,
+                };
+                Some((Outcome::Moving(m), Some(moved)))
             }
         }
     }
 
     /// A start fitted: the dead-reckoned distance moves on to what the start covered (it
     /// stood still while the speed was not yet observable).
-    fn started(&mut self, s: &Start) {
-        if let Some((_, odometer, _)) = &self.departure {
-            self.odometer_m = self.odometer_m.max(odometer + s.travelled_m);
-        }
+    fn started(&mut self, m: &Moved) {
+        let from = m.stood_odometer_m + m.start.travelled_m;
+        self.odometer_m = self.odometer_m.max(from);
     }
 
     /// The filter's chainage from where it stood plus what the start covered.
-    fn start_chainage(&mut self, s: &Start) {
-        let Some((_, _, Some(stood_at))) = &self.departure else {
+    fn start_chainage(&mut self, m: &Moved) {
+        let (Some(stood_at), s) = (m.stood_chainage_m, &m.start) else {
             return;
         };
         let z = stood_at + s.travelled_m;
