@@ -33,6 +33,14 @@ fn pct(x: f64) -> String {
     }
 }
 
+/// A share of the distance, and the same in metres per kilometre.
+fn per_km(x: f64) -> String {
+    match x.is_finite() {
+        true => format!("{} ({:+.2} m/km)", pct(x), 1000.0 * x),
+        false => "–".into(),
+    }
+}
+
 /// Whether `ours` meets the goal `goal` (smaller is better).
 fn goal(ours: f64, goal: f64) -> &'static str {
     match ours.is_finite() {
@@ -112,8 +120,8 @@ fn markdown(r: &EddyCurrentResults) -> Result<String> {
             row.pipeline,
             f(row.acceleration.rmse(), 3),
             f(row.hard_acceleration.rmse(), 3),
-            pct(mean(&row.distance_share)),
-            pct(worst),
+            per_km(mean(&row.distance_share)),
+            per_km(worst),
             f(mean(&counts), 1),
             worst_count.map_or("–".into(), |c| c.to_string()),
             f(
