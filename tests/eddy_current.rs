@@ -382,6 +382,15 @@ fn the_viewer_shows_eddy_current_speed_correlation_warp_and_counts() {
     ] {
         assert!(printed.contains(entity), "{entity} missing");
     }
+    // ρ exists only in moving windows: its line breaks over the yard's stops (a Clear),
+    // the sleeper count's does not.
+    let cleared = |entity: &str| {
+        printed
+            .lines()
+            .any(|l| l.contains(&format!("- {entity} -")) && l.contains("Clear"))
+    };
+    assert!(cleared("/diagnostics/warped_kf/eddy_current/correlation/ρ"));
+    assert!(!cleared("/diagnostics/warped_kf/eddy_current/sleepers/sensor_a"));
 }
 
 #[test]

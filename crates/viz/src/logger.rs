@@ -1206,6 +1206,11 @@ impl Logger {
                             &[color],
                             &[[1.5, 1.0][k]],
                         )?;
+                        // ρ and the accelerations exist only in moving windows: the line
+                        // breaks over a stop instead of joining its two ends.
+                        if what != "sleepers" {
+                            self.columns.break_on_silence(id);
+                        }
                         self.raw.insert(entity.clone(), id);
                         let lines = &mut self.layout.pipelines[p].lines;
                         if !lines.iter().any(|(e, _)| *e == plot) {
