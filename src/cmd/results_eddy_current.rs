@@ -202,11 +202,10 @@ fn markdown(r: &EddyCurrentResults) -> Result<String> {
     )?;
     writeln!(md, "  `plain`, without the warp, waits for windows that do not reach back to the standstill and that agree")?;
     writeln!(md, "  with each other.")?;
-    writeln!(md, "- Above 5 m/s the correlation is within a fraction of a per cent. `warped` holds each window's")?;
-    writeln!(md, "  measurement at the window's middle; `warped_kf` gives the filter's state at its latest window, whose")?;
-    writeln!(md, "  p95 sits in the 5–15 m/s phases where the acceleration changes (the filter's acceleration lags the")?;
-    writeln!(md, "  jerk; a larger jerk PSD only adds noise elsewhere) and over switches, where windows of lower ρ are")?;
-    writeln!(md, "  biased by a few cm/s.")?;
+    writeln!(md, "- Above 5 m/s the correlation is within a fraction of a per cent. `warped` and `warped_kf` give their")?;
+    writeln!(md, "  states at the windows' middles, the time a window measures (the filter runs half a window behind the")?;
+    writeln!(md, "  signal, and fuses a sleeper crossing when it gets there); the p95 sits in the 5–15 m/s phases where the")?;
+    writeln!(md, "  acceleration changes, and over switches, where windows of lower ρ are biased by a few cm/s.")?;
     writeln!(md, "- The plain and warped correlators hold their last measurement: their distance on the rough track runs")?;
     writeln!(
         md,

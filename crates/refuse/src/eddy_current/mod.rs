@@ -26,6 +26,7 @@ pub mod speed;
 mod test_track;
 pub mod warping;
 
+use std::collections::VecDeque;
 use std::path::Path;
 
 use nalgebra::{RowVector3, Vector3};
@@ -65,6 +66,8 @@ pub const SWITCH_MARGIN_M: f64 = 3.0;
 const PRIOR_FOR_NS: u64 = 2_000_000_000;
 /// The filter starts over after this long without a measurement, ns.
 const FORGET_AFTER_NS: u64 = 5_000_000_000;
+/// Crossings waiting for the filter, at most (several seconds of sleepers at line speed).
+const MAX_CROSSINGS: usize = 1024;
 /// Windows are at least this far apart, s.
 const MIN_HOP_S: f64 = 0.1;
 /// A start's fit hands over to the correlator once the start lies this far before the
@@ -95,7 +98,10 @@ pub struct EddyCurrentPipeline {
     odometer_m: f64,
     /// Chainage = `count_origin + counter a's distance` once the first sleeper is seen.
     count_origin: Option<f64>,
-    last_count_ns: Option<u64>,
+    /// Sleeper crossings not yet fused: when, and sensor a's counted distance then. The
+    /// filter runs at its windows' middles, half a window behind the signal; a crossing
+    /// waits until the filter reaches its time.
+    crossings: VecDeque<(u64, f64)>,
     /// The level-0 sample of the next window.
     next_window: u64,
     /// The last state's stamp: states go out in time order (a window at a coarser level is
@@ -133,7 +139,7 @@ impl EddyCurrentPipeline {
             departure: None,
             counters: Default::default(),
             count_origin: None,
-            last_count_ns: None,
+            crossings: VecDeque::new(),
             next_window: 0,
             last_out_ns: 0,
             last_measured_ns: None,
@@ -369,7 +375,10 @@ impl EddyCurrentPipeline {
             if self.count_origin.is_none() && !self.standing && matches!(c, Crossing::Counted(_)) {
                 self.count_origin = Some(s - self.counters[0].distance_m);
             }
-            self.last_count_ns = Some(t);
+            if self.crossings.len() == MAX_CROSSINGS {
+                self.crossings.pop_front();
+            }
+            self.crossings.push_back((t, self.counters[0].distance_m));
         }
     }
 
@@ -542,7 +551,7 @@ impl EddyCurrentPipeline {
                         {
                             self.kf = None;
                         }
-                        self.advance(stamp_ns);
+                        self.advance(stamp_ns, false);
                         self.filter_state(o);
                     }
                     false => {
@@ -635,7 +644,7 @@ impl EddyCurrentPipeline {
             return;
         };
         let z = stood_at + s.travelled_m;
-        self.advance(s.at_ns);
+        self.advance(s.at_ns, false);
         if let Some(kf) = self.kf.as_mut() {
             let var = (0.02 + 0.02 * s.travelled_m).powi(2);
             kf.update(&RowVector3::new(1.0, 0.0, 0.0), var, z);
@@ -724,42 +733,61 @@ impl EddyCurrentPipeline {
         push_state(state, o);
     }
 
-    /// The filter to `t`, never backwards: for a window centred before the filter's time,
-    /// how much before (s), so its speed is compared with the state's speed then,
-    /// `v − a Δ` (constant acceleration: exact).
-    fn advance(&mut self, t: u64) -> f64 {
-        let Some(kf) = self.kf.as_mut() else {
+    /// The filter to `t`, never backwards; with `count`, fusing the newest sleeper crossing
+    /// due by then at its own time (only beside a speed measurement: without one, at a stop
+    /// or with no lock, the band-passed signal the crossings come from is not tuned to the
+    /// speed, and they are dropped). For a window centred before the filter's time: how much
+    /// before (s), so its speed is compared with the state's speed then, `v − a Δ` (constant
+    /// acceleration: exact).
+    fn advance(&mut self, t: u64, count: bool) -> f64 {
+        if self.kf.is_none() {
             return 0.0;
-        };
+        }
+        let mut due = None;
+        while self.crossings.front().is_some_and(|c| c.0 <= t) {
+            due = self.crossings.pop_front();
+        }
+        if let (Some((tc, counted)), Some(origin), true) = (due, self.count_origin, count) {
+            if tc > self.kf_ns {
+                self.predict_to(tc);
+                self.fuse_count(origin + counted);
+            }
+        }
         if t > self.kf_ns {
-            let dt = (t - self.kf_ns) as f64 / 1e9;
-            let x = kf.estimate.state;
-            // Braking through zero without a measurement: the train stops where the speed
-            // reaches zero (the correlator sees the speed's magnitude; a train does not run
-            // backwards on its brakes). The prediction goes to that moment, the estimate is
-            // projected onto the constraint (its covariance left as it is: a measurement, not
-            // the constraint, should make the filter sure), and it stands from there.
-            let to_stop = match x[1] > 0.0 && x[2] < 0.0 {
-                true => -x[1] / x[2],
-                false => f64::INFINITY,
-            };
-            if to_stop < dt {
-                kf.predict(&self.model, to_stop);
-                let x = &mut kf.estimate.state;
-                (x[1], x[2]) = (0.0, 0.0);
-                kf.predict(&self.model, dt - to_stop);
-            } else {
-                kf.predict(&self.model, dt);
-            }
-            let x = &mut kf.estimate.state;
-            if x[1] < 0.0 {
-                (x[1], x[2]) = (0.0, x[2].max(0.0));
-            }
-            self.kf_ns = t;
+            self.predict_to(t);
             0.0
         } else {
             (self.kf_ns - t) as f64 / 1e9
         }
+    }
+
+    /// Predicts the filter to `t` (after its time). Braking through zero without a
+    /// measurement, the train stops where the speed reaches zero (the correlator sees the
+    /// speed's magnitude; a train does not run backwards on its brakes): the prediction goes
+    /// to that moment, the estimate is projected onto the constraint (its covariance left as
+    /// it is: a measurement, not the constraint, should make the filter sure), and it stands
+    /// from there.
+    fn predict_to(&mut self, t: u64) {
+        let Some(kf) = self.kf.as_mut() else { return };
+        let dt = t.saturating_sub(self.kf_ns) as f64 / 1e9;
+        let x = kf.estimate.state;
+        let to_stop = match x[1] > 0.0 && x[2] < 0.0 {
+            true => -x[1] / x[2],
+            false => f64::INFINITY,
+        };
+        if to_stop < dt {
+            kf.predict(&self.model, to_stop);
+            let x = &mut kf.estimate.state;
+            (x[1], x[2]) = (0.0, 0.0);
+            kf.predict(&self.model, dt - to_stop);
+        } else {
+            kf.predict(&self.model, dt);
+        }
+        let x = &mut kf.estimate.state;
+        if x[1] < 0.0 {
+            (x[1], x[2]) = (0.0, x[2].max(0.0));
+        }
+        self.kf_ns = t;
     }
 
     fn filter_moving(
@@ -791,7 +819,7 @@ impl EddyCurrentPipeline {
             self.filter_state(o);
             return;
         }
-        let late_s = self.advance(m.stamp_ns);
+        let late_s = self.advance(m.stamp_ns, true);
         let kf = self.kf.as_mut().expect("started");
         let a_prior = kf.estimate.state[2];
         let p_aa = kf.estimate.covariance[(2, 2)];
@@ -849,20 +877,11 @@ impl EddyCurrentPipeline {
             diag.clone(),
             o,
         );
-        self.count_update();
         self.filter_state(o);
     }
 
-    /// The counted distance as a chainage measurement at the last sleeper's time.
-    fn count_update(&mut self) {
-        let (Some(origin), Some(t)) = (self.count_origin, self.last_count_ns) else {
-            return;
-        };
-        let s = origin + self.counters[0].distance_m;
-        if t < self.kf_ns {
-            return;
-        }
-        self.advance(t);
+    /// The counted distance `s` as a chainage measurement at the filter's time.
+    fn fuse_count(&mut self, s: f64) {
         if let Some(kf) = self.kf.as_mut() {
             let h = RowVector3::new(1.0, 0.0, 0.0);
             if kf.innovation(&h, COUNT_STD_M.powi(2), s).nis <= COUNT_GATE_NIS {
@@ -873,7 +892,7 @@ impl EddyCurrentPipeline {
 
     fn filter_standstill(&mut self, t: u64) -> Option<Innovation> {
         self.kf.as_ref()?;
-        self.advance(t);
+        self.advance(t, false);
         let kf = self.kf.as_mut()?;
         let i = kf.update(
             &RowVector3::new(0.0, 1.0, 0.0),
