@@ -530,7 +530,7 @@ fn the_closed_loop_correlator_tracks_like_the_open_loop_one() {
             .iter()
             .filter_map(|st| {
                 let g = truth_at(&truth, st.stamp_ns);
-                (g.speed_mps > 5.0).then(|| st.speed_mps - g.speed_mps)
+                (g.speed_mps > 5.0).then_some(st.speed_mps - g.speed_mps)
             })
             .collect();
         (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt()
