@@ -269,9 +269,11 @@ fn the_acceleration_cross_check_flags_and_keeps_the_warps_acceleration_out() {
         strict_flags > 10 * normal_flags.max(10),
         "{strict_flags} against {normal_flags}"
     );
-    // Measured: 0.227 against 0.207 m/s² (seed 1, first 200 s).
+    // Left out, the warp's acceleration no longer helps the filter's: measured 0.173 against
+    // 0.169 m/s² (seed 1, first 200 s; 0.150 against 0.145 over the whole run). The filter's
+    // own acceleration, from the windows' speeds at their middles, carries most of it.
     assert!(
-        strict_rmse > 1.05 * normal_rmse,
+        strict_rmse > 1.01 * normal_rmse,
         "{strict_rmse} against {normal_rmse}"
     );
 }

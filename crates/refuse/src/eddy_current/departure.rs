@@ -71,9 +71,11 @@ impl Start {
         (v * lag_std / FINE_STEPS as f64).powi(2) + (MODEL_SPEED_SHARE * v).powi(2)
     }
 
-    /// The acceleration's variance, (m/s²)².
+    /// The acceleration's variance, (m/s²)²: wide, for a real start ramps its acceleration
+    /// up (jerk-limited) and the fitted α is the mean over the ramp, well below the one
+    /// reached.
     pub fn acceleration_variance(&self) -> f64 {
-        (0.1 * self.acceleration_mps2 + 0.05 * (2.0 - self.rho)).powi(2)
+        (0.3 * self.acceleration_mps2 + 0.05 * (2.0 - self.rho)).powi(2)
     }
 
     fn agrees(&self, other: &Start) -> bool {

@@ -244,7 +244,8 @@ impl SpeedEstimator {
         if lags.start + 2 >= lags.end {
             return None;
         }
-        let mut acquired = true;
+        // Acquired afresh: found over every lag, not about the expected delay.
+        let mut acquired = prior.is_none();
         let mut peak = None;
         if q.correlator == CorrelatorKind::ClosedLoop {
             if let (Some((ll, lag)), Some(v)) = (self.lock, prior) {
