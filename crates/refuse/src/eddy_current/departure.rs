@@ -21,7 +21,7 @@
 //! and on the acceleration (within 25 %): a chance alignment of clamps does not repeat.
 
 use super::correlation::pearson_at;
-use super::front_end::{FrontEnd, LEVELS, WINDOW};
+use super::front_end::{FrontEnd, LEVELS};
 
 /// A start's fit is no measurement below this correlation: its window has seen a few clamps
 /// only, and a chance alignment of two of them can reach a middling ρ.
@@ -147,11 +147,10 @@ impl Departure {
         min_rho: f64,
     ) -> Option<Fit> {
         let since_max = self.since_quiet_s(fe.now_ns());
-        let span = |l: usize| (WINDOW - 1) as f64 / fe.rate(l);
-        let level = (FIRST_LEVEL..LEVELS).find(|&l| span(l) >= since_max)?;
+        let level = (FIRST_LEVEL..LEVELS).find(|&l| fe.span_s(l) >= since_max)?;
         let rate = fe.rate(level);
         let (a, b, mid) = fe.window(level)?;
-        let end_ns = mid + (0.5 * span(level) * 1e9) as u64;
+        let end_ns = mid + (0.5 * fe.span_s(level) * 1e9) as u64;
         let Some((since, travel, rho)) =
             self.search(&a, &b, rate, spacing_m, since_max, max_acceleration)
         else {

@@ -188,6 +188,11 @@ impl FrontEnd {
         self.fs_hz / (1u64 << l) as f64
     }
 
+    /// The time a window at level `l` spans, first sample to last, s.
+    pub fn span_s(&self, l: usize) -> f64 {
+        (WINDOW - 1) as f64 / self.rate(l)
+    }
+
     /// Time of the latest sample.
     pub fn now_ns(&self) -> u64 {
         self.start_ns + ((self.samples.max(1) - 1) as f64 * 1e9 / self.fs_hz).round() as u64

@@ -564,9 +564,9 @@ impl EddyCurrentPipeline {
         }
     }
 
-    /// A start from a standstill (warped pipelines with `start_fit`, after a standstill, while the signal is
-    /// no longer quiet): the start's fit instead of the correlator, until the start lies
-    /// before the window the correlator would use. None: the correlator's turn.
+    /// A start from a standstill (warped pipelines with `start_fit`, after a standstill,
+    /// while the signal is no longer quiet): the start's fit instead of the correlator, until
+    /// the start lies before the window the correlator would use. None: the correlator's turn.
     fn departing(&mut self, t: u64, q: &Request) -> Option<(Outcome, Option<Moved>)> {
         let front = self.front.as_ref()?;
         let on = self.settings.warp && self.settings.start_fit;
@@ -581,9 +581,9 @@ impl EddyCurrentPipeline {
         }
         let dep = self.departure.as_mut()?;
         let (stood_odometer_m, stood_chainage_m) = (dep.stood_odometer_m, dep.stood_chainage_m);
-        let s = self.settings.clone();
-        let min_rho = s.min_rho.max(departure::MIN_RHO);
-        let fit = dep.fit(front, self.spacing_d, s.max_acceleration_mps2, min_rho);
+        let min_rho = self.settings.min_rho.max(departure::MIN_RHO);
+        let max_acceleration = self.settings.max_acceleration_mps2;
+        let fit = dep.fit(front, self.spacing_d, max_acceleration, min_rho);
         let nothing = |best_rho| {
             Some((
                 Outcome::NoLock {

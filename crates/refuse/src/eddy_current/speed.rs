@@ -118,7 +118,7 @@ impl SpeedEstimator {
         let longest = MAX_SPEED_CHANGE * speed / acceleration.abs().max(1e-9);
         (l.saturating_sub(2)..=l)
             .rev()
-            .find(|&k| (WINDOW - 1) as f64 / fe.rate(k) <= longest)
+            .find(|&k| fe.span_s(k) <= longest)
             .unwrap_or(l.saturating_sub(2))
     }
 
@@ -139,7 +139,7 @@ impl SpeedEstimator {
             let l = Self::level_for_motion(fe, q.spacing_m, v, q.prior_acceleration_mps2);
             // The speed at the window's middle: under hard braking at low speed it is
             // several times the speed now.
-            let half = 0.5 * (WINDOW - 1) as f64 / fe.rate(l);
+            let half = 0.5 * fe.span_s(l);
             let v_mid = (v - q.prior_acceleration_mps2 * half).max(0.5 * v);
             self.at_level(fe, q, l, Some(v_mid))
         });
@@ -178,7 +178,7 @@ impl SpeedEstimator {
             };
         };
         let rate = fe.rate(level);
-        let span_s = (WINDOW - 1) as f64 / rate;
+        let span_s = fe.span_s(level);
         let lag_std = |rho: f64| 0.05 + 2.0 * (1.0 - rho).max(0.0);
         let mut m = SpeedMeasurement {
             stamp_ns: mid,
