@@ -67,6 +67,19 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    // A bug must not greet a field engineer with a backtrace: one line that says what and
+    // where, and that it is railfuse's fault. (Recorder sources catch theirs and go on.)
+    std::panic::set_hook(Box::new(|info| {
+        let what = railfuse_record::recorder::sources::panic_text(info.payload());
+        let at = info
+            .location()
+            .map_or(String::new(), |l| format!(" at {l}"));
+        let thread = std::thread::current();
+        eprintln!(
+            "railfuse: internal error in thread '{}' (a bug; please report it): {what}{at}",
+            thread.name().unwrap_or("unnamed")
+        );
+    }));
     let cli = Cli::parse();
     progress::set_quiet(cli.quiet);
     railfuse_catalog::foxglove::set_twins_by_default(!cli.no_foxglove);

@@ -314,6 +314,7 @@ fn bad_fixes_and_imu_samples_get_their_reason_nothing_fused_from_them_and_are_co
             latitude_deg: Some(lat),
             longitude_deg: Some(lon),
             altitude_m: Some(alt),
+            altitude_msl_m: None,
             position_covariance_enu_m2: Some([4e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 1e-3]),
             speed_mps: Some(10.0),
             course_rad: Some(std::f64::consts::FRAC_PI_2),

@@ -3,6 +3,7 @@
 
 mod common;
 
+use common::live::free_port;
 use common::*;
 
 fn python_ok(script: &str, args: &[&str]) -> serde_json::Value {
@@ -443,14 +444,6 @@ fn sensor_states_reach_the_fused_file_and_the_viewer() {
     rerun_ok(&["rrd", "verify", s(&rrd)]);
     assert!(rerun_ok(&["rrd", "print", "-v", s(&rrd)])
         .contains("/diagnostics/sf/sensor_states/radar_speed/scale_factor"));
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
 }
 
 /// A real Rerun server on loopback that saves what it receives: (process, URL, file).

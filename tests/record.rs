@@ -5,30 +5,13 @@ mod common;
 
 use std::io::Write;
 use std::net::{TcpStream, UdpSocket};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use common::live::*;
 use common::*;
 use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::{GnssFix, RadarSpeed};
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn spawn(args: &[&str]) -> Child {
-    Command::new(env!("CARGO_BIN_EXE_railfuse"))
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap()
-}
 
 /// Speeds of every /radar/speed message, in file order, and the recorder's own diagnostics.
 fn radar_speeds(path: &std::path::Path) -> (Vec<f64>, usize) {
@@ -92,35 +75,6 @@ fn captures(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
     (nmea, ubx)
 }
 
-fn line(k: usize) -> String {
-    format!(
-        r#"{{"topic":"/radar/speed","stamp_ns":{},"speed_mps":{k},"quality":1.0,"valid":true}}"#,
-        1_000 + k
-    )
-}
-
-fn stop(child: Child) -> serde_json::Value {
-    unsafe { libc::kill(child.id() as i32, libc::SIGTERM) };
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
-fn wait_listening(port: u16) {
-    let t = Instant::now();
-    while TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(
-            t.elapsed() < Duration::from_secs(20),
-            "the recorder never listened on {port}"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 #[test]
 fn udp_and_tcp_json_lines_arrive_once_in_order_and_garbage_is_counted() {
     let d = tempfile::tempdir().unwrap();
@@ -140,7 +94,7 @@ fn udp_and_tcp_json_lines_arrive_once_in_order_and_garbage_is_counted() {
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
     for k in 0..2000 {
-        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp))
+        sock.send_to(radar_line(k).as_bytes(), ("127.0.0.1", udp))
             .unwrap();
         if k % 200 == 0 {
             sock.send_to(b"\x00\x01 binary noise \xff", ("127.0.0.1", udp))
@@ -149,7 +103,7 @@ fn udp_and_tcp_json_lines_arrive_once_in_order_and_garbage_is_counted() {
             conn.write_all(&vec![b'x'; 70_000]).unwrap();
             conn.write_all(b"\n").unwrap();
         }
-        conn.write_all(format!("{}\n", line(10_000 + k)).as_bytes())
+        conn.write_all(format!("{}\n", radar_line(10_000 + k)).as_bytes())
             .unwrap();
         if k % 100 == 0 {
             std::thread::sleep(Duration::from_millis(2)); // a UDP sender paces itself
@@ -201,7 +155,7 @@ fn nmea_and_ubx_files_and_stdin_record_their_fixes_and_count_bad_checksums() {
     ]);
     let mut stdin = child.stdin.take().unwrap();
     for k in 0..100 {
-        writeln!(stdin, "{}", line(k)).unwrap();
+        writeln!(stdin, "{}", radar_line(k)).unwrap();
     }
     drop(stdin); // end of input: with the files read too, every source has ended
     let out_json = child.wait_with_output().unwrap();
@@ -248,27 +202,7 @@ fn nmea_and_ubx_files_and_stdin_record_their_fixes_and_count_bad_checksums() {
 fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets_the_rest() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("killed.mcap");
-    let partial = d.path().join("killed.mcap.partial");
-    let tcp = free_port();
-    let mut child = spawn(&[
-        "record",
-        "-o",
-        s(&out),
-        "--tcp",
-        &tcp.to_string(),
-        "--chunk-interval",
-        "0.2",
-    ]);
-    wait_listening(tcp);
-    let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
-    for k in 0..3000 {
-        conn.write_all(format!("{}\n", line(k)).as_bytes()).unwrap();
-    }
-    conn.flush().unwrap();
-    std::thread::sleep(Duration::from_millis(1500)); // several chunk intervals
-    child.kill().unwrap(); // SIGKILL
-    child.wait().unwrap();
-    assert!(!out.exists() && partial.exists());
+    let partial = killed_recording(&out, 3000);
     let fixed = d.path().join("fixed.mcap");
     let r: serde_json::Value =
         serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout)
@@ -397,8 +331,8 @@ fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
     assert_eq!(
         (
             r["messages"].as_u64(),
-            r["skipped"]["checksum failures"].as_u64(),
-            r["skipped"]["malformed"].as_u64()
+            r["skipped"]["NMEA checksum failure"].as_u64(),
+            r["skipped"]["not an NMEA sentence"].as_u64()
         ),
         (Some(50), Some(50), Some(50)),
         "{r}"
@@ -413,14 +347,6 @@ fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
     .unwrap();
     assert_eq!(r["messages"], 1, "{r}");
     assert_eq!(gnss_fixes(&b)[0].satellites, 29);
-}
-
-/// NMEA sentences with their checksums, CRLF-terminated.
-fn nmea_text(bodies: &[String]) -> String {
-    bodies
-        .iter()
-        .map(|b| format!("${b}*{:02X}\r\n", b.bytes().fold(0u8, |a, x| a ^ x)))
-        .collect()
 }
 
 #[test]
@@ -619,7 +545,7 @@ fn a_disk_filling_mid_recording_keeps_every_closed_chunk() {
             "the recorder never hit the size limit after {k} messages"
         );
         for _ in 0..50 {
-            let _ = sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp));
+            let _ = sock.send_to(radar_line(k).as_bytes(), ("127.0.0.1", udp));
             k += 1;
         }
         std::thread::sleep(Duration::from_millis(10));
@@ -704,7 +630,7 @@ fn sources_come_from_a_toml_file_too() {
     std::thread::sleep(Duration::from_millis(700));
     let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
     for k in 0..10 {
-        sock.send_to(line(k).as_bytes(), ("127.0.0.1", udp))
+        sock.send_to(radar_line(k).as_bytes(), ("127.0.0.1", udp))
             .unwrap();
     }
     let o = child.wait_with_output().unwrap();

@@ -94,8 +94,8 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     sock.set_write_timeout(Some(Duration::from_secs(1)))?;
     println!("UDP ingest (JSON lines, one message per datagram, 3 s per rate):");
     println!(
-        "{:>12} {:>10} {:>10} {:>8}",
-        "rate msg/s", "sent", "written", "lost"
+        "{:>12} {:>10} {:>10} {:>8} {:>22}",
+        "rate msg/s", "sent", "written", "lost", "counted as kernel drop"
     );
     let mut best = 0.0;
     // Doubling to 80 000, then finer steps to find where loss begins.
@@ -110,8 +110,9 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
         std::thread::sleep(Duration::from_millis(500));
         let r = finish(c)?;
         let written = r["per_topic"]["/radar/speed"].as_u64().unwrap_or(0);
+        let kernel = r["sources"][0]["kernel_dropped"].as_u64().unwrap_or(0);
         println!(
-            "{rate:>12.0} {sent:>10} {written:>10} {:>8}",
+            "{rate:>12.0} {sent:>10} {written:>10} {:>8} {kernel:>22}",
             sent.saturating_sub(written)
         );
         if written >= sent {

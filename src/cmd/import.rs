@@ -50,7 +50,9 @@ fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
             .ok_or_else(bad)
     };
     let (y, m, d) = (next()?, next()?, next()?);
-    if !(1970..=9999).contains(&y) || !(1..=12).contains(&m) || !(1..=31).contains(&d) {
+    let on_calendar =
+        (1..=12).contains(&m) && railfuse_record::decode::time::is_date(y, m as u32, d as u32);
+    if !(1970..=9999).contains(&y) || !on_calendar {
         return Err(bad());
     }
     Ok((y, m as u32, d as u32))
@@ -80,9 +82,13 @@ pub fn run(a: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
+    let read = if report.lines > 0 || report.bytes == 0 {
+        format!("{} lines", report.lines)
+    } else {
+        format!("{} bytes", report.bytes)
+    };
     println!(
-        "imported {} lines of {} as {} messages -> {}",
-        report.lines,
+        "imported {read} of {} as {} messages -> {}",
         report.input.display(),
         report.messages,
         report.output.display()

@@ -140,7 +140,7 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
 }
 
 fn status_line(s: &Status) -> String {
-    let dropped: u64 = s.sources.iter().map(|x| x.dropped).sum();
+    let dropped: u64 = s.sources.iter().map(|x| x.dropped + x.kernel_dropped).sum();
     let bad: u64 = s
         .sources
         .iter()
@@ -199,8 +199,12 @@ pub fn run(a: Args) -> Result<()> {
     }
     let terminal = std::io::stderr().is_terminal();
     let mut since_plain = 0u32;
-    let mut warned = 0;
+    let (mut warned, mut said) = (0, 0);
     let status: Box<dyn FnMut(&Status)> = Box::new(move |s: &Status| {
+        for n in &s.notices[said..] {
+            eprintln!("{}warning: {n}", if terminal { "\r\x1b[2K" } else { "" });
+        }
+        said = s.notices.len();
         // A source that fails for good is said at once, on its own line: the run goes on with
         // the others, but the engineer should not find out at the end of a three-hour run.
         for f in &s.failed_sources[warned..] {
@@ -279,23 +283,41 @@ pub fn run(a: Args) -> Result<()> {
         );
         for s in &report.sources {
             println!(
-                "  {}: {} received, {} written, {} dropped, {} malformed, {} checksum failures, {} oversized, {} reconnects{}",
+                "  {}: {} received, {} written, {} dropped by the recorder, {} by the kernel, {} malformed, {} checksum failures, {} oversized, {} reconnects{}",
                 s.name,
                 s.received,
                 s.written,
                 s.dropped,
+                s.kernel_dropped,
                 s.malformed,
                 s.checksum_failures,
                 s.oversized,
                 s.reconnects,
                 s.last_error.as_ref().map_or(String::new(), |e| format!(" (last error: {e})"))
             );
+            for (reason, n) in &s.skipped {
+                println!("    skipped {n:>8}  {reason}");
+            }
+            for p in &s.first_problems {
+                println!("    {p}");
+            }
+        }
+        if report.lost_to_write_error > 0 {
+            println!(
+                "  {} messages taken from the sources did not reach the disk before the write error",
+                report.lost_to_write_error
+            );
         }
     }
     if let Some(e) = &report.write_error {
+        let file = report.failed_file.as_ref().unwrap_or(&report.output);
+        let partial = railfuse_catalog::log::partial_path(file);
         bail!(
-            "recording stopped by a write error (every closed chunk is kept; `railfuse recover {}.partial` salvages them if the file was not finished): {e}",
-            report.output.display()
+            "recording stopped by a write error: {e}; every closed chunk is kept in {} \
+             (`railfuse recover {} -o {}` salvages them)",
+            partial.display(),
+            partial.display(),
+            file.display()
         );
     }
     if !report.failed_sources.is_empty() {

@@ -36,6 +36,8 @@ pub enum Error {
     },
     #[error("{path}: cannot write MCAP: {cause}")]
     Write { path: PathBuf, cause: String },
+    #[error("{output}: this is the input {input} itself (the same file); write the salvaged log to another path")]
+    OutputIsInput { input: PathBuf, output: PathBuf },
 }
 
 impl Error {

@@ -56,8 +56,8 @@ pub enum SourceError {
     },
     #[error("simulated source: temporary file: {0}")]
     TempFile(#[source] io::Error),
-    #[error("the source's thread panicked")]
-    Panicked,
+    #[error("ended by an internal error (a bug in railfuse; please report it): {0}")]
+    Panicked(String),
 }
 
 /// What is wrong with one JSON line (or one CSV row made into a message).

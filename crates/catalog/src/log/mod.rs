@@ -16,7 +16,7 @@ pub use reader::{
     SchemaInfo,
 };
 pub use recover::{recover, RecoverReport};
-pub use writer::{ChannelId, LogWriter, WriterOptions};
+pub use writer::{partial_path, ChannelId, LogWriter, WriterOptions};
 
 /// MCAP profile name railfuse writes (no ROS semantics: plain JSON channels).
 pub const PROFILE: &str = "railfuse";
@@ -33,6 +33,31 @@ mod tests {
 
     use super::*;
     use crate::messages::{ChannelMessage, RadarSpeed};
+
+    #[test]
+    fn a_writer_dropped_on_an_error_path_keeps_a_partial_that_holds_messages() {
+        let d = tempfile::tempdir().unwrap();
+        let (path, empty) = (d.path().join("run.mcap"), d.path().join("empty.mcap"));
+        let mut w = LogWriter::create(&path).unwrap();
+        let ch = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();
+        for k in 0..100u64 {
+            let m = RadarSpeed {
+                stamp_ns: k,
+                speed_mps: 1.0,
+                quality: 1.0,
+                valid: true,
+                speed_variance_m2ps2: None,
+            };
+            w.write(ch, k, &m).unwrap();
+        }
+        drop(w); // as a panic unwinding through the recorder would
+        let partial = partial_path(&path);
+        let fixed = d.path().join("fixed.mcap");
+        assert_eq!(recover(&partial, &fixed).unwrap().messages, 100);
+        // One with nothing in it is cleaned up.
+        drop(LogWriter::create(&empty).unwrap());
+        assert!(!partial_path(&empty).exists());
+    }
 
     #[test]
     fn what_is_written_reads_back_record_for_record() {

@@ -41,8 +41,37 @@ pub struct RecoverReport {
     pub orphan_messages: u64,
 }
 
+/// The file `recover` writes `output` through until it is complete: `<output>.partial`, or,
+/// where that is the input itself (`recover run.mcap.partial -o run.mcap`, the usual case),
+/// `<output>.recovering`. The input is never written over, truncated or deleted: an output
+/// that is the input (the same path, or a hard or symbolic link to it) is refused.
+fn working_path(input: &Path, output: &Path) -> Result<PathBuf> {
+    let same = |p: &Path| same_file::is_same_file(input, p).unwrap_or(false);
+    if same(output) {
+        return Err(Error::OutputIsInput {
+            input: input.to_owned(),
+            output: output.to_owned(),
+        });
+    }
+    let partial = super::partial_path(output);
+    if !same(&partial) {
+        return Ok(partial);
+    }
+    let mut working = output.as_os_str().to_owned();
+    working.push(".recovering");
+    let working = PathBuf::from(working);
+    if same(&working) {
+        return Err(Error::OutputIsInput {
+            input: input.to_owned(),
+            output: working,
+        });
+    }
+    Ok(working)
+}
+
 /// Copies every intact record of `input` into a complete log at `output`.
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
+    let working = working_path(input, output)?;
     let mut scanner = Scanner::salvage(input)?;
     let mut report = RecoverReport {
         input: input.to_owned(),
@@ -50,7 +79,7 @@ pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
         input_bytes: scanner.size(),
         ..Default::default()
     };
-    let mut writer = LogWriter::create(output)?;
+    let mut writer = LogWriter::create_working(output, &working, &Default::default())?;
     let mut channels: BTreeMap<u16, String> = BTreeMap::new();
     // Channels lost with a damaged chunk may still be in an intact summary.
     let mut from_summary = BTreeMap::new();

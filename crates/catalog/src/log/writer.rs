@@ -127,9 +127,12 @@ impl LogWriter {
 
     pub fn create_with(path: impl AsRef<Path>, options: &WriterOptions) -> Result<Self> {
         let path = path.as_ref().to_owned();
-        let mut partial = path.clone().into_os_string();
-        partial.push(".partial");
-        let partial = PathBuf::from(partial);
+        Self::create_working(&path, &partial_path(&path), options)
+    }
+
+    /// Writes `path`, by way of `working` (instead of `<path>.partial`) until it is finished.
+    pub fn create_working(path: &Path, working: &Path, options: &WriterOptions) -> Result<Self> {
+        let (path, partial) = (path.to_owned(), working.to_owned());
         let file = File::create(&partial).map_err(|e| Error::io(&partial, e))?;
         let mut start = MAGIC.to_vec();
         let header = Header {
@@ -638,13 +641,30 @@ impl LogWriter {
     }
 }
 
+/// Where the log `path` is written until it is finished: `<path>.partial`.
+pub fn partial_path(path: &Path) -> PathBuf {
+    let mut partial = path.as_os_str().to_owned();
+    partial.push(".partial");
+    PathBuf::from(partial)
+}
+
 impl Drop for LogWriter {
     fn drop(&mut self) {
-        // Dropped without finish(): an error path. Leave no `.partial` file behind.
-        if let Some(worker) = self.worker.take() {
+        // Dropped without finish(): an error path (or a panic unwinding). A file that holds
+        // messages is never deleted: its open chunk is written too, and the `.partial` stays
+        // for `railfuse recover`. Only an empty one is removed.
+        if self.worker.is_some() {
+            let holds_messages = self.stats.message_count > 0;
+            if holds_messages {
+                let _ = self.close_chunk();
+            }
             self.jobs = None;
-            let _ = worker.join();
-            let _ = std::fs::remove_file(&self.partial);
+            if let Some(worker) = self.worker.take() {
+                let _ = worker.join();
+            }
+            if !holds_messages {
+                let _ = std::fs::remove_file(&self.partial);
+            }
         }
     }
 }

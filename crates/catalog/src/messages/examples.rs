@@ -15,7 +15,7 @@ impl MessageKind {
         match self {
             MessageKind::GnssFix => json!({
                 "stamp_ns": T, "fix_type": "rtk_fixed", "satellites": 21, "hdop": 0.6,
-                "latitude_deg": 44.6551106, "longitude_deg": 10.9297304, "altitude_m": 79.3,
+                "latitude_deg": 44.6551106, "longitude_deg": 10.9297304, "altitude_m": 79.3, "altitude_msl_m": 35.2,
                 "position_covariance_enu_m2": [4e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 1e-3],
                 "speed_mps": 22.5, "course_rad": 1.2
             }),
@@ -104,8 +104,10 @@ impl MessageKind {
                 "stamp_ns": T, "bytes_written": 1_048_576,
                 "sources": [{
                     "name": "udp:5600", "received": 100, "written": 99, "malformed": 1,
-                    "checksum_failures": 0, "oversized": 0, "dropped": 0, "reconnects": 0,
-                    "connected": true, "last_error": "not a JSON object"
+                    "checksum_failures": 0, "oversized": 0, "dropped": 0, "kernel_dropped": 2,
+                    "reconnects": 0, "connected": true, "last_error": "not a JSON object",
+                    "skipped": {"JSON line that does not decode": 1},
+                    "first_problems": ["line 7: not a JSON object: expected value at line 1 column 1"]
                 }]
             }),
         }

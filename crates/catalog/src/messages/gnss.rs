@@ -49,6 +49,10 @@ pub struct GnssFix {
     /// Height above the WGS84 ellipsoid.
     #[serde(default)]
     pub altitude_m: Option<f64>,
+    /// Height above mean sea level (the geoid), as the receiver reported it (NMEA GGA, UBX
+    /// hMSL); absent where the source gives only the ellipsoidal height.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub altitude_msl_m: Option<f64>,
     /// Position covariance in the local east/north/up frame, row-major 3×3, m².
     #[serde(default)]
     pub position_covariance_enu_m2: Option<[f64; 9]>,

@@ -1,6 +1,11 @@
 //! u-blox UBX frames: `b5 62`, class, id, little-endian u16 length, payload, Fletcher-8
 //! checksum over class..payload. Decoded: NAV-PVT (position, velocity, time, fix type) and
 //! NAV-COV (position covariance, NED).
+//!
+//! What a receiver marks invalid is not used: a NAV-PVT without `validDate` and `validTime`
+//! has no UTC (and a date off the calendar or `nano` outside ±1 s counts as none), one with
+//! `flags3.invalidLlh` or a latitude/longitude off the globe has no position, and a NAV-COV
+//! with a non-finite value or a negative variance is refused.
 
 use railfuse_catalog::messages::{FixType, GnssFix};
 
@@ -22,6 +27,22 @@ pub enum UbxError {
     Checksum { expected: [u8; 2], found: [u8; 2] },
     #[error("UBX {class:02x}/{id:02x} with a {len}-byte payload of the wrong size")]
     BadPayload { class: u8, id: u8, len: usize },
+    #[error("UBX NAV-COV with a covariance that is not finite or has a negative variance")]
+    BadCovariance,
+}
+
+impl UbxError {
+    /// The reason a frame is refused, as reports count it: one name per kind of problem.
+    pub fn reason(&self) -> &'static str {
+        match self {
+            UbxError::NoSync => "no UBX sync bytes",
+            UbxError::Truncated => "UBX frame cut short",
+            UbxError::TooLong(_) => "UBX frame over the length limit",
+            UbxError::Checksum { .. } => "UBX checksum failure",
+            UbxError::BadPayload { .. } => "UBX payload of the wrong size",
+            UbxError::BadCovariance => "UBX NAV-COV with an invalid covariance",
+        }
+    }
 }
 
 /// One checked frame.
@@ -87,7 +108,12 @@ pub struct NavPvt {
     pub num_sv: u8,
     pub lon_deg: f64,
     pub lat_deg: f64,
+    /// Height above the ellipsoid.
     pub height_m: f64,
+    /// Height above mean sea level.
+    pub height_msl_m: f64,
+    /// flags3.invalidLlh: the receiver says longitude, latitude and heights are not valid.
+    pub invalid_llh: bool,
     pub h_acc_m: f64,
     pub v_acc_m: f64,
     pub ground_speed_mps: f64,
@@ -146,6 +172,8 @@ impl NavPvt {
             lon_deg: i32le(p, 24) as f64 * 1e-7,
             lat_deg: i32le(p, 28) as f64 * 1e-7,
             height_m: i32le(p, 32) as f64 * 1e-3,
+            height_msl_m: i32le(p, 36) as f64 * 1e-3,
+            invalid_llh: p[78] & 0x01 != 0,
             h_acc_m: u32le(p, 40) as f64 * 1e-3,
             v_acc_m: u32le(p, 44) as f64 * 1e-3,
             ground_speed_mps: i32le(p, 60) as f64 * 1e-3,
@@ -155,9 +183,10 @@ impl NavPvt {
     }
 
     /// The fix type as railfuse names it: no position unless the receiver says the fix is
-    /// good and it is a 2D/3D (or GNSS + DR) solution.
+    /// good, it is a 2D/3D (or GNSS + DR) solution, and its position is valid and on the globe.
     pub fn railfuse_fix_type(&self) -> FixType {
-        if !self.gnss_fix_ok || !matches!(self.fix_type, 2..=4) {
+        let on_globe = self.lat_deg.abs() <= 90.0 && self.lon_deg.abs() <= 180.0;
+        if !self.gnss_fix_ok || !matches!(self.fix_type, 2..=4) || self.invalid_llh || !on_globe {
             return FixType::None;
         }
         match (self.carr_soln, self.diff_soln) {
@@ -181,6 +210,7 @@ impl NavPvt {
             latitude_deg: has.then_some(self.lat_deg),
             longitude_deg: has.then_some(self.lon_deg),
             altitude_m: has.then_some(self.height_m),
+            altitude_msl_m: has.then_some(self.height_msl_m),
             // hAcc is the receiver's horizontal 1σ estimate: split evenly over east and north.
             position_covariance_enu_m2: has.then(|| {
                 covariance_enu.unwrap_or([h2 / 2.0, 0.0, 0.0, 0.0, h2 / 2.0, 0.0, 0.0, 0.0, v2])
@@ -214,6 +244,10 @@ impl NavCov {
         }
         let c = |o| f32le(p, o) as f64;
         let (nn, ne, nd, ee, ed, dd) = (c(16), c(20), c(24), c(28), c(32), c(36));
+        let finite = [nn, ne, nd, ee, ed, dd].iter().all(|x| x.is_finite());
+        if !finite || nn < 0.0 || ee < 0.0 || dd < 0.0 {
+            return Err(UbxError::BadCovariance);
+        }
         // NED → ENU: E = e, N = n, U = −d.
         let enu = [ee, ne, -ed, ne, nn, -nd, -ed, -nd, dd];
         Ok(NavCov {
@@ -278,6 +312,53 @@ impl PvtCovPairing {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A frame of `class`/`id` around `payload`, with its checksum.
+    fn frame(class: u8, id: u8, payload: &[u8]) -> Vec<u8> {
+        let mut f = vec![0xb5, 0x62, class, id];
+        f.extend_from_slice(&(payload.len() as u16).to_le_bytes());
+        f.extend_from_slice(payload);
+        let c = checksum(&f[2..]);
+        f.extend_from_slice(&c);
+        f
+    }
+
+    #[test]
+    fn what_the_receiver_marks_invalid_or_off_the_calendar_is_not_used() {
+        let mut p = vec![0u8; 92];
+        p[4..6].copy_from_slice(&2024u16.to_le_bytes());
+        (p[6], p[7], p[8], p[9], p[10], p[11]) = (12, 31, 23, 59, 59, 0x07);
+        (p[20], p[21]) = (3, 0x01); // 3D, gnssFixOK
+        p[28..32].copy_from_slice(&480_000_000i32.to_le_bytes());
+        let decode = |p: &[u8]| {
+            let f = frame(0x01, 0x07, p);
+            NavPvt::decode(&parse_frame(&f).unwrap().0).unwrap()
+        };
+        let good = decode(&p);
+        assert!(good.utc_ns.is_some() && good.railfuse_fix_type() == FixType::Single);
+        let mut invalid_llh = p.clone();
+        invalid_llh[78] = 0x01;
+        assert_eq!(decode(&invalid_llh).railfuse_fix_type(), FixType::None);
+        assert_eq!(decode(&invalid_llh).to_fix(1, None).latitude_deg, None);
+        // 31 December, month 13, and second 60 at 23:58 (not a leap second).
+        for (at, value) in [(7, 32u8), (6, 13), (10, 60)] {
+            let mut bad = p.clone();
+            (bad[9], bad[at]) = (58, value);
+            assert_eq!(decode(&bad).utc_ns, None, "byte {at} = {value}");
+        }
+        let mut nano = p.clone();
+        nano[16..20].copy_from_slice(&2_000_000_000i32.to_le_bytes());
+        assert_eq!(decode(&nano).utc_ns, None);
+        // NAV-COV: a NaN or a negative variance is refused.
+        for (at, value) in [(16, f32::NAN), (28, -1.0f32), (36, f32::INFINITY)] {
+            let mut c = vec![0u8; 64];
+            c[5] = 1;
+            c[at..at + 4].copy_from_slice(&value.to_le_bytes());
+            let f = frame(0x01, 0x36, &c);
+            let got = NavCov::decode(&parse_frame(&f).unwrap().0);
+            assert_eq!(got, Err(UbxError::BadCovariance), "offset {at}: {value}");
+        }
+    }
 
     #[test]
     fn ack_frames_check_and_a_flipped_byte_fails_the_checksum() {

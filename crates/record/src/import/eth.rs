@@ -243,14 +243,15 @@ impl EthImport {
     fn nmea_sentence(&mut self, n: u64, now: u64, data: &str) -> Result<()> {
         let clock = self.offset.map(|_| now);
         match nmea::parse(data).and_then(|s| self.nmea.feed(&s, clock)) {
-            Ok(Decoded::Fix) => {
-                while let Some(fix) = self.nmea.next_fix() {
-                    self.fix(now, &fix)?;
-                }
+            Ok(Decoded::Used) => {}
+            Ok(Decoded::NoFixYet) => {
+                self.count("NMEA GGA without a time (the receiver has no fix yet)".into())
             }
-            Ok(Decoded::Context | Decoded::Held) => {}
             Ok(Decoded::Skipped) => self.count("NMEA sentence type not used (GSV, GLL, …)".into()),
-            Err(e) => self.report.skip(n, "NMEA sentence rejected", e),
+            Err(e) => self.report.skip(n, e.reason(), e),
+        }
+        while let Some(fix) = self.nmea.next_fix() {
+            self.fix(now, &fix)?;
         }
         Ok(())
     }
@@ -359,6 +360,18 @@ pub fn import_with_progress(
     }
     if let (Some(pvt), Some(now)) = (im.pairing.finish(), im.last_now) {
         im.fix(now, &pvt.to_fix(pvt.utc_ns.unwrap_or(now), None))?;
+    }
+    // The last NMEA reporting cycle ends with the file.
+    let clock = im.offset.and(im.last_now);
+    let undated = im.nmea.finish(clock);
+    while let (Some(fix), Some(now)) = (im.nmea.next_fix(), im.last_now) {
+        im.fix(now, &fix)?;
+    }
+    if undated > 0 {
+        *im.report
+            .skipped
+            .entry("NMEA fixes with no date".to_owned())
+            .or_insert(0) += undated;
     }
     let run = BTreeMap::from([
         ("run_id".to_owned(), stem.clone()),

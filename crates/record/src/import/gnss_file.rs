@@ -45,6 +45,7 @@ pub fn import(
             eof = true;
             decoder.finish(0, &mut stats, &mut items);
         } else {
+            report.bytes += n as u64;
             decoder.feed(&buf[..n], 0, &mut stats, &mut items);
         }
         for item in items.drain(..) {
@@ -59,22 +60,9 @@ pub fn import(
                 .or_insert(0) += 1;
         }
     }
-    for (what, n) in [
-        ("checksum failures", stats.checksum_failures),
-        ("malformed", stats.malformed),
-        ("oversized", stats.oversized),
-        (
-            "NMEA fixes with no date (no RMC/ZDA after them; give --date)",
-            decoder.undated_fixes(),
-        ),
-    ] {
-        if n > 0 {
-            report.skipped.insert(what.to_owned(), n);
-        }
-    }
-    if let Some(e) = stats.last_error {
-        report.first_problems.push(e);
-    }
+    report.lines = decoder.lines();
+    report.skipped = stats.skipped;
+    report.first_problems = stats.first_problems;
     writer.finish()?;
     Ok(report)
 }

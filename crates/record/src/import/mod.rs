@@ -22,6 +22,8 @@ pub struct ImportReport {
     pub output: PathBuf,
     pub format: String,
     pub lines: u64,
+    /// Bytes read (binary formats, where there are no lines).
+    pub bytes: u64,
     pub messages: u64,
     pub per_topic: BTreeMap<String, u64>,
     /// Input that was not used, by reason (bad checksum, unknown line type, …).

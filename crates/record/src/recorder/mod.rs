@@ -7,21 +7,26 @@
 //! rest), writes its own health on `/recorder/diagnostics`, and finishes the file cleanly when
 //! told to stop (SIGINT/SIGTERM in the CLI), when a duration is up or when every source has
 //! ended. A write error (a full disk) stops the recording: what was written is kept.
+//!
+//! A recording is never lost: a `.partial` left by an earlier run that did not finish is moved
+//! aside (and said) before a new one starts; a source that fails or panics ends alone; on a
+//! stop the sources drain what their peers already sent while the writer keeps writing; and
+//! the file of a run that ends abnormally stays as `.partial` for `railfuse recover`.
 
 pub mod message;
 mod serial;
 pub mod source_spec;
 pub mod sources;
 pub mod stream;
+mod udp;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, TryRecvError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use railfuse_catalog::log::LogWriter;
+use railfuse_catalog::log::{partial_path, LogWriter};
 use railfuse_catalog::messages::{RecorderDiagnostics, SourceStats};
 use railfuse_catalog::topics;
 use serde::Serialize;
@@ -67,6 +72,9 @@ pub struct Status {
     pub sources: Vec<SourceStats>,
     /// Sources that ended for good with an error ("<source>: <cause>"), in the order they did.
     pub failed_sources: Vec<String>,
+    /// What the engineer must hear at once (a `.partial` moved aside, a listener that cannot
+    /// accept), in the order it happened.
+    pub notices: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -84,14 +92,23 @@ pub struct RecordReport {
     pub failed_sources: Vec<String>,
     /// Every file written, in order (one unless splitting).
     pub files: Vec<PathBuf>,
+    /// The file being written when a write error stopped the recording.
+    pub failed_file: Option<PathBuf>,
+    /// Messages taken from the sources that never reached the disk (the open chunk when a
+    /// write error stopped the recording); not counted in `messages`.
+    pub lost_to_write_error: u64,
+    /// What was said at once during the recording.
+    pub notices: Vec<String>,
 }
 
 /// Joins a source's thread; an error that ended it goes on the list as "<source>: <cause>".
 fn join_source(name: String, handle: SourceThread, failed: &mut Vec<String>) {
-    if let Err(e) = handle
-        .join()
-        .unwrap_or(Err(crate::error::SourceError::Panicked))
-    {
+    let joined = handle.join().unwrap_or_else(|_| {
+        Err(crate::error::SourceError::Panicked(
+            "the source's thread".into(),
+        ))
+    });
+    if let Err(e) = joined {
         failed.push(format!("{name}: {e}"));
     }
 }
@@ -106,12 +123,45 @@ pub fn part_path(output: &Path, n: u32) -> PathBuf {
     output.with_file_name(format!("{stem}-{n:03}.{ext}"))
 }
 
-/// Opens one output file with the recorder's channel and the run metadata.
+/// A `.partial` of `path` left by an earlier recording that did not finish, if it holds data,
+/// is moved aside (never written over): `run.mcap.partial` → `run-unrecovered-1.mcap.partial`.
+/// Returns what to tell the engineer.
+fn move_aside_unfinished(path: &Path) -> railfuse_catalog::Result<Option<String>> {
+    let partial = partial_path(path);
+    let size = match std::fs::metadata(&partial) {
+        Ok(m) if m.is_file() && m.len() > 0 => m.len(),
+        _ => return Ok(None),
+    };
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
+    let ext = path.extension().and_then(|s| s.to_str()).unwrap_or("mcap");
+    let aside = (1..)
+        .map(|n| partial_path(&path.with_file_name(format!("{stem}-unrecovered-{n}.{ext}"))))
+        .find(|p| !p.exists())
+        .expect("a free name");
+    std::fs::rename(&partial, &aside).map_err(|e| railfuse_catalog::Error::Io {
+        path: partial.clone(),
+        source: e,
+    })?;
+    let salvaged = aside.with_extension("");
+    Ok(Some(format!(
+        "{} ({:.1} MiB) was left by a recording that did not finish: moved to {}; \
+         `railfuse recover {} -o {}` salvages it",
+        partial.display(),
+        size as f64 / (1 << 20) as f64,
+        aside.display(),
+        aside.display(),
+        salvaged.display()
+    )))
+}
+
+/// Opens one output file with the recorder's channel and the run metadata; a notice when an
+/// unfinished file of the same name was moved aside.
 fn open_part(
     path: &Path,
     opts: &RecordOptions,
     part: Option<u32>,
-) -> railfuse_catalog::Result<(ItemWriter, railfuse_catalog::log::ChannelId)> {
+) -> railfuse_catalog::Result<(ItemWriter, railfuse_catalog::log::ChannelId, Option<String>)> {
+    let notice = move_aside_unfinished(path)?;
     let mut writer = ItemWriter::new(LogWriter::create(path)?);
     let diag = writer
         .writer
@@ -133,13 +183,11 @@ fn open_part(
     writer
         .writer
         .write_metadata(topics::metadata::RUN, metadata)?;
-    Ok((writer, diag))
+    Ok((writer, diag, notice))
 }
 
 fn file_size(path: &Path) -> u64 {
-    let mut partial = path.as_os_str().to_owned();
-    partial.push(".partial");
-    std::fs::metadata(&partial)
+    std::fs::metadata(partial_path(path))
         .or_else(|_| std::fs::metadata(path))
         .map_or(0, |m| m.len())
 }
@@ -180,6 +228,10 @@ pub fn record(
 
 type SourceThread = std::thread::JoinHandle<Result<(), crate::error::SourceError>>;
 
+/// How long a stopping recording waits for its sources (they drain for [`sources::DRAIN`]);
+/// one blocked for good (a terminal on standard input) is left behind.
+const STOP_WAIT: Duration = Duration::from_secs(4);
+
 /// A recording in progress: the sources' threads and queues, the open output file and the
 /// counts.
 struct Recording {
@@ -190,12 +242,20 @@ struct Recording {
     files: Vec<PathBuf>,
     part: u32,
     part_started: Instant,
+    /// Bytes of the parts already finished.
+    finished_bytes: u64,
     source_stop: Arc<AtomicBool>,
-    queues: Vec<Receiver<Item>>,
+    queues: Vec<flume::Receiver<Item>>,
+    alerts: flume::Receiver<String>,
+    notices: Vec<String>,
+    reported_notices: usize,
     stats: Vec<sources::Stats>,
     /// Each source's name and thread, until it is joined.
     threads: Vec<Option<(String, SourceThread)>>,
     written: Vec<u64>,
+    /// `written` and `messages` as of the last chunk known to be on disk.
+    written_on_disk: Vec<u64>,
+    messages_on_disk: u64,
     open: Vec<bool>,
     started: Instant,
     last_flush: Instant,
@@ -216,21 +276,31 @@ impl Recording {
         } else {
             opts.output.clone()
         };
-        let (writer, diag) = open_part(&current, opts, splitting.then_some(1))?;
+        let (writer, diag, notice) = open_part(&current, opts, splitting.then_some(1))?;
         let source_stop = Arc::new(AtomicBool::new(false));
+        let (alert_tx, alerts) = flume::unbounded();
         let (mut queues, mut stats, mut threads) = (Vec::new(), Vec::new(), Vec::new());
+        let mut failed_sources = Vec::new();
         for spec in &opts.sources {
-            let (tx, rx) = sync_channel(opts.queue.max(1));
+            let (tx, rx) = flume::bounded(opts.queue.max(1));
             let s = Arc::new(Mutex::new(SourceStats {
                 name: spec.to_string(),
                 ..Default::default()
             }));
-            let (spec, st, stop) = (spec.clone(), s.clone(), source_stop.clone());
-            let name = spec.to_string();
-            threads.push(Some((
-                name,
-                std::thread::spawn(move || sources::run(spec, tx, st, stop)),
-            )));
+            let link = sources::Link {
+                queue: tx,
+                stats: s.clone(),
+                stop: source_stop.clone(),
+                alerts: alert_tx.clone(),
+            };
+            let (spec, name) = (spec.clone(), spec.to_string());
+            match std::thread::Builder::new()
+                .name(name.clone())
+                .spawn(move || sources::run(spec, link))
+            {
+                Ok(handle) => threads.push(Some((name, handle))),
+                Err(e) => failed_sources.push(format!("{name}: cannot start its thread: {e}")),
+            }
             queues.push(rx);
             stats.push(s);
         }
@@ -242,8 +312,14 @@ impl Recording {
             current,
             part: 1,
             part_started: now,
+            finished_bytes: 0,
             source_stop,
+            alerts,
+            notices: notice.into_iter().collect(),
+            reported_notices: 0,
             written: vec![0; queues.len()],
+            written_on_disk: vec![0; queues.len()],
+            messages_on_disk: 0,
             open: vec![true; queues.len()],
             queues,
             stats,
@@ -255,7 +331,7 @@ impl Recording {
             messages: 0,
             per_topic: BTreeMap::new(),
             write_error: None,
-            failed_sources: Vec::new(),
+            failed_sources,
         })
     }
 
@@ -280,8 +356,8 @@ impl Recording {
                         }
                         *self.per_topic.entry(item.topic).or_insert(0) += 1;
                     }
-                    Err(TryRecvError::Empty) => break,
-                    Err(TryRecvError::Disconnected) => {
+                    Err(flume::TryRecvError::Empty) => break,
+                    Err(flume::TryRecvError::Disconnected) => {
                         self.open[i] = false;
                         break;
                     }
@@ -304,7 +380,7 @@ impl Recording {
             .zip(&self.written)
             .map(|(s, &w)| SourceStats {
                 written: w,
-                ..s.lock().expect("stats").clone()
+                ..sources::lock(s).clone()
             })
             .collect()
     }
@@ -315,23 +391,28 @@ impl Recording {
         let d = RecorderDiagnostics {
             stamp_ns: sources::now_ns(),
             sources: self.snapshot(),
-            bytes_written: file_size(&self.current),
+            bytes_written: self.bytes_written(),
         };
         self.writer.writer.write(self.diag, d.stamp_ns, &d)?;
         self.writer.writer.flush_chunk()?;
+        self.written_on_disk.clone_from(&self.written);
+        self.messages_on_disk = self.messages;
         self.last_flush = Instant::now();
-        let full = opts.split_bytes.is_some_and(|b| d.bytes_written >= b)
+        let part_bytes = file_size(&self.current);
+        let full = opts.split_bytes.is_some_and(|b| part_bytes >= b)
             || opts
                 .split_every
                 .is_some_and(|t| self.part_started.elapsed() >= t);
         if full {
             self.part += 1;
             let next = part_path(&opts.output, self.part);
-            let (writer, diag) = open_part(&next, opts, Some(self.part))?;
+            let (writer, diag, notice) = open_part(&next, opts, Some(self.part))?;
+            self.notices.extend(notice);
             self.diag = diag;
             std::mem::replace(&mut self.writer, writer)
                 .writer
                 .finish()?;
+            self.finished_bytes += file_size(&self.current);
             self.current = next;
             self.files.push(self.current.clone());
             self.part_started = Instant::now();
@@ -351,48 +432,70 @@ impl Recording {
         }
     }
 
-    /// The live status, once a second and at once when a source fails for good.
+    /// Bytes on disk so far, every part together.
+    fn bytes_written(&self) -> u64 {
+        self.finished_bytes + file_size(&self.current)
+    }
+
+    /// The live status, once a second, and at once when a source fails for good or there is
+    /// something to say.
     fn report_status(&mut self, opts: &mut RecordOptions) {
+        self.notices.extend(self.alerts.try_iter());
         let Some(status) = opts.status.as_mut() else {
             return;
         };
         if self.last_status.elapsed() < Duration::from_secs(1)
             && self.failed_sources.len() <= self.reported_failures
+            && self.notices.len() <= self.reported_notices
         {
             return;
         }
         self.reported_failures = self.failed_sources.len();
+        self.reported_notices = self.notices.len();
         status(&Status {
             elapsed_s: self.started.elapsed().as_secs_f64(),
             messages: self.messages,
             per_topic: self.per_topic.clone(),
-            bytes_written: file_size(&self.current),
+            bytes_written: self.bytes_written(),
             sources: self.snapshot(),
             failed_sources: self.failed_sources.clone(),
+            notices: self.notices.clone(),
         });
         self.last_status = Instant::now();
     }
 
-    /// Stops the sources, writes what they still queued (unless the disk is the problem) and
-    /// the last diagnostics, and finishes the file.
+    /// Stops the sources and keeps writing while they drain what their peers already sent
+    /// (unless the disk is the problem), then writes the last diagnostics and finishes the
+    /// file.
     fn finish(mut self, mut opts: RecordOptions, stopped_by: String) -> RecordReport {
         self.source_stop.store(true, Ordering::Relaxed);
-        for (name, handle) in std::mem::take(&mut self.threads).into_iter().flatten() {
-            join_source(name, handle, &mut self.failed_sources);
+        opts.tap = None;
+        let waited = Instant::now();
+        loop {
+            if self.write_error.is_none() {
+                if let Err(e) = self.drain_queues(&mut opts, 1024) {
+                    self.write_error = Some(e.to_string());
+                }
+            }
+            self.reap_sources();
+            if self.threads.iter().all(Option::is_none) || waited.elapsed() >= STOP_WAIT {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
         }
         if self.write_error.is_none() {
-            // Every source has stopped: its queue is all there is.
-            opts.tap = None;
+            // The sources have stopped (or are left behind): their queues are all there is.
             if let Err(e) = self.drain_queues(&mut opts, usize::MAX) {
                 self.write_error = Some(e.to_string());
             }
         }
         self.queues.clear();
+        self.notices.extend(self.alerts.try_iter());
         let sources = self.snapshot();
         let d = RecorderDiagnostics {
             stamp_ns: sources::now_ns(),
             sources: sources.clone(),
-            bytes_written: file_size(&self.current),
+            bytes_written: self.bytes_written(),
         };
         if self.write_error.is_none() {
             if let Err(e) = self.writer.writer.write(self.diag, d.stamp_ns, &d) {
@@ -403,6 +506,15 @@ impl Recording {
         if let (Err(e), None) = (&finished, &self.write_error) {
             self.write_error = Some(e.to_string());
         }
+        // After a write error only what reached the disk counts as written.
+        let (mut sources, mut lost) = (sources, 0);
+        if self.write_error.is_some() {
+            lost = self.messages - self.messages_on_disk;
+            self.messages = self.messages_on_disk;
+            for (s, &w) in sources.iter_mut().zip(&self.written_on_disk) {
+                s.written = w;
+            }
+        }
         RecordReport {
             output: opts.output,
             duration_s: self.started.elapsed().as_secs_f64(),
@@ -410,9 +522,12 @@ impl Recording {
             per_topic: self.per_topic,
             sources,
             stopped_by,
+            failed_file: self.write_error.is_some().then(|| self.current.clone()),
             write_error: self.write_error,
             failed_sources: self.failed_sources,
             files: self.files,
+            lost_to_write_error: lost,
+            notices: self.notices,
         }
     }
 }

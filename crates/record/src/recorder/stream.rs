@@ -45,10 +45,21 @@ pub struct StreamDecoder {
     buf: Vec<u8>,
     /// Discarding the rest of an oversized line.
     skipping: bool,
+    /// Lines begun so far (text formats): the current line's number.
+    lines: u64,
+    /// Stream bytes before `buf[0]` (UBX): where a problem was.
+    offset: u64,
+    /// Inside a stretch of bytes that are not a frame (UBX), counted once when it ends; and
+    /// whether that stretch is the rest of a frame already counted as refused.
+    in_noise: Option<bool>,
     nmea: FixAssembler,
     pairing: PvtCovPairing,
     undated_pvt: u64,
 }
+
+/// Why a fix without a time was not written.
+const NMEA_UNDATED: &str = "NMEA fixes with no date (no RMC/ZDA after them; give --date)";
+const UBX_UNDATED: &str = "UBX NAV-PVT without a valid UTC time";
 
 impl StreamDecoder {
     pub fn new(format: StreamFormat) -> Self {
@@ -62,16 +73,41 @@ impl StreamDecoder {
             format,
             buf: Vec::new(),
             skipping: false,
+            lines: 0,
+            offset: 0,
+            in_noise: None,
             nmea: FixAssembler::with_date(date),
             pairing: PvtCovPairing::default(),
             undated_pvt: 0,
         }
     }
 
-    /// Fixes dropped for want of a time: NMEA fixes no date came for (after
-    /// [`StreamDecoder::finish`]), NAV-PVTs without valid UTC read from a file.
-    pub fn undated_fixes(&self) -> u64 {
-        self.nmea.undated + self.undated_pvt
+    /// Drops a half line held since its peer fell silent (text formats), counted; says
+    /// whether there was one.
+    pub fn drop_partial(&mut self, stats: &mut SourceStats) -> bool {
+        if self.format == StreamFormat::Ubx || self.buf.is_empty() {
+            return false;
+        }
+        let at = format!("line {}", self.lines + 1);
+        let why = format!("{} bytes with no end of line, then silence", self.buf.len());
+        stats.malformed += 1;
+        stats.skip("half line left idle", &at, &why);
+        // Its rest, should it ever come, is discarded up to the end of the line.
+        (self.buf, self.skipping) = (Vec::new(), true);
+        true
+    }
+
+    /// Lines read so far (text formats).
+    pub fn lines(&self) -> u64 {
+        self.lines
+    }
+
+    /// Where the problem at `buf[at]` (UBX) or on the current line (text) was.
+    fn place(&self, at: usize) -> String {
+        match self.format {
+            StreamFormat::Ubx => format!("byte {}", self.offset + at as u64),
+            _ => format!("line {}", self.lines),
+        }
     }
 
     /// A NAV-PVT as a fix, stamped with its UTC or, from a live source, the receive time; a
@@ -103,6 +139,7 @@ impl StreamDecoder {
             _ => {
                 for &b in bytes {
                     if b == b'\n' {
+                        self.lines += 1;
                         if !self.skipping {
                             let line = std::mem::take(&mut self.buf);
                             self.line(&line, receive_ns, stats, out);
@@ -112,6 +149,9 @@ impl StreamDecoder {
                     } else if !self.skipping {
                         if self.buf.len() >= MAX_LINE {
                             stats.oversized += 1;
+                            let at = format!("line {}", self.lines + 1);
+                            let why = format!("longer than {MAX_LINE} bytes");
+                            stats.skip("line over the length limit", &at, &why);
                             self.skipping = true;
                             self.buf.clear();
                         } else {
@@ -123,23 +163,50 @@ impl StreamDecoder {
         }
     }
 
-    /// End of stream: a last line without newline, a NAV-PVT waiting for its NAV-COV.
+    /// End of stream: a last line without newline, a frame cut short, the last NMEA cycle, a
+    /// NAV-PVT waiting for its NAV-COV; fixes that never got a time are counted.
     pub fn finish(&mut self, receive_ns: u64, stats: &mut SourceStats, out: &mut Vec<Item>) {
-        if self.format != StreamFormat::Ubx && !self.buf.is_empty() && !self.skipping {
+        if self.format == StreamFormat::Ubx {
+            self.end_noise(stats);
+            if !self.buf.is_empty() {
+                stats.malformed += 1;
+                let at = self.place(0);
+                let why = format!("{} bytes at the end of the stream", self.buf.len());
+                stats.skip(UbxError::Truncated.reason(), &at, &why);
+                self.offset += self.buf.len() as u64;
+                self.buf.clear();
+            }
+        } else if !self.buf.is_empty() && !self.skipping {
+            self.lines += 1;
             let line = std::mem::take(&mut self.buf);
             self.line(&line, receive_ns, stats, out);
         }
-        self.nmea.finish();
+        let clock = (receive_ns > 0).then_some(receive_ns);
+        let before = self.nmea.undated;
+        self.nmea.finish(clock);
+        while let Some(fix) = self.nmea.next_fix() {
+            push_fix(fix, receive_ns, stats, out);
+        }
         if let Some(pvt) = self.pairing.finish() {
             self.push_pvt(&pvt, None, receive_ns, stats, out);
+        }
+        for (reason, n) in [
+            (NMEA_UNDATED, self.nmea.undated - before),
+            (UBX_UNDATED, std::mem::take(&mut self.undated_pvt)),
+        ] {
+            if n > 0 {
+                *stats.skipped.entry(reason.to_owned()).or_insert(0) += n;
+            }
         }
     }
 
     fn line(&mut self, raw: &[u8], receive_ns: u64, stats: &mut SourceStats, out: &mut Vec<Item>) {
         let text = match std::str::from_utf8(raw) {
             Ok(t) => t.trim_end_matches('\r'),
-            Err(_) => {
+            Err(e) => {
                 stats.malformed += 1;
+                let at = self.place(0);
+                stats.skip("line that is not UTF-8", &at, &e);
                 return;
             }
         };
@@ -154,6 +221,8 @@ impl StreamDecoder {
                 }
                 Err(e) => {
                     stats.malformed += 1;
+                    let at = self.place(0);
+                    stats.skip("JSON line that does not decode", &at, &e);
                     stats.last_error = Some(e.to_string());
                 }
             },
@@ -164,10 +233,15 @@ impl StreamDecoder {
                 while let Some(fix) = self.nmea.next_fix() {
                     push_fix(fix, receive_ns, stats, out);
                 }
-                count_nmea_outcome(fed, stats);
+                let at = self.place(0);
+                count_nmea_outcome(fed, &at, stats);
             }
             StreamFormat::Ubx => unreachable!("UBX is binary"),
         }
+    }
+
+    fn end_noise(&mut self, stats: &mut SourceStats) {
+        end_noise(&mut self.in_noise, stats);
     }
 
     fn feed_ubx(
@@ -185,13 +259,13 @@ impl StreamDecoder {
                 // Keep a trailing b5 that may start the next frame; the rest is noise.
                 let keep = usize::from(rest.last() == Some(&ubx::SYNC[0]));
                 if rest.len() > keep {
-                    stats.malformed += 1;
+                    self.in_noise.get_or_insert(false);
                 }
                 start = self.buf.len() - keep;
                 break;
             };
             if sync > 0 {
-                stats.malformed += 1; // bytes between frames
+                self.in_noise.get_or_insert(false);
             }
             let at = start + sync;
             match ubx::parse_frame(&self.buf[at..]) {
@@ -199,45 +273,74 @@ impl StreamDecoder {
                     start = at;
                     break;
                 }
-                Err(UbxError::Checksum { .. }) => {
-                    stats.checksum_failures += 1;
-                    start = at + 2;
-                }
                 Err(e) => {
-                    stats.malformed += 1;
-                    stats.last_error = Some(e.to_string());
+                    end_noise(&mut self.in_noise, stats);
+                    if matches!(e, UbxError::Checksum { .. }) {
+                        stats.checksum_failures += 1;
+                    } else {
+                        stats.malformed += 1;
+                        stats.last_error = Some(e.to_string());
+                    }
+                    let place = self.place(at);
+                    stats.skip(e.reason(), &place, &e);
+                    // What follows the sync up to the next frame is the refused frame's.
+                    self.in_noise = Some(true);
                     start = at + 2;
                 }
                 Ok((frame, used)) => {
-                    match (frame.class, frame.id) {
+                    end_noise(&mut self.in_noise, stats);
+                    let refused = match (frame.class, frame.id) {
                         NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
                             Ok(pvt) => {
                                 if let Some(prev) = self.pairing.pvt(pvt) {
                                     self.push_pvt(&prev, None, receive_ns, stats, out);
                                 }
+                                None
                             }
-                            Err(_) => stats.malformed += 1,
+                            Err(e) => Some(e),
                         },
-                        NavCov::CLASS_ID => {
-                            let paired = NavCov::decode(&frame)
-                                .ok()
-                                .and_then(|c| self.pairing.cov(&c));
-                            if let Some((pvt, cov)) = paired {
-                                self.push_pvt(&pvt, cov, receive_ns, stats, out);
+                        NavCov::CLASS_ID => match NavCov::decode(&frame) {
+                            Ok(c) => {
+                                if let Some((pvt, cov)) = self.pairing.cov(&c) {
+                                    self.push_pvt(&pvt, cov, receive_ns, stats, out);
+                                }
+                                None
                             }
+                            Err(e) => Some(e),
+                        },
+                        (class, id) => {
+                            stats.count(&format!("UBX {class:02x}/{id:02x} (not decoded)"));
+                            None
                         }
-                        _ => {}
+                    };
+                    if let Some(e) = refused {
+                        stats.malformed += 1;
+                        let place = self.place(at);
+                        stats.skip(e.reason(), &place, &e);
                     }
                     start = at + used;
                 }
             }
         }
         self.buf.drain(..start);
+        self.offset += start as u64;
         // A sync pair followed by a huge claimed length cannot hold the buffer for ever.
         if self.buf.len() > 2 * ubx::MAX_PAYLOAD {
             stats.malformed += 1;
+            let place = self.place(0);
+            stats.skip("UBX bytes that never completed a frame", &place, &"dropped");
+            self.offset += self.buf.len() as u64;
             self.buf.clear();
         }
+    }
+}
+
+/// A stretch of bytes that were not a frame ends: counted once (unless it was the rest of a
+/// frame already refused).
+fn end_noise(in_noise: &mut Option<bool>, stats: &mut SourceStats) {
+    if in_noise.take() == Some(false) {
+        stats.malformed += 1;
+        stats.count("bytes between UBX frames");
     }
 }
 
@@ -250,16 +353,27 @@ fn push_fix(fix: GnssFix, receive_ns: u64, stats: &mut SourceStats, out: &mut Ve
     });
 }
 
-fn count_nmea_outcome(fed: Result<Decoded, NmeaError>, stats: &mut SourceStats) {
-    match fed {
-        Ok(_) => {}
-        Err(NmeaError::Checksum { .. }) => stats.checksum_failures += 1,
-        Err(NmeaError::TooLong(_)) => stats.oversized += 1,
-        Err(e) => {
+/// Counts a sentence that was not used under its reason (and in the totals when it was bad).
+fn count_nmea_outcome(fed: Result<Decoded, NmeaError>, at: &str, stats: &mut SourceStats) {
+    let e = match fed {
+        Ok(Decoded::Used) => return,
+        Ok(Decoded::NoFixYet) => {
+            return stats.count("NMEA GGA without a time (the receiver has no fix yet)")
+        }
+        Ok(Decoded::Skipped) => {
+            return stats.count("NMEA sentence type not used (GSV, GLL, TXT, …)")
+        }
+        Err(e) => e,
+    };
+    match e {
+        NmeaError::Checksum { .. } => stats.checksum_failures += 1,
+        NmeaError::TooLong(_) => stats.oversized += 1,
+        _ => {
             stats.malformed += 1;
             stats.last_error = Some(e.to_string());
         }
     }
+    stats.skip(e.reason(), at, &e);
 }
 
 #[cfg(test)]
@@ -267,7 +381,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn noise_between_ubx_frames_is_counted_and_frames_split_anywhere_still_decode() {
+    fn noise_between_ubx_frames_is_counted_once_however_the_stream_is_split() {
         let mut frames = Vec::new();
         let mut b = Vec::new();
         for hex in ["b56205010200068a98c1", "b56205000200068a97bc"] {
@@ -277,14 +391,29 @@ mod tests {
         }
         let mut bad = frames.clone();
         bad[6] ^= 0xff;
-        let mut d = StreamDecoder::new(StreamFormat::Ubx);
-        let mut stats = SourceStats::default();
-        let mut out = Vec::new();
-        for chunk in bad.chunks(3) {
-            d.feed(chunk, 0, &mut stats, &mut out);
+        bad.extend_from_slice(&frames[..7]); // a frame cut short by the end of the stream
+        let decode = |chunk: usize| {
+            let mut d = StreamDecoder::new(StreamFormat::Ubx);
+            let (mut stats, mut out) = (SourceStats::default(), Vec::new());
+            for c in bad.chunks(chunk) {
+                d.feed(c, 0, &mut stats, &mut out);
+            }
+            d.finish(0, &mut stats, &mut out);
+            stats
+        };
+        let whole = decode(bad.len());
+        assert_eq!(whole.checksum_failures, 1);
+        // The noise after the refused frame is that frame's; the one after the good frame and
+        // the cut frame are counted once each.
+        assert_eq!(whole.skipped["bytes between UBX frames"], 1, "{whole:?}");
+        assert_eq!(whole.skipped["UBX frame cut short"], 1, "{whole:?}");
+        assert_eq!(
+            whole.first_problems[0],
+            "byte 0: UBX checksum [8b, a7] where the frame gives [98, c1]"
+        );
+        for chunk in [1, 2, 3, 7] {
+            assert_eq!(decode(chunk), whole, "split every {chunk} bytes");
         }
-        assert_eq!(stats.checksum_failures, 1);
-        assert!(stats.malformed >= 2, "{stats:?}");
     }
 
     #[test]

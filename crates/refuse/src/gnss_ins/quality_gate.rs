@@ -137,6 +137,7 @@ mod tests {
             latitude_deg: Some(46.0),
             longitude_deg: Some(7.0),
             altitude_m: Some(500.0),
+            altitude_msl_m: None,
             position_covariance_enu_m2: None,
             speed_mps: None,
             course_rad: None,

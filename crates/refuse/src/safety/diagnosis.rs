@@ -253,6 +253,7 @@ mod tests {
             latitude_deg: Some(44.6),
             longitude_deg: Some(10.9),
             altitude_m: Some(40.0),
+            altitude_msl_m: None,
             position_covariance_enu_m2: None,
             speed_mps: None,
             course_rad: None,

@@ -147,6 +147,7 @@ impl SimSensor for Gnss {
             latitude_deg: None,
             longitude_deg: None,
             altitude_m: None,
+            altitude_msl_m: None,
             position_covariance_enu_m2: None,
             speed_mps: None,
             course_rad: None,
