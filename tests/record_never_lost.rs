@@ -467,7 +467,11 @@ fn nmea_and_ubx_fixes_match_pynmeagps_and_pyubx2_field_by_field_across_midnight_
         std::thread::sleep(Duration::from_millis(800));
         let live = stop(child);
         let src = &live["sources"][0];
-        assert_eq!(src["skipped"].as_object(), Some(skipped), "import: {r}\nrecord: {live}");
+        assert_eq!(
+            src["skipped"].as_object(),
+            Some(skipped),
+            "import: {r}\nrecord: {live}"
+        );
         assert_eq!(src["written"].as_u64(), r["messages"].as_u64(), "{live}");
     }
 }

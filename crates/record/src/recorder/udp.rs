@@ -17,7 +17,8 @@ pub fn size_receive_buffer(sock: &UdpSocket, bytes: usize) -> usize {
     socket::getsockopt(sock, sockopt::RcvBuf).map_or(0, |granted| granted / 2)
 }
 
-/// Receives datagrams with the kernel's drop count.
+/// Receives datagrams with the kernel's drop count. The kernel stamps its running count on
+/// each datagram it queues, so drops are known when the next datagram after them arrives.
 pub struct Receiver<'a> {
     sock: &'a UdpSocket,
     cmsg: Vec<u8>,
@@ -73,5 +74,39 @@ mod tests {
         let mut buf = [0u8; 64];
         assert_eq!(r.recv(&mut buf).unwrap(), (5, 0));
         assert_eq!(&buf[..5], b"hello");
+    }
+
+    #[test]
+    fn datagrams_the_kernel_drops_on_a_full_buffer_are_counted_to_the_last_one() {
+        let rx = UdpSocket::bind("127.0.0.1:0").unwrap();
+        size_receive_buffer(&rx, 4096); // the kernel's smallest: a burst overflows it
+        rx.set_read_timeout(Some(std::time::Duration::from_millis(200)))
+            .unwrap();
+        let mut r = Receiver::new(&rx);
+        let tx = UdpSocket::bind("127.0.0.1:0").unwrap();
+        let sent = 2000;
+        for _ in 0..sent {
+            tx.send_to(&[7u8; 1000], rx.local_addr().unwrap()).unwrap();
+        }
+        let (mut received, mut dropped) = (0u64, 0);
+        let mut buf = [0u8; 2048];
+        while let Ok((_, d)) = r.recv(&mut buf) {
+            received += 1;
+            dropped = d;
+        }
+        // The kernel stamps its running count on the datagrams queued after a drop: the next
+        // one brings it.
+        tx.send_to(b"next", rx.local_addr().unwrap()).unwrap();
+        dropped = r.recv(&mut buf).map_or(dropped, |(_, d)| d);
+        assert!(
+            dropped > 0,
+            "nothing dropped: the buffer was not full ({received} received, buffer {})",
+            socket::getsockopt(&rx, sockopt::RcvBuf).unwrap()
+        );
+        assert_eq!(
+            received + dropped,
+            sent,
+            "every datagram received or counted"
+        );
     }
 }
