@@ -475,3 +475,31 @@ fn nmea_and_ubx_fixes_match_pynmeagps_and_pyubx2_field_by_field_across_midnight_
         assert_eq!(src["written"].as_u64(), r["messages"].as_u64(), "{live}");
     }
 }
+
+#[test]
+fn a_listener_serves_at_most_its_connection_cap_and_counts_the_rest() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("crowd.mcap");
+    let tcp = free_port();
+    let child = spawn(&["record", "-o", s(&out), "--tcp", &tcp.to_string(), "--json"]);
+    wait_listening(tcp);
+    let crowd: Vec<TcpStream> = (0..70)
+        .map(|k| {
+            let mut c = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
+            c.write_all(format!("{}\n", radar_line(k)).as_bytes())
+                .unwrap();
+            std::thread::sleep(Duration::from_millis(20)); // accepted in order
+            c
+        })
+        .collect();
+    std::thread::sleep(Duration::from_millis(500));
+    let r = stop(child);
+    drop(crowd);
+    let cap = railfuse_record::recorder::sources::MAX_CONNECTIONS;
+    assert_eq!(
+        r["sources"][0]["skipped"]["connection refused: too many open"],
+        70 - cap as u64,
+        "{r}"
+    );
+    assert_eq!(radar_count(&out), cap);
+}

@@ -194,6 +194,7 @@ fn decimal(
             .parse::<f64>()
             .map(Some)
             .map_err(|_| bad(s, i, name, "not a number")),
+        t if is_decimal(t, true) => Err(bad(s, i, name, "negative")),
         _ => Err(bad(s, i, name, "not a number")),
     }
 }
@@ -683,7 +684,7 @@ mod tests {
             ),
             (gga("4807.038", "X"), "N/S: hemisphere expected"),
             (gst("NaN"), "σ latitude: not a number"),
-            (gst("-0.5"), "σ latitude: not a number"),
+            (gst("-0.5"), "σ latitude: negative"),
             (gst("inf"), "σ latitude: not a number"),
         ] {
             assert_eq!(reason(&body), why, "{body}");

@@ -417,6 +417,31 @@ mod tests {
     }
 
     #[test]
+    fn a_half_line_left_idle_is_dropped_counted_and_its_rest_discarded() {
+        let mut d = StreamDecoder::new(StreamFormat::JsonLines);
+        let (mut stats, mut out) = (SourceStats::default(), Vec::new());
+        let good = br#"{"topic":"/radar/speed","speed_mps":3.0,"quality":1.0,"valid":true}"#;
+        d.feed(b"{\"topic\":\"/radar/sp", 1, &mut stats, &mut out);
+        assert!(d.drop_partial(&mut stats));
+        assert!(!d.drop_partial(&mut stats), "nothing left to drop");
+        d.feed(b"eed\"}\n", 1, &mut stats, &mut out);
+        d.feed(good, 1, &mut stats, &mut out);
+        d.feed(b"\n", 1, &mut stats, &mut out);
+        assert_eq!(
+            (
+                stats.skipped["half line left idle"],
+                stats.malformed,
+                out.len()
+            ),
+            (1, 1, 1)
+        );
+        assert_eq!(
+            stats.first_problems,
+            ["line 1: 19 bytes with no end of line, then silence"]
+        );
+    }
+
+    #[test]
     fn oversized_and_garbage_lines_are_counted_and_the_next_good_line_still_arrives() {
         let mut d = StreamDecoder::new(StreamFormat::JsonLines);
         let mut stats = SourceStats::default();
