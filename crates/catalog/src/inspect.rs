@@ -1,7 +1,10 @@
 //! What a log holds: per-channel counts, rates and gaps, metadata, attachments, and which
 //! fused pipelines it carries. One streaming pass; memory grows with channels, not messages.
+//! Log times may run out of file order (MCAP allows it): spans are minimum to maximum, and gaps
+//! are measured in log-time order, through a bounded reorder window per channel.
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::cmp::Reverse;
+use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
 use std::path::Path;
 
 use serde::Serialize;
@@ -47,6 +50,48 @@ pub struct LogSummary {
     pub fused_pipelines: Vec<String>,
 }
 
+/// Log times held per channel to put them back in order before measuring gaps: a message more
+/// than this many messages out of order is measured where it stands.
+const REORDER_WINDOW: usize = 1 << 16;
+
+/// A channel's largest gap between consecutive log times, in log-time order.
+#[derive(Default)]
+struct Gaps {
+    pending: BinaryHeap<Reverse<u64>>,
+    last: Option<u64>,
+    /// (start, length) of the largest gap so far, ns.
+    largest: Option<(u64, u64)>,
+}
+
+impl Gaps {
+    fn push(&mut self, t: u64) {
+        self.pending.push(Reverse(t));
+        if self.pending.len() > REORDER_WINDOW {
+            self.take_earliest();
+        }
+    }
+
+    fn take_earliest(&mut self) {
+        let Some(Reverse(t)) = self.pending.pop() else {
+            return;
+        };
+        if let Some(last) = self.last {
+            let gap = t.saturating_sub(last);
+            if self.largest.is_none_or(|(_, g)| gap > g) {
+                self.largest = Some((last, gap));
+            }
+        }
+        self.last = Some(self.last.map_or(t, |l| l.max(t)));
+    }
+
+    fn finish(mut self) -> Option<(u64, u64)> {
+        while !self.pending.is_empty() {
+            self.take_earliest();
+        }
+        self.largest
+    }
+}
+
 /// Reads the whole file once and summarises it.
 pub fn summarise(path: &Path) -> Result<LogSummary> {
     let mut reader = LogReader::open(path)?;
@@ -54,6 +99,7 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
     let mut metadata = Vec::new();
     let mut attachments = Vec::new();
     let mut messages = 0u64;
+    let mut gaps: HashMap<u16, Gaps> = HashMap::new();
     while let Some(record) = reader.next() {
         match record? {
             LogRecord::Channel(c) => {
@@ -78,15 +124,10 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
                     .get_mut(&m.channel.id)
                     .expect("the reader checks channel ids");
                 c.messages += 1;
-                if let Some(last) = c.last_log_time_ns {
-                    let gap = seconds_between(last, m.log_time_ns);
-                    if c.largest_gap_s.is_none_or(|g| gap > g) {
-                        c.largest_gap_s = Some(gap);
-                        c.largest_gap_start_ns = Some(last);
-                    }
-                }
-                c.first_log_time_ns.get_or_insert(m.log_time_ns);
-                c.last_log_time_ns = Some(m.log_time_ns);
+                gaps.entry(m.channel.id).or_default().push(m.log_time_ns);
+                let t = m.log_time_ns;
+                c.first_log_time_ns = Some(c.first_log_time_ns.map_or(t, |f| f.min(t)));
+                c.last_log_time_ns = Some(c.last_log_time_ns.map_or(t, |l| l.max(t)));
             }
             LogRecord::Metadata { name, metadata: m } => metadata.push((name, m)),
             LogRecord::Attachment {
@@ -100,6 +141,12 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
                 bytes: data.len(),
             }),
             LogRecord::Schema(_) => {}
+        }
+    }
+    for (id, g) in gaps {
+        if let (Some(c), Some((start, gap))) = (channels.get_mut(&id), g.finish()) {
+            c.largest_gap_s = Some(seconds_between(start, start + gap));
+            c.largest_gap_start_ns = Some(start);
         }
     }
     for c in channels.values_mut() {

@@ -176,7 +176,7 @@ impl<'a> Replay<'a> {
     fn new(opts: &'a RefuseOptions<'a>, summary: Option<LogSummary>) -> Result<Self> {
         let input = opts.input;
         let names: BTreeSet<String> = opts.config.names().map(str::to_owned).collect();
-        let known = summary.as_ref().map(|s| &s.channels);
+        let known = summary.as_ref().and_then(|s| s.channels.as_ref());
         let mut writer = LogWriter::create(opts.output)?;
         // Fused states of kept pipelines may trail the reference by a chunk in file order.
         let lag = eval::lag_allowance_s(summary.as_ref().and_then(|s| s.longest_chunk_ns));

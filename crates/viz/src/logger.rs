@@ -153,7 +153,10 @@ pub fn visualize(
     logger.start_ns = span.map(|s| s.0);
     // Pipelines in a fixed order, so each keeps its colour from run to run: refuse gives a
     // config's first pipeline the highest channel ids, so descending ids is config order.
-    for c in summary.iter().flat_map(|s| s.channels.iter().rev()) {
+    for c in summary
+        .iter()
+        .flat_map(|s| s.channels.iter().flatten().rev())
+    {
         if let Some((p, FusedChannel::State)) = topics::parse_fused(&c.topic) {
             logger.pipeline(p);
         }

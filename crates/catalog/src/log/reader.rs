@@ -383,8 +383,9 @@ fn describe(e: &mcap::McapError) -> String {
 /// What a file's summary section tells without reading the data.
 #[derive(Debug, Clone)]
 pub struct LogSummary {
-    /// Every channel, by id.
-    pub channels: Vec<Arc<ChannelInfo>>,
+    /// Every channel, by id, when the summary repeats them (`None` when it does not: the
+    /// channels are then known only from the data section).
+    pub channels: Option<Vec<Arc<ChannelInfo>>>,
     /// The longest time span of one chunk (log time), if the file has chunk indexes.
     pub longest_chunk_ns: Option<u64>,
     /// Log times of the first and last message, from the statistics record, if it has one.
@@ -394,72 +395,141 @@ pub struct LogSummary {
 /// The channel table of a file from its summary section (one seek to the end), or `None` when
 /// the file has no summary. A file without a valid footer (truncated) is an error.
 pub fn read_channels(path: &Path) -> Result<Option<Vec<Arc<ChannelInfo>>>> {
-    Ok(read_summary(path)?.map(|s| s.channels))
+    Ok(read_summary(path)?.and_then(|s| s.channels))
 }
 
 /// The summary section of a file (one seek to the end), or `None` when it has none. A file
 /// without a valid footer (truncated) is an error.
+///
+/// The summary may repeat a channel without its schema (the specification allows it, and
+/// the official writers do it): such a schema is then taken from the data section, where
+/// it must stand before the channel's first message.
 pub fn read_summary(path: &Path) -> Result<Option<LogSummary>> {
-    use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader, SummaryReaderOptions};
-    use std::io::Seek;
-    let mut file = open_checked(path)?;
-    let size = file.metadata().map_err(|e| Error::io(path, e))?.len();
-    let mut options = SummaryReaderOptions::default().with_file_size(size);
-    options.record_length_limit = Some(super::RECORD_LENGTH_LIMIT);
-    let mut reader = SummaryReader::new_with_options(options);
-    while let Some(event) = reader.next_event() {
-        match event.map_err(|e| Error::mcap(path, describe(&e)))? {
-            SummaryReadEvent::ReadRequest(need) => {
-                let n = file
-                    .read(reader.insert(need))
-                    .map_err(|e| Error::io(path, e))?;
-                reader.notify_read(n);
-            }
-            SummaryReadEvent::SeekRequest(to) => {
-                let pos = file.seek(to).map_err(|e| Error::io(path, e))?;
-                reader.notify_seeked(pos);
-            }
-        }
-    }
-    let Some(summary) = reader.finish() else {
+    let Some(raw) = read_summary_records(path)? else {
         return Ok(None);
     };
-    let mut channels: Vec<_> = summary
-        .channels
-        .values()
+    let mut schemas: HashMap<u16, Arc<SchemaInfo>> = HashMap::new();
+    let mut channels = Vec::new();
+    let (mut longest_chunk_ns, mut message_span_ns) = (None::<u64>, None);
+    for framed in Records::new(&raw) {
+        let framed = framed.map_err(|e| Error::mcap(path, format!("summary: {e}")))?;
+        if !matches!(
+            framed.opcode,
+            op::SCHEMA | op::CHANNEL | op::CHUNK_INDEX | op::STATISTICS
+        ) {
+            continue;
+        }
+        let record = mcap::parse_record(framed.opcode, framed.body)
+            .map_err(|e| Error::mcap(path, format!("summary: {}", describe(&e))))?;
+        match record {
+            Record::Schema { header, data } => {
+                let info = SchemaInfo {
+                    id: header.id,
+                    name: header.name,
+                    encoding: header.encoding,
+                    data: data.into_owned(),
+                };
+                schemas.insert(info.id, Arc::new(info));
+            }
+            Record::Channel(c) => channels.push(c),
+            Record::ChunkIndex(c) => {
+                let span = c.message_end_time.saturating_sub(c.message_start_time);
+                longest_chunk_ns = Some(longest_chunk_ns.map_or(span, |l| l.max(span)));
+            }
+            Record::Statistics(st) if st.message_count > 0 => {
+                message_span_ns = Some((st.message_start_time, st.message_end_time));
+            }
+            _ => {}
+        }
+    }
+    let missing: Vec<u16> = channels
+        .iter()
+        .map(|c| c.schema_id)
+        .filter(|&id| id != 0 && !schemas.contains_key(&id))
+        .collect();
+    if !missing.is_empty() {
+        schemas.extend(schemas_from_data(path, &missing)?);
+    }
+    let mut channels: Vec<_> = channels
+        .into_iter()
         .map(|c| {
             Arc::new(ChannelInfo {
                 id: c.id,
-                topic: c.topic.clone(),
-                message_encoding: c.message_encoding.clone(),
-                metadata: c.metadata.clone(),
-                schema: c.schema.as_ref().map(|s| {
-                    Arc::new(SchemaInfo {
-                        id: s.id,
-                        name: s.name.clone(),
-                        encoding: s.encoding.clone(),
-                        data: s.data.to_vec(),
-                    })
-                }),
+                schema: schemas.get(&c.schema_id).cloned(),
+                topic: c.topic,
+                message_encoding: c.message_encoding,
+                metadata: c.metadata,
             })
         })
         .collect();
     channels.sort_by_key(|c| c.id);
-    let longest_chunk_ns = summary
-        .chunk_indexes
-        .iter()
-        .map(|c| c.message_end_time.saturating_sub(c.message_start_time))
-        .max();
-    let message_span_ns = summary
-        .stats
-        .as_ref()
-        .filter(|s| s.message_count > 0)
-        .map(|s| (s.message_start_time, s.message_end_time));
+    channels.dedup_by_key(|c| c.id);
     Ok(Some(LogSummary {
-        channels,
+        channels: (!channels.is_empty()).then_some(channels),
         longest_chunk_ns,
         message_span_ns,
     }))
+}
+
+/// The records of the summary section, from the footer's offsets; `None` when the file has no
+/// summary. A file without a valid footer (truncated) is an error.
+fn read_summary_records(path: &Path) -> Result<Option<Vec<u8>>> {
+    use std::io::{Seek, SeekFrom};
+    // Footer record (opcode, length, summary start, summary offset start, CRC), then magic.
+    const FOOTER: u64 = 1 + 8 + 8 + 8 + 4;
+    let mut file = open_checked(path)?;
+    let size = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    let truncated = || {
+        Error::mcap(
+            path,
+            "the file ends in the middle of a record (truncated: was the recording cut off?)",
+        )
+    };
+    if size < 8 + FOOTER + 8 {
+        return Err(truncated());
+    }
+    let mut tail = [0u8; (FOOTER + 8) as usize];
+    file.seek(SeekFrom::Start(size - FOOTER - 8))
+        .and_then(|_| file.read_exact(&mut tail))
+        .map_err(|e| Error::io(path, e))?;
+    if tail[0] != op::FOOTER || &tail[FOOTER as usize..] != mcap::MAGIC {
+        return Err(truncated());
+    }
+    let at = |i: usize| u64::from_le_bytes(tail[i..i + 8].try_into().expect("8 bytes"));
+    let (start, offsets) = (at(9), at(17));
+    let end = if offsets != 0 {
+        offsets
+    } else {
+        size - FOOTER - 8
+    };
+    if start == 0 {
+        return Ok(None);
+    }
+    if start > end || end > size - FOOTER - 8 || end - start > super::RECORD_LENGTH_LIMIT as u64 {
+        return Err(Error::mcap(path, "the footer points outside the file"));
+    }
+    let mut raw = vec![0u8; (end - start) as usize];
+    file.seek(SeekFrom::Start(start))
+        .and_then(|_| file.read_exact(&mut raw))
+        .map_err(|e| Error::io(path, e))?;
+    Ok(Some(raw))
+}
+
+/// The schemas `ids` as the data section defines them (read until all are found).
+fn schemas_from_data(path: &Path, ids: &[u16]) -> Result<Vec<(u16, Arc<SchemaInfo>)>> {
+    let mut found = Vec::new();
+    let mut reader = LogReader::open(path)?;
+    while let Some(record) = reader.next() {
+        if let LogRecord::Schema(s) = record? {
+            if ids.contains(&s.id) && !found.iter().any(|(id, _)| *id == s.id) {
+                found.push((s.id, s));
+                if found.len() == ids.len() {
+                    break;
+                }
+            }
+        }
+    }
+    Ok(found)
 }
 
 /// Opens a file that must be an MCAP file: not empty, starting with the MCAP magic.

@@ -1,0 +1,131 @@
+//! Every valid MCAP layout reads in every command. The official Python writer rewrites one
+//! railfuse log in each layout the specification allows (chunks or none, summaries that repeat
+//! channels and schemas or not, no summary, no message index, no statistics, compression,
+//! metadata and attachments anywhere, log times out of order, a schemaless channel), and info,
+//! refuse, eval, viz, tune and recover run on each: the same messages, the same fused result.
+
+mod common;
+
+use common::*;
+use serde_json::Value;
+
+fn json(out: &std::process::Output) -> Value {
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// (states, position RMSE, speed RMSE) of the first pipeline of a fused log.
+fn accuracy(fused: &std::path::Path) -> (u64, f64, f64) {
+    let e = json(&ok(&["eval", s(fused), "--json"]));
+    let p = &e["pipelines"][0];
+    (
+        p["states"].as_u64().unwrap(),
+        p["position_error_m"]["rmse"].as_f64().unwrap(),
+        p["speed_error_mps"]["rmse"].as_f64().unwrap(),
+    )
+}
+
+#[test]
+fn every_valid_layout_reads_in_every_command_with_the_same_result() {
+    let d = tempfile::tempdir().unwrap();
+    let py = python(
+        "mcap_layouts.py",
+        &[s(&sample("short-run.mcap")), s(d.path())],
+    );
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let written: Value = serde_json::from_slice(&py.stdout).unwrap();
+    let messages = written["messages"].as_u64().unwrap();
+    let mut baseline = None;
+    let mut table = vec!["layout | info | refuse + eval | viz | tune | recover".to_owned()];
+    for layout in written["layouts"].as_array().unwrap() {
+        let layout = layout.as_str().unwrap();
+        let log = d.path().join(format!("{layout}.mcap"));
+        let extra = if layout == "schemaless_channel" {
+            messages.div_ceil(100)
+        } else {
+            0
+        };
+        let info = json(&ok(&["info", s(&log), "--json"]));
+        assert_eq!(
+            info["messages"].as_u64(),
+            Some(messages + extra),
+            "{layout}"
+        );
+        // Gaps in log-time order: the same as the original's whatever the file order.
+        let truth = info["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["topic"] == "/truth")
+            .unwrap();
+        assert!(
+            truth["largest_gap_s"].as_f64().unwrap() < 0.0101,
+            "{layout}: {truth}"
+        );
+
+        let fused = d.path().join(format!("{layout}.fused.mcap"));
+        ok(&[
+            "refuse",
+            s(&log),
+            "-c",
+            s(&sample("kalman.toml")),
+            "-o",
+            s(&fused),
+        ]);
+        let got = accuracy(&fused);
+        let base = *baseline.get_or_insert(got);
+        if layout == "log_times_out_of_order" {
+            // Measurements arrive out of order: the reorder window takes most, not all.
+            assert!(
+                got.0 as f64 > 0.99 * base.0 as f64,
+                "{layout}: {got:?} against {base:?}"
+            );
+            assert!(
+                got.1 < 1.2 * base.1 && got.2 < 1.2 * base.2,
+                "{layout}: {got:?} against {base:?}"
+            );
+        } else {
+            assert_eq!(got, base, "{layout}");
+        }
+
+        let rrd = d.path().join(format!("{layout}.rrd"));
+        ok(&["viz", s(&log), "--save", s(&rrd)]);
+        let verify = rerun(&["rrd", "verify", s(&rrd)]);
+        assert!(verify.status.success(), "{layout}: {}", stderr(&verify));
+
+        let tuned = d.path().join(format!("{layout}.toml"));
+        ok(&[
+            "tune",
+            s(&log),
+            "-c",
+            s(&sample("kalman.toml")),
+            "--pipeline",
+            "kalman",
+            "--params",
+            "motion.jerk_psd=0.001..10",
+            "--max-evals",
+            "3",
+            "-o",
+            s(&tuned),
+        ]);
+
+        let salvaged = d.path().join(format!("{layout}.recovered.mcap"));
+        let r = json(&ok(&["recover", s(&log), "-o", s(&salvaged), "--json"]));
+        assert_eq!(
+            r["messages"].as_u64(),
+            Some(messages + extra),
+            "{layout}: {r}"
+        );
+        table.push(format!(
+            "{layout} | {} msgs | {} states, RMSE {:.3} m | verified | ok | {} msgs",
+            messages + extra,
+            got.0,
+            got.1,
+            r["messages"]
+        ));
+    }
+    println!("{}", table.join("\n"));
+}
