@@ -165,6 +165,9 @@ pub fn refuse_with(
             report.undecodable_messages
         );
     }
+    for (reason, n) in &report.skipped {
+        eprintln!("note: {n} messages skipped: {reason}");
+    }
     if report.out_of_order_messages > 0 {
         eprintln!(
             "note: {} messages are earlier in log time than the one before them in the file",

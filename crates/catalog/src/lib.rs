@@ -17,6 +17,7 @@
 //!   the Rust type with `schemars`, so the type is the one source of truth.
 
 pub mod error;
+pub mod foreign;
 pub mod foxglove;
 pub mod geodesy;
 pub mod inspect;

@@ -73,6 +73,18 @@ pub fn fused_imu_error_model(pipeline: &str) -> String {
     format!("{FUSED_PREFIX}{pipeline}/imu_error_model")
 }
 
+/// `/fused/<pipeline>/navsatfix`: for a ROS 2 input, the fused position as
+/// `sensor_msgs/msg/NavSatFix` (CDR), for ROS tools.
+pub fn fused_nav_sat_fix(pipeline: &str) -> String {
+    format!("{FUSED_PREFIX}{pipeline}/navsatfix")
+}
+
+/// `/fused/<pipeline>/odometry`: for a ROS 2 input, the fused state as `nav_msgs/msg/Odometry`
+/// (CDR).
+pub fn fused_odometry(pipeline: &str) -> String {
+    format!("{FUSED_PREFIX}{pipeline}/odometry")
+}
+
 /// The channels each pipeline writes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FusedChannel {

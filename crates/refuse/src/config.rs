@@ -32,6 +32,10 @@ use crate::measurement::Quantity;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PipelinesFile {
+    /// The track for pipelines that work in chainage, where the log carries none (a ROS 2
+    /// bag): a GeoJSON file, relative to this configuration. A log's own `/track/map` wins.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub track: Option<PathBuf>,
     pub pipeline: Vec<Spanned<PipelineConfig>>,
 }
 
@@ -290,6 +294,11 @@ impl Variance {
 #[serde(deny_unknown_fields)]
 pub struct SensorConfig {
     pub topic: String,
+    /// What the sensor is, where its channel's schema cannot say: a ROS
+    /// `geometry_msgs/msg/TwistWithCovarianceStamped` is a `"radar"`'s speed or an
+    /// `"odometer"`'s (also `"gnss"`, `"imu"`). railfuse's own channels need none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub role: Option<railfuse_catalog::foreign::Role>,
     /// Federated filters: the device (sub-filter) this channel feeds, or "master" for
     /// absolute fixes fused in the master filter. Default: the topic.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -477,6 +486,7 @@ impl PipelineConfig {
     /// This pipeline alone, as TOML: what is stored beside its fused channels.
     pub fn to_toml(&self) -> String {
         toml::to_string(&PipelinesFile {
+            track: None,
             pipeline: vec![Spanned::new(0..0, self.clone())],
         })
         .expect("a config serialises")

@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use mcap::records::op;
+use railfuse_catalog::foreign::{ros2, Translated, Translator};
 use railfuse_catalog::foxglove::TwinKind;
 use railfuse_catalog::log::format::{self, Records};
 use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
@@ -18,8 +19,8 @@ use railfuse_catalog::log::{
     read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
 };
 use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, SafetyStatus,
-    TrackMap,
+    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, MessageKind,
+    SafetyStatus, TrackMap,
 };
 use railfuse_catalog::topics;
 use serde::Serialize;
@@ -27,7 +28,7 @@ use serde::Serialize;
 use crate::config::FilterKind;
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalReport, Evaluator};
-use crate::measurement::{Measurement, SensorContext, SensorModel};
+use crate::measurement::{Measurement, Quantity, SensorContext, SensorModel};
 use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 use crate::spec::Pipelines;
 
@@ -88,6 +89,11 @@ pub struct RefuseReport {
     pub undecodable_messages: u64,
     /// The first of them, with the reason.
     pub first_undecodable: Option<String>,
+    /// Foreign messages read and not measurements (a NavSatFix of status NO_FIX), by reason.
+    pub skipped: BTreeMap<String, u64>,
+    /// Foreign topics whose messages carried no time of their own (a zero `header.stamp`):
+    /// they took the log time.
+    pub stamped_by_log_time: BTreeSet<String>,
     pub pipelines: Vec<PipelineReport>,
 }
 
@@ -101,6 +107,8 @@ struct Route {
     /// (pipeline, sensor index) pairs fed by this channel, and how to read it.
     sensors: Vec<(usize, usize)>,
     model: Option<SensorModel>,
+    /// A foreign channel (a ROS 2 bag's): read as the catalogue kind it translates to.
+    translator: Option<Translator>,
     /// The evaluation reads it (reference, track map, events, kept fused channels).
     evaluated: bool,
 }
@@ -129,6 +137,22 @@ struct Output {
 
 /// The shortest interval between two Foxglove positions of one pipeline.
 const LOCATION_TWIN_EVERY_NS: u64 = 100_000_000;
+
+/// A foreign channel as the railfuse channel of `kind` it is read as (same id and topic).
+fn catalogue_channel(info: &ChannelInfo, kind: MessageKind) -> Arc<ChannelInfo> {
+    Arc::new(ChannelInfo {
+        id: info.id,
+        topic: info.topic.clone(),
+        message_encoding: railfuse_catalog::log::MESSAGE_ENCODING.to_owned(),
+        metadata: info.metadata.clone(),
+        schema: Some(Arc::new(SchemaInfo {
+            id: info.schema.as_ref().map_or(0, |s| s.id),
+            name: kind.schema_name().to_owned(),
+            encoding: railfuse_catalog::log::SCHEMA_ENCODING.to_owned(),
+            data: kind.schema_bytes(),
+        })),
+    })
+}
 
 /// Replays `opts.input` through the pipelines into `opts.output` and evaluates the result
 /// against `opts.reference` in the same pass.
@@ -162,6 +186,9 @@ struct Replay<'a> {
     schemas: HashMap<u16, Arc<SchemaInfo>>,
     channels: HashMap<u16, Arc<ChannelInfo>>,
     routes: HashMap<u16, Route>,
+    /// For a ROS 2 input, each pipeline's state also as NavSatFix and Odometry in CDR
+    /// (registered when the first CDR channel is met).
+    ros_outputs: Vec<(ChannelId, ChannelId)>,
     seen_topics: BTreeSet<String>,
     eval: Evaluator,
     measurements: Vec<Measurement>,
@@ -195,10 +222,14 @@ impl<'a> Replay<'a> {
             writer,
             pipelines,
             outputs,
-            context: SensorContext::default(),
+            // The configuration's track until the log brings its own.
+            context: SensorContext {
+                track: opts.config.track.clone(),
+            },
             schemas: HashMap::new(),
             channels: HashMap::new(),
             routes: HashMap::new(),
+            ros_outputs: Vec::new(),
             seen_topics: BTreeSet::new(),
             eval,
             measurements: Vec::new(),
@@ -212,6 +243,8 @@ impl<'a> Replay<'a> {
                 out_of_order_messages: 0,
                 undecodable_messages: 0,
                 first_undecodable: None,
+                skipped: BTreeMap::new(),
+                stamped_by_log_time: BTreeSet::new(),
                 pipelines: Vec::new(),
             },
             last_log_time: 0,
@@ -387,10 +420,20 @@ impl<'a> Replay<'a> {
         if let Some(route) = self.routes.get(&info.id) {
             return Ok(!route.replaced);
         }
+        if info.message_encoding == ros2::ENCODING && self.ros_outputs.is_empty() {
+            self.register_ros_outputs()?;
+        }
         let mut route = Route::default();
         if self.is_replaced(&info.topic) {
             route.replaced = true;
         } else {
+            let info = match self.translator(&info)? {
+                Some(t) => {
+                    route.translator = Some(t);
+                    catalogue_channel(&info, t.kind)
+                }
+                None => info.clone(),
+            };
             self.seen_topics.insert(info.topic.clone());
             let schema = info.schema_name();
             route.context = match schema {
@@ -407,11 +450,106 @@ impl<'a> Replay<'a> {
                     route.model = Some(binding.model);
                 }
             }
+            self.channels.insert(info.id, info);
         }
         let kept = !route.replaced;
         self.routes.insert(info.id, route);
-        self.channels.insert(info.id, info);
+        self.channels.entry(info.id).or_insert(info);
         Ok(kept)
+    }
+
+    /// Each pipeline's NavSatFix and Odometry channels (CDR, `ros2msg` schemas), on ids below
+    /// the other fused channels' that the input has not used so far.
+    fn register_ros_outputs(&mut self) -> Result<()> {
+        let lowest = self
+            .outputs
+            .iter()
+            .flat_map(|o| {
+                [
+                    Some(o.state),
+                    o.location,
+                    Some(o.diagnostics),
+                    o.smoothed,
+                    o.safety,
+                ]
+                .into_iter()
+                .chain([o.imu_error_model])
+            })
+            .flatten()
+            .map(|c| c.0)
+            .min()
+            .unwrap_or(u16::MAX);
+        let needed = 2 + 2 * self.pipelines.len();
+        let ids: Vec<u16> = (1..lowest)
+            .rev()
+            .filter(|id| !self.channels.contains_key(id) && !self.schemas.contains_key(id))
+            .take(needed)
+            .collect();
+        if ids.len() < needed {
+            return Err(Error::Log(ids_exhausted(self.opts.output)));
+        }
+        let (nav_schema, odom_schema) = (ids[0], ids[1]);
+        let w = &mut self.writer;
+        w.copy_schema(
+            nav_schema,
+            ros2::NAV_SAT_FIX,
+            "ros2msg",
+            ros2::NAV_SAT_FIX_DEFINITION.as_bytes(),
+        )?;
+        w.copy_schema(
+            odom_schema,
+            ros2::ODOMETRY,
+            "ros2msg",
+            ros2::ODOMETRY_DEFINITION.as_bytes(),
+        )?;
+        let none = BTreeMap::new();
+        for (k, p) in self.pipelines.iter().enumerate() {
+            let (nav, odom) = (ids[2 + 2 * k], ids[3 + 2 * k]);
+            let name = p.name();
+            w.copy_channel(
+                nav,
+                nav_schema,
+                &topics::fused_nav_sat_fix(name),
+                ros2::ENCODING,
+                &none,
+            )?;
+            w.copy_channel(
+                odom,
+                odom_schema,
+                &topics::fused_odometry(name),
+                ros2::ENCODING,
+                &none,
+            )?;
+            self.ros_outputs.push((ChannelId(nav), ChannelId(odom)));
+        }
+        Ok(())
+    }
+
+    /// How the pipelines' sensors on a foreign channel read it (`None`: a channel of
+    /// railfuse's own, or one nothing reads). The sensors on one topic must agree on its role.
+    fn translator(&self, info: &ChannelInfo) -> Result<Option<Translator>> {
+        let sensors: Vec<(&AnyPipeline, usize)> = self
+            .pipelines
+            .iter()
+            .filter_map(|p| Some((p, p.spec().sensor_for(&info.topic)?)))
+            .collect();
+        let role = sensors
+            .first()
+            .and_then(|(p, si)| p.spec().sensors[*si].role);
+        for (p, si) in &sensors {
+            if p.spec().sensors[*si].role != role {
+                let problem =
+                    format!("is read with another role by an earlier pipeline ({role:?})");
+                return Err(p.spec().channel_error(self.opts.input, *si, problem));
+            }
+        }
+        match Translator::for_channel(&info.message_encoding, info.schema_name(), role) {
+            Ok(t) => Ok(t),
+            Err(why) => match sensors.first() {
+                Some((p, si)) => Err(p.spec().channel_error(self.opts.input, *si, why)),
+                None => Ok(None),
+            },
+        }
     }
 
     /// Every sensor of every pipeline has met its channel; `channels` are the log's, named
@@ -430,6 +568,37 @@ impl<'a> Replay<'a> {
                         false => format!("is not in the file (it has {})", have.join(", ")),
                     };
                     return Err(p.channel_error(self.opts.input, si, problem));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// A pipeline that takes chainage from GNSS fixes had a track to match them on: from the
+    /// log or from the configuration.
+    fn check_track_for_chainage(&self) -> Result<()> {
+        if self.context.track.is_some() {
+            return Ok(());
+        }
+        for route in self.routes.values() {
+            if route.model != Some(SensorModel::GnssFix) {
+                continue;
+            }
+            for &(pi, si) in &route.sensors {
+                let p = &self.pipelines[pi];
+                let fields = &p.spec().sensors[si].fields;
+                let chainage = fields
+                    .as_ref()
+                    .is_none_or(|f| f.contains(&Quantity::Chainage));
+                if !matches!(p, AnyPipeline::Messages(_)) && chainage {
+                    return Err(p.spec().channel_error(
+                        self.opts.input,
+                        si,
+                        "gives chainage only on a track map, and neither the log (no /track/map) \
+                         nor the configuration has one: name a GeoJSON line at its top with \
+                         track = \"line.geojson\""
+                            .into(),
+                    ));
                 }
             }
         }
@@ -463,12 +632,47 @@ impl<'a> Replay<'a> {
         }
         let input = self.opts.input;
         let channel = self.channels[&h.channel_id].clone();
+        // A foreign message is read as its catalogue kind's railfuse message.
+        let translated;
+        let data = match self.routes[&h.channel_id].translator {
+            None => m.data,
+            Some(t) => match t.translate(m.data, h.log_time) {
+                Ok(Translated::Message {
+                    message,
+                    took_log_time,
+                }) => {
+                    if took_log_time && !self.report.stamped_by_log_time.contains(&channel.topic) {
+                        eprintln!(
+                            "{}: {}: messages carry no header.stamp: their log time is used",
+                            input.display(),
+                            channel.topic
+                        );
+                        self.report
+                            .stamped_by_log_time
+                            .insert(channel.topic.clone());
+                    }
+                    translated = message.to_json();
+                    &translated[..]
+                }
+                Ok(Translated::Skipped(reason)) => {
+                    *self.report.skipped.entry(reason.to_owned()).or_insert(0) += 1;
+                    return Ok(true);
+                }
+                Err(e) => {
+                    self.report.undecodable_messages += 1;
+                    self.report.first_undecodable.get_or_insert_with(|| {
+                        format!("{}: log time {} ns: {e}", channel.topic, h.log_time)
+                    });
+                    return Ok(true);
+                }
+            },
+        };
         let msg = LogMessage {
             channel: &channel,
             sequence: h.sequence,
             log_time_ns: h.log_time,
             publish_time_ns: h.publish_time,
-            data: m.data,
+            data,
         };
         if let Some(observe) = self.opts.observer {
             observe(
@@ -564,6 +768,16 @@ impl<'a> Replay<'a> {
                     out.last_location_ns = Some(state.stamp_ns);
                 }
             }
+            if let (Some(state), Some(&(nav, odom))) = (&f.state, self.ros_outputs.get(pi)) {
+                let map = self.context.track.as_ref();
+                if let Some(fix) = ros2::fused_nav_sat_fix(name, state, map) {
+                    self.writer
+                        .write_encoded(nav, f.log_time_ns, state.stamp_ns, &fix)?;
+                }
+                let odometry = ros2::fused_odometry(state, map);
+                self.writer
+                    .write_encoded(odom, f.log_time_ns, state.stamp_ns, &odometry)?;
+            }
             if let Some(state) = &f.state {
                 self.writer.write(out.state, f.log_time_ns, state)?;
                 self.eval.fused_state(out.state.0, state);
@@ -596,6 +810,7 @@ impl<'a> Replay<'a> {
     fn finish(mut self) -> Result<(RefuseReport, EvalReport)> {
         let input = self.opts.input;
         self.check_every_sensor_bound(&[])?;
+        self.check_track_for_chainage()?;
         for pi in 0..self.pipelines.len() {
             self.pipelines[pi].finish(self.last_log_time, &self.context, &mut self.fused);
             self.emit(pi)?;

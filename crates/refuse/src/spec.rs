@@ -46,6 +46,8 @@ pub const DEFAULT_CHAINAGE_STD_M: f64 = 0.01;
 pub struct Pipelines {
     /// Where the configuration came from, for messages.
     pub path: PathBuf,
+    /// The track map the configuration names (`track = "line.geojson"`), read and checked.
+    pub track: Option<railfuse_catalog::messages::TrackMap>,
     pub pipeline: Vec<PipelineSpec>,
 }
 
@@ -95,8 +97,23 @@ impl Pipelines {
                 .map_err(|Invalid { span, message }| invalid(span, message))?;
             pipeline.push(spec);
         }
+        // The track file is relative to the configuration.
+        let track = match &file.track {
+            Some(t) => {
+                let at = path.parent().unwrap_or(Path::new("")).join(t);
+                let map = railfuse_catalog::track_geojson::read_track_map(&at).map_err(|e| {
+                    Error::ConfigSyntax {
+                        path: path.to_owned(),
+                        message: format!("track: {e}"),
+                    }
+                })?;
+                Some(map)
+            }
+            None => None,
+        };
         Ok(Self {
             path: path.to_owned(),
+            track,
             pipeline,
         })
     }
@@ -199,6 +216,8 @@ pub struct InitialSpec {
 #[derive(Debug, Clone)]
 pub struct SensorSpec {
     pub topic: String,
+    /// What the sensor is, for a foreign channel whose schema cannot say (config `role`).
+    pub role: Option<railfuse_catalog::foreign::Role>,
     /// Federated pipelines: the device index ([`MASTER`] for the master filter) and name.
     /// Centralised pipelines: 0 and no name.
     pub device: usize,
@@ -392,8 +411,10 @@ impl PipelineSpec {
                 .map(|k| k.schema_name())
                 .collect();
             return Err(fail(format!(
-                "has schema '{schema}', which no sensor model reads (supported: {})",
-                supported.join(", ")
+                "has schema '{schema}', which no sensor model reads (supported: {}; and, \
+                 read as those, {})",
+                supported.join(", "),
+                railfuse_catalog::foreign::Translator::schemas().join(", ")
             )));
         };
         let eddy = self.estimator.kind() == crate::config::FilterKind::EddyCurrent;
@@ -621,6 +642,7 @@ fn sensor(
     };
     Ok(SensorSpec {
         topic: s.topic.clone(),
+        role: s.role,
         device,
         device_name,
         fields: s.fields.clone(),

@@ -202,47 +202,18 @@ pub fn location_fix(g: &GnssFix) -> Option<Twin> {
 /// chainage on the map, with the along-track variance as an approximated east/north
 /// covariance (nothing across the track: a 1-D pipeline knows none) and the track's heading.
 pub fn fused_location(pipeline: &str, f: &FusedState, map: Option<&TrackMap>) -> Option<Twin> {
-    let (latitude, longitude, altitude, cov, cov_type, heading) = match &f.plane {
-        Some(p) => {
-            let [ee, en, ne, nn] = p.covariance_en_m2;
-            let cov = [ee, en, 0.0, ne, nn, 0.0, 0.0, 0.0, 0.0];
-            (
-                p.latitude_deg,
-                p.longitude_deg,
-                map.map_or(0.0, |m| m.origin.altitude_m),
-                cov,
-                3,
-                p.heading_rad,
-            )
-        }
-        None => {
-            let map = map?;
-            let (east, north, heading) = map.locate(f.chainage_m)?;
-            let (latitude, longitude, altitude) = map.origin.to_geodetic(east, north, 0.0);
-            let var = f.covariance[0].max(0.0);
-            let (s, c) = heading.sin_cos();
-            let (ee, en, nn) = (var * s * s, var * s * c, var * c * c);
-            let cov = [ee, en, 0.0, en, nn, 0.0, 0.0, 0.0, 0.0];
-            (latitude, longitude, altitude, cov, 1, Some(heading))
-        }
-    };
-    [latitude, longitude, altitude]
-        .iter()
-        .chain(&cov)
-        .all(|v| v.is_finite())
-        .then(|| {
-            Twin::LocationFix(LocationFix {
-                timestamp: Time::from_ns(f.stamp_ns),
-                frame_id: pipeline.to_owned(),
-                latitude,
-                longitude,
-                altitude,
-                position_covariance: cov,
-                position_covariance_type: cov_type,
-                heading,
-                color: None,
-            })
-        })
+    let g = f.geodetic(map)?;
+    Some(Twin::LocationFix(LocationFix {
+        timestamp: Time::from_ns(f.stamp_ns),
+        frame_id: pipeline.to_owned(),
+        latitude: g.latitude_deg,
+        longitude: g.longitude_deg,
+        altitude: g.altitude_m,
+        position_covariance: g.covariance_enu_m2,
+        position_covariance_type: g.covariance_type,
+        heading: g.heading_rad,
+        color: None,
+    }))
 }
 
 /// The track as a GeoJSON feature collection: the centre line, tunnels, stations and balises.

@@ -393,8 +393,20 @@ impl LogWriter {
         twin: &crate::foxglove::Twin,
     ) -> Result<()> {
         let json = serde_json::to_vec(twin).map_err(|e| Error::write(&self.partial, e))?;
+        self.write_encoded(channel, log_time_ns, twin.stamp_ns(), &json)
+    }
+
+    /// Writes a message already encoded in its channel's encoding (a ROS 2 CDR payload), with
+    /// the channel's next sequence number.
+    pub fn write_encoded(
+        &mut self,
+        channel: ChannelId,
+        log_time_ns: u64,
+        publish_time_ns: u64,
+        data: &[u8],
+    ) -> Result<()> {
         let sequence = self.next_sequence(channel.0);
-        self.write_raw(channel.0, sequence, log_time_ns, twin.stamp_ns(), &json)
+        self.write_raw(channel.0, sequence, log_time_ns, publish_time_ns, data)
     }
 
     fn next_sequence(&mut self, channel: u16) -> u32 {

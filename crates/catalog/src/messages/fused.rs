@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use super::TrackMap;
+
 /// The fused along-track state of one pipeline after a measurement update.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct FusedState {
@@ -39,6 +41,67 @@ pub struct PlanePosition {
     pub velocity_covariance_en: Option<[f64; 4]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub heading_rad: Option<f64>,
+}
+
+/// Where a fused state is on the globe, with the uncertainty there.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FusedGeodetic {
+    pub latitude_deg: f64,
+    pub longitude_deg: f64,
+    pub altitude_m: f64,
+    /// East/north/up, row-major 3×3, m² (nothing known up: zeros).
+    pub covariance_enu_m2: [f64; 9],
+    /// As ROS and Foxglove name it: 3 known (a 2-D pipeline's own), 1 approximated (an
+    /// along-track variance spread along the track's heading).
+    pub covariance_type: u8,
+    /// Clockwise from north: a 2-D pipeline's own, else the track's.
+    pub heading_rad: Option<f64>,
+}
+
+impl FusedState {
+    /// Its position in the map's local plane: east, north, heading (clockwise from north) and
+    /// the east/north covariance (row-major 2×2). A 2-D pipeline's own, map or no map; an
+    /// along-track one's chainage on the map, its variance along the track's heading (a 1-D
+    /// pipeline knows nothing across the track).
+    pub fn local(&self, map: Option<&TrackMap>) -> Option<(f64, f64, Option<f64>, [f64; 4])> {
+        if let Some(p) = &self.plane {
+            return Some((p.east_m, p.north_m, p.heading_rad, p.covariance_en_m2));
+        }
+        let (east, north, heading) = map?.locate(self.chainage_m)?;
+        let var = self.covariance[0].max(0.0);
+        let (s, c) = heading.sin_cos();
+        let (ee, en, nn) = (var * s * s, var * s * c, var * c * c);
+        Some((east, north, Some(heading), [ee, en, en, nn]))
+    }
+
+    /// Its position on the globe (altitude: the map origin's, else 0); `None` for an
+    /// along-track state with no map, or anything not finite.
+    pub fn geodetic(&self, map: Option<&TrackMap>) -> Option<FusedGeodetic> {
+        let (east, north, heading, [ee, en, ne, nn]) = self.local(map)?;
+        let (latitude_deg, longitude_deg, altitude_m, covariance_type) = match &self.plane {
+            Some(p) => {
+                let alt = map.map_or(0.0, |m| m.origin.altitude_m);
+                (p.latitude_deg, p.longitude_deg, alt, 3)
+            }
+            None => {
+                let (lat, lon, alt) = map?.origin.to_geodetic(east, north, 0.0);
+                (lat, lon, alt, 1)
+            }
+        };
+        let covariance_enu_m2 = [ee, en, 0.0, ne, nn, 0.0, 0.0, 0.0, 0.0];
+        let finite = [latitude_deg, longitude_deg, altitude_m]
+            .iter()
+            .chain(&covariance_enu_m2)
+            .all(|v| v.is_finite());
+        finite.then_some(FusedGeodetic {
+            latitude_deg,
+            longitude_deg,
+            altitude_m,
+            covariance_enu_m2,
+            covariance_type,
+            heading_rad: heading,
+        })
+    }
 }
 
 impl PlanePosition {

@@ -23,8 +23,8 @@ pub use balise::BalisePassage;
 pub use eddy_current::EddyCurrentBlock;
 pub use events::{Event, EventKind, Severity};
 pub use fused::{
-    DeviceShare, EddyCurrentDiagnostics, FusedDiagnostics, FusedState, GateDecision, PlanePosition,
-    SensorStateEstimate,
+    DeviceShare, EddyCurrentDiagnostics, FusedDiagnostics, FusedGeodetic, FusedState, GateDecision,
+    PlanePosition, SensorStateEstimate,
 };
 pub use gnss::{FixType, GnssFix};
 pub use ground_truth::GroundTruth;

@@ -6,14 +6,19 @@ use serde::{Deserialize, Serialize};
 pub struct Odometer {
     pub stamp_ns: u64,
     pub sensor_id: String,
-    /// Cumulative pulse count since the sensor started.
-    pub pulse_count: u64,
+    /// Cumulative pulse count since the sensor started (absent from an odometer that reports
+    /// only its speed, as a ROS `Twist` does).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pulse_count: Option<u64>,
     /// Pulses per wheel revolution.
-    pub pulses_per_revolution: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pulses_per_revolution: Option<u32>,
     /// Wheel diameter the sensor was configured with, m.
-    pub wheel_diameter_m: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_diameter_m: Option<f64>,
     /// Distance since the previous sample from the configured diameter, m.
-    pub distance_increment_m: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distance_increment_m: Option<f64>,
     /// Speed over the last sample interval, m/s.
     pub speed_mps: f64,
 }

@@ -119,11 +119,12 @@ impl Diagnosis {
         let other_speed = self.axles[1 - k].speed_mps;
         let a = &mut self.axles[k];
         a.last_stamp_ns = Some(m.stamp_ns);
-        a.unchanged = match a.last_pulses {
-            Some(p) if p == m.pulse_count => a.unchanged + 1,
+        // A stuck pulse generator shows in its count; one that reports only speed cannot.
+        a.unchanged = match (a.last_pulses, m.pulse_count) {
+            (Some(p), Some(now)) if p == now => a.unchanged + 1,
             _ => 0,
         };
-        a.last_pulses = Some(m.pulse_count);
+        a.last_pulses = m.pulse_count;
         a.fault = None;
         if !m.speed_mps.is_finite() || m.speed_mps < -0.5 || m.speed_mps > s.max_speed_mps {
             a.fault = Some(format!("speed {} m/s out of range", m.speed_mps));
@@ -135,7 +136,8 @@ impl Diagnosis {
         if a.unchanged >= s.stuck_samples && moving {
             a.fault = Some(format!(
                 "stuck: pulse count {} unchanged for {} samples while the other axle moves",
-                m.pulse_count, a.unchanged
+                m.pulse_count.unwrap_or_default(),
+                a.unchanged
             ));
             return;
         }
@@ -264,10 +266,10 @@ mod tests {
         Odometer {
             stamp_ns,
             sensor_id: "a".into(),
-            pulse_count: pulses,
-            pulses_per_revolution: 100,
-            wheel_diameter_m: 0.9,
-            distance_increment_m: 0.1,
+            pulse_count: Some(pulses),
+            pulses_per_revolution: Some(100),
+            wheel_diameter_m: Some(0.9),
+            distance_increment_m: Some(0.1),
             speed_mps: speed,
         }
     }

@@ -28,12 +28,14 @@ pub struct OdometryCheck {
 impl OdometryCheck {
     /// A sample of axle 2.
     pub fn axle_2(&mut self, m: &Odometer) {
-        if self.start.is_some() && m.distance_increment_m.is_finite() {
-            self.distance_m += m.distance_increment_m;
+        // An odometer that reports only its speed gives no distance to check against.
+        if let (Some(_), Some(d)) = (self.start, m.distance_increment_m.filter(|d| d.is_finite())) {
+            self.distance_m += d;
         }
-        if m.pulses_per_revolution > 0 && m.wheel_diameter_m.is_finite() {
-            self.quantum_m =
-                std::f64::consts::PI * m.wheel_diameter_m / m.pulses_per_revolution as f64;
+        if let (Some(ppr @ 1..), Some(diameter)) = (m.pulses_per_revolution, m.wheel_diameter_m) {
+            if diameter.is_finite() {
+                self.quantum_m = std::f64::consts::PI * diameter / ppr as f64;
+            }
         }
     }
 
@@ -87,10 +89,10 @@ mod tests {
         Odometer {
             stamp_ns: 0,
             sensor_id: "2".into(),
-            pulse_count: 0,
-            pulses_per_revolution: 100,
-            wheel_diameter_m: 0.9,
-            distance_increment_m: increment,
+            pulse_count: Some(0),
+            pulses_per_revolution: Some(100),
+            wheel_diameter_m: Some(0.9),
+            distance_increment_m: Some(increment),
             speed_mps: 0.0,
         }
     }

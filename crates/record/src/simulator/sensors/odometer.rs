@@ -103,10 +103,10 @@ impl SimSensor for OdometerSensor {
         let msg = Odometer {
             stamp_ns: w.t_ns,
             sensor_id: p.sensor_id.clone(),
-            pulse_count: pulses,
-            pulses_per_revolution: p.pulses_per_revolution,
-            wheel_diameter_m: p.configured_diameter_m,
-            distance_increment_m: (pulses - self.last_pulses) as f64 * pulse_len_cfg,
+            pulse_count: Some(pulses),
+            pulses_per_revolution: Some(p.pulses_per_revolution),
+            wheel_diameter_m: Some(p.configured_diameter_m),
+            distance_increment_m: Some((pulses - self.last_pulses) as f64 * pulse_len_cfg),
             speed_mps: speed,
         };
         self.last_pulses = pulses;

@@ -1,0 +1,96 @@
+//! Messages of other tools' schemas, read as railfuse's own. A ROS 2 bag's
+//! `sensor_msgs/msg/NavSatFix` is a [`GnssFix`](crate::messages::GnssFix), its `Imu` an
+//! [`Imu`](crate::messages::Imu), a `geometry_msgs/msg/TwistWithCovarianceStamped` the speed of
+//! the sensor its [`Role`] names. One table ([`Translator::for_channel`]) maps a channel's
+//! message encoding, schema name and role to a catalogue kind; everything after it (sensor
+//! models, pipelines, the viewer) sees catalogue messages only, never an encoding.
+
+pub mod ros2;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::messages::{AnyMessage, MessageKind};
+
+/// What a sensor is, where its message's schema cannot say (a `Twist` from a Doppler radar
+/// or from a wheel odometer).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Role {
+    Radar,
+    Odometer,
+    Gnss,
+    Imu,
+}
+
+impl Role {
+    pub const NAMES: &'static [&'static str] = &["radar", "odometer", "gnss", "imu"];
+}
+
+/// Why one foreign message was not read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ForeignError {
+    #[error("CDR payload does not decode as {schema}: {cause}")]
+    Cdr { schema: String, cause: String },
+    #[error("{0}")]
+    Invalid(String),
+}
+
+/// One foreign message read.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Translated {
+    Message {
+        message: AnyMessage,
+        /// The message carried no time of its own (a zero `header.stamp`): it took the log
+        /// time.
+        took_log_time: bool,
+    },
+    /// Read, and not a measurement (a fix of status NO_FIX), with the reason it is counted
+    /// under.
+    Skipped(&'static str),
+}
+
+type Decode = fn(&[u8], Option<Role>, u64) -> Result<Translated, ForeignError>;
+
+/// How to read a foreign channel as a catalogue kind.
+#[derive(Clone, Copy)]
+pub struct Translator {
+    pub kind: MessageKind,
+    role: Option<Role>,
+    decode: Decode,
+}
+
+impl std::fmt::Debug for Translator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Translator({:?}, {:?})", self.kind, self.role)
+    }
+}
+
+impl Translator {
+    /// The translator of a channel of `schema` in `encoding` for a sensor of `role`: `Ok(None)`
+    /// for a schema no translator reads (railfuse's own included), an error in words for one
+    /// that needs a role it was not given, or whose schema cannot be that role.
+    pub fn for_channel(
+        encoding: &str,
+        schema: &str,
+        role: Option<Role>,
+    ) -> Result<Option<Self>, String> {
+        if encoding != ros2::ENCODING {
+            return Ok(None);
+        }
+        let Some((kind, decode)) = ros2::reader(schema, role)? else {
+            return Ok(None);
+        };
+        Ok(Some(Self { kind, role, decode }))
+    }
+
+    /// Reads one payload; `log_time_ns` stands in for a missing sensor time.
+    pub fn translate(&self, data: &[u8], log_time_ns: u64) -> Result<Translated, ForeignError> {
+        (self.decode)(data, self.role, log_time_ns)
+    }
+
+    /// The schemas a translator reads, for messages that list what would fit.
+    pub fn schemas() -> &'static [&'static str] {
+        ros2::SCHEMAS
+    }
+}

@@ -1,0 +1,647 @@
+//! ROS 2 messages in CDR (MCAP message encoding `cdr`, schema encoding `ros2msg`), read as
+//! catalogue messages. A payload is a 4-byte encapsulation header (little- or big-endian CDR)
+//! and the message's fields in CDR, decoded by `cdr-encoding` into the structs below, which
+//! follow the ROS 2 message definitions field for field.
+//!
+//! - `sensor_msgs/msg/NavSatFix` → GNSS fix. Status −1 (NO_FIX) is skipped and counted; 0 is
+//!   a single fix, 1 (SBAS) differential, 2 (GBAS) RTK fixed, as ROS GNSS drivers report RTK.
+//!   The position covariance (ENU, m², as ROS defines it) is used unless its type is UNKNOWN.
+//!   The altitude is ellipsoidal (REP 145 / the message's definition).
+//! - `sensor_msgs/msg/Imu` → IMU: `linear_acceleration` is specific force (gravity included,
+//!   REP 145), `angular_velocity` the angular rate; the frame id is the sensor id.
+//! - `geometry_msgs/msg/TwistWithCovarianceStamped`, `TwistStamped` and
+//!   `nav_msgs/msg/Odometry` → the speed along body x (`twist.linear.x`) of a radar or an
+//!   odometer, as the sensor's role says; its variance from the covariance's first element
+//!   where that is positive. With role `gnss` a twist is a receiver's velocity in east/north
+//!   (x east, y north: the ublox driver's `fix_velocity`, nmea_navsat_driver's `vel`): a GNSS
+//!   fix with speed over ground and course and no position, since ROS sends a receiver's
+//!   position (NavSatFix) and velocity on two topics.
+//!
+//! `header.stamp` is the measurement time; a zero stamp takes the log time (the caller says
+//! so once per topic).
+//!
+//! The other way, a pipeline's fused state is written for ROS tools as a NavSatFix (its
+//! position on the globe with covariance) and an Odometry (position in the map frame, speed
+//! along body x), with their definitions as MCAP `ros2msg` schemas.
+
+use byteorder::{BigEndian, LittleEndian};
+use serde::{Deserialize, Serialize};
+
+use super::{Decode, ForeignError, Role, Translated};
+use crate::messages::{
+    AnyMessage, FixType, FusedState, GnssFix, Imu, MessageKind, Odometer, RadarSpeed, TrackMap,
+};
+
+/// The MCAP message encoding of ROS 2 channels.
+pub const ENCODING: &str = "cdr";
+
+pub const NAV_SAT_FIX: &str = "sensor_msgs/msg/NavSatFix";
+pub const IMU: &str = "sensor_msgs/msg/Imu";
+pub const TWIST_WITH_COVARIANCE_STAMPED: &str = "geometry_msgs/msg/TwistWithCovarianceStamped";
+pub const TWIST_STAMPED: &str = "geometry_msgs/msg/TwistStamped";
+pub const ODOMETRY: &str = "nav_msgs/msg/Odometry";
+
+/// Every schema read here.
+pub const SCHEMAS: &[&str] = &[
+    NAV_SAT_FIX,
+    IMU,
+    TWIST_WITH_COVARIANCE_STAMPED,
+    TWIST_STAMPED,
+    ODOMETRY,
+];
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Time {
+    pub sec: i32,
+    pub nanosec: u32,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Header {
+    pub stamp: Time,
+    pub frame_id: String,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct NavSatStatus {
+    pub status: i8,
+    pub service: u16,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct NavSatFix {
+    pub header: Header,
+    pub status: NavSatStatus,
+    pub latitude: f64,
+    pub longitude: f64,
+    pub altitude: f64,
+    pub position_covariance: [f64; 9],
+    pub position_covariance_type: u8,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Vector3 {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Quaternion {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    pub w: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct ImuMsg {
+    pub header: Header,
+    pub orientation: Quaternion,
+    pub orientation_covariance: [f64; 9],
+    pub angular_velocity: Vector3,
+    pub angular_velocity_covariance: [f64; 9],
+    pub linear_acceleration: Vector3,
+    pub linear_acceleration_covariance: [f64; 9],
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Twist {
+    pub linear: Vector3,
+    pub angular: Vector3,
+}
+
+/// A 6×6 covariance, row-major (serde reads arrays of up to 32 elements: six rows of six).
+type Covariance6 = [[f64; 6]; 6];
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct TwistWithCovariance {
+    pub twist: Twist,
+    pub covariance: Covariance6,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct TwistWithCovarianceStamped {
+    pub header: Header,
+    pub twist: TwistWithCovariance,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct TwistStamped {
+    pub header: Header,
+    pub twist: Twist,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Pose {
+    pub position: Vector3,
+    pub orientation: Quaternion,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct PoseWithCovariance {
+    pub pose: Pose,
+    pub covariance: Covariance6,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Odometry {
+    pub header: Header,
+    pub child_frame_id: String,
+    pub pose: PoseWithCovariance,
+    pub twist: TwistWithCovariance,
+}
+
+/// `sensor_msgs/msg/NavSatFix` with what it includes, as ROS 2 writes a definition into an
+/// MCAP schema (`ros2msg`): the message, then each type it uses after a separator line.
+pub const NAV_SAT_FIX_DEFINITION: &str = "\
+std_msgs/Header header
+NavSatStatus status
+float64 latitude
+float64 longitude
+float64 altitude
+float64[9] position_covariance
+uint8 COVARIANCE_TYPE_UNKNOWN=0
+uint8 COVARIANCE_TYPE_APPROXIMATED=1
+uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN=2
+uint8 COVARIANCE_TYPE_KNOWN=3
+uint8 position_covariance_type
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+================================================================================
+MSG: sensor_msgs/NavSatStatus
+int8 STATUS_NO_FIX=-1
+int8 STATUS_FIX=0
+int8 STATUS_SBAS_FIX=1
+int8 STATUS_GBAS_FIX=2
+int8 status
+uint16 SERVICE_GPS=1
+uint16 SERVICE_GLONASS=2
+uint16 SERVICE_COMPASS=4
+uint16 SERVICE_GALILEO=8
+uint16 service
+";
+
+/// `nav_msgs/msg/Odometry` with what it includes (see [`NAV_SAT_FIX_DEFINITION`]).
+pub const ODOMETRY_DEFINITION: &str = "\
+std_msgs/Header header
+string child_frame_id
+geometry_msgs/PoseWithCovariance pose
+geometry_msgs/TwistWithCovariance twist
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+================================================================================
+MSG: geometry_msgs/PoseWithCovariance
+Pose pose
+float64[36] covariance
+================================================================================
+MSG: geometry_msgs/Pose
+Point position
+Quaternion orientation
+================================================================================
+MSG: geometry_msgs/Point
+float64 x
+float64 y
+float64 z
+================================================================================
+MSG: geometry_msgs/Quaternion
+float64 x 0
+float64 y 0
+float64 z 0
+float64 w 1
+================================================================================
+MSG: geometry_msgs/TwistWithCovariance
+Twist twist
+float64[36] covariance
+================================================================================
+MSG: geometry_msgs/Twist
+Vector3 linear
+Vector3 angular
+================================================================================
+MSG: geometry_msgs/Vector3
+float64 x
+float64 y
+float64 z
+";
+
+/// A message as a ROS 2 CDR payload: the little-endian encapsulation header, then its fields.
+pub fn to_cdr<T: Serialize>(msg: &T) -> Vec<u8> {
+    let mut out = vec![0x00, 0x01, 0x00, 0x00];
+    out.extend(cdr_encoding::to_vec::<T, LittleEndian>(msg).expect("a ROS message serialises"));
+    out
+}
+
+fn header_at(stamp_ns: u64, frame_id: &str) -> Header {
+    Header {
+        stamp: Time {
+            sec: (stamp_ns / 1_000_000_000) as i32,
+            nanosec: (stamp_ns % 1_000_000_000) as u32,
+        },
+        frame_id: frame_id.to_owned(),
+    }
+}
+
+/// A pipeline's fused state as `sensor_msgs/msg/NavSatFix` (CDR): its position on the globe
+/// and that position's covariance; `None` where it has no place on the globe (no map).
+pub fn fused_nav_sat_fix(
+    pipeline: &str,
+    f: &FusedState,
+    map: Option<&TrackMap>,
+) -> Option<Vec<u8>> {
+    let g = f.geodetic(map)?;
+    Some(to_cdr(&NavSatFix {
+        header: header_at(f.stamp_ns, pipeline),
+        status: NavSatStatus {
+            status: 0,
+            service: 0,
+        },
+        latitude: g.latitude_deg,
+        longitude: g.longitude_deg,
+        altitude: g.altitude_m,
+        position_covariance: g.covariance_enu_m2,
+        position_covariance_type: g.covariance_type,
+    }))
+}
+
+/// A pipeline's fused state as `nav_msgs/msg/Odometry` (CDR): the position in the map's
+/// east/north/up frame (`map`), the heading as the yaw, and the speed along the body's x axis
+/// (`base_link`) with its variance.
+pub fn fused_odometry(f: &FusedState, map: Option<&TrackMap>) -> Vec<u8> {
+    let zero = Vector3 {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+    };
+    let mut pose_covariance = [[0.0; 6]; 6];
+    let mut twist_covariance = [[0.0; 6]; 6];
+    twist_covariance[0][0] = f.covariance[4];
+    let (position, orientation) = match f.local(map) {
+        Some((east, north, heading, [ee, en, _, nn])) => {
+            (pose_covariance[0][0], pose_covariance[0][1]) = (ee, en);
+            (pose_covariance[1][0], pose_covariance[1][1]) = (en, nn);
+            // ROS yaw is counter-clockwise from east; the heading is clockwise from north.
+            let yaw = std::f64::consts::FRAC_PI_2 - heading.unwrap_or(std::f64::consts::FRAC_PI_2);
+            let (s, c) = (yaw / 2.0).sin_cos();
+            (
+                Vector3 {
+                    x: east,
+                    y: north,
+                    z: 0.0,
+                },
+                Quaternion {
+                    x: 0.0,
+                    y: 0.0,
+                    z: s,
+                    w: c,
+                },
+            )
+        }
+        None => (
+            Vector3 {
+                x: f.chainage_m,
+                y: 0.0,
+                z: 0.0,
+            },
+            Quaternion {
+                x: 0.0,
+                y: 0.0,
+                z: 0.0,
+                w: 1.0,
+            },
+        ),
+    };
+    to_cdr(&Odometry {
+        header: header_at(f.stamp_ns, "map"),
+        child_frame_id: "base_link".to_owned(),
+        pose: PoseWithCovariance {
+            pose: Pose {
+                position,
+                orientation,
+            },
+            covariance: pose_covariance,
+        },
+        twist: TwistWithCovariance {
+            twist: Twist {
+                linear: Vector3 {
+                    x: f.speed_mps,
+                    y: 0.0,
+                    z: 0.0,
+                },
+                angular: zero,
+            },
+            covariance: twist_covariance,
+        },
+    })
+}
+
+/// Decodes a CDR payload (encapsulation header first) as `T`.
+pub fn from_cdr<T: for<'de> Deserialize<'de>>(
+    data: &[u8],
+    schema: &str,
+) -> Result<T, ForeignError> {
+    let fail = |cause: String| ForeignError::Cdr {
+        schema: schema.to_owned(),
+        cause,
+    };
+    if data.len() < 4 {
+        return Err(fail(format!(
+            "{} bytes, shorter than the encapsulation header",
+            data.len()
+        )));
+    }
+    // Alignment counts from the end of the encapsulation header.
+    let body = &data[4..];
+    let decoded = match data[1] {
+        0x01 | 0x03 => cdr_encoding::from_bytes::<T, LittleEndian>(body),
+        0x00 | 0x02 => cdr_encoding::from_bytes::<T, BigEndian>(body),
+        other => {
+            return Err(fail(format!(
+                "encapsulation kind {other:#04x} is not plain CDR"
+            )))
+        }
+    };
+    decoded.map(|(v, _)| v).map_err(|e| fail(e.to_string()))
+}
+
+/// The message's time, or the log time where its stamp is zero.
+fn stamp(h: &Header, log_time_ns: u64) -> Result<(u64, bool), ForeignError> {
+    if h.stamp.sec == 0 && h.stamp.nanosec == 0 {
+        return Ok((log_time_ns, true));
+    }
+    if h.stamp.sec < 0 || h.stamp.nanosec >= 1_000_000_000 {
+        return Err(ForeignError::Invalid(format!(
+            "header.stamp {}.{:09} is not a time",
+            h.stamp.sec, h.stamp.nanosec
+        )));
+    }
+    Ok((
+        h.stamp.sec as u64 * 1_000_000_000 + u64::from(h.stamp.nanosec),
+        false,
+    ))
+}
+
+fn nav_sat_fix(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
+    let m: NavSatFix = from_cdr(data, NAV_SAT_FIX)?;
+    let fix_type = match m.status.status {
+        -1 => return Ok(Translated::Skipped("NavSatFix with status NO_FIX")),
+        0 => FixType::Single,
+        1 => FixType::Dgps,
+        2 => FixType::RtkFixed,
+        s => {
+            return Err(ForeignError::Invalid(format!(
+                "NavSatFix status {s} (−1 to 2)"
+            )))
+        }
+    };
+    let on_globe = m.latitude.abs() <= 90.0 && m.longitude.abs() <= 180.0;
+    if !on_globe || !m.altitude.is_finite() {
+        return Err(ForeignError::Invalid(format!(
+            "NavSatFix position ({}, {}, {}) is not on the globe",
+            m.latitude, m.longitude, m.altitude
+        )));
+    }
+    let c = m.position_covariance;
+    let covariance_known = m.position_covariance_type != 0
+        && c.iter().all(|x| x.is_finite())
+        && c[0] >= 0.0
+        && c[4] >= 0.0
+        && c[8] >= 0.0;
+    let (stamp_ns, took_log_time) = stamp(&m.header, log_time_ns)?;
+    Ok(Translated::Message {
+        message: AnyMessage::GnssFix(GnssFix {
+            stamp_ns,
+            fix_type,
+            satellites: 0,
+            hdop: None,
+            latitude_deg: Some(m.latitude),
+            longitude_deg: Some(m.longitude),
+            altitude_m: Some(m.altitude),
+            altitude_msl_m: None,
+            position_covariance_enu_m2: covariance_known.then_some(c),
+            speed_mps: None,
+            course_rad: None,
+        }),
+        took_log_time,
+    })
+}
+
+fn imu(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
+    let m: ImuMsg = from_cdr(data, IMU)?;
+    let (a, w) = (&m.linear_acceleration, &m.angular_velocity);
+    let (stamp_ns, took_log_time) = stamp(&m.header, log_time_ns)?;
+    Ok(Translated::Message {
+        message: AnyMessage::Imu(Imu {
+            stamp_ns,
+            sensor_id: m.header.frame_id,
+            specific_force_mps2: [a.x, a.y, a.z],
+            angular_rate_radps: [w.x, w.y, w.z],
+        }),
+        took_log_time,
+    })
+}
+
+/// A twist's linear velocity (body x for a radar or an odometer, east/north for a GNSS
+/// receiver), with the variance of x where given, as the sensor `role` says.
+fn speed(
+    header: Header,
+    linear: &Vector3,
+    variance: Option<f64>,
+    role: Option<Role>,
+    log_time_ns: u64,
+) -> Result<Translated, ForeignError> {
+    let (stamp_ns, took_log_time) = stamp(&header, log_time_ns)?;
+    let variance = variance.filter(|v| v.is_finite() && *v > 0.0);
+    let speed_mps = linear.x;
+    let message = match role {
+        Some(Role::Gnss) => {
+            let (east, north) = (linear.x, linear.y);
+            let moving = east.hypot(north) > 0.5;
+            AnyMessage::GnssFix(GnssFix {
+                stamp_ns,
+                fix_type: FixType::Single,
+                satellites: 0,
+                hdop: None,
+                latitude_deg: None,
+                longitude_deg: None,
+                altitude_m: None,
+                altitude_msl_m: None,
+                position_covariance_enu_m2: None,
+                speed_mps: Some(east.hypot(north)).filter(|v| v.is_finite()),
+                // Clockwise from north; undefined when (nearly) standing.
+                course_rad: moving.then(|| east.atan2(north).rem_euclid(std::f64::consts::TAU)),
+            })
+        }
+        Some(Role::Odometer) => AnyMessage::Odometer(Odometer {
+            stamp_ns,
+            sensor_id: header.frame_id,
+            pulse_count: None,
+            pulses_per_revolution: None,
+            wheel_diameter_m: None,
+            distance_increment_m: None,
+            speed_mps,
+        }),
+        // A radar measures the speed's magnitude.
+        _ => AnyMessage::RadarSpeed(RadarSpeed {
+            stamp_ns,
+            speed_mps: speed_mps.abs(),
+            quality: 1.0,
+            valid: speed_mps.is_finite(),
+            speed_variance_m2ps2: variance,
+        }),
+    };
+    Ok(Translated::Message {
+        message,
+        took_log_time,
+    })
+}
+
+fn twist_with_covariance(
+    data: &[u8],
+    role: Option<Role>,
+    log_time_ns: u64,
+) -> Result<Translated, ForeignError> {
+    let m: TwistWithCovarianceStamped = from_cdr(data, TWIST_WITH_COVARIANCE_STAMPED)?;
+    let var = m.twist.covariance[0][0];
+    speed(
+        m.header,
+        &m.twist.twist.linear,
+        Some(var),
+        role,
+        log_time_ns,
+    )
+}
+
+fn twist(data: &[u8], role: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
+    let m: TwistStamped = from_cdr(data, TWIST_STAMPED)?;
+    speed(m.header, &m.twist.linear, None, role, log_time_ns)
+}
+
+fn odometry(data: &[u8], role: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
+    let m: Odometry = from_cdr(data, ODOMETRY)?;
+    let var = m.twist.covariance[0][0];
+    let role = role.or(Some(Role::Odometer));
+    speed(
+        m.header,
+        &m.twist.twist.linear,
+        Some(var),
+        role,
+        log_time_ns,
+    )
+}
+
+/// The catalogue kind and reader of `schema` for a sensor of `role`; `Ok(None)` for a schema
+/// not read here.
+pub(super) fn reader(
+    schema: &str,
+    role: Option<Role>,
+) -> Result<Option<(MessageKind, Decode)>, String> {
+    let speed_kind = |role: Option<Role>, default: Option<Role>| match role.or(default) {
+        Some(Role::Radar) => Ok(MessageKind::RadarSpeed),
+        Some(Role::Odometer) => Ok(MessageKind::Odometer),
+        Some(Role::Gnss) => Ok(MessageKind::GnssFix),
+        Some(other) => Err(format!(
+            "{schema} is a velocity: it can be a radar's, an odometer's or a GNSS receiver's, \
+             not {other:?}"
+        )),
+        None => Err(format!(
+            "{schema} can be a radar's, an odometer's or a GNSS receiver's velocity: say which \
+             with role = \"radar\", \"odometer\" or \"gnss\""
+        )),
+    };
+    let wrong_role = |kind: &str| Err(format!("{schema} is {kind}: its role cannot be {role:?}"));
+    Ok(Some(match schema {
+        NAV_SAT_FIX => match role {
+            None | Some(Role::Gnss) => (MessageKind::GnssFix, nav_sat_fix as Decode),
+            _ => return wrong_role("a GNSS fix"),
+        },
+        IMU => match role {
+            None | Some(Role::Imu) => (MessageKind::Imu, imu as Decode),
+            _ => return wrong_role("an IMU sample"),
+        },
+        TWIST_WITH_COVARIANCE_STAMPED => (speed_kind(role, None)?, twist_with_covariance as Decode),
+        TWIST_STAMPED => (speed_kind(role, None)?, twist as Decode),
+        ODOMETRY => (speed_kind(role, Some(Role::Odometer))?, odometry as Decode),
+        _ => return Ok(None),
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::foreign::Translator;
+
+    /// A CDR little-endian payload of a NavSatFix, written field by field as ROS 2 writes it.
+    fn nav_sat_fix_payload(status: i8, lat: f64) -> Vec<u8> {
+        let mut b = vec![0x00, 0x01, 0x00, 0x00];
+        let mut body = Vec::new();
+        body.extend_from_slice(&1_700_000_000i32.to_le_bytes());
+        body.extend_from_slice(&5u32.to_le_bytes());
+        body.extend_from_slice(&4u32.to_le_bytes()); // "gps" + NUL
+        body.extend_from_slice(b"gps\0");
+        body.push(status as u8);
+        body.push(0); // align u16
+        body.extend_from_slice(&1u16.to_le_bytes());
+        while body.len() % 8 != 0 {
+            body.push(0);
+        }
+        for x in [lat, 10.9, 80.0] {
+            body.extend_from_slice(&x.to_le_bytes());
+        }
+        for k in 0..9 {
+            body.extend_from_slice(&(if k % 4 == 0 { 0.25f64 } else { 0.0 }).to_le_bytes());
+        }
+        body.push(2);
+        b.extend(body);
+        b
+    }
+
+    #[test]
+    fn a_nav_sat_fix_reads_as_a_gnss_fix_and_no_fix_or_nan_are_said() {
+        let t = Translator::for_channel("cdr", NAV_SAT_FIX, None)
+            .unwrap()
+            .unwrap();
+        let Translated::Message {
+            message: AnyMessage::GnssFix(f),
+            took_log_time,
+        } = t.translate(&nav_sat_fix_payload(0, 44.6), 7).unwrap()
+        else {
+            panic!("not a fix")
+        };
+        assert!(!took_log_time);
+        assert_eq!(f.stamp_ns, 1_700_000_000_000_000_005);
+        assert_eq!(
+            (f.fix_type, f.latitude_deg, f.altitude_m),
+            (FixType::Single, Some(44.6), Some(80.0))
+        );
+        assert_eq!(f.position_covariance_enu_m2.map(|c| c[8]), Some(0.25));
+        assert_eq!(
+            t.translate(&nav_sat_fix_payload(-1, 44.6), 7).unwrap(),
+            Translated::Skipped("NavSatFix with status NO_FIX")
+        );
+        assert!(t.translate(&nav_sat_fix_payload(0, f64::NAN), 7).is_err());
+        assert!(matches!(
+            t.translate(&[0, 1, 0, 0, 1, 2], 7),
+            Err(ForeignError::Cdr { .. })
+        ));
+        // A twist needs a role; an IMU cannot be a radar.
+        assert!(Translator::for_channel("cdr", TWIST_STAMPED, None)
+            .unwrap_err()
+            .contains("role"));
+        assert!(Translator::for_channel("cdr", IMU, Some(Role::Radar)).is_err());
+        assert!(Translator::for_channel("json", NAV_SAT_FIX, None)
+            .unwrap()
+            .is_none());
+    }
+}

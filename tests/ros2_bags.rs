@@ -1,0 +1,238 @@
+//! Re-fusing a ROS 2 bag: a simulated seed001 run rewritten by rosbags (a library not written
+//! here) as `ros2 bag record` would log the same sensors (NavSatFix, Imu, a radar's
+//! TwistWithCovarianceStamped), refused with samples/seed001.toml with only the topics
+//! changed, a role added and the track named: the same accuracy as on the native log.
+
+mod common;
+
+use std::path::Path;
+
+use common::*;
+use railfuse_catalog::messages::{FusedState, GroundTruth};
+
+/// The bag and its track written from `native` into `dir`; the ROS topics' counts.
+fn ros2_bag(native: &Path, dir: &Path) -> serde_json::Value {
+    let py = python("ros2_bag.py", &[s(native), s(dir)]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    serde_json::from_slice(&py.stdout).unwrap()
+}
+
+/// samples/seed001.toml for the bag's topics: `/fix` for the GNSS position and, since ROS
+/// sends a receiver's velocity on a topic of its own, a sensor table for `/fix_velocity`
+/// beside it with the GNSS speed's variance; `/radar` (a radar's twist); the track from
+/// `line.geojson` beside it. `edit` changes the text further.
+fn bag_config(dir: &Path, edit: impl Fn(String) -> String) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(sample("seed001.toml")).unwrap();
+    let mut out = String::new();
+    for (k, block) in text.split("[[pipeline.sensor]]").enumerate() {
+        if k > 0 {
+            out += "[[pipeline.sensor]]";
+        }
+        let Some(rest) = block.strip_prefix("\ntopic = \"/gnss/fix\"") else {
+            out += block;
+            continue;
+        };
+        // The same table for the position, and its speed from the velocity topic.
+        let speed_only: String = rest
+            .replace("chainage = \"message\", ", "")
+            .lines()
+            .filter(|l| !l.starts_with("chainage_bias"))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        out += &format!("\ntopic = \"/fix\"\nfields = [\"chainage\"]{rest}");
+        out += "[[pipeline.sensor]]\ntopic = \"/fix_velocity\"\nrole = \"gnss\"\n";
+        out += &format!("fields = [\"speed\"]{speed_only}");
+    }
+    let text = out.replace(
+        "topic = \"/radar/speed\"",
+        "topic = \"/radar\"\nrole = \"radar\"",
+    );
+    let path = dir.join("ros.toml");
+    std::fs::write(&path, edit(format!("track = \"line.geojson\"\n{text}"))).unwrap();
+    path
+}
+
+/// Max |position error| and max |speed error| of each pipeline's states against the truth.
+fn worst_errors(fused: &Path, truth: &[GroundTruth], names: &[&str]) -> Vec<(f64, f64)> {
+    names
+        .iter()
+        .map(|name| {
+            let states: Vec<FusedState> = messages(fused, &format!("/fused/{name}/state"));
+            assert!(states.len() > 1000, "{name}: {} states", states.len());
+            states.iter().fold((0.0f64, 0.0f64), |(p, v), st| {
+                let g = truth_at(truth, st.stamp_ns);
+                (
+                    p.max((st.chainage_m - g.chainage_m).abs()),
+                    v.max((st.speed_mps - g.speed_mps).abs()),
+                )
+            })
+        })
+        .collect()
+}
+
+#[test]
+fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
+    let d = tempfile::tempdir().unwrap();
+    let native = d.path().join("seed001.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed001",
+        "--seed",
+        "1",
+        "--duration",
+        "300",
+        "-o",
+        s(&native),
+    ]);
+    let counts = ros2_bag(&native, d.path());
+    let bag = d.path().join("bag/bag.mcap");
+    let info =
+        stderr(&ok(&["info", s(&bag)])) + &String::from_utf8_lossy(&ok(&["info", s(&bag)]).stdout);
+    assert!(info.contains("sensor_msgs/msg/NavSatFix"), "{info}");
+
+    let config = bag_config(d.path(), |t| t);
+    let (fused_native, fused_bag) = (
+        d.path().join("native.fused.mcap"),
+        d.path().join("bag.fused.mcap"),
+    );
+    ok(&[
+        "refuse",
+        s(&native),
+        "-c",
+        s(&sample("seed001.toml")),
+        "-o",
+        s(&fused_native),
+    ]);
+    let out = ok(&[
+        "refuse",
+        s(&bag),
+        "-c",
+        s(&config),
+        "-o",
+        s(&fused_bag),
+        "--json",
+    ]);
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let inputs = counts
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|v| v.as_u64().unwrap())
+        .sum::<u64>();
+    assert_eq!(
+        report["refuse"]["input_messages"].as_u64(),
+        Some(inputs),
+        "{report}"
+    );
+
+    // The fused state for ROS tools, read by the official ROS 2 decoder for MCAP: as many as
+    // the pipeline's states, stamped as they are, on the track and at their speed.
+    let states: Vec<FusedState> = messages(&fused_bag, "/fused/kf/state");
+    let py = python("check_ros2_outputs.py", &[s(&fused_bag), "kf"]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let ros: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    let (fix, odom) = (&ros["/fused/kf/navsatfix"], &ros["/fused/kf/odometry"]);
+    assert_eq!(fix["count"].as_u64(), Some(states.len() as u64), "{ros}");
+    assert_eq!(odom["count"].as_u64(), Some(states.len() as u64), "{ros}");
+    let last = states.last().unwrap();
+    assert_eq!(
+        odom["last"]["stamp_ns"].as_u64(),
+        Some(last.stamp_ns),
+        "{ros}"
+    );
+    assert!((odom["last"]["speed"].as_f64().unwrap() - last.speed_mps).abs() < 1e-9);
+    assert!((odom["last"]["speed_variance"].as_f64().unwrap() - last.covariance[4]).abs() < 1e-12);
+    let along = fix["last"]["covariance"][0].as_f64().unwrap()
+        + fix["last"]["covariance"][4].as_f64().unwrap();
+    assert!(
+        (along - last.covariance[0]).abs() < 1e-6 * last.covariance[0].max(1.0),
+        "{ros}"
+    );
+    assert!(
+        fix["last"]["latitude"].as_f64().unwrap().abs() <= 90.0,
+        "{ros}"
+    );
+
+    let truth: Vec<GroundTruth> = messages(&native, "/truth");
+    let names = ["fkf", "kf", "fkf_cal", "kf_cal"];
+    let (a, b) = (
+        worst_errors(&fused_native, &truth, &names),
+        worst_errors(&fused_bag, &truth, &names),
+    );
+    let mut table =
+        vec!["pipeline | native max |pos| m | bag | native max |speed| m/s | bag".to_owned()];
+    for ((name, n), r) in names.iter().zip(&a).zip(&b) {
+        table.push(format!(
+            "{name} | {:.3} | {:.3} | {:.4} | {:.4}",
+            n.0, r.0, n.1, r.1
+        ));
+    }
+    println!("{}", table.join("\n"));
+    for ((name, n), r) in names.iter().zip(&a).zip(&b) {
+        assert!(
+            r.0 <= 1.05 * n.0 + 0.01,
+            "{name}: position {r:?} against {n:?}\n{}",
+            table.join("\n")
+        );
+        assert!(
+            r.1 <= 1.05 * n.1 + 0.005,
+            "{name}: speed {r:?} against {n:?}\n{}",
+            table.join("\n")
+        );
+    }
+}
+
+#[test]
+fn a_bag_needs_its_radars_role_and_a_track_each_said_in_one_line() {
+    let d = tempfile::tempdir().unwrap();
+    let native = d.path().join("seed001.mcap");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "seed001",
+        "--seed",
+        "1",
+        "--duration",
+        "30",
+        "-o",
+        s(&native),
+    ]);
+    ros2_bag(&native, d.path());
+    let bag = d.path().join("bag/bag.mcap");
+    let out = d.path().join("x.mcap");
+    for (edit, says) in [
+        (
+            Box::new(|t: String| t.replace("role = \"radar\"\n", ""))
+                as Box<dyn Fn(String) -> String>,
+            "role = \"radar\"",
+        ),
+        (
+            Box::new(|t: String| t.replace("track = \"line.geojson\"\n", "")),
+            "track = \"line.geojson\"",
+        ),
+        (
+            Box::new(|t: String| t.replace("role = \"radar\"", "role = \"imu\"")),
+            "not Imu",
+        ),
+    ] {
+        let config = bag_config(d.path(), edit);
+        let o = railfuse(&["refuse", s(&bag), "-c", s(&config), "-o", s(&out)]);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{err}");
+        assert_eq!(
+            err.lines().filter(|l| l.contains("error")).count(),
+            1,
+            "{err}"
+        );
+        assert!(err.contains(says), "{err}");
+    }
+}
