@@ -10,6 +10,23 @@ use std::path::Path;
 use common::*;
 use railfuse_catalog::messages::{FusedState, GroundTruth};
 
+/// A simulated seed001 run of `secs` seconds in `dir`.
+fn seed001(dir: &Path, secs: u32) -> std::path::PathBuf {
+    let native = dir.join("seed001.mcap");
+    let secs = secs.to_string();
+    let args = [
+        "simulate",
+        "--scenario",
+        "seed001",
+        "--seed",
+        "1",
+        "--duration",
+        &secs,
+    ];
+    ok(&[&args[..], &["-o", s(&native)]].concat());
+    native
+}
+
 /// The bag and its track written from `native` into `dir`; the ROS topics' counts.
 fn ros2_bag(native: &Path, dir: &Path) -> serde_json::Value {
     let py = python("ros2_bag.py", &[s(native), s(dir)]);
@@ -77,18 +94,7 @@ fn worst_errors(fused: &Path, truth: &[GroundTruth], names: &[&str]) -> Vec<(f64
 #[test]
 fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
     let d = tempfile::tempdir().unwrap();
-    let native = d.path().join("seed001.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--seed",
-        "1",
-        "--duration",
-        "300",
-        "-o",
-        s(&native),
-    ]);
+    let native = seed001(d.path(), 300);
     let counts = ros2_bag(&native, d.path());
     let bag = d.path().join("bag/bag.mcap");
     let info =
@@ -194,18 +200,7 @@ fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
 #[test]
 fn a_bag_needs_its_radars_role_and_a_track_each_said_in_one_line() {
     let d = tempfile::tempdir().unwrap();
-    let native = d.path().join("seed001.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--seed",
-        "1",
-        "--duration",
-        "30",
-        "-o",
-        s(&native),
-    ]);
+    let native = seed001(d.path(), 30);
     ros2_bag(&native, d.path());
     let bag = d.path().join("bag/bag.mcap");
     let out = d.path().join("x.mcap");

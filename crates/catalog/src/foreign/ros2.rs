@@ -152,9 +152,27 @@ pub struct Odometry {
     pub twist: TwistWithCovariance,
 }
 
+/// The definitions of `std_msgs/Header` and `builtin_interfaces/Time`, which every stamped
+/// message includes.
+macro_rules! header_definitions {
+    () => {
+        "\
+================================================================================
+MSG: std_msgs/Header
+builtin_interfaces/Time stamp
+string frame_id
+================================================================================
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+"
+    };
+}
+
 /// `sensor_msgs/msg/NavSatFix` with what it includes, as ROS 2 writes a definition into an
 /// MCAP schema (`ros2msg`): the message, then each type it uses after a separator line.
-pub const NAV_SAT_FIX_DEFINITION: &str = "\
+pub const NAV_SAT_FIX_DEFINITION: &str = concat!(
+    "\
 std_msgs/Header header
 NavSatStatus status
 float64 latitude
@@ -166,14 +184,9 @@ uint8 COVARIANCE_TYPE_APPROXIMATED=1
 uint8 COVARIANCE_TYPE_DIAGONAL_KNOWN=2
 uint8 COVARIANCE_TYPE_KNOWN=3
 uint8 position_covariance_type
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
+",
+    header_definitions!(),
+    "\
 ================================================================================
 MSG: sensor_msgs/NavSatStatus
 int8 STATUS_NO_FIX=-1
@@ -186,22 +199,19 @@ uint16 SERVICE_GLONASS=2
 uint16 SERVICE_COMPASS=4
 uint16 SERVICE_GALILEO=8
 uint16 service
-";
+"
+);
 
 /// `nav_msgs/msg/Odometry` with what it includes (see [`NAV_SAT_FIX_DEFINITION`]).
-pub const ODOMETRY_DEFINITION: &str = "\
+pub const ODOMETRY_DEFINITION: &str = concat!(
+    "\
 std_msgs/Header header
 string child_frame_id
 geometry_msgs/PoseWithCovariance pose
 geometry_msgs/TwistWithCovariance twist
-================================================================================
-MSG: std_msgs/Header
-builtin_interfaces/Time stamp
-string frame_id
-================================================================================
-MSG: builtin_interfaces/Time
-int32 sec
-uint32 nanosec
+",
+    header_definitions!(),
+    "\
 ================================================================================
 MSG: geometry_msgs/PoseWithCovariance
 Pose pose
@@ -234,7 +244,8 @@ MSG: geometry_msgs/Vector3
 float64 x
 float64 y
 float64 z
-";
+"
+);
 
 /// A message as a ROS 2 CDR payload: the little-endian encapsulation header, then its fields.
 pub fn to_cdr<T: Serialize>(msg: &T) -> Vec<u8> {
