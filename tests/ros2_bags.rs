@@ -168,6 +168,27 @@ fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
         "{ros}"
     );
 
+    // The viewer draws the bag's sensors: at least as many rows as Rerun's own MCAP loader.
+    let rrd = d.path().join("bag.rrd");
+    let viz: serde_json::Value =
+        serde_json::from_slice(&ok(&["viz", s(&bag), "--save", s(&rrd), "--json"]).stdout).unwrap();
+    assert!(rerun(&["rrd", "verify", s(&rrd)]).status.success());
+    let own = d.path().join("rerun-own.rrd");
+    assert!(rerun(&["mcap", "convert", s(&bag), "-o", s(&own)])
+        .status
+        .success());
+    let stats = String::from_utf8_lossy(&rerun(&["rrd", "stats", s(&own)]).stdout).into_owned();
+    let rows: u64 = stats
+        .lines()
+        .find_map(|l| l.strip_prefix("num_rows = "))
+        .map(|n| n.chars().filter(char::is_ascii_digit).collect::<String>())
+        .map(|n| n.parse().unwrap())
+        .unwrap_or_else(|| panic!("{stats}"));
+    assert!(
+        viz["rows"].as_u64().unwrap() >= rows,
+        "{viz} against Rerun's {rows}"
+    );
+
     let truth: Vec<GroundTruth> = messages(&native, "/truth");
     let names = ["fkf", "kf", "fkf_cal", "kf_cal"];
     let (a, b) = (

@@ -91,6 +91,23 @@ pub fn run(a: Args) -> Result<()> {
     let bar = crate::progress::Progress::bytes("viz", size);
     let report = visualize(&a.input, &sink, &options, &|done| bar.set(done))?;
     bar.finish();
+    // What could not be shown is said, one line each, and nothing shown is never silent.
+    for (topic, why) in &report.not_shown {
+        eprintln!("not shown: {topic}: {why}");
+    }
+    if let Some(first) = &report.first_undecodable {
+        eprintln!(
+            "warning: {} messages did not decode and were skipped; the first: {first}",
+            report.undecodable
+        );
+    }
+    if report.logged == 0 {
+        eprintln!(
+            "warning: {}: nothing to show: none of its {} messages is of a type railfuse draws",
+            a.input.display(),
+            report.messages
+        );
+    }
     if a.json {
         let recording_bytes = match &sink {
             Sink::Save(p) => std::fs::metadata(p).ok().map(|m| m.len()),
@@ -101,6 +118,8 @@ pub fn run(a: Args) -> Result<()> {
             "rows": report.logged,
             "entities": report.entities,
             "bin_s": report.bin_s,
+            "not_shown": report.not_shown,
+            "undecodable": report.undecodable,
             "recording_bytes": recording_bytes,
             "run": {
                 "elapsed_s": started.elapsed().as_secs_f64(),

@@ -19,8 +19,8 @@ use railfuse_catalog::log::{
     read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
 };
 use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, MessageKind,
-    SafetyStatus, TrackMap,
+    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, SafetyStatus,
+    TrackMap,
 };
 use railfuse_catalog::topics;
 use serde::Serialize;
@@ -137,22 +137,6 @@ struct Output {
 
 /// The shortest interval between two Foxglove positions of one pipeline.
 const LOCATION_TWIN_EVERY_NS: u64 = 100_000_000;
-
-/// A foreign channel as the railfuse channel of `kind` it is read as (same id and topic).
-fn catalogue_channel(info: &ChannelInfo, kind: MessageKind) -> Arc<ChannelInfo> {
-    Arc::new(ChannelInfo {
-        id: info.id,
-        topic: info.topic.clone(),
-        message_encoding: railfuse_catalog::log::MESSAGE_ENCODING.to_owned(),
-        metadata: info.metadata.clone(),
-        schema: Some(Arc::new(SchemaInfo {
-            id: info.schema.as_ref().map_or(0, |s| s.id),
-            name: kind.schema_name().to_owned(),
-            encoding: railfuse_catalog::log::SCHEMA_ENCODING.to_owned(),
-            data: kind.schema_bytes(),
-        })),
-    })
-}
 
 /// Replays `opts.input` through the pipelines into `opts.output` and evaluates the result
 /// against `opts.reference` in the same pass.
@@ -430,7 +414,7 @@ impl<'a> Replay<'a> {
             let info = match self.translator(&info)? {
                 Some(t) => {
                     route.translator = Some(t);
-                    catalogue_channel(&info, t.kind)
+                    t.channel(&info)
                 }
                 None => info.clone(),
             };

@@ -1,11 +1,12 @@
 //! Turns railfuse messages into Rerun entities: one streaming pass over a file
 //! ([`visualize`]), or message by message while recording or re-fusing ([`LiveViz`]).
 
-use std::collections::{BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use railfuse_catalog::foreign::{ros2, Role, Translated, Translator};
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::{ChannelInfo, LogMessage, LogReader, LogRecord, SchemaInfo};
 use railfuse_catalog::messages::fused::CHI2_95_1DOF;
@@ -90,6 +91,11 @@ pub struct VizReport {
     pub entities: BTreeSet<String>,
     /// Plots were decimated to bins of this many seconds.
     pub bin_s: Option<f64>,
+    /// Channels of another tool's encoding that could not be shown, by topic, with why.
+    pub not_shown: BTreeMap<String, String>,
+    /// Messages of foreign channels that did not decode (the first, with its reason).
+    pub undecodable: u64,
+    pub first_undecodable: Option<String>,
 }
 
 /// How long to wait for a viewer to take the last of the data.
@@ -165,10 +171,21 @@ pub fn visualize(
     if streaming {
         logger.send_blueprint()?;
     }
+    // How each foreign channel is read (a ROS 2 bag's): by channel id, None where it is not.
+    let mut foreign: HashMap<u16, Option<(Translator, Arc<ChannelInfo>)>> = HashMap::new();
     while let Some(record) = reader.next() {
         if let LogRecord::Message(m) = record? {
             logger.report.messages += 1;
-            logger.message(&m)?;
+            if m.channel.message_encoding == ros2::ENCODING {
+                let read = foreign
+                    .entry(m.channel.id)
+                    .or_insert_with(|| logger.foreign_channel(m.channel));
+                if let Some((t, info)) = read {
+                    logger.foreign_message(t, info, &m)?;
+                }
+            } else {
+                logger.message(&m)?;
+            }
             if logger.report.messages.is_multiple_of(4096) {
                 progress(reader.bytes_read());
                 if streaming {
@@ -603,6 +620,56 @@ impl Logger {
         };
         let s = t.saturating_sub(start) as f64 / 1e9;
         self.options.from_s.is_none_or(|f| s >= f) && self.options.to_s.is_none_or(|e| s <= e)
+    }
+
+    /// How a foreign channel is shown: as the catalogue kind it translates to. With no
+    /// config to give a role, a twist is drawn as the speed of its topic. One that cannot be
+    /// shown goes on the report with why.
+    fn foreign_channel(&mut self, c: &ChannelInfo) -> Option<(Translator, Arc<ChannelInfo>)> {
+        let (encoding, schema) = (c.message_encoding.as_str(), c.schema_name());
+        let t = Translator::for_channel(encoding, schema, None)
+            .or_else(|_| Translator::for_channel(encoding, schema, Some(Role::Odometer)));
+        match t {
+            Ok(Some(t)) => Some((t, t.channel(c))),
+            _ => {
+                let why = format!(
+                    "{schema} ({encoding}) is not a type railfuse reads (it reads {})",
+                    Translator::schemas().join(", ")
+                );
+                self.report.not_shown.insert(c.topic.clone(), why);
+                None
+            }
+        }
+    }
+
+    /// A foreign message, drawn as the catalogue message it translates to; one that does not
+    /// decode is counted.
+    fn foreign_message(
+        &mut self,
+        t: &Translator,
+        info: &Arc<ChannelInfo>,
+        m: &LogMessage<'_>,
+    ) -> Result<(), Error> {
+        match t.translate(m.data, m.log_time_ns) {
+            Ok(Translated::Message { message, .. }) => {
+                let data = message.to_json();
+                self.message(&LogMessage {
+                    channel: info,
+                    sequence: m.sequence,
+                    log_time_ns: m.log_time_ns,
+                    publish_time_ns: m.publish_time_ns,
+                    data: &data,
+                })
+            }
+            Ok(Translated::Skipped(_)) => Ok(()),
+            Err(e) => {
+                self.report.undecodable += 1;
+                self.report.first_undecodable.get_or_insert_with(|| {
+                    format!("{}: log time {} ns: {e}", info.topic, m.log_time_ns)
+                });
+                Ok(())
+            }
+        }
     }
 
     /// One message to the entities of its kind.

@@ -10,6 +10,9 @@ pub mod ros2;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use std::sync::Arc;
+
+use crate::log::{ChannelInfo, SchemaInfo};
 use crate::messages::{AnyMessage, MessageKind};
 
 /// What a sensor is, where its message's schema cannot say (a `Twist` from a Doppler radar
@@ -87,6 +90,23 @@ impl Translator {
     /// Reads one payload; `log_time_ns` stands in for a missing sensor time.
     pub fn translate(&self, data: &[u8], log_time_ns: u64) -> Result<Translated, ForeignError> {
         (self.decode)(data, self.role, log_time_ns)
+    }
+
+    /// The foreign channel `info` as the railfuse channel it is read as: the same id and
+    /// topic, the catalogue kind's JSON schema.
+    pub fn channel(&self, info: &ChannelInfo) -> Arc<ChannelInfo> {
+        Arc::new(ChannelInfo {
+            id: info.id,
+            topic: info.topic.clone(),
+            message_encoding: crate::log::MESSAGE_ENCODING.to_owned(),
+            metadata: info.metadata.clone(),
+            schema: Some(Arc::new(SchemaInfo {
+                id: info.schema.as_ref().map_or(0, |s| s.id),
+                name: self.kind.schema_name().to_owned(),
+                encoding: crate::log::SCHEMA_ENCODING.to_owned(),
+                data: self.kind.schema_bytes(),
+            })),
+        })
     }
 
     /// The schemas a translator reads, for messages that list what would fit.

@@ -476,6 +476,10 @@ fn speed(
     let variance = variance.filter(|v| v.is_finite() && *v > 0.0);
     let speed_mps = linear.x;
     let message = match role {
+        // An odometer's sample is its speed: without one there is nothing to read.
+        Some(Role::Odometer) if !speed_mps.is_finite() => {
+            return Ok(Translated::Skipped("odometer twist without a finite speed"))
+        }
         Some(Role::Gnss) => {
             let (east, north) = (linear.x, linear.y);
             let moving = east.hypot(north) > 0.5;
