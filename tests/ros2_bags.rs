@@ -1,7 +1,9 @@
 //! Re-fusing a ROS 2 bag: a simulated seed001 run rewritten by rosbags (a library not written
 //! here) as `ros2 bag record` would log the same sensors (NavSatFix, Imu, a radar's
 //! TwistWithCovarianceStamped), refused with samples/seed001.toml with only the topics
-//! changed, a role added and the track named: the same accuracy as on the native log.
+//! changed, a role added and the track named: the same accuracy as on the native log. And a
+//! Foxglove log's `foxglove.LocationFix` (JSON, written by the official Python writer) feeding
+//! the GNSS sensor of the same config.
 
 mod common;
 
@@ -251,4 +253,37 @@ fn a_bag_needs_its_radars_role_and_a_track_each_said_in_one_line() {
         );
         assert!(err.contains(says), "{err}");
     }
+}
+
+#[test]
+fn a_foxglove_logs_location_fixes_feed_the_gnss_sensor() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 60);
+    let log = d.path().join("foxglove.mcap");
+    let py = python("foxglove_log.py", &[s(&native), s(&log)]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let written: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    let text = std::fs::read_to_string(sample("seed001.toml")).unwrap();
+    let config = d.path().join("foxglove.toml");
+    std::fs::write(
+        &config,
+        text.replace("topic = \"/gnss/fix\"", "topic = \"/gps\""),
+    )
+    .unwrap();
+    let fused = d.path().join("foxglove.fused.mcap");
+    ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
+    // Every LocationFix reached the filter as a GNSS chainage measurement.
+    let diagnostics: Vec<railfuse_catalog::messages::FusedDiagnostics> =
+        messages(&fused, "/fused/kf/diagnostics");
+    // One record per measurement: the chainage has a value, the speed (none in a
+    // LocationFix) does not.
+    let chainage_from_gps = diagnostics
+        .iter()
+        .filter(|d| d.source == "/gps" && d.measurement.is_some())
+        .count() as u64;
+    assert_eq!(Some(chainage_from_gps), written["location_fixes"].as_u64());
 }

@@ -517,9 +517,12 @@ impl<'a> Replay<'a> {
             .iter()
             .filter_map(|p| Some((p, p.spec().sensor_for(&info.topic)?)))
             .collect();
-        let role = sensors
-            .first()
-            .and_then(|(p, si)| p.spec().sensors[*si].role);
+        // Only what a pipeline reads is translated (railfuse's own Foxglove twins pass as
+        // they are).
+        let Some(&(first, first_si)) = sensors.first() else {
+            return Ok(None);
+        };
+        let role = first.spec().sensors[first_si].role;
         for (p, si) in &sensors {
             if p.spec().sensors[*si].role != role {
                 let problem =
@@ -527,13 +530,8 @@ impl<'a> Replay<'a> {
                 return Err(p.spec().channel_error(self.opts.input, *si, problem));
             }
         }
-        match Translator::for_channel(&info.message_encoding, info.schema_name(), role) {
-            Ok(t) => Ok(t),
-            Err(why) => match sensors.first() {
-                Some((p, si)) => Err(p.spec().channel_error(self.opts.input, *si, why)),
-                None => Ok(None),
-            },
-        }
+        Translator::for_channel(&info.message_encoding, info.schema_name(), role)
+            .map_err(|why| first.spec().channel_error(self.opts.input, first_si, why))
     }
 
     /// Every sensor of every pipeline has met its channel; `channels` are the log's, named

@@ -3,8 +3,10 @@
 //! [`Imu`](crate::messages::Imu), a `geometry_msgs/msg/TwistWithCovarianceStamped` the speed of
 //! the sensor its [`Role`] names. One table ([`Translator::for_channel`]) maps a channel's
 //! message encoding, schema name and role to a catalogue kind; everything after it (sensor
-//! models, pipelines, the viewer) sees catalogue messages only, never an encoding.
+//! models, pipelines, the viewer) sees catalogue messages only, never an encoding. Readers:
+//! [`ros2`] (CDR) and [`foxglove`] (Foxglove's well-known schemas in JSON).
 
+pub mod foxglove;
 pub mod ros2;
 
 use schemars::JsonSchema;
@@ -78,10 +80,12 @@ impl Translator {
         schema: &str,
         role: Option<Role>,
     ) -> Result<Option<Self>, String> {
-        if encoding != ros2::ENCODING {
-            return Ok(None);
-        }
-        let Some((kind, decode)) = ros2::reader(schema, role)? else {
+        let read = match encoding {
+            ros2::ENCODING => ros2::reader(schema, role)?,
+            foxglove::ENCODING => foxglove::reader(schema, role)?,
+            _ => None,
+        };
+        let Some((kind, decode)) = read else {
             return Ok(None);
         };
         Ok(Some(Self { kind, role, decode }))
@@ -110,7 +114,7 @@ impl Translator {
     }
 
     /// The schemas a translator reads, for messages that list what would fit.
-    pub fn schemas() -> &'static [&'static str] {
-        ros2::SCHEMAS
+    pub fn schemas() -> Vec<&'static str> {
+        [ros2::SCHEMAS, &[foxglove::LOCATION_FIX]].concat()
     }
 }

@@ -7,7 +7,7 @@
 //! The schemas are copies of `@foxglove/schemas` 2.1.0 (npm; `dist/jsonschema`); the interop
 //! tests validate the twins against the package itself.
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use crate::messages::{Event, FixType, FusedState, GnssFix, MessageKind, Severity, TrackMap};
@@ -104,7 +104,7 @@ impl Twin {
 }
 
 /// `foxglove.Time`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Time {
     pub sec: u64,
     pub nsec: u32,
@@ -120,7 +120,7 @@ impl Time {
 }
 
 /// `foxglove.Color`, components 0–1.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Color {
     pub r: f64,
     pub g: f64,
@@ -128,10 +128,11 @@ pub struct Color {
     pub a: f64,
 }
 
-/// `foxglove.LocationFix`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+/// `foxglove.LocationFix` (read too: a Foxglove SDK log's GNSS fixes).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct LocationFix {
     pub timestamp: Time,
+    #[serde(default)]
     pub frame_id: String,
     pub latitude: f64,
     pub longitude: f64,
@@ -141,9 +142,9 @@ pub struct LocationFix {
     /// 0 unknown, 1 approximated, 2 diagonal known, 3 known.
     pub position_covariance_type: u8,
     /// Clockwise from north, rad.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub heading: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub color: Option<Color>,
 }
 
