@@ -3,9 +3,9 @@
 //! used unless its type is unknown). The timestamp is the measurement time; a zero one takes
 //! the log time.
 
-use super::{Decode, ForeignError, Role, Translated};
+use super::{Decode, ForeignError, PositionFix, Role, Translated};
 use crate::foxglove::LocationFix;
-use crate::messages::{AnyMessage, FixType, GnssFix, MessageKind};
+use crate::messages::{AnyMessage, FixType, MessageKind};
 
 pub const ENCODING: &str = "json";
 pub const LOCATION_FIX: &str = "foxglove.LocationFix";
@@ -17,30 +17,19 @@ fn location_fix(
 ) -> Result<Translated, ForeignError> {
     let m: LocationFix = serde_json::from_slice(data)
         .map_err(|e| ForeignError::Invalid(format!("not a {LOCATION_FIX}: {e}")))?;
-    let on_globe = m.latitude.abs() <= 90.0 && m.longitude.abs() <= 180.0;
-    if !on_globe || !m.altitude.is_finite() {
-        return Err(ForeignError::Invalid(format!(
-            "{LOCATION_FIX} position ({}, {}, {}) is not on the globe",
-            m.latitude, m.longitude, m.altitude
-        )));
-    }
     let stamp_ns = m.timestamp.sec * 1_000_000_000 + u64::from(m.timestamp.nsec);
-    let c = m.position_covariance;
-    let known = m.position_covariance_type != 0 && c.iter().all(|x| x.is_finite());
+    let fix = PositionFix {
+        stamp_ns: if stamp_ns == 0 { log_time_ns } else { stamp_ns },
+        fix_type: FixType::Single,
+        latitude_deg: m.latitude,
+        longitude_deg: m.longitude,
+        altitude_m: m.altitude,
+        covariance_enu_m2: m.position_covariance,
+        covariance_type: m.position_covariance_type,
+        course_rad: m.heading,
+    };
     Ok(Translated::Message {
-        message: AnyMessage::GnssFix(GnssFix {
-            stamp_ns: if stamp_ns == 0 { log_time_ns } else { stamp_ns },
-            fix_type: FixType::Single,
-            satellites: 0,
-            hdop: None,
-            latitude_deg: Some(m.latitude),
-            longitude_deg: Some(m.longitude),
-            altitude_m: Some(m.altitude),
-            altitude_msl_m: None,
-            position_covariance_enu_m2: known.then_some(c),
-            speed_mps: None,
-            course_rad: m.heading,
-        }),
+        message: AnyMessage::GnssFix(fix.into_gnss_fix(LOCATION_FIX)?),
         took_log_time: stamp_ns == 0,
     })
 }

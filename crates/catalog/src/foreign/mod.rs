@@ -55,6 +55,52 @@ pub enum Translated {
     Skipped(&'static str),
 }
 
+/// A position fix as foreign schemas give one (NavSatFix, LocationFix): on the globe, its
+/// ENU covariance used where its type is not UNKNOWN (0) and it is finite with non-negative
+/// variances.
+pub(crate) struct PositionFix {
+    pub stamp_ns: u64,
+    pub fix_type: crate::messages::FixType,
+    pub latitude_deg: f64,
+    pub longitude_deg: f64,
+    pub altitude_m: f64,
+    pub covariance_enu_m2: [f64; 9],
+    pub covariance_type: u8,
+    pub course_rad: Option<f64>,
+}
+
+impl PositionFix {
+    /// The catalogue's fix of it; `schema` names the message in an error.
+    pub(crate) fn into_gnss_fix(
+        self,
+        schema: &str,
+    ) -> Result<crate::messages::GnssFix, ForeignError> {
+        let (lat, lon, alt) = (self.latitude_deg, self.longitude_deg, self.altitude_m);
+        if !(lat.abs() <= 90.0 && lon.abs() <= 180.0 && alt.is_finite()) {
+            return Err(ForeignError::Invalid(format!(
+                "{schema} position ({lat}, {lon}, {alt}) is not on the globe"
+            )));
+        }
+        let c = self.covariance_enu_m2;
+        let known = self.covariance_type != 0
+            && c.iter().all(|x| x.is_finite())
+            && [c[0], c[4], c[8]].iter().all(|v| *v >= 0.0);
+        Ok(crate::messages::GnssFix {
+            stamp_ns: self.stamp_ns,
+            fix_type: self.fix_type,
+            satellites: 0,
+            hdop: None,
+            latitude_deg: Some(lat),
+            longitude_deg: Some(lon),
+            altitude_m: Some(alt),
+            altitude_msl_m: None,
+            position_covariance_enu_m2: known.then_some(c),
+            speed_mps: None,
+            course_rad: self.course_rad,
+        })
+    }
+}
+
 type Decode = fn(&[u8], Option<Role>, u64) -> Result<Translated, ForeignError>;
 
 /// How to read a foreign channel as a catalogue kind.

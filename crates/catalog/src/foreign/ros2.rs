@@ -27,7 +27,7 @@
 use byteorder::{BigEndian, LittleEndian};
 use serde::{Deserialize, Serialize};
 
-use super::{Decode, ForeignError, Role, Translated};
+use super::{Decode, ForeignError, PositionFix, Role, Translated};
 use crate::messages::{
     AnyMessage, FixType, FusedState, GnssFix, Imu, MessageKind, Odometer, RadarSpeed, TrackMap,
 };
@@ -416,34 +416,19 @@ fn nav_sat_fix(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Transla
             )))
         }
     };
-    let on_globe = m.latitude.abs() <= 90.0 && m.longitude.abs() <= 180.0;
-    if !on_globe || !m.altitude.is_finite() {
-        return Err(ForeignError::Invalid(format!(
-            "NavSatFix position ({}, {}, {}) is not on the globe",
-            m.latitude, m.longitude, m.altitude
-        )));
-    }
-    let c = m.position_covariance;
-    let covariance_known = m.position_covariance_type != 0
-        && c.iter().all(|x| x.is_finite())
-        && c[0] >= 0.0
-        && c[4] >= 0.0
-        && c[8] >= 0.0;
     let (stamp_ns, took_log_time) = stamp(&m.header, log_time_ns)?;
+    let fix = PositionFix {
+        stamp_ns,
+        fix_type,
+        latitude_deg: m.latitude,
+        longitude_deg: m.longitude,
+        altitude_m: m.altitude,
+        covariance_enu_m2: m.position_covariance,
+        covariance_type: m.position_covariance_type,
+        course_rad: None,
+    };
     Ok(Translated::Message {
-        message: AnyMessage::GnssFix(GnssFix {
-            stamp_ns,
-            fix_type,
-            satellites: 0,
-            hdop: None,
-            latitude_deg: Some(m.latitude),
-            longitude_deg: Some(m.longitude),
-            altitude_m: Some(m.altitude),
-            altitude_msl_m: None,
-            position_covariance_enu_m2: covariance_known.then_some(c),
-            speed_mps: None,
-            course_rad: None,
-        }),
+        message: AnyMessage::GnssFix(fix.into_gnss_fix(NAV_SAT_FIX)?),
         took_log_time,
     })
 }
