@@ -29,15 +29,20 @@ fn seed001(dir: &Path, secs: u32) -> std::path::PathBuf {
     native
 }
 
-/// The bag and its track written from `native` into `dir`; the ROS topics' counts.
-fn ros2_bag(native: &Path, dir: &Path) -> serde_json::Value {
-    let py = python("ros2_bag.py", &[s(native), s(dir)]);
+/// The bag and its track written from `native` into `dir` (`storage`: none for MCAP, or
+/// `sqlite3`); the ROS topics' counts.
+fn ros2_bag_in(native: &Path, dir: &Path, storage: &[&str]) -> serde_json::Value {
+    let py = python("ros2_bag.py", &[&[s(native), s(dir)][..], storage].concat());
     assert!(
         py.status.success(),
         "{}",
         String::from_utf8_lossy(&py.stderr)
     );
     serde_json::from_slice(&py.stdout).unwrap()
+}
+
+fn ros2_bag(native: &Path, dir: &Path) -> serde_json::Value {
+    ros2_bag_in(native, dir, &[])
 }
 
 /// samples/seed001.toml for the bag's topics: `/fix` for the GNSS position and, since ROS
@@ -286,4 +291,64 @@ fn a_foxglove_logs_location_fixes_feed_the_gnss_sensor() {
         .filter(|d| d.source == "/gps" && d.measurement.is_some())
         .count() as u64;
     assert_eq!(Some(chainage_from_gps), written["location_fixes"].as_u64());
+}
+
+#[test]
+fn a_sqlite3_bag_imports_to_mcap_keeping_topics_types_qos_and_times_and_refuses_the_same() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 60);
+    let counts = ros2_bag(&native, d.path());
+    assert_eq!(ros2_bag_in(&native, d.path(), &["sqlite3"]), counts);
+    let imported = d.path().join("imported.mcap");
+    let sqlite = d.path().join("bag-sqlite3");
+    let r: serde_json::Value = serde_json::from_slice(
+        &ok(&[
+            "import",
+            "--format",
+            "rosbag2",
+            s(&sqlite),
+            "-o",
+            s(&imported),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(&r["per_topic"], &counts, "{r}");
+    // Topics, types, encodings, QoS and times as rosbags' own MCAP storage has them.
+    let bag = d.path().join("bag/bag.mcap");
+    let channels = |p: &Path| {
+        let mut c: Vec<_> = railfuse_catalog::log::read_channels(p)
+            .unwrap()
+            .unwrap()
+            .iter()
+            .map(|c| {
+                let qos = c.metadata.get("offered_qos_profiles").cloned();
+                let schema = c.schema_name().to_owned();
+                (c.topic.clone(), schema, c.message_encoding.clone(), qos)
+            })
+            .collect();
+        c.sort();
+        c
+    };
+    assert_eq!(channels(&imported), channels(&bag));
+    let times = |p: &Path| {
+        let mut t = Vec::new();
+        let mut r = railfuse_catalog::log::LogReader::open(p).unwrap();
+        while let Some(rec) = r.next() {
+            if let railfuse_catalog::log::LogRecord::Message(m) = rec.unwrap() {
+                t.push((m.channel.topic.clone(), m.log_time_ns));
+            }
+        }
+        t.sort();
+        t
+    };
+    assert_eq!(times(&imported), times(&bag));
+    // And it refuses exactly as the MCAP bag does.
+    let config = bag_config(d.path(), |t| t);
+    let (a, b) = (d.path().join("a.mcap"), d.path().join("b.mcap"));
+    ok(&["refuse", s(&bag), "-c", s(&config), "-o", s(&a)]);
+    ok(&["refuse", s(&imported), "-c", s(&config), "-o", s(&b)]);
+    let states = |p: &Path| messages::<FusedState>(p, "/fused/kf_cal/state");
+    assert_eq!(states(&a), states(&b));
 }

@@ -38,6 +38,8 @@ pub enum Format {
     Ubx,
     /// Any table, with `--map`.
     Csv,
+    /// A ROS 2 bag in the sqlite3 storage (a directory of .db3 files), to MCAP.
+    Rosbag2,
 }
 
 fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
@@ -69,6 +71,7 @@ pub fn run(a: Args) -> Result<()> {
         }
         Format::Nmea => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea, a.date)?,
         Format::Ubx => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx, a.date)?,
+        Format::Rosbag2 => railfuse_record::import::rosbag2::import(&a.input, &a.output)?,
         Format::Csv => {
             let Some(map) = &a.map else {
                 anyhow::bail!(

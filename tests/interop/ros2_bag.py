@@ -1,10 +1,11 @@
 """A railfuse log rewritten as a ROS 2 bag (MCAP storage, CDR) by rosbags, as `ros2 bag record`
 would have logged the same sensors, and its track as a GeoJSON line.
 
-    ros2_bag.py IN.mcap OUT_DIR
+    ros2_bag.py IN.mcap OUT_DIR [sqlite3]
 
-writes OUT_DIR/bag/ (metadata.yaml and the .mcap) and OUT_DIR/line.geojson, and prints the
-message counts per ROS topic as JSON:
+writes OUT_DIR/bag/ (metadata.yaml and the .mcap; with `sqlite3`, the storage before ROS 2
+Jazzy: OUT_DIR/bag-sqlite3/ with a .db3) and OUT_DIR/line.geojson, and prints the message
+counts per ROS topic as JSON:
 
 - /gnss/fix (railfuse GnssFix) -> /fix         sensor_msgs/msg/NavSatFix (no fix: NO_FIX)
                                -> /fix_velocity geometry_msgs/msg/TwistWithCovarianceStamped,
@@ -32,6 +33,8 @@ STATUS = {"none": -1, "single": 0, "dgps": 1, "rtk_float": 2, "rtk_fixed": 2}
 
 def main():
     source, out = Path(sys.argv[1]), Path(sys.argv[2])
+    sqlite = sys.argv[3:] == ["sqlite3"]
+    storage, bag_dir = (StoragePlugin.SQLITE3, "bag-sqlite3") if sqlite else (StoragePlugin.MCAP, "bag")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
@@ -50,7 +53,7 @@ def main():
         )
 
     counts = {}
-    with open(source, "rb") as f, Writer(out / "bag", version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+    with open(source, "rb") as f, Writer(out / bag_dir, version=9, storage_plugin=storage) as bag:
         conns = {}
 
         def write(topic, msgtype, msg, log_time):

@@ -247,6 +247,15 @@ float64 z
 "
 );
 
+/// The definition railfuse carries for a ROS 2 type, where it has one.
+pub fn definition(ros_type: &str) -> Option<&'static str> {
+    match ros_type {
+        NAV_SAT_FIX => Some(NAV_SAT_FIX_DEFINITION),
+        ODOMETRY => Some(ODOMETRY_DEFINITION),
+        _ => None,
+    }
+}
+
 /// A message as a ROS 2 CDR payload: the little-endian encapsulation header, then its fields.
 pub fn to_cdr<T: Serialize>(msg: &T) -> Vec<u8> {
     let mut out = vec![0x00, 0x01, 0x00, 0x00];
