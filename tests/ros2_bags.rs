@@ -352,3 +352,47 @@ fn a_sqlite3_bag_imports_to_mcap_keeping_topics_types_qos_and_times_and_refuses_
     let states = |p: &Path| messages::<FusedState>(p, "/fused/kf_cal/state");
     assert_eq!(states(&a), states(&b));
 }
+
+#[test]
+fn a_csv_track_of_latitude_and_longitude_serves_as_the_geojson_one_does() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 30);
+    ros2_bag(&native, d.path());
+    // The same line as a CSV table: one vertex a row.
+    let geojson: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.path().join("line.geojson")).unwrap())
+            .unwrap();
+    let line = &geojson["features"][0];
+    let mut csv = "latitude,longitude,altitude_m,chainage_m\n".to_owned();
+    for (p, c) in line["geometry"]["coordinates"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(line["properties"]["chainage_m"].as_array().unwrap())
+    {
+        csv += &format!("{},{},{},{}\n", p[1], p[0], p[2], c);
+    }
+    std::fs::write(d.path().join("line.csv"), csv).unwrap();
+    let bag = d.path().join("bag/bag.mcap");
+    let (a, b) = (d.path().join("a.mcap"), d.path().join("b.mcap"));
+    ok(&[
+        "refuse",
+        s(&bag),
+        "-c",
+        s(&bag_config(d.path(), |t| t)),
+        "-o",
+        s(&a),
+    ]);
+    let csv_config = bag_config(d.path(), |t| t.replace("line.geojson", "line.csv"));
+    ok(&["refuse", s(&bag), "-c", s(&csv_config), "-o", s(&b)]);
+    let states = |p: &Path| messages::<FusedState>(p, "/fused/kf/state");
+    assert_eq!(states(&a), states(&b));
+    // A table without the columns: one line that says which it has.
+    std::fs::write(d.path().join("line.csv"), "x,y\n1,2\n3,4\n").unwrap();
+    let o = railfuse(&["refuse", s(&bag), "-c", s(&csv_config), "-o", s(&b)]);
+    let err = stderr(&o);
+    assert!(
+        !o.status.success() && err.contains("latitude and longitude columns (it has x, y)"),
+        "{err}"
+    );
+}

@@ -17,6 +17,8 @@
 //! - The local east/north/up frame has its origin at the main line's first vertex (height
 //!   its third coordinate, else 0).
 //!
+//! A CSV of latitude/longitude rows is read as one such line ([`csv_to_geojson`]).
+//!
 //! The map is checked as [`TrackMap::check`] checks a logged one, and coordinates must be
 //! finite, latitude within ±90° and longitude within ±180°.
 
@@ -42,8 +44,95 @@ pub enum GeoJsonMapError {
     Invalid { path: String, cause: String },
 }
 
+/// Reads and checks a track file by its extension: a CSV (`.csv`, [`csv_to_geojson`]) or
+/// GeoJSON (anything else).
+pub fn read_track_file(path: &Path) -> Result<TrackMap, GeoJsonMapError> {
+    let csv = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    if !csv {
+        return read_track_map(path);
+    }
+    let shown = path.display().to_string();
+    parse_track_map(&csv_to_geojson(&read_bounded(path)?, &shown)?, &shown)
+}
+
+/// A CSV of the main line's vertices, one a row, as GeoJSON: a header naming the columns
+/// `latitude` and `longitude` (degrees; `lat`, `lon` and `lng` do too) and optionally
+/// `altitude_m` (height, m) and `chainage_m` (else measured along the line from 0).
+pub fn csv_to_geojson(text: &str, path: &str) -> Result<String, GeoJsonMapError> {
+    let invalid = |cause: String| GeoJsonMapError::Invalid {
+        path: path.to_owned(),
+        cause,
+    };
+    let mut r = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
+    let header = r.headers().map_err(|e| invalid(e.to_string()))?.clone();
+    let column = |names: &[&str]| {
+        header
+            .iter()
+            .position(|h| names.iter().any(|n| h.eq_ignore_ascii_case(n)))
+    };
+    let (Some(lat), Some(lon)) = (
+        column(&["latitude", "lat", "latitude_deg"]),
+        column(&["longitude", "lon", "lng", "longitude_deg"]),
+    ) else {
+        let found: Vec<&str> = header.iter().collect();
+        return Err(invalid(format!(
+            "a CSV track needs latitude and longitude columns (it has {})",
+            found.join(", ")
+        )));
+    };
+    let (alt, chainage) = (
+        column(&["altitude_m", "altitude"]),
+        column(&["chainage_m", "chainage"]),
+    );
+    let (mut coordinates, mut chainages) = (Vec::new(), Vec::new());
+    for (k, row) in r.records().enumerate() {
+        let row = row.map_err(|e| invalid(e.to_string()))?;
+        let number = |i: usize| {
+            let v = row.get(i).unwrap_or("");
+            v.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    invalid(format!(
+                        "line {}: column {}: '{v}' is not a number",
+                        k + 2,
+                        &header[i]
+                    ))
+                })
+        };
+        let mut point = vec![number(lon)?, number(lat)?];
+        if let Some(a) = alt {
+            point.push(number(a)?);
+        }
+        coordinates.push(point);
+        if let Some(c) = chainage {
+            chainages.push(number(c)?);
+        }
+    }
+    let mut properties = serde_json::Map::new();
+    properties.insert("name".into(), path.into());
+    if chainage.is_some() {
+        properties.insert("chainage_m".into(), chainages.into());
+    }
+    Ok(serde_json::json!({
+        "type": "Feature",
+        "properties": properties,
+        "geometry": { "type": "LineString", "coordinates": coordinates },
+    })
+    .to_string())
+}
+
 /// Reads and checks a GeoJSON track map.
 pub fn read_track_map(path: &Path) -> Result<TrackMap, GeoJsonMapError> {
+    parse_track_map(&read_bounded(path)?, &path.display().to_string())
+}
+
+/// A track file's text, bounded (a map is small; anything much larger is not one).
+fn read_bounded(path: &Path) -> Result<String, GeoJsonMapError> {
     let shown = path.display().to_string();
     // A map is small; anything past this is not a track map.
     const MAX_BYTES: u64 = 256 << 20;
@@ -59,11 +148,10 @@ pub fn read_track_map(path: &Path) -> Result<TrackMap, GeoJsonMapError> {
             cause: format!("{size} bytes, more than a track map's limit of {MAX_BYTES}"),
         });
     }
-    let text = std::fs::read_to_string(path).map_err(|source| GeoJsonMapError::Io {
+    std::fs::read_to_string(path).map_err(|source| GeoJsonMapError::Io {
         path: shown.clone(),
         source,
-    })?;
-    parse_track_map(&text, &shown)
+    })
 }
 
 /// Parses and checks a GeoJSON track map; `path` names it in errors.

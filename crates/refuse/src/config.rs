@@ -33,7 +33,8 @@ use crate::measurement::Quantity;
 #[serde(deny_unknown_fields)]
 pub struct PipelinesFile {
     /// The track for pipelines that work in chainage, where the log carries none (a ROS 2
-    /// bag): a GeoJSON file, relative to this configuration. A log's own `/track/map` wins.
+    /// bag): a GeoJSON file, or a CSV of latitude/longitude rows (`.csv`), relative to this
+    /// configuration. A log's own `/track/map` wins.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub track: Option<PathBuf>,
     pub pipeline: Vec<Spanned<PipelineConfig>>,

@@ -101,7 +101,7 @@ impl Pipelines {
         let track = match &file.track {
             Some(t) => {
                 let at = path.parent().unwrap_or(Path::new("")).join(t);
-                let map = railfuse_catalog::track_geojson::read_track_map(&at).map_err(|e| {
+                let map = railfuse_catalog::track_geojson::read_track_file(&at).map_err(|e| {
                     Error::ConfigSyntax {
                         path: path.to_owned(),
                         message: format!("track: {e}"),
