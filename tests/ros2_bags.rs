@@ -2,15 +2,15 @@
 //! here) as `ros2 bag record` would log the same sensors (NavSatFix, Imu, a radar's
 //! TwistWithCovarianceStamped), refused with samples/seed001.toml with only the topics
 //! changed, a role added and the track named: the same accuracy as on the native log. And a
-//! Foxglove log's `foxglove.LocationFix` (JSON, written by the official Python writer) feeding
-//! the GNSS sensor of the same config.
+//! Foxglove log's `foxglove.LocationFix` (JSON, and protobuf with the file's own descriptors,
+//! written by the official Python writers) feeding the GNSS sensor of the same config.
 
 mod common;
 
 use std::path::Path;
 
 use common::*;
-use railfuse_catalog::messages::{FusedState, GroundTruth};
+use railfuse_catalog::messages::{FusedState, GroundTruth, RadarSpeed};
 
 /// A simulated seed001 run of `secs` seconds in `dir`.
 fn seed001(dir: &Path, secs: u32) -> std::path::PathBuf {
@@ -260,12 +260,25 @@ fn a_bag_needs_its_radars_role_and_a_track_each_said_in_one_line() {
     }
 }
 
-#[test]
-fn a_foxglove_logs_location_fixes_feed_the_gnss_sensor() {
-    let d = tempfile::tempdir().unwrap();
-    let native = seed001(d.path(), 60);
-    let log = d.path().join("foxglove.mcap");
-    let py = python("foxglove_log.py", &[s(&native), s(&log)]);
+/// A Foxglove log of the seed001 run in `dir` (`args`: none for JSON, `--protobuf`), refused
+/// with samples/seed001.toml bound to `/gps`: the log, the fused log, the refuse run and how
+/// many LocationFix messages the writer wrote.
+fn foxglove_refused(
+    dir: &Path,
+    native: &Path,
+    args: &[&str],
+) -> (
+    std::path::PathBuf,
+    std::path::PathBuf,
+    std::process::Output,
+    u64,
+) {
+    let name = args.first().map_or("json", |a| a.trim_start_matches('-'));
+    let log = dir.join(format!("foxglove-{name}.mcap"));
+    let py = python(
+        "foxglove_log.py",
+        &[&[s(native), s(&log)][..], args].concat(),
+    );
     assert!(
         py.status.success(),
         "{}",
@@ -273,24 +286,78 @@ fn a_foxglove_logs_location_fixes_feed_the_gnss_sensor() {
     );
     let written: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
     let text = std::fs::read_to_string(sample("seed001.toml")).unwrap();
-    let config = d.path().join("foxglove.toml");
+    let config = dir.join("foxglove.toml");
     std::fs::write(
         &config,
         text.replace("topic = \"/gnss/fix\"", "topic = \"/gps\""),
     )
     .unwrap();
-    let fused = d.path().join("foxglove.fused.mcap");
-    ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
-    // Every LocationFix reached the filter as a GNSS chainage measurement.
+    let fused = dir.join(format!("foxglove-{name}.fused.mcap"));
+    let run = railfuse(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
+    (log, fused, run, written["location_fixes"].as_u64().unwrap())
+}
+
+/// Fixes from `/gps` that reached the filter as GNSS chainage measurements: one diagnostics
+/// record per measurement, the chainage with a value (a LocationFix has no speed).
+fn chainage_from_gps(fused: &Path) -> u64 {
     let diagnostics: Vec<railfuse_catalog::messages::FusedDiagnostics> =
-        messages(&fused, "/fused/kf/diagnostics");
-    // One record per measurement: the chainage has a value, the speed (none in a
-    // LocationFix) does not.
-    let chainage_from_gps = diagnostics
+        messages(fused, "/fused/kf/diagnostics");
+    diagnostics
         .iter()
         .filter(|d| d.source == "/gps" && d.measurement.is_some())
-        .count() as u64;
-    assert_eq!(Some(chainage_from_gps), written["location_fixes"].as_u64());
+        .count() as u64
+}
+
+#[test]
+fn a_foxglove_logs_location_fixes_feed_the_gnss_sensor_in_json_and_protobuf() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 60);
+    for args in [&[][..], &["--protobuf"]] {
+        let (_, fused, run, written) = foxglove_refused(d.path(), &native, args);
+        assert!(run.status.success(), "{args:?}: {}", stderr(&run));
+        // Every LocationFix reached the filter as a GNSS chainage measurement.
+        assert_eq!(chainage_from_gps(&fused), written, "{args:?}");
+        // The viewer draws them on the map, beside the fused track.
+        let rrd = d.path().join("foxglove.rrd");
+        let viz: serde_json::Value =
+            serde_json::from_slice(&ok(&["viz", s(&fused), "--save", s(&rrd), "--json"]).stdout)
+                .unwrap();
+        let entities = viz["entities"].as_array().unwrap();
+        assert!(
+            entities.iter().any(|e| e == "map/gnss/single"),
+            "{args:?}: {viz}"
+        );
+        assert!(viz["not_shown"].get("/gps").is_none(), "{args:?}: {viz}");
+    }
+}
+
+#[test]
+fn a_protobuf_schema_that_does_not_parse_rejects_its_messages_in_one_line_and_loses_nothing_else() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 30);
+    let (_, fused, run, written) =
+        foxglove_refused(d.path(), &native, &["--protobuf", "--bad-schema"]);
+    let err = stderr(&run);
+    assert!(run.status.success(), "{err}");
+    let warning: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("did not decode"))
+        .collect();
+    assert_eq!(warning.len(), 1, "{err}");
+    assert!(
+        warning[0].contains(&format!("warning: {written} sensor messages"))
+            && warning[0].contains("/gps: log time")
+            && warning[0].contains("does not parse as a FileDescriptorSet"),
+        "{err}"
+    );
+    // The other sensors fused as before: IMU and radar measurements all reached the filter.
+    assert_eq!(chainage_from_gps(&fused), 0);
+    let diagnostics: Vec<railfuse_catalog::messages::FusedDiagnostics> =
+        messages(&fused, "/fused/kf/diagnostics");
+    assert!(diagnostics.iter().any(|d| d.source == "/radar/speed"));
+    let copied: Vec<RadarSpeed> = messages(&fused, "/radar/speed");
+    let original: Vec<RadarSpeed> = messages(&native, "/radar/speed");
+    assert_eq!(copied.len(), original.len());
 }
 
 #[test]

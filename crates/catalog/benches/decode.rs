@@ -60,7 +60,7 @@ fn payloads() -> [(&'static str, MessageKind, Vec<Vec<u8>>, Vec<Vec<u8>>); 2] {
     let imu_cdr: Vec<Vec<u8>> = imus.map(|m| ros2::to_cdr(&m)).collect();
     // The same messages as railfuse writes them.
     let json = |schema: &str, cdr: &[Vec<u8>]| -> Vec<Vec<u8>> {
-        let t = Translator::for_channel("cdr", schema, None)
+        let t = Translator::for_schema("cdr", schema, b"", None)
             .unwrap()
             .unwrap();
         cdr.iter()
@@ -90,7 +90,7 @@ fn decode(c: &mut Criterion) {
     let mut g = c.benchmark_group("decode");
     g.throughput(Throughput::Elements(N as u64));
     for (schema, kind, json, cdr) in payloads() {
-        let t = Translator::for_channel("cdr", schema, None)
+        let t = Translator::for_schema("cdr", schema, b"", None)
             .unwrap()
             .unwrap();
         g.bench_function(format!("{schema} cdr"), |b| {

@@ -413,8 +413,9 @@ impl<'a> Replay<'a> {
         } else {
             let info = match self.translator(&info)? {
                 Some(t) => {
+                    let read_as = t.channel(&info);
                     route.translator = Some(t);
-                    t.channel(&info)
+                    read_as
                 }
                 None => info.clone(),
             };
@@ -530,7 +531,7 @@ impl<'a> Replay<'a> {
                 return Err(p.spec().channel_error(self.opts.input, *si, problem));
             }
         }
-        Translator::for_channel(&info.message_encoding, info.schema_name(), role)
+        Translator::for_channel(info, role)
             .map_err(|why| first.spec().channel_error(self.opts.input, first_si, why))
     }
 
@@ -616,7 +617,7 @@ impl<'a> Replay<'a> {
         let channel = self.channels[&h.channel_id].clone();
         // A foreign message is read as its catalogue kind's railfuse message.
         let translated;
-        let data = match self.routes[&h.channel_id].translator {
+        let data = match &self.routes[&h.channel_id].translator {
             None => m.data,
             Some(t) => match t.translate(m.data, h.log_time) {
                 Ok(Translated::Message {

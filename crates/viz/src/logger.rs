@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use railfuse_catalog::foreign::{ros2, Role, Translated, Translator};
+use railfuse_catalog::foreign::{Role, Translated, Translator};
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::{ChannelInfo, LogMessage, LogReader, LogRecord, SchemaInfo};
 use railfuse_catalog::messages::fused::CHI2_95_1DOF;
@@ -171,12 +171,13 @@ pub fn visualize(
     if streaming {
         logger.send_blueprint()?;
     }
-    // How each foreign channel is read (a ROS 2 bag's): by channel id, None where it is not.
+    // How each foreign channel is read (a ROS 2 bag's, a Foxglove log's): by channel id, None
+    // where it is not.
     let mut foreign: HashMap<u16, Option<(Translator, Arc<ChannelInfo>)>> = HashMap::new();
     while let Some(record) = reader.next() {
         if let LogRecord::Message(m) = record? {
             logger.report.messages += 1;
-            if m.channel.message_encoding == ros2::ENCODING {
+            if is_foreign(m.channel) {
                 let read = foreign
                     .entry(m.channel.id)
                     .or_insert_with(|| logger.foreign_channel(m.channel));
@@ -627,10 +628,13 @@ impl Logger {
     /// shown goes on the report with why.
     fn foreign_channel(&mut self, c: &ChannelInfo) -> Option<(Translator, Arc<ChannelInfo>)> {
         let (encoding, schema) = (c.message_encoding.as_str(), c.schema_name());
-        let t = Translator::for_channel(encoding, schema, None)
-            .or_else(|_| Translator::for_channel(encoding, schema, Some(Role::Odometer)));
+        let t = Translator::for_channel(c, None)
+            .or_else(|_| Translator::for_channel(c, Some(Role::Odometer)));
         match t {
-            Ok(Some(t)) => Some((t, t.channel(c))),
+            Ok(Some(t)) => {
+                let info = t.channel(c);
+                Some((t, info))
+            }
             _ => {
                 let why = format!(
                     "{schema} ({encoding}) is not a type railfuse reads (it reads {})",
@@ -1528,4 +1532,15 @@ impl TruthWindow {
         let w = (t - ta) as f64 / (tb - ta) as f64;
         Some((a.0 + w * (b.0 - a.0), a.1 + w * (b.1 - a.1)))
     }
+}
+
+/// A channel of another tool's schema, shown as the catalogue kind it translates to. The
+/// ROS and Foxglove twins railfuse writes of its own fused states (under `/fused/` and
+/// `/foxglove/`) are not: the fused states themselves are shown.
+fn is_foreign(c: &ChannelInfo) -> bool {
+    c.kind().is_none()
+        && !c.topic.starts_with(topics::FUSED_PREFIX)
+        && !c
+            .topic
+            .starts_with(railfuse_catalog::foxglove::TOPIC_PREFIX)
 }

@@ -55,7 +55,7 @@ mod tests {
 
     #[test]
     fn a_location_fix_reads_as_a_gnss_fix() {
-        let t = Translator::for_channel("json", LOCATION_FIX, None)
+        let t = Translator::for_schema("json", LOCATION_FIX, b"", None)
             .unwrap()
             .unwrap();
         let json = br#"{"timestamp":{"sec":1780300800,"nsec":5},"frame_id":"rx","latitude":44.6,

@@ -4,9 +4,11 @@
 //! the sensor its [`Role`] names. One table ([`Translator::for_channel`]) maps a channel's
 //! message encoding, schema name and role to a catalogue kind; everything after it (sensor
 //! models, pipelines, the viewer) sees catalogue messages only, never an encoding. Readers:
-//! [`ros2`] (CDR) and [`foxglove`] (Foxglove's well-known schemas in JSON).
+//! [`ros2`] (CDR), [`foxglove`] (Foxglove's well-known schemas in JSON) and [`protobuf`]
+//! (the same schemas in protobuf, read through the file's own descriptors).
 
 pub mod foxglove;
+pub mod protobuf;
 pub mod ros2;
 
 use schemars::JsonSchema;
@@ -103,12 +105,21 @@ impl PositionFix {
 
 type Decode = fn(&[u8], Option<Role>, u64) -> Result<Translated, ForeignError>;
 
+/// How one channel's payloads are read: by a fixed function of the schema (CDR and JSON,
+/// whose layout the schema's name fixes), or through the descriptors the channel's own schema
+/// carries (protobuf).
+#[derive(Clone)]
+enum Decoder {
+    Fixed(Decode),
+    Protobuf(Arc<protobuf::Reader>),
+}
+
 /// How to read a foreign channel as a catalogue kind.
-#[derive(Clone, Copy)]
+#[derive(Clone)]
 pub struct Translator {
     pub kind: MessageKind,
     role: Option<Role>,
-    decode: Decode,
+    decoder: Decoder,
 }
 
 impl std::fmt::Debug for Translator {
@@ -118,28 +129,50 @@ impl std::fmt::Debug for Translator {
 }
 
 impl Translator {
-    /// The translator of a channel of `schema` in `encoding` for a sensor of `role`: `Ok(None)`
-    /// for a schema no translator reads (railfuse's own included), an error in words for one
-    /// that needs a role it was not given, or whose schema cannot be that role.
-    pub fn for_channel(
+    /// The translator of `channel` (its message encoding and schema) for a sensor of `role`.
+    pub fn for_channel(channel: &ChannelInfo, role: Option<Role>) -> Result<Option<Self>, String> {
+        let schema = channel.schema.as_deref();
+        Self::for_schema(
+            &channel.message_encoding,
+            schema.map_or("", |s| s.name.as_str()),
+            schema.map_or(&[][..], |s| &s.data[..]),
+            role,
+        )
+    }
+
+    /// The translator of a channel of `schema` (its data `schema_data`) in `encoding` for a
+    /// sensor of `role`: `Ok(None)` for a schema no translator reads (railfuse's own
+    /// included), an error in words for one that needs a role it was not given, or whose
+    /// schema cannot be that role.
+    pub fn for_schema(
         encoding: &str,
         schema: &str,
+        schema_data: &[u8],
         role: Option<Role>,
     ) -> Result<Option<Self>, String> {
+        let fixed = |read: Option<(MessageKind, Decode)>| {
+            read.map(|(kind, decode)| (kind, Decoder::Fixed(decode)))
+        };
         let read = match encoding {
-            ros2::ENCODING => ros2::reader(schema, role)?,
-            foxglove::ENCODING => foxglove::reader(schema, role)?,
+            ros2::ENCODING => fixed(ros2::reader(schema, role)?),
+            foxglove::ENCODING => fixed(foxglove::reader(schema, role)?),
+            protobuf::ENCODING => protobuf::reader(schema, schema_data, role)?
+                .map(|(kind, reader)| (kind, Decoder::Protobuf(Arc::new(reader)))),
             _ => None,
         };
-        let Some((kind, decode)) = read else {
-            return Ok(None);
-        };
-        Ok(Some(Self { kind, role, decode }))
+        Ok(read.map(|(kind, decoder)| Self {
+            kind,
+            role,
+            decoder,
+        }))
     }
 
     /// Reads one payload; `log_time_ns` stands in for a missing sensor time.
     pub fn translate(&self, data: &[u8], log_time_ns: u64) -> Result<Translated, ForeignError> {
-        (self.decode)(data, self.role, log_time_ns)
+        match &self.decoder {
+            Decoder::Fixed(decode) => decode(data, self.role, log_time_ns),
+            Decoder::Protobuf(reader) => reader.translate(data, log_time_ns),
+        }
     }
 
     /// The foreign channel `info` as the railfuse channel it is read as: the same id and
@@ -160,7 +193,18 @@ impl Translator {
     }
 
     /// The schemas a translator reads, for messages that list what would fit.
-    pub fn schemas() -> Vec<&'static str> {
-        [ros2::SCHEMAS, &[foxglove::LOCATION_FIX]].concat()
+    pub fn schemas() -> Vec<String> {
+        let in_encoding = |encoding: &str, schemas: &[&str]| {
+            schemas
+                .iter()
+                .map(|s| format!("{s} ({encoding})"))
+                .collect::<Vec<_>>()
+        };
+        [
+            in_encoding(ros2::ENCODING, ros2::SCHEMAS),
+            in_encoding(foxglove::ENCODING, &[foxglove::LOCATION_FIX]),
+            in_encoding(protobuf::ENCODING, protobuf::SCHEMAS),
+        ]
+        .concat()
     }
 }

@@ -618,7 +618,7 @@ mod tests {
 
     #[test]
     fn a_nav_sat_fix_reads_as_a_gnss_fix_and_no_fix_or_nan_are_said() {
-        let t = Translator::for_channel("cdr", NAV_SAT_FIX, None)
+        let t = Translator::for_schema("cdr", NAV_SAT_FIX, b"", None)
             .unwrap()
             .unwrap();
         let Translated::Message {
@@ -645,11 +645,11 @@ mod tests {
             Err(ForeignError::Cdr { .. })
         ));
         // A twist needs a role; an IMU cannot be a radar.
-        assert!(Translator::for_channel("cdr", TWIST_STAMPED, None)
+        assert!(Translator::for_schema("cdr", TWIST_STAMPED, b"", None)
             .unwrap_err()
             .contains("role"));
-        assert!(Translator::for_channel("cdr", IMU, Some(Role::Radar)).is_err());
-        assert!(Translator::for_channel("json", NAV_SAT_FIX, None)
+        assert!(Translator::for_schema("cdr", IMU, b"", Some(Role::Radar)).is_err());
+        assert!(Translator::for_schema("json", NAV_SAT_FIX, b"", None)
             .unwrap()
             .is_none());
     }
