@@ -175,10 +175,22 @@ fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
         "{ros}"
     );
 
-    // The viewer draws the bag's sensors: at least as many rows as Rerun's own MCAP loader.
+    // The viewer draws the bag's sensors, with the fused results beside them: at least as
+    // many rows as Rerun's own MCAP loader logs of the bag alone.
     let rrd = d.path().join("bag.rrd");
-    let viz: serde_json::Value =
-        serde_json::from_slice(&ok(&["viz", s(&bag), "--save", s(&rrd), "--json"]).stdout).unwrap();
+    let viz: serde_json::Value = serde_json::from_slice(
+        &ok(&["viz", s(&fused_bag), "--save", s(&rrd), "--json"]).stdout,
+    )
+    .unwrap();
+    let entities = viz["entities"].as_array().unwrap();
+    for shown in ["map/gnss/", "speed/radar", "map/fused/kf/position"] {
+        assert!(
+            entities
+                .iter()
+                .any(|e| e.as_str().is_some_and(|e| e.starts_with(shown))),
+            "{shown}: {viz}"
+        );
+    }
     assert!(rerun(&["rrd", "verify", s(&rrd)]).status.success());
     let own = d.path().join("rerun-own.rrd");
     assert!(rerun(&["mcap", "convert", s(&bag), "-o", s(&own)])
