@@ -505,7 +505,7 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
     .unwrap();
     let out = ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]);
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(r["refuse"]["undecodable_messages"], bad, "{r}");
+    assert_eq!(r["refuse"]["undecodable"]["total"], bad, "{r}");
     assert!(
         stderr(&out).contains("2 sensor messages did not decode and were skipped"),
         "{}",

@@ -178,10 +178,9 @@ fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
     // The viewer draws the bag's sensors, with the fused results beside them: at least as
     // many rows as Rerun's own MCAP loader logs of the bag alone.
     let rrd = d.path().join("bag.rrd");
-    let viz: serde_json::Value = serde_json::from_slice(
-        &ok(&["viz", s(&fused_bag), "--save", s(&rrd), "--json"]).stdout,
-    )
-    .unwrap();
+    let viz: serde_json::Value =
+        serde_json::from_slice(&ok(&["viz", s(&fused_bag), "--save", s(&rrd), "--json"]).stdout)
+            .unwrap();
     let entities = viz["entities"].as_array().unwrap();
     for shown in ["map/gnss/", "speed/radar", "map/fused/kf/position"] {
         assert!(
@@ -472,6 +471,147 @@ fn a_csv_track_of_latitude_and_longitude_serves_as_the_geojson_one_does() {
     let err = stderr(&o);
     assert!(
         !o.status.success() && err.contains("latitude and longitude columns (it has x, y)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_bag_without_a_config_refuses_with_a_default_pipeline_that_says_what_it_used_and_left_out() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 120);
+    ros2_bag_in(&native, d.path(), &["--hostile"]);
+    let bag = d.path().join("bag/bag.mcap");
+    let out = d.path().join("default.mcap");
+    // Without a track, the fixes cannot give chainage: said, and the rest still runs.
+    let o = ok(&["refuse", s(&bag), "-o", s(&out)]);
+    let err = stderr(&o);
+    assert!(
+        err.lines().any(|l| l.starts_with("  leaves out /fix: ")
+            && l.contains("sensor_msgs/msg/NavSatFix")
+            && l.contains("--track")),
+        "{err}"
+    );
+    // With the bag's track, every sensor topic is used, each with what it gives; the topic
+    // of a type railfuse does not read is left out with its type.
+    let saved = d.path().join("default.toml");
+    let line = d.path().join("line.geojson");
+    let o = ok(&[
+        "refuse",
+        s(&bag),
+        "-o",
+        s(&out),
+        "--track",
+        s(&line),
+        "--save-config",
+        s(&saved),
+    ]);
+    let err = stderr(&o);
+    for (topic, says) in [
+        ("/fix", "GNSS fixes, their chainage on the track"),
+        ("/fix_velocity", "a GNSS receiver's velocity"),
+        ("/imu", "the IMU's acceleration"),
+        (
+            "/radar",
+            "a Doppler radar's speed, its role from the topic's name",
+        ),
+    ] {
+        assert!(
+            err.lines()
+                .any(|l| l.starts_with(&format!("  uses {topic}: ")) && l.contains(says)),
+            "{topic}: {err}"
+        );
+    }
+    assert!(
+        err.lines().any(|l| l.starts_with(
+            "  leaves out /notes: std_msgs/msg/String (cdr): no sensor model reads it"
+        )),
+        "{err}"
+    );
+    // What it ran is what it saved: the saved file refuses to the same states.
+    let again = d.path().join("again.mcap");
+    ok(&["refuse", s(&bag), "-c", s(&saved), "-o", s(&again)]);
+    let (a, b): (Vec<FusedState>, Vec<FusedState>) = (
+        messages(&out, "/fused/default/state"),
+        messages(&again, "/fused/default/state"),
+    );
+    assert_eq!(a, b);
+    // A first look, not a tuned pipeline, and still a train's position: within metres of
+    // the truth over the run.
+    let truth: Vec<GroundTruth> = messages(&native, "/truth");
+    let worst = worst_errors(&out, &truth, &["default"])[0];
+    println!(
+        "default pipeline on the bag: max |position error| {:.3} m, max |speed error| {:.3} m/s",
+        worst.0, worst.1
+    );
+    assert!(worst.0 < 10.0 && worst.1 < 1.0, "{worst:?}");
+}
+
+#[test]
+fn bad_messages_in_a_bag_are_each_said_in_one_line_and_nothing_else_is_lost() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 120);
+    let counts = ros2_bag_in(&native, d.path(), &["--hostile"]);
+    let bag = d.path().join("bag/bag.mcap");
+    let config = bag_config(d.path(), |t| t);
+    let out = d.path().join("out.mcap");
+    let o = ok(&["refuse", s(&bag), "-c", s(&config), "-o", s(&out)]);
+    let err = stderr(&o);
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning:")).collect();
+    assert_eq!(warnings.len(), 2, "{err}");
+    let (cut, nan) = (
+        counts["truncated"].as_u64().unwrap(),
+        counts["nan"].as_u64().unwrap(),
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains(&format!("warning: {cut} sensor messages"))
+                && w.contains("/fix: log time")
+                && w.contains("CDR payload does not decode as sensor_msgs/msg/NavSatFix")),
+        "{err}"
+    );
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains(&format!("warning: {nan} sensor messages"))
+                && w.contains("/fix: log time")
+                && w.contains("(NaN, ")
+                && w.contains("is not on the globe")),
+        "{err}"
+    );
+    // Every input record is in the output, the bad ones and the unread topic too.
+    for topic in ["/fix", "/notes", "/radar", "/imu"] {
+        let n = railfuse_catalog::inspect::summarise(&out)
+            .unwrap()
+            .channels
+            .iter()
+            .find(|c| c.topic == topic)
+            .map(|c| c.messages);
+        assert_eq!(n, counts[topic].as_u64(), "{topic}");
+    }
+    // Every good fix reached the filter; the bad ones did not.
+    let diagnostics: Vec<railfuse_catalog::messages::FusedDiagnostics> =
+        messages(&out, "/fused/kf/diagnostics");
+    let fixes = diagnostics
+        .iter()
+        .filter(|d| d.source == "/fix" && d.measurement.is_some())
+        .count() as u64;
+    let no_fix = counts["/fix"].as_u64().unwrap() - cut - nan;
+    assert!(fixes <= no_fix, "{fixes} of {no_fix}");
+    // And a sensor bound to the topic of an unknown type is refused in one line, naming
+    // the topic, its type and what would fit.
+    let config = bag_config(d.path(), |t| {
+        t.replace("topic = \"/radar\"", "topic = \"/notes\"")
+    });
+    let o = railfuse(&["refuse", s(&bag), "-c", s(&config), "-o", s(&out)]);
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    let errors: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    assert!(
+        errors[0].contains("/notes")
+            && errors[0].contains("std_msgs/msg/String")
+            && errors[0].contains("TwistWithCovarianceStamped"),
         "{err}"
     );
 }

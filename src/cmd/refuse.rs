@@ -7,6 +7,7 @@ use railfuse_refuse::eval::EvalReport;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
+use railfuse_refuse::default_config::default_config;
 use railfuse_refuse::replay::{refuse, Observer, RefuseOptions, RefuseReport};
 use railfuse_refuse::spec::Pipelines;
 
@@ -16,9 +17,19 @@ use super::eval::print_eval;
 pub struct Args {
     /// The input MCAP log.
     pub input: PathBuf,
-    /// Pipeline configuration (TOML); see samples/kalman.toml.
+    /// Pipeline configuration (TOML); see samples/kalman.toml. Without one, a default
+    /// pipeline is picked from what the log's topics decode to, and which topics it used and
+    /// why it left the others out is printed.
     #[arg(short, long)]
-    pub config: PathBuf,
+    pub config: Option<PathBuf>,
+    /// The track (GeoJSON line or CSV of latitude/longitude) for the default pipeline, on
+    /// which GNSS fixes give chainage, when the log has none. A configuration names its own
+    /// at its top (`track = "line.geojson"`).
+    #[arg(long, conflicts_with = "config")]
+    pub track: Option<PathBuf>,
+    /// Write the default pipeline's configuration here, to edit and pass with --config.
+    #[arg(long, conflicts_with = "config", value_name = "FILE")]
+    pub save_config: Option<PathBuf>,
     /// The output MCAP log: every input record plus the fused channels. May be the input
     /// itself: it is replaced only once the new file is complete.
     #[arg(short, long)]
@@ -37,8 +48,10 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let config = Pipelines::load(&a.config)?;
-    let source = a.config.display().to_string();
+    let (config, source) = match &a.config {
+        Some(path) => (Pipelines::load(path)?, path.display().to_string()),
+        None => default_pipeline(&a.input, a.track.as_deref(), a.save_config.as_deref())?,
+    };
     let live = match &a.viz {
         Some(target) => Some(LiveView::open(target)?),
         None => None,
@@ -68,6 +81,40 @@ pub fn run(a: Args) -> Result<()> {
         print_counts(&report);
     }
     Ok(())
+}
+
+/// The default pipeline of a log given no configuration, with what it used and left out said
+/// on stderr (and its configuration written to `save`, when given).
+fn default_pipeline(
+    input: &Path,
+    track: Option<&Path>,
+    save: Option<&Path>,
+) -> Result<(Pipelines, String)> {
+    let default = default_config(input, track)?;
+    let path = match save {
+        Some(path) => {
+            std::fs::write(path, &default.text)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            path.to_owned()
+        }
+        None => PathBuf::from(format!("{} (default pipeline)", input.display())),
+    };
+    let config = default.pipelines(&path)?;
+    eprintln!(
+        "no --config: re-fusing with a default pipeline '{}' (Kalman, constant acceleration){}",
+        railfuse_refuse::default_config::NAME,
+        match save {
+            Some(p) => format!("; its configuration is in {}", p.display()),
+            None => "; --save-config FILE writes it to edit".to_owned(),
+        }
+    );
+    for t in &default.used {
+        eprintln!("  uses {}: {}", t.topic, t.why);
+    }
+    for t in &default.left_out {
+        eprintln!("  leaves out {}: {}", t.topic, t.why);
+    }
+    Ok((config, path.display().to_string()))
 }
 
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -159,11 +206,8 @@ pub fn refuse_with(
         report.fused_messages,
         output.display()
     );
-    if let Some(first) = &report.first_undecodable {
-        eprintln!(
-            "warning: {} sensor messages did not decode and were skipped; the first: {first}",
-            report.undecodable_messages
-        );
+    for line in report.undecodable.lines() {
+        eprintln!("warning: {line}");
     }
     for (reason, n) in &report.skipped {
         eprintln!("note: {n} messages skipped: {reason}");

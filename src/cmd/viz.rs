@@ -95,11 +95,8 @@ pub fn run(a: Args) -> Result<()> {
     for (topic, why) in &report.not_shown {
         eprintln!("not shown: {topic}: {why}");
     }
-    if let Some(first) = &report.first_undecodable {
-        eprintln!(
-            "warning: {} messages did not decode and were skipped; the first: {first}",
-            report.undecodable
-        );
+    for line in report.undecodable.lines() {
+        eprintln!("warning: {line}");
     }
     if report.logged == 0 {
         eprintln!(
@@ -119,7 +116,7 @@ pub fn run(a: Args) -> Result<()> {
             "entities": report.entities,
             "bin_s": report.bin_s,
             "not_shown": report.not_shown,
-            "undecodable": report.undecodable,
+            "undecodable": report.undecodable.total,
             "recording_bytes": recording_bytes,
             "run": {
                 "elapsed_s": started.elapsed().as_secs_f64(),

@@ -1,7 +1,7 @@
 """A railfuse log rewritten as a ROS 2 bag (MCAP storage, CDR) by rosbags, as `ros2 bag record`
 would have logged the same sensors, and its track as a GeoJSON line.
 
-    ros2_bag.py IN.mcap OUT_DIR [sqlite3]
+    ros2_bag.py IN.mcap OUT_DIR [sqlite3] [--hostile]
 
 writes OUT_DIR/bag/ (metadata.yaml and the .mcap; with `sqlite3`, the storage before ROS 2
 Jazzy: OUT_DIR/bag-sqlite3/ with a .db3) and OUT_DIR/line.geojson, and prints the message
@@ -15,6 +15,10 @@ counts per ROS topic as JSON:
 - /odometer/N                  -> /odom/N      geometry_msgs/msg/TwistWithCovarianceStamped
 
 Each message keeps its log time as the bag's time and its sensor time as header.stamp.
+
+With --hostile the bag also holds what a field log can: every 100th /fix payload cut short
+(counted as "truncated"), every 100th from the 50th with a NaN latitude ("nan"), and a topic
+of a type railfuse does not read (/notes, std_msgs/msg/String).
 """
 
 import json
@@ -33,7 +37,8 @@ STATUS = {"none": -1, "single": 0, "dgps": 1, "rtk_float": 2, "rtk_fixed": 2}
 
 def main():
     source, out = Path(sys.argv[1]), Path(sys.argv[2])
-    sqlite = sys.argv[3:] == ["sqlite3"]
+    sqlite = "sqlite3" in sys.argv[3:]
+    hostile = "--hostile" in sys.argv[3:]
     storage, bag_dir = (StoragePlugin.SQLITE3, "bag-sqlite3") if sqlite else (StoragePlugin.MCAP, "bag")
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
@@ -56,10 +61,11 @@ def main():
     with open(source, "rb") as f, Writer(out / bag_dir, version=9, storage_plugin=storage) as bag:
         conns = {}
 
-        def write(topic, msgtype, msg, log_time):
+        def write(topic, msgtype, msg, log_time, cut=None):
             if topic not in conns:
                 conns[topic] = bag.add_connection(topic, msgtype, typestore=ts)
-            bag.write(conns[topic], log_time, ts.serialize_cdr(msg, msgtype))
+            data = ts.serialize_cdr(msg, msgtype)
+            bag.write(conns[topic], log_time, bytes(data[:cut]) if cut else data)
             counts[topic] = counts.get(topic, 0) + 1
 
         for schema, channel, m in make_reader(f).iter_messages():
@@ -79,7 +85,17 @@ def main():
                     position_covariance=np.array(cov if cov else [0.0] * 9),
                     position_covariance_type=3 if cov else 0,
                 )
-                write("/fix", "sensor_msgs/msg/NavSatFix", msg, m.log_time)
+                n = counts.get("/fix", 0)
+                cut = None
+                if hostile and n % 100 == 0:
+                    cut = 20  # the header and half the status: too short for a NavSatFix
+                    counts["truncated"] = counts.get("truncated", 0) + 1
+                elif hostile and n % 100 == 50:
+                    msg.latitude = float("nan")
+                    counts["nan"] = counts.get("nan", 0) + 1
+                write("/fix", "sensor_msgs/msg/NavSatFix", msg, m.log_time, cut)
+                if hostile and n % 100 == 0:
+                    write("/notes", "std_msgs/msg/String", T["std_msgs/msg/String"](data="checkpoint"), m.log_time)
                 if has and d.get("speed_mps") is not None:
                     v, c = d["speed_mps"], d.get("course_rad") or 0.0
                     vel = twist(d["stamp_ns"], "gnss", v * math.sin(c), 0.0, y=v * math.cos(c))

@@ -25,6 +25,7 @@ pub mod log;
 pub mod map_matching;
 pub mod messages;
 pub mod reference_track;
+pub mod rejections;
 pub mod topics;
 pub mod track_geojson;
 

@@ -11,6 +11,9 @@ pub enum Error {
     /// A track map that cannot be used (the message names the file and the cause).
     #[error("{0}")]
     Map(String),
+    /// A log given no configuration in which no topic feeds a sensor model.
+    #[error("{0}")]
+    NoDefaultPipeline(String),
     #[error("{path}: {source}")]
     ConfigRead {
         path: PathBuf,

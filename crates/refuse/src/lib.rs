@@ -10,6 +10,7 @@
 //! - [`measurement`]: sensor models, how each channel's messages become measurements;
 //! - [`config`]: the pipeline TOML as written;
 //! - [`spec`]: the pipelines validated, and each sensor bound to its channel;
+//! - [`default_config`]: the pipeline a log given no configuration is re-fused with;
 //! - [`pipeline`]: one configured estimator fed in sensor-time order ([`reorder`]: the
 //!   reorder window);
 //! - [`prefilter`]: source 003's RLS, adaptive RLS and PU-RLS pre-filters of one channel;
@@ -25,6 +26,7 @@
 
 pub mod accuracy;
 pub mod config;
+pub mod default_config;
 pub mod eddy_current;
 pub mod error;
 pub mod eval;

@@ -22,6 +22,7 @@ use railfuse_catalog::messages::{
     ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, SafetyStatus,
     TrackMap,
 };
+use railfuse_catalog::rejections::Rejections;
 use railfuse_catalog::topics;
 use serde::Serialize;
 
@@ -85,10 +86,9 @@ pub struct RefuseReport {
     pub fused_messages: u64,
     /// Messages whose log time is earlier than the one before them in the file.
     pub out_of_order_messages: u64,
-    /// Sensor messages the pipelines read that did not decode: skipped (copied unchanged).
-    pub undecodable_messages: u64,
-    /// The first of them, with the reason.
-    pub first_undecodable: Option<String>,
+    /// Sensor messages the pipelines read that did not decode: skipped (copied unchanged),
+    /// counted by topic and cause, the first of each said.
+    pub undecodable: Rejections,
     /// Foreign messages read and not measurements (a NavSatFix of status NO_FIX), by reason.
     pub skipped: BTreeMap<String, u64>,
     /// Foreign topics whose messages carried no time of their own (a zero `header.stamp`):
@@ -225,8 +225,7 @@ impl<'a> Replay<'a> {
                 input_bytes: 0,
                 fused_messages: 0,
                 out_of_order_messages: 0,
-                undecodable_messages: 0,
-                first_undecodable: None,
+                undecodable: Rejections::default(),
                 skipped: BTreeMap::new(),
                 stamped_by_log_time: BTreeSet::new(),
                 pipelines: Vec::new(),
@@ -642,8 +641,7 @@ impl<'a> Replay<'a> {
                     return Ok(true);
                 }
                 Err(e) => {
-                    self.report.undecodable_messages += 1;
-                    self.report.first_undecodable.get_or_insert_with(|| {
+                    self.report.undecodable.add(&channel.topic, e.kind(), || {
                         format!("{}: log time {} ns: {e}", channel.topic, h.log_time)
                     });
                     return Ok(true);
@@ -691,10 +689,9 @@ impl<'a> Replay<'a> {
         // A sensor message that does not decode (a null where a number belongs) is skipped
         // and counted: one bad message must not cost the whole replay.
         if let Err(e) = model.decode(&msg, input, &self.context, &mut self.measurements) {
-            self.report.undecodable_messages += 1;
             self.report
-                .first_undecodable
-                .get_or_insert_with(|| e.to_string());
+                .undecodable
+                .add(&channel.topic, "decode", || e.to_string());
             return Ok(true);
         }
         let sensors =
@@ -705,10 +702,9 @@ impl<'a> Replay<'a> {
                     // A pipeline in the plane reads the whole message.
                     Some(p) => {
                         if let Err(e) = p.push(si, &msg, input, &self.context, &mut self.fused) {
-                            self.report.undecodable_messages += 1;
                             self.report
-                                .first_undecodable
-                                .get_or_insert_with(|| e.to_string());
+                                .undecodable
+                                .add(&channel.topic, "decode", || e.to_string());
                         }
                     }
                     None => {

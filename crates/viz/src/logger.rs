@@ -93,9 +93,8 @@ pub struct VizReport {
     pub bin_s: Option<f64>,
     /// Channels of another tool's encoding that could not be shown, by topic, with why.
     pub not_shown: BTreeMap<String, String>,
-    /// Messages of foreign channels that did not decode (the first, with its reason).
-    pub undecodable: u64,
-    pub first_undecodable: Option<String>,
+    /// Messages of foreign channels that did not decode, by topic and cause.
+    pub undecodable: railfuse_catalog::rejections::Rejections,
 }
 
 /// How long to wait for a viewer to take the last of the data.
@@ -667,8 +666,7 @@ impl Logger {
             }
             Ok(Translated::Skipped(_)) => Ok(()),
             Err(e) => {
-                self.report.undecodable += 1;
-                self.report.first_undecodable.get_or_insert_with(|| {
+                self.report.undecodable.add(&info.topic, e.kind(), || {
                     format!("{}: log time {} ns: {e}", info.topic, m.log_time_ns)
                 });
                 Ok(())

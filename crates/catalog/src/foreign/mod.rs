@@ -41,6 +41,22 @@ pub enum ForeignError {
     Cdr { schema: String, cause: String },
     #[error("{0}")]
     Invalid(String),
+    /// The channel's schema cannot be used (a protobuf schema that does not parse).
+    #[error("{0}")]
+    Schema(String),
+}
+
+impl ForeignError {
+    /// The kind of cause, to count messages by ("cdr": the payload does not decode;
+    /// "invalid": it decodes to values that are not a measurement; "schema": the channel's
+    /// schema is unusable).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            ForeignError::Cdr { .. } => "cdr",
+            ForeignError::Invalid(_) => "invalid",
+            ForeignError::Schema(_) => "schema",
+        }
+    }
 }
 
 /// One foreign message read.

@@ -41,7 +41,7 @@ impl Reader {
         let descriptor = self
             .descriptor
             .as_ref()
-            .map_err(|cause| ForeignError::Invalid(cause.clone()))?;
+            .map_err(|cause| ForeignError::Schema(cause.clone()))?;
         let message = DynamicMessage::decode(descriptor.clone(), data).map_err(|e| {
             ForeignError::Invalid(format!(
                 "protobuf payload does not decode as {}: {e}",

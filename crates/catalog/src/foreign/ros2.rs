@@ -501,10 +501,15 @@ fn speed(
             distance_increment_m: None,
             speed_mps,
         }),
-        // A radar measures the speed's magnitude.
+        // A radar measures the speed's magnitude; a NaN one (how a driver says "no echo") is
+        // an invalid sample, counted by the sensor model, not a message that fails to read.
         _ => AnyMessage::RadarSpeed(RadarSpeed {
             stamp_ns,
-            speed_mps: speed_mps.abs(),
+            speed_mps: if speed_mps.is_finite() {
+                speed_mps.abs()
+            } else {
+                0.0
+            },
             quality: 1.0,
             valid: speed_mps.is_finite(),
             speed_variance_m2ps2: variance,

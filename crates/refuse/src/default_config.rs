@@ -1,0 +1,318 @@
+//! The pipeline `refuse` runs on a log given no configuration: one Kalman filter on the
+//! constant-acceleration model, in chainage, fusing every channel whose messages feed a
+//! sensor model, whatever tool wrote the log. What each topic decodes to picks its sensor
+//! (through [`Translator`] for other tools' schemas); a speed whose schema cannot say whose
+//! it is (a ROS `Twist`) takes its role from the topic's name (`radar`, `odom`, `wheel`,
+//! `gps`, …). Every topic is accounted for: used, with what it gives, or left out, with why.
+//!
+//! The pipeline is written as configuration text and parsed like any file, so what it runs is
+//! exactly what `--save-config` writes for the user to edit.
+//!
+//! The variances are a first look's, not a tuned pipeline's: a GNSS fix's chainage 4 m² (a
+//! single fix's 2 m), speeds 0.1 (m/s)² with tight gates (scale errors are not modelled),
+//! an IMU's acceleration 0.01 (m/s²)², loops and balises as their messages report.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::sync::Arc;
+
+use railfuse_catalog::foreign::{Role, Translator};
+use railfuse_catalog::log::{ChannelInfo, LogReader, LogRecord};
+use railfuse_catalog::messages::MessageKind;
+use railfuse_catalog::{foxglove, topics};
+
+use crate::error::{Error, Result};
+use crate::spec::Pipelines;
+
+/// The name of the default pipeline (its fused channels are `/fused/default/…`).
+pub const NAME: &str = "default";
+
+/// One topic of the log and what the default pipeline did with it.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TopicChoice {
+    pub topic: String,
+    /// What it gives (used) or why it was left out.
+    pub why: String,
+}
+
+/// The default pipeline of one log.
+#[derive(Debug, Clone)]
+pub struct DefaultConfig {
+    /// The configuration text, as a file would hold it.
+    pub text: String,
+    pub used: Vec<TopicChoice>,
+    pub left_out: Vec<TopicChoice>,
+}
+
+impl DefaultConfig {
+    /// The pipelines of the text; `path` names them in messages and anchors relative paths.
+    pub fn pipelines(&self, path: &Path) -> Result<Pipelines> {
+        Pipelines::parse(&self.text, path)
+    }
+}
+
+/// What one sensor table of the default pipeline says.
+struct Sensor {
+    role: Option<Role>,
+    fields: Option<&'static str>,
+    variance: &'static str,
+    gate_nis: Option<f64>,
+}
+
+/// The default pipeline for the log at `input`; `track` is a track file (GeoJSON or CSV)
+/// for a log without one, which GNSS fixes need to give chainage.
+pub fn default_config(input: &Path, track: Option<&Path>) -> Result<DefaultConfig> {
+    let channels = channels(input)?;
+    let track_in_log = channels
+        .iter()
+        .any(|c| c.kind() == Some(MessageKind::TrackMap));
+    let has_track = track_in_log || track.is_some();
+    let (mut used, mut left_out) = (Vec::new(), Vec::new());
+    let mut sensors = String::new();
+    for c in &channels {
+        let choice = |why: String| TopicChoice {
+            topic: c.topic.clone(),
+            why,
+        };
+        match sensor_of(c, has_track) {
+            Ok((sensor, gives)) => {
+                if let Some(s) = sensor {
+                    write_sensor(&mut sensors, &c.topic, &s);
+                }
+                used.push(choice(gives));
+            }
+            Err(why) => left_out.push(choice(why)),
+        }
+    }
+    if sensors.is_empty() {
+        let why: Vec<String> = left_out
+            .iter()
+            .map(|c| format!("{}: {}", c.topic, c.why))
+            .collect();
+        return Err(Error::NoDefaultPipeline(format!(
+            "{}: no topic feeds a sensor model, so there is no default pipeline to run ({}); \
+             write one and pass it with --config",
+            input.display(),
+            if why.is_empty() {
+                "the log has no channels".to_owned()
+            } else {
+                why.join("; ")
+            }
+        )));
+    }
+    let mut text = format!(
+        "# The default pipeline railfuse picked for {} from what its topics decode to.\n",
+        input.display()
+    );
+    if let (Some(t), false) = (track, track_in_log) {
+        let t = std::path::absolute(t).unwrap_or_else(|_| t.to_owned());
+        writeln!(text, "track = {}", toml_string(&t.display().to_string())).unwrap();
+    }
+    write!(
+        text,
+        "\n[[pipeline]]\nname = \"{NAME}\"\nfilter = \"kalman\"\n\
+         motion = {{ model = \"constant_acceleration\", jerk_psd = 0.2 }}\n\
+         reorder_window_s = 0.5\n\n\
+         [pipeline.initial]\nspeed_mps = 0.0\nspeed_std_mps = 30.0\nacceleration_std_mps2 = 1.0\n\
+         {sensors}"
+    )
+    .unwrap();
+    Ok(DefaultConfig {
+        text,
+        used,
+        left_out,
+    })
+}
+
+/// Every channel of the log, by topic: from the summary, or from the data section where the
+/// summary does not list them.
+fn channels(input: &Path) -> Result<Vec<Arc<ChannelInfo>>> {
+    let mut channels = match railfuse_catalog::log::read_channels(input)? {
+        Some(c) => c,
+        None => {
+            let mut found = Vec::new();
+            let mut reader = LogReader::open(input)?;
+            while let Some(record) = reader.next() {
+                if let LogRecord::Channel(c) = record? {
+                    found.push(c);
+                }
+            }
+            found
+        }
+    };
+    channels.sort_by(|a, b| a.topic.cmp(&b.topic).then(a.id.cmp(&b.id)));
+    channels.dedup_by(|a, b| a.topic == b.topic);
+    Ok(channels)
+}
+
+/// The sensor a channel feeds and what it gives (`None` sensor: used as context), or why it
+/// is left out.
+fn sensor_of(
+    c: &ChannelInfo,
+    has_track: bool,
+) -> std::result::Result<(Option<Sensor>, String), String> {
+    if c.topic.starts_with(topics::FUSED_PREFIX) {
+        return Err("a fused output of an earlier re-fusion".into());
+    }
+    if c.topic.starts_with(foxglove::TOPIC_PREFIX) {
+        return Err(
+            "railfuse's Foxglove twin of a channel of its own, for Foxglove's panels".into(),
+        );
+    }
+    let schema = c.schema_name();
+    let (kind, role, named) = match c.kind() {
+        Some(kind) => (kind, None, false),
+        None => foreign_kind(c)?,
+    };
+    let sensor = |role, fields, variance, gate_nis| Sensor {
+        role,
+        fields,
+        variance,
+        gate_nis,
+    };
+    let from_name = if named {
+        ", its role from the topic's name"
+    } else {
+        ""
+    };
+    Ok(match kind {
+        MessageKind::GnssFix if role == Some(Role::Gnss) => (
+            Some(sensor(role, Some("[\"speed\"]"), "0.04", Some(16.0))),
+            format!("{schema}: a GNSS receiver's velocity, its speed{from_name}"),
+        ),
+        // Other tools' fixes (NavSatFix, LocationFix) carry a position only.
+        MessageKind::GnssFix if has_track && c.kind().is_none() => (
+            Some(sensor(role, Some("[\"chainage\"]"), "4.0", Some(16.0))),
+            format!("{schema}: GNSS fixes, their chainage on the track"),
+        ),
+        MessageKind::GnssFix if has_track => (
+            Some(sensor(
+                role,
+                None,
+                "{ chainage = 4.0, speed = 0.04 }",
+                Some(16.0),
+            )),
+            format!("{schema}: GNSS fixes, their chainage on the track and their speed"),
+        ),
+        MessageKind::GnssFix if c.kind().is_some() => (
+            Some(sensor(role, Some("[\"speed\"]"), "0.04", Some(16.0))),
+            format!(
+                "{schema}: GNSS speed only; its positions give chainage only on a track map, \
+                 and the log has none (name one with --track line.geojson)"
+            ),
+        ),
+        MessageKind::GnssFix => {
+            return Err(format!(
+                "{schema}: GNSS positions give chainage only on a track map, and the log has \
+                 none: name one with --track line.geojson"
+            ))
+        }
+        MessageKind::Imu => (
+            Some(sensor(role, Some("[\"acceleration\"]"), "0.01", Some(25.0))),
+            format!("{schema}: the IMU's acceleration along the track"),
+        ),
+        MessageKind::RadarSpeed => (
+            Some(sensor(role, None, "0.1", Some(16.0))),
+            format!("{schema}: a Doppler radar's speed{from_name}"),
+        ),
+        MessageKind::Odometer => (
+            Some(sensor(role, None, "0.1", Some(9.0))),
+            format!("{schema}: an odometer's speed{from_name}"),
+        ),
+        MessageKind::LoopPosition => (
+            Some(sensor(None, None, "\"message\"", None)),
+            format!("{schema}: the cross-induction loop's chainage"),
+        ),
+        MessageKind::BalisePassage => (
+            Some(sensor(None, None, "\"message\"", Some(100.0))),
+            format!("{schema}: balise passages' chainage"),
+        ),
+        MessageKind::TrackMap => (None, "the track map: GNSS fixes' chainage".into()),
+        MessageKind::Event => (None, "events: device faults and recoveries".into()),
+        MessageKind::GroundTruth => {
+            return Err("ground truth: the accuracy table's reference, not a sensor".into())
+        }
+        MessageKind::EddyCurrentBlock => {
+            return Err(
+                "eddy-current blocks need the eddy-current pipeline (see samples/seed004.toml)"
+                    .into(),
+            )
+        }
+        other => return Err(format!("{}: not a measurement", other.schema_name())),
+    })
+}
+
+/// What a channel of another tool's schema decodes to, with the role it needs (taken from
+/// the topic's name where the schema cannot tell) and whether the name gave it.
+fn foreign_kind(c: &ChannelInfo) -> std::result::Result<(MessageKind, Option<Role>, bool), String> {
+    let (schema, encoding) = (c.schema_name(), &c.message_encoding);
+    let unread = || {
+        format!(
+            "{schema} ({encoding}): no sensor model reads it (railfuse reads {})",
+            Translator::schemas().join(", ")
+        )
+    };
+    match Translator::for_channel(c, None) {
+        Ok(Some(t)) => Ok((t.kind, None, false)),
+        Ok(None) => Err(unread()),
+        Err(needs_role) => {
+            let role = role_from_name(&c.topic).ok_or(needs_role)?;
+            let t = Translator::for_channel(c, Some(role))?.ok_or_else(unread)?;
+            Ok((t.kind, Some(role), true))
+        }
+    }
+}
+
+/// The role a topic's name says (`/radar`, `/wheel_odom`, `/gps/fix_velocity`), if it says
+/// one.
+fn role_from_name(topic: &str) -> Option<Role> {
+    let t = topic.to_ascii_lowercase();
+    let says = |words: &[&str]| words.iter().any(|w| t.contains(w));
+    if says(&["radar", "doppler"]) {
+        Some(Role::Radar)
+    } else if says(&["odom", "wheel", "axle", "tacho"]) {
+        Some(Role::Odometer)
+    } else if says(&["gps", "gnss", "navsat", "fix"]) {
+        Some(Role::Gnss)
+    } else {
+        None
+    }
+}
+
+fn write_sensor(out: &mut String, topic: &str, s: &Sensor) {
+    write!(
+        out,
+        "\n[[pipeline.sensor]]\ntopic = {}\n",
+        toml_string(topic)
+    )
+    .unwrap();
+    if let Some(role) = s.role {
+        let name = serde_json::to_string(&role).expect("a role is a name");
+        writeln!(out, "role = {name}").unwrap();
+    }
+    if let Some(fields) = s.fields {
+        writeln!(out, "fields = {fields}").unwrap();
+    }
+    writeln!(out, "variance = {}", s.variance).unwrap();
+    if let Some(g) = s.gate_nis {
+        writeln!(out, "gate_nis = {g:?}").unwrap();
+    }
+}
+
+/// A TOML basic string of `s`.
+fn toml_string(s: &str) -> String {
+    toml::Value::String(s.to_owned()).to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_topics_name_gives_a_twist_its_role() {
+        assert_eq!(role_from_name("/radar"), Some(Role::Radar));
+        assert_eq!(role_from_name("/wheel_odom/twist"), Some(Role::Odometer));
+        assert_eq!(role_from_name("/gps/fix_velocity"), Some(Role::Gnss));
+        assert_eq!(role_from_name("/cmd_vel"), None);
+    }
+}
