@@ -527,6 +527,22 @@ fn a_bag_without_a_config_refuses_with_a_default_pipeline_that_says_what_it_used
         )),
         "{err}"
     );
+    // The output carries the track it was fused on, so the viewer draws it under the fixes.
+    let maps: Vec<railfuse_catalog::messages::TrackMap> = messages(&out, "/track/map");
+    assert_eq!(maps.len(), 1);
+    let rrd = d.path().join("default.rrd");
+    let viz: serde_json::Value =
+        serde_json::from_slice(&ok(&["viz", s(&out), "--save", s(&rrd), "--json"]).stdout).unwrap();
+    let entities = viz["entities"].as_array().unwrap();
+    for shown in [
+        "map/track",
+        "map/gnss/single",
+        "map/fused/default/position",
+        "speed/radar",
+    ] {
+        assert!(entities.iter().any(|e| e == shown), "{shown}: {viz}");
+    }
+    assert!(viz["not_shown"].get("/notes").is_some(), "{viz}");
     // What it ran is what it saved: the saved file refuses to the same states.
     let again = d.path().join("again.mcap");
     ok(&["refuse", s(&bag), "-c", s(&saved), "-o", s(&again)]);

@@ -19,8 +19,8 @@ use railfuse_catalog::log::{
     read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
 };
 use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, SafetyStatus,
-    TrackMap,
+    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, MessageKind,
+    SafetyStatus, TrackMap,
 };
 use railfuse_catalog::rejections::Rejections;
 use railfuse_catalog::topics;
@@ -173,6 +173,11 @@ struct Replay<'a> {
     /// For a ROS 2 input, each pipeline's state also as NavSatFix and Odometry in CDR
     /// (registered when the first CDR channel is met).
     ros_outputs: Vec<(ChannelId, ChannelId)>,
+    /// The configuration's track, written once as `/track/map` before the first message of
+    /// an input that has none, so that the output shows (and re-fuses on) the track it was
+    /// fused on.
+    track_output: Option<TrackOutput>,
+    track_written: bool,
     seen_topics: BTreeSet<String>,
     eval: Evaluator,
     measurements: Vec<Measurement>,
@@ -192,7 +197,8 @@ impl<'a> Replay<'a> {
         // Fused states of kept pipelines may trail the reference by a chunk in file order.
         let lag = eval::lag_allowance_s(summary.as_ref().and_then(|s| s.longest_chunk_ns));
         let mut eval = Evaluator::new(opts.output, opts.reference, lag);
-        let outputs = register_outputs(opts, known.map(Vec::as_slice), &mut writer, &mut eval)?;
+        let (outputs, track_output) =
+            register_outputs(opts, known.map(Vec::as_slice), &mut writer, &mut eval)?;
         let pipelines = opts
             .config
             .pipeline
@@ -214,6 +220,8 @@ impl<'a> Replay<'a> {
             channels: HashMap::new(),
             routes: HashMap::new(),
             ros_outputs: Vec::new(),
+            track_output,
+            track_written: false,
             seen_topics: BTreeSet::new(),
             eval,
             measurements: Vec::new(),
@@ -461,6 +469,7 @@ impl<'a> Replay<'a> {
             })
             .flatten()
             .map(|c| c.0)
+            .chain(self.track_output.iter().flat_map(TrackOutput::ids))
             .min()
             .unwrap_or(u16::MAX);
         let needed = 2 + 2 * self.pipelines.len();
@@ -602,6 +611,14 @@ impl<'a> Replay<'a> {
         };
         if route.replaced {
             return Ok(false);
+        }
+        if let (Some(out), Some(track), false) = (
+            self.track_output,
+            &self.opts.config.track,
+            self.track_written,
+        ) {
+            out.write(&mut self.writer, h.log_time, track)?;
+            self.track_written = true;
         }
         self.report.input_messages += 1;
         if h.log_time < self.last_log_time {
@@ -873,12 +890,14 @@ impl<'a> Replay<'a> {
 /// the highest ids the input (`known`, its summary's channels) does not use, so copied
 /// records keep theirs (replaced channels' ids too: their records may sit in chunks copied
 /// whole).
+/// Each pipeline's fused channels and, for a configuration's track that the input (whose
+/// summary lists its channels) lacks, a `/track/map` channel to write it on.
 fn register_outputs(
     opts: &RefuseOptions<'_>,
     known: Option<&[Arc<ChannelInfo>]>,
     writer: &mut LogWriter,
     eval: &mut Evaluator,
-) -> Result<Vec<Output>> {
+) -> Result<(Vec<Output>, Option<TrackOutput>)> {
     let used: BTreeSet<u16> = known.into_iter().flatten().map(|c| c.id).collect();
     let used_schemas: BTreeSet<u16> = known
         .into_iter()
@@ -962,7 +981,57 @@ fn register_outputs(
             smoothed_states: 0,
         });
     }
-    Ok(outputs)
+    let input_has_track = |channels: &[Arc<ChannelInfo>]| {
+        channels
+            .iter()
+            .any(|c| c.kind() == Some(MessageKind::TrackMap))
+    };
+    let track = match (&opts.config.track, known) {
+        (Some(_), Some(channels)) if !input_has_track(channels) => {
+            let (schema, id) = (next()?, next()?);
+            let map = writer.add_channel_with_ids::<TrackMap>(schema, id, topics::TRACK_MAP)?;
+            let twin = match railfuse_catalog::foxglove::twins_by_default() {
+                true => Some(writer.add_twin_channel_with_ids(
+                    TwinKind::GeoJson,
+                    next()?,
+                    next()?,
+                    &railfuse_catalog::foxglove::twin_topic(topics::TRACK_MAP),
+                )?),
+                false => None,
+            };
+            Some(TrackOutput { map, twin })
+        }
+        _ => None,
+    };
+    Ok((outputs, track))
+}
+
+/// Where the configuration's track is written in the output, and its Foxglove twin.
+#[derive(Debug, Clone, Copy)]
+struct TrackOutput {
+    map: ChannelId,
+    twin: Option<ChannelId>,
+}
+
+impl TrackOutput {
+    fn ids(&self) -> impl Iterator<Item = u16> {
+        [Some(self.map), self.twin]
+            .into_iter()
+            .flatten()
+            .map(|c| c.0)
+    }
+
+    /// Writes `track` on its channels (its twin on the twin's own: the writer's automatic
+    /// twin channel would take an id the input may use).
+    fn write(&self, writer: &mut LogWriter, log_time_ns: u64, track: &TrackMap) -> Result<()> {
+        let json = serde_json::to_vec(track).expect("a track map serialises");
+        writer.write_encoded(self.map, log_time_ns, track.stamp_ns(), &json)?;
+        let twin = railfuse_catalog::foxglove::Twin::of(MessageKind::TrackMap, &json);
+        if let (Some(channel), Some(twin)) = (self.twin, twin) {
+            writer.write_twin(channel, log_time_ns, &twin)?;
+        }
+        Ok(())
+    }
 }
 
 fn copy_channel(writer: &mut LogWriter, c: &ChannelInfo) -> Result<()> {
