@@ -3,6 +3,7 @@
 //! channels and schemas or not, no summary, no message index, no statistics, compression,
 //! metadata and attachments anywhere, log times out of order, a schemaless channel), and info,
 //! refuse, eval, viz, tune and recover run on each: the same messages, the same fused result.
+//! And a ROS 2 bag as rosbags writes it, in every command.
 
 mod common;
 
@@ -128,4 +129,72 @@ fn every_valid_layout_reads_in_every_command_with_the_same_result() {
         ));
     }
     println!("{}", table.join("\n"));
+}
+
+/// A ROS 2 bag as rosbags writes one (MCAP storage, CDR, its own chunking and summary) in
+/// every command, with the default pipeline its topics give and the bag's track.
+#[test]
+fn a_ros2_bag_written_by_rosbags_reads_in_every_command() {
+    let d = tempfile::tempdir().unwrap();
+    let py = python("ros2_bag.py", &[s(&sample("short-run.mcap")), s(d.path())]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let counts: Value = serde_json::from_slice(&py.stdout).unwrap();
+    let messages: u64 = counts
+        .as_object()
+        .unwrap()
+        .values()
+        .filter_map(Value::as_u64)
+        .sum();
+    let bag = d.path().join("bag/bag.mcap");
+    let info = json(&ok(&["info", s(&bag), "--json"]));
+    assert_eq!(info["messages"].as_u64(), Some(messages), "{info}");
+
+    let (fused, config) = (d.path().join("bag.fused.mcap"), d.path().join("bag.toml"));
+    let track = d.path().join("line.geojson");
+    ok(&[
+        "refuse",
+        s(&bag),
+        "--track",
+        s(&track),
+        "--save-config",
+        s(&config),
+        "-o",
+        s(&fused),
+    ]);
+    // No ground truth in a bag: the table has the states, NIS and counts.
+    let e = json(&ok(&["eval", s(&fused), "--json"]));
+    let states = e["pipelines"][0]["states"].as_u64().unwrap();
+    assert!(states > 1000, "{e}");
+
+    let rrd = d.path().join("bag.rrd");
+    ok(&["viz", s(&fused), "--save", s(&rrd)]);
+    let verify = rerun(&["rrd", "verify", s(&rrd)]);
+    assert!(verify.status.success(), "{}", stderr(&verify));
+
+    let tuned = d.path().join("bag.tuned.toml");
+    ok(&[
+        "tune",
+        s(&bag),
+        "-c",
+        s(&config),
+        "--pipeline",
+        "default",
+        "--params",
+        "motion.jerk_psd=0.001..10",
+        "--max-evals",
+        "3",
+        "-o",
+        s(&tuned),
+    ]);
+    let salvaged = d.path().join("bag.recovered.mcap");
+    let r = json(&ok(&["recover", s(&bag), "-o", s(&salvaged), "--json"]));
+    assert_eq!(r["messages"].as_u64(), Some(messages), "{r}");
+    println!(
+        "rosbags bag | {messages} msgs | {states} states (default pipeline, no truth) | verified | ok | {} msgs",
+        r["messages"]
+    );
 }

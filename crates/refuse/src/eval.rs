@@ -15,8 +15,10 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
-use railfuse_catalog::log::{read_summary, LogMessage, LogReader, LogRecord};
+use railfuse_catalog::foreign::ForeignChannels;
+use railfuse_catalog::log::{read_summary, ChannelInfo, LogMessage, LogReader, LogRecord};
 use railfuse_catalog::messages::{
     BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision,
     GnssFix, GroundTruth, SafetyStatus, TrackMap,
@@ -542,15 +544,22 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
     let mut eval = Evaluator::new(input, reference_topic, lag_allowance_s(longest));
     let mut reads = std::collections::HashSet::new();
     let mut reader = LogReader::open(input)?;
+    let (mut foreign, mut translated) = (ForeignChannels::default(), Vec::new());
     while let Some(record) = reader.next() {
         match record? {
-            LogRecord::Channel(c) if eval.channel(c.id, &c.topic, c.schema_name()) => {
-                reads.insert(c.id);
+            LogRecord::Channel(c) => {
+                let c = reference_channel(&mut foreign, c, reference_topic);
+                if eval.channel(c.id, &c.topic, c.schema_name()) {
+                    reads.insert(c.id);
+                }
             }
             LogRecord::Message(m) => {
                 eval.log_time(m.log_time_ns);
                 if reads.contains(&m.channel.id) {
-                    eval.message(&m)?;
+                    // A foreign reference sample that does not read is a gap in it.
+                    if let Ok(Some(m)) = foreign.message(m, &mut translated) {
+                        eval.message(&m)?;
+                    }
                 }
             }
             LogRecord::Metadata { name, metadata } => eval.metadata(&name, &metadata),
@@ -558,6 +567,19 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
         }
     }
     eval.finish(input)
+}
+
+/// `c` as the evaluation reads it: another tool's reference channel (a ROS bag's NavSatFix)
+/// as the catalogue kind it translates to, every other channel as it is.
+fn reference_channel(
+    foreign: &mut ForeignChannels,
+    c: Arc<ChannelInfo>,
+    reference_topic: &str,
+) -> Arc<ChannelInfo> {
+    match c.topic == reference_topic && c.kind().is_none() {
+        true => foreign.channel(c.clone(), None).unwrap_or(c),
+        false => c,
+    }
 }
 
 /// A log's reference channel read in step with states that come later in the file (smoothed
@@ -569,6 +591,8 @@ struct ReferenceWalk {
     topic: String,
     roles: BTreeMap<u16, Role>,
     map: Option<TrackMap>,
+    foreign: ForeignChannels,
+    translated: Vec<u8>,
     done: bool,
 }
 
@@ -580,6 +604,8 @@ impl ReferenceWalk {
             topic: topic.to_owned(),
             roles: BTreeMap::new(),
             map: None,
+            foreign: ForeignChannels::default(),
+            translated: Vec::new(),
             done: false,
         })
     }
@@ -597,18 +623,24 @@ impl ReferenceWalk {
                 break;
             };
             match record? {
-                LogRecord::Channel(c) => match reference_kind(c.schema_name()) {
-                    Some(kind) if c.topic == self.topic => {
-                        self.roles.insert(c.id, Role::Reference(kind));
+                LogRecord::Channel(c) => {
+                    let c = reference_channel(&mut self.foreign, c, &self.topic);
+                    match reference_kind(c.schema_name()) {
+                        Some(kind) if c.topic == self.topic => {
+                            self.roles.insert(c.id, Role::Reference(kind));
+                        }
+                        _ if c.schema_name() == TrackMap::SCHEMA_NAME => {
+                            self.roles.insert(c.id, Role::TrackMap);
+                        }
+                        _ => {}
                     }
-                    _ if c.schema_name() == TrackMap::SCHEMA_NAME => {
-                        self.roles.insert(c.id, Role::TrackMap);
-                    }
-                    _ => {}
-                },
+                }
                 LogRecord::Message(m) => match self.roles.get(&m.channel.id).copied() {
                     Some(Role::TrackMap) => self.map = Some(m.decode(&self.path)?),
                     Some(Role::Reference(kind)) => {
+                        let Ok(Some(m)) = self.foreign.message(m, &mut self.translated) else {
+                            continue; // a foreign sample that does not read: a gap
+                        };
                         let sample = reference_sample(kind, &m, &self.path, self.map.as_ref())?;
                         if let Some((t, s, v)) = sample {
                             meter.add_reference(t, s, v, spans);

@@ -526,10 +526,13 @@ impl<'a> Replay<'a> {
             .iter()
             .filter_map(|p| Some((p, p.spec().sensor_for(&info.topic)?)))
             .collect();
-        // Only what a pipeline reads is translated (railfuse's own Foxglove twins pass as
-        // they are).
+        // Only what a pipeline reads, or the accuracy table's reference, is translated
+        // (railfuse's own Foxglove twins pass as they are).
         let Some(&(first, first_si)) = sensors.first() else {
-            return Ok(None);
+            let reference = info.topic == self.opts.reference && info.kind().is_none();
+            return Ok(reference
+                .then(|| Translator::for_channel(info, None).ok().flatten())
+                .flatten());
         };
         let role = first.spec().sensors[first_si].role;
         for (p, si) in &sensors {

@@ -16,7 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
 
-use crate::log::{ChannelInfo, SchemaInfo};
+use crate::log::{ChannelInfo, LogMessage, SchemaInfo};
 use crate::messages::{AnyMessage, MessageKind};
 
 /// What a sensor is, where its message's schema cannot say (a `Twist` from a Doppler radar
@@ -222,5 +222,55 @@ impl Translator {
             in_encoding(protobuf::ENCODING, protobuf::SCHEMAS),
         ]
         .concat()
+    }
+}
+
+/// The foreign channels of one log being read, each with its translator and the railfuse
+/// channel it reads as: what a command that walks a log (tune, eval) puts between the
+/// reader and its own code, so that it sees catalogue messages only.
+#[derive(Default)]
+pub struct ForeignChannels {
+    read_as: std::collections::HashMap<u16, (Translator, Arc<ChannelInfo>)>,
+}
+
+impl ForeignChannels {
+    /// Meets a channel: the channel to treat it as (the railfuse one it translates to with
+    /// `role`, else itself), or why a sensor of `role` cannot read it.
+    pub fn channel(
+        &mut self,
+        c: Arc<ChannelInfo>,
+        role: Option<Role>,
+    ) -> Result<Arc<ChannelInfo>, String> {
+        match Translator::for_channel(&c, role)? {
+            Some(t) => {
+                let read_as = t.channel(&c);
+                self.read_as.insert(c.id, (t, read_as.clone()));
+                Ok(read_as)
+            }
+            None => Ok(c),
+        }
+    }
+
+    /// A message as its channel is treated: translated (into `buf`) on a foreign channel,
+    /// unchanged on another; `Ok(None)` for one read and skipped (a NO_FIX fix).
+    pub fn message<'a>(
+        &'a self,
+        m: LogMessage<'a>,
+        buf: &'a mut Vec<u8>,
+    ) -> Result<Option<LogMessage<'a>>, ForeignError> {
+        let Some((t, channel)) = self.read_as.get(&m.channel.id) else {
+            return Ok(Some(m));
+        };
+        match t.translate(m.data, m.log_time_ns)? {
+            Translated::Message { message, .. } => {
+                *buf = message.to_json();
+                Ok(Some(LogMessage {
+                    channel,
+                    data: buf,
+                    ..m
+                }))
+            }
+            Translated::Skipped(_) => Ok(None),
+        }
     }
 }

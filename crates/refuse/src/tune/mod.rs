@@ -269,7 +269,7 @@ impl Tuner {
         let recordings = req
             .logs
             .par_iter()
-            .map(|log| Recording::load(log, &spec, reference.as_deref()))
+            .map(|log| Recording::load(log, &spec, reference.as_deref(), pipelines.track.as_ref()))
             .collect::<Result<Vec<_>>>()?;
         let em = match optimiser {
             OptimiserKind::Em => {

@@ -7,6 +7,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::{
     ChannelMessage, Event, EventKind, FusedState, GateDecision, TrackMap,
@@ -135,7 +136,25 @@ pub struct Metrics {
 impl Recording {
     /// Reads `path` once: the measurements of `spec`'s sensors and, when `reference` is
     /// given, its samples. Every sensor's channel must be in the log, and the reference too.
-    pub fn load(path: &Path, spec: &PipelineSpec, reference: Option<&str>) -> Result<Self> {
+    ///
+    /// Other tools' channels (a ROS 2 bag's) are read as the catalogue kinds they translate
+    /// to, with the role their sensor table gives; `track` is the configuration's track, for
+    /// a log without one.
+    pub fn load(
+        path: &Path,
+        spec: &PipelineSpec,
+        reference: Option<&str>,
+        track: Option<&TrackMap>,
+    ) -> Result<Self> {
+        if let Some(si) = reference.and_then(|r| spec.sensor_for(r)) {
+            return Err(spec.channel_error(
+                path,
+                si,
+                "is also the reference: a sensor cannot score the filter it feeds (name \
+                 another with --reference)"
+                    .into(),
+            ));
+        }
         let mut reader = LogReader::open(path)?;
         let n = spec.sensors.len();
         let mut schemas: Vec<Option<String>> = vec![None; n];
@@ -148,7 +167,11 @@ impl Recording {
             Reference(eval::ReferenceKind),
         }
         let mut roles: HashMap<u16, Role> = HashMap::new();
-        let mut context = SensorContext::default();
+        let mut foreign = ForeignChannels::default();
+        let mut translated = Vec::new();
+        let mut context = SensorContext {
+            track: track.cloned(),
+        };
         let mut rec = Self {
             path: path.to_owned(),
             schemas: Vec::new(),
@@ -167,6 +190,20 @@ impl Recording {
             match record? {
                 LogRecord::Channel(c) => {
                     topics_seen.push(c.topic.clone());
+                    let sensor = spec.sensor_for(&c.topic);
+                    let role = sensor.and_then(|si| spec.sensors[si].role);
+                    // Only what the pipeline reads is translated.
+                    let read = sensor.is_some() || Some(c.topic.as_str()) == reference;
+                    let c = match read {
+                        false => c,
+                        true => foreign.channel(c, role).map_err(|why| match sensor {
+                            Some(si) => spec.channel_error(path, si, why),
+                            None => Error::TuneLog {
+                                input: path.to_owned(),
+                                message: format!("reference: {why}"),
+                            },
+                        })?,
+                    };
                     let schema = c.schema_name();
                     let role = if Some(c.topic.as_str()) == reference {
                         reference_channel = true;
@@ -196,6 +233,14 @@ impl Recording {
                 }
                 LogRecord::Message(m) => {
                     rec.end_ns = rec.end_ns.max(m.log_time_ns);
+                    let m = match foreign.message(m, &mut translated) {
+                        Ok(Some(m)) => m,
+                        Ok(None) => continue,
+                        Err(_) => {
+                            rec.undecodable += 1;
+                            continue;
+                        }
+                    };
                     match roles.get(&m.channel.id) {
                         Some(Role::Sensor(si, model)) => {
                             if model.decode(&m, path, &context, &mut out).is_err() {
