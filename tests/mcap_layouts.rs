@@ -25,6 +25,29 @@ fn accuracy(fused: &std::path::Path) -> (u64, f64, f64) {
     )
 }
 
+/// Three evaluations of a tuning of `pipeline`'s jerk on `log`.
+fn tune_three(
+    log: &std::path::Path,
+    config: &std::path::Path,
+    pipeline: &str,
+    out: &std::path::Path,
+) {
+    ok(&[
+        "tune",
+        s(log),
+        "-c",
+        s(config),
+        "--pipeline",
+        pipeline,
+        "--params",
+        "motion.jerk_psd=0.001..10",
+        "--max-evals",
+        "3",
+        "-o",
+        s(out),
+    ]);
+}
+
 #[test]
 fn every_valid_layout_reads_in_every_command_with_the_same_result() {
     let d = tempfile::tempdir().unwrap();
@@ -97,21 +120,12 @@ fn every_valid_layout_reads_in_every_command_with_the_same_result() {
         let verify = rerun(&["rrd", "verify", s(&rrd)]);
         assert!(verify.status.success(), "{layout}: {}", stderr(&verify));
 
-        let tuned = d.path().join(format!("{layout}.toml"));
-        ok(&[
-            "tune",
-            s(&log),
-            "-c",
-            s(&sample("kalman.toml")),
-            "--pipeline",
+        tune_three(
+            &log,
+            &sample("kalman.toml"),
             "kalman",
-            "--params",
-            "motion.jerk_psd=0.001..10",
-            "--max-evals",
-            "3",
-            "-o",
-            s(&tuned),
-        ]);
+            &d.path().join(format!("{layout}.toml")),
+        );
 
         let salvaged = d.path().join(format!("{layout}.recovered.mcap"));
         let r = json(&ok(&["recover", s(&log), "-o", s(&salvaged), "--json"]));
@@ -175,21 +189,7 @@ fn a_ros2_bag_written_by_rosbags_reads_in_every_command() {
     let verify = rerun(&["rrd", "verify", s(&rrd)]);
     assert!(verify.status.success(), "{}", stderr(&verify));
 
-    let tuned = d.path().join("bag.tuned.toml");
-    ok(&[
-        "tune",
-        s(&bag),
-        "-c",
-        s(&config),
-        "--pipeline",
-        "default",
-        "--params",
-        "motion.jerk_psd=0.001..10",
-        "--max-evals",
-        "3",
-        "-o",
-        s(&tuned),
-    ]);
+    tune_three(&bag, &config, "default", &d.path().join("bag.tuned.toml"));
     let salvaged = d.path().join("bag.recovered.mcap");
     let r = json(&ok(&["recover", s(&bag), "-o", s(&salvaged), "--json"]));
     assert_eq!(r["messages"].as_u64(), Some(messages), "{r}");
