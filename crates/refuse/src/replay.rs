@@ -141,6 +141,15 @@ const LOCATION_TWIN_EVERY_NS: u64 = 100_000_000;
 /// Replays `opts.input` through the pipelines into `opts.output` and evaluates the result
 /// against `opts.reference` in the same pass.
 pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
+    let result = refuse_into(opts);
+    // A failed run leaves no half output: the input is untouched and the run can be redone.
+    if result.is_err() {
+        let _ = std::fs::remove_file(railfuse_catalog::log::partial_path(opts.output));
+    }
+    result
+}
+
+fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
     let summary = read_summary(opts.input)?;
     let mut replay = Replay::new(opts, summary)?;
     let mut items = ReadAhead::new(Scanner::open(opts.input)?, READ_AHEAD_BYTES);

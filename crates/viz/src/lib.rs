@@ -27,4 +27,10 @@ pub enum Error {
     Log(#[from] railfuse_catalog::Error),
     #[error("Rerun: {0}")]
     Rerun(String),
+    #[error("{path}: {source}")]
+    Output {
+        path: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
 }

@@ -139,6 +139,33 @@ pub fn visualize(
     options: &VizOptions,
     progress: &dyn Fn(u64),
 ) -> Result<VizReport, Error> {
+    let Sink::Save(rrd) = sink else {
+        return visualize_into(path, sink, options, progress);
+    };
+    // A recording is written beside its name and takes it only once complete: a failed run
+    // (a damaged log) leaves no .rrd that opens as if it were whole.
+    let mut partial = rrd.clone().into_os_string();
+    partial.push(".partial");
+    let partial = PathBuf::from(partial);
+    let result = visualize_into(path, &Sink::Save(partial.clone()), options, progress);
+    match &result {
+        Ok(_) => std::fs::rename(&partial, rrd).map_err(|source| Error::Output {
+            path: rrd.clone(),
+            source,
+        })?,
+        Err(_) => {
+            let _ = std::fs::remove_file(&partial);
+        }
+    }
+    result
+}
+
+fn visualize_into(
+    path: &Path,
+    sink: &Sink,
+    options: &VizOptions,
+    progress: &dyn Fn(u64),
+) -> Result<VizReport, Error> {
     let mut reader = LogReader::open(path)?;
     let summary = railfuse_catalog::log::read_summary(path)?;
     // Fused states may trail the truth in file order by a chunk (railfuse writes the fused

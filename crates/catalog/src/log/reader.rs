@@ -479,11 +479,24 @@ fn read_summary_records(path: &Path) -> Result<Option<Vec<u8>>> {
     const FOOTER: u64 = 1 + 8 + 8 + 8 + 4;
     let mut file = open_checked(path)?;
     let size = file.metadata().map_err(|e| Error::io(path, e))?.len();
+    // Where a file without its footer is damaged, as `info` says it: the first record a
+    // strict scan cannot read, else the missing footer itself.
     let truncated = || {
-        Error::mcap(
-            path,
-            "the file ends in the middle of a record (truncated: was the recording cut off?)",
-        )
+        let mut scan = match Scanner::open(path) {
+            Ok(scan) => scan,
+            Err(e) => return e,
+        };
+        while let Some(item) = scan.next() {
+            if let Err(e) = item {
+                return e;
+            }
+        }
+        Error::Damaged {
+            path: path.to_owned(),
+            offset: size,
+            cause: "the file ends without its footer (truncated: was the recording cut off?)"
+                .into(),
+        }
     };
     if size < 8 + FOOTER + 8 {
         return Err(truncated());
