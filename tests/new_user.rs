@@ -8,14 +8,17 @@ use std::path::Path;
 
 use common::*;
 
-/// The one line a failed command printed, after checking it failed.
+/// The one error line a failed command printed, after checking it failed.
 fn fails(args: &[&str]) -> String {
     let o = railfuse(args);
     let err = stderr(&o);
     assert!(!o.status.success(), "{args:?} exited 0: {err}");
-    let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
     assert_eq!(lines.len(), 1, "{args:?}: {err}");
-    assert!(!err.contains("panicked") && !err.contains("RUST_BACKTRACE"), "{err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
+        "{err}"
+    );
     lines[0].to_owned()
 }
 
@@ -69,8 +72,129 @@ fn every_reading_command_reports_a_damaged_log_as_info_does_and_leaves_no_output
                 "{args:?}: {line}"
             );
         }
-        for out in ["o.mcap", "o.mcap.partial", "o.rrd", "o.rrd.partial", "t.toml"] {
+        for out in [
+            "o.mcap",
+            "o.mcap.partial",
+            "o.rrd",
+            "o.rrd.partial",
+            "t.toml",
+        ] {
             assert!(!exists(&d.path().join(out)), "{out} left after {damaged:?}");
         }
+    }
+}
+
+#[test]
+fn wrong_input_is_one_line_and_a_non_zero_exit_never_a_silent_zero() {
+    let d = tempfile::tempdir().unwrap();
+    let p = |name: &str| d.path().join(name);
+    let run = sample("short-run.mcap");
+    let fused = p("fused.mcap");
+    ok(&[
+        "refuse",
+        s(&run),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+    ]);
+    std::fs::write(p("receiver.nmea"), "$GPGGA,junk\n$GPRMC,also junk\n").unwrap();
+    std::fs::write(
+        p("LICENSE"),
+        "Permission is hereby granted, free of charge\n",
+    )
+    .unwrap();
+    std::fs::write(p("map.toml"), "[[message]]\n").unwrap();
+    let out = p("e.mcap");
+    let config = sample("kalman.toml");
+    let (nmea, license, map, rrd) = (p("receiver.nmea"), p("LICENSE"), p("map.toml"), p("v.rrd"));
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["import", s(&nmea), "-o", s(&out)],
+            "no nmea message in it",
+        ),
+        (
+            vec!["import", s(&license), "-o", s(&out)],
+            "cannot tell its format",
+        ),
+        (
+            vec!["import", s(&run), "-o", s(&out)],
+            "already an MCAP log",
+        ),
+        (
+            vec![
+                "import",
+                s(&nmea),
+                "--format",
+                "nmea",
+                "--map",
+                s(&map),
+                "-o",
+                s(&out),
+            ],
+            "--map is the column mapping of --format csv",
+        ),
+        (
+            vec!["eval", s(&fused), "--reference", "/nothere"],
+            "no channel /nothere to take as the reference",
+        ),
+        (
+            vec![
+                "refuse",
+                s(&run),
+                "-c",
+                s(&config),
+                "-o",
+                s(&out),
+                "--reference",
+                "/nothere",
+            ],
+            "no channel /nothere to take as the reference",
+        ),
+        (vec!["eval", s(&run)], "no fused pipelines to evaluate"),
+        (
+            vec!["viz", s(&fused), "--pipelines", "nope", "--save", s(&rrd)],
+            "no pipeline 'nope'",
+        ),
+        (
+            vec!["viz", s(&fused), "--topics", "/nope", "--save", s(&rrd)],
+            "no topic /nope",
+        ),
+        (
+            vec!["viz", s(&fused), "--from", "99999", "--save", s(&rrd)],
+            "past the end",
+        ),
+        (
+            vec![
+                "record",
+                "--serial",
+                "/dev/nonexistent:115200",
+                "-o",
+                s(&out),
+                "--duration",
+                "1",
+            ],
+            "serial /dev/nonexistent: No such file",
+        ),
+        (
+            vec![
+                "simulate",
+                "--scenario",
+                "seed001",
+                "--duration",
+                "60",
+                "--fault",
+                "radar:dropout:200:300",
+                "-o",
+                s(&out),
+            ],
+            "starts at 200 s, after the run's end at 60 s",
+        ),
+    ];
+    for (args, says) in cases {
+        let line = fails(&args);
+        assert!(line.contains(says), "{args:?}: {line}");
+        assert!(!exists(&out), "{args:?} left {out:?}");
+        assert!(!exists(&rrd), "{args:?} left v.rrd");
     }
 }

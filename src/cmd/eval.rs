@@ -14,22 +14,68 @@ pub struct Args {
     /// A fused MCAP log (the output of `railfuse refuse`).
     pub input: PathBuf,
     /// The reference: the ground-truth channel, another pipeline's state
-    /// (`/fused/<name>/state`) or a GNSS fix channel (an RTK receiver).
-    #[arg(long, default_value = topics::GROUND_TRUTH)]
-    pub reference: String,
+    /// (`/fused/<name>/state`) or a GNSS fix channel (an RTK receiver). Without it, the
+    /// ground truth (`/truth`) where the log has one, else NIS and counts only.
+    #[arg(long)]
+    pub reference: Option<String>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let report = evaluate(&a.input, &a.reference)?;
+    if let Some(topic) = &a.reference {
+        check_reference_in_log(&a.input, topic)?;
+    }
+    let topic = a.reference.as_deref().unwrap_or(topics::GROUND_TRUTH);
+    let report = evaluate(&a.input, topic)?;
+    if report.pipelines.is_empty() {
+        anyhow::bail!(
+            "{}: no fused pipelines to evaluate: re-fuse it first (railfuse refuse {} -c CONFIG -o OUT)",
+            a.input.display(),
+            a.input.display()
+        );
+    }
+    check_reference_used(&a.input, a.reference.as_deref(), &report)?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_eval(&report);
     }
     Ok(())
+}
+
+/// A reference named on the command line is in the log: said before any work, where the
+/// log's summary lists its channels.
+pub fn check_reference_in_log(input: &std::path::Path, topic: &str) -> Result<()> {
+    let Some(channels) = railfuse_catalog::log::read_channels(input)? else {
+        return Ok(());
+    };
+    if channels.iter().any(|c| c.topic == topic) {
+        return Ok(());
+    }
+    let have: Vec<&str> = channels.iter().map(|c| c.topic.as_str()).collect();
+    anyhow::bail!(
+        "{}: no channel {topic} to take as the reference (it has {})",
+        input.display(),
+        have.join(", ")
+    )
+}
+
+/// A reference named on the command line was one the table could use.
+pub fn check_reference_used(
+    input: &std::path::Path,
+    named: Option<&str>,
+    report: &EvalReport,
+) -> Result<()> {
+    match (named, &report.reference) {
+        (Some(topic), None) => anyhow::bail!(
+            "{}: reference {topic} is not in the log or gives no samples (a reference is ground \
+             truth, a fused state, or GNSS fixes with position and speed)",
+            input.display()
+        ),
+        _ => Ok(()),
+    }
 }
 
 /// The accuracy table, as eval, refuse and demo print it: one row per pipeline (and per

@@ -11,15 +11,18 @@ pub struct Args {
     /// The railfuse MCAP log to write.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Input format.
-    #[arg(long, value_enum, default_value_t = Format::Eth)]
-    pub format: Format,
+    /// Input format. Without it, it is told from the input: a directory with metadata.yaml
+    /// is a ROS 2 bag, bytes B5 62 UBX, lines starting `$` NMEA, `HH:MM:SS.ffffff,X,hex`
+    /// lines an ETH node log, and `--map` a CSV table.
+    #[arg(long, value_enum)]
+    pub format: Option<Format>,
     /// UTC date (YYYY-MM-DD) of NMEA fixes that come before any RMC or ZDA sentence. Without
     /// it they wait for the first such sentence, and any that never get a date are dropped
     /// and counted (never stamped 1970).
     #[arg(long, value_parser = parse_date)]
     pub date: Option<(i64, u32, u32)>,
     /// The column mapping of a CSV import (TOML; see `railfuse import --help` and the README).
+    /// Only with `--format csv` (which it implies when no format is given).
     #[arg(long, value_name = "MAPPING.toml")]
     pub map: Option<PathBuf>,
     /// Print the report as JSON.
@@ -27,7 +30,7 @@ pub struct Args {
     pub json: bool,
 }
 
-#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, clap::ValueEnum)]
 pub enum Format {
     /// ETH-PBL railway node CSV: raw IMU, UBX frames as hex, NMEA, correction-link and
     /// station events.
@@ -60,8 +63,72 @@ fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
     Ok((y, m as u32, d as u32))
 }
 
+/// The format of `input`, told from its first bytes (or `--map`), or why it cannot be.
+fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
+    use std::io::Read;
+    if input.is_dir() {
+        return match input.join("metadata.yaml").exists() {
+            true => Ok(Format::Rosbag2),
+            false => anyhow::bail!(
+                "{}: a directory without metadata.yaml is not a ROS 2 bag",
+                input.display()
+            ),
+        };
+    }
+    if map {
+        return Ok(Format::Csv);
+    }
+    let mut head = Vec::with_capacity(512);
+    std::fs::File::open(input)
+        .and_then(|f| f.take(512).read_to_end(&mut head))
+        .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
+    let first_line = String::from_utf8_lossy(&head);
+    let first_line = first_line
+        .lines()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("");
+    let eth_line = |l: &str| {
+        let mut fields = l.split(',');
+        let time = fields.next().unwrap_or("");
+        let kind = fields.next().unwrap_or("");
+        time.len() >= 8
+            && time.as_bytes()[2] == b':'
+            && time.as_bytes()[5] == b':'
+            && kind.len() == 1
+            && fields.next().is_some()
+    };
+    match () {
+        _ if head.starts_with(b"\x89MCAP") => anyhow::bail!(
+            "{} is already an MCAP log: nothing to import (railfuse info shows what it holds)",
+            input.display()
+        ),
+        _ if head.starts_with(&[0xb5, 0x62]) => Ok(Format::Ubx),
+        _ if first_line.starts_with('$') => Ok(Format::Nmea),
+        _ if eth_line(first_line) => Ok(Format::Eth),
+        _ => anyhow::bail!(
+            "{}: cannot tell its format from its first line; name it with --format \
+             (eth, nmea, ubx, csv with --map, rosbag2)",
+            input.display()
+        ),
+    }
+}
+
 pub fn run(a: Args) -> Result<()> {
-    let report: ImportReport = match a.format {
+    let format = match a.format {
+        Some(f) => f,
+        None => {
+            let f = detect(&a.input, a.map.is_some())?;
+            eprintln!("format: {} (told from the input)", format_name(f));
+            f
+        }
+    };
+    if a.map.is_some() && format != Format::Csv {
+        anyhow::bail!(
+            "--map is the column mapping of --format csv, not of --format {}",
+            format_name(format)
+        );
+    }
+    let report: ImportReport = match format {
         Format::Eth => {
             let size = std::fs::metadata(&a.input).map_or(0, |m| m.len());
             let bar = crate::progress::Progress::bytes("import", size);
@@ -81,6 +148,20 @@ pub fn run(a: Args) -> Result<()> {
             csv_map::import(&a.input, map, &a.output)?
         }
     };
+    // An import that found nothing is wrong input, not an empty log.
+    if report.messages == 0 {
+        let _ = std::fs::remove_file(&a.output);
+        let first = report
+            .first_problems
+            .first()
+            .map_or(String::new(), |p| format!(" (the first problem: {p})"));
+        anyhow::bail!(
+            "{}: no {} message in it{first}: is it a {} file? Name its format with --format",
+            a.input.display(),
+            format_name(format),
+            format_name(format)
+        );
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
@@ -107,4 +188,10 @@ pub fn run(a: Args) -> Result<()> {
         println!("  {p}");
     }
     Ok(())
+}
+
+fn format_name(f: Format) -> String {
+    use clap::ValueEnum;
+    f.to_possible_value()
+        .map_or_else(|| format!("{f:?}"), |v| v.get_name().to_owned())
 }

@@ -162,6 +162,19 @@ fn status_line(s: &Status) -> String {
 
 pub fn run(a: Args) -> Result<()> {
     let specs = sources(&a)?;
+    // A serial device missing at the start is a wrong name far more often than a receiver
+    // about to be plugged in: said now, not after a run of nothing. One that goes away
+    // during the run is reconnected to.
+    for s in &specs {
+        if let SourceSpec::Serial { path, .. } = s {
+            if let Err(e) = std::fs::metadata(path) {
+                bail!(
+                    "serial {}: {e} (is the receiver plugged in? ls /dev/serial/by-id lists them)",
+                    path.display()
+                );
+            }
+        }
+    }
     let mut metadata = BTreeMap::new();
     if let Some(f) = &a.meta_file {
         let text = std::fs::read_to_string(f).with_context(|| format!("{}", f.display()))?;

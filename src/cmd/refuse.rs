@@ -34,9 +34,10 @@ pub struct Args {
     /// itself: it is replaced only once the new file is complete.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// Reference trajectory for the accuracy table (ground truth or another pipeline's state).
-    #[arg(long, default_value = topics::GROUND_TRUTH)]
-    pub reference: String,
+    /// Reference trajectory for the accuracy table (ground truth, another pipeline's state or
+    /// a GNSS fix channel). Without it, the ground truth (`/truth`) where the log has one.
+    #[arg(long)]
+    pub reference: Option<String>,
     /// Print the report as JSON (with wall time, throughput and peak memory).
     #[arg(long)]
     pub json: bool,
@@ -48,6 +49,10 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    if let Some(topic) = &a.reference {
+        super::eval::check_reference_in_log(&a.input, topic)?;
+    }
+    let reference = a.reference.as_deref().unwrap_or(topics::GROUND_TRUTH);
     let (config, source) = match &a.config {
         Some(path) => (Pipelines::load(path)?, path.display().to_string()),
         None => default_pipeline(&a.input, a.track.as_deref(), a.save_config.as_deref())?,
@@ -62,7 +67,7 @@ pub fn run(a: Args) -> Result<()> {
         &a.output,
         &config,
         source,
-        &a.reference,
+        reference,
         observer.as_ref().map(|o| o as Observer<'_>),
     )?;
     drop(observer);
@@ -80,7 +85,8 @@ pub fn run(a: Args) -> Result<()> {
         print_eval(&eval);
         print_counts(&report);
     }
-    Ok(())
+    // The fused log is written; the table the user asked for could not be made.
+    super::eval::check_reference_used(&a.input, a.reference.as_deref(), &eval)
 }
 
 /// The default pipeline of a log given no configuration, with what it used and left out said

@@ -64,6 +64,11 @@ pub fn simulate_to(
         .map_err(|e| anyhow::anyhow!("--{e}"))?;
     let started = Instant::now();
     let report = simulate(&preset, seed, duration, faults, output)?;
+    // A preset's whole run is known only once driven: a fault after its end is said now.
+    if let Err(e) = Scenario::faults_within(report.duration_s, faults) {
+        let _ = std::fs::remove_file(output);
+        bail!("--{e}");
+    }
     let wall = started.elapsed().as_secs_f64();
     eprintln!(
         "simulated '{}' seed {}: {:.1} s of run, {:.2} km of track, {} messages in {:.2} s ({:.0} msg/s) -> {}",

@@ -79,8 +79,58 @@ pub fn live_sink(target: &str) -> Sink {
     }
 }
 
+/// What `--pipelines`, `--topics`, `--from` and `--to` name is in the log: said before any
+/// work, where the log's summary lists its channels and span.
+fn check_selection(input: &std::path::Path, show: &ShowArgs) -> Result<()> {
+    let Some(summary) = railfuse_catalog::log::read_summary(input)? else {
+        return Ok(());
+    };
+    if let Some(channels) = &summary.channels {
+        let fused: Vec<&str> = channels
+            .iter()
+            .filter_map(|c| match railfuse_catalog::topics::parse_fused(&c.topic) {
+                Some((p, railfuse_catalog::topics::FusedChannel::State)) => Some(p),
+                _ => None,
+            })
+            .collect();
+        for p in &show.pipelines {
+            if !fused.contains(&p.as_str()) {
+                let have = match fused.is_empty() {
+                    true => "none: re-fuse it first".to_owned(),
+                    false => fused.join(", "),
+                };
+                anyhow::bail!(
+                    "{}: no pipeline '{p}' in it (it has {have})",
+                    input.display()
+                );
+            }
+        }
+        for t in &show.topics {
+            if !channels.iter().any(|c| &c.topic == t) {
+                let have: Vec<&str> = channels.iter().map(|c| c.topic.as_str()).collect();
+                anyhow::bail!(
+                    "{}: no topic {t} in it (it has {})",
+                    input.display(),
+                    have.join(", ")
+                );
+            }
+        }
+    }
+    if let Some((first, last)) = summary.message_span_ns {
+        let span_s = last.saturating_sub(first) as f64 / 1e9;
+        if let Some(from) = show.from.filter(|f| *f > span_s) {
+            anyhow::bail!(
+                "--from {from}: past the end of {}, which spans {span_s:.1} s",
+                input.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 pub fn run(a: Args) -> Result<()> {
     let options = a.show.options()?;
+    check_selection(&a.input, &a.show)?;
     let sink = match (a.save, a.connect) {
         (Some(p), _) => Sink::Save(p),
         (None, Some(url)) => Sink::Connect(url),

@@ -118,6 +118,14 @@ pub enum ScenarioError {
     NoDevices(String),
     #[error("fault: scenario '{scenario}' has no {device} to fail")]
     NoSuchDevice { scenario: String, device: String },
+    #[error(
+        "fault {device}: its window starts at {start_s} s, after the run's end at {duration_s} s"
+    )]
+    AfterTheRun {
+        device: String,
+        start_s: f64,
+        duration_s: f64,
+    },
 }
 
 /// A CSV column mapping that does not fit its file.

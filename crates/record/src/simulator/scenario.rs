@@ -131,6 +131,9 @@ impl Scenario {
         if let Some(d) = duration_s.filter(|d| !(d.is_finite() && *d > 0.0)) {
             return Err(ScenarioError::Duration(d));
         }
+        if let Some(duration_s) = duration_s {
+            Self::faults_within(duration_s, faults)?;
+        }
         let name = self.name();
         let Some(line) = self.line() else {
             return match faults.is_empty() {
@@ -155,6 +158,23 @@ impl Scenario {
             }
         }
         Ok(())
+    }
+}
+
+impl Scenario {
+    /// Every fault window starts before the run ends (`duration_s`, s).
+    pub fn faults_within(
+        duration_s: f64,
+        faults: &[super::FaultSpec],
+    ) -> Result<(), ScenarioError> {
+        match faults.iter().find(|f| f.start_s >= duration_s) {
+            Some(f) => Err(ScenarioError::AfterTheRun {
+                device: f.device.clone(),
+                start_s: f.start_s,
+                duration_s,
+            }),
+            None => Ok(()),
+        }
     }
 }
 
