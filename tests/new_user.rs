@@ -198,3 +198,56 @@ fn wrong_input_is_one_line_and_a_non_zero_exit_never_a_silent_zero() {
         assert!(!exists(&rrd), "{args:?} left v.rrd");
     }
 }
+
+#[test]
+fn help_lists_every_value_the_parser_takes_and_the_csv_mapping_has_an_example_of_every_type() {
+    let help = |cmd: &str| String::from_utf8(ok(&[cmd, "--help"]).stdout).unwrap();
+    let tune = help("tune");
+    for optimiser in ["grid", "nelder_mead", "pso", "bayesian", "em"] {
+        assert!(tune.contains(optimiser), "{optimiser}: {tune}");
+    }
+    let simulate = help("simulate");
+    for name in railfuse_record::Scenario::NAMES {
+        assert!(
+            simulate.contains(&format!("- {name}:")),
+            "{name}: {simulate}"
+        );
+    }
+    for device in railfuse_record::simulator::faults::DEVICES {
+        assert!(simulate.contains(device), "{device}: {simulate}");
+    }
+    let import = help("import");
+    for key in [
+        "time_column",
+        "time_unit",
+        "time_offset_ns",
+        "--example-map",
+    ] {
+        assert!(import.contains(key), "{key}: {import}");
+    }
+    // The example mapping names the fields every type needs: its CSV imports one message
+    // of each.
+    let d = tempfile::tempdir().unwrap();
+    ok(&["import", "--example-map", s(d.path())]);
+    let out = d.path().join("example.mcap");
+    let r: serde_json::Value = serde_json::from_slice(
+        &ok(&[
+            "import",
+            s(&d.path().join("example.csv")),
+            "--map",
+            s(&d.path().join("mapping.toml")),
+            "-o",
+            s(&out),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    let kinds = railfuse_record::import::csv_map::EXAMPLE_KINDS;
+    assert_eq!(r["messages"].as_u64(), Some(kinds.len() as u64), "{r}");
+    assert_eq!(
+        r["per_topic"].as_object().unwrap().len(),
+        kinds.len(),
+        "{r}"
+    );
+}

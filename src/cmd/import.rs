@@ -7,10 +7,11 @@ use railfuse_record::recorder::StreamFormat;
 #[derive(clap::Args)]
 pub struct Args {
     /// The log to convert.
-    pub input: PathBuf,
+    #[arg(required_unless_present = "example_map")]
+    pub input: Option<PathBuf>,
     /// The railfuse MCAP log to write.
-    #[arg(short, long)]
-    pub output: PathBuf,
+    #[arg(short, long, required_unless_present = "example_map")]
+    pub output: Option<PathBuf>,
     /// Input format. Without it, it is told from the input: a directory with metadata.yaml
     /// is a ROS 2 bag, bytes B5 62 UBX, lines starting `$` NMEA, `HH:MM:SS.ffffff,X,hex`
     /// lines an ETH node log, and `--map` a CSV table.
@@ -21,10 +22,17 @@ pub struct Args {
     /// and counted (never stamped 1970).
     #[arg(long, value_parser = parse_date)]
     pub date: Option<(i64, u32, u32)>,
-    /// The column mapping of a CSV import (TOML; see `railfuse import --help` and the README).
-    /// Only with `--format csv` (which it implies when no format is given).
+    /// The column mapping of a CSV import (TOML): `time_column`, `time_unit` (s, ms, us,
+    /// ns), `time_offset_ns`, `delimiter`, and per `[[channel]]` its `topic`, `type`,
+    /// `fields = { field = "column" }` (`name[i]` for an array's elements) and `constants`.
+    /// `--example-map DIR` writes one for every message type. Only with `--format csv`
+    /// (which it implies when no format is given).
     #[arg(long, value_name = "MAPPING.toml")]
     pub map: Option<PathBuf>,
+    /// Write DIR/mapping.toml, a CSV mapping with a channel of every message type and the
+    /// fields each requires, and DIR/example.csv, a table it imports; then stop.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["input", "output", "format", "map"])]
+    pub example_map: Option<PathBuf>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -114,6 +122,23 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    if let Some(dir) = &a.example_map {
+        let (mapping, table) = csv_map::example();
+        std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+        for (name, text) in [("mapping.toml", mapping), ("example.csv", table)] {
+            let path = dir.join(name);
+            std::fs::write(&path, text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        }
+        println!(
+            "wrote {0}/mapping.toml and {0}/example.csv: railfuse import {0}/example.csv --map {0}/mapping.toml -o example.mcap",
+            dir.display()
+        );
+        return Ok(());
+    }
+    let (Some(input), Some(output)) = (a.input.clone(), a.output.clone()) else {
+        anyhow::bail!("import needs an input and -o OUTPUT");
+    };
+    let a = Resolved { a, input, output };
     let format = match a.format {
         Some(f) => f,
         None => {
@@ -194,4 +219,18 @@ fn format_name(f: Format) -> String {
     use clap::ValueEnum;
     f.to_possible_value()
         .map_or_else(|| format!("{f:?}"), |v| v.get_name().to_owned())
+}
+
+/// The arguments of an import, its input and output given.
+struct Resolved {
+    a: Args,
+    input: PathBuf,
+    output: PathBuf,
+}
+
+impl std::ops::Deref for Resolved {
+    type Target = Args;
+    fn deref(&self) -> &Args {
+        &self.a
+    }
 }

@@ -21,3 +21,10 @@ pub mod viz;
 
 /// The pipeline configuration used when none is given: `samples/kalman.toml`.
 pub const DEFAULT_PIPELINES: &str = railfuse_experiments::long_runs::KALMAN_PIPELINES;
+
+/// The simulator's presets as `--scenario` and `--simulate` take them, each with what it is.
+pub fn scenarios() -> clap::builder::PossibleValuesParser {
+    clap::builder::PossibleValuesParser::new(railfuse_record::Scenario::NAMES.iter().map(|n| {
+        clap::builder::PossibleValue::new(*n).help(railfuse_record::Scenario::describe(n))
+    }))
+}

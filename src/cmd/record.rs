@@ -38,7 +38,7 @@ pub struct Args {
     pub stdin: Option<String>,
     /// Record the embedded simulator in real time (the default when no source is given).
     #[arg(long, value_name = "SCENARIO",
-          value_parser = clap::builder::PossibleValuesParser::new(railfuse_record::Scenario::NAMES))]
+          value_parser = super::scenarios())]
     pub simulate: Option<String>,
     /// Simulator: the seed of its random streams (the same seed gives the same run).
     #[arg(long, default_value_t = 0)]

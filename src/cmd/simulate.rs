@@ -7,14 +7,9 @@ use railfuse_record::{simulate, Scenario, SimulationReport};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Scenario preset: `default` (a mixed line run with every sensor), `seed000` (source
-    /// 000's maglev simulation, its parameters exactly as stated), `seed000_loop_drift` (the
-    /// same with the loop's error growing with distance, as the source describes), `seed001`
-    /// (source 001's: INS, BeiDou, Doppler radar, 500 s) or `seed002` (source 002's: the
-    /// default line with parallel tracks and multipath at four stations, cuttings, a surveyed
-    /// map with its own error).
+    /// Scenario preset.
     #[arg(long, default_value = "default",
-          value_parser = clap::builder::PossibleValuesParser::new(Scenario::NAMES))]
+          value_parser = super::scenarios())]
     pub scenario: String,
     /// Seed of every random draw: the same seed gives the same file.
     #[arg(long, default_value_t = 0)]
@@ -22,12 +17,7 @@ pub struct Args {
     /// Length of the run in seconds (default: the preset's whole run).
     #[arg(long)]
     pub duration: Option<f64>,
-    /// Make a device fail for a window: DEVICE:MODE:START:END with DEVICE one of gnss, imu,
-    /// radar, odometer1, odometer2, loop, balise; MODE dropout, stuck or bias=VALUE (SI units:
-    /// a GNSS position jump along the track in m, an axle slipping beyond spec in m/s);
-    /// START and END in seconds from the start; `:reported` adds the device's own fault and
-    /// recovery events. Repeatable.
-    #[arg(long = "fault", value_name = "DEVICE:MODE:START:END[:reported]")]
+    #[arg(long = "fault", value_name = "DEVICE:MODE:START:END[:reported]", help = fault_help())]
     pub faults: Vec<FaultSpec>,
     /// Output MCAP file.
     #[arg(short, long)]
@@ -82,4 +72,16 @@ pub fn simulate_to(
         output.display()
     );
     Ok(report)
+}
+
+/// The `--fault` help, from the devices and modes the parser takes.
+fn fault_help() -> String {
+    format!(
+        "Make a device fail for a window: DEVICE:MODE:START:END with DEVICE one of {}; MODE \
+         dropout, stuck or bias=VALUE (SI units: a GNSS position jump along the track in m, a \
+         speed in m/s, a specific force in m/s², a loop position in m), or for the map \
+         offset=D (a stretch published D m to the left); START and END in seconds from the \
+         start; `:reported` adds the device's own fault and recovery events. Repeatable.",
+        railfuse_record::simulator::faults::DEVICES.join(", ")
+    )
 }

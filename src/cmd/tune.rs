@@ -5,7 +5,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
-use railfuse_refuse::config::{ObjectiveKind, OptimiserKind};
+use railfuse_refuse::config::{value_names, ObjectiveKind, OptimiserKind};
 use railfuse_refuse::tune::recording::Metrics;
 use railfuse_refuse::tune::search::SearchProgress;
 use railfuse_refuse::tune::{write_trace_csv, write_trace_mcap, TuneOutcome, TuneRequest, Tuner};
@@ -33,11 +33,13 @@ pub struct Args {
     /// add to and override [pipeline.tune.params]).
     #[arg(long = "params", value_name = "PATH=MIN..MAX")]
     pub params: Vec<String>,
-    /// rmse (against the reference) or nll (the innovations' negative log-likelihood).
-    #[arg(long, value_parser = parse_enum::<ObjectiveKind>)]
+    #[arg(long, value_parser = parse_enum::<ObjectiveKind>, help = format!(
+        "What to minimise: {} (rmse against the reference; nll the innovations' negative \
+         log-likelihood)", value_names(ObjectiveKind::ALL).join(", ")))]
     pub objective: Option<ObjectiveKind>,
-    /// grid, nelder-mead (the default) or pso.
-    #[arg(long, value_parser = parse_enum::<OptimiserKind>)]
+    #[arg(long, value_parser = parse_enum::<OptimiserKind>, help = format!(
+        "The search: {} (nelder_mead the default; - and _ alike, here and in the TOML)",
+        value_names(OptimiserKind::ALL).join(", ")))]
     pub optimiser: Option<OptimiserKind>,
     /// The most evaluations (replays of every log); default 200, a grid's point count.
     #[arg(long)]

@@ -419,6 +419,8 @@ pub enum ObjectiveKind {
 #[serde(rename_all = "snake_case")]
 pub enum OptimiserKind {
     Grid,
+    /// The default. `nelder-mead` is read as well, as the command line takes it.
+    #[serde(alias = "nelder-mead")]
     NelderMead,
     /// Particle swarm.
     Pso,
@@ -428,6 +430,30 @@ pub enum OptimiserKind {
     /// Expectation–maximisation: the maximum-likelihood motion noise and sensor variances of
     /// a linear-Gaussian Kalman pipeline.
     Em,
+}
+
+impl OptimiserKind {
+    /// Every optimiser, for help texts.
+    pub const ALL: &'static [Self] = &[
+        OptimiserKind::Grid,
+        OptimiserKind::NelderMead,
+        OptimiserKind::Pso,
+        OptimiserKind::Bayesian,
+        OptimiserKind::Em,
+    ];
+}
+
+impl ObjectiveKind {
+    /// Every objective, for help texts.
+    pub const ALL: &'static [Self] = &[ObjectiveKind::Rmse, ObjectiveKind::Nll];
+}
+
+/// The names of `values` as a configuration file spells them.
+pub fn value_names<T: Serialize>(values: &[T]) -> Vec<String> {
+    values
+        .iter()
+        .filter_map(|v| serde_json::to_value(v).ok()?.as_str().map(str::to_owned))
+        .collect()
 }
 
 /// Bounds of one tuned value, in its own units.
@@ -505,4 +531,35 @@ pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
 /// A config file path for messages when the text did not come from a file.
 pub fn embedded_path(name: &str) -> PathBuf {
     PathBuf::from(format!("<embedded {name}>"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The help lists every value the parser takes: a new variant fails to compile here until
+    /// it is in `ALL`.
+    #[test]
+    fn help_lists_every_optimiser_and_objective_and_both_spellings_read() {
+        for k in OptimiserKind::ALL {
+            match k {
+                OptimiserKind::Grid
+                | OptimiserKind::NelderMead
+                | OptimiserKind::Pso
+                | OptimiserKind::Bayesian
+                | OptimiserKind::Em => {}
+            }
+        }
+        for k in ObjectiveKind::ALL {
+            match k {
+                ObjectiveKind::Rmse | ObjectiveKind::Nll => {}
+            }
+        }
+        assert_eq!(OptimiserKind::ALL.len(), 5);
+        assert_eq!(ObjectiveKind::ALL.len(), 2);
+        for spelling in ["nelder_mead", "nelder-mead"] {
+            let t: TuneConfig = toml::from_str(&format!("optimiser = \"{spelling}\"")).unwrap();
+            assert_eq!(t.optimiser, Some(OptimiserKind::NelderMead));
+        }
+    }
 }

@@ -13,6 +13,11 @@
 //! constants = { quality = 1.0, valid = true }
 //! ```
 //!
+//! A field that is an array takes one column per element, `name[i]` (an IMU's
+//! `specific_force_mps2[0]` … `[2]`). The fields each message type needs are its JSON schema's
+//! required properties: [`example`] writes a mapping with a channel of every type that fits a
+//! table row, and a CSV it imports (`railfuse import --example-map DIR`).
+//!
 //! A row with an empty cell for a channel's field gives no message on that channel (loggers
 //! leave cells empty when a sensor had nothing new); a cell that does not parse, or a message
 //! that does not validate, is counted with its line.
@@ -21,6 +26,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use railfuse_catalog::log::LogWriter;
+use railfuse_catalog::messages::MessageKind;
 use serde::Deserialize;
 use serde_json::Value;
 
@@ -63,6 +69,10 @@ pub struct ChannelMapping {
 /// A cell as JSON: a number when it parses as one, a boolean for true/false, else text.
 fn cell(text: &str) -> Value {
     let t = text.trim();
+    // Whole numbers stay integers: a count or an id must not arrive as 1.0.
+    if let Ok(n) = t.parse::<i64>() {
+        return Value::from(n);
+    }
     if let Ok(x) = t.parse::<f64>() {
         return serde_json::Number::from_f64(x).map_or(Value::Null, Value::Number);
     }
@@ -71,6 +81,147 @@ fn cell(text: &str) -> Value {
         "false" | "FALSE" => Value::Bool(false),
         _ => Value::String(t.to_owned()),
     }
+}
+
+/// Sets `field` of `obj` to `value`; `name[i]` sets element i of the array `name` (holes
+/// stay null, which the message's validation refuses).
+fn put(obj: &mut serde_json::Map<String, Value>, field: &str, value: Value) {
+    let indexed = field
+        .strip_suffix(']')
+        .and_then(|f| f.split_once('['))
+        .and_then(|(name, i)| Some((name, i.parse::<usize>().ok().filter(|i| *i < 64)?)));
+    let Some((name, i)) = indexed else {
+        obj.insert(field.to_owned(), value);
+        return;
+    };
+    let slot = obj
+        .entry(name.to_owned())
+        .or_insert_with(|| Value::Array(Vec::new()));
+    if let Value::Array(items) = slot {
+        if items.len() <= i {
+            items.resize(i + 1, Value::Null);
+        }
+        items[i] = value;
+    }
+}
+
+/// The message types a table row can carry (an eddy-current block is a window of samples,
+/// a track map a whole line: neither is a row).
+pub const EXAMPLE_KINDS: &[MessageKind] = &[
+    MessageKind::RadarSpeed,
+    MessageKind::Odometer,
+    MessageKind::GnssFix,
+    MessageKind::Imu,
+    MessageKind::LoopPosition,
+    MessageKind::BalisePassage,
+    MessageKind::GroundTruth,
+    MessageKind::Event,
+];
+
+/// A mapping with one channel of every type in [`EXAMPLE_KINDS`], each field its schema
+/// requires mapped to a column (the optional ones named in a comment), and a CSV of one row
+/// that it imports: `(mapping TOML, CSV)`. Made from the types' own JSON schemas, so it names
+/// exactly the fields the import validates against.
+pub fn example() -> (String, String) {
+    let mut toml = String::from(
+        "# Every message type a CSV row can carry: each channel maps the fields its type\n\
+         # requires to columns; the optional ones are listed under it. Keep the channels you\n\
+         # have, rename the columns to your logger's, and delete the rest.\n\
+         time_column = \"t\"          # the sensor time of each row\n\
+         time_unit = \"s\"            # s, ms, us or ns\n\
+         time_offset_ns = 1780300800000000000   # added to each time (the run's start)\n\
+         delimiter = \",\"\n",
+    );
+    let (mut header, mut row) = (vec!["t".to_owned()], vec!["0.5".to_owned()]);
+    for &kind in EXAMPLE_KINDS {
+        let schema: Value = serde_json::from_slice(&kind.schema_bytes()).unwrap_or_default();
+        let required: Vec<&str> = schema["required"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(Value::as_str)
+            .filter(|f| *f != "stamp_ns")
+            .collect();
+        let properties = schema["properties"].as_object();
+        let optional: Vec<&str> = properties
+            .into_iter()
+            .flatten()
+            .map(|(k, _)| k.as_str())
+            .filter(|k| *k != "stamp_ns" && !required.contains(k))
+            .collect();
+        let prefix = kind.type_name().to_ascii_lowercase();
+        let mut fields = Vec::new();
+        for f in &required {
+            let property = &schema["properties"][*f];
+            let n = property["minItems"]
+                .as_u64()
+                .filter(|_| property["type"] == "array");
+            let names: Vec<String> = match n {
+                Some(n) => (0..n).map(|i| format!("{f}[{i}]")).collect(),
+                None => vec![(*f).to_owned()],
+            };
+            for name in names {
+                let column = format!("{prefix}_{}", name.replace(['[', ']'], "_"));
+                let column = column.trim_end_matches('_').to_owned();
+                fields.push(format!("\"{name}\" = \"{column}\""));
+                header.push(column);
+                row.push(example_value(&schema, property));
+            }
+        }
+        let topic = standard_topic(kind);
+        toml += &format!(
+            "\n[[channel]]\ntopic = \"{topic}\"\ntype = \"{}\"\nfields = {{ {} }}\n",
+            kind.type_name(),
+            fields.join(", ")
+        );
+        if !optional.is_empty() {
+            toml += &format!("# optional fields: {}\n", optional.join(", "));
+        }
+    }
+    (toml, format!("{}\n{}\n", header.join(","), row.join(",")))
+}
+
+/// The topic a kind travels on in a railfuse log.
+fn standard_topic(kind: MessageKind) -> &'static str {
+    use railfuse_catalog::topics;
+    match kind {
+        MessageKind::RadarSpeed => topics::RADAR_SPEED,
+        MessageKind::Odometer => topics::ODOMETER_1,
+        MessageKind::GnssFix => topics::GNSS_FIX,
+        MessageKind::Imu => topics::IMU,
+        MessageKind::LoopPosition => topics::LOOP_POSITION,
+        MessageKind::BalisePassage => topics::BALISE,
+        MessageKind::GroundTruth => topics::GROUND_TRUTH,
+        _ => topics::EVENTS,
+    }
+}
+
+/// A value of a property's type that its schema accepts: the first of an enumeration, else
+/// a plain number, integer, flag or word.
+fn example_value(schema: &Value, property: &Value) -> String {
+    let property = match property["$ref"].as_str() {
+        Some(r) => &schema["$defs"][r.rsplit('/').next().unwrap_or("")],
+        None => property,
+    };
+    // An enumeration as schemars writes one: `enum`, or `oneOf` of `enum`s and `const`s.
+    fn first(v: &Value) -> Option<&str> {
+        v["enum"].get(0).or(v.get("const")).and_then(Value::as_str)
+    }
+    let first_of = first(property).or_else(|| property["oneOf"].get(0).and_then(first));
+    if let Some(v) = first_of {
+        return v.to_owned();
+    }
+    let ty = match &property["type"] {
+        Value::Array(types) => types.first().and_then(Value::as_str).unwrap_or(""),
+        t => t.as_str().unwrap_or(""),
+    };
+    match ty {
+        "integer" => "1",
+        "boolean" => "true",
+        "string" => "a",
+        _ => "0.5",
+    }
+    .to_owned()
 }
 
 pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<ImportReport> {
@@ -191,7 +342,7 @@ pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<Import
             }
             obj.insert("stamp_ns".into(), Value::from(stamp));
             for (field, i) in cols {
-                obj.insert(field.clone(), cell(record.get(*i).unwrap_or("")));
+                put(&mut obj, field, cell(record.get(*i).unwrap_or("")));
             }
             for (k, v) in constants {
                 obj.insert(k.clone(), v.clone());

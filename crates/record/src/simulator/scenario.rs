@@ -84,6 +84,29 @@ impl Scenario {
         "seed004",
     ];
 
+    /// What each preset of [`Self::NAMES`] is, in a line, for help texts.
+    pub fn describe(name: &str) -> &'static str {
+        match name {
+            "default" => "a mixed line run near Modena with every sensor",
+            "seed000" => "source 000's maglev simulation, its parameters exactly as stated",
+            "seed000_loop_drift" => "seed000 with the loop's error growing with distance",
+            "seed001" => "source 001's: INS, BeiDou and Doppler radar, 500 s",
+            "seed002" => {
+                "source 002's: curves, parallel tracks and multipath at four stations, \
+                 cuttings, a surveyed map with its own error"
+            }
+            "seed003" => {
+                "source 003's: RTK at 5 Hz, satellites lost in cuttings, a 150 s GNSS \
+                 outage, a 30 Hz MEMS IMU"
+            }
+            "seed004" => {
+                "source 004's: shunting, hard acceleration and braking, long stops and line \
+                 speed over sleeper sections and switches, with the eddy-current sensor pair"
+            }
+            _ => "",
+        }
+    }
+
     pub fn preset(name: &str) -> Option<Scenario> {
         match name {
             "default" => Some(Scenario::Default(Box::new(LineScenario::default_run()))),
