@@ -251,3 +251,47 @@ fn help_lists_every_value_the_parser_takes_and_the_csv_mapping_has_an_example_of
         "{r}"
     );
 }
+
+#[test]
+fn outputs_are_checked_before_the_work_and_seeds_zero_is_refused() {
+    let d = tempfile::tempdir().unwrap();
+    // Outside the repository there is no docs/: said at once, not after the runs.
+    let started = std::time::Instant::now();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
+        .args(["results", "--safety", "--seeds", "1"])
+        .current_dir(d.path())
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("docs/safety.md: cannot write: its folder docs does not exist"),
+        "{err}"
+    );
+    assert!(!d.path().join("target").exists(), "work started: {err}");
+    assert!(started.elapsed().as_secs() < 10);
+    // tune: a trace path it cannot write stops it before the search, and nothing is written.
+    let tuned = d.path().join("t.toml");
+    let line = fails(&[
+        "tune",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("kalman.toml")),
+        "--pipeline",
+        "kalman",
+        "--params",
+        "motion.jerk_psd=0.01..1",
+        "-o",
+        s(&tuned),
+        "--trace",
+        "/nonexistent/dir/t.csv",
+    ]);
+    assert!(
+        line.contains("/nonexistent/dir/t.csv: cannot write"),
+        "{line}"
+    );
+    assert!(!tuned.exists());
+    let o = railfuse(&["results", "--seeds", "0"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--seeds"), "{}", stderr(&o));
+}

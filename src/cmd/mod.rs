@@ -28,3 +28,27 @@ pub fn scenarios() -> clap::builder::PossibleValuesParser {
         clap::builder::PossibleValue::new(*n).help(railfuse_record::Scenario::describe(n))
     }))
 }
+
+/// `path` can be written: checked before a long run, not found out at its end. A file the
+/// check creates is removed again.
+pub fn check_writable(path: &std::path::Path) -> anyhow::Result<()> {
+    let existed = path.exists();
+    let opened = std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(path);
+    if let Err(e) = opened {
+        let why = match path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty() && !p.is_dir())
+        {
+            Some(dir) => format!("its folder {} does not exist", dir.display()),
+            None => e.to_string(),
+        };
+        anyhow::bail!("{}: cannot write: {why}", path.display());
+    }
+    if !existed {
+        let _ = std::fs::remove_file(path);
+    }
+    Ok(())
+}

@@ -11,8 +11,10 @@ use railfuse_experiments::sources::{self, Results, Verdict};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Seeds per experiment (0, 1, … N−1).
-    #[arg(long, default_value_t = 10)]
+    /// Runs per experiment, at least 1: seeds 0 … N−1 for sources 000 and 001 and the long
+    /// runs, 1 … N for --tuning, --safety, --gnss-ins and --eddy-current (each page says
+    /// which).
+    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: u64,
     /// Where to write the table (Markdown); default docs/results.md, or docs/tuning.md with
     /// --tuning, docs/safety.md with --safety, docs/gnss_ins.md with --gnss-ins,
@@ -57,7 +59,21 @@ fn verdict(v: Verdict) -> String {
     }
 }
 
+/// Where the page goes: `--output`, else the page kept under docs/.
+fn page(a: &Args) -> PathBuf {
+    let default = match () {
+        _ if a.safety => "docs/safety.md",
+        _ if a.gnss_ins => "docs/gnss_ins.md",
+        _ if a.eddy_current => "docs/eddy_current.md",
+        _ if a.tuning => "docs/tuning.md",
+        _ => "docs/results.md",
+    };
+    a.output.clone().unwrap_or_else(|| default.into())
+}
+
 pub fn run(a: Args) -> Result<()> {
+    // Minutes of runs must not end in "cannot write": the page is checked first.
+    super::check_writable(&page(&a))?;
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
     if a.safety {
@@ -72,16 +88,16 @@ pub fn run(a: Args) -> Result<()> {
     if a.tuning {
         return super::results_tuning::run(&a);
     }
-    let seeds = a.seeds.max(1);
+    let seeds = a.seeds;
     let bar = crate::progress::Progress::steps("results", sources::runs(seeds));
     let results = sources::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
-    write_table(&a, "docs/results.md", &markdown(&results)?)
+    write_table(&a, &markdown(&results)?)
 }
 
 /// Writes a results table to `--output` (else `default`) and prints it.
-pub(super) fn write_table(a: &Args, default: &str, md: &str) -> Result<()> {
-    let output = a.output.clone().unwrap_or_else(|| default.into());
+pub(super) fn write_table(a: &Args, md: &str) -> Result<()> {
+    let output = page(a);
     std::fs::write(&output, md).with_context(|| format!("{}: cannot write", output.display()))?;
     print!("{md}");
     eprintln!("-> {}", output.display());

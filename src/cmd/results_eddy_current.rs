@@ -10,13 +10,13 @@ use railfuse_experiments::eddy_current::{self, EddyCurrentResults, BANDS, STARTI
 use super::results::Args;
 
 pub fn run(a: &Args) -> Result<()> {
-    let seeds = a.seeds.max(1);
+    let seeds = a.seeds;
     let bar =
         crate::progress::Progress::steps("eddy_current experiments", eddy_current::runs(seeds));
     let results = eddy_current::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
     let md = markdown(&results)?;
-    super::results::write_table(a, "docs/eddy_current.md", &md)
+    super::results::write_table(a, &md)
 }
 
 fn f(x: f64, digits: usize) -> String {

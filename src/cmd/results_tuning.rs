@@ -12,7 +12,7 @@ use super::results::Args;
 use super::DEFAULT_PIPELINES;
 
 pub fn run(a: &Args) -> Result<()> {
-    let seeds = a.seeds.max(1);
+    let seeds = a.seeds;
     let bar = crate::progress::Progress::steps("tuning experiments", tuning::runs(seeds));
     let results = tuning::run_all(&a.dir, seeds, DEFAULT_PIPELINES, &|done| bar.set(done))?;
     bar.finish();
@@ -22,7 +22,7 @@ pub fn run(a: &Args) -> Result<()> {
         None => None,
     };
     let md = markdown(&results, em.as_ref())?;
-    super::results::write_table(a, "docs/tuning.md", &md)
+    super::results::write_table(a, &md)
 }
 
 fn markdown(r: &TuningResults, em: Option<&EmComparison>) -> Result<String> {

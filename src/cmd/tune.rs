@@ -82,6 +82,10 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 fn tune(a: &Args) -> Result<()> {
+    // Every output can be written before the search runs, and none is written until all are.
+    for path in [a.output.clone(), trace_csv_path(a), trace_mcap_path(a)] {
+        super::check_writable(&path)?;
+    }
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         // The second Ctrl-C ends at once; the first ends the search with the best so far.
@@ -122,13 +126,16 @@ fn tune(a: &Args) -> Result<()> {
     Ok(())
 }
 
+fn trace_csv_path(a: &Args) -> PathBuf {
+    a.trace
+        .clone()
+        .unwrap_or_else(|| a.output.with_extension("trace.csv"))
+}
+
 fn write_outputs(a: &Args, tuner: &Tuner, outcome: &TuneOutcome) -> Result<()> {
     std::fs::write(&a.output, &outcome.tuned_toml)
         .with_context(|| format!("{}: writing the tuned configuration", a.output.display()))?;
-    let trace = a
-        .trace
-        .clone()
-        .unwrap_or_else(|| a.output.with_extension("trace.csv"));
+    let trace = trace_csv_path(a);
     let file = std::fs::File::create(&trace)
         .with_context(|| format!("{}: writing the trace", trace.display()))?;
     write_trace_csv(std::io::BufWriter::new(file), &tuner.params, &outcome.trace)
