@@ -292,10 +292,10 @@ fn bad_configs_name_the_line_column_or_channel() {
             "a variance",
         ],
     );
-    // seed000 logs have no odometer: the channel is named.
+    // seed000 logs have no odometer: a sensor that requires one names the channel.
     let missing = write(
         "missing.toml",
-        good.replacen("/radar/speed", "/odometer/1", 1),
+        good.replacen("\"/radar/speed\"", "\"/odometer/1\"\nrequired = true", 1),
     );
     assert_one_clear_line(
         &railfuse(&["refuse", s(&raw), "-c", s(&missing), "-o", s(&out)]),

@@ -295,3 +295,56 @@ fn outputs_are_checked_before_the_work_and_seeds_zero_is_refused() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--seeds"), "{}", stderr(&o));
 }
+
+#[test]
+fn a_short_live_run_refuses_with_the_sample_config_a_missing_sensor_said_not_fatal() {
+    let d = tempfile::tempdir().unwrap();
+    let live = d.path().join("live.mcap");
+    ok(&[
+        "record",
+        "--simulate",
+        "default",
+        "--speed",
+        "10",
+        "--duration",
+        "3",
+        "-q",
+        "-o",
+        s(&live),
+    ]);
+    let fused = d.path().join("live.fused.mcap");
+    let o = ok(&[
+        "refuse",
+        s(&live),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+    ]);
+    let err = stderr(&o);
+    let warnings: Vec<&str> = err.lines().filter(|l| l.contains("/balise")).collect();
+    assert_eq!(warnings.len(), 1, "{err}");
+    assert!(
+        warnings[0].starts_with("warning: ") && warnings[0].contains("runs without it"),
+        "{err}"
+    );
+    let states: Vec<railfuse_catalog::messages::FusedState> =
+        messages(&fused, "/fused/kalman/state");
+    assert!(!states.is_empty());
+    // Marked required, the same sensor stops the run in one line.
+    let text = std::fs::read_to_string(sample("kalman.toml")).unwrap();
+    let required = d.path().join("required.toml");
+    std::fs::write(
+        &required,
+        text.replace(
+            "topic = \"/balise\"",
+            "topic = \"/balise\"\nrequired = true",
+        ),
+    )
+    .unwrap();
+    let line = fails(&["refuse", s(&live), "-c", s(&required), "-o", s(&fused)]);
+    assert!(
+        line.contains("/balise") && line.contains("is not in the file"),
+        "{line}"
+    );
+}

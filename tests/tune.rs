@@ -332,13 +332,22 @@ fn bad_tuning_requests_get_one_clear_line_each() {
         args.extend(extra.iter());
         refused(&args, &[expected]);
     }
-    // A log without the pipeline's sensors, and a pipeline the file does not have.
+    // A log without a sensor the pipeline requires, and a pipeline the file does not have.
+    let requires_loop = d.path().join("requires_loop.toml");
+    std::fs::write(
+        &requires_loop,
+        std::fs::read_to_string(&kalman).unwrap().replace(
+            "topic = \"/loop/position\"",
+            "topic = \"/loop/position\"\nrequired = true",
+        ),
+    )
+    .unwrap();
     refused(
         &[
             "tune",
             s(&seed001),
             "-c",
-            s(&kalman),
+            s(&requires_loop),
             "--pipeline",
             "kalman",
             "--params",

@@ -212,7 +212,12 @@ pub fn refuse_with(
         report.fused_messages,
         output.display()
     );
-    for line in report.undecodable.lines() {
+    for line in report
+        .undecodable
+        .lines()
+        .iter()
+        .chain(&report.missing_sensors)
+    {
         eprintln!("warning: {line}");
     }
     for (reason, n) in &report.skipped {

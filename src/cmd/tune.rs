@@ -107,6 +107,9 @@ fn tune(a: &Args) -> Result<()> {
     let loading = crate::progress::Progress::steps("decoding logs", a.logs.len() as u64);
     let tuner = Tuner::open(&request)?;
     loading.finish();
+    for warning in tuner.recordings.iter().flat_map(|r| &r.missing_sensors) {
+        eprintln!("warning: {warning}");
+    }
     let bar = crate::progress::Progress::steps("tune", tuner.budget as u64);
     let progress = |p: SearchProgress| {
         let rate = p.evaluations as f64 / p.elapsed_s.max(1e-9);

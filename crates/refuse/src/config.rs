@@ -329,6 +329,11 @@ pub struct SensorConfig {
     /// every brake and start.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub speed_window_s: Option<f64>,
+    /// The log must have this channel: without it refuse and tune stop. By default a sensor
+    /// whose channel is missing (a balise on a run that passed none) is left out with a
+    /// warning, and the pipeline runs on the others.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub required: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

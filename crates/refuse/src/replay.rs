@@ -89,6 +89,8 @@ pub struct RefuseReport {
     /// Sensor messages the pipelines read that did not decode: skipped (copied unchanged),
     /// counted by topic and cause, the first of each said.
     pub undecodable: Rejections,
+    /// Sensors left out because the log lacks their channel, each said as a warning.
+    pub missing_sensors: BTreeSet<String>,
     /// Foreign messages read and not measurements (a NavSatFix of status NO_FIX), by reason.
     pub skipped: BTreeMap<String, u64>,
     /// Foreign topics whose messages carried no time of their own (a zero `header.stamp`):
@@ -187,6 +189,8 @@ struct Replay<'a> {
     /// fused on.
     track_output: Option<TrackOutput>,
     track_written: bool,
+    /// The sensors were checked against the summary's channels.
+    bound_checked: bool,
     seen_topics: BTreeSet<String>,
     eval: Evaluator,
     measurements: Vec<Measurement>,
@@ -231,6 +235,7 @@ impl<'a> Replay<'a> {
             ros_outputs: Vec::new(),
             track_output,
             track_written: false,
+            bound_checked: false,
             seen_topics: BTreeSet::new(),
             eval,
             measurements: Vec::new(),
@@ -243,6 +248,7 @@ impl<'a> Replay<'a> {
                 fused_messages: 0,
                 out_of_order_messages: 0,
                 undecodable: Rejections::default(),
+                missing_sensors: BTreeSet::new(),
                 skipped: BTreeMap::new(),
                 stamped_by_log_time: BTreeSet::new(),
                 pipelines: Vec::new(),
@@ -255,6 +261,7 @@ impl<'a> Replay<'a> {
                 replay.route(c.clone())?;
             }
             replay.check_every_sensor_bound(channels)?;
+            replay.bound_checked = true;
         }
         Ok(replay)
     }
@@ -555,23 +562,29 @@ impl<'a> Replay<'a> {
             .map_err(|why| first.spec().channel_error(self.opts.input, first_si, why))
     }
 
-    /// Every sensor of every pipeline has met its channel; `channels` are the log's, named
-    /// in the error.
-    fn check_every_sensor_bound(&self, channels: &[Arc<ChannelInfo>]) -> Result<()> {
+    /// Every sensor of every pipeline has met its channel, or is said missing (an error for
+    /// a required one, or for a pipeline left with none); `channels` are the log's, named in
+    /// the message.
+    fn check_every_sensor_bound(&mut self, channels: &[Arc<ChannelInfo>]) -> Result<()> {
+        let have: Vec<&str> = channels
+            .iter()
+            .map(|c| c.topic.as_str())
+            .filter(|t| !t.starts_with(topics::FUSED_PREFIX))
+            .collect();
         for p in &self.opts.config.pipeline {
-            for (si, s) in p.sensors.iter().enumerate() {
-                if !self.seen_topics.contains(&s.topic) {
-                    let have: Vec<&str> = channels
-                        .iter()
-                        .map(|c| c.topic.as_str())
-                        .filter(|t| !t.starts_with(topics::FUSED_PREFIX))
-                        .collect();
-                    let problem = match have.is_empty() {
-                        true => "is not in the file".to_owned(),
-                        false => format!("is not in the file (it has {})", have.join(", ")),
-                    };
-                    return Err(p.channel_error(self.opts.input, si, problem));
-                }
+            let missing: Vec<usize> = (0..p.sensors.len())
+                .filter(|&si| !self.seen_topics.contains(&p.sensors[si].topic))
+                .collect();
+            for &si in &missing {
+                let warning = p.missing_channel(self.opts.input, si, &have)?;
+                self.report.missing_sensors.insert(warning);
+            }
+            if !p.sensors.is_empty() && missing.len() == p.sensors.len() {
+                return Err(p.channel_error(
+                    self.opts.input,
+                    0,
+                    "is not in the file, nor is any other channel of the pipeline".into(),
+                ));
             }
         }
         Ok(())
@@ -817,7 +830,10 @@ impl<'a> Replay<'a> {
     /// output and finishes the evaluation.
     fn finish(mut self) -> Result<(RefuseReport, EvalReport)> {
         let input = self.opts.input;
-        self.check_every_sensor_bound(&[])?;
+        // Without a summary, the channels are known only now.
+        if !self.bound_checked {
+            self.check_every_sensor_bound(&[])?;
+        }
         self.check_track_for_chainage()?;
         for pi in 0..self.pipelines.len() {
             self.pipelines[pi].finish(self.last_log_time, &self.context, &mut self.fused);

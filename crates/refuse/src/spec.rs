@@ -230,6 +230,8 @@ pub struct SensorSpec {
     pub states: Vec<SensorState>,
     /// The window its speed is the mean over, s (config `speed_window_s`).
     pub speed_window_s: Option<f64>,
+    /// A log without its channel is an error (config `required`), not a warning.
+    pub required: bool,
     /// Where its table is.
     pub declared: Place,
 }
@@ -469,6 +471,22 @@ impl PipelineSpec {
     }
 
     /// An error about sensor `sensor`'s channel in log `input`.
+    /// A sensor whose channel the log `input` lacks (`have`: the channels it has): an error
+    /// if the configuration marks it required, else the warning to give, the pipeline
+    /// running on its other sensors.
+    pub fn missing_channel(&self, input: &Path, sensor: usize, have: &[&str]) -> Result<String> {
+        let problem = match have.is_empty() {
+            true => "is not in the file".to_owned(),
+            false => format!("is not in the file (it has {})", have.join(", ")),
+        };
+        if self.sensors[sensor].required {
+            return Err(self.channel_error(input, sensor, problem));
+        }
+        let problem =
+            format!("{problem}: it runs without it (required = true makes this an error)");
+        Ok(self.channel_error(input, sensor, problem).to_string())
+    }
+
     pub fn channel_error(&self, input: &Path, sensor: usize, problem: String) -> Error {
         let s = &self.sensors[sensor];
         Error::Channel {
@@ -650,6 +668,7 @@ fn sensor(
         gate_nis,
         states,
         speed_window_s,
+        required: s.required,
         declared,
     })
 }

@@ -347,6 +347,9 @@ fn target(spec: &PipelineSpec, p: &Param, motion_key: &str) -> std::result::Resu
 fn sequence(spec: &PipelineSpec, r: &Recording) -> std::result::Result<Sequence, String> {
     let mut all: Vec<(u64, Datum)> = Vec::new();
     for (si, schema) in r.schemas.iter().enumerate() {
+        let Some(schema) = schema else {
+            continue;
+        };
         let binding = spec.bind(&r.path, si, schema).map_err(|e| e.to_string())?;
         for step in &r.steps {
             let Step::Sensor {

@@ -41,7 +41,10 @@ pub(super) enum Step {
 pub struct Recording {
     pub path: PathBuf,
     /// Per sensor of the pipeline: its channel's schema.
-    pub(super) schemas: Vec<String>,
+    /// Each sensor's channel schema; `None` for one the log lacks.
+    pub(super) schemas: Vec<Option<String>>,
+    /// Sensors left out because the log lacks their channel, each said as a warning.
+    pub missing_sensors: Vec<String>,
     pub(super) steps: Vec<Step>,
     pub(super) measurements: Vec<Measurement>,
     devices: Vec<String>,
@@ -175,6 +178,7 @@ impl Recording {
         let mut rec = Self {
             path: path.to_owned(),
             schemas: Vec::new(),
+            missing_sensors: Vec::new(),
             steps: Vec::new(),
             measurements: Vec::new(),
             devices: Vec::new(),
@@ -290,12 +294,16 @@ impl Recording {
                 _ => {}
             }
         }
-        if let Some(si) = schemas.iter().position(Option::is_none) {
-            let have: Vec<&str> = topics_seen.iter().map(String::as_str).collect();
+        let have: Vec<&str> = topics_seen.iter().map(String::as_str).collect();
+        for si in (0..n).filter(|&si| schemas[si].is_none()) {
+            rec.missing_sensors
+                .push(spec.missing_channel(path, si, &have)?);
+        }
+        if n > 0 && rec.missing_sensors.len() == n {
             return Err(spec.channel_error(
                 path,
-                si,
-                format!("is not in the file (it has {})", have.join(", ")),
+                0,
+                "is not in the file, nor is any other channel of the pipeline".into(),
             ));
         }
         if let Some(topic) = reference {
@@ -313,7 +321,7 @@ impl Recording {
                 });
             }
         }
-        rec.schemas = schemas.into_iter().flatten().collect();
+        rec.schemas = schemas;
         rec.measurements.shrink_to_fit();
         rec.steps.shrink_to_fit();
         Ok(rec)
@@ -344,7 +352,9 @@ impl Recording {
         }
         let mut pipeline = AnyPipeline::new(spec.without_smoother())?;
         for (si, schema) in self.schemas.iter().enumerate() {
-            pipeline.bind(si, &spec.bind(&self.path, si, schema)?);
+            if let Some(schema) = schema {
+                pipeline.bind(si, &spec.bind(&self.path, si, schema)?);
+            }
         }
         let mut scorer = Scorer::new(self);
         let mut fused = Vec::new();
