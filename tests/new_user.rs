@@ -348,3 +348,44 @@ fn a_short_live_run_refuses_with_the_sample_config_a_missing_sensor_said_not_fat
         "{line}"
     );
 }
+
+#[test]
+fn a_first_tune_without_params_tunes_the_pipelines_noise_values_and_says_which() {
+    let d = tempfile::tempdir().unwrap();
+    let tuned = d.path().join("tuned.toml");
+    let o = ok(&[
+        "tune",
+        s(&sample("short-run.mcap")),
+        "-c",
+        s(&sample("kalman.toml")),
+        "--pipeline",
+        "kalman",
+        "--max-evals",
+        "20",
+        "-o",
+        s(&tuned),
+        "--json",
+    ]);
+    let err = stderr(&o);
+    let said = err
+        .lines()
+        .find(|l| l.starts_with("no --params: tuning the pipeline's noise values"))
+        .unwrap_or_else(|| panic!("{err}"));
+    // The process noise and every sensor variance given as a number ("message" ones are
+    // each message's own).
+    for name in [
+        "motion.jerk_psd",
+        "sensor[/radar/speed].variance",
+        "sensor[/odometer/1].variance",
+        "sensor[/odometer/2].variance",
+    ] {
+        assert!(said.contains(name), "{name}: {said}");
+    }
+    assert!(!said.contains("/loop/position"), "{said}");
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(r["params"].as_array().unwrap().len(), 4, "{r}");
+    assert_ne!(
+        std::fs::read_to_string(&tuned).unwrap(),
+        std::fs::read_to_string(sample("kalman.toml")).unwrap()
+    );
+}

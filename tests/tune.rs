@@ -316,7 +316,6 @@ fn bad_tuning_requests_get_one_clear_line_each() {
             vec!["--params", "motion.jerk_psd=0.01..1", "--objective", "rmse"],
             "the rmse objective needs a reference",
         ),
-        (vec![], "nothing to tune"),
     ];
     for (extra, expected) in cases {
         let mut args = vec![

@@ -110,6 +110,13 @@ fn tune(a: &Args) -> Result<()> {
     for warning in tuner.recordings.iter().flat_map(|r| &r.missing_sensors) {
         eprintln!("warning: {warning}");
     }
+    if tuner.noise_values {
+        let names: Vec<String> = tuner.params.iter().map(|p| p.path.to_string()).collect();
+        eprintln!(
+            "no --params: tuning the pipeline's noise values over 1/100 … 100 × each: {}",
+            names.join(", ")
+        );
+    }
     let bar = crate::progress::Progress::steps("tune", tuner.budget as u64);
     let progress = |p: SearchProgress| {
         let rate = p.evaluations as f64 / p.elapsed_s.max(1e-9);

@@ -4,7 +4,7 @@ use anyhow::Result;
 use railfuse_viz::{visualize, Sink, VizOptions};
 
 #[derive(clap::Args)]
-#[command(group(clap::ArgGroup::new("sink").required(true).args(["save", "connect", "spawn"])))]
+#[command(group(clap::ArgGroup::new("sink").args(["save", "connect", "spawn"])))]
 pub struct Args {
     /// The MCAP log (raw or fused).
     pub input: PathBuf,
@@ -14,7 +14,8 @@ pub struct Args {
     /// Stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy
     #[arg(long, value_name = "URL")]
     pub connect: Option<String>,
-    /// Start a Rerun viewer and stream to it.
+    /// Start a Rerun viewer (the `rerun` on PATH) and stream to it: what viz does without
+    /// --save or --connect.
     #[arg(long)]
     pub spawn: bool,
     #[command(flatten)]

@@ -105,6 +105,8 @@ pub struct Evaluation {
 pub struct Tuner {
     config: TunableConfig,
     pub params: Vec<Param>,
+    /// No parameters were named: `params` are the pipeline's noise values.
+    pub noise_values: bool,
     pub recordings: Vec<Recording>,
     pub objective: Objective,
     pub reference: Option<String>,
@@ -211,12 +213,20 @@ impl Tuner {
                 None => bounds.push((name, b)),
             }
         }
+        let mut config = TunableConfig::new(&text, &req.config, &req.pipeline)?;
+        // Nothing named: the pipeline's noise values, as a first tune wants.
+        let noise_values = bounds.is_empty();
+        if noise_values {
+            let topics: Vec<&str> = spec.sensors.iter().map(|s| s.topic.as_str()).collect();
+            bounds = config.noise_values(&topics);
+        }
         if bounds.is_empty() {
             return Err(fail(
-                "nothing to tune: give [pipeline.tune.params] in the file or --params".into(),
+                "nothing to tune: no --params, no [pipeline.tune.params], and no noise value \
+                 given as a number (\"message\" variances are each message's own)"
+                    .into(),
             ));
         }
-        let mut config = TunableConfig::new(&text, &req.config, &req.pipeline)?;
         let mut params = Vec::new();
         for (name, b) in &bounds {
             let path: ParamPath = name.parse().map_err(fail)?;
@@ -281,6 +291,7 @@ impl Tuner {
             em,
             config,
             params,
+            noise_values,
             recordings,
             objective,
             reference,

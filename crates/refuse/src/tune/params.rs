@@ -244,6 +244,47 @@ impl TunableConfig {
         })
     }
 
+    /// The file's number at `path`, if it holds one there.
+    pub fn number_at(&mut self, path: &ParamPath) -> Option<f64> {
+        self.value_mut(path)
+            .ok()
+            .and_then(|v| number(v).ok())
+            .map(|(x, _)| x)
+    }
+
+    /// What a tune without parameters tunes: the process noise and every sensor variance the
+    /// file gives as a number (not "message"), each over two decades either side of its
+    /// value, on a log scale. `topics` are the pipeline's sensors.
+    pub fn noise_values(&mut self, topics: &[&str]) -> Vec<(String, ParamBounds)> {
+        let motion = [
+            "motion.jerk_psd",
+            "motion.jerk_variance",
+            "motion.acceleration_psd",
+            "motion.acceleration_std_mps2",
+        ]
+        .map(str::to_owned);
+        let sensors = topics.iter().flat_map(|t| {
+            ["", ".chainage", ".speed", ".acceleration"]
+                .map(|field| format!("sensor[{t}].variance{field}"))
+        });
+        let mut out = Vec::new();
+        for name in motion.into_iter().chain(sensors) {
+            let Ok(path) = name.parse::<ParamPath>() else {
+                continue;
+            };
+            if let Some(v) = self.number_at(&path).filter(|v| v.is_finite() && *v > 0.0) {
+                let bounds = ParamBounds {
+                    min: v / 100.0,
+                    max: v * 100.0,
+                    scale: Some(crate::config::Scale::Log),
+                    steps: None,
+                };
+                out.push((name, bounds));
+            }
+        }
+        out
+    }
+
     fn value_mut(&mut self, path: &ParamPath) -> Result<&mut Value> {
         let (file, pipeline) = (self.path.clone(), self.pipeline.clone());
         leaf(self.table_mut()?, &path.segments).map_err(|why| Error::Tune {
