@@ -100,3 +100,45 @@ pub fn truth_at(
         .min(truth.len() - 1);
     &truth[i]
 }
+
+/// A receiver's NMEA capture (50 RTK fixes, 50 sentences with a wrong checksum, 50 lines of
+/// garbage) and a UBX capture (the real frames of an ETH sample with torn frames between).
+pub fn captures(dir: &std::path::Path) -> (std::path::PathBuf, std::path::PathBuf) {
+    let d = dir;
+    let nmea = d.join("rx.nmea");
+    let mut text = String::new();
+    for k in 0..50 {
+        let body = format!(
+            "GNRMC,0835{:02}.00,A,4439.30664,N,01055.78382,E,10.0,90.0,201022,,,R,V",
+            k % 60
+        );
+        let gga = format!(
+            "GNGGA,0835{:02}.00,4439.30664,N,01055.78382,E,4,12,0.58,35.2,M,44.1,M,1.0,0000",
+            k % 60
+        );
+        for b in [body, gga] {
+            let cs = b.bytes().fold(0u8, |a, x| a ^ x);
+            text += &format!("${b}*{cs:02X}\r\n");
+        }
+        text += "$GNGGA,083500.00,4439.3,N,01055.7,E,1,05,1.0,3.0,M,4.0,M,,*00\r\n"; // wrong checksum
+        text += "\u{1}\u{2}garbage\r\n";
+    }
+    std::fs::write(&nmea, &text).unwrap();
+    let ubx = d.join("rx.ubx");
+    let hexes = std::fs::read_to_string(sample(
+        "eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv",
+    ))
+    .unwrap();
+    let mut bytes = Vec::new();
+    for l in hexes.lines().filter(|l| l.contains(",U,")) {
+        let h = l.rsplit(',').next().unwrap();
+        bytes.extend(
+            (0..h.len())
+                .step_by(2)
+                .map(|i| u8::from_str_radix(&h[i..i + 2], 16).unwrap()),
+        );
+        bytes.extend_from_slice(b"\xb5\x62\x01\x07\x04\x00junk"); // a torn frame with a bad checksum
+    }
+    std::fs::write(&ubx, &bytes).unwrap();
+    (nmea, ubx)
+}
