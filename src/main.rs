@@ -17,7 +17,8 @@ use clap::{Parser, Subcommand};
     about = "MCAP log recorder and offline re-fusion toolkit for train speed and position testing"
 )]
 struct Cli {
-    /// No progress output (bars on a terminal, periodic lines otherwise).
+    /// No progress output (bars on a terminal, periodic lines otherwise) and no informational
+    /// lines; results, warnings and errors are still printed.
     #[arg(long, short, global = true)]
     quiet: bool,
     /// Do not add Foxglove twins (foxglove.LocationFix of GNSS fixes and fused positions,

@@ -16,6 +16,22 @@ pub fn set_quiet(quiet: bool) {
     QUIET.store(quiet, Ordering::Relaxed);
 }
 
+/// Whether `--quiet` was given: informational lines on stderr are left out too.
+pub fn is_quiet() -> bool {
+    QUIET.load(Ordering::Relaxed)
+}
+
+/// A command's informational line on stderr (what it did, where it wrote), left out with
+/// `--quiet`; warnings and errors are always said, results always printed.
+#[macro_export]
+macro_rules! say {
+    ($($arg:tt)*) => {
+        if !$crate::progress::is_quiet() {
+            eprintln!($($arg)*);
+        }
+    };
+}
+
 const PLAIN_EVERY: Duration = Duration::from_secs(10);
 
 #[derive(Clone, Copy)]

@@ -879,6 +879,14 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
         "{e}"
     );
     assert!(
+        e["unknown_reference"]
+            .as_str()
+            .unwrap()
+            .contains("reference /nothere is not in the log"),
+        "{e}"
+    );
+    assert_eq!(v["pandas_rows"], v["state_rows"], "{v}");
+    assert!(
         e["unknown_param"]
             .as_str()
             .unwrap()

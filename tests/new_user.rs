@@ -389,3 +389,82 @@ fn a_first_tune_without_params_tunes_the_pipelines_noise_values_and_says_which()
         std::fs::read_to_string(sample("kalman.toml")).unwrap()
     );
 }
+
+#[test]
+fn the_smaller_things_quiet_counts_folders_bench_flags_and_memory_in_mib() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("q.mcap");
+    // -q: nothing on stderr but warnings and errors.
+    let o = ok(&[
+        "simulate",
+        "--scenario",
+        "seed001",
+        "--duration",
+        "5",
+        "-q",
+        "-o",
+        s(&out),
+    ]);
+    assert_eq!(stderr(&o), "");
+    let o = ok(&[
+        "record",
+        "--simulate",
+        "default",
+        "--speed",
+        "10",
+        "--duration",
+        "1",
+        "-q",
+        "-o",
+        s(&d.path().join("r.mcap")),
+    ]);
+    assert_eq!(stderr(&o), "");
+    // Counts that must be at least 1 name their flag.
+    for flag in ["--threads", "--max-evals"] {
+        let o = railfuse(&[
+            "tune",
+            s(&sample("short-run.mcap")),
+            "-c",
+            s(&sample("kalman.toml")),
+            "--pipeline",
+            "kalman",
+            flag,
+            "0",
+            "-o",
+            s(&d.path().join("t.toml")),
+        ]);
+        let err = stderr(&o);
+        assert!(!o.status.success());
+        assert!(
+            err.contains(&format!("'0' for '{flag}")) && err.contains("at least 1"),
+            "{err}"
+        );
+    }
+    // A missing output folder is named as the user wrote it.
+    let line = fails(&["simulate", "--duration", "2", "-o", "nodir/x.mcap"]);
+    assert!(
+        line.contains("nodir/x.mcap: cannot write MCAP: its folder nodir does not exist"),
+        "{line}"
+    );
+    assert!(!line.contains(".partial"), "{line}");
+    // bench: one measurement a run, and --json only where it is read.
+    let o = railfuse(&["bench", "--safety", "1", "--viz", "1"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("cannot be used with"),
+        "{}",
+        stderr(&o)
+    );
+    let o = railfuse(&["bench", "--json"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--em"),
+        "{}",
+        stderr(&o)
+    );
+    // Memory in MiB, as the README gives it.
+    let o = ok(&["bench", "--tune", "5", "--dir", s(&d.path().join("bench"))]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("peak RSS") && text.contains(" MiB") && !text.contains("KiB"),
+        "{text}"
+    );
+}

@@ -74,7 +74,11 @@ fn inputs(dir: &Path) {
     std::fs::rename(dir.join("bag-sqlite3"), dir.join("old_bag")).unwrap();
     // A recording cut off (what a crash leaves) and one with a damaged chunk.
     let bytes = std::fs::read(&short).unwrap();
-    std::fs::write(dir.join("field.mcap.partial"), &bytes[..bytes.len() * 2 / 3]).unwrap();
+    std::fs::write(
+        dir.join("field.mcap.partial"),
+        &bytes[..bytes.len() * 2 / 3],
+    )
+    .unwrap();
     let mut damaged = bytes.clone();
     let mid = damaged.len() / 2;
     damaged[mid] ^= 0xff;

@@ -58,16 +58,24 @@ def refuse(
     )
 
 
-def evaluate(input: PathLike, reference: str = "/truth") -> dict:
+def evaluate(input: PathLike, reference: str | None = None) -> dict:
     """The accuracy table of a fused log's pipelines against ``reference`` (ground truth, a
-    GNSS channel, another pipeline's state)."""
-    return json.loads(_railfuse.evaluate(os.fspath(input), reference))
+    GNSS channel, another pipeline's state). Without one, the ground truth (``/truth``) where
+    the log has it, else NIS and counts only; a reference named that the log does not have,
+    or that gives no samples, raises :class:`RailfuseError`, as ``railfuse eval`` fails."""
+    report = json.loads(_railfuse.evaluate(os.fspath(input), reference or "/truth"))
+    if reference is not None and report.get("reference") is None:
+        raise RailfuseError(
+            f"{os.fspath(input)}: reference {reference} is not in the log or gives no samples"
+        )
+    return report
 
 
 def read(path: PathLike, topic: str):
     """Every message of ``topic`` as a ``pyarrow.Table``: one row per message, a column per
     field (nested fields as structs and lists), ``log_time_ns`` first. Fused states and
-    diagnostics (``/fused/<pipeline>/state``) read like any other channel."""
+    diagnostics (``/fused/<pipeline>/state``) read like any other channel. For
+    ``Table.to_pandas()``, install the ``pandas`` extra: ``pip install 'railfuse[pandas]'``."""
     import pyarrow as pa
     import pyarrow.json as pajson
 

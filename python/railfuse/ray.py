@@ -29,7 +29,7 @@ def _refuse(input: str, config: str, output: str, reference: str) -> dict:
 
 
 @ray.remote
-def _evaluate(input: str, reference: str) -> dict:
+def _evaluate(input: str, reference: str | None) -> dict:
     return railfuse.evaluate(input, reference)
 
 
@@ -49,7 +49,7 @@ def refuse_many(
     return ray.get([_refuse.remote(i, config, o, reference) for i, o in zip(inputs, outputs)])
 
 
-def evaluate_many(inputs: Iterable[os.PathLike | str], reference: str = "/truth") -> list[dict]:
+def evaluate_many(inputs: Iterable[os.PathLike | str], reference: str | None = None) -> list[dict]:
     """The accuracy table of every fused log, one Ray task each, in input order."""
     return ray.get([_evaluate.remote(os.path.abspath(p), reference) for p in inputs])
 

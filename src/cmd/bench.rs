@@ -17,6 +17,8 @@ use super::DEFAULT_PIPELINES;
 const PEER: &str = include_str!("../../bench/peer_refuse.py");
 
 #[derive(clap::Args)]
+// One measurement a run: a second mode flag is refused, not silently dropped.
+#[command(group(clap::ArgGroup::new("mode").args(["record", "viz", "tune", "em", "safety", "gnss_ins", "eddy_current"])))]
 pub struct Args {
     /// Durations (s) of the simulated default-scenario logs to measure with samples/kalman.toml;
     /// memory should not grow with them.
@@ -63,7 +65,7 @@ pub struct Args {
     #[arg(long, default_value_t = 20)]
     pub em_iterations: usize,
     /// With --em: print JSON.
-    #[arg(long)]
+    #[arg(long, requires = "em")]
     pub json: bool,
     /// Measure source 002's ekf_safety instead: epochs per second of samples/seed002.toml's
     /// two pipelines on a seed002 run of this many seconds (the whole refuse command).
@@ -188,13 +190,13 @@ pub fn run(a: Args) -> Result<()> {
             None => ("-".into(), "-".into(), "-".into()),
         };
         println!(
-            "{:<28} {:>9} {:>6.1} {:>9.3} {:>11.2} M {:>6} KiB {:>8} {:>11} {:>7}",
+            "{:<28} {:>9} {:>6.1} {:>9.3} {:>11.2} M {:>6} MiB {:>8} {:>11} {:>7}",
             label,
             sim.messages,
             mib,
             ours.wall_s,
             rate / 1e6,
-            ours.peak_rss_kib.map_or("-".into(), |k| k.to_string()),
+            mib_of(ours.peak_rss_kib),
             peer_s,
             peer_rate,
             ratio
@@ -240,7 +242,7 @@ fn safety(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
     let epochs: u64 = m.safety_epochs.iter().sum();
     println!(
         "seed002 {:.0} s, {} messages: refuse {:.3} s (median of {}), {} epochs in {} pipelines: \
-         {:.0} epochs/s per pipeline, {:.2} M msg/s, peak RSS {} KiB",
+         {:.0} epochs/s per pipeline, {:.2} M msg/s, peak RSS {} MiB",
         sim.duration_s,
         sim.messages,
         m.wall_s,
@@ -249,7 +251,7 @@ fn safety(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
         m.safety_epochs.len(),
         epochs as f64 / m.safety_epochs.len().max(1) as f64 / m.wall_s,
         sim.messages as f64 / m.wall_s / 1e6,
-        all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
+        mib_of(all.iter().filter_map(|m| m.peak_rss_kib).max()),
     );
     Ok(())
 }
@@ -277,14 +279,14 @@ fn gnss_ins(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
     let imu_and_fixes = sim.duration_s * (200.0 + 10.0);
     println!(
         "default {:.0} s, {} messages: gnss_ins pu_rls refuse {:.3} s (median of {}): {:.0}x real \
-         time, about {:.0} epochs/s (IMU samples and fixes), peak RSS {} KiB",
+         time, about {:.0} epochs/s (IMU samples and fixes), peak RSS {} MiB",
         sim.duration_s,
         sim.messages,
         m.wall_s,
         all.len(),
         sim.duration_s / m.wall_s,
         imu_and_fixes / m.wall_s,
-        all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
+        mib_of(all.iter().filter_map(|m| m.peak_rss_kib).max()),
     );
     Ok(())
 }
@@ -311,14 +313,14 @@ fn eddy_current(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
     println!(
         "default {:.0} s, {} messages: eddy_current warped_kf refuse {:.3} s (median of {}): \
          {:.0}x real time, {:.2} M samples/s (two sensors at 10 kHz: 0.02 M/s in real time), \
-         peak RSS {} KiB",
+         peak RSS {} MiB",
         sim.duration_s,
         sim.messages,
         m.wall_s,
         all.len(),
         sim.duration_s / m.wall_s,
         samples / m.wall_s / 1e6,
-        all.iter().filter_map(|m| m.peak_rss_kib).max().unwrap_or(0),
+        mib_of(all.iter().filter_map(|m| m.peak_rss_kib).max()),
     );
     Ok(())
 }
@@ -380,4 +382,9 @@ pub fn find_python() -> Option<PathBuf> {
     }
     let venv = PathBuf::from(".venv-interop/bin/python");
     venv.exists().then_some(venv)
+}
+
+/// A resident size in KiB (as /proc gives it) written in MiB, as the README reports memory.
+pub fn mib_of(kib: Option<u64>) -> String {
+    kib.map_or("-".into(), |k| format!("{:.1}", k as f64 / 1024.0))
 }

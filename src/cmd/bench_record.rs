@@ -187,8 +187,11 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
         sent as f64 / wall
     );
     println!(
-        "recorder CPU {:.2} % of one core; resident memory {rss0} KiB at start, {rss_mid} KiB midway, {rss1} KiB at the end",
-        100.0 * (cpu1 - cpu0) / wall
+        "recorder CPU {:.2} % of one core; resident memory {} MiB at start, {} MiB midway, {} MiB at the end",
+        100.0 * (cpu1 - cpu0) / wall,
+        super::bench::mib_of(Some(rss0)),
+        super::bench::mib_of(Some(rss_mid)),
+        super::bench::mib_of(Some(rss1)),
     );
     Ok(())
 }

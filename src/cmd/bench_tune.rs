@@ -40,8 +40,8 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
         "default {duration_s:.0} s run, {} messages ({} read by samples/kalman.toml): decoded once in {decode_s:.2} s; peak RSS {} MiB (before decoding {} MiB)",
         sim.messages,
         sensor_messages,
-        peak_rss_kib().map_or("-".into(), |k| format!("{:.0}", k as f64 / 1024.0)),
-        rss_before.map_or("-".into(), |k| format!("{:.0}", k as f64 / 1024.0)),
+        super::bench::mib_of(peak_rss_kib()),
+        super::bench::mib_of(rss_before),
     );
     println!(
         "{:<10} {:>12} {:>16} {:>18}",

@@ -43,7 +43,7 @@ pub fn run(a: Args) -> Result<()> {
         &Default::default(),
         &|_| {},
     )?;
-    eprintln!(
+    crate::say!(
         "logged {} rows on {} Rerun entities -> {}",
         viz.logged,
         viz.entities.len(),

@@ -143,7 +143,7 @@ pub fn run(a: Args) -> Result<()> {
         Some(f) => f,
         None => {
             let f = detect(&a.input, a.map.is_some())?;
-            eprintln!("format: {} (told from the input)", format_name(f));
+            crate::say!("format: {} (told from the input)", format_name(f));
             f
         }
     };

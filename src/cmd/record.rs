@@ -227,6 +227,9 @@ pub fn run(a: Args) -> Result<()> {
             );
         }
         warned = s.failed_sources.len();
+        if crate::progress::is_quiet() {
+            return;
+        }
         if terminal {
             eprint!("\r\x1b[2K{}", status_line(s));
         } else {
@@ -239,7 +242,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     });
     for s in &specs {
-        eprintln!("recording {s}");
+        crate::say!("recording {s}");
     }
     let tap: Option<railfuse_record::recorder::TapHook> = match &a.viz {
         None => None,

@@ -106,7 +106,7 @@ fn default_pipeline(
         None => PathBuf::from(format!("{} (default pipeline)", input.display())),
     };
     let config = default.pipelines(&path)?;
-    eprintln!(
+    crate::say!(
         "no --config: re-fusing with a default pipeline '{}' (Kalman, constant acceleration){}",
         railfuse_refuse::default_config::NAME,
         match save {
@@ -115,10 +115,10 @@ fn default_pipeline(
         }
     );
     for t in &default.used {
-        eprintln!("  uses {}: {}", t.topic, t.why);
+        crate::say!("  uses {}: {}", t.topic, t.why);
     }
     for t in &default.left_out {
-        eprintln!("  leaves out {}: {}", t.topic, t.why);
+        crate::say!("  leaves out {}: {}", t.topic, t.why);
     }
     Ok((config, path.display().to_string()))
 }
@@ -203,7 +203,7 @@ pub fn refuse_with(
         input_messages_per_s: report.input_messages as f64 / elapsed_s,
         peak_rss_kib: peak_rss_kib(),
     };
-    eprintln!(
+    crate::say!(
         "re-fused {} messages of {} in {:.2} s ({:.0} msg/s), wrote {} fused messages -> {}",
         report.input_messages,
         input.display(),

@@ -100,7 +100,7 @@ pub(super) fn write_table(a: &Args, md: &str) -> Result<()> {
     let output = page(a);
     std::fs::write(&output, md).with_context(|| format!("{}: cannot write", output.display()))?;
     print!("{md}");
-    eprintln!("-> {}", output.display());
+    crate::say!("-> {}", output.display());
     Ok(())
 }
 

@@ -60,7 +60,7 @@ pub fn simulate_to(
         bail!("--{e}");
     }
     let wall = started.elapsed().as_secs_f64();
-    eprintln!(
+    crate::say!(
         "simulated '{}' seed {}: {:.1} s of run, {:.2} km of track, {} messages in {:.2} s ({:.0} msg/s) -> {}",
         report.scenario,
         seed,

@@ -42,13 +42,13 @@ pub struct Args {
         value_names(OptimiserKind::ALL).join(", ")))]
     pub optimiser: Option<OptimiserKind>,
     /// The most evaluations (replays of every log); default 200, a grid's point count.
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one)]
     pub max_evals: Option<usize>,
     /// Seed of the particle swarm.
     #[arg(long)]
     pub seed: Option<u64>,
     /// Worker threads (default: every core).
-    #[arg(long)]
+    #[arg(long, value_parser = at_least_one)]
     pub threads: Option<usize>,
     /// The tuned configuration: the input file with only the tuned values changed.
     #[arg(short, long)]
@@ -65,6 +65,15 @@ pub struct Args {
     pub json: bool,
 }
 
+/// A count that must be at least 1 (threads, evaluations).
+fn at_least_one(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(0) => Err("must be at least 1".into()),
+        Ok(n) => Ok(n),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
 /// A config enum from its snake_case name (`nelder-mead` as well as `nelder_mead`).
 fn parse_enum<T: serde::de::DeserializeOwned>(s: &str) -> Result<T, String> {
     serde_json::from_value(serde_json::Value::String(s.replace('-', "_")))
@@ -74,7 +83,7 @@ fn parse_enum<T: serde::de::DeserializeOwned>(s: &str) -> Result<T, String> {
 pub fn run(a: Args) -> Result<()> {
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = a.threads {
-        pool = pool.num_threads(n.max(1));
+        pool = pool.num_threads(n);
     }
     pool.build()
         .context("tune: starting the worker threads")?
@@ -112,7 +121,7 @@ fn tune(a: &Args) -> Result<()> {
     }
     if tuner.noise_values {
         let names: Vec<String> = tuner.params.iter().map(|p| p.path.to_string()).collect();
-        eprintln!(
+        crate::say!(
             "no --params: tuning the pipeline's noise values over 1/100 … 100 × each: {}",
             names.join(", ")
         );

@@ -188,7 +188,7 @@ pub fn run(a: Args) -> Result<()> {
         }
         None => String::new(),
     };
-    eprintln!(
+    crate::say!(
         "read {} messages, logged {} rows on {} entities{density} -> {target}",
         report.messages,
         report.logged,

@@ -21,6 +21,7 @@ summary["evaluate_rmse"] = railfuse.evaluate(py_fused)["pipelines"][0]["position
 states = railfuse.read(py_fused, "/fused/kalman/state")
 assert isinstance(states, pa.Table)
 summary["state_rows"] = states.num_rows
+summary["pandas_rows"] = len(states.to_pandas())
 summary["state_columns"] = states.column_names
 summary["first_chainage"] = states.column("chainage_m")[0].as_py()
 summary["covariance_type"] = str(states.schema.field("covariance").type)
@@ -34,6 +35,7 @@ for name, call in {
         [raw], config, "kalman", params={"motion.jerk_pds": (0.01, 1)}
     ),
     "unknown_scenario": lambda: railfuse.simulate(os.path.join(out_dir, "x.mcap"), "nope"),
+    "unknown_reference": lambda: railfuse.evaluate(py_fused, reference="/nothere"),
 }.items():
     try:
         call()

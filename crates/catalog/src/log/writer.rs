@@ -133,6 +133,16 @@ impl LogWriter {
     /// Writes `path`, by way of `working` (instead of `<path>.partial`) until it is finished.
     pub fn create_working(path: &Path, working: &Path, options: &WriterOptions) -> Result<Self> {
         let (path, partial) = (path.to_owned(), working.to_owned());
+        // Named as the user wrote it: the output and its folder, not the working file.
+        if let Some(dir) = path
+            .parent()
+            .filter(|d| !d.as_os_str().is_empty() && !d.is_dir())
+        {
+            return Err(Error::Write {
+                path: path.clone(),
+                cause: format!("its folder {} does not exist", dir.display()),
+            });
+        }
         let file = File::create(&partial).map_err(|e| Error::io(&partial, e))?;
         let mut start = MAGIC.to_vec();
         let header = Header {
