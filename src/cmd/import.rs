@@ -176,10 +176,17 @@ pub fn run(a: Args) -> Result<()> {
     // An import that found nothing is wrong input, not an empty log.
     if report.messages == 0 {
         let _ = std::fs::remove_file(&a.output);
-        let first = report
-            .first_problems
-            .first()
-            .map_or(String::new(), |p| format!(" (the first problem: {p})"));
+        // Why: the reasons lines were not used, else the first problem.
+        let reasons: Vec<String> = report
+            .skipped
+            .iter()
+            .map(|(why, n)| format!("{n} × {why}"))
+            .collect();
+        let first = match (reasons.is_empty(), report.first_problems.first()) {
+            (false, _) => format!(" ({})", reasons.join("; ")),
+            (true, Some(p)) => format!(" (the first problem: {p})"),
+            (true, None) => String::new(),
+        };
         anyhow::bail!(
             "{}: no {} message in it{first}: is it a {} file? Name its format with --format",
             a.input.display(),
