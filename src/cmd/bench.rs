@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
-use super::refuse::RunStats;
+use super::measure::{find_python, mib_of, RunStats};
 use railfuse_experiments::sources::SEED001_PIPELINES;
 
 use super::DEFAULT_PIPELINES;
@@ -374,17 +374,4 @@ fn peer_child(python: &Path, script: &Path, raw: &Path, config: &Path, dir: &Pat
         );
     }
     Ok(wall_s)
-}
-
-pub fn find_python() -> Option<PathBuf> {
-    if let Some(p) = std::env::var_os("RAILFUSE_PYTHON") {
-        return Some(PathBuf::from(p));
-    }
-    let venv = PathBuf::from(".venv-interop/bin/python");
-    venv.exists().then_some(venv)
-}
-
-/// A resident size in KiB (as /proc gives it) written in MiB, as the README reports memory.
-pub fn mib_of(kib: Option<u64>) -> String {
-    kib.map_or("-".into(), |k| format!("{:.1}", k as f64 / 1024.0))
 }

@@ -189,9 +189,9 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     println!(
         "recorder CPU {:.2} % of one core; resident memory {} MiB at start, {} MiB midway, {} MiB at the end",
         100.0 * (cpu1 - cpu0) / wall,
-        super::bench::mib_of(Some(rss0)),
-        super::bench::mib_of(Some(rss_mid)),
-        super::bench::mib_of(Some(rss1)),
+        super::measure::mib_of(Some(rss0)),
+        super::measure::mib_of(Some(rss_mid)),
+        super::measure::mib_of(Some(rss1)),
     );
     Ok(())
 }

@@ -9,7 +9,7 @@ use anyhow::{Context, Result};
 use railfuse_refuse::tune::{TuneRequest, Tuner};
 use rayon::prelude::*;
 
-use super::refuse::peak_rss_kib;
+use super::measure::peak_rss_kib;
 use super::DEFAULT_PIPELINES;
 
 pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
@@ -40,8 +40,8 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
         "default {duration_s:.0} s run, {} messages ({} read by samples/kalman.toml): decoded once in {decode_s:.2} s; peak RSS {} MiB (before decoding {} MiB)",
         sim.messages,
         sensor_messages,
-        super::bench::mib_of(peak_rss_kib()),
-        super::bench::mib_of(rss_before),
+        super::measure::mib_of(peak_rss_kib()),
+        super::measure::mib_of(rss_before),
     );
     println!(
         "{:<10} {:>12} {:>16} {:>18}",

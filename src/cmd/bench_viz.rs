@@ -57,7 +57,7 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
             "{:<22} {:>8.2} {:>12} {:>10} {:>14.1} {:>9}",
             label,
             wall_s,
-            super::bench::mib_of(peak),
+            super::measure::mib_of(peak),
             v["rows"],
             v["recording_bytes"].as_u64().unwrap_or(0) as f64 / 1e6,
             v["bin_s"]

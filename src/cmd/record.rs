@@ -247,7 +247,7 @@ pub fn run(a: Args) -> Result<()> {
     let tap: Option<railfuse_record::recorder::TapHook> = match &a.viz {
         None => None,
         Some(target) => {
-            let sink = super::viz::live_sink(target);
+            let sink = railfuse_viz::Sink::live(target);
             let mut live = railfuse_viz::LiveViz::open(&sink, &Default::default())?;
             let mut failed = false;
             Some(Box::new(

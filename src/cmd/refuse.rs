@@ -12,6 +12,7 @@ use railfuse_refuse::replay::{refuse, Observer, RefuseOptions, RefuseReport};
 use railfuse_refuse::spec::Pipelines;
 
 use super::eval::print_eval;
+use super::measure::{peak_rss_kib, RunStats};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -123,14 +124,6 @@ fn default_pipeline(
     Ok((config, path.display().to_string()))
 }
 
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct RunStats {
-    pub elapsed_s: f64,
-    pub input_messages_per_s: f64,
-    /// Peak resident memory of this process (VmHWM), KiB; None where /proc is missing.
-    pub peak_rss_kib: Option<u64>,
-}
-
 /// A viewer fed as the replay goes (`--viz`).
 struct LiveView {
     viz: Mutex<railfuse_viz::LiveViz>,
@@ -139,7 +132,7 @@ struct LiveView {
 
 impl LiveView {
     fn open(target: &str) -> Result<Self> {
-        let sink = super::viz::live_sink(target);
+        let sink = railfuse_viz::Sink::live(target);
         Ok(LiveView {
             viz: Mutex::new(railfuse_viz::LiveViz::open(&sink, &Default::default())?),
             failed: AtomicBool::new(false),
@@ -230,13 +223,6 @@ pub fn refuse_with(
         );
     }
     Ok((report, eval, stats))
-}
-
-/// Peak resident set size of this process, from /proc/self/status.
-pub fn peak_rss_kib() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// What each pipeline did with its measurements (the gate counts are in the accuracy table).

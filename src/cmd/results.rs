@@ -3,52 +3,13 @@
 //! the results table kept in `docs/results.md`.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
 
 use anyhow::{Context, Result};
+
+pub use super::results_page::Args;
+use super::results_page::{page, write_table};
 use railfuse_experiments::long_runs;
 use railfuse_experiments::sources::{self, Results, Verdict};
-
-#[derive(clap::Args)]
-pub struct Args {
-    /// Runs per experiment, at least 1: seeds 0 … N−1 for sources 000 and 001 and the long
-    /// runs, 1 … N for --tuning, --safety, --gnss-ins and --eddy-current (each page says
-    /// which).
-    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..))]
-    pub seeds: u64,
-    /// Where to write the table (Markdown); default docs/results.md, or docs/tuning.md with
-    /// --tuning, docs/safety.md with --safety, docs/gnss_ins.md with --gnss-ins,
-    /// docs/eddy_current.md with --eddy-current.
-    #[arg(short, long)]
-    pub output: Option<PathBuf>,
-    /// Run the tuning experiments instead: recovery of seed000's known noise values by EM and
-    /// each optimiser, the default pipeline tuned and scored on held-out runs, and EM against
-    /// pykalman's (needs the test venv's Python, or --python).
-    #[arg(long)]
-    pub tuning: bool,
-    /// Run source 002's safety experiment instead (samples/seed002.toml on the seed002 and
-    /// default scenarios, fault-free and faulted): availability, containment of the truth in
-    /// U_safe, faults flagged; written to docs/safety.md.
-    #[arg(long, conflicts_with = "tuning")]
-    pub safety: bool,
-    /// Run source 003's GNSS/INS experiment instead (samples/seed003.toml on the seed003 and
-    /// default scenarios): velocity and position errors in the plane and through the 150 s
-    /// GNSS loss, beside the source's figures; written to docs/gnss_ins.md.
-    #[arg(long, conflicts_with_all = ["tuning", "safety"])]
-    pub gnss_ins: bool,
-    /// Run source 004's eddy-current experiment instead (samples/seed004.toml on the seed004
-    /// preset and on a rougher track): speed error by speed band, acceleration, distance and
-    /// sleeper count errors against the goals; written to docs/eddy_current.md.
-    #[arg(long, conflicts_with_all = ["tuning", "safety", "gnss_ins"])]
-    pub eddy_current: bool,
-    /// Python with pykalman, for --tuning (default: $RAILFUSE_PYTHON, then
-    /// .venv-interop/bin/python).
-    #[arg(long)]
-    pub python: Option<PathBuf>,
-    /// Folder for the simulated and fused logs.
-    #[arg(long, default_value = "target/results")]
-    pub dir: PathBuf,
-}
 
 fn verdict(v: Verdict) -> String {
     match v {
@@ -57,18 +18,6 @@ fn verdict(v: Verdict) -> String {
         Verdict::FallsShort => "**falls short**".into(),
         Verdict::NotComparable { because } => format!("not comparable because {because}"),
     }
-}
-
-/// Where the page goes: `--output`, else the page kept under docs/.
-fn page(a: &Args) -> PathBuf {
-    let default = match () {
-        _ if a.safety => "docs/safety.md",
-        _ if a.gnss_ins => "docs/gnss_ins.md",
-        _ if a.eddy_current => "docs/eddy_current.md",
-        _ if a.tuning => "docs/tuning.md",
-        _ => "docs/results.md",
-    };
-    a.output.clone().unwrap_or_else(|| default.into())
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -96,13 +45,6 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 /// Writes a results table to `--output` (else `default`) and prints it.
-pub(super) fn write_table(a: &Args, md: &str) -> Result<()> {
-    let output = page(a);
-    std::fs::write(&output, md).with_context(|| format!("{}: cannot write", output.display()))?;
-    print!("{md}");
-    crate::say!("-> {}", output.display());
-    Ok(())
-}
 
 /// The results as the Markdown kept in `docs/results.md`.
 fn markdown(r: &Results) -> Result<String> {

@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use anyhow::Result;
 use railfuse_experiments::eddy_current::{self, EddyCurrentResults, BANDS, STARTING_S};
 
-use super::results::Args;
+use super::results_page::{write_table, Args};
 
 pub fn run(a: &Args) -> Result<()> {
     let seeds = a.seeds;
@@ -16,7 +16,7 @@ pub fn run(a: &Args) -> Result<()> {
     let results = eddy_current::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
     let md = markdown(&results)?;
-    super::results::write_table(a, &md)
+    write_table(a, &md)
 }
 
 fn f(x: f64, digits: usize) -> String {

@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use anyhow::Result;
 use railfuse_experiments::safety::{self, SafetyResults};
 
-use super::results::Args;
+use super::results_page::{write_table, Args};
 
 pub fn run(a: &Args) -> Result<()> {
     let seeds = a.seeds;
@@ -14,7 +14,7 @@ pub fn run(a: &Args) -> Result<()> {
     let results = safety::run_all(&a.dir, seeds, &|done| bar.set(done))?;
     bar.finish();
     let md = markdown(&results)?;
-    super::results::write_table(a, &md)
+    write_table(a, &md)
 }
 
 fn markdown(r: &SafetyResults) -> Result<String> {

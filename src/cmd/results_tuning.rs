@@ -8,7 +8,7 @@ use railfuse_experiments::tuning::{self, TuningResults, SEED000_TRUTH};
 use railfuse_refuse::tune::recording::Metrics;
 
 use super::bench_em::{self, EmComparison};
-use super::results::Args;
+use super::results_page::{write_table, Args};
 use super::DEFAULT_PIPELINES;
 
 pub fn run(a: &Args) -> Result<()> {
@@ -16,13 +16,13 @@ pub fn run(a: &Args) -> Result<()> {
     let bar = crate::progress::Progress::steps("tuning experiments", tuning::runs(seeds));
     let results = tuning::run_all(&a.dir, seeds, DEFAULT_PIPELINES, &|done| bar.set(done))?;
     bar.finish();
-    let python = a.python.clone().or_else(super::bench::find_python);
+    let python = a.python.clone().or_else(super::measure::find_python);
     let em = match &python {
         Some(py) => Some(bench_em::compare(py, &a.dir, 10_000, 20, 5)?),
         None => None,
     };
     let md = markdown(&results, em.as_ref())?;
-    super::results::write_table(a, &md)
+    write_table(a, &md)
 }
 
 fn markdown(r: &TuningResults, em: Option<&EmComparison>) -> Result<String> {

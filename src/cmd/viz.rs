@@ -71,15 +71,6 @@ impl ShowArgs {
     }
 }
 
-/// `spawn` or a viewer URL, as `--viz` takes it.
-pub fn live_sink(target: &str) -> Sink {
-    if target == "spawn" {
-        Sink::Spawn
-    } else {
-        Sink::Connect(target.to_owned())
-    }
-}
-
 /// What `--pipelines`, `--topics`, `--from` and `--to` name is in the log: said before any
 /// work, where the log's summary lists its channels and span.
 fn check_selection(input: &std::path::Path, show: &ShowArgs) -> Result<()> {
@@ -171,7 +162,7 @@ pub fn run(a: Args) -> Result<()> {
             "recording_bytes": recording_bytes,
             "run": {
                 "elapsed_s": started.elapsed().as_secs_f64(),
-                "peak_rss_kib": super::refuse::peak_rss_kib(),
+                "peak_rss_kib": super::measure::peak_rss_kib(),
             },
         });
         println!("{}", serde_json::to_string_pretty(&v)?);

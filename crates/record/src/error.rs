@@ -3,7 +3,7 @@
 use std::io;
 use std::path::PathBuf;
 
-use crate::simulator::faults::DEVICES;
+pub use crate::simulator::faults::FaultSpecError;
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -82,23 +82,6 @@ pub enum JsonLineError {
         #[source]
         source: serde_json::Error,
     },
-}
-
-/// A `--fault DEVICE:MODE:START:END[:reported]` that does not parse.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum FaultSpecError {
-    #[error("'{0}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260")]
-    Shape(String),
-    #[error("'{spec}': unknown device '{device}' (devices: {})", DEVICES.join(", "))]
-    UnknownDevice { spec: String, device: String },
-    #[error(
-        "'{spec}': unknown mode '{mode}' (dropout, stuck, bias=VALUE; the map: offset=METRES)"
-    )]
-    UnknownMode { spec: String, mode: String },
-    #[error("'{0}': START and END are seconds from the start of the run")]
-    Times(String),
-    #[error("'{0}': the window ends before it starts")]
-    EmptyWindow(String),
 }
 
 /// A stream format name that is not json, nmea or ubx.

@@ -31,6 +31,16 @@ pub enum Sink {
     Spawn,
 }
 
+impl Sink {
+    /// A live view as `--viz` names one: `spawn`, or a viewer's URL.
+    pub fn live(target: &str) -> Sink {
+        match target {
+            "spawn" => Sink::Spawn,
+            url => Sink::Connect(url.to_owned()),
+        }
+    }
+}
+
 /// What to show, and how densely.
 #[derive(Debug, Clone, Default)]
 pub struct VizOptions {

@@ -14,7 +14,6 @@
 //! train covers between START and END shifted D m to the left (a survey blunder, a map of the
 //! wrong track), which a map check must catch.
 
-use crate::error::FaultSpecError;
 use railfuse_catalog::messages::{Event, EventKind};
 use serde::{Deserialize, Serialize};
 
@@ -53,6 +52,23 @@ pub const DEVICES: &[&str] = &[
     "eddy_current",
     "map",
 ];
+
+/// A `--fault DEVICE:MODE:START:END[:reported]` that does not parse.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FaultSpecError {
+    #[error("'{0}': a fault is DEVICE:MODE:START:END[:reported], e.g. radar:dropout:200:260")]
+    Shape(String),
+    #[error("'{spec}': unknown device '{device}' (devices: {})", DEVICES.join(", "))]
+    UnknownDevice { spec: String, device: String },
+    #[error(
+        "'{spec}': unknown mode '{mode}' (dropout, stuck, bias=VALUE; the map: offset=METRES)"
+    )]
+    UnknownMode { spec: String, mode: String },
+    #[error("'{0}': START and END are seconds from the start of the run")]
+    Times(String),
+    #[error("'{0}': the window ends before it starts")]
+    EmptyWindow(String),
+}
 
 impl std::str::FromStr for FaultSpec {
     type Err = FaultSpecError;
