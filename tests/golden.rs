@@ -1,6 +1,8 @@
-//! Re-fusion output pinned: every channel of the output of `samples/` runs (the copied input
-//! channels and the fused ones) is digested per topic and compared with
-//! `tests/golden/refuse-digests.txt`, written by the code before the file-to-file fast path.
+//! Re-fusion output pinned: every channel of the output of every `samples/*.toml` on the run
+//! it was written for, on fixed seeds (the copied input channels and the fused ones), is
+//! digested per topic and compared with `tests/golden/refuse-digests.txt`, written by the code
+//! before the file-to-file fast path (seed002–004 and gnss-s1 added before the refuse crate
+//! was taken apart, issue 29).
 //! A change to the filters that is meant to change their output re-blesses it:
 //!
 //!     RAILFUSE_BLESS=1 cargo test --test golden
@@ -61,6 +63,38 @@ fn refuse_output_of_the_sample_runs_is_unchanged() {
         "-o",
         s(&seed001),
     ]);
+    // Every other sample configuration on the run it was written for (fixed seeds, 300 s).
+    let sim = |scenario: &str, name: &str| {
+        let out = d.path().join(name);
+        ok(&[
+            "simulate",
+            "--scenario",
+            scenario,
+            "--seed",
+            "1",
+            "--duration",
+            "300",
+            "-o",
+            s(&out),
+        ]);
+        out
+    };
+    let (default, seed003, seed004) = (
+        sim("default", "default.mcap"),
+        sim("seed003", "seed003.mcap"),
+        sim("seed004", "seed004.mcap"),
+    );
+    let sn2 = d.path().join("sn2.mcap");
+    ok(&[
+        "import",
+        "--format",
+        "eth",
+        s(&sample(
+            "eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv",
+        )),
+        "-o",
+        s(&sn2),
+    ]);
     let fused_once = d.path().join("short-run.kalman.mcap");
     // (label, input, config, output)
     let runs: Vec<(&str, &Path, &str, std::path::PathBuf)> = vec![
@@ -101,6 +135,25 @@ fn refuse_output_of_the_sample_runs_is_unchanged() {
             "seed001.toml",
             d.path().join("s1.mcap"),
         ),
+        (
+            "seed002",
+            &default,
+            "seed002.toml",
+            d.path().join("s2.mcap"),
+        ),
+        (
+            "seed003",
+            &seed003,
+            "seed003.toml",
+            d.path().join("s3.mcap"),
+        ),
+        (
+            "seed004",
+            &seed004,
+            "seed004.toml",
+            d.path().join("s4.mcap"),
+        ),
+        ("gnss-s1", &sn2, "gnss-s1.toml", d.path().join("g1.mcap")),
     ];
     let mut text = String::new();
     for (label, input, config, output) in &runs {
