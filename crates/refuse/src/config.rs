@@ -28,6 +28,7 @@ use crate::filter::particle::ParticleSettings;
 use crate::filter::sharing::{Redistribution, SharingName};
 use crate::filter::working_state::DetectorSettings;
 use crate::measurement::Quantity;
+pub use crate::noise::{FromMessage, Variance, VarianceValue};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -250,45 +251,6 @@ pub struct BandConfig {
     pub below_kmh: Option<f64>,
     /// β per device name.
     pub beta: BTreeMap<String, f64>,
-}
-
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(
-    untagged,
-    expecting = "a variance (a number, SI units squared), \"message\", or a table of those per field"
-)]
-pub enum Variance {
-    Fixed(f64),
-    FromMessage(FromMessage),
-    PerField(BTreeMap<Quantity, VarianceValue>),
-}
-
-/// One field's variance.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(
-    untagged,
-    expecting = "a variance (a number, SI units squared) or \"message\""
-)]
-pub enum VarianceValue {
-    Fixed(f64),
-    FromMessage(FromMessage),
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum FromMessage {
-    Message,
-}
-
-impl Variance {
-    /// The variance setting of one field, if the sensor gives one for it.
-    pub fn of(&self, q: Quantity) -> Option<VarianceValue> {
-        match self {
-            Variance::Fixed(v) => Some(VarianceValue::Fixed(*v)),
-            Variance::FromMessage(m) => Some(VarianceValue::FromMessage(*m)),
-            Variance::PerField(map) => map.get(&q).copied(),
-        }
-    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

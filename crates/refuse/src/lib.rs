@@ -25,15 +25,18 @@
 //! - [`tune`]: offline tuning of a pipeline's noise values over logs decoded once.
 
 pub mod accuracy;
+pub mod base;
 pub mod config;
 pub mod default_config;
 pub mod eddy_current;
 pub mod error;
 pub mod eval;
 pub mod filter;
+pub mod fused;
 pub mod gnss_ins;
 pub mod measurement;
 pub mod model;
+pub mod noise;
 pub mod pipeline;
 pub mod prefilter;
 pub mod reorder;

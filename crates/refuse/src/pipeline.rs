@@ -9,85 +9,25 @@
 //! filter step.
 
 use nalgebra::{SMatrix, SVector};
-use railfuse_catalog::messages::{
-    FusedDiagnostics, FusedState, GateDecision, SafetyStatus, SensorStateEstimate,
-};
-use serde::Serialize;
+use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 
-use crate::config::VarianceValue;
 use crate::eddy_current::EddyCurrentPipeline;
 use crate::error::{Error, Result};
 use crate::filter::federated::Federated;
 use crate::filter::rts::EpochRecorder;
 use crate::filter::{
-    Centralised, Estimator, Innovation, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
+    Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
     StateAndCovariance,
 };
 use crate::gnss_ins::GnssInsPipeline;
 use crate::measurement::{Measurement, ObservationRow, Quantity, SensorContext};
 use crate::model::SensorState;
+use crate::noise::VarianceValue;
 use crate::reorder::ReorderQueue;
 use crate::safety::SafetyPipeline;
 use crate::spec::{EstimatorSpec, PipelineSpec, SensorBinding, MAX_STATES};
 
-/// What a pipeline did with its measurements.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
-pub struct PipelineCounts {
-    pub accepted: u64,
-    /// Used after a gate lockout (the filter's variance widened first).
-    pub accepted_after_lockout: u64,
-    pub rejected_gate: u64,
-    pub rejected_invalid: u64,
-    pub rejected_late: u64,
-    pub rejected_device_fault: u64,
-    pub before_initialisation: u64,
-}
-
-/// The diagnostics record of one measurement of a pipeline that reads whole messages
-/// (`ekf_safety`, `gnss_ins`): its value and variance, its innovation, what was decided and
-/// why, and the axis of the plane it is on.
-pub fn measurement_record(
-    stamp_ns: u64,
-    topic: &str,
-    axis: Option<&str>,
-    (z, r): (Option<f64>, Option<f64>),
-    i: Option<Innovation>,
-    decision: GateDecision,
-    reason: Option<&str>,
-) -> FusedDiagnostics {
-    FusedDiagnostics {
-        stamp_ns,
-        source: topic.to_owned(),
-        measurement: z.filter(|z| z.is_finite()),
-        measurement_variance: r.filter(|r| r.is_finite()),
-        innovation: i.map(|i| i.residual).filter(|x| x.is_finite()),
-        innovation_variance: i.map(|i| i.variance).filter(|x| x.is_finite()),
-        nis: i.map(|i| i.nis).filter(|x| x.is_finite()),
-        decision,
-        device: None,
-        axis: axis.map(str::to_owned),
-        reason: reason.map(str::to_owned),
-        effective_sample_size: None,
-        resampled: None,
-        sharing: None,
-        eddy_current: None,
-    }
-}
-
-/// Output of one processed measurement or output tick.
-#[derive(Debug, Clone, Default)]
-pub struct Fused {
-    /// Replay time at which the filter released it: the log time of the message that pushed
-    /// the replay past the reorder window (non-decreasing, so fused channels stay in
-    /// log-time order).
-    pub log_time_ns: u64,
-    pub state: Option<FusedState>,
-    pub diagnostics: Option<FusedDiagnostics>,
-    /// Pipelines with safety checks: the epoch's checks and safe interval.
-    pub safety: Option<SafetyStatus>,
-    /// GNSS/INS pipelines: what they learnt of the IMU's errors.
-    pub imu_error_model: Option<railfuse_catalog::messages::ImuErrorModel>,
-}
+pub use crate::fused::{measurement_record, Fused, PipelineCounts};
 
 struct Field<const N: usize> {
     quantity: Quantity,
@@ -629,7 +569,6 @@ pub fn fused_state<const N: usize>(
 /// A pipeline that reads whole messages rather than scalar measurements: source 002's
 /// `ekf_safety` and source 003's `gnss_ins`, both in the plane.
 pub trait MessagePipeline {
-    fn spec(&self) -> &PipelineSpec;
     fn counts(&self) -> &PipelineCounts;
     /// Sensor `sensor` is bound to its channel with this variance setting.
     fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>);
@@ -652,9 +591,6 @@ pub trait MessagePipeline {
 macro_rules! message_pipeline {
     ($ty:ty) => {
         impl MessagePipeline for $ty {
-            fn spec(&self) -> &PipelineSpec {
-                &self.spec
-            }
             fn counts(&self) -> &PipelineCounts {
                 &self.counts
             }
@@ -686,7 +622,8 @@ message_pipeline!(EddyCurrentPipeline);
 
 /// A pipeline of any state dimension up to [`MAX_STATES`], or one that reads whole messages.
 pub enum AnyPipeline {
-    Messages(Box<dyn MessagePipeline>),
+    /// Its spec, and the pipeline (built from the spec's [`base`](PipelineSpec::base)).
+    Messages(Box<PipelineSpec>, Box<dyn MessagePipeline>),
     Two(Pipeline<2>),
     Three(Pipeline<3>),
     Four(Pipeline<4>),
@@ -707,7 +644,7 @@ macro_rules! each {
             AnyPipeline::Six($p) => $e,
             AnyPipeline::Seven($p) => $e,
             AnyPipeline::Eight($p) => $e,
-            AnyPipeline::Messages($s) => $safety,
+            AnyPipeline::Messages(_, $s) => $safety,
         }
     };
 }
@@ -722,18 +659,18 @@ impl AnyPipeline {
                 motion,
             } => {
                 let (settings, roles, motion) = (settings.clone(), *roles, *motion);
-                let safety = SafetyPipeline::new(spec, *settings, roles, motion)?;
-                return Ok(AnyPipeline::Messages(Box::new(safety)));
+                let safety = SafetyPipeline::new(spec.base(), *settings, roles, motion)?;
+                return Ok(AnyPipeline::Messages(Box::new(spec), Box::new(safety)));
             }
             EstimatorSpec::GnssIns { settings, roles } => {
                 let (settings, roles) = (settings.clone(), *roles);
-                let p = GnssInsPipeline::new(spec, *settings, roles)?;
-                return Ok(AnyPipeline::Messages(Box::new(p)));
+                let p = GnssInsPipeline::new(spec.base(), *settings, roles)?;
+                return Ok(AnyPipeline::Messages(Box::new(spec), Box::new(p)));
             }
             EstimatorSpec::EddyCurrent { settings, motion } => {
                 let (settings, motion) = ((**settings).clone(), *motion);
-                let p = EddyCurrentPipeline::new(spec, settings, motion)?;
-                return Ok(AnyPipeline::Messages(Box::new(p)));
+                let p = EddyCurrentPipeline::new(spec.base(), settings, motion)?;
+                return Ok(AnyPipeline::Messages(Box::new(spec), Box::new(p)));
             }
             _ => {}
         }
@@ -749,7 +686,10 @@ impl AnyPipeline {
     }
 
     pub fn spec(&self) -> &PipelineSpec {
-        each!(self, p => &p.spec, s => s.spec())
+        match self {
+            AnyPipeline::Messages(spec, _) => spec,
+            _ => each!(self, p => &p.spec, _s => unreachable!("matched above")),
+        }
     }
 
     pub fn name(&self) -> &str {
@@ -769,7 +709,7 @@ impl AnyPipeline {
     /// [`push`](Self::push)'s scalar measurements.
     pub fn as_message_pipeline(&mut self) -> Option<&mut dyn MessagePipeline> {
         match self {
-            AnyPipeline::Messages(s) => Some(s.as_mut()),
+            AnyPipeline::Messages(_, s) => Some(s.as_mut()),
             _ => None,
         }
     }

@@ -606,7 +606,7 @@ impl<'a> Replay<'a> {
                 let chainage = fields
                     .as_ref()
                     .is_none_or(|f| f.contains(&Quantity::Chainage));
-                if !matches!(p, AnyPipeline::Messages(_)) && chainage {
+                if !matches!(p, AnyPipeline::Messages(..)) && chainage {
                     return Err(p.spec().channel_error(
                         self.opts.input,
                         si,

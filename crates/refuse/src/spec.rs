@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use toml::Spanned;
 
+pub use crate::base::{InitialSpec, PipelineBase};
 use crate::config::{
     line_column, FederatedConfig, FilterKind, FromMessage, InitialConfig, MotionConfig,
     PipelineConfig, PipelinesFile, SensorConfig, Variance, VarianceValue,
@@ -199,19 +200,6 @@ impl EstimatorSpec {
     }
 }
 
-/// Where the filter starts (see [`InitialConfig`]), as variances.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct InitialSpec {
-    /// A start chainage, if the pipeline is told one: (chainage, variance).
-    pub chainage: Option<(f64, f64)>,
-    /// The variance of the start chainage of a pipeline that starts at distance 0.
-    pub distance_variance: f64,
-    pub speed_mps: f64,
-    pub speed_variance: f64,
-    pub acceleration_mps2: f64,
-    pub acceleration_variance: f64,
-}
-
 /// One sensor of a pipeline: a channel and what to take from it.
 #[derive(Debug, Clone)]
 pub struct SensorSpec {
@@ -281,6 +269,17 @@ fn at_least_zero(what: &str, v: f64) -> Result<f64, String> {
 }
 
 impl PipelineSpec {
+    /// What a pipeline that reads whole messages is given of its spec.
+    pub fn base(&self) -> PipelineBase {
+        PipelineBase {
+            name: self.name.clone(),
+            topics: self.sensors.iter().map(|s| s.topic.clone()).collect(),
+            gates: self.sensors.iter().map(|s| s.gate_nis).collect(),
+            reorder_window_ns: self.reorder_window_ns,
+            initial: self.initial,
+        }
+    }
+
     fn new(
         table: &Spanned<PipelineConfig>,
         place: &dyn Fn(Range<usize>) -> Place,

@@ -35,13 +35,13 @@ use railfuse_catalog::messages::{
     EddyCurrentBlock, EddyCurrentDiagnostics, FusedState, GateDecision, TrackMap,
 };
 
-use crate::config::VarianceValue;
+use crate::base::PipelineBase;
 use crate::error::Result;
 use crate::filter::{Innovation, KalmanFilter};
+use crate::fused::{measurement_record, Fused, PipelineCounts};
 use crate::measurement::SensorContext;
 use crate::model::ConstantAcceleration;
-use crate::pipeline::{measurement_record, Fused, PipelineCounts};
-use crate::spec::PipelineSpec;
+use crate::noise::VarianceValue;
 use departure::{Departure, Fit, Moved};
 use front_end::{FrontEnd, WINDOW};
 use input_check::Continuity;
@@ -75,7 +75,7 @@ const MIN_HOP_S: f64 = 0.1;
 const HANDOVER_MARGIN_S: f64 = 0.3;
 
 pub struct EddyCurrentPipeline {
-    pub spec: PipelineSpec,
+    pub base: PipelineBase,
     settings: EddyCurrentSettings,
     pub counts: PipelineCounts,
     continuity: Continuity,
@@ -116,13 +116,13 @@ pub struct EddyCurrentPipeline {
 
 impl EddyCurrentPipeline {
     pub fn new(
-        spec: PipelineSpec,
+        base: PipelineBase,
         settings: EddyCurrentSettings,
         model: ConstantAcceleration,
     ) -> Result<Self> {
         let start_m = settings.initial_chainage_m;
         Ok(EddyCurrentPipeline {
-            spec,
+            base,
             model,
             settings,
             counts: PipelineCounts::default(),

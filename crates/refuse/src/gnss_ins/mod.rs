@@ -35,15 +35,15 @@ use railfuse_catalog::messages::{
 };
 use railfuse_catalog::seconds_between;
 
-use crate::config::VarianceValue;
+use crate::base::PipelineBase;
 use crate::error::Result;
 use crate::filter::Innovation;
+use crate::fused::{measurement_record, Fused, PipelineCounts};
 use crate::measurement::SensorContext;
-use crate::pipeline::{measurement_record, Fused, PipelineCounts};
+use crate::noise::VarianceValue;
 use crate::prefilter::unscented::velocity_from_speed_and_course;
 use crate::prefilter::PreFilter;
 use crate::reorder::ReorderQueue;
-use crate::spec::PipelineSpec;
 use adaptive_noise::AdaptiveNoise;
 use error_learning::ErrorLearning;
 use error_state::{
@@ -75,7 +75,7 @@ const MAP_WINDOW_M: f64 = 200.0;
 
 /// A `gnss_ins` pipeline.
 pub struct GnssInsPipeline {
-    pub spec: PipelineSpec,
+    pub base: PipelineBase,
     settings: GnssInsSettings,
     roles: Roles,
     gnss_variance: Option<VarianceValue>,
@@ -115,7 +115,7 @@ struct Out {
 }
 
 impl GnssInsPipeline {
-    pub fn new(spec: PipelineSpec, settings: GnssInsSettings, roles: Roles) -> Result<Self> {
+    pub fn new(base: PipelineBase, settings: GnssInsSettings, roles: Roles) -> Result<Self> {
         let p = settings.prefilter;
         let prefilters = [p.position, p.position, p.velocity, p.velocity, p.imu, p.imu]
             .iter()
@@ -128,7 +128,7 @@ impl GnssInsPipeline {
             .adaptive
             .map(|a| [AdaptiveNoise::new(a), AdaptiveNoise::new(a)]);
         Ok(Self {
-            spec,
+            base,
             roles,
             gnss_variance: None,
             queue: ReorderQueue::default(),
@@ -188,7 +188,7 @@ impl GnssInsPipeline {
             (imu.stamp_ns, Input::Imu(imu))
         };
         self.queue.push(item.0, item.1);
-        let up_to = msg.log_time_ns.saturating_sub(self.spec.reorder_window_ns);
+        let up_to = msg.log_time_ns.saturating_sub(self.base.reorder_window_ns);
         self.release(up_to, msg.log_time_ns, context, out);
         Ok(())
     }
@@ -247,7 +247,7 @@ impl GnssInsPipeline {
     }
 
     fn topic(&self, sensor: usize) -> &str {
-        &self.spec.sensors[sensor].topic
+        &self.base.topics[sensor]
     }
 
     // --- IMU --------------------------------------------------------------------------
@@ -559,7 +559,7 @@ impl GnssInsPipeline {
             m.covariance = akf[kind].noise(reported);
             akf[kind].push(m.residual, projected, reported);
         }
-        let gate = self.spec.sensors[self.roles.gnss].gate_nis;
+        let gate = self.base.gates[self.roles.gnss];
         let s = projected + m.covariance;
         let nis = s
             .try_inverse()

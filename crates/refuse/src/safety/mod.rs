@@ -41,14 +41,14 @@ use railfuse_catalog::messages::{
     SafetyCheck, SafetyStatus, SensorStateEstimate, TrackMap,
 };
 
-use crate::config::VarianceValue;
+use crate::base::PipelineBase;
 use crate::error::Result;
 use crate::filter::Innovation;
+use crate::fused::{Fused, PipelineCounts};
 use crate::measurement::SensorContext;
 use crate::model::{AccelerationInput, ConstantAcceleration};
-use crate::pipeline::{Fused, PipelineCounts};
+use crate::noise::VarianceValue;
 use crate::reorder::ReorderQueue;
-use crate::spec::PipelineSpec;
 use acceleration_input::AxleAcceleration;
 use diagnosis::{Diagnosis, FixVerdict};
 use divergence::{DivergenceTests, InnovationKind};
@@ -79,7 +79,7 @@ const SPEED_VARIANCE_FLOOR: f64 = 1e-6;
 
 /// An `ekf_safety` pipeline.
 pub struct SafetyPipeline {
-    pub spec: PipelineSpec,
+    pub base: PipelineBase,
     settings: SafetySettings,
     roles: Roles,
     plain_motion: ConstantAcceleration,
@@ -104,7 +104,7 @@ pub struct SafetyPipeline {
 impl SafetyPipeline {
     /// `plain_motion` moves each axis when the acceleration input is off.
     pub fn new(
-        spec: PipelineSpec,
+        base: PipelineBase,
         settings: SafetySettings,
         roles: Roles,
         plain_motion: ConstantAcceleration,
@@ -127,8 +127,8 @@ impl SafetyPipeline {
             }
         }
         Ok(Self {
-            variances: vec![None; spec.sensors.len()],
-            spec,
+            variances: vec![None; base.topics.len()],
+            base,
             settings,
             roles,
             plain_motion,
@@ -177,7 +177,7 @@ impl SafetyPipeline {
             (m.stamp_ns, Input::Axle(k, m))
         };
         self.queue.push(item.0, item.1);
-        let up_to = msg.log_time_ns.saturating_sub(self.spec.reorder_window_ns);
+        let up_to = msg.log_time_ns.saturating_sub(self.base.reorder_window_ns);
         self.release(up_to, msg.log_time_ns, context, out);
         Ok(())
     }
@@ -224,7 +224,7 @@ impl SafetyPipeline {
     }
 
     fn topic(&self, sensor: usize) -> &str {
-        &self.spec.sensors[sensor].topic
+        &self.base.topics[sensor]
     }
 
     /// The motion model of the plane filter.
@@ -337,7 +337,7 @@ impl SafetyPipeline {
         if self.filter.is_none() {
             let speed = self.diagnosis.axles[0]
                 .speed_mps
-                .unwrap_or(self.spec.initial.speed_mps);
+                .unwrap_or(self.base.initial.speed_mps);
             let gm = |b: Option<settings::BiasSettings>| {
                 b.map(|b| plane_filter::GaussMarkov {
                     std: b.std,
@@ -351,8 +351,8 @@ impl SafetyPipeline {
                 (e, n),
                 re.max(rn),
                 (speed, m.heading_rad),
-                self.spec.initial.speed_variance,
-                self.spec.initial.acceleration_variance,
+                self.base.initial.speed_variance,
+                self.base.initial.acceleration_variance,
             ));
             self.time_ns = fix.stamp_ns;
             self.counts.accepted += 1;
@@ -668,8 +668,7 @@ impl Epoch {
         reason: Option<&str>,
     ) {
         let stamp = self.stamp_ns;
-        let d =
-            crate::pipeline::measurement_record(stamp, topic, axis, (z, r), i, decision, reason);
+        let d = crate::fused::measurement_record(stamp, topic, axis, (z, r), i, decision, reason);
         self.diagnostics.push(d);
     }
 

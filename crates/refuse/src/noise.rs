@@ -1,0 +1,48 @@
+//! A sensor's measurement noise as a configuration gives it: a variance in SI units squared,
+//! "message" (each message's own reported variance), or a table of those per quantity. Below
+//! the configuration and every pipeline, which all read it.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::measurement::Quantity;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(
+    untagged,
+    expecting = "a variance (a number, SI units squared), \"message\", or a table of those per field"
+)]
+pub enum Variance {
+    Fixed(f64),
+    FromMessage(FromMessage),
+    PerField(BTreeMap<Quantity, VarianceValue>),
+}
+
+/// One field's variance.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(
+    untagged,
+    expecting = "a variance (a number, SI units squared) or \"message\""
+)]
+pub enum VarianceValue {
+    Fixed(f64),
+    FromMessage(FromMessage),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FromMessage {
+    Message,
+}
+
+impl Variance {
+    /// The variance setting of one field, if the sensor gives one for it.
+    pub fn of(&self, q: Quantity) -> Option<VarianceValue> {
+        match self {
+            Variance::Fixed(v) => Some(VarianceValue::Fixed(*v)),
+            Variance::FromMessage(m) => Some(VarianceValue::FromMessage(*m)),
+            Variance::PerField(map) => map.get(&q).copied(),
+        }
+    }
+}
