@@ -31,14 +31,11 @@ pub mod default_config;
 pub mod eddy_current;
 pub mod error;
 pub mod eval;
-pub mod filter;
 pub mod fused;
 pub mod gnss_ins;
 pub mod measurement;
-pub mod model;
 pub mod noise;
 pub mod pipeline;
-pub mod prefilter;
 pub mod reorder;
 pub mod replay;
 pub mod safety;
@@ -46,3 +43,5 @@ pub mod spec;
 pub mod tune;
 
 pub use error::{Error, Result};
+// The estimation maths, under the paths the pipelines have always used.
+pub use railfuse_estimation::{filter, model, prefilter};

@@ -476,7 +476,16 @@ impl<const N: usize> Pipeline<N> {
         let extra = e.diagnostics();
         diagnostics.effective_sample_size = extra.effective_sample_size;
         diagnostics.resampled = extra.resampled;
-        diagnostics.sharing = extra.sharing;
+        diagnostics.sharing = extra.sharing.map(|shares| {
+            shares
+                .into_iter()
+                .map(|s| railfuse_catalog::messages::DeviceShare {
+                    device: s.device,
+                    beta: s.beta,
+                    fault: s.fault,
+                })
+                .collect()
+        });
         let decision = match outcome {
             Outcome::Accepted(_) => GateDecision::Accepted,
             Outcome::AcceptedAfterLockout(_) => GateDecision::AcceptedAfterLockout,

@@ -120,7 +120,7 @@ impl LocalTrend {
     pub fn at(&self, t_ns: u64) -> Self {
         let mut next = *self;
         if let Some(last) = self.last_ns {
-            let dt = railfuse_catalog::seconds_between(last, t_ns);
+            let dt = seconds_between(last, t_ns);
             let t = Self::shift(dt);
             next.rls.weights = t * next.rls.weights;
             next.rls.p = symmetric(t * next.rls.p * t.transpose());
@@ -132,9 +132,7 @@ impl LocalTrend {
 
     /// One sample `d` with variance `variance` at `t_ns`, forgetting factor `lambda`.
     pub fn update(&mut self, t_ns: u64, d: f64, variance: f64, lambda: f64) -> TrendStep {
-        let gap = self
-            .last_ns
-            .map(|l| railfuse_catalog::seconds_between(l, t_ns));
+        let gap = self.last_ns.map(|l| seconds_between(l, t_ns));
         if gap.is_some_and(|g| !(0.0..=MAX_GAP_S).contains(&g)) {
             *self = Self::new(self.delta);
         }
@@ -262,4 +260,9 @@ mod tests {
         let after = trend.update(100 * 100_000_000 + 60_000_000_000, 500.0, 0.01, 0.99);
         assert!((after.value - 500.0).abs() < 1e-6, "{}", after.value);
     }
+}
+
+/// Seconds from `a_ns` to `b_ns` (negative when `b` is earlier).
+fn seconds_between(a_ns: u64, b_ns: u64) -> f64 {
+    (b_ns as i128 - a_ns as i128) as f64 / 1e9
 }

@@ -15,7 +15,7 @@
 use nalgebra::SMatrix;
 
 use super::TransitionModel;
-use crate::measurement::Quantity;
+use crate::quantity::Quantity;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SensorState {

@@ -23,9 +23,19 @@ pub use kalman::KalmanFilter;
 pub use particle::ParticleFilter;
 
 use nalgebra::{RowSVector, SMatrix, SVector};
-pub use railfuse_catalog::messages::DeviceShare;
 
 use crate::model::TransitionModel;
+
+/// One device's part in a federated fusion: its information-sharing coefficient β and, while
+/// it is out of the fusion, why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DeviceShare {
+    pub device: String,
+    /// Information-sharing coefficient β (0 while failed).
+    pub beta: f64,
+    /// Why the device is out of the fusion (timeout, stuck, gate_failures, reported), if it is.
+    pub fault: Option<String>,
+}
 
 /// A Gaussian estimate: the state and its covariance, kept together.
 #[derive(Debug, Clone, PartialEq)]
