@@ -193,3 +193,65 @@ fn no_import_circle_anywhere_in_the_tree() {
         "no longer circular, take off STILL_CIRCULAR: {gone:#?}"
     );
 }
+
+/// The crates' railfuse dependencies as `cargo metadata` gives them, one line per crate.
+fn crate_graph(root: &Path) -> String {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = std::process::Command::new(cargo)
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
+        .current_dir(root)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mut lines = Vec::new();
+    for p in meta["packages"].as_array().unwrap() {
+        let mut deps: Vec<&str> = p["dependencies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|d| d["kind"].is_null())
+            .filter_map(|d| d["name"].as_str())
+            .filter(|n| n.starts_with("railfuse"))
+            .collect();
+        deps.sort();
+        let deps = match deps.is_empty() {
+            true => "(none)".to_owned(),
+            false => deps.join(", "),
+        };
+        lines.push(format!("- `{}` → {deps}", p["name"].as_str().unwrap()));
+    }
+    lines.sort();
+    lines.join("\n")
+}
+
+#[test]
+fn docs_architecture_shows_the_crate_graph_cargo_gives() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("docs/architecture.md");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let (start, end) = ("<!-- crate graph -->\n", "<!-- end crate graph -->");
+    let (head, rest) = text
+        .split_once(start)
+        .expect("the crate graph's start marker");
+    let (_, tail) = rest.split_once(end).expect("the crate graph's end marker");
+    let want = format!("{head}{start}{}\n{end}{tail}", crate_graph(root));
+    if std::env::var_os("RAILFUSE_BLESS").is_some() {
+        std::fs::write(&path, &want).unwrap();
+        return;
+    }
+    assert_eq!(
+        text, want,
+        "docs/architecture.md: regenerate with RAILFUSE_BLESS=1 cargo test --test layers"
+    );
+}
