@@ -1,5 +1,6 @@
-//! Every `railfuse` command in the README runs as written, in order, from a clean directory
-//! (with `samples/` beside it, as in a checkout). The inputs the README assumes a reader
+//! Every `railfuse` command in the README, and in the book's pages (docs/, in the order of
+//! docs/SUMMARY.md), runs as written, in order, from a clean directory (with `samples/`
+//! beside it, as in a checkout). The inputs the README assumes a reader
 //! brings (a receiver's NMEA and UBX captures, a ROS 2 bag in both storages, a recording cut
 //! off and a damaged one) are made first; a command that needs what a test cannot have (a
 //! serial device, a network peer, a viewer window, minutes of experiments) is listed as not
@@ -85,16 +86,13 @@ fn inputs(dir: &Path) {
     std::fs::write(dir.join("damaged.mcap"), damaged).unwrap();
 }
 
-#[test]
-fn every_railfuse_command_in_the_readme_runs_as_written() {
-    let readme =
-        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md")).unwrap();
-    let commands = commands(&readme);
-    assert!(commands.len() > 40, "{commands:?}");
+/// Runs `commands` in order in a clean directory with the reader's inputs: what did not run,
+/// with why, and what failed.
+fn run_in_order(commands: &[String]) -> (usize, Vec<String>, Vec<String>) {
     let d = tempfile::tempdir().unwrap();
     inputs(d.path());
     let (mut ran, mut skipped, mut failed) = (0, Vec::new(), Vec::new());
-    for cmd in &commands {
+    for cmd in commands {
         if let Some(why) = not_run(cmd) {
             skipped.push(format!("railfuse {cmd}: {why}"));
             continue;
@@ -114,10 +112,33 @@ fn every_railfuse_command_in_the_readme_runs_as_written() {
             ));
         }
     }
-    println!(
-        "ran {ran} README commands; not run:\n{}",
-        skipped.join("\n")
-    );
+    (ran, skipped, failed)
+}
+
+#[test]
+fn every_railfuse_command_in_the_readme_and_the_book_runs_as_written() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let readme = commands(&std::fs::read_to_string(root.join("README.md")).unwrap());
+    // The book's pages in the order a reader meets them.
+    let summary = std::fs::read_to_string(root.join("docs/SUMMARY.md")).unwrap();
+    let mut book = Vec::new();
+    for line in summary.lines() {
+        if let Some(page) = line.split("](").nth(1).and_then(|r| r.split(')').next()) {
+            book.extend(commands(
+                &std::fs::read_to_string(root.join("docs").join(page)).unwrap(),
+            ));
+        }
+    }
+    assert!(readme.len() >= 10 && book.len() > 40, "{readme:?} {book:?}");
+    let mut failed = Vec::new();
+    for (what, commands) in [("README", &readme), ("book", &book)] {
+        let (ran, skipped, f) = run_in_order(commands);
+        println!(
+            "{what}: ran {ran} commands; not run:\n{}",
+            skipped.join("\n")
+        );
+        failed.extend(f.into_iter().map(|f| format!("{what}: {f}")));
+    }
     assert!(
         failed.is_empty(),
         "{} failed:\n{}",
