@@ -11,6 +11,9 @@
 //! - [`prefilter`]: source 003's RLS, adaptive RLS and PU-RLS pre-filters of one channel;
 //! - [`quantity`]: what a measurement measures, and its row of the observation matrix.
 //!
+//! `cargo run -p railfuse-estimation --example train_along_track` filters and RTS-smooths a
+//! simulated train with this crate alone.
+//!
 //! Dependencies: nalgebra and rand for the maths; serde only so that settings can be read from
 //! a configuration by the crates above.
 

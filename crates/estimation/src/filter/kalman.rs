@@ -17,6 +17,24 @@ use nalgebra::{RowSVector, SMatrix, SVector};
 use super::{symmetric, Innovation, LocalFilter, StateAndCovariance};
 use crate::model::TransitionModel;
 
+/// A Kalman filter over an `N`-state, its estimate and covariance kept together.
+///
+/// ```
+/// use nalgebra::{Matrix2, RowVector2, Vector2};
+/// use railfuse_estimation::filter::KalmanFilter;
+/// use railfuse_estimation::model::ConstantVelocity;
+///
+/// // A train at chainage 0 m and 10 m/s, a second later seen by a loop at 10.2 m.
+/// let mut kf = KalmanFilter::new(Vector2::new(0.0, 10.0), Matrix2::identity());
+/// kf.predict(&ConstantVelocity { acceleration_psd: 0.1 }, 1.0);
+/// let innovation = kf.update(&RowVector2::new(1.0, 0.0), 0.25, 10.2);
+/// assert!((innovation.residual - 0.2).abs() < 1e-12);
+/// assert!(innovation.nis < 1.0);
+/// // Between the prediction (10 m) and the fix (10.2 m), and surer than either.
+/// let e = &kf.estimate;
+/// assert!(e.state[0] > 10.0 && e.state[0] < 10.2);
+/// assert!(e.covariance[(0, 0)] < 0.25);
+/// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct KalmanFilter<const N: usize> {
     pub estimate: StateAndCovariance<N>,
