@@ -162,48 +162,9 @@ fn status_line(s: &Status) -> String {
 
 pub fn run(a: Args) -> Result<()> {
     let specs = sources(&a)?;
-    // A serial device missing at the start is a wrong name far more often than a receiver
-    // about to be plugged in: said now, not after a run of nothing. One that goes away
-    // during the run is reconnected to.
-    for s in &specs {
-        if let SourceSpec::Serial { path, .. } = s {
-            if let Err(e) = std::fs::metadata(path) {
-                bail!(
-                    "serial {}: {e} (is the receiver plugged in? ls /dev/serial/by-id lists them)",
-                    path.display()
-                );
-            }
-        }
-    }
-    let mut metadata = BTreeMap::new();
-    if let Some(f) = &a.meta_file {
-        let text = std::fs::read_to_string(f).with_context(|| format!("{}", f.display()))?;
-        let table: toml::Table = toml::from_str(&text)
-            .map_err(|e| anyhow::anyhow!("{}: {}", f.display(), e.message()))?;
-        for (k, v) in table {
-            metadata.insert(k, v.as_str().map_or_else(|| v.to_string(), str::to_owned));
-        }
-    }
-    for m in &a.meta {
-        let (k, v) = m
-            .split_once('=')
-            .with_context(|| format!("--meta {m}: KEY=VALUE"))?;
-        metadata.insert(k.trim().to_owned(), v.to_owned());
-    }
-    for (what, v) in [
-        ("--split-size", a.split_size),
-        ("--split-every", a.split_every),
-    ] {
-        if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
-            bail!("{what} must be positive");
-        }
-    }
-    if !(a.chunk_interval.is_finite() && a.chunk_interval > 0.0) {
-        bail!(
-            "--chunk-interval must be positive, not {}",
-            a.chunk_interval
-        );
-    }
+    check_serial_devices(&specs)?;
+    let metadata = metadata(&a)?;
+    check_sizes(&a)?;
     // Ctrl-C or SIGTERM finishes the file (summary, indexes) instead of killing the run.
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
@@ -211,61 +172,9 @@ pub fn run(a: Args) -> Result<()> {
             .context("cannot install the Ctrl-C / SIGTERM handler")?;
     }
     let terminal = std::io::stderr().is_terminal();
-    let mut since_plain = 0u32;
-    let (mut warned, mut said) = (0, 0);
-    let status: Box<dyn FnMut(&Status)> = Box::new(move |s: &Status| {
-        for n in &s.notices[said..] {
-            eprintln!("{}warning: {n}", if terminal { "\r\x1b[2K" } else { "" });
-        }
-        said = s.notices.len();
-        // A source that fails for good is said at once, on its own line: the run goes on with
-        // the others, but the engineer should not find out at the end of a three-hour run.
-        for f in &s.failed_sources[warned..] {
-            eprintln!(
-                "{}warning: source failed: {f}",
-                if terminal { "\r\x1b[2K" } else { "" }
-            );
-        }
-        warned = s.failed_sources.len();
-        if crate::progress::is_quiet() {
-            return;
-        }
-        if terminal {
-            eprint!("\r\x1b[2K{}", status_line(s));
-        } else {
-            // Not a terminal: a plain line every 10 s.
-            since_plain += 1;
-            if since_plain >= 10 {
-                since_plain = 0;
-                eprintln!("{}", status_line(s));
-            }
-        }
-    });
     for s in &specs {
         crate::say!("recording {s}");
     }
-    let tap: Option<railfuse_record::recorder::TapHook> = match &a.viz {
-        None => None,
-        Some(target) => {
-            let sink = railfuse_viz::Sink::live(target);
-            let mut live = railfuse_viz::LiveViz::open(&sink, &Default::default())?;
-            let mut failed = false;
-            Some(Box::new(
-                move |item: &railfuse_record::recorder::message::Item| {
-                    if failed {
-                        return;
-                    }
-                    let (schema, json) =
-                        (item.message.kind().schema_name(), item.message.to_json());
-                    // A viewer that goes away must not stop the recording: say so once.
-                    if let Err(e) = live.message(&item.topic, schema, item.log_time_ns, &json) {
-                        eprintln!("\nviewer: {e}; recording continues without it");
-                        failed = true;
-                    }
-                },
-            ))
-        }
-    };
     let opts = RecordOptions {
         output: a.output.clone(),
         sources: specs,
@@ -275,8 +184,8 @@ pub fn run(a: Args) -> Result<()> {
         split_every: a.split_every.map(Duration::from_secs_f64),
         queue: a.queue,
         metadata,
-        status: Some(status),
-        tap,
+        status: Some(status_printer(terminal)),
+        tap: live_view(a.viz.as_deref())?,
     };
     let report = record(opts, stop)?;
     if terminal {
@@ -290,40 +199,7 @@ pub fn run(a: Args) -> Result<()> {
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        println!(
-            "recorded {} messages in {:.1} s -> {} (stopped: {})",
-            report.messages,
-            report.duration_s,
-            files.join(", "),
-            report.stopped_by
-        );
-        for s in &report.sources {
-            println!(
-                "  {}: {} received, {} written, {} dropped by the recorder, {} by the kernel, {} malformed, {} checksum failures, {} oversized, {} reconnects{}",
-                s.name,
-                s.received,
-                s.written,
-                s.dropped,
-                s.kernel_dropped,
-                s.malformed,
-                s.checksum_failures,
-                s.oversized,
-                s.reconnects,
-                s.last_error.as_ref().map_or(String::new(), |e| format!(" (last error: {e})"))
-            );
-            for (reason, n) in &s.skipped {
-                println!("    skipped {n:>8}  {reason}");
-            }
-            for p in &s.first_problems {
-                println!("    {p}");
-            }
-        }
-        if report.lost_to_write_error > 0 {
-            println!(
-                "  {} messages taken from the sources did not reach the disk before the write error",
-                report.lost_to_write_error
-            );
-        }
+        print_report(&report, &files);
     }
     if let Some(e) = &report.write_error {
         let file = report.failed_file.as_ref().unwrap_or(&report.output);
@@ -346,4 +222,153 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// A serial device missing at the start is a wrong name far more often than a receiver about
+/// to be plugged in: said now, not after a run of nothing. One that goes away during the run
+/// is reconnected to.
+fn check_serial_devices(specs: &[SourceSpec]) -> Result<()> {
+    for s in specs {
+        if let SourceSpec::Serial { path, .. } = s {
+            if let Err(e) = std::fs::metadata(path) {
+                bail!(
+                    "serial {}: {e} (is the receiver plugged in? ls /dev/serial/by-id lists them)",
+                    path.display()
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The run's metadata: `--meta-file`'s table, then each `--meta KEY=VALUE`.
+fn metadata(a: &Args) -> Result<BTreeMap<String, String>> {
+    let mut metadata = BTreeMap::new();
+    if let Some(f) = &a.meta_file {
+        let text = std::fs::read_to_string(f).with_context(|| format!("{}", f.display()))?;
+        let table: toml::Table = toml::from_str(&text)
+            .map_err(|e| anyhow::anyhow!("{}: {}", f.display(), e.message()))?;
+        for (k, v) in table {
+            metadata.insert(k, v.as_str().map_or_else(|| v.to_string(), str::to_owned));
+        }
+    }
+    for m in &a.meta {
+        let (k, v) = m
+            .split_once('=')
+            .with_context(|| format!("--meta {m}: KEY=VALUE"))?;
+        metadata.insert(k.trim().to_owned(), v.to_owned());
+    }
+    Ok(metadata)
+}
+
+/// Split sizes and the chunk interval are positive.
+fn check_sizes(a: &Args) -> Result<()> {
+    for (what, v) in [
+        ("--split-size", a.split_size),
+        ("--split-every", a.split_every),
+    ] {
+        if v.is_some_and(|v| !(v.is_finite() && v > 0.0)) {
+            bail!("{what} must be positive");
+        }
+    }
+    if !(a.chunk_interval.is_finite() && a.chunk_interval > 0.0) {
+        bail!(
+            "--chunk-interval must be positive, not {}",
+            a.chunk_interval
+        );
+    }
+    Ok(())
+}
+
+/// What the recorder says while it runs: every notice and failed source at once, on its own
+/// line; the status line redrawn on a terminal, else a plain line every 10 s (none with -q).
+fn status_printer(terminal: bool) -> Box<dyn FnMut(&Status)> {
+    let mut since_plain = 0u32;
+    let (mut warned, mut said) = (0, 0);
+    let clear = if terminal { "\r\x1b[2K" } else { "" };
+    Box::new(move |s: &Status| {
+        for n in &s.notices[said..] {
+            eprintln!("{clear}warning: {n}");
+        }
+        said = s.notices.len();
+        // A source that fails for good is said at once: the run goes on with the others, but
+        // the engineer should not find out at the end of a three-hour run.
+        for f in &s.failed_sources[warned..] {
+            eprintln!("{clear}warning: source failed: {f}");
+        }
+        warned = s.failed_sources.len();
+        if crate::progress::is_quiet() {
+            return;
+        }
+        if terminal {
+            eprint!("\r\x1b[2K{}", status_line(s));
+        } else {
+            since_plain += 1;
+            if since_plain >= 10 {
+                since_plain = 0;
+                eprintln!("{}", status_line(s));
+            }
+        }
+    })
+}
+
+/// The live viewer `--viz` names, fed every recorded message; one that goes away is said
+/// once and the recording goes on.
+fn live_view(target: Option<&str>) -> Result<Option<railfuse_record::recorder::TapHook>> {
+    let Some(target) = target else {
+        return Ok(None);
+    };
+    let sink = railfuse_viz::Sink::live(target);
+    let mut live = railfuse_viz::LiveViz::open(&sink, &Default::default())?;
+    let mut failed = false;
+    Ok(Some(Box::new(
+        move |item: &railfuse_record::recorder::message::Item| {
+            if failed {
+                return;
+            }
+            let (schema, json) = (item.message.kind().schema_name(), item.message.to_json());
+            if let Err(e) = live.message(&item.topic, schema, item.log_time_ns, &json) {
+                eprintln!("\nviewer: {e}; recording continues without it");
+                failed = true;
+            }
+        },
+    )))
+}
+
+/// The report in words: messages, files, and per source what came, went and why.
+fn print_report(report: &railfuse_record::recorder::RecordReport, files: &[String]) {
+    println!(
+        "recorded {} messages in {:.1} s -> {} (stopped: {})",
+        report.messages,
+        report.duration_s,
+        files.join(", "),
+        report.stopped_by
+    );
+    for s in &report.sources {
+        println!(
+            "  {}: {} received, {} written, {} dropped by the recorder, {} by the kernel, {} malformed, {} checksum failures, {} oversized, {} reconnects{}",
+            s.name,
+            s.received,
+            s.written,
+            s.dropped,
+            s.kernel_dropped,
+            s.malformed,
+            s.checksum_failures,
+            s.oversized,
+            s.reconnects,
+            s.last_error.as_ref().map_or(String::new(), |e| format!(" (last error: {e})"))
+        );
+        for (reason, n) in &s.skipped {
+            println!("    skipped {n:>8}  {reason}");
+        }
+        for p in &s.first_problems {
+            println!("    {p}");
+        }
+    }
+    if report.lost_to_write_error > 0 {
+        println!(
+            "  {} messages taken from the sources did not reach the disk before the write error",
+            report.lost_to_write_error
+        );
+    }
 }
