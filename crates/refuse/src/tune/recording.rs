@@ -6,9 +6,10 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use railfuse_catalog::foreign::ForeignChannels;
-use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::log::{ChannelInfo, LogMessage, LogReader, LogRecord};
 use railfuse_catalog::messages::{
     ChannelMessage, Event, EventKind, FusedState, GateDecision, TrackMap,
 };
@@ -158,173 +159,16 @@ impl Recording {
                     .into(),
             ));
         }
+        let mut loader = Loader::new(path, spec, reference, track);
         let mut reader = LogReader::open(path)?;
-        let n = spec.sensors.len();
-        let mut schemas: Vec<Option<String>> = vec![None; n];
-        let mut topics_seen = Vec::new();
-        // Channel id → what it is to this recording.
-        enum Role {
-            Sensor(usize, SensorModel),
-            Map,
-            Events,
-            Reference(eval::ReferenceKind),
-        }
-        let mut roles: HashMap<u16, Role> = HashMap::new();
-        let mut foreign = ForeignChannels::default();
-        let mut translated = Vec::new();
-        let mut context = SensorContext {
-            track: track.cloned(),
-        };
-        let mut rec = Self {
-            path: path.to_owned(),
-            schemas: Vec::new(),
-            missing_sensors: Vec::new(),
-            steps: Vec::new(),
-            measurements: Vec::new(),
-            devices: Vec::new(),
-            reference: Vec::new(),
-            reference_topic: reference.map(str::to_owned),
-            end_ns: 0,
-            lag_s: eval::lag_allowance_s(None) + spec.reorder_window_ns as f64 / 1e9,
-            undecodable: 0,
-        };
-        let mut reference_channel = false;
-        let mut out = Vec::new();
         while let Some(record) = reader.next() {
             match record? {
-                LogRecord::Channel(c) => {
-                    topics_seen.push(c.topic.clone());
-                    let sensor = spec.sensor_for(&c.topic);
-                    let role = sensor.and_then(|si| spec.sensors[si].role);
-                    // Only what the pipeline reads is translated.
-                    let read = sensor.is_some() || Some(c.topic.as_str()) == reference;
-                    let c = match read {
-                        false => c,
-                        true => foreign.channel(c, role).map_err(|why| match sensor {
-                            Some(si) => spec.channel_error(path, si, why),
-                            None => Error::TuneLog {
-                                input: path.to_owned(),
-                                message: format!("reference: {why}"),
-                            },
-                        })?,
-                    };
-                    let schema = c.schema_name();
-                    let role = if Some(c.topic.as_str()) == reference {
-                        reference_channel = true;
-                        let kind = reference_kind(schema).ok_or_else(|| Error::TuneLog {
-                            input: path.to_owned(),
-                            message: format!(
-                                "reference {} has schema '{schema}', not ground truth, a GNSS \
-                                 fix or a fused state",
-                                c.topic
-                            ),
-                        })?;
-                        Some(Role::Reference(kind))
-                    } else if let Some(si) = spec.sensor_for(&c.topic) {
-                        let binding = spec.bind(path, si, schema)?;
-                        schemas[si] = Some(schema.to_owned());
-                        Some(Role::Sensor(si, binding.model))
-                    } else if schema == TrackMap::SCHEMA_NAME {
-                        Some(Role::Map)
-                    } else if schema == Event::SCHEMA_NAME {
-                        Some(Role::Events)
-                    } else {
-                        None
-                    };
-                    if let Some(r) = role {
-                        roles.insert(c.id, r);
-                    }
-                }
-                LogRecord::Message(m) => {
-                    rec.end_ns = rec.end_ns.max(m.log_time_ns);
-                    let m = match foreign.message(m, &mut translated) {
-                        Ok(Some(m)) => m,
-                        Ok(None) => continue,
-                        Err(_) => {
-                            rec.undecodable += 1;
-                            continue;
-                        }
-                    };
-                    match roles.get(&m.channel.id) {
-                        Some(Role::Sensor(si, model)) => {
-                            if model.decode(&m, path, &context, &mut out).is_err() {
-                                rec.undecodable += 1;
-                                continue;
-                            }
-                            let start = rec.measurements.len() as u32;
-                            rec.measurements.extend_from_slice(&out);
-                            rec.steps.push(Step::Sensor {
-                                sensor: *si,
-                                log_time_ns: m.log_time_ns,
-                                start,
-                                end: rec.measurements.len() as u32,
-                            });
-                        }
-                        Some(Role::Map) => context.track = Some(m.decode(path)?),
-                        Some(Role::Events) => {
-                            let e: Event = m.decode(path)?;
-                            let failed = match e.kind {
-                                EventKind::DeviceFault => true,
-                                EventKind::DeviceRecovered => false,
-                                _ => continue,
-                            };
-                            let device = match rec.devices.iter().position(|d| *d == e.text) {
-                                Some(i) => i,
-                                None => {
-                                    rec.devices.push(e.text.clone());
-                                    rec.devices.len() - 1
-                                }
-                            };
-                            rec.steps.push(Step::Device { device, failed });
-                        }
-                        Some(Role::Reference(kind)) => {
-                            if let Some((t, s, v)) =
-                                reference_sample(*kind, &m, path, context.track.as_ref())?
-                            {
-                                rec.reference.push(ReferenceSample {
-                                    stamp_ns: t,
-                                    chainage_m: s,
-                                    speed_mps: v,
-                                });
-                            }
-                        }
-                        None => {}
-                    }
-                }
+                LogRecord::Channel(c) => loader.channel(c)?,
+                LogRecord::Message(m) => loader.message(m)?,
                 _ => {}
             }
         }
-        let have: Vec<&str> = topics_seen.iter().map(String::as_str).collect();
-        for si in (0..n).filter(|&si| schemas[si].is_none()) {
-            rec.missing_sensors
-                .push(spec.missing_channel(path, si, &have)?);
-        }
-        if n > 0 && rec.missing_sensors.len() == n {
-            return Err(spec.channel_error(
-                path,
-                0,
-                "is not in the file, nor is any other channel of the pipeline".into(),
-            ));
-        }
-        if let Some(topic) = reference {
-            let message = match reference_channel {
-                false => format!("has no reference channel {topic}"),
-                true if rec.reference.is_empty() => {
-                    format!("reference channel {topic} has no usable samples")
-                }
-                true => String::new(),
-            };
-            if !message.is_empty() {
-                return Err(Error::TuneLog {
-                    input: path.to_owned(),
-                    message,
-                });
-            }
-        }
-        rec.schemas = schemas;
-        rec.measurements.shrink_to_fit();
-        rec.steps.shrink_to_fit();
-        Ok(rec)
+        loader.finish()
     }
 
     /// Sensor messages held.
@@ -453,5 +297,217 @@ impl<'a> Scorer<'a> {
         self.score.unscored = self.meter.unmatched + self.meter.in_reference_gaps;
         self.score.counts = counts;
         self.score
+    }
+}
+
+/// What a channel is to a recording.
+enum Role {
+    Sensor(usize, SensorModel),
+    Map,
+    Events,
+    Reference(eval::ReferenceKind),
+}
+
+/// One log being read into a [`Recording`]: each channel's role as it is met, then its
+/// messages decoded into measurements, device events and reference samples.
+struct Loader<'a> {
+    path: &'a Path,
+    spec: &'a PipelineSpec,
+    reference: Option<&'a str>,
+    topics_seen: Vec<String>,
+    /// Channel id → what it is to this recording.
+    roles: HashMap<u16, Role>,
+    foreign: ForeignChannels,
+    translated: Vec<u8>,
+    context: SensorContext,
+    reference_channel: bool,
+    out: Vec<Measurement>,
+    rec: Recording,
+}
+
+impl<'a> Loader<'a> {
+    fn new(
+        path: &'a Path,
+        spec: &'a PipelineSpec,
+        reference: Option<&'a str>,
+        track: Option<&TrackMap>,
+    ) -> Self {
+        let rec = Recording {
+            path: path.to_owned(),
+            schemas: vec![None; spec.sensors.len()],
+            missing_sensors: Vec::new(),
+            steps: Vec::new(),
+            measurements: Vec::new(),
+            devices: Vec::new(),
+            reference: Vec::new(),
+            reference_topic: reference.map(str::to_owned),
+            end_ns: 0,
+            lag_s: eval::lag_allowance_s(None) + spec.reorder_window_ns as f64 / 1e9,
+            undecodable: 0,
+        };
+        Self {
+            path,
+            spec,
+            reference,
+            topics_seen: Vec::new(),
+            roles: HashMap::new(),
+            foreign: ForeignChannels::default(),
+            translated: Vec::new(),
+            context: SensorContext {
+                track: track.cloned(),
+            },
+            reference_channel: false,
+            out: Vec::new(),
+            rec,
+        }
+    }
+
+    /// A channel met: what it is (a sensor, the map, events, the reference), read as the
+    /// catalogue kind it translates to where another tool wrote it.
+    fn channel(&mut self, c: Arc<ChannelInfo>) -> Result<()> {
+        let (path, spec, reference) = (self.path, self.spec, self.reference);
+        self.topics_seen.push(c.topic.clone());
+        let sensor = spec.sensor_for(&c.topic);
+        let role = sensor.and_then(|si| spec.sensors[si].role);
+        // Only what the pipeline reads is translated.
+        let read = sensor.is_some() || Some(c.topic.as_str()) == reference;
+        let c = match read {
+            false => c,
+            true => self.foreign.channel(c, role).map_err(|why| match sensor {
+                Some(si) => spec.channel_error(path, si, why),
+                None => Error::TuneLog {
+                    input: path.to_owned(),
+                    message: format!("reference: {why}"),
+                },
+            })?,
+        };
+        let schema = c.schema_name();
+        let role = if Some(c.topic.as_str()) == reference {
+            self.reference_channel = true;
+            let kind = reference_kind(schema).ok_or_else(|| Error::TuneLog {
+                input: path.to_owned(),
+                message: format!(
+                    "reference {} has schema '{schema}', not ground truth, a GNSS fix or a \
+                     fused state",
+                    c.topic
+                ),
+            })?;
+            Some(Role::Reference(kind))
+        } else if let Some(si) = sensor {
+            let binding = spec.bind(path, si, schema)?;
+            self.rec.schemas[si] = Some(schema.to_owned());
+            Some(Role::Sensor(si, binding.model))
+        } else if schema == TrackMap::SCHEMA_NAME {
+            Some(Role::Map)
+        } else if schema == Event::SCHEMA_NAME {
+            Some(Role::Events)
+        } else {
+            None
+        };
+        if let Some(r) = role {
+            self.roles.insert(c.id, r);
+        }
+        Ok(())
+    }
+
+    /// A message: measurements of a sensor, the track, a device event or a reference sample.
+    fn message(&mut self, m: LogMessage<'_>) -> Result<()> {
+        let path = self.path;
+        let rec = &mut self.rec;
+        rec.end_ns = rec.end_ns.max(m.log_time_ns);
+        let m = match self.foreign.message(m, &mut self.translated) {
+            Ok(Some(m)) => m,
+            Ok(None) => return Ok(()),
+            Err(_) => {
+                rec.undecodable += 1;
+                return Ok(());
+            }
+        };
+        match self.roles.get(&m.channel.id) {
+            Some(Role::Sensor(si, model)) => {
+                if model
+                    .decode(&m, path, &self.context, &mut self.out)
+                    .is_err()
+                {
+                    rec.undecodable += 1;
+                    return Ok(());
+                }
+                let start = rec.measurements.len() as u32;
+                rec.measurements.extend_from_slice(&self.out);
+                rec.steps.push(Step::Sensor {
+                    sensor: *si,
+                    log_time_ns: m.log_time_ns,
+                    start,
+                    end: rec.measurements.len() as u32,
+                });
+            }
+            Some(Role::Map) => self.context.track = Some(m.decode(path)?),
+            Some(Role::Events) => {
+                let e: Event = m.decode(path)?;
+                let failed = match e.kind {
+                    EventKind::DeviceFault => true,
+                    EventKind::DeviceRecovered => false,
+                    _ => return Ok(()),
+                };
+                let device = match rec.devices.iter().position(|d| *d == e.text) {
+                    Some(i) => i,
+                    None => {
+                        rec.devices.push(e.text.clone());
+                        rec.devices.len() - 1
+                    }
+                };
+                rec.steps.push(Step::Device { device, failed });
+            }
+            Some(Role::Reference(kind)) => {
+                let track = self.context.track.as_ref();
+                if let Some((t, s, v)) = reference_sample(*kind, &m, path, track)? {
+                    rec.reference.push(ReferenceSample {
+                        stamp_ns: t,
+                        chainage_m: s,
+                        speed_mps: v,
+                    });
+                }
+            }
+            None => {}
+        }
+        Ok(())
+    }
+
+    /// The recording, once every sensor met its channel or was said missing, and the
+    /// reference (if one was named) gave samples.
+    fn finish(mut self) -> Result<Recording> {
+        let (path, spec) = (self.path, self.spec);
+        let n = spec.sensors.len();
+        let have: Vec<&str> = self.topics_seen.iter().map(String::as_str).collect();
+        for si in (0..n).filter(|&si| self.rec.schemas[si].is_none()) {
+            let warning = spec.missing_channel(path, si, &have)?;
+            self.rec.missing_sensors.push(warning);
+        }
+        if n > 0 && self.rec.missing_sensors.len() == n {
+            return Err(spec.channel_error(
+                path,
+                0,
+                "is not in the file, nor is any other channel of the pipeline".into(),
+            ));
+        }
+        if let Some(topic) = self.reference {
+            let message = match self.reference_channel {
+                false => format!("has no reference channel {topic}"),
+                true if self.rec.reference.is_empty() => {
+                    format!("reference channel {topic} has no usable samples")
+                }
+                true => String::new(),
+            };
+            if !message.is_empty() {
+                return Err(Error::TuneLog {
+                    input: path.to_owned(),
+                    message,
+                });
+            }
+        }
+        let mut rec = self.rec;
+        rec.measurements.shrink_to_fit();
+        rec.steps.shrink_to_fit();
+        Ok(rec)
     }
 }
