@@ -268,56 +268,59 @@ fn bad_configs_name_the_line_column_or_channel() {
             good.lines().position(|l| l.starts_with(text)).unwrap() + 1
         )
     };
-    let unknown = write(
-        "unknown.toml",
-        good.replacen("reorder_window_s = 0.0", "reorder_windw_s = 0.0", 1),
-    );
-    assert_one_clear_line(
-        &railfuse(&["refuse", s(&raw), "-c", s(&unknown), "-o", s(&out)]),
-        &[
+    // (file, edit of the sample, what its one line must say)
+    let cases: Vec<(&str, String, Vec<String>)> = vec![
+        (
             "unknown.toml",
-            &(line_of("reorder_window_s") + " 1"),
-            "unknown field `reorder_windw_s`",
-        ],
-    );
-    let wrong_type = write(
-        "type.toml",
-        good.replacen("variance = 0.01", "variance = true", 1),
-    );
-    assert_one_clear_line(
-        &railfuse(&["refuse", s(&raw), "-c", s(&wrong_type), "-o", s(&out)]),
-        &[
+            good.replacen("reorder_window_s = 0.0", "reorder_windw_s = 0.0", 1),
+            vec![
+                "unknown.toml".into(),
+                line_of("reorder_window_s") + " 1",
+                "unknown field `reorder_windw_s`".into(),
+            ],
+        ),
+        (
             "type.toml",
-            &(line_of("variance = 0.01") + " 12"),
-            "a variance",
-        ],
-    );
-    // seed000 logs have no odometer: a sensor that requires one names the channel.
-    let missing = write(
-        "missing.toml",
-        good.replacen("\"/radar/speed\"", "\"/odometer/1\"\nrequired = true", 1),
-    );
-    assert_one_clear_line(
-        &railfuse(&["refuse", s(&raw), "-c", s(&missing), "-o", s(&out)]),
-        &["/odometer/1", "is not in the file", "kf_no_balise"],
-    );
-    let wrong_schema = write("schema.toml", good.replacen("/radar/speed", "/truth", 1));
-    assert_one_clear_line(
-        &railfuse(&["refuse", s(&raw), "-c", s(&wrong_schema), "-o", s(&out)]),
-        &["/truth", "railfuse.GroundTruth"],
-    );
-    // A radar gives speed only: a position bias for it could never be observed.
-    let unobservable = write(
-        "state.toml",
-        good.replacen("\"/radar/speed\"\nvariance = 0.01\n", "\"/radar/speed\"\nvariance = 0.01\nchainage_bias = { std_m = 1.0, time_constant_s = 60.0 }\n", 1),
-    );
-    assert_one_clear_line(
-        &railfuse(&["refuse", s(&raw), "-c", s(&unobservable), "-o", s(&out)]),
-        &[
-            "/radar/speed",
-            "has a chainage_bias state but gives no chainage to observe it",
-        ],
-    );
+            good.replacen("variance = 0.01", "variance = true", 1),
+            vec![
+                "type.toml".into(),
+                line_of("variance = 0.01") + " 12",
+                "a variance".into(),
+            ],
+        ),
+        // seed000 logs have no odometer: a sensor that requires one names the channel.
+        (
+            "missing.toml",
+            good.replacen("\"/radar/speed\"", "\"/odometer/1\"\nrequired = true", 1),
+            vec!["/odometer/1".into(), "is not in the file".into(), "kf_no_balise".into()],
+        ),
+        (
+            "schema.toml",
+            good.replacen("/radar/speed", "/truth", 1),
+            vec!["/truth".into(), "railfuse.GroundTruth".into()],
+        ),
+        // A radar gives speed only: a position bias for it could never be observed.
+        (
+            "state.toml",
+            good.replacen(
+                "\"/radar/speed\"\nvariance = 0.01\n",
+                "\"/radar/speed\"\nvariance = 0.01\nchainage_bias = { std_m = 1.0, time_constant_s = 60.0 }\n",
+                1,
+            ),
+            vec![
+                "/radar/speed".into(),
+                "has a chainage_bias state but gives no chainage to observe it".into(),
+            ],
+        ),
+    ];
+    for (name, text, says) in cases {
+        let config = write(name, text);
+        let says: Vec<&str> = says.iter().map(String::as_str).collect();
+        assert_one_clear_line(
+            &railfuse(&["refuse", s(&raw), "-c", s(&config), "-o", s(&out)]),
+            &says,
+        );
+    }
     assert!(!out.exists());
 }
 
