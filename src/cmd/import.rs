@@ -138,11 +138,10 @@ pub fn run(a: Args) -> Result<()> {
     let (Some(input), Some(output)) = (a.input.clone(), a.output.clone()) else {
         anyhow::bail!("import needs an input and -o OUTPUT");
     };
-    let a = Resolved { a, input, output };
     let format = match a.format {
         Some(f) => f,
         None => {
-            let f = detect(&a.input, a.map.is_some())?;
+            let f = detect(&input, a.map.is_some())?;
             crate::say!("format: {} (told from the input)", format_name(f));
             f
         }
@@ -155,27 +154,27 @@ pub fn run(a: Args) -> Result<()> {
     }
     let report: ImportReport = match format {
         Format::Eth => {
-            let size = std::fs::metadata(&a.input).map_or(0, |m| m.len());
+            let size = std::fs::metadata(&input).map_or(0, |m| m.len());
             let bar = crate::progress::Progress::bytes("import", size);
-            let report = eth::import_with_progress(&a.input, &a.output, &|done| bar.set(done))?;
+            let report = eth::import_with_progress(&input, &output, &|done| bar.set(done))?;
             bar.finish();
             report
         }
-        Format::Nmea => gnss_file::import(&a.input, &a.output, StreamFormat::Nmea, a.date)?,
-        Format::Ubx => gnss_file::import(&a.input, &a.output, StreamFormat::Ubx, a.date)?,
-        Format::Rosbag2 => railfuse_record::import::rosbag2::import(&a.input, &a.output)?,
+        Format::Nmea => gnss_file::import(&input, &output, StreamFormat::Nmea, a.date)?,
+        Format::Ubx => gnss_file::import(&input, &output, StreamFormat::Ubx, a.date)?,
+        Format::Rosbag2 => railfuse_record::import::rosbag2::import(&input, &output)?,
         Format::Csv => {
             let Some(map) = &a.map else {
                 anyhow::bail!(
                     "--format csv needs --map MAPPING.toml (the column of each message field)"
                 )
             };
-            csv_map::import(&a.input, map, &a.output)?
+            csv_map::import(&input, map, &output)?
         }
     };
     // An import that found nothing is wrong input, not an empty log.
     if report.messages == 0 {
-        let _ = std::fs::remove_file(&a.output);
+        let _ = std::fs::remove_file(&output);
         // Why: the reasons lines were not used, else the first problem.
         let reasons: Vec<String> = report
             .skipped
@@ -189,7 +188,7 @@ pub fn run(a: Args) -> Result<()> {
         };
         anyhow::bail!(
             "{}: no {} message in it{first}: is it a {} file? Name its format with --format",
-            a.input.display(),
+            input.display(),
             format_name(format),
             format_name(format)
         );
@@ -226,18 +225,4 @@ fn format_name(f: Format) -> String {
     use clap::ValueEnum;
     f.to_possible_value()
         .map_or_else(|| format!("{f:?}"), |v| v.get_name().to_owned())
-}
-
-/// The arguments of an import, its input and output given.
-struct Resolved {
-    a: Args,
-    input: PathBuf,
-    output: PathBuf,
-}
-
-impl std::ops::Deref for Resolved {
-    type Target = Args;
-    fn deref(&self) -> &Args {
-        &self.a
-    }
 }
