@@ -143,10 +143,13 @@ const LOCATION_TWIN_EVERY_NS: u64 = 100_000_000;
 /// Replays `opts.input` through the pipelines into `opts.output` and evaluates the result
 /// against `opts.reference` in the same pass.
 pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
+    let partial = railfuse_catalog::log::partial_path(opts.output);
+    let ours = !partial.exists();
     let result = refuse_into(opts);
-    // A failed run leaves no half output: the input is untouched and the run can be redone.
-    if result.is_err() {
-        let _ = std::fs::remove_file(railfuse_catalog::log::partial_path(opts.output));
+    // A failed run leaves no half output of its own (the input is untouched and the run can
+    // be redone); a .partial that was there before is someone else's and stays.
+    if result.is_err() && ours {
+        let _ = std::fs::remove_file(&partial);
     }
     result
 }

@@ -157,6 +157,15 @@ pub fn visualize(
     let mut partial = rrd.clone().into_os_string();
     partial.push(".partial");
     let partial = PathBuf::from(partial);
+    if partial.exists() {
+        return Err(Error::Output {
+            path: partial,
+            source: std::io::Error::new(
+                std::io::ErrorKind::AlreadyExists,
+                "an unfinished earlier recording is in the way: move or remove it",
+            ),
+        });
+    }
     let result = visualize_into(path, &Sink::Save(partial.clone()), options, progress);
     match &result {
         Ok(_) => std::fs::rename(&partial, rrd).map_err(|source| Error::Output {
