@@ -14,7 +14,7 @@ use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_refuse::config::{ObjectiveKind, OptimiserKind};
 use railfuse_refuse::replay::{refuse as refuse_log, RefuseOptions};
 use railfuse_refuse::spec::Pipelines;
-use railfuse_refuse::tune::{TuneRequest, Tuner as RustTuner};
+use railfuse_tune::{TuneRequest, Tuner as RustTuner};
 
 create_exception!(_railfuse, RailfuseError, PyException);
 

@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use railfuse_refuse::tune::{TuneRequest, Tuner};
+use railfuse_tune::{TuneRequest, Tuner};
 use rayon::prelude::*;
 
 use super::measure::peak_rss_kib;
@@ -64,7 +64,7 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
             (0..n)
                 .into_par_iter()
                 .map(|_| tuner.evaluate(&start).map(|e| e.objective))
-                .collect::<railfuse_refuse::Result<Vec<f64>>>()
+                .collect::<railfuse_tune::Result<Vec<f64>>>()
         })?;
         let rate = n as f64 / started.elapsed().as_secs_f64();
         println!(

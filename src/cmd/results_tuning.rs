@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 
 use anyhow::Result;
 use railfuse_experiments::tuning::{self, TuningResults, SEED000_TRUTH};
-use railfuse_refuse::tune::recording::Metrics;
+use railfuse_tune::recording::Metrics;
 
 use super::bench_em::{self, EmComparison};
 use super::results_page::{write_table, Args};

@@ -6,9 +6,9 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use railfuse_refuse::config::{value_names, ObjectiveKind, OptimiserKind};
-use railfuse_refuse::tune::recording::Metrics;
-use railfuse_refuse::tune::search::SearchProgress;
-use railfuse_refuse::tune::{write_trace_csv, write_trace_mcap, TuneOutcome, TuneRequest, Tuner};
+use railfuse_tune::recording::Metrics;
+use railfuse_tune::search::SearchProgress;
+use railfuse_tune::{write_trace_csv, write_trace_mcap, TuneOutcome, TuneRequest, Tuner};
 
 use crate::table::Table;
 

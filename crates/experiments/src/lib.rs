@@ -47,6 +47,8 @@ pub enum Error {
     Simulate(#[from] railfuse_catalog::Error),
     #[error(transparent)]
     Refuse(#[from] railfuse_refuse::Error),
+    #[error(transparent)]
+    Tune(#[from] railfuse_tune::Error),
     #[error("a pipeline variant does not read back: {0}")]
     Toml(toml::de::Error),
     #[error("{}: {source}", path.display())]

@@ -12,8 +12,8 @@ use std::time::Instant;
 
 use railfuse_record::{simulate, Scenario};
 use railfuse_refuse::config::{ObjectiveKind, OptimiserKind};
-use railfuse_refuse::tune::recording::Metrics;
-use railfuse_refuse::tune::{ParamReport, TuneRequest, Tuner};
+use railfuse_tune::recording::Metrics;
+use railfuse_tune::{ParamReport, TuneRequest, Tuner};
 use serde::Serialize;
 
 use crate::{Error, Result};
@@ -37,7 +37,7 @@ pub fn methods() -> Vec<(OptimiserKind, &'static str, usize)> {
         (OptimiserKind::NelderMead, "Nelder–Mead", 200),
         (OptimiserKind::Pso, "particle swarm", 200),
     ];
-    if railfuse_refuse::tune::BAYESIAN {
+    if railfuse_tune::BAYESIAN {
         m.push((OptimiserKind::Bayesian, "Bayesian (EGO)", 60));
     }
     m

@@ -49,24 +49,4 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    /// A tuning request that cannot run: an unknown parameter, bounds that do not hold the
-    /// start, a search that cannot be made.
-    #[error("{path}: pipeline '{pipeline}': tune: {message}")]
-    Tune {
-        path: PathBuf,
-        pipeline: String,
-        message: String,
-    },
-    /// A log that cannot be tuned on: no reference channel, no samples of it.
-    #[error("{input}: {message}")]
-    TuneLog { input: PathBuf, message: String },
-    /// Ctrl-C during a search: the best result so far is kept.
-    #[error("interrupted")]
-    Interrupted,
-    /// A search used its evaluations up: the best result so far is kept.
-    #[error("the evaluation budget is used up")]
-    TuneBudget,
-    /// The optimiser itself failed.
-    #[error("tune: the optimiser failed: {0}")]
-    TuneSearch(String),
 }

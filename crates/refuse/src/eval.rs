@@ -90,7 +90,7 @@ pub struct SpanReport {
 }
 
 #[derive(Clone, Copy, PartialEq)]
-pub(crate) enum ReferenceKind {
+pub enum ReferenceKind {
     Truth,
     Fused,
     Gnss,
@@ -144,7 +144,7 @@ impl Scored {
 }
 
 /// A reference sample from a reference message, if it gives one.
-pub(crate) fn reference_sample(
+pub fn reference_sample(
     kind: ReferenceKind,
     m: &railfuse_catalog::log::LogMessage<'_>,
     path: &Path,
@@ -656,7 +656,7 @@ impl ReferenceWalk {
 }
 
 /// The reference kind a schema gives.
-pub(crate) fn reference_kind(schema: &str) -> Option<ReferenceKind> {
+pub fn reference_kind(schema: &str) -> Option<ReferenceKind> {
     match schema {
         s if s == GroundTruth::SCHEMA_NAME => Some(ReferenceKind::Truth),
         s if s == FusedState::SCHEMA_NAME => Some(ReferenceKind::Fused),

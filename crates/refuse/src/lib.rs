@@ -21,8 +21,9 @@
 //! - [`safety`]: source 002's EKF in the plane with its safety checks and safe interval;
 //! - [`accuracy`]: error and consistency statistics against a reference;
 //! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
-//! - [`replay`]: the `refuse` run, streaming input to output;
-//! - [`tune`]: offline tuning of a pipeline's noise values over logs decoded once.
+//! - [`replay`]: the `refuse` run, streaming input to output.
+//!
+//! Tuning (`railfuse tune`) is the `railfuse-tune` crate, above this one.
 
 pub mod accuracy;
 pub mod base;
@@ -40,7 +41,6 @@ pub mod reorder;
 pub mod replay;
 pub mod safety;
 pub mod spec;
-pub mod tune;
 
 pub use error::{Error, Result};
 // The estimation maths, under the paths the pipelines have always used.

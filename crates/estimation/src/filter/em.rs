@@ -15,7 +15,7 @@
 //! and of each measurement `E[(z − Hx)(z − Hx)ᵀ] = (z − H x_t|T)(…)ᵀ + H P_t|T Hᵀ`. A full
 //! `Q` or `R` is their mean ([`LinearGaussian`], pykalman's estimate); a pipeline's
 //! structured noise `Q_t = q Q₁(dt_t)` and per-sensor variances take the maximum-likelihood
-//! scalars ([`crate::tune::em`]).
+//! scalars (the `railfuse-tune` crate's `em` module).
 
 use nalgebra::{SMatrix, SVector};
 

@@ -22,8 +22,8 @@ use rand_xoshiro::rand_core::SeedableRng;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::config::OptimiserKind;
 use crate::error::{Error, Result};
+use railfuse_refuse::config::OptimiserKind;
 
 /// One evaluation of the trace.
 #[derive(Debug, Clone, Serialize)]
@@ -115,7 +115,7 @@ impl<'a> Evaluations<'a> {
         }
         let first = self.asked.fetch_add(points.len(), Ordering::SeqCst);
         if first >= self.budget {
-            return Err(Error::TuneBudget);
+            return Err(Error::Budget);
         }
         // Points past the budget are not evaluated.
         let take = points.len().min(self.budget - first);
@@ -168,7 +168,7 @@ impl<'a> Evaluations<'a> {
             }
         }
         if take < points.len() {
-            return Err(Error::TuneBudget);
+            return Err(Error::Budget);
         }
         Ok(values)
     }
@@ -219,7 +219,7 @@ pub fn search(s: &SearchSettings, book: &Evaluations<'_>) -> Result<Ending> {
     };
     match ended {
         Ok(()) => Ok(Ending::Converged),
-        Err(Error::TuneBudget) => Ok(Ending::Budget),
+        Err(Error::Budget) => Ok(Ending::Budget),
         Err(Error::Interrupted) => Ok(Ending::Interrupted),
         Err(e) => Err(e),
     }
@@ -281,7 +281,7 @@ fn wrap(e: Error) -> argmin::core::Error {
 fn unwrap(e: argmin::core::Error) -> Error {
     match e.downcast::<Error>() {
         Ok(e) => e,
-        Err(other) => Error::TuneSearch(other.to_string()),
+        Err(other) => Error::Search(other.to_string()),
     }
 }
 
@@ -366,6 +366,6 @@ fn bayesian(s: &SearchSettings, book: &Evaluations<'_>) -> Result<()> {
     if let Some(e) = failure.into_inner().expect("failure lock") {
         return Err(e);
     }
-    let _: Array1<f64> = result.map_err(|e| Error::TuneSearch(e.to_string()))?.x_opt;
+    let _: Array1<f64> = result.map_err(|e| Error::Search(e.to_string()))?.x_opt;
     Ok(())
 }

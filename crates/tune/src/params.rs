@@ -14,9 +14,9 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 use toml_edit::{DocumentMut, Item, TableLike, Value};
 
-use crate::config::{ParamBounds, Scale};
 use crate::error::{Error, Result};
-use crate::spec::{PipelineSpec, Pipelines};
+use railfuse_refuse::config::{ParamBounds, Scale};
+use railfuse_refuse::spec::{PipelineSpec, Pipelines};
 
 #[derive(Debug, Clone, PartialEq, Eq)]
 enum Segment {
@@ -162,12 +162,12 @@ pub struct TunableConfig {
 impl TunableConfig {
     /// Opens configuration text (already validated by [`Pipelines::parse`]) at `pipeline`.
     pub fn new(text: &str, path: &Path, pipeline: &str) -> Result<Self> {
-        let doc: DocumentMut =
-            text.parse()
-                .map_err(|e: toml_edit::TomlError| Error::ConfigSyntax {
-                    path: path.to_owned(),
-                    message: e.message().to_owned(),
-                })?;
+        let doc: DocumentMut = text.parse().map_err(|e: toml_edit::TomlError| {
+            railfuse_refuse::Error::ConfigSyntax {
+                path: path.to_owned(),
+                message: e.message().to_owned(),
+            }
+        })?;
         let mut c = Self {
             path: path.to_owned(),
             doc,
@@ -178,7 +178,7 @@ impl TunableConfig {
     }
 
     fn fail(&self, message: String) -> Error {
-        Error::Tune {
+        Error::Request {
             path: self.path.clone(),
             pipeline: self.pipeline.clone(),
             message,
@@ -196,7 +196,7 @@ impl TunableConfig {
                 a.iter_mut()
                     .find(|t| t.get("name").and_then(Item::as_str) == Some(name.as_str()))
             });
-        found.ok_or_else(|| Error::Tune {
+        found.ok_or_else(|| Error::Request {
             path,
             pipeline: name,
             message: "no [[pipeline]] of that name".into(),
@@ -276,7 +276,7 @@ impl TunableConfig {
                 let bounds = ParamBounds {
                     min: v / 100.0,
                     max: v * 100.0,
-                    scale: Some(crate::config::Scale::Log),
+                    scale: Some(railfuse_refuse::config::Scale::Log),
                     steps: None,
                 };
                 out.push((name, bounds));
@@ -287,7 +287,7 @@ impl TunableConfig {
 
     fn value_mut(&mut self, path: &ParamPath) -> Result<&mut Value> {
         let (file, pipeline) = (self.path.clone(), self.pipeline.clone());
-        leaf(self.table_mut()?, &path.segments).map_err(|why| Error::Tune {
+        leaf(self.table_mut()?, &path.segments).map_err(|why| Error::Request {
             path: file,
             pipeline,
             message: format!("{path}: {why}"),

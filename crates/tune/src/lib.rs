@@ -14,6 +14,7 @@
 //! changed ([`params::TunableConfig`]).
 
 mod em;
+pub mod error;
 pub mod params;
 pub mod recording;
 pub mod search;
@@ -26,9 +27,10 @@ use std::time::Instant;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::config::{ObjectiveKind, OptimiserKind, ParamBounds, PipelinesFile, Scale};
-use crate::error::{Error, Result};
-use crate::spec::{PipelineSpec, Pipelines};
+pub use crate::error::{Error, Result};
+use railfuse_refuse::config::{ObjectiveKind, OptimiserKind, ParamBounds, PipelinesFile, Scale};
+use railfuse_refuse::spec::{PipelineSpec, Pipelines};
+use railfuse_refuse::Error as RefuseError;
 
 use params::{Param, ParamPath, TunableConfig};
 use recording::{Metrics, Recording, Score};
@@ -193,13 +195,13 @@ impl Tuner {
             .cloned()
             .ok_or_else(|| {
                 let names: Vec<&str> = pipelines.names().collect();
-                Error::Tune {
+                Error::Request {
                     path: req.config.clone(),
                     pipeline: req.pipeline.clone(),
                     message: format!("no [[pipeline]] of that name (it has {})", names.join(", ")),
                 }
             })?;
-        let fail = |message: String| Error::Tune {
+        let fail = |message: String| Error::Request {
             path: req.config.clone(),
             pipeline: req.pipeline.clone(),
             message,
@@ -334,7 +336,11 @@ impl Tuner {
     fn objective_at(&self, values: &[f64]) -> Result<f64> {
         match self.evaluate(values) {
             Ok(e) => Ok(e.objective),
-            Err(e @ (Error::ConfigInvalid { .. } | Error::ConfigSyntax { .. })) => {
+            Err(
+                e @ Error::Refuse(
+                    RefuseError::ConfigInvalid { .. } | RefuseError::ConfigSyntax { .. },
+                ),
+            ) => {
                 self.invalid.fetch_add(1, Ordering::Relaxed);
                 self.first_invalid
                     .lock()

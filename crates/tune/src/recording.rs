@@ -16,12 +16,12 @@ use railfuse_catalog::messages::{
 use railfuse_catalog::reference_track::ReferenceSample;
 use serde::Serialize;
 
-use crate::accuracy::{AccuracyMeter, Consistency, ErrorStats, CHI2_95_1DOF};
 use crate::error::{Error, Result};
-use crate::eval::{self, reference_kind, reference_sample};
-use crate::measurement::{Measurement, SensorContext, SensorModel};
-use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
-use crate::spec::PipelineSpec;
+use railfuse_refuse::accuracy::{AccuracyMeter, Consistency, ErrorStats, CHI2_95_1DOF};
+use railfuse_refuse::eval::{self, reference_kind, reference_sample};
+use railfuse_refuse::measurement::{Measurement, SensorContext, SensorModel};
+use railfuse_refuse::pipeline::{AnyPipeline, Fused, PipelineCounts};
+use railfuse_refuse::spec::PipelineSpec;
 
 /// One thing that happened in the log, in file order.
 #[derive(Debug, Clone)]
@@ -151,13 +151,15 @@ impl Recording {
         track: Option<&TrackMap>,
     ) -> Result<Self> {
         if let Some(si) = reference.and_then(|r| spec.sensor_for(r)) {
-            return Err(spec.channel_error(
-                path,
-                si,
-                "is also the reference: a sensor cannot score the filter it feeds (name \
-                 another with --reference)"
-                    .into(),
-            ));
+            return Err(spec
+                .channel_error(
+                    path,
+                    si,
+                    "is also the reference: a sensor cannot score the filter it feeds (name \
+                     another with --reference)"
+                        .into(),
+                )
+                .into());
         }
         let mut loader = Loader::new(path, spec, reference, track);
         let mut reader = LogReader::open(path)?;
@@ -184,7 +186,7 @@ impl Recording {
     pub fn replay(&self, spec: &PipelineSpec) -> Result<Score> {
         let kind = spec.estimator.kind();
         if kind.reads_whole_messages() {
-            return Err(Error::TuneLog {
+            return Err(Error::Recording {
                 input: self.path.clone(),
                 message: format!(
                     "pipeline '{}' is an {} pipeline, which reads whole messages: tune \
@@ -374,8 +376,8 @@ impl<'a> Loader<'a> {
         let c = match read {
             false => c,
             true => self.foreign.channel(c, role).map_err(|why| match sensor {
-                Some(si) => spec.channel_error(path, si, why),
-                None => Error::TuneLog {
+                Some(si) => spec.channel_error(path, si, why).into(),
+                None => Error::Recording {
                     input: path.to_owned(),
                     message: format!("reference: {why}"),
                 },
@@ -384,7 +386,7 @@ impl<'a> Loader<'a> {
         let schema = c.schema_name();
         let role = if Some(c.topic.as_str()) == reference {
             self.reference_channel = true;
-            let kind = reference_kind(schema).ok_or_else(|| Error::TuneLog {
+            let kind = reference_kind(schema).ok_or_else(|| Error::Recording {
                 input: path.to_owned(),
                 message: format!(
                     "reference {} has schema '{schema}', not ground truth, a GNSS fix or a \
@@ -484,11 +486,13 @@ impl<'a> Loader<'a> {
             self.rec.missing_sensors.push(warning);
         }
         if n > 0 && self.rec.missing_sensors.len() == n {
-            return Err(spec.channel_error(
-                path,
-                0,
-                "is not in the file, nor is any other channel of the pipeline".into(),
-            ));
+            return Err(spec
+                .channel_error(
+                    path,
+                    0,
+                    "is not in the file, nor is any other channel of the pipeline".into(),
+                )
+                .into());
         }
         if let Some(topic) = self.reference {
             let message = match self.reference_channel {
@@ -499,7 +503,7 @@ impl<'a> Loader<'a> {
                 true => String::new(),
             };
             if !message.is_empty() {
-                return Err(Error::TuneLog {
+                return Err(Error::Recording {
                     input: path.to_owned(),
                     message,
                 });

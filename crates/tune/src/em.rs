@@ -7,7 +7,7 @@
 //! What it leaves out, because EM needs a linear-Gaussian model: gates (every measurement
 //! counts) and sensor states (a pipeline with them is refused).
 //!
-//! M-step, with `S_t` the expected process noise of step t (see [`crate::filter::em`]):
+//! M-step, with `S_t` the expected process noise of step t (see [`railfuse_refuse::filter::em`]):
 //! ```text
 //! q = Σ_t tr(Q₁(dt_t)⁺ S_t) / Σ_t rank Q₁(dt_t)
 //! r_s = mean over sensor s's measurements of (z − h x_t|T)² + h P_t|T hᵀ
@@ -18,14 +18,14 @@ use nalgebra::{RowSVector, SMatrix, SVector};
 
 use super::params::Param;
 use super::recording::{Recording, Step};
-use crate::config::VarianceValue;
 use crate::error::{Error, Result};
-use crate::filter::em::{smooth, EmModel, Smoothed};
-use crate::measurement::Quantity;
-use crate::model::{
+use railfuse_refuse::config::VarianceValue;
+use railfuse_refuse::filter::em::{smooth, EmModel, Smoothed};
+use railfuse_refuse::measurement::Quantity;
+use railfuse_refuse::model::{
     ConstantAcceleration, ConstantVelocity, MotionModel, ProcessNoise, TransitionModel,
 };
-use crate::spec::{EstimatorSpec, PipelineSpec};
+use railfuse_refuse::spec::{EstimatorSpec, PipelineSpec};
 
 /// What an EM parameter is in the model.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -158,7 +158,7 @@ impl PipelineEm {
             values = next;
             match each(&values) {
                 // The budget or Ctrl-C: this iterate is the answer.
-                Err(Error::TuneBudget | Error::Interrupted) => break,
+                Err(Error::Budget | Error::Interrupted) => break,
                 other => other?,
             }
             if !moved {
@@ -297,7 +297,9 @@ impl<const N: usize> EmModel<N> for Model<'_, N> {
             let k: SVector<f64, N> = *p * h.transpose() / s;
             *x += k * nu;
             let i_kh = SMatrix::<f64, N, N>::identity() - k * h;
-            *p = crate::filter::symmetric(i_kh * *p * i_kh.transpose() + k * r * k.transpose());
+            *p = railfuse_refuse::filter::symmetric(
+                i_kh * *p * i_kh.transpose() + k * r * k.transpose(),
+            );
             ll -= 0.5 * ((std::f64::consts::TAU * s).ln() + nu * nu / s);
         }
         ll
