@@ -240,11 +240,8 @@ pub fn print_counts(report: &RefuseReport) {
             c.rejected_device_fault,
             c.before_initialisation
         );
-        if let Some(g) = &p.gnss_gate {
-            println!(
-                "{}: GNSS gate: {} fixes taken as the reference, {} pre-filtered, {} refused",
-                p.name, g.reference, g.pre_filtered, g.refused
-            );
+        if let Some(line) = &p.report {
+            println!("{}: {line}", p.name);
         }
     }
 }

@@ -28,6 +28,7 @@ use crate::filter::particle::ParticleSettings;
 use crate::filter::sharing::{Redistribution, SharingName};
 use crate::filter::working_state::DetectorSettings;
 use crate::measurement::Quantity;
+use crate::model::{ConstantAcceleration, ConstantVelocity, MotionModel, ProcessNoise, Singer};
 pub use crate::noise::{FromMessage, Variance, VarianceValue};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -41,22 +42,27 @@ pub struct PipelinesFile {
     pub pipeline: Vec<Spanned<PipelineConfig>>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+/// The estimators along the track, built into the spec. `filter` may also name a registered
+/// kind that reads whole messages ([`crate::kinds`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FilterKind {
     Kalman,
     Particle,
     FederatedKalman,
     FederatedParticle,
-    /// Source 002: the EKF in the plane with safety checks and a safe interval.
-    EkfSafety,
-    /// Source 003: GNSS and a MEMS IMU in an error-state filter in the plane.
-    GnssIns,
-    /// Source 004: speed and distance from an eddy-current sensor pair.
-    EddyCurrent,
 }
 
 impl FilterKind {
+    pub const ALL: [FilterKind; 4] = [
+        FilterKind::Kalman,
+        FilterKind::Particle,
+        FilterKind::FederatedKalman,
+        FilterKind::FederatedParticle,
+    ];
+
+    pub fn parse(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
     pub fn is_federated(self) -> bool {
         matches!(
             self,
@@ -66,72 +72,183 @@ impl FilterKind {
     pub fn is_particle(self) -> bool {
         matches!(self, FilterKind::Particle | FilterKind::FederatedParticle)
     }
-    /// The pipeline reads whole messages (in the plane), not scalar measurements.
-    pub fn reads_whole_messages(self) -> bool {
-        matches!(
-            self,
-            FilterKind::EkfSafety | FilterKind::GnssIns | FilterKind::EddyCurrent
-        )
-    }
     pub fn name(self) -> &'static str {
         match self {
             FilterKind::Kalman => "kalman",
             FilterKind::Particle => "particle",
             FilterKind::FederatedKalman => "federated_kalman",
             FilterKind::FederatedParticle => "federated_particle",
-            FilterKind::EkfSafety => "ekf_safety",
-            FilterKind::GnssIns => "gnss_ins",
-            FilterKind::EddyCurrent => "eddy_current",
         }
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// One `[[pipeline]]` table. A key that is none of these names a registered kind's settings
+/// table (`[pipeline.safety]`, …): kept as written in `sections`, and read by the kind the
+/// spec finds in its registry ([`crate::kinds`]).
+#[derive(Debug, Clone, PartialEq)]
 pub struct PipelineConfig {
     /// Names the output channels `/fused/<name>/…`: letters, digits, `_` and `-`.
     pub name: String,
-    pub filter: FilterKind,
+    /// `kalman`, `particle`, `federated_kalman`, `federated_particle`, or a registered kind
+    /// (`ekf_safety`, `gnss_ins`, `eddy_current`).
+    pub filter: Spanned<String>,
     pub motion: MotionConfig,
-    #[serde(default)]
     pub initial: InitialConfig,
     /// Measurements are released to the filter in sensor-time order once the replay is this
     /// far past them, so sensors with different latencies are fused in the right order.
-    #[serde(default = "default_reorder_window_s")]
     pub reorder_window_s: f64,
     /// Fused states on a regular grid at this rate (predicted to each tick) instead of one
     /// state per accepted measurement.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub output_rate_hz: Option<f64>,
     /// Kalman and particle pipelines: after this many gate rejections in a row of one
     /// quantity (chainage, speed or acceleration), the filter has locked itself out (its
     /// estimate, not the sensors, is wrong: a hard stop its motion model did not expect). The
     /// next one widens that component's variance until the measurement fits (NIS = 1) and is
     /// used. 0 turns this off. Federated pipelines have their detector's `gate_failures`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gate_lockout: Option<u32>,
     /// Kalman pipelines: also write the fixed-interval RTS smoothed states.
-    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub smoother: bool,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub particle: Option<ParticleSettings>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub federated: Option<FederatedConfig>,
-    /// `ekf_safety` pipelines: the sensors' roles and the safety checks' thresholds.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub safety: Option<crate::safety::SafetySettings>,
-    /// `gnss_ins` pipelines: the sensors' roles, the GNSS gate, the pre-filters, the IMU's
-    /// error model and the learning.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub gnss_ins: Option<crate::gnss_ins::GnssInsSettings>,
-    /// `eddy_current` pipelines: the correlator, warping, the filter, sleeper counting.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub eddy_current: Option<crate::eddy_current::EddyCurrentSettings>,
+    /// Registered kinds' settings tables by key (`safety`, `gnss_ins`, `eddy_current`), as
+    /// written.
+    pub sections: BTreeMap<String, Spanned<toml::Value>>,
     pub sensor: Vec<Spanned<SensorConfig>>,
     /// What `railfuse tune` may change in this pipeline and what it minimises; refuse
     /// ignores it.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tune: Option<TuneConfig>,
+}
+
+impl PipelineConfig {
+    /// The keys of a `[[pipeline]]` table other than kinds' settings tables.
+    pub const FIELDS: &'static [&'static str] = &[
+        "name",
+        "filter",
+        "motion",
+        "initial",
+        "reorder_window_s",
+        "output_rate_hz",
+        "gate_lockout",
+        "smoother",
+        "particle",
+        "federated",
+        "sensor",
+        "tune",
+    ];
+
+    /// The estimator along the track `filter` names, if it names one.
+    pub fn filter_kind(&self) -> Option<FilterKind> {
+        FilterKind::parse(self.filter.get_ref())
+    }
+}
+
+/// Field by field (serde's derive cannot keep the unknown keys, the kinds' tables, without
+/// buffering the table, which would lose the sensors' places in the file).
+impl<'de> Deserialize<'de> for PipelineConfig {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Table;
+        impl<'de> serde::de::Visitor<'de> for Table {
+            type Value = PipelineConfig;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a [[pipeline]] table")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut map: A,
+            ) -> Result<PipelineConfig, A::Error> {
+                use serde::de::Error as _;
+                let (mut name, mut filter, mut motion, mut sensor) = (None, None, None, None);
+                let mut c = PipelineConfig {
+                    name: String::new(),
+                    filter: Spanned::new(0..0, String::new()),
+                    motion: MotionConfig::ConstantVelocity {
+                        acceleration_psd: 0.0,
+                    },
+                    initial: InitialConfig::default(),
+                    reorder_window_s: default_reorder_window_s(),
+                    output_rate_hz: None,
+                    gate_lockout: None,
+                    smoother: false,
+                    particle: None,
+                    federated: None,
+                    sections: BTreeMap::new(),
+                    sensor: Vec::new(),
+                    tune: None,
+                };
+                while let Some(key) = map.next_key::<String>()? {
+                    match key.as_str() {
+                        "name" => name = Some(map.next_value()?),
+                        "filter" => filter = Some(map.next_value()?),
+                        "motion" => motion = Some(map.next_value()?),
+                        "initial" => c.initial = map.next_value()?,
+                        "reorder_window_s" => c.reorder_window_s = map.next_value()?,
+                        "output_rate_hz" => c.output_rate_hz = Some(map.next_value()?),
+                        "gate_lockout" => c.gate_lockout = Some(map.next_value()?),
+                        "smoother" => c.smoother = map.next_value()?,
+                        "particle" => c.particle = Some(map.next_value()?),
+                        "federated" => c.federated = Some(map.next_value()?),
+                        "sensor" => sensor = Some(map.next_value()?),
+                        "tune" => c.tune = Some(map.next_value()?),
+                        _ => {
+                            let table = map.next_value()?;
+                            c.sections.insert(key, table);
+                        }
+                    }
+                }
+                c.name = name.ok_or_else(|| A::Error::missing_field("name"))?;
+                c.filter = filter.ok_or_else(|| A::Error::missing_field("filter"))?;
+                c.motion = motion.ok_or_else(|| A::Error::missing_field("motion"))?;
+                c.sensor = sensor.ok_or_else(|| A::Error::missing_field("sensor"))?;
+                Ok(c)
+            }
+        }
+        d.deserialize_map(Table)
+    }
+}
+
+/// The table as it is written back: the kinds' tables after the estimators' settings.
+impl Serialize for PipelineConfig {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        #[derive(Serialize)]
+        struct View<'a> {
+            name: &'a str,
+            filter: &'a Spanned<String>,
+            motion: &'a MotionConfig,
+            initial: &'a InitialConfig,
+            reorder_window_s: f64,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            output_rate_hz: Option<f64>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            gate_lockout: Option<u32>,
+            #[serde(skip_serializing_if = "std::ops::Not::not")]
+            smoother: bool,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            particle: Option<&'a ParticleSettings>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            federated: Option<&'a FederatedConfig>,
+            #[serde(flatten)]
+            sections: &'a BTreeMap<String, Spanned<toml::Value>>,
+            sensor: &'a [Spanned<SensorConfig>],
+            #[serde(skip_serializing_if = "Option::is_none")]
+            tune: Option<&'a TuneConfig>,
+        }
+        View {
+            name: &self.name,
+            filter: &self.filter,
+            motion: &self.motion,
+            initial: &self.initial,
+            reorder_window_s: self.reorder_window_s,
+            output_rate_hz: self.output_rate_hz,
+            gate_lockout: self.gate_lockout,
+            smoother: self.smoother,
+            particle: self.particle.as_ref(),
+            federated: self.federated.as_ref(),
+            sections: &self.sections,
+            sensor: &self.sensor,
+            tune: self.tune.as_ref(),
+        }
+        .serialize(s)
+    }
 }
 
 fn default_reorder_window_s() -> f64 {
@@ -157,6 +274,51 @@ pub enum MotionConfig {
         time_constant_s: f64,
         acceleration_std_mps2: f64,
     },
+}
+
+impl MotionConfig {
+    /// The model, its noise checked.
+    pub fn model(&self) -> Result<MotionModel, String> {
+        Ok(match *self {
+            MotionConfig::ConstantVelocity { acceleration_psd } => {
+                MotionModel::ConstantVelocity(ConstantVelocity {
+                    acceleration_psd: positive("motion.acceleration_psd", acceleration_psd)?,
+                })
+            }
+            MotionConfig::ConstantAcceleration {
+                jerk_psd,
+                jerk_variance,
+            } => {
+                let noise = match (jerk_psd, jerk_variance) {
+                    (Some(q), None) => ProcessNoise::WhiteJerkPsd(positive("motion.jerk_psd", q)?),
+                    (None, Some(v)) => {
+                        ProcessNoise::PiecewiseJerkVariance(positive("motion.jerk_variance", v)?)
+                    }
+                    _ => return Err("motion needs exactly one of jerk_psd or jerk_variance".into()),
+                };
+                MotionModel::ConstantAcceleration(ConstantAcceleration { noise })
+            }
+            MotionConfig::Singer {
+                time_constant_s,
+                acceleration_std_mps2,
+            } => MotionModel::Singer(Singer {
+                time_constant_s: positive("motion.time_constant_s", time_constant_s)?,
+                acceleration_std_mps2: positive(
+                    "motion.acceleration_std_mps2",
+                    acceleration_std_mps2,
+                )?,
+            }),
+        })
+    }
+}
+
+/// `v` if it is positive, else why not.
+pub fn positive(what: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{what} must be positive, not {v}"))
+    }
 }
 
 /// Where the filter starts. By default at its first position measurement: chainage from it;

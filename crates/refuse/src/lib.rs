@@ -11,6 +11,8 @@
 //! - [`config`]: the pipeline TOML as written;
 //! - [`spec`]: the pipelines validated, and each sensor bound to its channel;
 //! - [`default_config`]: the pipeline a log given no configuration is re-fused with;
+//! - [`kinds`]: what a pipeline kind that reads whole messages gives the spec and the replay;
+//!   [`registry`]: the kinds by name, one line each;
 //! - [`pipeline`]: one configured estimator fed in sensor-time order ([`reorder`]: the
 //!   reorder window);
 //! - [`prefilter`]: source 003's RLS, adaptive RLS and PU-RLS pre-filters of one channel;
@@ -34,9 +36,11 @@ pub mod error;
 pub mod eval;
 pub mod fused;
 pub mod gnss_ins;
+pub mod kinds;
 pub mod measurement;
 pub mod noise;
 pub mod pipeline;
+pub mod registry;
 pub mod reorder;
 pub mod replay;
 pub mod safety;

@@ -11,7 +11,6 @@
 use nalgebra::{SMatrix, SVector};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 
-use crate::eddy_current::EddyCurrentPipeline;
 use crate::error::{Error, Result};
 use crate::filter::federated::Federated;
 use crate::filter::rts::EpochRecorder;
@@ -19,12 +18,11 @@ use crate::filter::{
     Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
     StateAndCovariance,
 };
-use crate::gnss_ins::GnssInsPipeline;
+use crate::kinds::MessagePipeline;
 use crate::measurement::{Measurement, ObservationRow, Quantity, SensorContext};
 use crate::model::SensorState;
 use crate::noise::VarianceValue;
 use crate::reorder::ReorderQueue;
-use crate::safety::SafetyPipeline;
 use crate::spec::{EstimatorSpec, PipelineSpec, SensorBinding, MAX_STATES};
 
 pub use crate::fused::{measurement_record, Fused, PipelineCounts};
@@ -314,9 +312,7 @@ impl<const N: usize> Pipeline<N> {
                 t0,
                 |i, s| ParticleFilter::new(particle.stream(i as u64 + 1), s),
             )),
-            EstimatorSpec::EkfSafety { .. }
-            | EstimatorSpec::GnssIns { .. }
-            | EstimatorSpec::EddyCurrent { .. } => {
+            EstimatorSpec::Messages(_) => {
                 unreachable!("AnyPipeline::new makes a message pipeline of these specs")
             }
         }
@@ -575,60 +571,6 @@ pub fn fused_state<const N: usize>(
     }
 }
 
-/// A pipeline that reads whole messages rather than scalar measurements: source 002's
-/// `ekf_safety` and source 003's `gnss_ins`, both in the plane.
-pub trait MessagePipeline {
-    fn counts(&self) -> &PipelineCounts;
-    /// Sensor `sensor` is bound to its channel with this variance setting.
-    fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>);
-    /// One message of sensor `sensor`; an error only for a message that does not decode.
-    fn push(
-        &mut self,
-        sensor: usize,
-        msg: &railfuse_catalog::log::LogMessage<'_>,
-        input: &std::path::Path,
-        context: &SensorContext,
-        out: &mut Vec<Fused>,
-    ) -> Result<()>;
-    /// The end of the log: everything still queued.
-    fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>);
-    /// A GNSS quality gate's decisions, for pipelines that have one.
-    fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally>;
-}
-
-/// [`MessagePipeline`] by the pipeline's own methods of the same names.
-macro_rules! message_pipeline {
-    ($ty:ty) => {
-        impl MessagePipeline for $ty {
-            fn counts(&self) -> &PipelineCounts {
-                &self.counts
-            }
-            fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
-                <$ty>::bind(self, sensor, variance)
-            }
-            fn push(
-                &mut self,
-                sensor: usize,
-                msg: &railfuse_catalog::log::LogMessage<'_>,
-                input: &std::path::Path,
-                context: &SensorContext,
-                out: &mut Vec<Fused>,
-            ) -> Result<()> {
-                <$ty>::push(self, sensor, msg, input, context, out)
-            }
-            fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
-                <$ty>::finish(self, log_time_ns, context, out)
-            }
-            fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
-                <$ty>::gate_tally(self)
-            }
-        }
-    };
-}
-message_pipeline!(SafetyPipeline);
-message_pipeline!(GnssInsPipeline);
-message_pipeline!(EddyCurrentPipeline);
-
 /// A pipeline of any state dimension up to [`MAX_STATES`], or one that reads whole messages.
 pub enum AnyPipeline {
     /// Its spec, and the pipeline (built from the spec's [`base`](PipelineSpec::base)).
@@ -661,27 +603,9 @@ macro_rules! each {
 impl AnyPipeline {
     pub fn new(spec: PipelineSpec) -> Result<Self> {
         const _: () = assert!(MAX_STATES == 8, "AnyPipeline has a variant per dimension");
-        match &spec.estimator {
-            EstimatorSpec::EkfSafety {
-                settings,
-                roles,
-                motion,
-            } => {
-                let (settings, roles, motion) = (settings.clone(), *roles, *motion);
-                let safety = SafetyPipeline::new(spec.base(), *settings, roles, motion)?;
-                return Ok(AnyPipeline::Messages(Box::new(spec), Box::new(safety)));
-            }
-            EstimatorSpec::GnssIns { settings, roles } => {
-                let (settings, roles) = (settings.clone(), *roles);
-                let p = GnssInsPipeline::new(spec.base(), *settings, roles)?;
-                return Ok(AnyPipeline::Messages(Box::new(spec), Box::new(p)));
-            }
-            EstimatorSpec::EddyCurrent { settings, motion } => {
-                let (settings, motion) = ((**settings).clone(), *motion);
-                let p = EddyCurrentPipeline::new(spec.base(), settings, motion)?;
-                return Ok(AnyPipeline::Messages(Box::new(spec), Box::new(p)));
-            }
-            _ => {}
+        if let EstimatorSpec::Messages(kind) = &spec.estimator {
+            let p = kind.build(spec.base())?;
+            return Ok(AnyPipeline::Messages(Box::new(spec), p));
         }
         Ok(match spec.dimension() {
             2 => AnyPipeline::Two(Pipeline::new(spec)?),
@@ -709,9 +633,9 @@ impl AnyPipeline {
         each!(self, p => &p.counts, s => s.counts())
     }
 
-    /// A GNSS quality gate's decisions (`gnss_ins`).
-    pub fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
-        each!(self, _p => None, s => s.gate_tally())
+    /// The kind's line for the run's report (a GNSS gate's decisions), if any.
+    pub fn report(&self) -> Option<String> {
+        each!(self, _p => None, s => s.report())
     }
 
     /// A pipeline fed whole messages ([`MessagePipeline::push`]) instead of

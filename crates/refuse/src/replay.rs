@@ -26,7 +26,6 @@ use railfuse_catalog::rejections::Rejections;
 use railfuse_catalog::topics;
 use serde::Serialize;
 
-use crate::config::FilterKind;
 use crate::error::{Error, Result};
 use crate::eval::{self, EvalReport, Evaluator};
 use crate::measurement::{Measurement, Quantity, SensorContext, SensorModel};
@@ -72,9 +71,9 @@ pub struct PipelineReport {
     pub counts: PipelineCounts,
     pub fused_states: u64,
     pub smoothed_states: u64,
-    /// `gnss_ins`: the GNSS quality gate's decisions.
+    /// The kind's own line (`gnss_ins`: the GNSS quality gate's decisions).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub gnss_gate: Option<crate::gnss_ins::quality_gate::GateTally>,
+    pub report: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -845,10 +844,7 @@ impl<'a> Replay<'a> {
             let p = &self.pipelines[pi];
             let metadata = BTreeMap::from([
                 ("pipeline".to_owned(), p.name().to_owned()),
-                (
-                    "filter".to_owned(),
-                    p.spec().estimator.kind().name().to_owned(),
-                ),
+                ("filter".to_owned(), p.spec().estimator.name().to_owned()),
                 ("config_toml".to_owned(), p.spec().to_toml()),
                 ("config_source".to_owned(), self.opts.config_source.clone()),
                 ("input".to_owned(), input.display().to_string()),
@@ -879,7 +875,7 @@ impl<'a> Replay<'a> {
                 counts: p.counts().clone(),
                 fused_states: out.states,
                 smoothed_states: out.smoothed_states,
-                gnss_gate: p.gate_tally(),
+                report: p.report(),
             });
         }
         let eval = self.eval.finish(log)?;
@@ -949,7 +945,7 @@ fn register_outputs(
         .config
         .pipeline
         .iter()
-        .any(|p| p.estimator.kind() == FilterKind::GnssIns);
+        .any(|p| p.estimator.outputs().imu_error_model);
     let model_schema = match any_gnss_ins {
         true => Some(next()?),
         false => None,
@@ -974,15 +970,15 @@ fn register_outputs(
             }
             false => None,
         };
-        let imu_error_model = match (p.estimator.kind(), model_schema) {
-            (FilterKind::GnssIns, Some(schema)) => {
+        let imu_error_model = match (p.estimator.outputs().imu_error_model, model_schema) {
+            (true, Some(schema)) => {
                 let topic = topics::fused_imu_error_model(&p.name);
                 Some(writer.add_channel_with_ids::<ImuErrorModel>(schema, next()?, &topic)?)
             }
             _ => None,
         };
-        let safety = match p.estimator.kind() {
-            FilterKind::EkfSafety => {
+        let safety = match p.estimator.outputs().safety {
+            true => {
                 let topic = topics::fused_safety(&p.name);
                 let id =
                     writer.add_channel_with_ids::<SafetyStatus>(safety_schema, next()?, &topic)?;

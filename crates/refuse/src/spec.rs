@@ -10,23 +10,24 @@
 
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use toml::Spanned;
 
 pub use crate::base::{InitialSpec, PipelineBase};
 use crate::config::{
-    line_column, FederatedConfig, FilterKind, FromMessage, InitialConfig, MotionConfig,
-    PipelineConfig, PipelinesFile, SensorConfig, Variance, VarianceValue,
+    line_column, positive, FederatedConfig, FilterKind, InitialConfig, PipelineConfig,
+    PipelinesFile, SensorConfig, Variance, VarianceValue,
 };
 use crate::error::{Error, Result};
 use crate::filter::federated::FederatedSettings;
 use crate::filter::particle::ParticleSettings;
 use crate::filter::sharing::{SharingTable, SpeedBand};
 use crate::filter::MASTER;
+use crate::kinds::{KindSpec, Outputs, PipelineKind};
 use crate::measurement::{Quantity, SensorModel};
-use crate::model::{
-    ConstantAcceleration, ConstantVelocity, MotionModel, ProcessNoise, SensorState, Singer,
-};
+use crate::model::{MotionModel, SensorState};
+use crate::registry::Registry;
 
 /// The most state components a pipeline may have (motion and sensor states together).
 pub const MAX_STATES: usize = 8;
@@ -56,15 +57,25 @@ impl Pipelines {
     /// Reads and validates a configuration file.
     pub fn load(path: &Path) -> Result<Self> {
         let (file, text) = PipelinesFile::load(path)?;
-        Self::from_file(file, &text, path)
+        Self::from_file(file, &text, path, &Registry::standard())
     }
 
     /// Parses and validates configuration text; `path` names it in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self> {
-        Self::from_file(PipelinesFile::parse(text, path)?, text, path)
+        Self::parse_with(text, path, &Registry::standard())
     }
 
-    fn from_file(file: PipelinesFile, text: &str, path: &Path) -> Result<Self> {
+    /// [`parse`](Self::parse) with the pipeline kinds of `registry`.
+    pub fn parse_with(text: &str, path: &Path, registry: &Registry) -> Result<Self> {
+        Self::from_file(PipelinesFile::parse(text, path)?, text, path, registry)
+    }
+
+    fn from_file(
+        file: PipelinesFile,
+        text: &str,
+        path: &Path,
+        registry: &Registry,
+    ) -> Result<Self> {
         if file.pipeline.is_empty() {
             return Err(Error::ConfigSyntax {
                 path: path.to_owned(),
@@ -94,7 +105,7 @@ impl Pipelines {
             if pipeline.iter().any(|q| q.name == p.get_ref().name) {
                 return Err(invalid(p.span(), "declared twice".into()));
             }
-            let spec = PipelineSpec::new(&p, &place)
+            let spec = PipelineSpec::new(&p, &place, registry)
                 .map_err(|Invalid { span, message }| invalid(span, message))?;
             pipeline.push(spec);
         }
@@ -164,34 +175,43 @@ pub enum EstimatorSpec {
         federated: FederatedSettings,
         particle: ParticleSettings,
     },
-    /// Source 002's EKF in the plane with safety checks.
-    EkfSafety {
-        settings: Box<crate::safety::SafetySettings>,
-        roles: crate::safety::Roles,
-        /// Per axis, when the acceleration input is off.
-        motion: crate::model::ConstantAcceleration,
-    },
-    /// Source 003's GNSS/INS in the plane.
-    EddyCurrent {
-        settings: Box<crate::eddy_current::EddyCurrentSettings>,
-        motion: ConstantAcceleration,
-    },
-    GnssIns {
-        settings: Box<crate::gnss_ins::GnssInsSettings>,
-        roles: crate::gnss_ins::Roles,
-    },
+    /// A registered kind that reads whole messages ([`crate::kinds`]).
+    Messages(Arc<dyn KindSpec>),
 }
 
 impl EstimatorSpec {
-    pub fn kind(&self) -> FilterKind {
+    /// `filter = "…"`.
+    pub fn name(&self) -> &'static str {
         match self {
+            EstimatorSpec::Messages(k) => k.name(),
+            e => e
+                .filter_kind()
+                .expect("an estimator along the track")
+                .name(),
+        }
+    }
+
+    /// The estimator along the track, `None` for a kind that reads whole messages.
+    pub fn filter_kind(&self) -> Option<FilterKind> {
+        Some(match self {
             EstimatorSpec::Kalman { .. } => FilterKind::Kalman,
             EstimatorSpec::Particle { .. } => FilterKind::Particle,
             EstimatorSpec::FederatedKalman { .. } => FilterKind::FederatedKalman,
             EstimatorSpec::FederatedParticle { .. } => FilterKind::FederatedParticle,
-            EstimatorSpec::EkfSafety { .. } => FilterKind::EkfSafety,
-            EstimatorSpec::GnssIns { .. } => FilterKind::GnssIns,
-            EstimatorSpec::EddyCurrent { .. } => FilterKind::EddyCurrent,
+            EstimatorSpec::Messages(_) => return None,
+        })
+    }
+
+    /// The pipeline reads whole messages (in the plane), not scalar measurements.
+    pub fn reads_whole_messages(&self) -> bool {
+        matches!(self, EstimatorSpec::Messages(_))
+    }
+
+    /// Output channels beside the state and diagnostics.
+    pub fn outputs(&self) -> Outputs {
+        match self {
+            EstimatorSpec::Messages(k) => k.outputs(),
+            _ => Outputs::default(),
         }
     }
 
@@ -252,14 +272,6 @@ pub struct PipelineSpec {
     source: PipelineConfig,
 }
 
-fn positive(what: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{what} must be positive, not {v}"))
-    }
-}
-
 fn at_least_zero(what: &str, v: f64) -> Result<f64, String> {
     if v.is_finite() && v >= 0.0 {
         Ok(v)
@@ -283,6 +295,7 @@ impl PipelineSpec {
     fn new(
         table: &Spanned<PipelineConfig>,
         place: &dyn Fn(Range<usize>) -> Place,
+        registry: &Registry,
     ) -> Result<Self, Invalid> {
         let c = table.get_ref();
         let here = |message: String| Invalid {
@@ -299,7 +312,8 @@ impl PipelineSpec {
                 "the name may hold only letters, digits, '_' and '-'".into(),
             ));
         }
-        let motion = motion_model(&c.motion).map_err(here)?;
+        let (filter, kind) = filter_and_kind(c, registry)?;
+        let motion = c.motion.model().map_err(here)?;
         let reorder_window_s =
             at_least_zero("reorder_window_s", c.reorder_window_s).map_err(here)?;
         let output_period_ns = c
@@ -311,7 +325,7 @@ impl PipelineSpec {
         if c.sensor.is_empty() {
             return Err(here("no [[pipeline.sensor]]: nothing to fuse".into()));
         }
-        let devices = match c.filter.is_federated() {
+        let devices = match filter.is_some_and(FilterKind::is_federated) {
             true => devices(&c.sensor),
             false => Vec::new(),
         };
@@ -321,7 +335,7 @@ impl PipelineSpec {
             .map(|s| {
                 sensor(
                     s.get_ref(),
-                    c.filter,
+                    filter,
                     motion.dimension(),
                     &devices,
                     place(s.span()),
@@ -340,7 +354,14 @@ impl PipelineSpec {
                 motion.dimension()
             )));
         }
-        let estimator = estimator(c, &devices).map_err(here)?;
+        let estimator = estimator(c, filter, kind, &devices).map_err(here)?;
+        // Stored beside the fused channels with every setting written out.
+        let mut source = c.clone();
+        if let (EstimatorSpec::Messages(k), Some(kind)) = (&estimator, kind) {
+            if let Some(t) = source.sections.get_mut(kind.section()) {
+                *t = Spanned::new(t.span(), k.settings());
+            }
+        }
         Ok(Self {
             name: c.name.clone(),
             estimator,
@@ -350,7 +371,7 @@ impl PipelineSpec {
             output_period_ns,
             sensors,
             devices,
-            source: c.clone(),
+            source,
         })
     }
 
@@ -418,7 +439,7 @@ impl PipelineSpec {
                 railfuse_catalog::foreign::Translator::schemas().join(", ")
             )));
         };
-        let eddy = self.estimator.kind() == crate::config::FilterKind::EddyCurrent;
+        let eddy = matches!(&self.estimator, EstimatorSpec::Messages(k) if k.reads_raw_blocks());
         if eddy != (model == SensorModel::EddyCurrent) {
             return Err(fail(match eddy {
                 true => format!(
@@ -498,36 +519,6 @@ impl PipelineSpec {
     }
 }
 
-fn motion_model(m: &MotionConfig) -> Result<MotionModel, String> {
-    Ok(match *m {
-        MotionConfig::ConstantVelocity { acceleration_psd } => {
-            MotionModel::ConstantVelocity(ConstantVelocity {
-                acceleration_psd: positive("motion.acceleration_psd", acceleration_psd)?,
-            })
-        }
-        MotionConfig::ConstantAcceleration {
-            jerk_psd,
-            jerk_variance,
-        } => {
-            let noise = match (jerk_psd, jerk_variance) {
-                (Some(q), None) => ProcessNoise::WhiteJerkPsd(positive("motion.jerk_psd", q)?),
-                (None, Some(v)) => {
-                    ProcessNoise::PiecewiseJerkVariance(positive("motion.jerk_variance", v)?)
-                }
-                _ => return Err("motion needs exactly one of jerk_psd or jerk_variance".into()),
-            };
-            MotionModel::ConstantAcceleration(ConstantAcceleration { noise })
-        }
-        MotionConfig::Singer {
-            time_constant_s,
-            acceleration_std_mps2,
-        } => MotionModel::Singer(Singer {
-            time_constant_s: positive("motion.time_constant_s", time_constant_s)?,
-            acceleration_std_mps2: positive("motion.acceleration_std_mps2", acceleration_std_mps2)?,
-        }),
-    })
-}
-
 fn initial(i: &InitialConfig) -> Result<InitialSpec, String> {
     if !(i.speed_mps.is_finite() && i.acceleration_mps2.is_finite()) {
         return Err("initial speed_mps and acceleration_mps2 must be finite".into());
@@ -565,10 +556,64 @@ fn devices(sensors: &[Spanned<SensorConfig>]) -> Vec<String> {
     names
 }
 
+/// What `filter` names: an estimator along the track, or a registered kind; and every
+/// other key of the table a kind's settings table, the one of this pipeline's kind.
+fn filter_and_kind<'r>(
+    c: &PipelineConfig,
+    registry: &'r Registry,
+) -> Result<(Option<FilterKind>, Option<&'r dyn PipelineKind>), Invalid> {
+    let name = c.filter.get_ref().as_str();
+    let (filter, kind) = (FilterKind::parse(name), registry.get(name));
+    if filter.is_none() && kind.is_none() {
+        let known: Vec<String> = FilterKind::ALL
+            .iter()
+            .map(|k| k.name())
+            .chain(registry.names())
+            .map(|n| format!("`{n}`"))
+            .collect();
+        return Err(Invalid {
+            span: c.filter.span(),
+            message: format!(
+                "filter: unknown kind `{name}`, expected one of {}",
+                known.join(", ")
+            ),
+        });
+    }
+    for (key, table) in &c.sections {
+        let Some(owner) = registry.by_section(key) else {
+            let known: Vec<String> = PipelineConfig::FIELDS
+                .iter()
+                .copied()
+                .chain(registry.sections())
+                .map(|n| format!("`{n}`"))
+                .collect();
+            return Err(Invalid {
+                span: table.span(),
+                message: format!(
+                    "unknown field `{key}`, expected one of {}",
+                    known.join(", ")
+                ),
+            });
+        };
+        if owner.name() != name {
+            let article = if key.starts_with(['a', 'e', 'i', 'o', 'u']) {
+                "an"
+            } else {
+                "a"
+            };
+            return Err(Invalid {
+                span: table.span(),
+                message: format!("{article} [{key}] section, but filter = \"{name}\""),
+            });
+        }
+    }
+    Ok((filter, kind))
+}
+
 /// One sensor table, validated against its pipeline's filter and motion model.
 fn sensor(
     s: &SensorConfig,
-    filter: FilterKind,
+    filter: Option<FilterKind>,
     motion: usize,
     devices: &[String],
     declared: Place,
@@ -597,7 +642,7 @@ fn sensor(
             }
         }
     }
-    if s.device.is_some() && !filter.is_federated() {
+    if s.device.is_some() && !filter.is_some_and(FilterKind::is_federated) {
         return Err("device is for federated filters only".into());
     }
     let mut states = Vec::new();
@@ -647,7 +692,7 @@ fn sensor(
         }
         Some(w) => Some(positive("speed_window_s", w)?),
     };
-    let (device, device_name) = match filter.is_federated() {
+    let (device, device_name) = match filter.is_some_and(FilterKind::is_federated) {
         false => (0, None),
         true => match s.device_name() {
             MASTER_DEVICE => (MASTER, Some(MASTER_DEVICE.to_owned())),
@@ -672,49 +717,39 @@ fn sensor(
     })
 }
 
-fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, String> {
+/// The estimator: one along the track with its settings, or the registered kind `kind` built
+/// from its table.
+fn estimator(
+    c: &PipelineConfig,
+    filter: Option<FilterKind>,
+    kind: Option<&dyn PipelineKind>,
+    devices: &[String],
+) -> Result<EstimatorSpec, String> {
     let lockout = c.gate_lockout.unwrap_or(DEFAULT_GATE_LOCKOUT);
-    if c.gate_lockout.is_some() && c.filter.is_federated() {
+    let federated_filter = filter.is_some_and(FilterKind::is_federated);
+    if c.gate_lockout.is_some() && federated_filter {
         return Err(
             "gate_lockout is for kalman and particle pipelines; a federated pipeline's \
                     devices have [federated] detector.gate_failures"
                 .into(),
         );
     }
-    if c.smoother && c.filter != FilterKind::Kalman {
+    if c.smoother && filter != Some(FilterKind::Kalman) {
         return Err(format!(
             "smoother = true needs filter = \"kalman\" (the RTS smoother is linear), not \"{}\"",
-            c.filter.name()
+            c.filter.get_ref()
         ));
     }
-    if c.particle.is_some() && !c.filter.is_particle() {
+    if c.particle.is_some() && !filter.is_some_and(FilterKind::is_particle) {
         return Err(format!(
             "a [particle] section, but filter = \"{}\"",
-            c.filter.name()
+            c.filter.get_ref()
         ));
     }
-    if c.safety.is_some() && c.filter != FilterKind::EkfSafety {
-        return Err(format!(
-            "a [safety] section, but filter = \"{}\"",
-            c.filter.name()
-        ));
-    }
-    if c.gnss_ins.is_some() && c.filter != FilterKind::GnssIns {
-        return Err(format!(
-            "a [gnss_ins] section, but filter = \"{}\"",
-            c.filter.name()
-        ));
-    }
-    if c.eddy_current.is_some() && c.filter != FilterKind::EddyCurrent {
-        return Err(format!(
-            "an [eddy_current] section, but filter = \"{}\"",
-            c.filter.name()
-        ));
-    }
-    if c.federated.is_some() && !c.filter.is_federated() {
+    if c.federated.is_some() && !federated_filter {
         return Err(format!(
             "a [federated] section, but filter = \"{}\"",
-            c.filter.name()
+            c.filter.get_ref()
         ));
     }
     let particle = || {
@@ -722,140 +757,27 @@ fn estimator(c: &PipelineConfig, devices: &[String]) -> Result<EstimatorSpec, St
         p.check().map(|()| p)
     };
     let federated = || federated(&c.federated.clone().unwrap_or_default(), devices);
-    Ok(match c.filter {
-        FilterKind::Kalman => EstimatorSpec::Kalman {
+    Ok(match (filter, kind) {
+        (Some(FilterKind::Kalman), _) => EstimatorSpec::Kalman {
             gate_lockout: lockout,
             smoother: c.smoother,
         },
-        FilterKind::Particle => EstimatorSpec::Particle {
+        (Some(FilterKind::Particle), _) => EstimatorSpec::Particle {
             particle: particle()?,
             gate_lockout: lockout,
         },
-        FilterKind::FederatedKalman => EstimatorSpec::FederatedKalman {
+        (Some(FilterKind::FederatedKalman), _) => EstimatorSpec::FederatedKalman {
             federated: federated()?,
         },
-        FilterKind::FederatedParticle => EstimatorSpec::FederatedParticle {
+        (Some(FilterKind::FederatedParticle), _) => EstimatorSpec::FederatedParticle {
             federated: federated()?,
             particle: particle()?,
         },
-        FilterKind::EkfSafety => safety(c)?,
-        FilterKind::GnssIns => gnss_ins(c)?,
-        FilterKind::EddyCurrent => eddy_current(c)?,
-    })
-}
-
-/// The sensor of role `role` on `topic`, by its place among the pipeline's sensors.
-fn sensor_of(c: &PipelineConfig, role: &str, topic: &str) -> Result<usize, String> {
-    c.sensor
-        .iter()
-        .position(|s| s.get_ref().topic == topic)
-        .ok_or_else(|| format!("{role} is {topic}, which is not one of the pipeline's sensors"))
-}
-
-/// A sensor of a whole-message pipeline with a setting such a pipeline does not read.
-fn along_track_only(c: &PipelineConfig, filter: &str) -> Result<(), String> {
-    match c.sensor.iter().map(|s| s.get_ref()).find(|s| {
-        s.chainage_bias.is_some()
-            || s.acceleration_bias.is_some()
-            || s.scale_factor.is_some()
-            || s.speed_window_s.is_some()
-            || s.fields.is_some()
-    }) {
-        Some(s) => Err(format!(
-            "sensor {}: an {filter} pipeline's sensors take a topic, a variance and a gate \
-             only (no fields, sensor states or speed window)",
-            s.topic
-        )),
-        None => Ok(()),
-    }
-}
-
-/// An `eddy_current` pipeline: its settings checked, its one sensor the block channel.
-fn eddy_current(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
-    let settings = c.eddy_current.clone().unwrap_or_default();
-    settings.check()?;
-    let MotionModel::ConstantAcceleration(motion) = motion_model(&c.motion)? else {
-        return Err(
-            "an eddy_current pipeline's filter is constant acceleration: set motion = \
-             { model = \"constant_acceleration\", jerk_psd = … }"
-                .into(),
-        );
-    };
-    sensor_of(c, "eddy_current.topic", &settings.topic)?;
-    along_track_only(c, "eddy_current")?;
-    if c.sensor.len() != 1 {
-        return Err(format!(
-            "an eddy_current pipeline has one sensor (eddy_current.topic), not {}",
-            c.sensor.len()
-        ));
-    }
-    Ok(EstimatorSpec::EddyCurrent {
-        settings: Box::new(settings),
-        motion,
-    })
-}
-
-/// A `gnss_ins` pipeline: its settings checked, its two sensors found by role.
-fn gnss_ins(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
-    let settings = c.gnss_ins.clone().unwrap_or_default();
-    settings.check()?;
-    let roles = crate::gnss_ins::Roles {
-        gnss: sensor_of(c, "gnss_ins.gnss", &settings.gnss)?,
-        imu: sensor_of(c, "gnss_ins.imu", &settings.imu)?,
-    };
-    along_track_only(c, "gnss_ins")?;
-    if c.sensor.len() != 2 {
-        return Err(format!(
-            "a gnss_ins pipeline has two sensors (gnss_ins.gnss and gnss_ins.imu), not {}",
-            c.sensor.len()
-        ));
-    }
-    let imu = c.sensor[roles.imu].get_ref();
-    if imu.variance != Variance::FromMessage(FromMessage::Message) {
-        return Err(format!(
-            "sensor {}: a gnss_ins pipeline's IMU takes variance = \"message\"; its error \
-             model is [pipeline.gnss_ins.imu_noise]",
-            imu.topic
-        ));
-    }
-    Ok(EstimatorSpec::GnssIns {
-        settings: Box::new(settings),
-        roles,
-    })
-}
-
-/// An `ekf_safety` pipeline: its settings checked, its three sensors found by role.
-fn safety(c: &PipelineConfig) -> Result<EstimatorSpec, String> {
-    let settings = c.safety.clone().unwrap_or_default();
-    settings.check()?;
-    let MotionModel::ConstantAcceleration(motion) = motion_model(&c.motion)? else {
-        return Err(
-            "an ekf_safety pipeline runs constant acceleration per axis: set motion = \
-                    { model = \"constant_acceleration\", jerk_psd = … }"
-                .into(),
-        );
-    };
-    let axle = |role: &str, topic: &Option<String>| {
-        topic.as_ref().map(|t| sensor_of(c, role, t)).transpose()
-    };
-    let roles = crate::safety::Roles {
-        gnss: sensor_of(c, "safety.gnss", &settings.gnss)?,
-        axle_1: axle("safety.axle_1", &settings.axle_1)?,
-        axle_2: axle("safety.axle_2", &settings.axle_2)?,
-    };
-    along_track_only(c, "ekf_safety")?;
-    let roles_given = 1 + usize::from(roles.axle_1.is_some()) + usize::from(roles.axle_2.is_some());
-    if c.sensor.len() != roles_given {
-        return Err(format!(
-            "an ekf_safety pipeline has one sensor per role it names (safety.gnss, axle_1, \
-             axle_2: {roles_given} here), not {}",
-            c.sensor.len()
-        ));
-    }
-    Ok(EstimatorSpec::EkfSafety {
-        settings: Box::new(settings),
-        roles,
-        motion,
+        (None, Some(kind)) => {
+            let settings = c.sections.get(kind.section()).map(|t| t.get_ref().clone());
+            EstimatorSpec::Messages(kind.spec(c, settings)?)
+        }
+        (None, None) => unreachable!("the filter was looked up in the registry"),
     })
 }
 
@@ -963,6 +885,7 @@ fn sharing_table(f: &FederatedConfig, devices: &[String]) -> Result<SharingTable
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::FromMessage;
 
     const GOOD: &str = r#"
 [[pipeline]]
@@ -1042,7 +965,7 @@ gate_nis = 16.0
         );
         assert!(
             err(&GOOD.replace("filter = \"kalman\"", "filter = \"magic\""))
-                .contains("unknown variant `magic`")
+                .contains("unknown kind `magic`")
         );
         assert!(err(&GOOD.replace("name = \"kf\"", "name = \"a/b\"")).contains("letters, digits"));
     }
@@ -1121,7 +1044,7 @@ variance = "message"
         .unwrap_err()
         .to_string();
         assert!(
-            e.contains("line 4") && e.contains("unknown variant `federated_kalmann`"),
+            e.contains("line 4") && e.contains("unknown kind `federated_kalmann`"),
             "{e}"
         );
         let particle = GOOD.replace(

@@ -184,15 +184,14 @@ impl Recording {
     /// Replays the log through `spec` (its sensors those the recording was made for) and
     /// scores it. The smoother, if the pipeline has one, is not run: states are scored.
     pub fn replay(&self, spec: &PipelineSpec) -> Result<Score> {
-        let kind = spec.estimator.kind();
-        if kind.reads_whole_messages() {
+        if spec.estimator.reads_whole_messages() {
             return Err(Error::Recording {
                 input: self.path.clone(),
                 message: format!(
                     "pipeline '{}' is an {} pipeline, which reads whole messages: tune \
                      replays scalar measurements only",
                     spec.name,
-                    kind.name()
+                    spec.estimator.name()
                 ),
             });
         }

@@ -18,6 +18,7 @@ pub mod correlation;
 pub mod departure;
 pub mod front_end;
 pub mod input_check;
+pub mod kind;
 pub mod landmark;
 pub mod settings;
 pub mod sleeper_count;
@@ -39,12 +40,14 @@ use crate::base::PipelineBase;
 use crate::error::Result;
 use crate::filter::{Innovation, KalmanFilter};
 use crate::fused::{measurement_record, Fused, PipelineCounts};
+use crate::kinds::MessagePipeline;
 use crate::measurement::SensorContext;
 use crate::model::ConstantAcceleration;
 use crate::noise::VarianceValue;
 use departure::{Departure, Fit, Moved};
 use front_end::{FrontEnd, WINDOW};
 use input_check::Continuity;
+pub use kind::Kind;
 pub use settings::EddyCurrentSettings;
 use sleeper_count::{Crossing, SleeperCounter};
 use speed::{Outcome, Request, SpeedEstimator, SpeedMeasurement};
@@ -148,14 +151,16 @@ impl EddyCurrentPipeline {
             odometer_m: start_m,
         })
     }
+}
 
-    pub fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
-        None
+impl MessagePipeline for EddyCurrentPipeline {
+    fn counts(&self) -> &PipelineCounts {
+        &self.counts
     }
 
-    pub fn bind(&mut self, _sensor: usize, _variance: Option<VarianceValue>) {}
+    fn bind(&mut self, _sensor: usize, _variance: Option<VarianceValue>) {}
 
-    pub fn push(
+    fn push(
         &mut self,
         _sensor: usize,
         msg: &LogMessage<'_>,
@@ -173,8 +178,10 @@ impl EddyCurrentPipeline {
         Ok(())
     }
 
-    pub fn finish(&mut self, _log_time_ns: u64, _context: &SensorContext, _out: &mut Vec<Fused>) {}
+    fn finish(&mut self, _log_time_ns: u64, _context: &SensorContext, _out: &mut Vec<Fused>) {}
+}
 
+impl EddyCurrentPipeline {
     fn topic(&self) -> String {
         self.settings.topic.clone()
     }

@@ -19,6 +19,7 @@
 pub mod adaptive_noise;
 pub mod error_learning;
 pub mod error_state;
+pub mod kind;
 pub mod planar_ins;
 pub mod quality_gate;
 pub mod settings;
@@ -39,6 +40,7 @@ use crate::base::PipelineBase;
 use crate::error::Result;
 use crate::filter::Innovation;
 use crate::fused::{measurement_record, Fused, PipelineCounts};
+use crate::kinds::MessagePipeline;
 use crate::measurement::SensorContext;
 use crate::noise::VarianceValue;
 use crate::prefilter::unscented::velocity_from_speed_and_course;
@@ -49,6 +51,7 @@ use error_learning::ErrorLearning;
 use error_state::{
     position_rows, velocity_rows, ErrorMeasurement, ErrorStateFilter, BA, BG, PSI, V,
 };
+pub use kind::Kind;
 use planar_ins::Navigation;
 use quality_gate::{GateTally, GateVerdict};
 pub use settings::GnssInsSettings;
@@ -157,22 +160,31 @@ impl GnssInsPipeline {
             settings,
         })
     }
+}
 
-    /// The gate's decisions so far.
-    pub fn gate_tally(&self) -> Option<GateTally> {
-        Some(self.gate)
+impl MessagePipeline for GnssInsPipeline {
+    fn counts(&self) -> &PipelineCounts {
+        &self.counts
+    }
+
+    fn report(&self) -> Option<String> {
+        let g = self.gate;
+        Some(format!(
+            "GNSS gate: {} fixes taken as the reference, {} pre-filtered, {} refused",
+            g.reference, g.pre_filtered, g.refused
+        ))
     }
 
     /// Sensor `sensor` is bound with this variance setting (the GNSS receiver's; the IMU's
     /// error model is `imu_noise`).
-    pub fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
+    fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
         if sensor == self.roles.gnss {
             self.gnss_variance = variance;
         }
     }
 
     /// One message of sensor `sensor`, received at `log_time_ns`.
-    pub fn push(
+    fn push(
         &mut self,
         sensor: usize,
         msg: &LogMessage<'_>,
@@ -193,7 +205,7 @@ impl GnssInsPipeline {
         Ok(())
     }
 
-    pub fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
+    fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
         self.release(u64::MAX, log_time_ns, context, out);
         // The model as it stands at the end, whatever the once-a-second clock says.
         let mut o = Out::default();
@@ -211,7 +223,9 @@ impl GnssInsPipeline {
             f
         }));
     }
+}
 
+impl GnssInsPipeline {
     /// The stamp of the last standstill sample (0 before any).
     fn standstill_end_ns(&self) -> u64 {
         self.standstill.last_ns().unwrap_or(0)

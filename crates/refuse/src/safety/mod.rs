@@ -23,6 +23,7 @@
 pub mod acceleration_input;
 pub mod diagnosis;
 pub mod divergence;
+pub mod kind;
 pub mod map_check;
 pub mod odometry_check;
 pub mod plane_filter;
@@ -45,6 +46,7 @@ use crate::base::PipelineBase;
 use crate::error::Result;
 use crate::filter::Innovation;
 use crate::fused::{Fused, PipelineCounts};
+use crate::kinds::MessagePipeline;
 use crate::measurement::SensorContext;
 use crate::model::{AccelerationInput, ConstantAcceleration};
 use crate::noise::VarianceValue;
@@ -52,6 +54,7 @@ use crate::reorder::ReorderQueue;
 use acceleration_input::AxleAcceleration;
 use diagnosis::{Diagnosis, FixVerdict};
 use divergence::{DivergenceTests, InnovationKind};
+pub use kind::Kind;
 use odometry_check::OdometryCheck;
 use plane_filter::{Axis, PlaneFilter, PlaneMotion};
 pub use settings::SafetySettings;
@@ -147,20 +150,21 @@ impl SafetyPipeline {
             counts: PipelineCounts::default(),
         })
     }
+}
 
-    /// S1 diagnoses the fixes itself; there is no quality gate to tally.
-    pub fn gate_tally(&self) -> Option<crate::gnss_ins::quality_gate::GateTally> {
-        None
+impl MessagePipeline for SafetyPipeline {
+    fn counts(&self) -> &PipelineCounts {
+        &self.counts
     }
 
     /// Sensor `sensor` is bound to its channel with this variance.
-    pub fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
+    fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
         self.variances[sensor] = variance;
     }
 
     /// One message of sensor `sensor`, received at `log_time_ns`; releases what the reorder
     /// window lets go. Returns an error only for a message that does not decode.
-    pub fn push(
+    fn push(
         &mut self,
         sensor: usize,
         msg: &LogMessage<'_>,
@@ -183,10 +187,12 @@ impl SafetyPipeline {
     }
 
     /// Releases everything still queued (the end of the log).
-    pub fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
+    fn finish(&mut self, log_time_ns: u64, context: &SensorContext, out: &mut Vec<Fused>) {
         self.release(u64::MAX, log_time_ns, context, out);
     }
+}
 
+impl SafetyPipeline {
     fn release(
         &mut self,
         up_to: u64,
