@@ -68,3 +68,28 @@ fn every_relative_link_names_a_file_that_exists_and_every_page_is_in_the_book() 
         }
     }
 }
+
+/// docs/config.md and docs/pipeline-config.schema.json are what the configuration types say
+/// now (`RAILFUSE_BLESS=1` rewrites them after a change to the types or their doc comments).
+#[test]
+fn the_configuration_reference_and_schema_are_generated_from_the_types() {
+    use railfuse_refuse::config_reference::{markdown, schema};
+    let registry = railfuse_refuse::registry::Registry::standard();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let json = serde_json::to_string_pretty(&schema(&registry)).unwrap() + "\n";
+    for (file, text) in [
+        ("docs/config.md", markdown(&registry)),
+        ("docs/pipeline-config.schema.json", json),
+    ] {
+        let path = root.join(file);
+        if std::env::var_os("RAILFUSE_BLESS").is_some() {
+            std::fs::write(&path, &text).unwrap();
+        }
+        let have = std::fs::read_to_string(&path).unwrap_or_default();
+        assert!(
+            have == text,
+            "{file} is not what the configuration types say: regenerate it with \
+             RAILFUSE_BLESS=1 cargo test --test docs"
+        );
+    }
+}

@@ -1059,3 +1059,22 @@ fn geodesy_agrees_with_pyproj_to_the_millimetre_over_100_km() {
         assert!(worst.as_f64().unwrap() < 1e-3, "{what}: {worst} m: {v}");
     }
 }
+
+/// The configuration schema (`refuse --config-schema`) checked by `jsonschema`: every sample
+/// configuration is valid, a misspelt key, a wrong type and an unknown setting are not.
+#[test]
+fn every_sample_configuration_is_valid_against_the_schema_jsonschema_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let schema = d.path().join("schema.json");
+    let out = ok(&["refuse", "--config-schema"]);
+    std::fs::write(&schema, &out.stdout).unwrap();
+    let samples = sample("");
+    let py = python("config_schema.py", &[s(&schema), s(&samples)]);
+    assert!(
+        py.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&py.stdout),
+        String::from_utf8_lossy(&py.stderr)
+    );
+    println!("{}", String::from_utf8_lossy(&py.stdout));
+}

@@ -4,6 +4,7 @@ use std::time::Instant;
 use anyhow::Result;
 use railfuse_catalog::topics;
 use railfuse_refuse::eval::EvalReport;
+use railfuse_refuse::registry::Registry;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 
@@ -17,7 +18,8 @@ use super::measure::{peak_rss_kib, RunStats};
 #[derive(clap::Args)]
 pub struct Args {
     /// The input MCAP log.
-    pub input: PathBuf,
+    #[arg(required_unless_present = "config_schema")]
+    pub input: Option<PathBuf>,
     /// Pipeline configuration (TOML); see samples/kalman.toml. Without one, a default
     /// pipeline is picked from what the log's topics decode to, and which topics it used and
     /// why it left the others out is printed.
@@ -33,8 +35,8 @@ pub struct Args {
     pub save_config: Option<PathBuf>,
     /// The output MCAP log: every input record plus the fused channels. May be the input
     /// itself: it is replaced only once the new file is complete.
-    #[arg(short, long)]
-    pub output: PathBuf,
+    #[arg(short, long, required_unless_present = "config_schema")]
+    pub output: Option<PathBuf>,
     /// Reference trajectory for the accuracy table (ground truth, another pipeline's state or
     /// a GNSS fix channel). Without it, the ground truth (`/truth`) where the log has one.
     #[arg(long)]
@@ -47,16 +49,28 @@ pub struct Args {
     /// A viewer that goes away is reported once; the re-fusion goes on.
     #[arg(long, value_name = "spawn|URL")]
     pub viz: Option<String>,
+    /// Print the JSON schema of the configuration file and exit: an editor that reads JSON
+    /// schemas for TOML (Taplo, Even Better TOML) then completes and checks a configuration.
+    #[arg(long, exclusive = true)]
+    pub config_schema: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
+    if a.config_schema {
+        let schema = railfuse_refuse::config_reference::schema(&Registry::standard());
+        println!("{}", serde_json::to_string_pretty(&schema)?);
+        return Ok(());
+    }
+    let (Some(input), Some(output)) = (a.input.as_deref(), a.output.as_deref()) else {
+        anyhow::bail!("refuse needs an input log and -o OUTPUT");
+    };
     if let Some(topic) = &a.reference {
-        super::eval::check_reference_in_log(&a.input, topic)?;
+        super::eval::check_reference_in_log(input, topic)?;
     }
     let reference = a.reference.as_deref().unwrap_or(topics::GROUND_TRUTH);
     let (config, source) = match &a.config {
         Some(path) => (Pipelines::load(path)?, path.display().to_string()),
-        None => default_pipeline(&a.input, a.track.as_deref(), a.save_config.as_deref())?,
+        None => default_pipeline(input, a.track.as_deref(), a.save_config.as_deref())?,
     };
     let live = match &a.viz {
         Some(target) => Some(LiveView::open(target)?),
@@ -64,8 +78,8 @@ pub fn run(a: Args) -> Result<()> {
     };
     let observer = live.as_ref().map(LiveView::observer);
     let (report, eval, stats) = refuse_with(
-        &a.input,
-        &a.output,
+        input,
+        output,
         &config,
         source,
         reference,
@@ -87,7 +101,7 @@ pub fn run(a: Args) -> Result<()> {
         print_counts(&report);
     }
     // The fused log is written; the table the user asked for could not be made.
-    super::eval::check_reference_used(&a.input, a.reference.as_deref(), &eval)
+    super::eval::check_reference_used(input, a.reference.as_deref(), &eval)
 }
 
 /// The default pipeline of a log given no configuration, with what it used and left out said

@@ -14,8 +14,9 @@
 //! `cargo run -p railfuse-estimation --example train_along_track` filters and RTS-smooths a
 //! simulated train with this crate alone.
 //!
-//! Dependencies: nalgebra and rand for the maths; serde only so that settings can be read from
-//! a configuration by the crates above.
+//! Dependencies: nalgebra and rand for the maths, tempfile for the RTS smoother's spill.
+//! Optional features: `serde`, so that settings can be read from a configuration by the
+//! crates above; `schema`, their JSON schema (schemars).
 
 pub mod filter;
 pub mod model;

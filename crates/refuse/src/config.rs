@@ -31,7 +31,7 @@ use crate::measurement::Quantity;
 use crate::model::{ConstantAcceleration, ConstantVelocity, MotionModel, ProcessNoise, Singer};
 pub use crate::noise::{FromMessage, Variance, VarianceValue};
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct PipelinesFile {
     /// The track for pipelines that work in chainage, where the log carries none (a ROS 2
@@ -39,6 +39,8 @@ pub struct PipelinesFile {
     /// configuration. A log's own `/track/map` wins.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub track: Option<PathBuf>,
+    /// The pipelines, each run over the same log in one pass.
+    #[schemars(with = "Vec<PipelineConfig>")]
     pub pipeline: Vec<Spanned<PipelineConfig>>,
 }
 
@@ -82,20 +84,27 @@ impl FilterKind {
     }
 }
 
-/// One `[[pipeline]]` table. A key that is none of these names a registered kind's settings
-/// table (`[pipeline.safety]`, …): kept as written in `sections`, and read by the kind the
-/// spec finds in its registry ([`crate::kinds`]).
-#[derive(Debug, Clone, PartialEq)]
+/// One pipeline: a named estimator, its motion model and its sensors. A kind that reads whole
+/// messages has its settings in a table of its own (`[pipeline.safety]`,
+/// `[pipeline.gnss_ins]`, `[pipeline.eddy_current]`).
+//
+// A key that is none of these fields names a registered kind's table: kept as written in
+// `sections` and read by the kind the spec finds in its registry (crate::kinds).
+#[derive(Debug, Clone, PartialEq, schemars::JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct PipelineConfig {
     /// Names the output channels `/fused/<name>/…`: letters, digits, `_` and `-`.
     pub name: String,
     /// `kalman`, `particle`, `federated_kalman`, `federated_particle`, or a registered kind
     /// (`ekf_safety`, `gnss_ins`, `eddy_current`).
+    #[schemars(with = "String")]
     pub filter: Spanned<String>,
     pub motion: MotionConfig,
+    #[schemars(default)]
     pub initial: InitialConfig,
     /// Measurements are released to the filter in sensor-time order once the replay is this
     /// far past them, so sensors with different latencies are fused in the right order.
+    #[schemars(default = "default_reorder_window_s")]
     pub reorder_window_s: f64,
     /// Fused states on a regular grid at this rate (predicted to each tick) instead of one
     /// state per accepted measurement.
@@ -107,12 +116,17 @@ pub struct PipelineConfig {
     /// used. 0 turns this off. Federated pipelines have their detector's `gate_failures`.
     pub gate_lockout: Option<u32>,
     /// Kalman pipelines: also write the fixed-interval RTS smoothed states.
+    #[schemars(default)]
     pub smoother: bool,
     pub particle: Option<ParticleSettings>,
+    /// Federated pipelines: the master filter's fusion, feedback, β tables and fault detector.
     pub federated: Option<FederatedConfig>,
     /// Registered kinds' settings tables by key (`safety`, `gnss_ins`, `eddy_current`), as
     /// written.
+    #[schemars(skip)]
     pub sections: BTreeMap<String, Spanned<toml::Value>>,
+    /// The channels it fuses, one table each.
+    #[schemars(with = "Vec<SensorConfig>")]
     pub sensor: Vec<Spanned<SensorConfig>>,
     /// What `railfuse tune` may change in this pipeline and what it minimises; refuse
     /// ignores it.
@@ -256,7 +270,7 @@ fn default_reorder_window_s() -> f64 {
 }
 
 /// The motion model and its noise: exactly one noise parameter, the one the model takes.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "model", rename_all = "snake_case", deny_unknown_fields)]
 pub enum MotionConfig {
     /// `[s, v]`, white acceleration of PSD `acceleration_psd` (m²/s³).
@@ -327,11 +341,13 @@ pub fn positive(what: &str, v: f64) -> Result<f64, String> {
 /// `acceleration_std_mps2`. With `chainage_m` (and `chainage_std_m`, default 0.01 m) it
 /// starts there at its first usable measurement of any kind; a pipeline none of whose sensors
 /// gives chainage (radar and odometers only) starts so at chainage 0: distance travelled.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct InitialConfig {
+    /// Start here, m, at the first usable measurement of any kind.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chainage_m: Option<f64>,
+    /// The spread of `chainage_m`, m (default 0.01).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub chainage_std_m: Option<f64>,
     pub speed_mps: f64,
@@ -353,7 +369,7 @@ impl Default for InitialConfig {
     }
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FederatedConfig {
     #[serde(default = "default_feedback")]
@@ -406,16 +422,17 @@ fn default_redistribution() -> Redistribution {
     Redistribution::Accuracy
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BandConfig {
+    /// The band holds speeds below this, km/h (the last band has none: every speed above).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub below_kmh: Option<f64>,
     /// β per device name.
     pub beta: BTreeMap<String, f64>,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SensorConfig {
     pub topic: String,
@@ -460,7 +477,7 @@ pub struct SensorConfig {
     pub required: bool,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ChainageBiasConfig {
     /// Stationary standard deviation, m.
@@ -469,7 +486,7 @@ pub struct ChainageBiasConfig {
     pub time_constant_s: f64,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AccelerationBiasConfig {
     /// Stationary standard deviation, m/s².
@@ -478,7 +495,7 @@ pub struct AccelerationBiasConfig {
     pub time_constant_s: f64,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScaleFactorConfig {
     /// Prior standard deviation (0.005 = 0.5 %).
@@ -504,7 +521,7 @@ pub struct ScaleFactorConfig {
 /// "motion.jerk_psd" = { min = 0.001, max = 10.0 }
 /// "sensor[/radar/speed].variance" = { min = 1e-4, max = 1.0 }
 /// ```
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TuneConfig {
     /// The reference topic (ground truth, an RTK GNSS channel, another pipeline's state or
@@ -535,7 +552,7 @@ pub struct TuneConfig {
 }
 
 /// What tuning minimises.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum ObjectiveKind {
     /// Weighted position and speed RMSE against the reference, pooled over the logs.
@@ -544,7 +561,7 @@ pub enum ObjectiveKind {
     Nll,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum OptimiserKind {
     Grid,
@@ -586,7 +603,7 @@ pub fn value_names<T: Serialize>(values: &[T]) -> Vec<String> {
 }
 
 /// Bounds of one tuned value, in its own units.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ParamBounds {
     pub min: f64,
@@ -600,7 +617,7 @@ pub struct ParamBounds {
     pub steps: Option<usize>,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Scale {
     Linear,

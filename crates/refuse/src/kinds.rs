@@ -68,6 +68,11 @@ pub trait PipelineKind: Send + Sync {
         pipeline: &PipelineConfig,
         settings: Option<toml::Value>,
     ) -> Result<Arc<dyn KindSpec>, String>;
+    /// The JSON schema of its settings table, for the configuration reference (by default:
+    /// any table).
+    fn settings_schema(&self, _g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({ "type": "object" })
+    }
 }
 
 /// A kind's validated settings: what its pipeline is built from.

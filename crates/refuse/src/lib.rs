@@ -9,6 +9,7 @@
 //!   detector per device;
 //! - [`measurement`]: sensor models, how each channel's messages become measurements;
 //! - [`config`]: the pipeline TOML as written;
+//! - [`config_reference`]: the configuration's JSON schema and reference page, from its types;
 //! - [`spec`]: the pipelines validated, and each sensor bound to its channel;
 //! - [`default_config`]: the pipeline a log given no configuration is re-fused with;
 //! - [`kinds`]: what a pipeline kind that reads whole messages gives the spec and the replay;
@@ -30,6 +31,7 @@
 pub mod accuracy;
 pub mod base;
 pub mod config;
+pub mod config_reference;
 pub mod default_config;
 pub mod eddy_current;
 pub mod error;

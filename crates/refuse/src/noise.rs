@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::measurement::Quantity;
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(
     untagged,
     expecting = "a variance (a number, SI units squared), \"message\", or a table of those per field"
@@ -20,7 +20,7 @@ pub enum Variance {
 }
 
 /// One field's variance.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(
     untagged,
     expecting = "a variance (a number, SI units squared) or \"message\""
@@ -30,7 +30,7 @@ pub enum VarianceValue {
     FromMessage(FromMessage),
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum FromMessage {
     Message,

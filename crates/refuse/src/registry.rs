@@ -41,6 +41,10 @@ impl Registry {
             .map(|k| &**k)
     }
 
+    pub fn kinds(&self) -> impl Iterator<Item = &dyn PipelineKind> + '_ {
+        self.kinds.iter().map(|k| &**k)
+    }
+
     pub fn names(&self) -> impl Iterator<Item = &'static str> + '_ {
         self.kinds.iter().map(|k| k.name())
     }

@@ -17,8 +17,10 @@ pub struct SharingTable {
 }
 
 /// How a failed device's share goes to the healthy ones.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum Redistribution {
     /// In equal parts.
     Even,
@@ -36,17 +38,19 @@ pub const SOURCE_000_DEVICES: [&str; 2] = ["loop", "radar"];
 pub const SOURCE_001_DEVICES: [&str; 3] = ["ins", "gnss", "radar"];
 
 /// A sharing table by name: `sharing = "…"` in a federated pipeline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
 pub enum SharingName {
     /// Equal shares, whatever the speed.
     #[default]
     Even,
     /// Source 000: α_loop 0.8 below 70 m/s, 0.5 above (devices loop, radar).
-    #[serde(rename = "source_000")]
+    #[cfg_attr(feature = "serde", serde(rename = "source_000"))]
     Source000,
     /// Source 001: β by speed band for devices ins, gnss, radar.
-    #[serde(rename = "source_001")]
+    #[cfg_attr(feature = "serde", serde(rename = "source_001"))]
     Source001,
 }
 

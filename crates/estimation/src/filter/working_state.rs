@@ -29,10 +29,10 @@
 //! can say who is right. `max_exclusion_s` then forces a cold restart after that long; it is
 //! off by default because a restart while the fault lasts lets the fault back in.
 
-use serde::{Deserialize, Serialize};
-
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields, default))]
 pub struct DetectorSettings {
     pub timeout_s: f64,
     pub stuck_messages: u32,

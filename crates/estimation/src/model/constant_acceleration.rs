@@ -1,10 +1,11 @@
 use nalgebra::{Matrix3, Vector3};
-use serde::{Deserialize, Serialize};
 
 use super::TransitionModel;
 
 /// How the jerk that drives the constant-acceleration model is modelled.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub enum ProcessNoise {
     /// Continuous white jerk of power spectral density `q` (m²/s⁵):
     ///

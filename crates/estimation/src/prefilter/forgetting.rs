@@ -20,10 +20,10 @@
 //! variance stands in for the noise power and the ratio that carries the information is the
 //! error against its expected variance, `rᵢ`.
 
-use serde::{Deserialize, Serialize};
-
 /// `λ(r̄) = floor + (ceiling − floor) · exp(−ρ · max(0, r̄ − 1))`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
 pub struct ForgettingModel {
     pub floor: f64,
     pub ceiling: f64,

@@ -20,23 +20,28 @@ pub mod pu_rls;
 pub mod rls;
 pub mod unscented;
 
-use serde::{Deserialize, Serialize};
-
 use forgetting::{ErrorLevel, ForgettingModel};
 use pu_rls::{PuRls, PuRlsSettings};
 use rls::LocalTrend;
 
 /// A channel's pre-filter, as configured.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
-#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+#[cfg_attr(
+    feature = "serde",
+    serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)
+)]
 pub enum PreFilterSettings {
     /// The samples as they are.
     #[default]
     None,
     /// RLS with a fixed forgetting factor.
     Rls {
+        /// The forgetting factor λ, in (0, 1].
         lambda: f64,
-        #[serde(default = "default_delta")]
+        /// The start covariance's scale δ (P₀ = I/δ).
+        #[cfg_attr(feature = "serde", serde(default = "default_delta"))]
         delta: f64,
     },
     /// RLS with λ from the recent errors ([`forgetting`]), fixed parameters.
@@ -45,13 +50,16 @@ pub enum PreFilterSettings {
     PuRls(PuRlsSettings),
 }
 
+#[cfg(feature = "serde")]
 fn default_delta() -> f64 {
     1e-2
 }
 
 /// Adaptive RLS: the forgetting model's parameters, `r̄`'s memory (samples) and `δ`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields, default))]
 pub struct AdaptiveRlsSettings {
     pub floor: f64,
     pub ceiling: f64,
@@ -312,6 +320,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(feature = "serde")]
     fn bad_settings_are_refused_with_the_field() {
         let bad = PreFilterSettings::Rls {
             lambda: 1.2,

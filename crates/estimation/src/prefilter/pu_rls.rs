@@ -25,15 +25,15 @@
 
 use std::collections::VecDeque;
 
-use serde::{Deserialize, Serialize};
-
 use super::forgetting::{ErrorLevel, ForgettingModel};
 use super::pso::Swarm;
 use super::rls::{LocalTrend, TrendStep};
 
 /// PU-RLS's settings.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields, default))]
 pub struct PuRlsSettings {
     /// The model's fixed ceiling: the longest memory (`1 / (1 − λ)` samples).
     pub ceiling: f64,

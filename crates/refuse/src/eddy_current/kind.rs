@@ -31,6 +31,9 @@ impl PipelineKind for Kind {
     fn section(&self) -> &'static str {
         "eddy_current"
     }
+    fn settings_schema(&self, g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        g.subschema_for::<EddyCurrentSettings>()
+    }
     fn spec(
         &self,
         c: &PipelineConfig,

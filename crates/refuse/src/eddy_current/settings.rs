@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use super::speed::CorrelatorKind;
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EddyCurrentSettings {
     /// The sensor pair's topic (one of the pipeline's sensors).

@@ -9,7 +9,7 @@ use super::front_end::{FrontEnd, LEVELS, WINDOW};
 use super::warping::WarpSearch;
 
 /// Which correlator finds the delay.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum CorrelatorKind {
     /// The global maximum over every lag, each window afresh.

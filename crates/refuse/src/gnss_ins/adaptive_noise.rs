@@ -21,7 +21,7 @@ use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
 /// `[pipeline.gnss_ins.adaptive]`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct AdaptiveNoiseSettings {
     /// Innovations averaged: 50 (5 s of 10 Hz fixes) gives the scale a spread of about 20 %,

@@ -23,7 +23,7 @@ use railfuse_catalog::messages::ImuErrorModel;
 use serde::{Deserialize, Serialize};
 
 /// `[pipeline.gnss_ins.learning]`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct LearningSettings {
     pub enabled: bool,

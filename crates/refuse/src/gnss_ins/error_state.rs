@@ -30,7 +30,7 @@ pub const BA: usize = 4;
 pub const BG: usize = 5;
 
 /// The IMU's error model (`[pipeline.gnss_ins.imu]`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ImuNoise {
     /// Accelerometer white noise density, m/s²/√Hz (velocity random walk).

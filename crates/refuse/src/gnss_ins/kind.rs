@@ -29,6 +29,9 @@ impl PipelineKind for Kind {
     fn section(&self) -> &'static str {
         "gnss_ins"
     }
+    fn settings_schema(&self, g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        g.subschema_for::<GnssInsSettings>()
+    }
     fn spec(
         &self,
         c: &PipelineConfig,

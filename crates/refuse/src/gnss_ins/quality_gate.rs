@@ -10,7 +10,7 @@ use railfuse_catalog::messages::{FixType, GnssFix};
 use serde::{Deserialize, Serialize};
 
 /// The gate's thresholds (`[pipeline.gnss_ins.gate]`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct GateSettings {
     /// Fewer satellites than this: not fused (the source: 4, the least a position needs).

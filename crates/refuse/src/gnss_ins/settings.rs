@@ -12,7 +12,7 @@ use crate::prefilter::PreFilterSettings;
 /// The pre-filter of each channel pair (`[pipeline.gnss_ins.prefilter]`): the GNSS east and
 /// north position, its east and north velocity, and the IMU's forward specific force and yaw
 /// rate (the source's Filter2), each axis a filter of its own.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct PreFilters {
     pub position: PreFilterSettings,
@@ -20,7 +20,7 @@ pub struct PreFilters {
     pub imu: PreFilterSettings,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct GnssInsSettings {
     /// The GNSS receiver's topic and the IMU's (each one of the pipeline's sensors).

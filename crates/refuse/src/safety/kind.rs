@@ -32,6 +32,9 @@ impl PipelineKind for Kind {
     fn section(&self) -> &'static str {
         "safety"
     }
+    fn settings_schema(&self, g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        g.subschema_for::<SafetySettings>()
+    }
     fn spec(
         &self,
         c: &PipelineConfig,

@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 /// containment target of 99.99 % when σ is honest.
 pub const ETA_9999: f64 = 3.8906;
 
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetySettings {
     /// The GNSS receiver's topic (one of the pipeline's sensors).
@@ -123,7 +123,7 @@ pub struct SafetySettings {
 }
 
 /// A first-order Gauss–Markov sensor error.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BiasSettings {
     pub std: f64,

@@ -26,8 +26,10 @@ use super::{symmetric, EstimatorDiagnostics, Innovation, LocalFilter, StateAndCo
 use crate::model::TransitionModel;
 
 /// A particle filter's settings: the `[pipeline.particle]` table as written.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(deny_unknown_fields, default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "schema", derive(schemars::JsonSchema))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields, default))]
 pub struct ParticleSettings {
     pub particles: usize,
     pub resampling: Resampling,
