@@ -391,7 +391,30 @@ impl EddyCurrentPipeline {
 
     /// One correlation window ending at `t`: a measurement, the filter, a state.
     fn window(&mut self, t: u64, map: Option<&TrackMap>, o: &mut Vec<Fused>) {
-        // What the last measurement says now; nothing when it is too old to go by.
+        let (q, prior) = self.request(t);
+        let (outcome, start) = match self.departing(t, &q) {
+            Some(o) => o,
+            None => {
+                let front = self.front.as_ref().expect("running");
+                (self.estimator.measure(front, &q), None)
+            }
+        };
+        self.schedule(t, map, &outcome, start.is_some(), prior);
+        let diag = EddyCurrentDiagnostics {
+            sleepers_a: self.counters[0].sleepers,
+            sleepers_b: self.counters[1].sleepers,
+            ..Default::default()
+        };
+        match outcome {
+            Outcome::Moving(m) => self.moving(t, m, start, diag, o),
+            Outcome::Standstill { stamp_ns } => self.standstill(t, stamp_ns, diag, o),
+            Outcome::NoLock { stamp_ns, best_rho } => self.no_lock(t, stamp_ns, best_rho, diag, o),
+        }
+    }
+
+    /// What the correlator is asked, with the speed the last measurement says now (nothing
+    /// when it is too old to go by).
+    fn request(&self, t: u64) -> (Request, Option<f64>) {
         let fresh = self
             .last_measured_ns
             .is_some_and(|m| t.saturating_sub(m) < PRIOR_FOR_NS);
@@ -411,18 +434,22 @@ impl EddyCurrentPipeline {
             min_rho: self.settings.min_rho,
             standstill_factor: self.settings.standstill_factor,
         };
-        let (outcome, start) = match self.departing(t, &q) {
-            Some(o) => o,
-            None => {
-                let front = self.front.as_ref().expect("running");
-                (self.estimator.measure(front, &q), None)
-            }
-        };
+        (q, prior)
+    }
+
+    /// The next window: a quarter of this one's span later, at least 0.1 s (a start's fits
+    /// every 0.1 s); and the band-pass tuned to the speed and the sleeper spacing here.
+    fn schedule(
+        &mut self,
+        t: u64,
+        map: Option<&TrackMap>,
+        outcome: &Outcome,
+        starting: bool,
+        prior: Option<f64>,
+    ) {
         let front = self.front.as_ref().expect("running");
-        // The next window: a quarter of this one's span later, at least 0.1 s (a start's
-        // fits every 0.1 s).
         let level = match outcome {
-            _ if self.departure.is_some() || start.is_some() => 0,
+            _ if self.departure.is_some() || starting => 0,
             Outcome::Moving(m) => m.level,
             _ => prior.map_or(0, |v| SpeedEstimator::level_for(front, self.spacing_d, v)),
         };
@@ -437,135 +464,154 @@ impl EddyCurrentPipeline {
         if let Some(f) = self.front.as_mut() {
             f.tune(speed_for_band, spacing);
         }
-        let mut diag = EddyCurrentDiagnostics {
-            sleepers_a: self.counters[0].sleepers,
-            sleepers_b: self.counters[1].sleepers,
-            ..Default::default()
+    }
+
+    /// A window the correlator measured.
+    fn moving(
+        &mut self,
+        t: u64,
+        m: SpeedMeasurement,
+        start: Option<Moved>,
+        mut diag: EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        self.standing = false;
+        self.last_measured_ns = Some(t);
+        diag.window = match start {
+            Some(_) => "moving_off".into(),
+            None => "moving".into(),
         };
-        match outcome {
-            Outcome::Moving(m) => {
-                self.standing = false;
-                self.last_measured_ns = Some(t);
-                diag.window = match start {
-                    Some(_) => "moving_off".into(),
-                    None => "moving".into(),
-                };
+        if let Some(s) = &start {
+            self.started(s);
+        }
+        diag.rho = Some(m.rho);
+        diag.unwarped_rho = m.unwarped_rho;
+        diag.warp_k = m.warp_k;
+        diag.warp_acceleration_mps2 = m.acceleration.map(|a| a.0);
+        diag.delay_s = Some(m.lag / self.front.as_ref().map_or(1.0, |f| f.rate(m.level)));
+        diag.level = Some(m.level as u32);
+        match self.settings.kalman {
+            true => {
+                self.filter_moving(&m, &mut diag, o);
                 if let Some(s) = &start {
-                    self.started(s);
-                }
-                diag.rho = Some(m.rho);
-                diag.unwarped_rho = m.unwarped_rho;
-                diag.warp_k = m.warp_k;
-                diag.warp_acceleration_mps2 = m.acceleration.map(|a| a.0);
-                diag.delay_s = Some(m.lag / self.front.as_ref().map_or(1.0, |f| f.rate(m.level)));
-                diag.level = Some(m.level as u32);
-                match self.settings.kalman {
-                    true => {
-                        self.filter_moving(&m, &mut diag, o);
-                        if let Some(s) = &start {
-                            self.start_chainage(s);
-                        }
-                    }
-                    false => {
-                        self.held = Some(m);
-                        self.state_of_measurement(m.stamp_ns, o);
-                        self.record(
-                            m.stamp_ns,
-                            Some(m.speed_mps),
-                            Some(m.speed_variance),
-                            None,
-                            GateDecision::Accepted,
-                            None,
-                            diag,
-                            o,
-                        );
-                    }
+                    self.start_chainage(s);
                 }
             }
-            Outcome::Standstill { stamp_ns } => {
-                self.last_measured_ns = Some(t);
-                self.last_standstill_ns = Some(t);
-                self.standing = true;
-                diag.window = "standstill".into();
-                if self.settings.kalman {
-                    let i = self.filter_standstill(stamp_ns);
-                    self.record(
-                        stamp_ns,
-                        Some(0.0),
-                        Some(STANDSTILL_SPEED_STD_MPS.powi(2)),
-                        i,
-                        GateDecision::Accepted,
-                        Some("standstill: as quiet as the noise floor"),
-                        diag,
-                        o,
-                    );
-                    self.filter_state(o);
-                } else {
-                    self.held = Some(SpeedMeasurement {
-                        stamp_ns,
-                        speed_mps: 0.0,
-                        speed_variance: STANDSTILL_SPEED_STD_MPS.powi(2),
-                        acceleration: Some((0.0, STANDSTILL_ACCELERATION_STD_MPS2.powi(2))),
-                        rho: 0.0,
-                        warp_k: None,
-                        unwarped_rho: None,
-                        level: 0,
-                        lag: 0.0,
-                        acquired: false,
-                    });
-                    self.state_of_measurement(stamp_ns, o);
-                    self.record(
-                        stamp_ns,
-                        Some(0.0),
-                        None,
-                        None,
-                        GateDecision::Accepted,
-                        Some("standstill: as quiet as the noise floor"),
-                        diag,
-                        o,
-                    );
-                }
-            }
-            Outcome::NoLock { stamp_ns, best_rho } => {
-                diag.window = "no_lock".into();
-                diag.rho = Some(best_rho);
-                let why = match self.departure.is_some() {
-                    true => format!(
-                        "moving off: no start fitted yet (the trailing sensor must pass track the leading one saw moving; best ρ {best_rho:.2})"
-                    ),
-                    false => format!(
-                        "no correlation peak of ρ ≥ {} over enough track (best ρ {best_rho:.2})",
-                        self.settings.min_rho
-                    ),
-                };
+            false => {
+                self.held = Some(m);
+                self.state_of_measurement(m.stamp_ns, o);
                 self.record(
-                    stamp_ns,
+                    m.stamp_ns,
+                    Some(m.speed_mps),
+                    Some(m.speed_variance),
                     None,
+                    GateDecision::Accepted,
                     None,
-                    None,
-                    GateDecision::RejectedInvalid,
-                    Some(&why),
                     diag,
                     o,
                 );
-                // The filter predicts on; the filterless variants hold their last value.
-                match self.settings.kalman {
-                    true => {
-                        // Long without a measurement: the filter knows nothing any more.
-                        if self
-                            .last_measured_ns
-                            .is_none_or(|m| t.saturating_sub(m) > FORGET_AFTER_NS)
-                        {
-                            self.kf = None;
-                        }
-                        self.advance(stamp_ns, false);
-                        self.filter_state(o);
-                    }
-                    false => {
-                        if self.held.is_some() {
-                            self.state_of_measurement(stamp_ns, o);
-                        }
-                    }
+            }
+        }
+    }
+
+    /// A window as quiet as the noise floor: the train stands.
+    fn standstill(
+        &mut self,
+        t: u64,
+        stamp_ns: u64,
+        mut diag: EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        self.last_measured_ns = Some(t);
+        self.last_standstill_ns = Some(t);
+        self.standing = true;
+        diag.window = "standstill".into();
+        if self.settings.kalman {
+            let i = self.filter_standstill(stamp_ns);
+            self.record(
+                stamp_ns,
+                Some(0.0),
+                Some(STANDSTILL_SPEED_STD_MPS.powi(2)),
+                i,
+                GateDecision::Accepted,
+                Some("standstill: as quiet as the noise floor"),
+                diag,
+                o,
+            );
+            self.filter_state(o);
+        } else {
+            self.held = Some(SpeedMeasurement {
+                stamp_ns,
+                speed_mps: 0.0,
+                speed_variance: STANDSTILL_SPEED_STD_MPS.powi(2),
+                acceleration: Some((0.0, STANDSTILL_ACCELERATION_STD_MPS2.powi(2))),
+                rho: 0.0,
+                warp_k: None,
+                unwarped_rho: None,
+                level: 0,
+                lag: 0.0,
+                acquired: false,
+            });
+            self.state_of_measurement(stamp_ns, o);
+            self.record(
+                stamp_ns,
+                Some(0.0),
+                None,
+                None,
+                GateDecision::Accepted,
+                Some("standstill: as quiet as the noise floor"),
+                diag,
+                o,
+            );
+        }
+    }
+
+    /// A window without a measurement: the filter predicts on, the filterless variants hold.
+    fn no_lock(
+        &mut self,
+        t: u64,
+        stamp_ns: u64,
+        best_rho: f64,
+        mut diag: EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        diag.window = "no_lock".into();
+        diag.rho = Some(best_rho);
+        let why = match self.departure.is_some() {
+            true => format!(
+                "moving off: no start fitted yet (the trailing sensor must pass track the leading one saw moving; best ρ {best_rho:.2})"
+            ),
+            false => format!(
+                "no correlation peak of ρ ≥ {} over enough track (best ρ {best_rho:.2})",
+                self.settings.min_rho
+            ),
+        };
+        self.record(
+            stamp_ns,
+            None,
+            None,
+            None,
+            GateDecision::RejectedInvalid,
+            Some(&why),
+            diag,
+            o,
+        );
+        // The filter predicts on; the filterless variants hold their last value.
+        match self.settings.kalman {
+            true => {
+                // Long without a measurement: the filter knows nothing any more.
+                if self
+                    .last_measured_ns
+                    .is_none_or(|m| t.saturating_sub(m) > FORGET_AFTER_NS)
+                {
+                    self.kf = None;
+                }
+                self.advance(stamp_ns, false);
+                self.filter_state(o);
+            }
+            false => {
+                if self.held.is_some() {
+                    self.state_of_measurement(stamp_ns, o);
                 }
             }
         }

@@ -58,11 +58,59 @@ pub fn page(a: &Args) -> PathBuf {
     a.output.clone().unwrap_or_else(|| default.into())
 }
 
+/// Runs an experiment of `runs` runs (`run` is told each run done) under a progress bar.
+pub fn with_progress<T, E: Into<anyhow::Error>>(
+    what: &str,
+    runs: u64,
+    run: impl FnOnce(&dyn Fn(u64)) -> std::result::Result<T, E>,
+) -> Result<T> {
+    let bar = crate::progress::Progress::steps(what, runs);
+    let out = run(&|done| bar.set(done)).map_err(Into::into)?;
+    bar.finish();
+    Ok(out)
+}
+
 /// Writes the page and prints it.
-pub fn write_table(a: &Args, md: &str) -> Result<()> {
+pub fn write_page(a: &Args, md: &str) -> Result<()> {
     let output = page(a);
     std::fs::write(&output, md).with_context(|| format!("{}: cannot write", output.display()))?;
     print!("{md}");
     crate::say!("-> {}", output.display());
     Ok(())
+}
+
+/// A page's text with `{{name}}` holes, filled from the results: the prose lives in the
+/// page's template (`pages/*.md`), the figures in the tables and values set here.
+pub struct Template {
+    text: &'static str,
+    values: Vec<(&'static str, String)>,
+}
+
+impl Template {
+    pub fn new(text: &'static str) -> Self {
+        Self {
+            text,
+            values: Vec::new(),
+        }
+    }
+
+    pub fn set(mut self, name: &'static str, value: impl std::fmt::Display) -> Self {
+        self.values.push((name, value.to_string()));
+        self
+    }
+
+    /// The page; every hole filled and every value used, or which is not.
+    pub fn render(self) -> Result<String> {
+        let mut out = self.text.to_owned();
+        for (name, value) in &self.values {
+            let hole = format!("{{{{{name}}}}}");
+            anyhow::ensure!(out.contains(&hole), "page template has no {hole}");
+            out = out.replace(&hole, value);
+        }
+        if let Some(i) = out.find("{{") {
+            let hole: String = out[i..].chars().take_while(|c| *c != '}').collect();
+            anyhow::bail!("page template: {hole}}}}} is not filled");
+        }
+        Ok(out)
+    }
 }
