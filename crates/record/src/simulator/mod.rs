@@ -239,8 +239,79 @@ fn simulate_line(
     let map = &track.map;
     let mut log = SimLog::create(out, scenario, seed, faults)?;
     log.fault_specs = faults.to_vec();
-    // The published map: the true one, or as a site's surveyors drew it, with any stretch a
-    // `map:offset` fault shifts.
+    let published = published_map(p, map, faults, seed);
+    log.write(topics::TRACK_MAP, start, published.as_ref().unwrap_or(map))?;
+    let mut driver = Driver::new(
+        p.driver.clone(),
+        map.stations.iter().map(|s| s.chainage_m).collect(),
+    );
+    let mut sensors = line_sensors(p, map, seed, start);
+    let mut surroundings = Surroundings::new(p, map);
+    let mut truth_schedule = Schedule::new(start, p.truth_rate_hz);
+    let mut outbox = Outbox::default();
+    let step_ns: u64 = 1_000_000;
+    let dt = step_ns as f64 / 1e9;
+    let limit_ns = duration_s.map(|d| start + seconds(d));
+    let mut t_ns = start;
+    loop {
+        let t = (t_ns - start) as f64 / 1e9;
+        match driver.step(t, dt) {
+            Some(DriverEvent::Arrived(i)) => outbox.push(
+                t_ns,
+                event(
+                    t_ns,
+                    EventKind::StationArrival,
+                    map.stations[i].name.clone(),
+                ),
+            ),
+            Some(DriverEvent::Departed(i)) => outbox.push(
+                t_ns,
+                event(
+                    t_ns,
+                    EventKind::StationDeparture,
+                    map.stations[i].name.clone(),
+                ),
+            ),
+            None => {}
+        }
+        let world = surroundings.world(&track, &driver, t_ns, t, dt, &mut outbox);
+        for s in &mut sensors {
+            s.step(&world, &mut outbox);
+        }
+        if truth_schedule.due(t_ns) {
+            outbox.push(t_ns, Emit::Truth(truth(&world, &map.origin)));
+        }
+        while let Some((log_time, emit)) = outbox.pop_due(t_ns) {
+            log.write_emit(log_time, emit)?;
+        }
+        let finished = driver.phase == Phase::Finished;
+        if finished || limit_ns.is_some_and(|l| t_ns >= l) {
+            break;
+        }
+        t_ns += step_ns;
+    }
+    while let Some((log_time, emit)) = outbox.pop_due(u64::MAX) {
+        log.write_emit(log_time, emit)?;
+    }
+    log.finish(scenario, map, (t_ns - start) as f64 / 1e9)
+}
+
+fn event(stamp_ns: u64, kind: EventKind, text: String) -> Emit {
+    Emit::Event(Event {
+        stamp_ns,
+        kind,
+        text,
+    })
+}
+
+/// The map the log publishes: the true one, or as a site's surveyors drew it, with any
+/// stretch a `map:offset` fault shifts. `None`: the true one.
+fn published_map(
+    p: &LineScenario,
+    map: &TrackMap,
+    faults: &[FaultSpec],
+    seed: u64,
+) -> Option<TrackMap> {
     let mut published = p
         .site
         .as_ref()
@@ -250,13 +321,16 @@ fn simulate_line(
         let base = published.as_ref().unwrap_or(map);
         published = Some(site::with_offsets(base, &offsets, 10.0));
     }
-    log.write(topics::TRACK_MAP, start, published.as_ref().unwrap_or(map))?;
-    let station_chainages: Vec<f64> = map.stations.iter().map(|s| s.chainage_m).collect();
+    published
+}
 
-    let mut driver = Driver::new(
-        p.driver.clone(),
-        map.stations.iter().map(|s| s.chainage_m).collect(),
-    );
+/// Every sensor the line scenario has, each with its own random stream.
+fn line_sensors(
+    p: &LineScenario,
+    map: &TrackMap,
+    seed: u64,
+    start: u64,
+) -> Vec<Box<dyn SimSensor>> {
     let mut sensors: Vec<Box<dyn SimSensor>> = vec![
         Box::new(Gnss::new(
             p.gnss.clone(),
@@ -294,67 +368,70 @@ fn simulate_line(
             rng_stream(seed, 10 + i as u64),
         )));
     }
-    let mut truth_schedule = Schedule::new(start, p.truth_rate_hz);
-    let mut outbox = Outbox::default();
-    let step_ns: u64 = 1_000_000;
-    let dt = step_ns as f64 / 1e9;
-    let limit_ns = duration_s.map(|d| start + seconds(d));
-    let mut tunnel_name: Option<String> = None;
-    let mut had_corrections = true;
-    let mut t_ns = start;
-    loop {
-        let t = (t_ns - start) as f64 / 1e9;
-        let event = |kind, text: String| {
-            Emit::Event(Event {
-                stamp_ns: t_ns,
-                kind,
-                text,
-            })
-        };
-        match driver.step(t, dt) {
-            Some(DriverEvent::Arrived(i)) => outbox.push(
-                t_ns,
-                event(EventKind::StationArrival, map.stations[i].name.clone()),
-            ),
-            Some(DriverEvent::Departed(i)) => outbox.push(
-                t_ns,
-                event(EventKind::StationDeparture, map.stations[i].name.clone()),
-            ),
-            None => {}
+    sensors
+}
+
+/// What the train passes through (tunnels, cuttings, multipath, correction outages): the
+/// world the sensors see at each step, and the events of entering and leaving it.
+struct Surroundings<'a> {
+    p: &'a LineScenario,
+    station_chainages: Vec<f64>,
+    tunnel: Option<String>,
+    corrections: bool,
+}
+
+impl<'a> Surroundings<'a> {
+    fn new(p: &'a LineScenario, map: &TrackMap) -> Self {
+        Self {
+            p,
+            station_chainages: map.stations.iter().map(|s| s.chainage_m).collect(),
+            tunnel: None,
+            corrections: true,
         }
+    }
+
+    fn world(
+        &mut self,
+        track: &Track,
+        driver: &Driver,
+        t_ns: u64,
+        t: f64,
+        dt: f64,
+        outbox: &mut Outbox,
+    ) -> World {
+        let (p, map) = (self.p, &track.map);
         let (east_m, north_m, heading_rad) =
             map.locate(driver.s).expect("a built track has vertices");
-        match (map.in_tunnel(driver.s), &tunnel_name) {
-            (Some(t), None) => {
-                outbox.push(t_ns, event(EventKind::TunnelEntry, t.name.clone()));
-                tunnel_name = Some(t.name.clone());
+        match (map.in_tunnel(driver.s), &self.tunnel) {
+            (Some(tunnel), None) => {
+                outbox.push(
+                    t_ns,
+                    event(t_ns, EventKind::TunnelEntry, tunnel.name.clone()),
+                );
+                self.tunnel = Some(tunnel.name.clone());
             }
             (None, Some(name)) => {
-                outbox.push(t_ns, event(EventKind::TunnelExit, name.clone()));
-                tunnel_name = None;
+                outbox.push(t_ns, event(t_ns, EventKind::TunnelExit, name.clone()));
+                self.tunnel = None;
             }
             _ => {}
         }
         let site = p
             .site
             .as_ref()
-            .map(|site| site.at(driver.s, &station_chainages))
+            .map(|site| site.at(driver.s, &self.station_chainages))
             .unwrap_or_default();
-        let corrections = !site.in_cutting
-            && !p
-                .correction_outages_s
-                .iter()
-                .any(|&(a, len)| t >= a && t < a + len);
-        if corrections != had_corrections {
-            let kind = if corrections {
-                EventKind::CorrectionLinkUp
-            } else {
-                EventKind::CorrectionLinkDown
+        let within = |spans: &[(f64, f64)]| spans.iter().any(|&(a, len)| t >= a && t < a + len);
+        let corrections = !site.in_cutting && !within(&p.correction_outages_s);
+        if corrections != self.corrections {
+            let kind = match corrections {
+                true => EventKind::CorrectionLinkUp,
+                false => EventKind::CorrectionLinkDown,
             };
-            outbox.push(t_ns, event(kind, "RTCM corrections".into()));
-            had_corrections = corrections;
+            outbox.push(t_ns, event(t_ns, kind, "RTCM corrections".into()));
+            self.corrections = corrections;
         }
-        let world = World {
+        World {
             t_ns,
             dt,
             chainage_m: driver.s,
@@ -364,38 +441,17 @@ fn simulate_line(
             north_m,
             heading_rad,
             curvature: track.curvature(driver.s),
-            in_tunnel: tunnel_name.is_some(),
+            in_tunnel: self.tunnel.is_some(),
             corrections,
-            gnss_outage: p
-                .gnss_outages_s
-                .iter()
-                .any(|&(a, len)| t >= a && t < a + len),
+            gnss_outage: within(&p.gnss_outages_s),
             sky_view: site.sky_view,
             // Left of heading h (clockwise from north) is (−cos h, sin h).
             gnss_multipath: (
                 -site.multipath_left_m * heading_rad.cos(),
                 site.multipath_left_m * heading_rad.sin(),
             ),
-        };
-        for s in &mut sensors {
-            s.step(&world, &mut outbox);
         }
-        if truth_schedule.due(t_ns) {
-            outbox.push(t_ns, Emit::Truth(truth(&world, &map.origin)));
-        }
-        while let Some((log_time, emit)) = outbox.pop_due(t_ns) {
-            log.write_emit(log_time, emit)?;
-        }
-        let finished = driver.phase == Phase::Finished;
-        if finished || limit_ns.is_some_and(|l| t_ns >= l) {
-            break;
-        }
-        t_ns += step_ns;
     }
-    while let Some((log_time, emit)) = outbox.pop_due(u64::MAX) {
-        log.write_emit(log_time, emit)?;
-    }
-    log.finish(scenario, map, (t_ns - start) as f64 / 1e9)
 }
 
 /// The chainage stretches `map:offset` faults shift, with their offsets: where the train is
