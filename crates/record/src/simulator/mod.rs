@@ -26,7 +26,6 @@ pub use track::{Segment, TrackParams};
 
 use driver::{Driver, DriverEvent, Phase};
 use faults::FaultInjector;
-use seed000::{JerkStep, Seed000Params};
 use sensors::{
     balise::BaliseReader, eddy_current::EddyCurrentSensor, gnss::Gnss, imu::ImuSensor,
     induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream,
@@ -213,7 +212,7 @@ pub fn simulate(
         | Scenario::Seed003(p)
         | Scenario::Seed004(p) => simulate_line(scenario, p, seed, duration_s, faults, out),
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
-            simulate_seed000(scenario, p, seed, duration_s, out)
+            seed000::simulate(scenario, p, seed, duration_s, out)
         }
     }
 }
@@ -507,179 +506,4 @@ fn truth(w: &World, origin: &GeodeticOrigin) -> GroundTruth {
         longitude_deg: lon,
         heading_rad: w.heading_rad,
     }
-}
-
-fn simulate_seed000(
-    scenario: &Scenario,
-    p: &Seed000Params,
-    seed: u64,
-    duration_s: Option<f64>,
-    out: &Path,
-) -> railfuse_catalog::Result<SimulationReport> {
-    use sensors::gauss;
-    let start = SIMULATED_START_NS;
-    let duration = duration_s.unwrap_or(p.duration_s);
-    let period = p.sample_period_s;
-    let steps = (duration / period).round() as u64;
-    // A straight guideway long enough for the run, due east.
-    let v_end = p.initial_speed_mps + p.initial_acceleration_mps2 * duration;
-    let length = (p.initial_speed_mps + v_end) / 2.0 * duration * 1.2 + 1000.0;
-    let origin = GeodeticOrigin {
-        latitude_deg: 31.19,
-        longitude_deg: 121.34,
-        altitude_m: 5.0,
-    };
-    let n_balises = (length / p.balise_spacing_m) as usize;
-    let map = TrackMap {
-        stamp_ns: start,
-        name: "maglev guideway (source 000 simulation)".into(),
-        origin,
-        vertices: vec![
-            TrackVertex {
-                chainage_m: 0.0,
-                east_m: 0.0,
-                north_m: 0.0,
-            },
-            TrackVertex {
-                chainage_m: length,
-                east_m: length,
-                north_m: 0.0,
-            },
-        ],
-        balises: (1..=n_balises)
-            .map(|k| TrackBalise {
-                balise_id: format!("BG{k:04}"),
-                chainage_m: k as f64 * p.balise_spacing_m,
-            })
-            .collect(),
-        tunnels: vec![],
-        stations: vec![],
-        sleeper_spacing_m: 1.032,
-        loop_crossing_spacing_m: None,
-        other_tracks: Vec::new(),
-        sleeper_sections: Vec::new(),
-        switches: Vec::new(),
-    };
-    let mut log = SimLog::create(out, scenario, seed, &[])?;
-    log.write(topics::TRACK_MAP, start, &map)?;
-    let mut process = rng_stream(seed, 0);
-    let mut loop_rng = rng_stream(seed, 1);
-    let mut radar_rng = rng_stream(seed, 2);
-    let mut drift_rng = rng_stream(seed, 3);
-    // The loop's accumulated along-track error (module doc of `seed000`).
-    let mut loop_error = 0.0;
-    let mut last_s = 0.0;
-    let (loop_sigma, radar_sigma) = (p.loop_variance_m2.sqrt(), p.radar_variance_m2ps2.sqrt());
-    let truth_per_step = (p.truth_rate_hz * period).round().max(1.0) as u64;
-    let mut x = JerkStep {
-        s: 0.0,
-        v: p.initial_speed_mps,
-        a: p.initial_acceleration_mps2,
-        jerk: 0.0,
-    };
-    let mut next_balise = 0;
-    let stamp = |k: u64, tau: f64| start + seconds(k as f64 * period + tau);
-    for k in 0..=steps {
-        // Measurements at the sample instant k.
-        let t_ns = stamp(k, 0.0);
-        if p.loop_drift_m_per_sqrt_km > 0.0 {
-            let step_sigma = p.loop_drift_m_per_sqrt_km * ((x.s - last_s).abs() / 1000.0).sqrt();
-            loop_error += gauss(&mut drift_rng, step_sigma);
-            last_s = x.s;
-        }
-        let z_loop = x.s + loop_error + gauss(&mut loop_rng, loop_sigma);
-        let z_radar = x.v + gauss(&mut radar_rng, radar_sigma);
-        log.write(
-            topics::LOOP_POSITION,
-            t_ns,
-            &LoopPosition {
-                stamp_ns: t_ns,
-                chainage_m: z_loop,
-                crossing: None,
-                variance_m2: Some(p.loop_variance_m2),
-            },
-        )?;
-        log.write(
-            topics::RADAR_SPEED,
-            t_ns,
-            &RadarSpeed {
-                stamp_ns: t_ns,
-                speed_mps: z_radar,
-                quality: 1.0,
-                valid: true,
-                speed_variance_m2ps2: Some(p.radar_variance_m2ps2),
-            },
-        )?;
-        if k == steps {
-            write_seed000_truth(&mut log, &x, t_ns, &origin)?;
-            break;
-        }
-        // The jerk w_k acting over (k, k+1].
-        x.jerk = gauss(&mut process, p.process_noise_variance.sqrt());
-        // Truth samples and balise passages of this step, written in time order.
-        let mut within: Vec<(f64, Option<usize>)> = (0..truth_per_step)
-            .map(|i| (i as f64 * period / truth_per_step as f64, None))
-            .collect();
-        while let Some(b) = map.balises.get(next_balise) {
-            let Some(tau) = x.passes(b.chainage_m, period) else {
-                break;
-            };
-            within.push((tau, Some(next_balise)));
-            next_balise += 1;
-        }
-        within.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (tau, balise) in within {
-            let t = stamp(k, tau);
-            match balise {
-                None => {
-                    let (s, v, a) = x.at(tau);
-                    write_seed000_truth(
-                        &mut log,
-                        &JerkStep {
-                            s,
-                            v,
-                            a,
-                            jerk: x.jerk,
-                        },
-                        t,
-                        &origin,
-                    )?;
-                }
-                Some(i) => {
-                    let b = &map.balises[i];
-                    let msg = BalisePassage {
-                        stamp_ns: t,
-                        balise_id: b.balise_id.clone(),
-                        chainage_m: b.chainage_m,
-                        variance_m2: Some(p.balise_variance_m2),
-                    };
-                    log.write(topics::BALISE, t, &msg)?;
-                }
-            }
-        }
-        let (s, v, a) = x.at(period);
-        x = JerkStep { s, v, a, jerk: 0.0 };
-    }
-    log.finish(scenario, &map, steps as f64 * period)
-}
-
-fn write_seed000_truth(
-    log: &mut SimLog,
-    x: &JerkStep,
-    t_ns: u64,
-    origin: &GeodeticOrigin,
-) -> railfuse_catalog::Result<()> {
-    let (lat, lon, _) = origin.to_geodetic(x.s, 0.0, 0.0);
-    let truth = GroundTruth {
-        stamp_ns: t_ns,
-        chainage_m: x.s,
-        speed_mps: x.v,
-        acceleration_mps2: x.a,
-        east_m: x.s,
-        north_m: 0.0,
-        latitude_deg: lat,
-        longitude_deg: lon,
-        heading_rad: std::f64::consts::FRAC_PI_2,
-    };
-    log.write(topics::GROUND_TRUTH, t_ns, &truth)
 }
