@@ -73,162 +73,192 @@ fn working_path(input: &Path, output: &Path) -> Result<PathBuf> {
 pub fn recover(input: &Path, output: &Path) -> Result<RecoverReport> {
     let working = working_path(input, output)?;
     let mut scanner = Scanner::salvage(input)?;
-    let mut report = RecoverReport {
+    let report = RecoverReport {
         input: input.to_owned(),
         output: output.to_owned(),
         input_bytes: scanner.size(),
         ..Default::default()
     };
-    let mut writer = LogWriter::create_working(output, &working, &Default::default())?;
-    let mut channels: BTreeMap<u16, String> = BTreeMap::new();
-    // Channels lost with a damaged chunk may still be in an intact summary.
-    let mut from_summary = BTreeMap::new();
-    if let Ok(Some(summary)) = read_channels(input) {
-        for c in summary {
-            from_summary.insert(c.id, c);
-        }
-    }
-    let mut schemas = HashSet::new();
+    let mut salvage = Salvage {
+        input,
+        writer: LogWriter::create_working(output, &working, &Default::default())?,
+        channels: BTreeMap::new(),
+        schemas: HashSet::new(),
+        // Channels lost with a damaged chunk may still be in an intact summary.
+        summary: match read_channels(input) {
+            Ok(Some(summary)) => summary.into_iter().map(|c| (c.id, c)).collect(),
+            _ => Summary::new(),
+        },
+        report,
+    };
     while let Some(item) = scanner.next() {
         match item? {
             Item::Damage(d) => {
-                report
-                    .stopped_by
+                let r = &mut salvage.report;
+                r.stopped_by
                     .get_or_insert_with(|| format!("byte {}: {}", d.offset, d.cause));
-                report.skipped.push(d);
+                r.skipped.push(d);
             }
-            Item::Chunk(chunk) => {
-                // Copied as it is unless a channel in it, or a message's channel, lost its
-                // definition with the damage (and the summary cannot give it back).
-                let mut whole = true;
-                let mut counts: Vec<(u16, u64)> = Vec::new();
-                for record in Records::new(&chunk.records) {
-                    let record = record.map_err(|e| Error::mcap(input, e))?;
-                    match record.opcode {
-                        op::SCHEMA => {
-                            schemas.insert(u16::from_le_bytes([record.body[0], record.body[1]]));
-                        }
-                        op::CHANNEL => {
-                            let Ok(mcap::records::Record::Channel(c)) =
-                                mcap::parse_record(op::CHANNEL, record.body)
-                            else {
-                                whole = false;
-                                continue;
-                            };
-                            let known = c.schema_id == 0
-                                || schemas.contains(&c.schema_id)
-                                || restore_schema(
-                                    &mut writer,
-                                    c.schema_id,
-                                    &from_summary,
-                                    &mut schemas,
-                                )?;
-                            if known {
-                                channels.insert(c.id, c.topic);
-                            } else {
-                                whole = false;
-                            }
-                        }
-                        op::MESSAGE => {
-                            let Some(m) = format::parse_message(record.body) else {
-                                continue;
-                            };
-                            let id = m.header.channel_id;
-                            if !channels.contains_key(&id)
-                                && !restore(
-                                    &mut writer,
-                                    id,
-                                    &from_summary,
-                                    &mut channels,
-                                    &mut schemas,
-                                )?
-                            {
-                                whole = false;
-                            }
-                            match counts.last_mut() {
-                                Some((c, n)) if *c == id => *n += 1,
-                                _ => counts.push((id, 1)),
-                            }
-                        }
-                        _ => {}
-                    }
-                }
-                if whole {
-                    writer.copy_chunk(chunk)?;
-                    report.chunks += 1;
-                    for (id, n) in counts {
-                        count(&mut report, &channels[&id], n);
-                    }
-                } else {
-                    // Record by record, leaving out channels defined nowhere (orphans).
-                    let (copied, orphans) = writer
-                        .copy_records_where(&chunk.records, |id| channels.contains_key(&id))?;
-                    report.orphan_messages += orphans;
-                    for (id, n) in copied {
-                        count(&mut report, &channels[&id], n);
-                    }
-                }
-            }
-            Item::Record { opcode, body, .. } => match mcap::parse_record(opcode, &body) {
-                Ok(mcap::records::Record::Schema { header, data }) => {
-                    writer.copy_schema(header.id, &header.name, &header.encoding, &data)?;
-                    schemas.insert(header.id);
-                }
-                Ok(mcap::records::Record::Channel(c)) => {
-                    // A channel whose schema was lost (and is not in the summary) is left out.
-                    let known = c.schema_id == 0
-                        || schemas.contains(&c.schema_id)
-                        || restore_schema(&mut writer, c.schema_id, &from_summary, &mut schemas)?;
-                    if known {
-                        let (id, schema, topic) = (c.id, c.schema_id, &c.topic);
-                        writer.copy_channel(id, schema, topic, &c.message_encoding, &c.metadata)?;
-                        channels.insert(c.id, c.topic);
-                    }
-                }
-                Ok(mcap::records::Record::Message { header, data }) => {
-                    if !channels.contains_key(&header.channel_id)
-                        && !restore(
-                            &mut writer,
-                            header.channel_id,
-                            &from_summary,
-                            &mut channels,
-                            &mut schemas,
-                        )?
-                    {
-                        report.orphan_messages += 1;
-                        continue;
-                    }
-                    writer.write_raw(
-                        header.channel_id,
-                        header.sequence,
-                        header.log_time,
-                        header.publish_time,
-                        &data,
-                    )?;
-                    count(&mut report, &channels[&header.channel_id], 1);
-                }
-                Ok(mcap::records::Record::Metadata(m)) => {
-                    writer.write_metadata(&m.name, m.metadata)?;
-                    report.metadata += 1;
-                }
-                Ok(mcap::records::Record::Attachment { header, data, .. }) => {
-                    writer.attach(
-                        &header.name,
-                        &header.media_type,
-                        header.log_time,
-                        header.create_time,
-                        &data,
-                    )?;
-                    report.attachments += 1;
-                }
-                _ => {}
-            },
+            Item::Chunk(chunk) => salvage.chunk(chunk)?,
+            Item::Record { opcode, body, .. } => salvage.record(opcode, &body)?,
         }
     }
-    report.schemas = schemas.len() as u64;
-    report.channels = channels.len() as u64;
-    writer.finish()?;
+    let mut report = salvage.report;
+    report.schemas = salvage.schemas.len() as u64;
+    report.channels = salvage.channels.len() as u64;
+    salvage.writer.finish()?;
     Ok(report)
+}
+
+type Summary = BTreeMap<u16, std::sync::Arc<super::ChannelInfo>>;
+
+/// The output being written and what it holds so far.
+struct Salvage<'a> {
+    input: &'a Path,
+    writer: LogWriter,
+    /// Channels written, with their topics.
+    channels: BTreeMap<u16, String>,
+    /// Schemas written.
+    schemas: HashSet<u16>,
+    /// The input's summary, where it is intact.
+    summary: Summary,
+    report: RecoverReport,
+}
+
+impl Salvage<'_> {
+    /// A chunk, copied as it is unless a channel in it, or a message's channel, lost its
+    /// definition with the damage (and the summary cannot give it back): then record by
+    /// record, leaving out the messages of channels defined nowhere (orphans).
+    fn chunk(&mut self, chunk: super::scan::Chunk) -> Result<()> {
+        let mut whole = true;
+        let mut counts: Vec<(u16, u64)> = Vec::new();
+        for record in Records::new(&chunk.records) {
+            let record = record.map_err(|e| Error::mcap(self.input, e))?;
+            match record.opcode {
+                op::SCHEMA => {
+                    self.schemas
+                        .insert(u16::from_le_bytes([record.body[0], record.body[1]]));
+                }
+                op::CHANNEL => match mcap::parse_record(op::CHANNEL, record.body) {
+                    Ok(mcap::records::Record::Channel(c)) if self.schema_known(c.schema_id)? => {
+                        self.channels.insert(c.id, c.topic);
+                    }
+                    _ => whole = false,
+                },
+                op::MESSAGE => {
+                    let Some(m) = format::parse_message(record.body) else {
+                        continue;
+                    };
+                    let id = m.header.channel_id;
+                    whole &= self.channel_known(id)?;
+                    match counts.last_mut() {
+                        Some((c, n)) if *c == id => *n += 1,
+                        _ => counts.push((id, 1)),
+                    }
+                }
+                _ => {}
+            }
+        }
+        if whole {
+            self.writer.copy_chunk(chunk)?;
+            self.report.chunks += 1;
+        } else {
+            let channels = &self.channels;
+            let (copied, orphans) = self
+                .writer
+                .copy_records_where(&chunk.records, |id| channels.contains_key(&id))?;
+            self.report.orphan_messages += orphans;
+            counts = copied.into_iter().collect();
+        }
+        for (id, n) in counts {
+            count(&mut self.report, &self.channels[&id], n);
+        }
+        Ok(())
+    }
+
+    /// A record outside any chunk (an unchunked file, or the data end's records).
+    fn record(&mut self, opcode: u8, body: &[u8]) -> Result<()> {
+        use mcap::records::Record;
+        match mcap::parse_record(opcode, body) {
+            Ok(Record::Schema { header, data }) => {
+                let (id, name, encoding) = (header.id, &header.name, &header.encoding);
+                self.writer.copy_schema(id, name, encoding, &data)?;
+                self.schemas.insert(header.id);
+            }
+            // A channel whose schema was lost (and is not in the summary) is left out.
+            Ok(Record::Channel(c)) if self.schema_known(c.schema_id)? => {
+                let (id, schema, topic) = (c.id, c.schema_id, &c.topic);
+                let w = &mut self.writer;
+                w.copy_channel(id, schema, topic, &c.message_encoding, &c.metadata)?;
+                self.channels.insert(c.id, c.topic);
+            }
+            Ok(Record::Message { header, data }) => {
+                let id = header.channel_id;
+                if !self.channel_known(id)? {
+                    self.report.orphan_messages += 1;
+                    return Ok(());
+                }
+                let (seq, log, publish) = (header.sequence, header.log_time, header.publish_time);
+                self.writer.write_raw(id, seq, log, publish, &data)?;
+                count(&mut self.report, &self.channels[&id], 1);
+            }
+            Ok(Record::Metadata(m)) => {
+                self.writer.write_metadata(&m.name, m.metadata)?;
+                self.report.metadata += 1;
+            }
+            Ok(Record::Attachment { header, data, .. }) => {
+                let (name, media) = (&header.name, &header.media_type);
+                let (log, created) = (header.log_time, header.create_time);
+                self.writer.attach(name, media, log, created, &data)?;
+                self.report.attachments += 1;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Schema `id` is written (0: none needed), or the summary gives it back now.
+    fn schema_known(&mut self, id: u16) -> Result<bool> {
+        Ok(id == 0 || self.schemas.contains(&id) || self.restore_schema(id)?)
+    }
+
+    /// Channel `id` is written, or the summary gives it back now.
+    fn channel_known(&mut self, id: u16) -> Result<bool> {
+        Ok(self.channels.contains_key(&id) || self.restore_channel(id)?)
+    }
+
+    /// Writes the summary's definition of channel `id` (and its schema), if it has it.
+    fn restore_channel(&mut self, id: u16) -> Result<bool> {
+        let Some(c) = self.summary.get(&id) else {
+            return Ok(false);
+        };
+        if let Some(s) = &c.schema {
+            self.writer
+                .copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
+            self.schemas.insert(s.id);
+        }
+        let schema_id = c.schema.as_ref().map_or(0, |s| s.id);
+        let w = &mut self.writer;
+        w.copy_channel(id, schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
+        self.channels.insert(id, c.topic.clone());
+        Ok(true)
+    }
+
+    /// Writes the summary's schema `id`, if a channel of the summary uses it.
+    fn restore_schema(&mut self, id: u16) -> Result<bool> {
+        let Some(s) = self
+            .summary
+            .values()
+            .filter_map(|c| c.schema.as_ref())
+            .find(|s| s.id == id)
+        else {
+            return Ok(false);
+        };
+        self.writer
+            .copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
+        self.schemas.insert(id);
+        Ok(true)
+    }
 }
 
 fn count(report: &mut RecoverReport, topic: &str, n: u64) {
@@ -237,48 +267,6 @@ fn count(report: &mut RecoverReport, topic: &str, n: u64) {
         .messages_per_topic
         .entry(topic.to_owned())
         .or_insert(0) += n;
-}
-
-type Summary = BTreeMap<u16, std::sync::Arc<super::ChannelInfo>>;
-
-/// Writes the summary's definition of channel `id` (and its schema), if the summary has it.
-fn restore(
-    writer: &mut LogWriter,
-    id: u16,
-    summary: &Summary,
-    channels: &mut BTreeMap<u16, String>,
-    schemas: &mut HashSet<u16>,
-) -> Result<bool> {
-    let Some(c) = summary.get(&id) else {
-        return Ok(false);
-    };
-    if let Some(s) = &c.schema {
-        writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
-        schemas.insert(s.id);
-    }
-    let schema_id = c.schema.as_ref().map_or(0, |s| s.id);
-    writer.copy_channel(id, schema_id, &c.topic, &c.message_encoding, &c.metadata)?;
-    channels.insert(id, c.topic.clone());
-    Ok(true)
-}
-
-/// Writes the summary's schema `id`, if a channel of the summary uses it.
-fn restore_schema(
-    writer: &mut LogWriter,
-    id: u16,
-    summary: &Summary,
-    schemas: &mut HashSet<u16>,
-) -> Result<bool> {
-    let Some(s) = summary
-        .values()
-        .filter_map(|c| c.schema.as_ref())
-        .find(|s| s.id == id)
-    else {
-        return Ok(false);
-    };
-    writer.copy_schema(s.id, &s.name, &s.encoding, &s.data)?;
-    schemas.insert(id);
-    Ok(true)
 }
 
 #[cfg(test)]
