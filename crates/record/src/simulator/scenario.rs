@@ -205,61 +205,9 @@ impl LineScenario {
     /// A mixed run near Modena: three stations 5.7 km apart, curves, a tunnel, a correction
     /// link outage, every sensor at a realistic rate.
     pub fn default_run() -> Self {
-        let odometer = |id: &str, true_diameter_m: f64, powered: bool| OdometerParams {
-            sensor_id: id.into(),
-            rate_hz: 25.0,
-            latency_s: 0.002,
-            pulses_per_revolution: 200,
-            configured_diameter_m: 0.85,
-            true_diameter_m,
-            speed_window_s: 0.2,
-            slip_rate_per_s: if powered { 0.04 } else { 0.0 },
-            slide_rate_per_s: 0.04,
-            slip_range: (0.03, 0.10),
-            slide_range: (0.05, 0.15),
-            episode_s: (1.0, 4.0),
-        };
         LineScenario {
             train: "simulated EMU, 4 cars".into(),
-            track: TrackParams {
-                name: "Modena test line (simulated)".into(),
-                origin: GeodeticOrigin {
-                    latitude_deg: 44.6551,
-                    longitude_deg: 10.9297,
-                    altitude_m: 40.0,
-                },
-                heading_deg: 60.0,
-                pattern: vec![
-                    Segment::Straight { length_m: 1800.0 },
-                    Segment::Curve {
-                        radius_m: 1500.0,
-                        angle_deg: 35.0,
-                    },
-                    Segment::Straight { length_m: 2600.0 },
-                    Segment::Curve {
-                        radius_m: 2000.0,
-                        angle_deg: -30.0,
-                    },
-                    Segment::Straight { length_m: 2200.0 },
-                    Segment::Curve {
-                        radius_m: 1200.0,
-                        angle_deg: 25.0,
-                    },
-                    Segment::Straight { length_m: 1500.0 },
-                    Segment::Curve {
-                        radius_m: 1800.0,
-                        angle_deg: -30.0,
-                    },
-                ],
-                station_spacing_m: 5700.0,
-                balise_spacing_m: 1000.0,
-                balise_jitter_m: 60.0,
-                tunnels: vec![(7000.0, 7800.0)],
-                sleeper_spacing_m: 0.6,
-                loop_crossing_spacing_m: Some(25.0),
-                vertex_spacing_m: 10.0,
-                station_chainages_m: vec![],
-            },
+            track: Self::default_track(),
             driver: DriverParams {
                 max_speed_mps: 33.3,
                 acceleration_mps2: 0.8,
@@ -312,8 +260,8 @@ impl LineScenario {
                 dropout_s: (0.5, 2.0),
             },
             odometers: vec![
-                odometer("axle1", 0.846, true),
-                odometer("axle2", 0.852, false),
+                Self::default_odometer("axle1", 0.846, true),
+                Self::default_odometer("axle2", 0.852, false),
             ],
             induction_loop: Some(LoopParams {
                 crossing_spacing_m: 25.0,
@@ -337,28 +285,95 @@ impl LineScenario {
                 switch_length_m: 35.0,
                 extra_switches_m: vec![],
             }),
-            eddy_current: Some(EddyCurrentParams {
-                rate_hz: 10_000.0,
-                block_s: 0.1,
-                latency_s: 0.005,
-                spacing_m: 0.25,
-                sleeper_jitter_m: 0.008,
-                pulse_width_m: 0.04,
-                sleeper_amplitude_v: 0.8,
-                amplitude_spread: 0.1,
-                switch_amplitude_v: 1.0,
-                cable_spacing_m: 300.0,
-                cable_amplitude_v: 1.2,
-                defects_per_km: 20.0,
-                defect_amplitude_v: 0.3,
-                height_m: 0.10,
-                vibration_m: 0.002,
-                vibration_s: 0.05,
-                noise_v: 0.05,
-                range_v: 5.0,
-                lsb_v: 0.0005,
-                gain_b: 0.97,
-            }),
+            eddy_current: Some(Self::default_eddy_current()),
+        }
+    }
+
+    /// The default line: about 8 km of straights and curves near Modena, a tunnel, a balise
+    /// every km and a loop crossing every 25 m.
+    fn default_track() -> TrackParams {
+        TrackParams {
+            name: "Modena test line (simulated)".into(),
+            origin: GeodeticOrigin {
+                latitude_deg: 44.6551,
+                longitude_deg: 10.9297,
+                altitude_m: 40.0,
+            },
+            heading_deg: 60.0,
+            pattern: vec![
+                Segment::Straight { length_m: 1800.0 },
+                Segment::Curve {
+                    radius_m: 1500.0,
+                    angle_deg: 35.0,
+                },
+                Segment::Straight { length_m: 2600.0 },
+                Segment::Curve {
+                    radius_m: 2000.0,
+                    angle_deg: -30.0,
+                },
+                Segment::Straight { length_m: 2200.0 },
+                Segment::Curve {
+                    radius_m: 1200.0,
+                    angle_deg: 25.0,
+                },
+                Segment::Straight { length_m: 1500.0 },
+                Segment::Curve {
+                    radius_m: 1800.0,
+                    angle_deg: -30.0,
+                },
+            ],
+            station_spacing_m: 5700.0,
+            balise_spacing_m: 1000.0,
+            balise_jitter_m: 60.0,
+            tunnels: vec![(7000.0, 7800.0)],
+            sleeper_spacing_m: 0.6,
+            loop_crossing_spacing_m: Some(25.0),
+            vertex_spacing_m: 10.0,
+            station_chainages_m: vec![],
+        }
+    }
+
+    /// A wheel odometer of the default train (`powered`: a driven axle, which slips).
+    fn default_odometer(id: &str, true_diameter_m: f64, powered: bool) -> OdometerParams {
+        OdometerParams {
+            sensor_id: id.into(),
+            rate_hz: 25.0,
+            latency_s: 0.002,
+            pulses_per_revolution: 200,
+            configured_diameter_m: 0.85,
+            true_diameter_m,
+            speed_window_s: 0.2,
+            slip_rate_per_s: if powered { 0.04 } else { 0.0 },
+            slide_rate_per_s: 0.04,
+            slip_range: (0.03, 0.10),
+            slide_range: (0.05, 0.15),
+            episode_s: (1.0, 4.0),
+        }
+    }
+
+    /// The default train's eddy-current sensor pair.
+    fn default_eddy_current() -> EddyCurrentParams {
+        EddyCurrentParams {
+            rate_hz: 10_000.0,
+            block_s: 0.1,
+            latency_s: 0.005,
+            spacing_m: 0.25,
+            sleeper_jitter_m: 0.008,
+            pulse_width_m: 0.04,
+            sleeper_amplitude_v: 0.8,
+            amplitude_spread: 0.1,
+            switch_amplitude_v: 1.0,
+            cable_spacing_m: 300.0,
+            cable_amplitude_v: 1.2,
+            defects_per_km: 20.0,
+            defect_amplitude_v: 0.3,
+            height_m: 0.10,
+            vibration_m: 0.002,
+            vibration_s: 0.05,
+            noise_v: 0.05,
+            range_v: 5.0,
+            lsb_v: 0.0005,
+            gain_b: 0.97,
         }
     }
 
