@@ -65,6 +65,15 @@ fn observe<M: ChannelMessage>(
     }
 }
 
+/// What the replay reads a message as.
+enum Read {
+    AsItIs,
+    /// A foreign message translated to railfuse's JSON.
+    As(Vec<u8>),
+    /// Nothing to read (skipped, or not translatable: counted).
+    Skip,
+}
+
 #[derive(Debug, Clone, Serialize)]
 pub struct PipelineReport {
     pub name: String,
@@ -639,78 +648,108 @@ impl<'a> Replay<'a> {
         if route.replaced {
             return Ok(false);
         }
-        if let (Some(out), Some(track), false) = (
-            self.track_output,
-            &self.opts.config.track,
-            self.track_written,
-        ) {
-            out.write(&mut self.writer, h.log_time, track)?;
-            self.track_written = true;
-        }
-        self.report.input_messages += 1;
-        if h.log_time < self.last_log_time {
-            self.report.out_of_order_messages += 1;
-        }
-        self.last_log_time = self.last_log_time.max(h.log_time);
-        self.eval.log_time(h.log_time);
-        if route.context.is_none() && route.model.is_none() && !route.evaluated {
+        let (context, model, evaluated) = (route.context, route.model, route.evaluated);
+        self.arrived(h.log_time)?;
+        if context.is_none() && model.is_none() && !evaluated {
             return Ok(true); // passes through untouched
         }
         let input = self.opts.input;
         let channel = self.channels[&h.channel_id].clone();
-        // A foreign message is read as its catalogue kind's railfuse message.
-        let translated;
-        let data = match &self.routes[&h.channel_id].translator {
-            None => m.data,
-            Some(t) => match t.translate(m.data, h.log_time) {
-                Ok(Translated::Message {
-                    message,
-                    took_log_time,
-                }) => {
-                    if took_log_time && !self.report.stamped_by_log_time.contains(&channel.topic) {
-                        eprintln!(
-                            "{}: {}: messages carry no header.stamp: their log time is used",
-                            input.display(),
-                            channel.topic
-                        );
-                        self.report
-                            .stamped_by_log_time
-                            .insert(channel.topic.clone());
-                    }
-                    translated = message.to_json();
-                    &translated[..]
-                }
-                Ok(Translated::Skipped(reason)) => {
-                    *self.report.skipped.entry(reason.to_owned()).or_insert(0) += 1;
-                    return Ok(true);
-                }
-                Err(e) => {
-                    self.report.undecodable.add(&channel.topic, e.kind(), || {
-                        format!("{}: log time {} ns: {e}", channel.topic, h.log_time)
-                    });
-                    return Ok(true);
-                }
-            },
+        let translated = match self.translate(&channel, h.channel_id, m) {
+            Read::AsItIs => None,
+            Read::As(data) => Some(data),
+            Read::Skip => return Ok(true),
         };
         let msg = LogMessage {
             channel: &channel,
             sequence: h.sequence,
             log_time_ns: h.log_time,
             publish_time_ns: h.publish_time,
-            data,
+            data: translated.as_deref().unwrap_or(m.data),
         };
         if let Some(observe) = self.opts.observer {
-            observe(
-                &msg.channel.topic,
-                msg.channel.schema_name(),
-                h.log_time,
-                m.data,
-            );
+            observe(&channel.topic, channel.schema_name(), h.log_time, m.data);
         }
-        if route.evaluated {
+        if evaluated {
             self.eval.message(&msg)?;
         }
-        match route.context {
+        self.context_message(context, &msg)?;
+        let Some(model) = model else {
+            return Ok(true);
+        };
+        // A sensor message that does not decode (a null where a number belongs) is skipped
+        // and counted: one bad message must not cost the whole replay.
+        if let Err(e) = model.decode(&msg, input, &self.context, &mut self.measurements) {
+            self.report
+                .undecodable
+                .add(&channel.topic, "decode", || e.to_string());
+            return Ok(true);
+        }
+        self.feed(h.channel_id, &msg).map(|()| true)
+    }
+
+    /// Counts a message read, and writes the configuration's track before the first.
+    fn arrived(&mut self, log_time: u64) -> Result<()> {
+        if let (Some(out), Some(track), false) = (
+            self.track_output,
+            &self.opts.config.track,
+            self.track_written,
+        ) {
+            out.write(&mut self.writer, log_time, track)?;
+            self.track_written = true;
+        }
+        self.report.input_messages += 1;
+        if log_time < self.last_log_time {
+            self.report.out_of_order_messages += 1;
+        }
+        self.last_log_time = self.last_log_time.max(log_time);
+        self.eval.log_time(log_time);
+        Ok(())
+    }
+
+    /// A foreign message read as its catalogue kind's railfuse message; one that does not
+    /// translate is counted, not fatal.
+    fn translate(&mut self, channel: &ChannelInfo, id: u16, m: &format::MessageView<'_>) -> Read {
+        let Some(t) = &self.routes[&id].translator else {
+            return Read::AsItIs;
+        };
+        let log_time = m.header.log_time;
+        match t.translate(m.data, log_time) {
+            Ok(Translated::Message {
+                message,
+                took_log_time,
+            }) => {
+                if took_log_time
+                    && self
+                        .report
+                        .stamped_by_log_time
+                        .insert(channel.topic.clone())
+                {
+                    eprintln!(
+                        "{}: {}: messages carry no header.stamp: their log time is used",
+                        self.opts.input.display(),
+                        channel.topic
+                    );
+                }
+                Read::As(message.to_json())
+            }
+            Ok(Translated::Skipped(reason)) => {
+                *self.report.skipped.entry(reason.to_owned()).or_insert(0) += 1;
+                Read::Skip
+            }
+            Err(e) => {
+                self.report.undecodable.add(&channel.topic, e.kind(), || {
+                    format!("{}: log time {} ns: {e}", channel.topic, log_time)
+                });
+                Read::Skip
+            }
+        }
+    }
+
+    /// The track map, or a device's own fault report, which the pipelines act on.
+    fn context_message(&mut self, kind: Option<ContextKind>, msg: &LogMessage<'_>) -> Result<()> {
+        let input = self.opts.input;
+        match kind {
             Some(ContextKind::TrackMap) => self.context.track = Some(msg.decode(input)?),
             Some(ContextKind::Events) => {
                 let e: Event = msg.decode(input)?;
@@ -727,40 +766,35 @@ impl<'a> Replay<'a> {
             }
             None => {}
         }
-        let Some(model) = route.model else {
-            return Ok(true);
-        };
-        // A sensor message that does not decode (a null where a number belongs) is skipped
-        // and counted: one bad message must not cost the whole replay.
-        if let Err(e) = model.decode(&msg, input, &self.context, &mut self.measurements) {
-            self.report
-                .undecodable
-                .add(&channel.topic, "decode", || e.to_string());
-            return Ok(true);
-        }
-        let sensors =
-            std::mem::take(&mut self.routes.get_mut(&h.channel_id).expect("routed").sensors);
+        Ok(())
+    }
+
+    /// A sensor message (its measurements decoded) to every pipeline sensor it feeds.
+    fn feed(&mut self, id: u16, msg: &LogMessage<'_>) -> Result<()> {
+        let input = self.opts.input;
+        let sensors = std::mem::take(&mut self.routes.get_mut(&id).expect("routed").sensors);
         let result = (|| {
             for &(pi, si) in &sensors {
                 match self.pipelines[pi].as_message_pipeline() {
                     // A pipeline in the plane reads the whole message.
                     Some(p) => {
-                        if let Err(e) = p.push(si, &msg, input, &self.context, &mut self.fused) {
+                        if let Err(e) = p.push(si, msg, input, &self.context, &mut self.fused) {
                             self.report
                                 .undecodable
-                                .add(&channel.topic, "decode", || e.to_string());
+                                .add(&msg.channel.topic, "decode", || e.to_string());
                         }
                     }
                     None => {
-                        self.pipelines[pi].push(si, &self.measurements, h.log_time, &mut self.fused)
+                        let log_time = msg.log_time_ns;
+                        self.pipelines[pi].push(si, &self.measurements, log_time, &mut self.fused)
                     }
                 }
                 self.emit(pi)?;
             }
             Ok(())
         })();
-        self.routes.get_mut(&h.channel_id).expect("routed").sensors = sensors;
-        result.map(|()| true)
+        self.routes.get_mut(&id).expect("routed").sensors = sensors;
+        result
     }
 
     /// Writes and scores what pipeline `pi` released.
