@@ -48,9 +48,16 @@ impl Table {
 
     /// The table as Markdown, ending in a newline.
     pub fn markdown(&self) -> String {
+        // `| a | b |`; an empty cell is `| |`.
         let line = |cells: &mut dyn Iterator<Item = &str>| {
-            let cells: Vec<&str> = cells.collect();
-            format!("| {} |\n", cells.join(" | "))
+            let mut out = String::from("|");
+            for c in cells {
+                out += &match c.is_empty() {
+                    true => " |".to_owned(),
+                    false => format!(" {c} |"),
+                };
+            }
+            out + "\n"
         };
         let mut out = line(&mut self.head.iter().map(|(h, _)| h.as_str()));
         out.push('|');
@@ -76,9 +83,10 @@ mod tests {
     fn a_table_is_a_header_an_alignment_line_and_a_line_per_row() {
         let mut t = Table::new(["case", "error (m)"], "lr");
         t.row(["no fault".into(), "0.12".into()]);
+        t.row(["".into(), "–".into()]);
         assert_eq!(
             t.markdown(),
-            "| case | error (m) |\n|---|---:|\n| no fault | 0.12 |\n"
+            "| case | error (m) |\n|---|---:|\n| no fault | 0.12 |\n| | – |\n"
         );
     }
 }
