@@ -1,0 +1,606 @@
+//! Pipelines as the replay runs them: the configuration file ([`crate::config`]) parsed once
+//! into validated types. A [`PipelineSpec`] holds the estimator and its settings, the motion
+//! model with its process noise chosen, where the filter starts, and each sensor's device,
+//! fields, variances and calibration states; nothing downstream checks a value again. Every
+//! error names the file, the line of the table it is about, and the pipeline.
+//!
+//! A sensor meets the log's channel in [`PipelineSpec::bind`], once per channel: the channel's
+//! schema picks the sensor model, and the fields the sensor asks for must be ones that model
+//! gives and the motion model holds.
+
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use toml::Spanned;
+
+pub use crate::base::{InitialSpec, PipelineBase};
+use crate::config::{
+    line_column, positive, FilterKind, InitialConfig, PipelineConfig, PipelinesFile, Variance,
+    VarianceValue,
+};
+use crate::error::{Error, Result};
+use crate::filter::federated::FederatedSettings;
+use crate::filter::particle::ParticleSettings;
+use crate::kinds::{KindSpec, Outputs, PipelineKind};
+use crate::measurement::{Quantity, SensorModel};
+use crate::model::{MotionModel, SensorState};
+use crate::registry::Registry;
+
+mod estimator;
+mod sensor;
+
+use estimator::estimator;
+use sensor::{devices, sensor};
+
+/// The most state components a pipeline may have (motion and sensor states together).
+pub const MAX_STATES: usize = 8;
+
+/// The device name reserved for the master filter of a federated pipeline.
+pub const MASTER_DEVICE: &str = "master";
+
+/// Gate rejections in a row of one quantity after which a centralised filter takes itself to
+/// be locked out.
+pub const DEFAULT_GATE_LOCKOUT: u32 = 5;
+
+/// Spread of a start chainage given without one, m: distance from where the log starts is
+/// exact.
+pub const DEFAULT_CHAINAGE_STD_M: f64 = 0.01;
+
+/// Every pipeline of one configuration file.
+#[derive(Debug, Clone)]
+pub struct Pipelines {
+    /// Where the configuration came from, for messages.
+    pub path: PathBuf,
+    /// The track map the configuration names (`track = "line.geojson"`), read and checked.
+    pub track: Option<railfuse_catalog::messages::TrackMap>,
+    pub pipeline: Vec<PipelineSpec>,
+}
+
+impl Pipelines {
+    /// Reads and validates a configuration file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let (file, text) = PipelinesFile::load(path)?;
+        Self::from_file(file, &text, path, &Registry::standard())
+    }
+
+    /// Parses and validates configuration text; `path` names it in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        Self::parse_with(text, path, &Registry::standard())
+    }
+
+    /// [`parse`](Self::parse) with the pipeline kinds of `registry`.
+    pub fn parse_with(text: &str, path: &Path, registry: &Registry) -> Result<Self> {
+        Self::from_file(PipelinesFile::parse(text, path)?, text, path, registry)
+    }
+
+    fn from_file(
+        file: PipelinesFile,
+        text: &str,
+        path: &Path,
+        registry: &Registry,
+    ) -> Result<Self> {
+        if file.pipeline.is_empty() {
+            return Err(Error::ConfigSyntax {
+                path: path.to_owned(),
+                message: "no [[pipeline]] declared".into(),
+            });
+        }
+        let mut pipeline: Vec<PipelineSpec> = Vec::new();
+        for p in file.pipeline {
+            let place = |span: Range<usize>| {
+                let (line, column) = line_column(text, span.start);
+                Place {
+                    path: path.to_owned(),
+                    line,
+                    column,
+                }
+            };
+            let invalid = |span: Range<usize>, message: String| {
+                let at = place(span);
+                Error::ConfigInvalid {
+                    path: at.path,
+                    line: at.line,
+                    column: at.column,
+                    pipeline: p.get_ref().name.clone(),
+                    message,
+                }
+            };
+            if pipeline.iter().any(|q| q.name == p.get_ref().name) {
+                return Err(invalid(p.span(), "declared twice".into()));
+            }
+            let spec = PipelineSpec::new(&p, &place, registry)
+                .map_err(|Invalid { span, message }| invalid(span, message))?;
+            pipeline.push(spec);
+        }
+        // The track file is relative to the configuration.
+        let track = match &file.track {
+            Some(t) => {
+                let at = path.parent().unwrap_or(Path::new("")).join(t);
+                let map = railfuse_catalog::track_geojson::read_track_file(&at).map_err(|e| {
+                    Error::ConfigSyntax {
+                        path: path.to_owned(),
+                        message: format!("track: {e}"),
+                    }
+                })?;
+                Some(map)
+            }
+            None => None,
+        };
+        Ok(Self {
+            path: path.to_owned(),
+            track,
+            pipeline,
+        })
+    }
+
+    /// The names of the pipelines, in file order.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.pipeline.iter().map(|p| p.name.as_str())
+    }
+}
+
+/// Where in a configuration file something is declared.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Place {
+    pub path: PathBuf,
+    pub line: usize,
+    pub column: usize,
+}
+
+impl std::fmt::Display for Place {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} line {}", self.path.display(), self.line)
+    }
+}
+
+/// A validation failure and the span of the table it is about.
+struct Invalid {
+    span: Range<usize>,
+    message: String,
+}
+
+/// The estimator of a pipeline, with its settings.
+#[derive(Debug, Clone)]
+pub enum EstimatorSpec {
+    Kalman {
+        gate_lockout: u32,
+        /// Also write the fixed-interval RTS smoothed states.
+        smoother: bool,
+    },
+    Particle {
+        particle: ParticleSettings,
+        gate_lockout: u32,
+    },
+    FederatedKalman {
+        federated: FederatedSettings,
+    },
+    FederatedParticle {
+        federated: FederatedSettings,
+        particle: ParticleSettings,
+    },
+    /// A registered kind that reads whole messages ([`crate::kinds`]).
+    Messages(Arc<dyn KindSpec>),
+}
+
+impl EstimatorSpec {
+    /// `filter = "…"`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            EstimatorSpec::Messages(k) => k.name(),
+            e => e
+                .filter_kind()
+                .expect("an estimator along the track")
+                .name(),
+        }
+    }
+
+    /// The estimator along the track, `None` for a kind that reads whole messages.
+    pub fn filter_kind(&self) -> Option<FilterKind> {
+        Some(match self {
+            EstimatorSpec::Kalman { .. } => FilterKind::Kalman,
+            EstimatorSpec::Particle { .. } => FilterKind::Particle,
+            EstimatorSpec::FederatedKalman { .. } => FilterKind::FederatedKalman,
+            EstimatorSpec::FederatedParticle { .. } => FilterKind::FederatedParticle,
+            EstimatorSpec::Messages(_) => return None,
+        })
+    }
+
+    /// The pipeline reads whole messages (in the plane), not scalar measurements.
+    pub fn reads_whole_messages(&self) -> bool {
+        matches!(self, EstimatorSpec::Messages(_))
+    }
+
+    /// Output channels beside the state and diagnostics.
+    pub fn outputs(&self) -> Outputs {
+        match self {
+            EstimatorSpec::Messages(k) => k.outputs(),
+            _ => Outputs::default(),
+        }
+    }
+
+    pub fn smoother(&self) -> bool {
+        matches!(self, EstimatorSpec::Kalman { smoother: true, .. })
+    }
+}
+
+/// One sensor of a pipeline: a channel and what to take from it.
+#[derive(Debug, Clone)]
+pub struct SensorSpec {
+    pub topic: String,
+    /// What the sensor is, for a foreign channel whose schema cannot say (config `role`).
+    pub role: Option<railfuse_catalog::foreign::Role>,
+    /// Federated pipelines: the device index ([`MASTER`] for the master filter) and name.
+    /// Centralised pipelines: 0 and no name.
+    pub device: usize,
+    pub device_name: Option<String>,
+    /// The quantities asked for; `None`: all its sensor model gives.
+    pub fields: Option<Vec<Quantity>>,
+    pub variance: Variance,
+    pub gate_nis: Option<f64>,
+    /// Its calibration states, in state order.
+    pub states: Vec<SensorState>,
+    /// The window its speed is the mean over, s (config `speed_window_s`).
+    pub speed_window_s: Option<f64>,
+    /// A log without its channel is an error (config `required`), not a warning.
+    pub required: bool,
+    /// Where its table is.
+    pub declared: Place,
+}
+
+/// A sensor bound to its channel: the sensor model that reads the channel, and each field
+/// used with its variance setting.
+#[derive(Debug, Clone)]
+pub struct SensorBinding {
+    pub model: SensorModel,
+    pub fields: Vec<(Quantity, VarianceValue)>,
+}
+
+/// One pipeline, validated.
+#[derive(Debug, Clone)]
+pub struct PipelineSpec {
+    /// Names the output channels `/fused/<name>/…`: letters, digits, `_` and `-`.
+    pub name: String,
+    pub estimator: EstimatorSpec,
+    pub motion: MotionModel,
+    pub initial: InitialSpec,
+    /// Measurements are released in sensor-time order once the replay is this far past them.
+    pub reorder_window_ns: u64,
+    /// Fused states on a regular grid of this period instead of one per accepted measurement.
+    pub output_period_ns: Option<u64>,
+    pub sensors: Vec<SensorSpec>,
+    /// Federated pipelines: the devices (sub-filters) in order of first mention, without the
+    /// master. Empty for centralised pipelines.
+    pub devices: Vec<String>,
+    /// The table as written, stored beside the fused channels.
+    source: PipelineConfig,
+}
+
+fn at_least_zero(what: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("{what} must be ≥ 0, not {v}"))
+    }
+}
+
+impl PipelineSpec {
+    /// What a pipeline that reads whole messages is given of its spec.
+    pub fn base(&self) -> PipelineBase {
+        PipelineBase {
+            name: self.name.clone(),
+            topics: self.sensors.iter().map(|s| s.topic.clone()).collect(),
+            gates: self.sensors.iter().map(|s| s.gate_nis).collect(),
+            reorder_window_ns: self.reorder_window_ns,
+            initial: self.initial,
+        }
+    }
+
+    fn new(
+        table: &Spanned<PipelineConfig>,
+        place: &dyn Fn(Range<usize>) -> Place,
+        registry: &Registry,
+    ) -> Result<Self, Invalid> {
+        let c = table.get_ref();
+        let here = |message: String| Invalid {
+            span: table.span(),
+            message,
+        };
+        if c.name.is_empty()
+            || !c
+                .name
+                .chars()
+                .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
+        {
+            return Err(here(
+                "the name may hold only letters, digits, '_' and '-'".into(),
+            ));
+        }
+        let (filter, kind) = filter_and_kind(c, registry)?;
+        let motion = c.motion.model().map_err(here)?;
+        let reorder_window_s =
+            at_least_zero("reorder_window_s", c.reorder_window_s).map_err(here)?;
+        let output_period_ns = c
+            .output_rate_hz
+            .map(|r| positive("output_rate_hz", r).map(|r| (1e9 / r).round().max(1.0) as u64))
+            .transpose()
+            .map_err(here)?;
+        let initial = initial(&c.initial).map_err(here)?;
+        if c.sensor.is_empty() {
+            return Err(here("no [[pipeline.sensor]]: nothing to fuse".into()));
+        }
+        let devices = match filter.is_some_and(FilterKind::is_federated) {
+            true => devices(&c.sensor),
+            false => Vec::new(),
+        };
+        let sensors = c
+            .sensor
+            .iter()
+            .map(|s| {
+                sensor(
+                    s.get_ref(),
+                    filter,
+                    motion.dimension(),
+                    &devices,
+                    place(s.span()),
+                )
+                .map_err(|message| Invalid {
+                    span: s.span(),
+                    message: format!("sensor {}: {message}", s.get_ref().topic),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let states: usize = sensors.iter().map(|s| s.states.len()).sum();
+        if motion.dimension() + states > MAX_STATES {
+            return Err(here(format!(
+                "{} motion states and {states} sensor states: at most {MAX_STATES} state \
+                 components in all",
+                motion.dimension()
+            )));
+        }
+        let estimator = estimator(c, filter, kind, &devices).map_err(here)?;
+        // Stored beside the fused channels with every setting written out.
+        let mut source = c.clone();
+        if let (EstimatorSpec::Messages(k), Some(kind)) = (&estimator, kind) {
+            if let Some(t) = source.sections.get_mut(kind.section()) {
+                *t = Spanned::new(t.span(), k.settings());
+            }
+        }
+        Ok(Self {
+            name: c.name.clone(),
+            estimator,
+            motion,
+            initial,
+            reorder_window_ns: (reorder_window_s * 1e9) as u64,
+            output_period_ns,
+            sensors,
+            devices,
+            source,
+        })
+    }
+
+    /// Motion states plus sensor states.
+    pub fn dimension(&self) -> usize {
+        self.motion.dimension() + self.sensors.iter().map(|s| s.states.len()).sum::<usize>()
+    }
+
+    /// Every sensor's calibration states, in state order after the motion states, with the
+    /// index of the sensor that owns each.
+    pub fn sensor_states(&self) -> Vec<(usize, SensorState)> {
+        self.sensors
+            .iter()
+            .enumerate()
+            .flat_map(|(i, s)| s.states.iter().map(move |st| (i, *st)))
+            .collect()
+    }
+
+    /// Index of the sensor reading `topic`.
+    pub fn sensor_for(&self, topic: &str) -> Option<usize> {
+        self.sensors.iter().position(|s| s.topic == topic)
+    }
+
+    /// This pipeline as TOML, as it was written (under its current name).
+    pub fn to_toml(&self) -> String {
+        self.source.to_toml()
+    }
+
+    /// The same pipeline without its RTS smoother (tuning scores the filter's own states).
+    pub fn without_smoother(&self) -> Self {
+        let mut p = self.clone();
+        if let EstimatorSpec::Kalman { smoother, .. } = &mut p.estimator {
+            *smoother = false;
+        }
+        p
+    }
+
+    /// Its `[pipeline.tune]` table, if it has one.
+    pub fn tune(&self) -> Option<&crate::config::TuneConfig> {
+        self.source.tune.as_ref()
+    }
+
+    /// The same pipeline under another name (benchmarks, side-by-side runs).
+    pub fn renamed(&self, name: &str) -> Self {
+        let mut p = self.clone();
+        p.name = name.to_owned();
+        p.source.name = name.to_owned();
+        p
+    }
+
+    /// Binds sensor `sensor` to a channel of `schema` in log `input`: its sensor model and
+    /// the fields it uses with their variances.
+    pub fn bind(&self, input: &Path, sensor: usize, schema: &str) -> Result<SensorBinding> {
+        let s = &self.sensors[sensor];
+        let fail = |problem: String| self.channel_error(input, sensor, problem);
+        let Some(model) = SensorModel::for_schema(schema) else {
+            let supported: Vec<&str> = SensorModel::SUPPORTED
+                .iter()
+                .map(|k| k.schema_name())
+                .collect();
+            return Err(fail(format!(
+                "has schema '{schema}', which no sensor model reads (supported: {}; and, \
+                 read as those, {})",
+                supported.join(", "),
+                railfuse_catalog::foreign::Translator::schemas().join(", ")
+            )));
+        };
+        let eddy = matches!(&self.estimator, EstimatorSpec::Messages(k) if k.reads_raw_blocks());
+        if eddy != (model == SensorModel::EddyCurrent) {
+            return Err(fail(match eddy {
+                true => format!(
+                    "has schema '{schema}'; an eddy_current pipeline reads {}",
+                    railfuse_catalog::messages::MessageKind::EddyCurrentBlock.schema_name()
+                ),
+                false => "carries raw eddy-current blocks, which only an eddy_current \
+                          pipeline reads"
+                    .into(),
+            }));
+        }
+        let gives: Vec<&str> = model.quantities().iter().map(|q| q.name()).collect();
+        let wanted = s.fields.as_deref().unwrap_or(model.quantities());
+        let mut fields = Vec::new();
+        for q in wanted {
+            if !model.quantities().contains(q) {
+                return Err(fail(format!(
+                    "gives {} but not {}",
+                    gives.join(" and "),
+                    q.name()
+                )));
+            }
+            if q.index() >= self.motion.dimension() {
+                return Err(fail(format!(
+                    "gives {}, which the {}-state motion model does not hold: set fields",
+                    q.name(),
+                    self.motion.dimension()
+                )));
+            }
+            let Some(variance) = s.variance.of(*q) else {
+                return Err(fail(format!(
+                    "gives {}, and the sensor's variance table has no entry for it",
+                    q.name()
+                )));
+            };
+            fields.push((*q, variance));
+        }
+        for state in &s.states {
+            let q = state.quantity();
+            if !wanted.contains(&q) {
+                return Err(fail(format!(
+                    "has a {} state but gives no {} to observe it",
+                    state.kind(),
+                    q.name()
+                )));
+            }
+        }
+        Ok(SensorBinding { model, fields })
+    }
+
+    /// An error about sensor `sensor`'s channel in log `input`.
+    /// A sensor whose channel the log `input` lacks (`have`: the channels it has): an error
+    /// if the configuration marks it required, else the warning to give, the pipeline
+    /// running on its other sensors.
+    pub fn missing_channel(&self, input: &Path, sensor: usize, have: &[&str]) -> Result<String> {
+        let problem = match have.is_empty() {
+            true => "is not in the file".to_owned(),
+            false => format!("is not in the file (it has {})", have.join(", ")),
+        };
+        if self.sensors[sensor].required {
+            return Err(self.channel_error(input, sensor, problem));
+        }
+        let problem =
+            format!("{problem}: it runs without it (required = true makes this an error)");
+        Ok(self.channel_error(input, sensor, problem).to_string())
+    }
+
+    pub fn channel_error(&self, input: &Path, sensor: usize, problem: String) -> Error {
+        let s = &self.sensors[sensor];
+        Error::Channel {
+            input: input.to_owned(),
+            pipeline: self.name.clone(),
+            topic: s.topic.clone(),
+            declared: s.declared.to_string(),
+            problem,
+        }
+    }
+}
+
+fn initial(i: &InitialConfig) -> Result<InitialSpec, String> {
+    if !(i.speed_mps.is_finite() && i.acceleration_mps2.is_finite()) {
+        return Err("initial speed_mps and acceleration_mps2 must be finite".into());
+    }
+    let chainage_std = positive(
+        "initial.chainage_std_m",
+        i.chainage_std_m.unwrap_or(DEFAULT_CHAINAGE_STD_M),
+    )?;
+    let chainage = match i.chainage_m {
+        Some(c) if !c.is_finite() => {
+            return Err(format!("initial.chainage_m must be finite, not {c}"))
+        }
+        c => c,
+    };
+    Ok(InitialSpec {
+        chainage: chainage.map(|c| (c, chainage_std.powi(2))),
+        distance_variance: chainage_std.powi(2),
+        speed_mps: i.speed_mps,
+        speed_variance: positive("initial.speed_std_mps", i.speed_std_mps)?.powi(2),
+        acceleration_mps2: i.acceleration_mps2,
+        acceleration_variance: positive("initial.acceleration_std_mps2", i.acceleration_std_mps2)?
+            .powi(2),
+    })
+}
+
+/// What `filter` names: an estimator along the track, or a registered kind; and every
+/// other key of the table a kind's settings table, the one of this pipeline's kind.
+fn filter_and_kind<'r>(
+    c: &PipelineConfig,
+    registry: &'r Registry,
+) -> Result<(Option<FilterKind>, Option<&'r dyn PipelineKind>), Invalid> {
+    let name = c.filter.get_ref().as_str();
+    let (filter, kind) = (FilterKind::parse(name), registry.get(name));
+    if filter.is_none() && kind.is_none() {
+        let known: Vec<String> = FilterKind::ALL
+            .iter()
+            .map(|k| k.name())
+            .chain(registry.names())
+            .map(|n| format!("`{n}`"))
+            .collect();
+        return Err(Invalid {
+            span: c.filter.span(),
+            message: format!(
+                "filter: unknown kind `{name}`, expected one of {}",
+                known.join(", ")
+            ),
+        });
+    }
+    for (key, table) in &c.sections {
+        let Some(owner) = registry.by_section(key) else {
+            let known: Vec<String> = PipelineConfig::FIELDS
+                .iter()
+                .copied()
+                .chain(registry.sections())
+                .map(|n| format!("`{n}`"))
+                .collect();
+            return Err(Invalid {
+                span: table.span(),
+                message: format!(
+                    "unknown field `{key}`, expected one of {}",
+                    known.join(", ")
+                ),
+            });
+        };
+        if owner.name() != name {
+            let article = if key.starts_with(['a', 'e', 'i', 'o', 'u']) {
+                "an"
+            } else {
+                "a"
+            };
+            return Err(Invalid {
+                span: table.span(),
+                message: format!("{article} [{key}] section, but filter = \"{name}\""),
+            });
+        }
+    }
+    Ok((filter, kind))
+}
+
+#[cfg(test)]
+mod tests;
