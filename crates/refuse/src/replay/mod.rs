@@ -12,16 +12,12 @@ use std::sync::Arc;
 
 use mcap::records::op;
 use railfuse_catalog::foreign::{ros2, Translated, Translator};
-use railfuse_catalog::foxglove::TwinKind;
 use railfuse_catalog::log::format::{self, Records};
 use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
 use railfuse_catalog::log::{
     read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
 };
-use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, ImuErrorModel, MessageKind,
-    SafetyStatus, TrackMap,
-};
+use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, TrackMap};
 use railfuse_catalog::rejections::Rejections;
 use railfuse_catalog::topics;
 use serde::Serialize;
@@ -31,6 +27,10 @@ use crate::eval::{self, EvalReport, Evaluator};
 use crate::measurement::{Measurement, Quantity, SensorContext, SensorModel};
 use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 use crate::spec::Pipelines;
+
+mod outputs;
+
+use outputs::{copy_channel, register_outputs, Output, TrackOutput};
 
 pub struct RefuseOptions<'a> {
     pub input: &'a Path,
@@ -127,22 +127,6 @@ struct Route {
 enum ContextKind {
     TrackMap,
     Events,
-}
-
-struct Output {
-    state: ChannelId,
-    /// The pipeline's position as a Foxglove LocationFix, when twins are on, and the stamp of
-    /// the last one written.
-    location: Option<ChannelId>,
-    last_location_ns: Option<u64>,
-    diagnostics: ChannelId,
-    smoothed: Option<ChannelId>,
-    /// Pipelines with safety checks: `/fused/<name>/safety`.
-    safety: Option<ChannelId>,
-    /// GNSS/INS pipelines: `/fused/<name>/imu_error_model`.
-    imu_error_model: Option<ChannelId>,
-    states: u64,
-    smoothed_states: u64,
 }
 
 /// The shortest interval between two Foxglove positions of one pipeline.
@@ -477,74 +461,6 @@ impl<'a> Replay<'a> {
         Ok(kept)
     }
 
-    /// Each pipeline's NavSatFix and Odometry channels (CDR, `ros2msg` schemas), on ids below
-    /// the other fused channels' that the input has not used so far.
-    fn register_ros_outputs(&mut self) -> Result<()> {
-        let lowest = self
-            .outputs
-            .iter()
-            .flat_map(|o| {
-                [
-                    Some(o.state),
-                    o.location,
-                    Some(o.diagnostics),
-                    o.smoothed,
-                    o.safety,
-                ]
-                .into_iter()
-                .chain([o.imu_error_model])
-            })
-            .flatten()
-            .map(|c| c.0)
-            .chain(self.track_output.iter().flat_map(TrackOutput::ids))
-            .min()
-            .unwrap_or(u16::MAX);
-        let needed = 2 + 2 * self.pipelines.len();
-        let ids: Vec<u16> = (1..lowest)
-            .rev()
-            .filter(|id| !self.channels.contains_key(id) && !self.schemas.contains_key(id))
-            .take(needed)
-            .collect();
-        if ids.len() < needed {
-            return Err(Error::Log(ids_exhausted(self.opts.output)));
-        }
-        let (nav_schema, odom_schema) = (ids[0], ids[1]);
-        let w = &mut self.writer;
-        w.copy_schema(
-            nav_schema,
-            ros2::NAV_SAT_FIX,
-            "ros2msg",
-            ros2::NAV_SAT_FIX_DEFINITION.as_bytes(),
-        )?;
-        w.copy_schema(
-            odom_schema,
-            ros2::ODOMETRY,
-            "ros2msg",
-            ros2::ODOMETRY_DEFINITION.as_bytes(),
-        )?;
-        let none = BTreeMap::new();
-        for (k, p) in self.pipelines.iter().enumerate() {
-            let (nav, odom) = (ids[2 + 2 * k], ids[3 + 2 * k]);
-            let name = p.name();
-            w.copy_channel(
-                nav,
-                nav_schema,
-                &topics::fused_nav_sat_fix(name),
-                ros2::ENCODING,
-                &none,
-            )?;
-            w.copy_channel(
-                odom,
-                odom_schema,
-                &topics::fused_odometry(name),
-                ros2::ENCODING,
-                &none,
-            )?;
-            self.ros_outputs.push((ChannelId(nav), ChannelId(odom)));
-        }
-        Ok(())
-    }
-
     /// How the pipelines' sensors on a foreign channel read it (`None`: a channel of
     /// railfuse's own, or one nothing reads). The sensors on one topic must agree on its role.
     fn translator(&self, info: &ChannelInfo) -> Result<Option<Translator>> {
@@ -797,71 +713,6 @@ impl<'a> Replay<'a> {
         result
     }
 
-    /// Writes and scores what pipeline `pi` released.
-    fn emit(&mut self, pi: usize) -> Result<()> {
-        let out = &mut self.outputs[pi];
-        let observer = self.opts.observer;
-        let name = self.pipelines[pi].name();
-        for f in self.fused.drain(..) {
-            if observer.is_some() {
-                if let Some(state) = &f.state {
-                    observe(observer, &topics::fused_state(name), f.log_time_ns, state);
-                }
-                if let Some(d) = &f.diagnostics {
-                    observe(observer, &topics::fused_diagnostics(name), f.log_time_ns, d);
-                }
-            }
-            // A map needs no more than 10 positions a second: the fused state keeps every one.
-            if let (Some(state), Some(channel)) = (&f.state, out.location) {
-                let map = self.context.track.as_ref();
-                let due = out
-                    .last_location_ns
-                    .is_none_or(|last| state.stamp_ns >= last + LOCATION_TWIN_EVERY_NS);
-                let twin = due
-                    .then(|| railfuse_catalog::foxglove::fused_location(name, state, map))
-                    .flatten();
-                if let Some(twin) = twin {
-                    self.writer.write_twin(channel, f.log_time_ns, &twin)?;
-                    out.last_location_ns = Some(state.stamp_ns);
-                }
-            }
-            if let (Some(state), Some(&(nav, odom))) = (&f.state, self.ros_outputs.get(pi)) {
-                let map = self.context.track.as_ref();
-                if let Some(fix) = ros2::fused_nav_sat_fix(name, state, map) {
-                    self.writer
-                        .write_encoded(nav, f.log_time_ns, state.stamp_ns, &fix)?;
-                }
-                let odometry = ros2::fused_odometry(state, map);
-                self.writer
-                    .write_encoded(odom, f.log_time_ns, state.stamp_ns, &odometry)?;
-            }
-            if let Some(state) = &f.state {
-                self.writer.write(out.state, f.log_time_ns, state)?;
-                self.eval.fused_state(out.state.0, state);
-                out.states += 1;
-                self.report.fused_messages += 1;
-            }
-            if let Some(d) = &f.diagnostics {
-                self.writer.write(out.diagnostics, f.log_time_ns, d)?;
-                self.eval.fused_diagnostics(out.diagnostics.0, d);
-                self.report.fused_messages += 1;
-            }
-            if let (Some(safety), Some(channel)) = (&f.safety, out.safety) {
-                if observer.is_some() {
-                    observe(observer, &topics::fused_safety(name), f.log_time_ns, safety);
-                }
-                self.writer.write(channel, f.log_time_ns, safety)?;
-                self.eval.safety_status(channel.0, safety);
-                self.report.fused_messages += 1;
-            }
-            if let (Some(model), Some(channel)) = (&f.imu_error_model, out.imu_error_model) {
-                self.writer.write(channel, f.log_time_ns, model)?;
-                self.report.fused_messages += 1;
-            }
-        }
-        Ok(())
-    }
-
     /// Flushes the pipelines, writes smoothed states and each pipeline's metadata, closes the
     /// output and finishes the evaluation.
     fn finish(mut self) -> Result<(RefuseReport, EvalReport)> {
@@ -914,195 +765,5 @@ impl<'a> Replay<'a> {
         }
         let eval = self.eval.finish(log)?;
         Ok((self.report, eval))
-    }
-
-    fn write_smoothed(&mut self, pi: usize) -> Result<()> {
-        let (Some(channel), Some(smoothed)) =
-            (self.outputs[pi].smoothed, self.pipelines[pi].smoothed())
-        else {
-            return Ok(());
-        };
-        let name = self.pipelines[pi].name().to_owned();
-        let spill = |source| Error::Spill {
-            pipeline: name.clone(),
-            source,
-        };
-        for state in smoothed.map_err(spill)? {
-            let state = state.map_err(spill)?;
-            observe(
-                self.opts.observer,
-                &topics::fused_smoothed(&name),
-                state.stamp_ns,
-                &state,
-            );
-            self.writer.write(channel, state.stamp_ns, &state)?;
-            if !self.reference_is_ours() {
-                self.eval
-                    .smoothed_state(channel.0, &state, self.opts.input)?;
-            }
-            self.report.fused_messages += 1;
-            self.outputs[pi].smoothed_states += 1;
-        }
-        Ok(())
-    }
-}
-
-/// Registers every pipeline's fused channels with the writer and the evaluation. They take
-/// the highest ids the input (`known`, its summary's channels) does not use, so copied
-/// records keep theirs (replaced channels' ids too: their records may sit in chunks copied
-/// whole).
-/// Each pipeline's fused channels and, for a configuration's track that the input (whose
-/// summary lists its channels) lacks, a `/track/map` channel to write it on.
-fn register_outputs(
-    opts: &RefuseOptions<'_>,
-    known: Option<&[Arc<ChannelInfo>]>,
-    writer: &mut LogWriter,
-    eval: &mut Evaluator,
-) -> Result<(Vec<Output>, Option<TrackOutput>)> {
-    let used: BTreeSet<u16> = known.into_iter().flatten().map(|c| c.id).collect();
-    let used_schemas: BTreeSet<u16> = known
-        .into_iter()
-        .flatten()
-        .filter_map(|c| c.schema.as_ref().map(|s| s.id))
-        .collect();
-    let mut free = (1..=u16::MAX)
-        .rev()
-        .filter(|id| !used.contains(id) && !used_schemas.contains(id));
-    let mut next = || {
-        free.next()
-            .ok_or_else(|| Error::Log(ids_exhausted(opts.output)))
-    };
-    let (state_schema, diag_schema, location_schema) = (next()?, next()?, next()?);
-    let safety_schema = next()?;
-    // Only when needed, so that the other pipelines' channel ids stay as they were.
-    let any_gnss_ins = opts
-        .config
-        .pipeline
-        .iter()
-        .any(|p| p.estimator.outputs().imu_error_model);
-    let model_schema = match any_gnss_ins {
-        true => Some(next()?),
-        false => None,
-    };
-    let mut outputs = Vec::new();
-    for p in &opts.config.pipeline {
-        let state_topic = topics::fused_state(&p.name);
-        let diag_topic = topics::fused_diagnostics(&p.name);
-        let state =
-            writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &state_topic)?;
-        let diagnostics =
-            writer.add_channel_with_ids::<FusedDiagnostics>(diag_schema, next()?, &diag_topic)?;
-        eval.channel(state.0, &state_topic, FusedState::SCHEMA_NAME);
-        eval.channel(diagnostics.0, &diag_topic, FusedDiagnostics::SCHEMA_NAME);
-        let smoothed = match p.estimator.smoother() {
-            true => {
-                let topic = topics::fused_smoothed(&p.name);
-                let id =
-                    writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &topic)?;
-                eval.channel(id.0, &topic, FusedState::SCHEMA_NAME);
-                Some(id)
-            }
-            false => None,
-        };
-        let imu_error_model = match (p.estimator.outputs().imu_error_model, model_schema) {
-            (true, Some(schema)) => {
-                let topic = topics::fused_imu_error_model(&p.name);
-                Some(writer.add_channel_with_ids::<ImuErrorModel>(schema, next()?, &topic)?)
-            }
-            _ => None,
-        };
-        let safety = match p.estimator.outputs().safety {
-            true => {
-                let topic = topics::fused_safety(&p.name);
-                let id =
-                    writer.add_channel_with_ids::<SafetyStatus>(safety_schema, next()?, &topic)?;
-                eval.channel(id.0, &topic, SafetyStatus::SCHEMA_NAME);
-                Some(id)
-            }
-            _ => None,
-        };
-        let location = match railfuse_catalog::foxglove::twins_by_default() {
-            true => Some(writer.add_twin_channel_with_ids(
-                TwinKind::LocationFix,
-                location_schema,
-                next()?,
-                &railfuse_catalog::foxglove::twin_topic(&state_topic),
-            )?),
-            false => None,
-        };
-        outputs.push(Output {
-            state,
-            location,
-            last_location_ns: None,
-            diagnostics,
-            smoothed,
-            safety,
-            imu_error_model,
-            states: 0,
-            smoothed_states: 0,
-        });
-    }
-    let input_has_track = |channels: &[Arc<ChannelInfo>]| {
-        channels
-            .iter()
-            .any(|c| c.kind() == Some(MessageKind::TrackMap))
-    };
-    let track = match (&opts.config.track, known) {
-        (Some(_), Some(channels)) if !input_has_track(channels) => {
-            let (schema, id) = (next()?, next()?);
-            let map = writer.add_channel_with_ids::<TrackMap>(schema, id, topics::TRACK_MAP)?;
-            let twin = match railfuse_catalog::foxglove::twins_by_default() {
-                true => Some(writer.add_twin_channel_with_ids(
-                    TwinKind::GeoJson,
-                    next()?,
-                    next()?,
-                    &railfuse_catalog::foxglove::twin_topic(topics::TRACK_MAP),
-                )?),
-                false => None,
-            };
-            Some(TrackOutput { map, twin })
-        }
-        _ => None,
-    };
-    Ok((outputs, track))
-}
-
-/// Where the configuration's track is written in the output, and its Foxglove twin.
-#[derive(Debug, Clone, Copy)]
-struct TrackOutput {
-    map: ChannelId,
-    twin: Option<ChannelId>,
-}
-
-impl TrackOutput {
-    fn ids(&self) -> impl Iterator<Item = u16> {
-        [Some(self.map), self.twin]
-            .into_iter()
-            .flatten()
-            .map(|c| c.0)
-    }
-
-    /// Writes `track` on its channels (its twin on the twin's own: the writer's automatic
-    /// twin channel would take an id the input may use).
-    fn write(&self, writer: &mut LogWriter, log_time_ns: u64, track: &TrackMap) -> Result<()> {
-        let json = serde_json::to_vec(track).expect("a track map serialises");
-        writer.write_encoded(self.map, log_time_ns, track.stamp_ns(), &json)?;
-        let twin = railfuse_catalog::foxglove::Twin::of(MessageKind::TrackMap, &json);
-        if let (Some(channel), Some(twin)) = (self.twin, twin) {
-            writer.write_twin(channel, log_time_ns, &twin)?;
-        }
-        Ok(())
-    }
-}
-
-fn copy_channel(writer: &mut LogWriter, c: &ChannelInfo) -> Result<()> {
-    let schema = c.schema.as_ref().map_or(0, |s| s.id);
-    Ok(writer.copy_channel(c.id, schema, &c.topic, &c.message_encoding, &c.metadata)?)
-}
-
-fn ids_exhausted(output: &Path) -> railfuse_catalog::Error {
-    railfuse_catalog::Error::Write {
-        path: output.to_owned(),
-        cause: "no channel ids left for the fused channels".into(),
     }
 }
