@@ -225,52 +225,17 @@ fn example_value(schema: &Value, property: &Value) -> String {
 }
 
 pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<ImportReport> {
-    let text = std::fs::read_to_string(mapping_path).map_err(|source| MappingError::Read {
-        path: mapping_path.to_owned(),
+    let (map, scale, delimiter) = read_mapping(mapping_path)?;
+    let csv_error = |source| MappingError::Csv {
+        path: input.to_owned(),
         source,
-    })?;
-    let map: CsvMapping = toml::from_str(&text).map_err(|source| MappingError::Toml {
-        path: mapping_path.to_owned(),
-        source,
-    })?;
-    let scale: f64 = match map.time_unit.as_str() {
-        "s" => 1e9,
-        "ms" => 1e6,
-        "us" => 1e3,
-        "ns" => 1.0,
-        u => {
-            return Err(MappingError::TimeUnit {
-                path: mapping_path.to_owned(),
-                unit: u.to_owned(),
-            }
-            .into())
-        }
-    };
-    let delimiter = match map.delimiter.as_bytes() {
-        [d] => *d,
-        _ => {
-            return Err(MappingError::Delimiter {
-                path: mapping_path.to_owned(),
-                delimiter: map.delimiter.clone(),
-            }
-            .into())
-        }
     };
     let mut reader = csv::ReaderBuilder::new()
         .delimiter(delimiter)
         .flexible(true)
         .from_path(input)
-        .map_err(|source| MappingError::Csv {
-            path: input.to_owned(),
-            source,
-        })?;
-    let headers = reader
-        .headers()
-        .map_err(|source| MappingError::Csv {
-            path: input.to_owned(),
-            source,
-        })?
-        .clone();
+        .map_err(csv_error)?;
+    let headers = reader.headers().map_err(csv_error)?.clone();
     let column = |what: String, name: &str| {
         headers
             .iter()
@@ -285,17 +250,21 @@ pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<Import
     let time_col = column("time_column".into(), &map.time_column)?;
     let mut channels = Vec::new();
     for c in &map.channel {
-        let mut cols = Vec::new();
+        let mut columns = Vec::new();
         for (field, col) in &c.fields {
             let i = column(format!("channel {}: column", c.topic), col)?;
-            cols.push((field.clone(), i));
+            columns.push((field.clone(), i));
         }
         let constants: Vec<(String, Value)> = c
             .constants
             .iter()
             .map(|(k, v)| (k.clone(), serde_json::to_value(v).unwrap_or(Value::Null)))
             .collect();
-        channels.push((c, cols, constants));
+        channels.push(Bound {
+            channel: c,
+            columns,
+            constants,
+        });
     }
     let mut report = ImportReport {
         input: input.to_owned(),
@@ -328,35 +297,96 @@ pub fn import(input: &Path, mapping_path: &Path, output: &Path) -> Result<Import
             report.skip(line, "bad time", t);
             continue;
         };
-        for (c, cols, constants) in &channels {
-            if cols
-                .iter()
-                .any(|(_, i)| record.get(*i).is_none_or(|v| v.trim().is_empty()))
-            {
-                continue;
-            }
-            let mut obj = serde_json::Map::new();
-            obj.insert("topic".into(), Value::from(c.topic.clone()));
-            if let Some(ty) = &c.type_name {
-                obj.insert("type".into(), Value::from(ty.clone()));
-            }
-            obj.insert("stamp_ns".into(), Value::from(stamp));
-            for (field, i) in cols {
-                put(&mut obj, field, cell(record.get(*i).unwrap_or("")));
-            }
-            for (k, v) in constants {
-                obj.insert(k.clone(), v.clone());
-            }
-            match from_object(obj, stamp) {
-                Ok(item) => {
-                    writer.write(&item)?;
-                    report.messages += 1;
-                    *report.per_topic.entry(item.topic).or_insert(0) += 1;
-                }
-                Err(e) => report.skip(line, "row does not make a valid message", e),
-            }
+        for b in &channels {
+            b.write_row(&record, stamp, line, &mut writer, &mut report)?;
         }
     }
     writer.writer.finish()?;
     Ok(report)
+}
+
+/// The mapping file read and checked: the mapping, the time unit's scale to ns, the delimiter.
+fn read_mapping(path: &Path) -> Result<(CsvMapping, f64, u8)> {
+    let text = std::fs::read_to_string(path).map_err(|source| MappingError::Read {
+        path: path.to_owned(),
+        source,
+    })?;
+    let map: CsvMapping = toml::from_str(&text).map_err(|source| MappingError::Toml {
+        path: path.to_owned(),
+        source,
+    })?;
+    let scale: f64 = match map.time_unit.as_str() {
+        "s" => 1e9,
+        "ms" => 1e6,
+        "us" => 1e3,
+        "ns" => 1.0,
+        u => {
+            return Err(MappingError::TimeUnit {
+                path: path.to_owned(),
+                unit: u.to_owned(),
+            }
+            .into())
+        }
+    };
+    let delimiter = match map.delimiter.as_bytes() {
+        [d] => *d,
+        _ => {
+            return Err(MappingError::Delimiter {
+                path: path.to_owned(),
+                delimiter: map.delimiter.clone(),
+            }
+            .into())
+        }
+    };
+    Ok((map, scale, delimiter))
+}
+
+/// A mapped channel with its columns found in the file's header.
+struct Bound<'a> {
+    channel: &'a ChannelMapping,
+    /// Each field and its column.
+    columns: Vec<(String, usize)>,
+    constants: Vec<(String, Value)>,
+}
+
+impl Bound<'_> {
+    /// The channel's message of one row, when the row has every one of its columns.
+    fn write_row(
+        &self,
+        record: &csv::StringRecord,
+        stamp: u64,
+        line: u64,
+        writer: &mut ItemWriter,
+        report: &mut ImportReport,
+    ) -> Result<()> {
+        let c = self.channel;
+        if self
+            .columns
+            .iter()
+            .any(|(_, i)| record.get(*i).is_none_or(|v| v.trim().is_empty()))
+        {
+            return Ok(());
+        }
+        let mut obj = serde_json::Map::new();
+        obj.insert("topic".into(), Value::from(c.topic.clone()));
+        if let Some(ty) = &c.type_name {
+            obj.insert("type".into(), Value::from(ty.clone()));
+        }
+        obj.insert("stamp_ns".into(), Value::from(stamp));
+        for (field, i) in &self.columns {
+            put(&mut obj, field, cell(record.get(*i).unwrap_or("")));
+        }
+        for (k, v) in &self.constants {
+            obj.insert(k.clone(), v.clone());
+        }
+        match from_object(obj, stamp) {
+            Ok(item) => {
+                writer.write(&item)?;
+                report.messages += 1;
+                *report.per_topic.entry(item.topic).or_insert(0) += 1;
+            }
+            Err(e) => report.skip(line, "row does not make a valid message", e),
+        }
+        Ok(())
+    }
 }
