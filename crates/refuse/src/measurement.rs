@@ -147,13 +147,6 @@ impl SensorModel {
         out: &mut Vec<Measurement>,
     ) -> Result<()> {
         out.clear();
-        let one = |stamp_ns, quantity, value, reported_variance, valid| Measurement {
-            stamp_ns,
-            quantity,
-            value,
-            reported_variance,
-            valid,
-        };
         match self {
             SensorModel::LoopPosition => {
                 let m: LoopPosition = msg.decode(path)?;
@@ -212,59 +205,88 @@ impl SensorModel {
             }
             // Read whole by its pipeline; nothing scalar in a block.
             SensorModel::EddyCurrent => {}
-            SensorModel::FusedState => {
-                #[derive(serde::Deserialize)]
-                struct State {
-                    stamp_ns: u64,
-                    chainage_m: f64,
-                    speed_mps: f64,
-                    covariance: [f64; 9],
-                }
-                let m: State = msg.decode_fields(path)?;
-                let var = |v: f64| (v.is_finite() && v > 0.0).then_some(v);
-                out.push(one(
-                    m.stamp_ns,
-                    Quantity::Chainage,
-                    m.chainage_m,
-                    var(m.covariance[0]),
-                    m.chainage_m.is_finite(),
-                ));
-                out.push(one(
-                    m.stamp_ns,
-                    Quantity::Speed,
-                    m.speed_mps,
-                    var(m.covariance[4]),
-                    m.speed_mps.is_finite(),
-                ));
-            }
-            SensorModel::GnssFix => {
-                let m: GnssFix = msg.decode(path)?;
-                let along = gnss_chainage(&m, ctx.track.as_ref());
-                let (chainage, variance, heading) = along.unwrap_or((f64::NAN, None, None));
-                out.push(one(
-                    m.stamp_ns,
-                    Quantity::Chainage,
-                    chainage,
-                    variance,
-                    along.is_some(),
-                ));
-                // Speed over ground is a magnitude: signed by the course against the track.
-                let sign = match (m.course_rad, heading) {
-                    (Some(c), Some(h)) if (c - h).cos() < 0.0 => -1.0,
-                    _ => 1.0,
-                };
-                let speed = m.speed_mps.map(|v| sign * v);
-                out.push(one(
-                    m.stamp_ns,
-                    Quantity::Speed,
-                    speed.unwrap_or(f64::NAN),
-                    None,
-                    m.fix_type.has_position() && speed.is_some(),
-                ));
-            }
+            SensorModel::FusedState => fused_state(msg, path, out)?,
+            SensorModel::GnssFix => gnss(msg, path, ctx, out)?,
         }
         Ok(())
     }
+}
+
+fn one(
+    stamp_ns: u64,
+    quantity: Quantity,
+    value: f64,
+    reported_variance: Option<f64>,
+    valid: bool,
+) -> Measurement {
+    Measurement {
+        stamp_ns,
+        quantity,
+        value,
+        reported_variance,
+        valid,
+    }
+}
+
+/// Another pipeline's state (or smoothed state) as chainage and speed measurements.
+fn fused_state(msg: &LogMessage<'_>, path: &Path, out: &mut Vec<Measurement>) -> Result<()> {
+    #[derive(serde::Deserialize)]
+    struct State {
+        stamp_ns: u64,
+        chainage_m: f64,
+        speed_mps: f64,
+        covariance: [f64; 9],
+    }
+    let m: State = msg.decode_fields(path)?;
+    let var = |v: f64| (v.is_finite() && v > 0.0).then_some(v);
+    out.push(one(
+        m.stamp_ns,
+        Quantity::Chainage,
+        m.chainage_m,
+        var(m.covariance[0]),
+        m.chainage_m.is_finite(),
+    ));
+    out.push(one(
+        m.stamp_ns,
+        Quantity::Speed,
+        m.speed_mps,
+        var(m.covariance[4]),
+        m.speed_mps.is_finite(),
+    ));
+    Ok(())
+}
+
+/// A GNSS fix as chainage on the track and speed signed by its course against the track.
+fn gnss(
+    msg: &LogMessage<'_>,
+    path: &Path,
+    ctx: &SensorContext,
+    out: &mut Vec<Measurement>,
+) -> Result<()> {
+    let m: GnssFix = msg.decode(path)?;
+    let along = gnss_chainage(&m, ctx.track.as_ref());
+    let (chainage, variance, heading) = along.unwrap_or((f64::NAN, None, None));
+    out.push(one(
+        m.stamp_ns,
+        Quantity::Chainage,
+        chainage,
+        variance,
+        along.is_some(),
+    ));
+    // Speed over ground is a magnitude: signed by the course against the track.
+    let sign = match (m.course_rad, heading) {
+        (Some(c), Some(h)) if (c - h).cos() < 0.0 => -1.0,
+        _ => 1.0,
+    };
+    let speed = m.speed_mps.map(|v| sign * v);
+    out.push(one(
+        m.stamp_ns,
+        Quantity::Speed,
+        speed.unwrap_or(f64::NAN),
+        None,
+        m.fix_type.has_position() && speed.is_some(),
+    ));
+    Ok(())
 }
 
 /// Chainage of a fix on the track map, its variance along the track, and the track heading.
