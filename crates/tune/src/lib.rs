@@ -28,7 +28,9 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 pub use crate::error::{Error, Result};
-use railfuse_refuse::config::{ObjectiveKind, OptimiserKind, ParamBounds, PipelinesFile, Scale};
+use railfuse_refuse::config::{
+    ObjectiveKind, OptimiserKind, ParamBounds, PipelinesFile, Scale, TuneConfig,
+};
 use railfuse_refuse::spec::{PipelineSpec, Pipelines};
 use railfuse_refuse::Error as RefuseError;
 
@@ -182,6 +184,64 @@ pub struct TuneOutcome {
     pub tuned_toml: String,
 }
 
+/// What is minimised: the request's objective, else the table's, else RMSE with a reference
+/// and the innovations' likelihood without; with the table's weights.
+fn objective(
+    req: &TuneRequest,
+    table: &TuneConfig,
+    has_reference: bool,
+) -> Result<Objective, String> {
+    let kind = match (req.objective.or(table.objective), has_reference) {
+        (Some(ObjectiveKind::Rmse), false) => {
+            return Err(
+                "the rmse objective needs a reference: --reference TOPIC or reference \
+                        in [pipeline.tune]"
+                    .into(),
+            )
+        }
+        (Some(k), _) => k,
+        (None, true) => ObjectiveKind::Rmse,
+        (None, false) => ObjectiveKind::Nll,
+    };
+    let objective = Objective {
+        kind,
+        position_weight: table.position_weight.unwrap_or(1.0),
+        speed_weight: table.speed_weight.unwrap_or(1.0),
+    };
+    if !(objective.position_weight >= 0.0 && objective.speed_weight >= 0.0)
+        || objective.position_weight + objective.speed_weight <= 0.0
+    {
+        return Err("the weights must be ≥ 0 and not both 0".into());
+    }
+    Ok(objective)
+}
+
+/// The optimiser (Nelder–Mead unless asked) and its evaluation budget (a grid's: every point).
+fn search_plan(
+    req: &TuneRequest,
+    table: &TuneConfig,
+    grid_points: usize,
+) -> Result<(OptimiserKind, usize), String> {
+    let optimiser = req
+        .optimiser
+        .or(table.optimiser)
+        .unwrap_or(OptimiserKind::NelderMead);
+    if optimiser == OptimiserKind::Bayesian && !BAYESIAN {
+        return Err(search::WITHOUT_BAYESIAN.into());
+    }
+    let budget = req
+        .max_evaluations
+        .or(table.max_evaluations)
+        .unwrap_or(match optimiser {
+            OptimiserKind::Grid => grid_points,
+            _ => DEFAULT_BUDGET,
+        });
+    if budget == 0 {
+        return Err("max_evaluations must be at least 1".into());
+    }
+    Ok((optimiser, budget))
+}
+
 impl Tuner {
     /// Reads the configuration, resolves the parameters and decodes every log (in parallel).
     pub fn open(req: &TuneRequest) -> Result<Self> {
@@ -207,7 +267,7 @@ impl Tuner {
             message,
         };
         let table = spec.tune().cloned().unwrap_or_default();
-        let mut bounds: Vec<(String, ParamBounds)> = table.params.into_iter().collect();
+        let mut bounds: Vec<(String, ParamBounds)> = table.params.clone().into_iter().collect();
         for arg in &req.params {
             let (name, b) = parse_param_arg(arg).map_err(fail)?;
             match bounds.iter_mut().find(|(n, _)| *n == name) {
@@ -234,50 +294,13 @@ impl Tuner {
             let path: ParamPath = name.parse().map_err(fail)?;
             params.push(config.param(&path, b)?);
         }
-        let reference = req.reference.clone().or(table.reference);
-        let kind = match (req.objective.or(table.objective), &reference) {
-            (Some(ObjectiveKind::Rmse), None) => {
-                return Err(fail(
-                    "the rmse objective needs a reference: --reference TOPIC or reference in \
-                     [pipeline.tune]"
-                        .into(),
-                ))
-            }
-            (Some(k), _) => k,
-            (None, Some(_)) => ObjectiveKind::Rmse,
-            (None, None) => ObjectiveKind::Nll,
-        };
-        let objective = Objective {
-            kind,
-            position_weight: table.position_weight.unwrap_or(1.0),
-            speed_weight: table.speed_weight.unwrap_or(1.0),
-        };
-        if !(objective.position_weight >= 0.0 && objective.speed_weight >= 0.0)
-            || objective.position_weight + objective.speed_weight <= 0.0
-        {
-            return Err(fail("the weights must be ≥ 0 and not both 0".into()));
-        }
+        let reference = req.reference.clone().or(table.reference.clone());
+        let objective = objective(req, &table, reference.is_some()).map_err(fail)?;
         if req.logs.is_empty() {
             return Err(fail("no logs to tune on".into()));
         }
-        let optimiser = req
-            .optimiser
-            .or(table.optimiser)
-            .unwrap_or(OptimiserKind::NelderMead);
-        if optimiser == OptimiserKind::Bayesian && !BAYESIAN {
-            return Err(fail(search::WITHOUT_BAYESIAN.into()));
-        }
         let grid_points: usize = params.iter().map(|p| p.steps).product();
-        let budget = req
-            .max_evaluations
-            .or(table.max_evaluations)
-            .unwrap_or(match optimiser {
-                OptimiserKind::Grid => grid_points,
-                _ => DEFAULT_BUDGET,
-            });
-        if budget == 0 {
-            return Err(fail("max_evaluations must be at least 1".into()));
-        }
+        let (optimiser, budget) = search_plan(req, &table, grid_points).map_err(fail)?;
         let recordings = req
             .logs
             .par_iter()
