@@ -407,29 +407,8 @@ impl Tuner {
             // EM's answer is its last iterate (the likelihood's maximum), whatever the objective
             // says of the iterates on the way.
             Some(em) => {
-                let units = |v: &[f64]| -> Vec<f64> {
-                    self.params
-                        .iter()
-                        .zip(v)
-                        .map(|(p, &v)| p.to_unit(v))
-                        .collect()
-                };
-                let mut ending = Ending::Converged;
-                let (values, ll) = em.run(&self.params, &start, self.budget - 1, |v| {
-                    book.batch(&[units(v)]).map(|_| ()).inspect_err(|e| {
-                        ending = match e {
-                            Error::Interrupted => Ending::Interrupted,
-                            _ => Ending::Budget,
-                        }
-                    })
-                })?;
-                let rounded = self
-                    .params
-                    .iter()
-                    .zip(&values)
-                    .map(|(p, &v)| p.round(v))
-                    .collect();
-                (ending, Some(rounded), Some(ll))
+                let (ending, values, ll) = self.run_em(em, &start, &book)?;
+                (ending, Some(values), Some(ll))
             }
             None => (search::search(&settings, &book)?, None, None),
         };
@@ -447,20 +426,7 @@ impl Tuner {
             optimiser: self.optimiser,
             objective_before: before.objective,
             objective_after: after.objective,
-            params: self
-                .params
-                .iter()
-                .zip(&best)
-                .map(|(p, &after)| ParamReport {
-                    name: p.path.to_string(),
-                    min: p.min,
-                    max: p.max,
-                    scale: p.scale,
-                    before: p.start,
-                    after,
-                    on_bound: p.on_bound(after),
-                })
-                .collect(),
+            params: self.param_reports(&best),
             before: before.pooled.metrics(),
             after: after.pooled.metrics(),
             logs: self
@@ -489,6 +455,56 @@ impl Tuner {
             trace,
             tuned_toml,
         })
+    }
+
+    /// EM on the pipeline's own model, each iterate booked as an evaluation: how it ended, its
+    /// answer (rounded to the parameters' steps) and its log-likelihood at each iteration.
+    fn run_em(
+        &self,
+        em: &em::PipelineEm,
+        start: &[f64],
+        book: &Evaluations<'_>,
+    ) -> Result<(Ending, Vec<f64>, Vec<f64>)> {
+        let units = |v: &[f64]| -> Vec<f64> {
+            self.params
+                .iter()
+                .zip(v)
+                .map(|(p, &v)| p.to_unit(v))
+                .collect()
+        };
+        let mut ending = Ending::Converged;
+        let (values, ll) = em.run(&self.params, start, self.budget - 1, |v| {
+            book.batch(&[units(v)]).map(|_| ()).inspect_err(|e| {
+                ending = match e {
+                    Error::Interrupted => Ending::Interrupted,
+                    _ => Ending::Budget,
+                }
+            })
+        })?;
+        let rounded = self
+            .params
+            .iter()
+            .zip(&values)
+            .map(|(p, &v)| p.round(v))
+            .collect();
+        Ok((ending, rounded, ll))
+    }
+
+    /// Each parameter's bounds, start and tuned value.
+    fn param_reports(&self, best: &[f64]) -> Vec<ParamReport> {
+        self.params
+            .iter()
+            .zip(best)
+            .map(|(p, &after)| ParamReport {
+                name: p.path.to_string(),
+                min: p.min,
+                max: p.max,
+                scale: p.scale,
+                before: p.start,
+                after,
+                on_bound: p.on_bound(after),
+            })
+            .collect()
     }
 
     /// The configuration text with `values` written in, comments kept.
