@@ -112,6 +112,12 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.eddy_current {
         return eddy_current(&a.dir, secs, a.repeat);
     }
+    refuse_table(&a)
+}
+
+/// The refuse table: the default log at each duration with samples/kalman.toml (and seed001
+/// with its four pipelines), railfuse beside the Python peer.
+fn refuse_table(a: &Args) -> Result<()> {
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create", a.dir.display()))?;
     let kalman = a.dir.join("kalman.toml");
@@ -156,57 +162,72 @@ pub fn run(a: Args) -> Result<()> {
     let bar = crate::progress::Progress::steps("bench", runs.len() as u64);
     for (done, (label, scenario, duration, config)) in runs.into_iter().enumerate() {
         bar.set(done as u64);
-        let tag = label.replace([' ', ','], "");
-        let raw = a.dir.join(format!("bench-{tag}.mcap"));
-        let preset = railfuse_record::Scenario::preset(scenario).expect("a built-in preset");
-        let sim = railfuse_record::simulate(&preset, 1, duration, &[], &raw)?;
-        let fused = a.dir.join(format!("bench-{tag}.fused.mcap"));
-        // The median of several runs: the machine's other load moves single timings.
-        let mut all = (0..a.repeat.max(1))
-            .map(|_| refuse_child(&raw, config, &fused))
-            .collect::<Result<Vec<_>>>()?;
-        all.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
-        let ours = Measured {
-            wall_s: all[all.len() / 2].wall_s,
-            peak_rss_kib: all.iter().filter_map(|m| m.peak_rss_kib).max(),
-            safety_epochs: Vec::new(),
-        };
-        let rate = sim.messages as f64 / ours.wall_s;
-        // The peer runs the Kalman job only (source 001's federated filters it has not).
-        let theirs = match (&python, scenario) {
-            (Some(py), "default") => Some(peer_child(py, &peer, &raw, config, &a.dir)?),
-            _ => None,
-        };
-        let mib = std::fs::metadata(&raw)?.len() as f64 / (1 << 20) as f64;
-        let (peer_s, peer_rate, ratio) = match theirs {
-            Some(s) => {
-                let r = sim.messages as f64 / s;
-                (
-                    format!("{s:.2}"),
-                    format!("{:.1} k", r / 1e3),
-                    format!("{:.0}x", rate / r),
-                )
-            }
-            None => ("-".into(), "-".into(), "-".into()),
-        };
-        println!(
-            "{:<28} {:>9} {:>6.1} {:>9.3} {:>11.2} M {:>6} MiB {:>8} {:>11} {:>7}",
-            label,
-            sim.messages,
-            mib,
-            ours.wall_s,
-            rate / 1e6,
-            mib_of(ours.peak_rss_kib),
-            peer_s,
-            peer_rate,
-            ratio
-        );
+        let peer = python.as_deref().zip(Some(peer.as_path()));
+        refuse_row(a, &label, scenario, duration, config, peer)?;
     }
     if python.is_none() {
         println!(
             "peer: not run: no Python with mcap and filterpy (run tests/run once, or --python)"
         );
     }
+    Ok(())
+}
+
+/// One row of the refuse table: the log simulated, refused `repeat` times (the median run),
+/// and the peer on the default scenario.
+fn refuse_row(
+    a: &Args,
+    label: &str,
+    scenario: &str,
+    duration: Option<f64>,
+    config: &Path,
+    peer: Option<(&Path, &Path)>,
+) -> Result<()> {
+    let tag = label.replace([' ', ','], "");
+    let raw = a.dir.join(format!("bench-{tag}.mcap"));
+    let preset = railfuse_record::Scenario::preset(scenario).expect("a built-in preset");
+    let sim = railfuse_record::simulate(&preset, 1, duration, &[], &raw)?;
+    let fused = a.dir.join(format!("bench-{tag}.fused.mcap"));
+    // The median of several runs: the machine's other load moves single timings.
+    let mut all = (0..a.repeat.max(1))
+        .map(|_| refuse_child(&raw, config, &fused))
+        .collect::<Result<Vec<_>>>()?;
+    all.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
+    let ours = Measured {
+        wall_s: all[all.len() / 2].wall_s,
+        peak_rss_kib: all.iter().filter_map(|m| m.peak_rss_kib).max(),
+        safety_epochs: Vec::new(),
+    };
+    let rate = sim.messages as f64 / ours.wall_s;
+    // The peer runs the Kalman job only (source 001's federated filters it has not).
+    let theirs = match (peer, scenario) {
+        (Some((py, peer)), "default") => Some(peer_child(py, peer, &raw, config, &a.dir)?),
+        _ => None,
+    };
+    let mib = std::fs::metadata(&raw)?.len() as f64 / (1 << 20) as f64;
+    let (peer_s, peer_rate, ratio) = match theirs {
+        Some(s) => {
+            let r = sim.messages as f64 / s;
+            (
+                format!("{s:.2}"),
+                format!("{:.1} k", r / 1e3),
+                format!("{:.0}x", rate / r),
+            )
+        }
+        None => ("-".into(), "-".into(), "-".into()),
+    };
+    println!(
+        "{:<28} {:>9} {:>6.1} {:>9.3} {:>11.2} M {:>6} MiB {:>8} {:>11} {:>7}",
+        label,
+        sim.messages,
+        mib,
+        ours.wall_s,
+        rate / 1e6,
+        mib_of(ours.peak_rss_kib),
+        peer_s,
+        peer_rate,
+        ratio
+    );
     Ok(())
 }
 
