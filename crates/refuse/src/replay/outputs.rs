@@ -17,6 +17,7 @@ use railfuse_catalog::topics;
 
 use crate::error::{Error, Result};
 use crate::eval::Evaluator;
+use crate::spec::PipelineSpec;
 
 use super::{observe, RefuseOptions, Replay, LOCATION_TWIN_EVERY_NS};
 
@@ -213,88 +214,29 @@ pub(super) fn register_outputs(
     writer: &mut LogWriter,
     eval: &mut Evaluator,
 ) -> Result<(Vec<Output>, Option<TrackOutput>)> {
-    let used: BTreeSet<u16> = known.into_iter().flatten().map(|c| c.id).collect();
-    let used_schemas: BTreeSet<u16> = known
-        .into_iter()
-        .flatten()
-        .filter_map(|c| c.schema.as_ref().map(|s| s.id))
-        .collect();
-    let mut free = (1..=u16::MAX)
-        .rev()
-        .filter(|id| !used.contains(id) && !used_schemas.contains(id));
-    let mut next = || {
-        free.next()
-            .ok_or_else(|| Error::Log(ids_exhausted(opts.output)))
-    };
-    let (state_schema, diag_schema, location_schema) = (next()?, next()?, next()?);
-    let safety_schema = next()?;
+    let mut ids = FreeIds::new(known, opts.output);
+    let (state, diagnostics, location) = (ids.next()?, ids.next()?, ids.next()?);
+    let safety = ids.next()?;
     // Only when needed, so that the other pipelines' channel ids stay as they were.
     let any_gnss_ins = opts
         .config
         .pipeline
         .iter()
         .any(|p| p.estimator.outputs().imu_error_model);
-    let model_schema = match any_gnss_ins {
-        true => Some(next()?),
+    let imu_error_model = match any_gnss_ins {
+        true => Some(ids.next()?),
         false => None,
+    };
+    let schemas = Schemas {
+        state,
+        diagnostics,
+        location,
+        safety,
+        imu_error_model,
     };
     let mut outputs = Vec::new();
     for p in &opts.config.pipeline {
-        let state_topic = topics::fused_state(&p.name);
-        let diag_topic = topics::fused_diagnostics(&p.name);
-        let state =
-            writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &state_topic)?;
-        let diagnostics =
-            writer.add_channel_with_ids::<FusedDiagnostics>(diag_schema, next()?, &diag_topic)?;
-        eval.channel(state.0, &state_topic, FusedState::SCHEMA_NAME);
-        eval.channel(diagnostics.0, &diag_topic, FusedDiagnostics::SCHEMA_NAME);
-        let smoothed = match p.estimator.smoother() {
-            true => {
-                let topic = topics::fused_smoothed(&p.name);
-                let id =
-                    writer.add_channel_with_ids::<FusedState>(state_schema, next()?, &topic)?;
-                eval.channel(id.0, &topic, FusedState::SCHEMA_NAME);
-                Some(id)
-            }
-            false => None,
-        };
-        let imu_error_model = match (p.estimator.outputs().imu_error_model, model_schema) {
-            (true, Some(schema)) => {
-                let topic = topics::fused_imu_error_model(&p.name);
-                Some(writer.add_channel_with_ids::<ImuErrorModel>(schema, next()?, &topic)?)
-            }
-            _ => None,
-        };
-        let safety = match p.estimator.outputs().safety {
-            true => {
-                let topic = topics::fused_safety(&p.name);
-                let id =
-                    writer.add_channel_with_ids::<SafetyStatus>(safety_schema, next()?, &topic)?;
-                eval.channel(id.0, &topic, SafetyStatus::SCHEMA_NAME);
-                Some(id)
-            }
-            _ => None,
-        };
-        let location = match railfuse_catalog::foxglove::twins_by_default() {
-            true => Some(writer.add_twin_channel_with_ids(
-                TwinKind::LocationFix,
-                location_schema,
-                next()?,
-                &railfuse_catalog::foxglove::twin_topic(&state_topic),
-            )?),
-            false => None,
-        };
-        outputs.push(Output {
-            state,
-            location,
-            last_location_ns: None,
-            diagnostics,
-            smoothed,
-            safety,
-            imu_error_model,
-            states: 0,
-            smoothed_states: 0,
-        });
+        outputs.push(pipeline_output(p, &schemas, &mut ids, writer, eval)?);
     }
     let input_has_track = |channels: &[Arc<ChannelInfo>]| {
         channels
@@ -303,13 +245,13 @@ pub(super) fn register_outputs(
     };
     let track = match (&opts.config.track, known) {
         (Some(_), Some(channels)) if !input_has_track(channels) => {
-            let (schema, id) = (next()?, next()?);
+            let (schema, id) = (ids.next()?, ids.next()?);
             let map = writer.add_channel_with_ids::<TrackMap>(schema, id, topics::TRACK_MAP)?;
             let twin = match railfuse_catalog::foxglove::twins_by_default() {
                 true => Some(writer.add_twin_channel_with_ids(
                     TwinKind::GeoJson,
-                    next()?,
-                    next()?,
+                    ids.next()?,
+                    ids.next()?,
                     &railfuse_catalog::foxglove::twin_topic(topics::TRACK_MAP),
                 )?),
                 false => None,
@@ -319,6 +261,114 @@ pub(super) fn register_outputs(
         _ => None,
     };
     Ok((outputs, track))
+}
+
+/// Ids neither a channel nor a schema of the input uses, highest first.
+struct FreeIds<'a> {
+    free: Box<dyn Iterator<Item = u16>>,
+    output: &'a Path,
+}
+
+impl<'a> FreeIds<'a> {
+    fn new(known: Option<&[Arc<ChannelInfo>]>, output: &'a Path) -> Self {
+        let mut used: BTreeSet<u16> = known.into_iter().flatten().map(|c| c.id).collect();
+        used.extend(
+            known
+                .into_iter()
+                .flatten()
+                .filter_map(|c| c.schema.as_ref().map(|s| s.id)),
+        );
+        Self {
+            free: Box::new((1..=u16::MAX).rev().filter(move |id| !used.contains(id))),
+            output,
+        }
+    }
+
+    fn next(&mut self) -> Result<u16> {
+        self.free
+            .next()
+            .ok_or_else(|| Error::Log(ids_exhausted(self.output)))
+    }
+}
+
+/// The schema ids of the fused channels, shared by every pipeline.
+struct Schemas {
+    state: u16,
+    diagnostics: u16,
+    location: u16,
+    safety: u16,
+    imu_error_model: Option<u16>,
+}
+
+/// One pipeline's channels, registered (and told to the evaluator) in a fixed order.
+fn pipeline_output(
+    p: &PipelineSpec,
+    schemas: &Schemas,
+    ids: &mut FreeIds<'_>,
+    writer: &mut LogWriter,
+    eval: &mut Evaluator,
+) -> Result<Output> {
+    let state_topic = topics::fused_state(&p.name);
+    let diag_topic = topics::fused_diagnostics(&p.name);
+    let state =
+        writer.add_channel_with_ids::<FusedState>(schemas.state, ids.next()?, &state_topic)?;
+    let diagnostics = writer.add_channel_with_ids::<FusedDiagnostics>(
+        schemas.diagnostics,
+        ids.next()?,
+        &diag_topic,
+    )?;
+    eval.channel(state.0, &state_topic, FusedState::SCHEMA_NAME);
+    eval.channel(diagnostics.0, &diag_topic, FusedDiagnostics::SCHEMA_NAME);
+    let smoothed = match p.estimator.smoother() {
+        true => {
+            let topic = topics::fused_smoothed(&p.name);
+            let id =
+                writer.add_channel_with_ids::<FusedState>(schemas.state, ids.next()?, &topic)?;
+            eval.channel(id.0, &topic, FusedState::SCHEMA_NAME);
+            Some(id)
+        }
+        false => None,
+    };
+    let imu_error_model = match (
+        p.estimator.outputs().imu_error_model,
+        schemas.imu_error_model,
+    ) {
+        (true, Some(schema)) => {
+            let topic = topics::fused_imu_error_model(&p.name);
+            Some(writer.add_channel_with_ids::<ImuErrorModel>(schema, ids.next()?, &topic)?)
+        }
+        _ => None,
+    };
+    let safety = match p.estimator.outputs().safety {
+        true => {
+            let topic = topics::fused_safety(&p.name);
+            let id =
+                writer.add_channel_with_ids::<SafetyStatus>(schemas.safety, ids.next()?, &topic)?;
+            eval.channel(id.0, &topic, SafetyStatus::SCHEMA_NAME);
+            Some(id)
+        }
+        _ => None,
+    };
+    let location = match railfuse_catalog::foxglove::twins_by_default() {
+        true => Some(writer.add_twin_channel_with_ids(
+            TwinKind::LocationFix,
+            schemas.location,
+            ids.next()?,
+            &railfuse_catalog::foxglove::twin_topic(&state_topic),
+        )?),
+        false => None,
+    };
+    Ok(Output {
+        state,
+        location,
+        last_location_ns: None,
+        diagnostics,
+        smoothed,
+        safety,
+        imu_error_model,
+        states: 0,
+        smoothed_states: 0,
+    })
 }
 
 /// Where the configuration's track is written in the output, and its Foxglove twin.
