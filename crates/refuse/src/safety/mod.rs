@@ -309,7 +309,48 @@ impl SafetyPipeline {
             epoch.refused(&topic, &why);
             return Some(self.finish_epoch(epoch, map));
         };
-        // Map matching of the fix (S1 map), near where the filter expects the train.
+        let m = match self.match_fix(map, (e, n)) {
+            Ok(m) => m,
+            Err(why) => {
+                self.counts.rejected_invalid += 1;
+                epoch.refused(&topic, &why);
+                return Some(self.finish_epoch(epoch, map));
+            }
+        };
+        if self.filter.is_none() {
+            self.start_filter((e, n), re.max(rn), m.heading_rad);
+            self.time_ns = fix.stamp_ns;
+            self.counts.accepted += 1;
+            epoch.used(&topic, "east", e, re, None);
+            epoch.used(&topic, "north", n, rn, None);
+            return Some(self.finish_epoch(epoch, map));
+        }
+        self.predict_to(fix.stamp_ns, map);
+        // S4 on the predicted position.
+        let p = self.filter.as_ref()?.position_covariance();
+        self.map_check = Some(map_check::map_check(
+            m.lateral_m,
+            m.heading_rad,
+            &p,
+            &Matrix2::new(re, 0.0, 0.0, rn),
+            self.settings.map_std_m,
+            self.settings.lambda,
+        ));
+        self.update_axes(
+            InnovationKind::Position,
+            &mut epoch,
+            [(Axis::East, e, re), (Axis::North, n, rn)],
+        );
+        Some(self.finish_epoch(epoch, map))
+    }
+
+    /// Map matching of a fix (S1 map), near where the filter expects the train: the match, or
+    /// why the fix does not fit the map (which the diagnosis is told either way).
+    fn match_fix(
+        &mut self,
+        map: &TrackMap,
+        (e, n): (f64, f64),
+    ) -> Result<railfuse_catalog::map_matching::MapMatch, String> {
         let expected = self.filter.as_ref().and_then(|f| {
             let (fe, fn_) = f.position();
             self.state_matcher
@@ -335,54 +376,33 @@ impl SafetyPipeline {
             }
         };
         self.diagnosis.map(map_fault.clone());
-        let Some(m) = matched.filter(|_| map_fault.is_none()) else {
-            self.counts.rejected_invalid += 1;
-            epoch.refused(&topic, map_fault.as_deref().unwrap_or("no match"));
-            return Some(self.finish_epoch(epoch, map));
-        };
-        if self.filter.is_none() {
-            let speed = self.diagnosis.axles[0]
-                .speed_mps
-                .unwrap_or(self.base.initial.speed_mps);
-            let gm = |b: Option<settings::BiasSettings>| {
-                b.map(|b| plane_filter::GaussMarkov {
-                    std: b.std,
-                    time_constant_s: b.time_constant_s,
-                })
-            };
-            self.filter = Some(PlaneFilter::new(
-                self.motion(),
-                gm(self.settings.gnss_bias),
-                gm(self.settings.axle_1_bias),
-                (e, n),
-                re.max(rn),
-                (speed, m.heading_rad),
-                self.base.initial.speed_variance,
-                self.base.initial.acceleration_variance,
-            ));
-            self.time_ns = fix.stamp_ns;
-            self.counts.accepted += 1;
-            epoch.used(&topic, "east", e, re, None);
-            epoch.used(&topic, "north", n, rn, None);
-            return Some(self.finish_epoch(epoch, map));
+        match (matched, map_fault) {
+            (Some(m), None) => Ok(m),
+            (_, why) => Err(why.unwrap_or_else(|| "no match".into())),
         }
-        self.predict_to(fix.stamp_ns, map);
-        // S4 on the predicted position.
-        let p = self.filter.as_ref()?.position_covariance();
-        self.map_check = Some(map_check::map_check(
-            m.lateral_m,
-            m.heading_rad,
-            &p,
-            &Matrix2::new(re, 0.0, 0.0, rn),
-            self.settings.map_std_m,
-            self.settings.lambda,
+    }
+
+    /// The filter started at the first usable fix, at the axle's speed along the track.
+    fn start_filter(&mut self, at: (f64, f64), variance: f64, heading_rad: f64) {
+        let speed = self.diagnosis.axles[0]
+            .speed_mps
+            .unwrap_or(self.base.initial.speed_mps);
+        let gm = |b: Option<settings::BiasSettings>| {
+            b.map(|b| plane_filter::GaussMarkov {
+                std: b.std,
+                time_constant_s: b.time_constant_s,
+            })
+        };
+        self.filter = Some(PlaneFilter::new(
+            self.motion(),
+            gm(self.settings.gnss_bias),
+            gm(self.settings.axle_1_bias),
+            at,
+            variance,
+            (speed, heading_rad),
+            self.base.initial.speed_variance,
+            self.base.initial.acceleration_variance,
         ));
-        self.update_axes(
-            InnovationKind::Position,
-            &mut epoch,
-            [(Axis::East, e, re), (Axis::North, n, rn)],
-        );
-        Some(self.finish_epoch(epoch, map))
     }
 
     /// S1 on a fix of a log without a track map (a real recording of GNSS alone, say): the fix
