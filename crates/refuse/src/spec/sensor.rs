@@ -58,6 +58,48 @@ pub(super) fn sensor(
     if s.device.is_some() && !filter.is_some_and(FilterKind::is_federated) {
         return Err("device is for federated filters only".into());
     }
+    let states = sensor_states(s, motion, &measures)?;
+    let speed_window_s = match s.speed_window_s {
+        None => None,
+        Some(_) if motion < 3 => {
+            return Err("speed_window_s needs the acceleration of a 3-state motion model".into())
+        }
+        Some(_) if !measures(Quantity::Speed) => {
+            return Err("speed_window_s, but speed is not among its fields".into())
+        }
+        Some(w) => Some(positive("speed_window_s", w)?),
+    };
+    let (device, device_name) = match filter.is_some_and(FilterKind::is_federated) {
+        false => (0, None),
+        true => match s.device_name() {
+            MASTER_DEVICE => (MASTER, Some(MASTER_DEVICE.to_owned())),
+            d => (
+                devices.iter().position(|n| n == d).unwrap_or_default(),
+                Some(d.to_owned()),
+            ),
+        },
+    };
+    Ok(SensorSpec {
+        topic: s.topic.clone(),
+        role: s.role,
+        device,
+        device_name,
+        fields: s.fields.clone(),
+        variance: s.variance.clone(),
+        gate_nis,
+        states,
+        speed_window_s,
+        required: s.required,
+        declared,
+    })
+}
+
+/// The calibration states a sensor table asks for, each checked against what it measures.
+fn sensor_states(
+    s: &SensorConfig,
+    motion: usize,
+    measures: &dyn Fn(Quantity) -> bool,
+) -> Result<Vec<SensorState>, String> {
     let mut states = Vec::new();
     if let Some(b) = s.chainage_bias {
         if !measures(Quantity::Chainage) {
@@ -95,37 +137,5 @@ pub(super) fn sensor(
             walk_per_s: at_least_zero("scale_factor.walk_per_s", k.walk_per_s)?,
         });
     }
-    let speed_window_s = match s.speed_window_s {
-        None => None,
-        Some(_) if motion < 3 => {
-            return Err("speed_window_s needs the acceleration of a 3-state motion model".into())
-        }
-        Some(_) if !measures(Quantity::Speed) => {
-            return Err("speed_window_s, but speed is not among its fields".into())
-        }
-        Some(w) => Some(positive("speed_window_s", w)?),
-    };
-    let (device, device_name) = match filter.is_some_and(FilterKind::is_federated) {
-        false => (0, None),
-        true => match s.device_name() {
-            MASTER_DEVICE => (MASTER, Some(MASTER_DEVICE.to_owned())),
-            d => (
-                devices.iter().position(|n| n == d).unwrap_or_default(),
-                Some(d.to_owned()),
-            ),
-        },
-    };
-    Ok(SensorSpec {
-        topic: s.topic.clone(),
-        role: s.role,
-        device,
-        device_name,
-        fields: s.fields.clone(),
-        variance: s.variance.clone(),
-        gate_nis,
-        states,
-        speed_window_s,
-        required: s.required,
-        declared,
-    })
+    Ok(states)
 }
