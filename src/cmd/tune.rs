@@ -8,7 +8,9 @@ use anyhow::{Context, Result};
 use railfuse_refuse::config::{value_names, ObjectiveKind, OptimiserKind};
 use railfuse_tune::recording::Metrics;
 use railfuse_tune::search::SearchProgress;
-use railfuse_tune::{write_trace_csv, write_trace_mcap, TuneOutcome, TuneRequest, Tuner};
+use railfuse_tune::{
+    write_trace_csv, write_trace_mcap, TuneOutcome, TuneReport, TuneRequest, Tuner,
+};
 
 use crate::table::Table;
 
@@ -197,6 +199,29 @@ fn print_report(a: &Args, o: &TuneOutcome) {
         r.objective_before,
         r.objective_after
     );
+    print!("{}", params_table(r));
+    print!("{}", logs_table(r));
+    if r.invalid_candidates > 0 {
+        println!(
+            "{} candidates were refused by the configuration's checks (scored as infinitely bad); the first: {}",
+            r.invalid_candidates,
+            r.first_invalid.as_deref().unwrap_or("-")
+        );
+    }
+    let trace = a
+        .trace
+        .clone()
+        .unwrap_or_else(|| a.output.with_extension("trace.csv"));
+    println!(
+        "wrote {} and the trace {} and {} (railfuse viz shows it)",
+        a.output.display(),
+        trace.display(),
+        trace_mcap_path(a).display()
+    );
+}
+
+/// Each tuned value: its bounds, scale, start and result.
+fn params_table(r: &TuneReport) -> Table {
     let mut t = Table::new(&[
         "parameter",
         "min",
@@ -217,7 +242,11 @@ fn print_report(a: &Args, o: &TuneOutcome) {
             if p.on_bound { "yes" } else { "" }.to_owned(),
         ]);
     }
-    print!("{t}");
+    t
+}
+
+/// Each log's figures before and after (and all logs pooled, when there are several).
+fn logs_table(r: &TuneReport) -> Table {
     let mut t = Table::new(&[
         "log",
         "",
@@ -255,22 +284,5 @@ fn print_report(a: &Args, o: &TuneOutcome) {
         row(&mut t, "all logs".into(), "before", &r.before);
         row(&mut t, String::new(), "after", &r.after);
     }
-    print!("{t}");
-    if r.invalid_candidates > 0 {
-        println!(
-            "{} candidates were refused by the configuration's checks (scored as infinitely bad); the first: {}",
-            r.invalid_candidates,
-            r.first_invalid.as_deref().unwrap_or("-")
-        );
-    }
-    let trace = a
-        .trace
-        .clone()
-        .unwrap_or_else(|| a.output.with_extension("trace.csv"));
-    println!(
-        "wrote {} and the trace {} and {} (railfuse viz shows it)",
-        a.output.display(),
-        trace.display(),
-        trace_mcap_path(a).display()
-    );
+    t
 }
