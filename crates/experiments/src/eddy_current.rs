@@ -225,44 +225,86 @@ struct WindowCounts {
 
 /// Adds one fused run's errors to `acc` (one row per pipeline).
 fn score(fused: &Path, acc: &mut [PipelineErrors]) -> Result<()> {
-    let mut truth: Vec<GroundTruth> = Vec::new();
-    let mut map: Option<TrackMap> = None;
-    let state_topics: Vec<String> = acc
-        .iter()
-        .map(|a| topics::fused_state(&a.pipeline))
-        .collect();
-    let diag_topics: Vec<String> = acc
-        .iter()
-        .map(|a| topics::fused_diagnostics(&a.pipeline))
-        .collect();
-    let mut states: Vec<Vec<FusedState>> = vec![Vec::new(); acc.len()];
-    let mut counts: Vec<WindowCounts> = vec![WindowCounts::default(); acc.len()];
-    let mut r = LogReader::open(fused)?;
-    while let Some(rec) = r.next() {
-        let LogRecord::Message(m) = rec? else {
-            continue;
+    let run = Run::read(fused, acc)?;
+    let truth = Truth::new(run.truth);
+    for ((a, states), counts) in acc.iter_mut().zip(&run.states).zip(&run.counts) {
+        score_pipeline(a, states, counts, &truth, run.map.as_ref());
+    }
+    Ok(())
+}
+
+/// What one fused log holds for the scores: the truth, the map, and each pipeline's states
+/// and window counts.
+struct Run {
+    truth: Vec<GroundTruth>,
+    map: Option<TrackMap>,
+    states: Vec<Vec<FusedState>>,
+    counts: Vec<WindowCounts>,
+}
+
+impl Run {
+    fn read(fused: &Path, acc: &[PipelineErrors]) -> Result<Self> {
+        let state_topics: Vec<String> = acc
+            .iter()
+            .map(|a| topics::fused_state(&a.pipeline))
+            .collect();
+        let diag_topics: Vec<String> = acc
+            .iter()
+            .map(|a| topics::fused_diagnostics(&a.pipeline))
+            .collect();
+        let mut run = Run {
+            truth: Vec::new(),
+            map: None,
+            states: vec![Vec::new(); acc.len()],
+            counts: vec![WindowCounts::default(); acc.len()],
         };
-        let topic = m.channel.topic.as_str();
-        if topic == topics::GROUND_TRUTH {
-            truth.push(m.decode(fused)?);
-        } else if topic == topics::TRACK_MAP {
-            map = Some(m.decode(fused)?);
-        } else if let Some(k) = state_topics.iter().position(|t| t == topic) {
-            states[k].push(m.decode(fused)?);
-        } else if let Some(k) = diag_topics.iter().position(|t| t == topic) {
-            let d: FusedDiagnostics = m.decode(fused)?;
-            if let Some(e) = d.eddy_current {
-                let c = &mut counts[k];
-                c.windows += 1;
-                c.no_lock += u64::from(e.window == "no_lock");
-                if e.sleepers_a > 0 {
-                    c.first.get_or_insert((d.stamp_ns, e.sleepers_a));
-                    c.last = Some((d.stamp_ns, e.sleepers_a));
+        let mut r = LogReader::open(fused)?;
+        while let Some(rec) = r.next() {
+            let LogRecord::Message(m) = rec? else {
+                continue;
+            };
+            let topic = m.channel.topic.as_str();
+            if topic == topics::GROUND_TRUTH {
+                run.truth.push(m.decode(fused)?);
+            } else if topic == topics::TRACK_MAP {
+                run.map = Some(m.decode(fused)?);
+            } else if let Some(k) = state_topics.iter().position(|t| t == topic) {
+                run.states[k].push(m.decode(fused)?);
+            } else if let Some(k) = diag_topics.iter().position(|t| t == topic) {
+                let d: FusedDiagnostics = m.decode(fused)?;
+                if let Some(e) = d.eddy_current {
+                    let c = &mut run.counts[k];
+                    c.windows += 1;
+                    c.no_lock += u64::from(e.window == "no_lock");
+                    if e.sleepers_a > 0 {
+                        c.first.get_or_insert((d.stamp_ns, e.sleepers_a));
+                        c.last = Some((d.stamp_ns, e.sleepers_a));
+                    }
                 }
             }
         }
+        Ok(run)
     }
-    let truth_at = |t: u64| -> Option<GroundTruth> {
+}
+
+/// The truth, interpolated to any stamp, and when the train moved off from each standstill.
+struct Truth {
+    samples: Vec<GroundTruth>,
+    onsets: Vec<u64>,
+}
+
+impl Truth {
+    fn new(samples: Vec<GroundTruth>) -> Self {
+        let onsets = samples
+            .windows(2)
+            .filter(|w| w[0].speed_mps == 0.0 && w[1].speed_mps > 0.0)
+            .map(|w| w[0].stamp_ns)
+            .collect();
+        Self { samples, onsets }
+    }
+
+    fn at(&self, t: u64) -> Option<GroundTruth> {
+        let truth = &self.samples;
         let i = truth.partition_point(|g| g.stamp_ns < t);
         let (a, b) = (truth.get(i.checked_sub(1)?)?, truth.get(i)?);
         let w = (t - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns).max(1) as f64;
@@ -274,64 +316,67 @@ fn score(fused: &Path, acc: &mut [PipelineErrors]) -> Result<()> {
             acceleration_mps2: lerp(a.acceleration_mps2, b.acceleration_mps2),
             ..a.clone()
         })
-    };
-    // When the train moved off from each standstill.
-    let onsets: Vec<u64> = truth
-        .windows(2)
-        .filter(|w| w[0].speed_mps == 0.0 && w[1].speed_mps > 0.0)
-        .map(|w| w[0].stamp_ns)
-        .collect();
-    let starting = |t: u64| {
-        let i = onsets.partition_point(|&o| o <= t);
-        i > 0 && (t - onsets[i - 1]) as f64 / 1e9 < STARTING_S
-    };
-    for (k, a) in acc.iter_mut().enumerate() {
-        a.runs += 1;
-        a.states += states[k].len() as u64;
-        a.windows += counts[k].windows;
-        a.no_lock += counts[k].no_lock;
-        for s in &states[k] {
-            let Some(g) = truth_at(s.stamp_ns) else {
-                continue;
-            };
-            let band = BANDS
-                .iter()
-                .position(|(_, lo, hi)| g.speed_mps >= *lo && g.speed_mps < *hi)
-                .unwrap_or(0);
-            let e = s.speed_mps - g.speed_mps;
-            a.speed[band].push(e, g.speed_mps);
-            a.acceleration.push(
-                s.acceleration_mps2 - g.acceleration_mps2,
-                g.acceleration_mps2,
-            );
-            if g.speed_mps > 0.01 && g.speed_mps < 5.0 && g.acceleration_mps2.abs() >= 0.8 {
-                a.hard_acceleration.push(e, g.speed_mps);
-            }
-            if (0.01..5.0).contains(&g.speed_mps) {
-                match starting(s.stamp_ns) {
-                    true => a.starting.push(e, g.speed_mps),
-                    false => a.slow_otherwise.push(e, g.speed_mps),
-                }
-            }
-        }
-        let (Some(first), Some(last)) = (states[k].first(), states[k].last()) else {
+    }
+
+    /// Within the first [`STARTING_S`] of a start from standstill.
+    fn starting(&self, t: u64) -> bool {
+        let i = self.onsets.partition_point(|&o| o <= t);
+        i > 0 && (t - self.onsets[i - 1]) as f64 / 1e9 < STARTING_S
+    }
+}
+
+/// One pipeline's states of one run added to its errors: speed by band, acceleration, the
+/// starts, distance and the sleeper count.
+fn score_pipeline(
+    a: &mut PipelineErrors,
+    states: &[FusedState],
+    counts: &WindowCounts,
+    truth: &Truth,
+    map: Option<&TrackMap>,
+) {
+    a.runs += 1;
+    a.states += states.len() as u64;
+    a.windows += counts.windows;
+    a.no_lock += counts.no_lock;
+    for s in states {
+        let Some(g) = truth.at(s.stamp_ns) else {
             continue;
         };
-        if let (Some(g0), Some(g1)) = (truth_at(first.stamp_ns), truth_at(last.stamp_ns)) {
-            let travelled = g1.chainage_m - g0.chainage_m;
-            let measured = last.chainage_m - first.chainage_m;
-            if travelled > 0.0 {
-                a.distance_share.push((measured - travelled) / travelled);
-            }
+        let band = BANDS
+            .iter()
+            .position(|(_, lo, hi)| g.speed_mps >= *lo && g.speed_mps < *hi)
+            .unwrap_or(0);
+        let e = s.speed_mps - g.speed_mps;
+        a.speed[band].push(e, g.speed_mps);
+        a.acceleration.push(
+            s.acceleration_mps2 - g.acceleration_mps2,
+            g.acceleration_mps2,
+        );
+        if g.speed_mps > 0.01 && g.speed_mps < 5.0 && g.acceleration_mps2.abs() >= 0.8 {
+            a.hard_acceleration.push(e, g.speed_mps);
         }
-        if let (Some(map), Some((t0, c0)), Some((t1, c1))) = (&map, counts[k].first, counts[k].last)
-        {
-            if let (Some(g0), Some(g1)) = (truth_at(t0), truth_at(t1)) {
-                let n = sleepers_between(map, g0.chainage_m, g1.chainage_m);
-                a.true_count.push(n);
-                a.count_error.push((c1 - c0) as i64 - n as i64);
+        if (0.01..5.0).contains(&g.speed_mps) {
+            match truth.starting(s.stamp_ns) {
+                true => a.starting.push(e, g.speed_mps),
+                false => a.slow_otherwise.push(e, g.speed_mps),
             }
         }
     }
-    Ok(())
+    let (Some(first), Some(last)) = (states.first(), states.last()) else {
+        return;
+    };
+    if let (Some(g0), Some(g1)) = (truth.at(first.stamp_ns), truth.at(last.stamp_ns)) {
+        let travelled = g1.chainage_m - g0.chainage_m;
+        let measured = last.chainage_m - first.chainage_m;
+        if travelled > 0.0 {
+            a.distance_share.push((measured - travelled) / travelled);
+        }
+    }
+    if let (Some(map), Some((t0, c0)), Some((t1, c1))) = (map, counts.first, counts.last) {
+        if let (Some(g0), Some(g1)) = (truth.at(t0), truth.at(t1)) {
+            let n = sleepers_between(map, g0.chainage_m, g1.chainage_m);
+            a.true_count.push(n);
+            a.count_error.push((c1 - c0) as i64 - n as i64);
+        }
+    }
 }
