@@ -331,50 +331,79 @@ pub fn import_with_progress(
         bytes: Vec::new(),
     };
 
-    let mut r = open(input)?;
-    let mut line = Vec::new();
-    let (mut n, mut consumed) = (0u64, 0u64);
-    let io = |source| Error::Io {
-        path: input.to_owned(),
-        source,
-    };
-    while let Some(ok) = read_line_bounded(&mut r, &mut line).map_err(io)? {
-        n += 1;
-        im.report.lines += 1;
-        consumed += line.len() as u64 + 1;
-        if n.is_multiple_of(4096) {
-            progress(consumed);
-        }
-        if !ok {
-            let limit = format!("over {} bytes", super::MAX_LINE);
-            im.report.skip(n, "line too long", limit);
-            continue;
-        }
-        let Ok(text) = std::str::from_utf8(&line) else {
-            im.report.skip(n, "not UTF-8 text", "binary bytes");
-            continue;
+    im.read(input, progress)?;
+    im.finish_cycles()?;
+    let run = run_metadata(input, &stem, node, &im.report.time_base);
+    im.writer.write_metadata(topics::metadata::RUN, run)?;
+    im.writer.finish()?;
+    Ok(im.report)
+}
+
+impl EthImport {
+    /// Every line of the file, each read within a bound; a line too long or not text is
+    /// skipped and counted.
+    fn read(&mut self, input: &Path, progress: &dyn Fn(u64)) -> Result<()> {
+        let mut r = open(input)?;
+        let mut line = Vec::new();
+        let (mut n, mut consumed) = (0u64, 0u64);
+        let io = |source| Error::Io {
+            path: input.to_owned(),
+            source,
         };
-        if !text.trim().is_empty() {
-            im.line(n, text)?;
+        while let Some(ok) = read_line_bounded(&mut r, &mut line).map_err(io)? {
+            n += 1;
+            self.report.lines += 1;
+            consumed += line.len() as u64 + 1;
+            if n.is_multiple_of(4096) {
+                progress(consumed);
+            }
+            if !ok {
+                let limit = format!("over {} bytes", super::MAX_LINE);
+                self.report.skip(n, "line too long", limit);
+                continue;
+            }
+            let Ok(text) = std::str::from_utf8(&line) else {
+                self.report.skip(n, "not UTF-8 text", "binary bytes");
+                continue;
+            };
+            if !text.trim().is_empty() {
+                self.line(n, text)?;
+            }
         }
+        Ok(())
     }
-    if let (Some(pvt), Some(now)) = (im.pairing.finish(), im.last_now) {
-        im.fix(now, &pvt.to_fix(pvt.utc_ns.unwrap_or(now), None))?;
+
+    /// The last PVT's fix, and the last NMEA reporting cycle, which ends with the file.
+    fn finish_cycles(&mut self) -> Result<()> {
+        if let (Some(pvt), Some(now)) = (self.pairing.finish(), self.last_now) {
+            self.fix(now, &pvt.to_fix(pvt.utc_ns.unwrap_or(now), None))?;
+        }
+        // The last NMEA reporting cycle ends with the file.
+        let clock = self.offset.and(self.last_now);
+        let undated = self.nmea.finish(clock);
+        while let (Some(fix), Some(now)) = (self.nmea.next_fix(), self.last_now) {
+            self.fix(now, &fix)?;
+        }
+        if undated > 0 {
+            *self
+                .report
+                .skipped
+                .entry("NMEA fixes with no date".to_owned())
+                .or_insert(0) += undated;
+        }
+        Ok(())
     }
-    // The last NMEA reporting cycle ends with the file.
-    let clock = im.offset.and(im.last_now);
-    let undated = im.nmea.finish(clock);
-    while let (Some(fix), Some(now)) = (im.nmea.next_fix(), im.last_now) {
-        im.fix(now, &fix)?;
-    }
-    if undated > 0 {
-        *im.report
-            .skipped
-            .entry("NMEA fixes with no date".to_owned())
-            .or_insert(0) += undated;
-    }
-    let run = BTreeMap::from([
-        ("run_id".to_owned(), stem.clone()),
+}
+
+/// The run's metadata record: the file's run id, node and train, and the time base.
+fn run_metadata(
+    input: &Path,
+    stem: &str,
+    node: String,
+    time_base: &str,
+) -> BTreeMap<String, String> {
+    BTreeMap::from([
+        ("run_id".to_owned(), stem.to_owned()),
         (
             "source".to_owned(),
             "ETH-PBL Railway-Precise-Localization (imported)".to_owned(),
@@ -388,12 +417,9 @@ pub fn import_with_progress(
                 .unwrap_or("")
                 .to_owned(),
         ),
-        ("time_base".to_owned(), im.report.time_base.clone()),
+        ("time_base".to_owned(), time_base.to_owned()),
         ("tool_version".to_owned(), crate::TOOL_VERSION.to_owned()),
-    ]);
-    im.writer.write_metadata(topics::metadata::RUN, run)?;
-    im.writer.finish()?;
-    Ok(im.report)
+    ])
 }
 
 #[cfg(test)]
