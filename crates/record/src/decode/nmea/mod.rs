@@ -407,110 +407,19 @@ impl FixAssembler {
     /// one (a live recorder's receive time).
     pub fn feed(&mut self, s: &Sentence<'_>, clock_ns: Option<u64>) -> Result<Decoded, NmeaError> {
         let (tod, part) = match s.kind {
-            "GGA" => {
-                let quality = whole(s, 5, "fix quality")?.unwrap_or(0);
-                let Some(tod) = time_of_day(s, 0)? else {
-                    return if quality == 0 {
-                        Ok(Decoded::NoFixYet)
-                    } else {
-                        Err(bad(s, 0, "time", "a fix without a time"))
-                    };
-                };
-                let gga = Gga {
-                    fix_type: match quality {
-                        1 => FixType::Single,
-                        2 | 3 => FixType::Dgps,
-                        4 => FixType::RtkFixed,
-                        5 => FixType::RtkFloat,
-                        0 | 6..=8 => FixType::None,
-                        _ => return Err(bad(s, 5, "fix quality", "0 to 8 expected")),
-                    },
-                    latitude_deg: angle(s, 1, false)?,
-                    longitude_deg: angle(s, 3, true)?,
-                    satellites: whole(s, 6, "satellites")?.unwrap_or(0).min(255) as u8,
-                    hdop: decimal(s, 7, "HDOP", false)?,
-                    msl_m: decimal(s, 8, "altitude", true)?,
-                    separation_m: decimal(s, 10, "geoid separation", true)?,
-                };
-                (Some(tod), Part::Gga(gga))
-            }
-            "RMC" => {
-                let tod = time_of_day(s, 0)?;
-                let date = match field(s, 8) {
-                    "" => None,
-                    t => {
-                        let n = whole(s, 8, "date")?.filter(|_| t.len() == 6);
-                        let n = n.ok_or_else(|| bad(s, 8, "date", "ddmmyy expected"))?;
-                        let yy = (n % 100) as i64;
-                        let y = if yy >= 69 { 1900 + yy } else { 2000 + yy };
-                        let (d, m) = (n / 10_000, n / 100 % 100);
-                        if !is_date(y, m, d) {
-                            return Err(bad(s, 8, "date", "not a date on the calendar"));
-                        }
-                        Some((y, m, d))
-                    }
-                };
-                let speed = decimal(s, 6, "speed", false)?.map(|kn| kn * 1852.0 / 3600.0);
-                let course = decimal(s, 7, "course", false)?.map(f64::to_radians);
-                let valid = match field(s, 1) {
-                    "A" => true,
-                    "V" | "" => false,
-                    _ => return Err(bad(s, 1, "status", "A or V expected")),
-                };
-                (tod, Part::Rmc(date, valid.then_some((speed, course))))
-            }
-            "ZDA" => {
-                let tod = time_of_day(s, 0)?.ok_or_else(|| bad(s, 0, "time", "empty"))?;
-                let d = whole(s, 1, "day")?.ok_or_else(|| bad(s, 1, "day", "empty"))?;
-                let m = whole(s, 2, "month")?.ok_or_else(|| bad(s, 2, "month", "empty"))?;
-                let y = whole(s, 3, "year")?.ok_or_else(|| bad(s, 3, "year", "empty"))?;
-                if field(s, 3).len() != 4 || !is_date(y.into(), m, d) {
-                    return Err(bad(s, 3, "year", "not a date on the calendar"));
-                }
-                (Some(tod), Part::Zda((y.into(), m, d)))
-            }
-            "VTG" => {
-                let course = decimal(s, 0, "course", false)?.map(f64::to_radians);
-                let speed = decimal(s, 6, "speed", false)?.map(|kmh| kmh / 3.6);
-                if field(s, 8) == "N" {
-                    (None, Part::Vtg(None, None))
-                } else {
-                    (None, Part::Vtg(speed, course))
-                }
-            }
+            "GGA" => match gga(s)? {
+                Some(p) => p,
+                None => return Ok(Decoded::NoFixYet),
+            },
+            "RMC" => rmc(s)?,
+            "ZDA" => zda(s)?,
+            "VTG" => vtg(s)?,
             "GSA" => (None, Part::Gsa(whole(s, 1, "fix mode")? == Some(1))),
-            "GST" => {
-                let tod = time_of_day(s, 0)?;
-                let sigmas = match (
-                    decimal(s, 5, "σ latitude", false)?,
-                    decimal(s, 6, "σ longitude", false)?,
-                    decimal(s, 7, "σ altitude", false)?,
-                ) {
-                    (Some(a), Some(b), Some(c)) => Some((a, b, c)),
-                    _ => None,
-                };
-                (tod, Part::Gst(sigmas))
-            }
+            "GST" => gst(s)?,
             _ => return Ok(Decoded::Skipped),
         };
         self.enter(tod, clock_ns);
-        let c = self.cycle.get_or_insert_with(Cycle::default);
-        match part {
-            Part::Gga(g) => c.gga = Some(g),
-            Part::Rmc(date, motion) => {
-                c.date = date.or(c.date);
-                if let Some((speed, course)) = motion {
-                    (c.speed_mps, c.course_rad) = (speed, course);
-                }
-            }
-            Part::Zda(date) => c.date = Some(date),
-            Part::Vtg(speed, course) => {
-                c.speed_mps = speed.or(c.speed_mps);
-                c.course_rad = course.or(c.course_rad);
-            }
-            Part::Gsa(no_fix) => c.no_fix_mode |= no_fix,
-            Part::Gst(sigmas) => c.sigmas = sigmas,
-        }
+        self.cycle.get_or_insert_with(Cycle::default).add(part);
         Ok(Decoded::Used)
     }
 
@@ -567,6 +476,121 @@ impl FixAssembler {
         self.last_ns = Some(stamp);
         if let Some(fix) = c.fix(stamp) {
             self.ready.push_back(fix);
+        }
+    }
+}
+
+/// GGA: the fix, its quality, satellites, HDOP and heights (`None`: no fix yet, no time).
+fn gga(s: &Sentence<'_>) -> Result<Option<(Option<u64>, Part)>, NmeaError> {
+    let quality = whole(s, 5, "fix quality")?.unwrap_or(0);
+    let Some(tod) = time_of_day(s, 0)? else {
+        return if quality == 0 {
+            Ok(None)
+        } else {
+            Err(bad(s, 0, "time", "a fix without a time"))
+        };
+    };
+    let gga = Gga {
+        fix_type: match quality {
+            1 => FixType::Single,
+            2 | 3 => FixType::Dgps,
+            4 => FixType::RtkFixed,
+            5 => FixType::RtkFloat,
+            0 | 6..=8 => FixType::None,
+            _ => return Err(bad(s, 5, "fix quality", "0 to 8 expected")),
+        },
+        latitude_deg: angle(s, 1, false)?,
+        longitude_deg: angle(s, 3, true)?,
+        satellites: whole(s, 6, "satellites")?.unwrap_or(0).min(255) as u8,
+        hdop: decimal(s, 7, "HDOP", false)?,
+        msl_m: decimal(s, 8, "altitude", true)?,
+        separation_m: decimal(s, 10, "geoid separation", true)?,
+    };
+    Ok(Some((Some(tod), Part::Gga(gga))))
+}
+
+/// RMC: the date, and speed and course when the status is valid.
+fn rmc(s: &Sentence<'_>) -> Result<(Option<u64>, Part), NmeaError> {
+    let tod = time_of_day(s, 0)?;
+    let date = match field(s, 8) {
+        "" => None,
+        t => {
+            let n = whole(s, 8, "date")?.filter(|_| t.len() == 6);
+            let n = n.ok_or_else(|| bad(s, 8, "date", "ddmmyy expected"))?;
+            let yy = (n % 100) as i64;
+            let y = if yy >= 69 { 1900 + yy } else { 2000 + yy };
+            let (d, m) = (n / 10_000, n / 100 % 100);
+            if !is_date(y, m, d) {
+                return Err(bad(s, 8, "date", "not a date on the calendar"));
+            }
+            Some((y, m, d))
+        }
+    };
+    let speed = decimal(s, 6, "speed", false)?.map(|kn| kn * 1852.0 / 3600.0);
+    let course = decimal(s, 7, "course", false)?.map(f64::to_radians);
+    let valid = match field(s, 1) {
+        "A" => true,
+        "V" | "" => false,
+        _ => return Err(bad(s, 1, "status", "A or V expected")),
+    };
+    Ok((tod, Part::Rmc(date, valid.then_some((speed, course)))))
+}
+
+/// ZDA: the date in full.
+fn zda(s: &Sentence<'_>) -> Result<(Option<u64>, Part), NmeaError> {
+    let tod = time_of_day(s, 0)?.ok_or_else(|| bad(s, 0, "time", "empty"))?;
+    let d = whole(s, 1, "day")?.ok_or_else(|| bad(s, 1, "day", "empty"))?;
+    let m = whole(s, 2, "month")?.ok_or_else(|| bad(s, 2, "month", "empty"))?;
+    let y = whole(s, 3, "year")?.ok_or_else(|| bad(s, 3, "year", "empty"))?;
+    if field(s, 3).len() != 4 || !is_date(y.into(), m, d) {
+        return Err(bad(s, 3, "year", "not a date on the calendar"));
+    }
+    Ok((Some(tod), Part::Zda((y.into(), m, d))))
+}
+
+/// VTG: speed and course over ground (none in mode N).
+fn vtg(s: &Sentence<'_>) -> Result<(Option<u64>, Part), NmeaError> {
+    let course = decimal(s, 0, "course", false)?.map(f64::to_radians);
+    let speed = decimal(s, 6, "speed", false)?.map(|kmh| kmh / 3.6);
+    Ok(match field(s, 8) == "N" {
+        true => (None, Part::Vtg(None, None)),
+        false => (None, Part::Vtg(speed, course)),
+    })
+}
+
+/// GST: the position's standard deviations.
+fn gst(s: &Sentence<'_>) -> Result<(Option<u64>, Part), NmeaError> {
+    let tod = time_of_day(s, 0)?;
+    let sigmas = match (
+        decimal(s, 5, "σ latitude", false)?,
+        decimal(s, 6, "σ longitude", false)?,
+        decimal(s, 7, "σ altitude", false)?,
+    ) {
+        (Some(a), Some(b), Some(c)) => Some((a, b, c)),
+        _ => None,
+    };
+    Ok((tod, Part::Gst(sigmas)))
+}
+
+impl Cycle {
+    /// A sentence's part added to the reporting cycle.
+    fn add(&mut self, part: Part) {
+        let c = self;
+        match part {
+            Part::Gga(g) => c.gga = Some(g),
+            Part::Rmc(date, motion) => {
+                c.date = date.or(c.date);
+                if let Some((speed, course)) = motion {
+                    (c.speed_mps, c.course_rad) = (speed, course);
+                }
+            }
+            Part::Zda(date) => c.date = Some(date),
+            Part::Vtg(speed, course) => {
+                c.speed_mps = speed.or(c.speed_mps);
+                c.course_rad = course.or(c.course_rad);
+            }
+            Part::Gsa(no_fix) => c.no_fix_mode |= no_fix,
+            Part::Gst(sigmas) => c.sigmas = sigmas,
         }
     }
 }
