@@ -87,48 +87,8 @@ impl Track {
             false => p.station_chainages_m.clone(),
         };
         let length = station_chainages.last().copied().unwrap_or(0.0) + 200.0;
-        let mut curvature = Vec::new();
-        let mut vertices = vec![TrackVertex {
-            chainage_m: 0.0,
-            east_m: 0.0,
-            north_m: 0.0,
-        }];
-        let (mut s, mut e, mut n, mut psi) = (0.0f64, 0.0f64, 0.0f64, p.heading_deg.to_radians());
-        'lay: loop {
-            for seg in &p.pattern {
-                curvature.push((s, seg.curvature()));
-                let len = seg.length_m();
-                // Straights need only their ends; curves a vertex every `vertex_spacing_m`.
-                let steps = if seg.curvature() == 0.0 {
-                    1
-                } else {
-                    (len / p.vertex_spacing_m).ceil().max(1.0) as usize
-                };
-                let ds = len / steps as f64;
-                for _ in 0..steps {
-                    // Exact arc (or straight) step: advance along the chord of the arc.
-                    let dpsi = seg.curvature() * ds;
-                    let mid = psi + dpsi / 2.0;
-                    let chord = if dpsi.abs() > 1e-12 {
-                        2.0 * (dpsi / 2.0).sin() / seg.curvature()
-                    } else {
-                        ds
-                    };
-                    e += chord * mid.sin();
-                    n += chord * mid.cos();
-                    psi += dpsi;
-                    s += ds;
-                    vertices.push(TrackVertex {
-                        chainage_m: s,
-                        east_m: e,
-                        north_m: n,
-                    });
-                }
-                if s >= length {
-                    break 'lay;
-                }
-            }
-        }
+        let (vertices, curvature) = lay(p, length);
+        let s = vertices.last().map_or(0.0, |v| v.chainage_m);
         let stations = station_chainages
             .iter()
             .enumerate()
@@ -137,20 +97,7 @@ impl Track {
                 chainage_m,
             })
             .collect();
-        let mut balises = Vec::new();
-        let mut b = p.balise_spacing_m / 2.0;
-        while b < s - 50.0 {
-            let jitter = if p.balise_jitter_m > 0.0 {
-                rng.random_range(-p.balise_jitter_m..p.balise_jitter_m)
-            } else {
-                0.0
-            };
-            balises.push(TrackBalise {
-                balise_id: format!("BG{:04}", balises.len() + 1),
-                chainage_m: b + jitter,
-            });
-            b += p.balise_spacing_m;
-        }
+        let balises = balises(p, s, rng);
         let tunnels = p
             .tunnels
             .iter()
@@ -190,6 +137,74 @@ impl Track {
             self.curvature[i - 1].1
         }
     }
+}
+
+/// The line laid from the pattern, repeated until it is `length` long: its vertices (a
+/// straight's ends, a curve's every `vertex_spacing_m`) and each segment's curvature from
+/// where it starts.
+fn lay(p: &TrackParams, length: f64) -> (Vec<TrackVertex>, Vec<(f64, f64)>) {
+    let mut curvature = Vec::new();
+    let mut vertices = vec![TrackVertex {
+        chainage_m: 0.0,
+        east_m: 0.0,
+        north_m: 0.0,
+    }];
+    let (mut s, mut e, mut n, mut psi) = (0.0f64, 0.0f64, 0.0f64, p.heading_deg.to_radians());
+    'lay: loop {
+        for seg in &p.pattern {
+            curvature.push((s, seg.curvature()));
+            let len = seg.length_m();
+            // Straights need only their ends; curves a vertex every `vertex_spacing_m`.
+            let steps = if seg.curvature() == 0.0 {
+                1
+            } else {
+                (len / p.vertex_spacing_m).ceil().max(1.0) as usize
+            };
+            let ds = len / steps as f64;
+            for _ in 0..steps {
+                // Exact arc (or straight) step: advance along the chord of the arc.
+                let dpsi = seg.curvature() * ds;
+                let mid = psi + dpsi / 2.0;
+                let chord = if dpsi.abs() > 1e-12 {
+                    2.0 * (dpsi / 2.0).sin() / seg.curvature()
+                } else {
+                    ds
+                };
+                e += chord * mid.sin();
+                n += chord * mid.cos();
+                psi += dpsi;
+                s += ds;
+                vertices.push(TrackVertex {
+                    chainage_m: s,
+                    east_m: e,
+                    north_m: n,
+                });
+            }
+            if s >= length {
+                break 'lay;
+            }
+        }
+    }
+    (vertices, curvature)
+}
+
+/// A balise every `balise_spacing_m` (from half a spacing in), each jittered.
+fn balises(p: &TrackParams, length: f64, rng: &mut impl rand::Rng) -> Vec<TrackBalise> {
+    let mut balises = Vec::new();
+    let mut b = p.balise_spacing_m / 2.0;
+    while b < length - 50.0 {
+        let jitter = if p.balise_jitter_m > 0.0 {
+            rng.random_range(-p.balise_jitter_m..p.balise_jitter_m)
+        } else {
+            0.0
+        };
+        balises.push(TrackBalise {
+            balise_id: format!("BG{:04}", balises.len() + 1),
+            chainage_m: b + jitter,
+        });
+        b += p.balise_spacing_m;
+    }
+    balises
 }
 
 #[cfg(test)]
