@@ -92,36 +92,7 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let sock = UdpSocket::bind("127.0.0.1:0")?;
     sock.set_write_timeout(Some(Duration::from_secs(1)))?;
-    println!("UDP ingest (JSON lines, one message per datagram, 3 s per rate):");
-    println!(
-        "{:>12} {:>10} {:>10} {:>8} {:>22}",
-        "rate msg/s", "sent", "written", "lost", "counted as kernel drop"
-    );
-    let mut best = 0.0;
-    // Doubling to 80 000, then finer steps to find where loss begins.
-    for rate in [
-        5_000.0, 10_000.0, 20_000.0, 40_000.0, 80_000.0, 100_000.0, 120_000.0, 140_000.0, 160_000.0,
-    ] {
-        let port = std::net::UdpSocket::bind("127.0.0.1:0")?
-            .local_addr()?
-            .port();
-        let c = start(dir, "ingest", port)?;
-        let sent = send_at(&sock, port, rate, 3.0, radar_line)?;
-        std::thread::sleep(Duration::from_millis(500));
-        let r = finish(c)?;
-        let written = r["per_topic"]["/radar/speed"].as_u64().unwrap_or(0);
-        let kernel = r["sources"][0]["kernel_dropped"].as_u64().unwrap_or(0);
-        println!(
-            "{rate:>12.0} {sent:>10} {written:>10} {:>8} {kernel:>22}",
-            sent.saturating_sub(written)
-        );
-        if written >= sent {
-            best = rate;
-        } else {
-            break;
-        }
-    }
-    println!("highest rate with zero loss: {best:.0} msg/s");
+    ingest(dir, &sock)?;
 
     println!("\nfield load ×{speedup} for {field_secs:.0} s (= {:.0} s of field data): IMU 1.6 kHz, GNSS 10 Hz, radar 50 Hz, 2 odometers 100 Hz, eddy-current 10 kHz (100 blocks/s of 100 samples × 2 sensors)", field_secs * speedup);
     let port = std::net::UdpSocket::bind("127.0.0.1:0")?
@@ -142,31 +113,7 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
     while t0.elapsed().as_secs_f64() < field_secs {
         let ms = (t0.elapsed().as_secs_f64() * 1000.0 * speedup) as u64;
         while k < ms {
-            let t = 1_780_300_800_000_000_000 + k * 1_000_000;
-            let mut lines = Vec::new();
-            for j in 0..(if k % 5 < 3 { 2 } else { 1 }) {
-                lines.push(format!(
-                    r#"{{"topic":"/imu","stamp_ns":{},"sensor_id":"imu0","specific_force_mps2":[0.01,0.02,9.81],"angular_rate_radps":[0.001,0.002,0.003]}}"#,
-                    t + j * 500_000
-                ));
-            }
-            if k.is_multiple_of(100) {
-                lines.push(format!(
-                    r#"{{"topic":"/gnss/fix","stamp_ns":{t},"fix_type":"rtk_fixed","satellites":18,"latitude_deg":44.6,"longitude_deg":10.9,"speed_mps":20.0}}"#
-                ));
-            }
-            if k.is_multiple_of(20) {
-                lines.push(radar_line(t));
-            }
-            if k.is_multiple_of(10) {
-                for o in ["/odometer/1", "/odometer/2"] {
-                    lines.push(format!(r#"{{"topic":"{o}","stamp_ns":{t},"sensor_id":"axle","pulse_count":{k},"pulses_per_revolution":200,"wheel_diameter_m":0.85,"distance_increment_m":0.2,"speed_mps":20.0}}"#));
-                }
-                lines.push(format!(
-                    r#"{{"topic":"/eddy_current/block","stamp_ns":{t},"sample_rate_hz":10000.0,"spacing_m":0.2,"sensor_a":[{block}],"sensor_b":[{block}]}}"#
-                ));
-            }
-            for l in lines {
+            for l in field_slice(k, &block) {
                 sock.send_to(l.as_bytes(), ("127.0.0.1", port))?;
                 sent += 1;
             }
@@ -194,4 +141,69 @@ pub fn run(dir: &Path, field_secs: f64, speedup: f64) -> Result<()> {
         super::measure::mib_of(Some(rss1)),
     );
     Ok(())
+}
+
+/// The ingest table: rising rates of radar datagrams until the recorder loses one.
+fn ingest(dir: &Path, sock: &UdpSocket) -> Result<()> {
+    println!("UDP ingest (JSON lines, one message per datagram, 3 s per rate):");
+    println!(
+        "{:>12} {:>10} {:>10} {:>8} {:>22}",
+        "rate msg/s", "sent", "written", "lost", "counted as kernel drop"
+    );
+    let mut best = 0.0;
+    // Doubling to 80 000, then finer steps to find where loss begins.
+    for rate in [
+        5_000.0, 10_000.0, 20_000.0, 40_000.0, 80_000.0, 100_000.0, 120_000.0, 140_000.0, 160_000.0,
+    ] {
+        let port = std::net::UdpSocket::bind("127.0.0.1:0")?
+            .local_addr()?
+            .port();
+        let c = start(dir, "ingest", port)?;
+        let sent = send_at(sock, port, rate, 3.0, radar_line)?;
+        std::thread::sleep(Duration::from_millis(500));
+        let r = finish(c)?;
+        let written = r["per_topic"]["/radar/speed"].as_u64().unwrap_or(0);
+        let kernel = r["sources"][0]["kernel_dropped"].as_u64().unwrap_or(0);
+        println!(
+            "{rate:>12.0} {sent:>10} {written:>10} {:>8} {kernel:>22}",
+            sent.saturating_sub(written)
+        );
+        if written >= sent {
+            best = rate;
+        } else {
+            break;
+        }
+    }
+    println!("highest rate with zero loss: {best:.0} msg/s");
+    Ok(())
+}
+
+/// The field load's datagrams of millisecond `k`: IMU at 1.6 kHz, GNSS 10 Hz, radar 50 Hz,
+/// two odometers and the eddy-current blocks at 100 Hz.
+fn field_slice(k: u64, block: &str) -> Vec<String> {
+    let t = 1_780_300_800_000_000_000 + k * 1_000_000;
+    let mut lines = Vec::new();
+    for j in 0..(if k % 5 < 3 { 2 } else { 1 }) {
+        lines.push(format!(
+            r#"{{"topic":"/imu","stamp_ns":{},"sensor_id":"imu0","specific_force_mps2":[0.01,0.02,9.81],"angular_rate_radps":[0.001,0.002,0.003]}}"#,
+            t + j * 500_000
+        ));
+    }
+    if k.is_multiple_of(100) {
+        lines.push(format!(
+            r#"{{"topic":"/gnss/fix","stamp_ns":{t},"fix_type":"rtk_fixed","satellites":18,"latitude_deg":44.6,"longitude_deg":10.9,"speed_mps":20.0}}"#
+        ));
+    }
+    if k.is_multiple_of(20) {
+        lines.push(radar_line(t));
+    }
+    if k.is_multiple_of(10) {
+        for o in ["/odometer/1", "/odometer/2"] {
+            lines.push(format!(r#"{{"topic":"{o}","stamp_ns":{t},"sensor_id":"axle","pulse_count":{k},"pulses_per_revolution":200,"wheel_diameter_m":0.85,"distance_increment_m":0.2,"speed_mps":20.0}}"#));
+        }
+        lines.push(format!(
+            r#"{{"topic":"/eddy_current/block","stamp_ns":{t},"sample_rate_hz":10000.0,"spacing_m":0.2,"sensor_a":[{block}],"sensor_b":[{block}]}}"#
+        ));
+    }
+    lines
 }
