@@ -12,7 +12,14 @@ const T: u64 = 1_780_300_800_000_000_000;
 impl MessageKind {
     /// The sample message's fields as JSON.
     pub fn example_json(self) -> Value {
-        match self {
+        self.sensor_example()
+            .or_else(|| self.other_example())
+            .expect("every kind has an example")
+    }
+
+    /// A raw sensor message's example.
+    fn sensor_example(self) -> Option<Value> {
+        Some(match self {
             MessageKind::GnssFix => json!({
                 "stamp_ns": T, "fix_type": "rtk_fixed", "satellites": 21, "hdop": 0.6,
                 "latitude_deg": 44.6551106, "longitude_deg": 10.9297304, "altitude_m": 79.3, "altitude_msl_m": 35.2,
@@ -42,6 +49,13 @@ impl MessageKind {
                 "stamp_ns": T, "sample_rate_hz": 10_000.0, "spacing_m": 0.3,
                 "sensor_a": [0.1, 0.4, -0.2], "sensor_b": [0.0, 0.1, 0.4]
             }),
+            _ => return None,
+        })
+    }
+
+    /// The example of a map, truth, event, fused or recorder message.
+    fn other_example(self) -> Option<Value> {
+        Some(match self {
             MessageKind::TrackMap => json!({
                 "stamp_ns": T, "name": "test line",
                 "origin": {"latitude_deg": 44.6, "longitude_deg": 10.9, "altitude_m": 40.0},
@@ -110,7 +124,8 @@ impl MessageKind {
                     "first_problems": ["line 7: not a JSON object: expected value at line 1 column 1"]
                 }]
             }),
-        }
+            _ => return None,
+        })
     }
 
     /// The sample message.
