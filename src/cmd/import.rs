@@ -1,4 +1,4 @@
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use railfuse_record::import::{csv_map, eth, gnss_file, ImportReport};
@@ -123,17 +123,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
 
 pub fn run(a: Args) -> Result<()> {
     if let Some(dir) = &a.example_map {
-        let (mapping, table) = csv_map::example();
-        std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
-        for (name, text) in [("mapping.toml", mapping), ("example.csv", table)] {
-            let path = dir.join(name);
-            std::fs::write(&path, text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-        }
-        println!(
-            "wrote {0}/mapping.toml and {0}/example.csv: railfuse import {0}/example.csv --map {0}/mapping.toml -o example.mcap",
-            dir.display()
-        );
-        return Ok(());
+        return write_example(dir);
     }
     let (Some(input), Some(output)) = (a.input.clone(), a.output.clone()) else {
         anyhow::bail!("import needs an input and -o OUTPUT");
@@ -175,28 +165,54 @@ pub fn run(a: Args) -> Result<()> {
     // An import that found nothing is wrong input, not an empty log.
     if report.messages == 0 {
         let _ = std::fs::remove_file(&output);
-        // Why: the reasons lines were not used, else the first problem.
-        let reasons: Vec<String> = report
-            .skipped
-            .iter()
-            .map(|(why, n)| format!("{n} × {why}"))
-            .collect();
-        let first = match (reasons.is_empty(), report.first_problems.first()) {
-            (false, _) => format!(" ({})", reasons.join("; ")),
-            (true, Some(p)) => format!(" (the first problem: {p})"),
-            (true, None) => String::new(),
-        };
-        anyhow::bail!(
-            "{}: no {} message in it{first}: is it a {} file? Name its format with --format",
-            input.display(),
-            format_name(format),
-            format_name(format)
-        );
+        anyhow::bail!(nothing_imported(&input, format, &report));
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
+    print_report(&report);
+    Ok(())
+}
+
+/// `--example-map DIR`: a mapping and a CSV it reads, to start from.
+fn write_example(dir: &Path) -> Result<()> {
+    let (mapping, table) = csv_map::example();
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
+    for (name, text) in [("mapping.toml", mapping), ("example.csv", table)] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    }
+    println!(
+        "wrote {0}/mapping.toml and {0}/example.csv: railfuse import {0}/example.csv --map {0}/mapping.toml -o example.mcap",
+        dir.display()
+    );
+    Ok(())
+}
+
+/// Why an import found no message: the reasons lines were not used, else the first problem.
+fn nothing_imported(input: &Path, format: Format, report: &ImportReport) -> String {
+    // Why: the reasons lines were not used, else the first problem.
+    let reasons: Vec<String> = report
+        .skipped
+        .iter()
+        .map(|(why, n)| format!("{n} × {why}"))
+        .collect();
+    let first = match (reasons.is_empty(), report.first_problems.first()) {
+        (false, _) => format!(" ({})", reasons.join("; ")),
+        (true, Some(p)) => format!(" (the first problem: {p})"),
+        (true, None) => String::new(),
+    };
+    format!(
+        "{}: no {} message in it{first}: is it a {} file? Name its format with --format",
+        input.display(),
+        format_name(format),
+        format_name(format)
+    )
+}
+
+/// What was imported, per topic, and what was not used.
+fn print_report(report: &ImportReport) {
     let read = if report.lines > 0 || report.bytes == 0 {
         format!("{} lines", report.lines)
     } else {
@@ -218,7 +234,6 @@ pub fn run(a: Args) -> Result<()> {
     for p in &report.first_problems {
         println!("  {p}");
     }
-    Ok(())
 }
 
 fn format_name(f: Format) -> String {
