@@ -176,37 +176,7 @@ fn sensor_of(
         ""
     };
     Ok(match kind {
-        MessageKind::GnssFix if role == Some(Role::Gnss) => (
-            Some(sensor(role, Some("[\"speed\"]"), "0.04", Some(16.0))),
-            format!("{schema}: a GNSS receiver's velocity, its speed{from_name}"),
-        ),
-        // Other tools' fixes (NavSatFix, LocationFix) carry a position only.
-        MessageKind::GnssFix if has_track && c.kind().is_none() => (
-            Some(sensor(role, Some("[\"chainage\"]"), "4.0", Some(16.0))),
-            format!("{schema}: GNSS fixes, their chainage on the track"),
-        ),
-        MessageKind::GnssFix if has_track => (
-            Some(sensor(
-                role,
-                None,
-                "{ chainage = 4.0, speed = 0.04 }",
-                Some(16.0),
-            )),
-            format!("{schema}: GNSS fixes, their chainage on the track and their speed"),
-        ),
-        MessageKind::GnssFix if c.kind().is_some() => (
-            Some(sensor(role, Some("[\"speed\"]"), "0.04", Some(16.0))),
-            format!(
-                "{schema}: GNSS speed only; its positions give chainage only on a track map, \
-                 and the log has none (name one with --track line.geojson)"
-            ),
-        ),
-        MessageKind::GnssFix => {
-            return Err(format!(
-                "{schema}: GNSS positions give chainage only on a track map, and the log has \
-                 none: name one with --track line.geojson"
-            ))
-        }
+        MessageKind::GnssFix => return gnss(c, role, has_track, from_name),
         MessageKind::Imu => (
             Some(sensor(role, Some("[\"acceleration\"]"), "0.01", Some(25.0))),
             format!("{schema}: the IMU's acceleration along the track"),
@@ -239,6 +209,52 @@ fn sensor_of(
             )
         }
         other => return Err(format!("{}: not a measurement", other.schema_name())),
+    })
+}
+
+/// A GNSS channel's sensor: its speed (a receiver's velocity), its chainage on the track
+/// (other tools' fixes carry a position only), or both; refused without a track to put a
+/// position-only fix on.
+fn gnss(
+    c: &ChannelInfo,
+    role: Option<Role>,
+    has_track: bool,
+    from_name: &str,
+) -> std::result::Result<(Option<Sensor>, String), String> {
+    let schema = c.schema_name();
+    let sensor = |fields, variance| Sensor {
+        role,
+        fields,
+        variance,
+        gate_nis: Some(16.0),
+    };
+    Ok(match () {
+        _ if role == Some(Role::Gnss) => (
+            Some(sensor(Some("[\"speed\"]"), "0.04")),
+            format!("{schema}: a GNSS receiver's velocity, its speed{from_name}"),
+        ),
+        // Other tools' fixes (NavSatFix, LocationFix) carry a position only.
+        _ if has_track && c.kind().is_none() => (
+            Some(sensor(Some("[\"chainage\"]"), "4.0")),
+            format!("{schema}: GNSS fixes, their chainage on the track"),
+        ),
+        _ if has_track => (
+            Some(sensor(None, "{ chainage = 4.0, speed = 0.04 }")),
+            format!("{schema}: GNSS fixes, their chainage on the track and their speed"),
+        ),
+        _ if c.kind().is_some() => (
+            Some(sensor(Some("[\"speed\"]"), "0.04")),
+            format!(
+                "{schema}: GNSS speed only; its positions give chainage only on a track map, \
+             and the log has none (name one with --track line.geojson)"
+            ),
+        ),
+        _ => {
+            return Err(format!(
+                "{schema}: GNSS positions give chainage only on a track map, and the log has \
+             none: name one with --track line.geojson"
+            ))
+        }
     })
 }
 
