@@ -12,39 +12,18 @@ fn simulation_is_deterministic_for_a_seed_and_differs_across_seeds() {
         d.path().join("b.mcap"),
         d.path().join("c.mcap"),
     );
-    ok(&[
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "3",
-        "--duration",
-        "40",
-        "-o",
-        s(&a),
-    ]);
-    ok(&[
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "3",
-        "--duration",
-        "40",
-        "-o",
-        s(&b),
-    ]);
-    ok(&[
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "4",
-        "--duration",
-        "40",
-        "-o",
-        s(&c),
-    ]);
+    simulate(
+        &["--scenario", "default", "--seed", "3", "--duration", "40"],
+        &a,
+    );
+    simulate(
+        &["--scenario", "default", "--seed", "3", "--duration", "40"],
+        &b,
+    );
+    simulate(
+        &["--scenario", "default", "--seed", "4", "--duration", "40"],
+        &c,
+    );
     let (a, b, c) = (
         std::fs::read(a).unwrap(),
         std::fs::read(b).unwrap(),
@@ -58,15 +37,7 @@ fn simulation_is_deterministic_for_a_seed_and_differs_across_seeds() {
 fn info_reports_channels_rates_gaps_metadata_and_fused_pipelines() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
-    ok(&[
-        "simulate",
-        "--seed",
-        "1",
-        "--duration",
-        "120",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(&["--seed", "1", "--duration", "120"], &raw);
     let info: serde_json::Value =
         serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
     let topic = |t: &str| {
@@ -101,14 +72,7 @@ fn info_reports_channels_rates_gaps_metadata_and_fused_pipelines() {
         .contains("\"gnss\""));
     assert_eq!(info["fused_pipelines"].as_array().unwrap().len(), 0);
 
-    ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    refuse(&raw, "kalman.toml", &fused);
     let info: serde_json::Value =
         serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
     assert_eq!(info["fused_pipelines"], serde_json::json!(["kalman"]));
@@ -127,15 +91,7 @@ fn refuse_copies_every_input_record_and_reports_accuracy() {
         d.path().join("f.mcap"),
         d.path().join("g.mcap"),
     );
-    ok(&[
-        "simulate",
-        "--seed",
-        "2",
-        "--duration",
-        "150",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(&["--seed", "2", "--duration", "150"], &raw);
     let out = ok(&[
         "refuse",
         s(&raw),
@@ -173,14 +129,7 @@ fn refuse_copies_every_input_record_and_reports_accuracy() {
         assert_eq!(c, f, "copied channel differs");
     }
     // Re-fusing a fused file replaces that pipeline's channels instead of adding more.
-    ok(&[
-        "refuse",
-        s(&fused),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&again),
-    ]);
+    refuse(&fused, "kalman.toml", &again);
     let again_info: serde_json::Value =
         serde_json::from_slice(&ok(&["info", s(&again), "--json"]).stdout).unwrap();
     let n = |v: &serde_json::Value| v["channels"].as_array().unwrap().len();
@@ -211,7 +160,7 @@ fn assert_one_clear_line(out: &std::process::Output, must_contain: &[&str]) {
 fn bad_files_get_one_clear_line_naming_the_file() {
     let d = tempfile::tempdir().unwrap();
     let raw = d.path().join("run.mcap");
-    ok(&["simulate", "--seed", "1", "--duration", "30", "-o", s(&raw)]);
+    simulate(&["--seed", "1", "--duration", "30"], &raw);
     let bytes = std::fs::read(&raw).unwrap();
     let empty = d.path().join("empty.mcap");
     std::fs::write(&empty, b"").unwrap();
@@ -246,15 +195,7 @@ fn bad_files_get_one_clear_line_naming_the_file() {
 fn bad_configs_name_the_line_column_or_channel() {
     let d = tempfile::tempdir().unwrap();
     let raw = d.path().join("run.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed000",
-        "--seed",
-        "1",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(&["--scenario", "seed000", "--seed", "1"], &raw);
     let out = d.path().join("out.mcap");
     let good = std::fs::read_to_string(sample("seed000.toml")).unwrap();
     let write = |name: &str, text: String| {
@@ -372,7 +313,7 @@ fn sensor_states_shrink_the_default_runs_errors_and_make_its_covariance_honest()
         d.path().join("run.fused.mcap"),
         d.path().join("both.toml"),
     );
-    ok(&["simulate", "--seed", "2", "-o", s(&raw)]);
+    simulate(&["--seed", "2"], &raw);
     // Both samples side by side, as `railfuse demo` runs them.
     let text = [sample("kalman.toml"), sample("sensor-states.toml")]
         .map(|p| std::fs::read_to_string(p).unwrap())
@@ -537,23 +478,8 @@ fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
 fn eval_scores_against_truth_another_pipeline_or_a_gnss_receiver() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
-    ok(&[
-        "simulate",
-        "--seed",
-        "3",
-        "--duration",
-        "200",
-        "-o",
-        s(&raw),
-    ]);
-    ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    simulate(&["--seed", "3", "--duration", "200"], &raw);
+    refuse(&raw, "kalman.toml", &fused);
     let eval = |reference: &str| -> serde_json::Value {
         serde_json::from_slice(&ok(&["eval", s(&fused), "--reference", reference, "--json"]).stdout)
             .unwrap()
@@ -803,15 +729,7 @@ fn a_pipeline_without_a_position_sensor_starts_at_distance_zero_or_where_told() 
 fn the_accuracy_refuse_prints_in_its_pass_equals_eval_of_the_written_file() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("s0.mcap"), d.path().join("s0.fused.mcap"));
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed000",
-        "--seed",
-        "3",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(&["--scenario", "seed000", "--seed", "3"], &raw);
     let cfg = sample("seed000.toml"); // kf_balise has an RTS smoother
     let o = ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]);
     let in_pass: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -881,7 +799,7 @@ fn foxglove_twins_are_added_beside_the_channels_and_left_out_on_request() {
         t
     };
     let (with, without) = (d.path().join("with.mcap"), d.path().join("without.mcap"));
-    ok(&["simulate", "--duration", "30", "-o", s(&with)]);
+    simulate(&["--duration", "30"], &with);
     ok(&[
         "--no-foxglove",
         "simulate",

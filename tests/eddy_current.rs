@@ -6,7 +6,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{messages, ok, python, rerun, s, sample, stderr, truth_at};
+use common::{messages, ok, python, rerun, s, sample, simulate, stderr, truth_at};
 use railfuse_catalog::log::LogWriter;
 use railfuse_catalog::messages::{EddyCurrentBlock, FusedDiagnostics, FusedState, GroundTruth};
 use railfuse_refuse::eddy_current::butterworth::Butterworth;
@@ -15,17 +15,10 @@ use railfuse_refuse::eddy_current::butterworth::Butterworth;
 /// the run to 40 m/s.
 fn seed004(dir: &Path, config: &Path) -> PathBuf {
     let run = dir.join("s4.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed004",
-        "--seed",
-        "1",
-        "--duration",
-        "200",
-        "-o",
-        s(&run),
-    ]);
+    simulate(
+        &["--scenario", "seed004", "--seed", "1", "--duration", "200"],
+        &run,
+    );
     let fused = dir.join("s4.fused.mcap");
     ok(&["refuse", s(&run), "-c", s(config), "-o", s(&fused)]);
     fused

@@ -34,17 +34,17 @@ fn sharing(path: &std::path::Path, pipeline: &str) -> Vec<(f64, Shares)> {
 fn a_killed_device_gives_its_share_to_the_others_and_the_error_stays_within_the_source_targets() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--seed",
-        "4",
-        "--fault",
-        "radar:dropout:200:300",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(
+        &[
+            "--scenario",
+            "seed001",
+            "--seed",
+            "4",
+            "--fault",
+            "radar:dropout:200:300",
+        ],
+        &raw,
+    );
     let out = ok(&[
         "refuse",
         s(&raw),
@@ -124,17 +124,17 @@ fn a_killed_device_gives_its_share_to_the_others_and_the_error_stays_within_the_
 fn a_biased_ins_is_caught_and_kept_out_until_it_agrees_again() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--seed",
-        "2",
-        "--fault",
-        "imu:bias=0.5:200:300",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(
+        &[
+            "--scenario",
+            "seed001",
+            "--seed",
+            "2",
+            "--fault",
+            "imu:bias=0.5:200:300",
+        ],
+        &raw,
+    );
     let out = ok(&[
         "refuse",
         s(&raw),
@@ -181,25 +181,18 @@ fn a_device_that_reports_its_own_fault_is_taken_out_and_back_by_its_events() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
     // A 0.05 m/s radar bias is below what the gates see; only the radar's own report says so.
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--seed",
-        "5",
-        "--fault",
-        "radar:bias=0.05:150:250:reported",
-        "-o",
-        s(&raw),
-    ]);
-    ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("seed001.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    simulate(
+        &[
+            "--scenario",
+            "seed001",
+            "--seed",
+            "5",
+            "--fault",
+            "radar:bias=0.05:150:250:reported",
+        ],
+        &raw,
+    );
+    refuse(&raw, "seed001.toml", &fused);
     let rows = sharing(&fused, "fkf");
     let radar_fault = |t0: f64, t1: f64| {
         rows.iter()
@@ -231,17 +224,17 @@ fn sensor_states_learn_the_radar_scale_factor_and_carry_the_position_through_a_g
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
     // GNSS, the only absolute position, dead for 100 s at up to 432 km/h.
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--seed",
-        "3",
-        "--fault",
-        "gnss:dropout:200:300",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(
+        &[
+            "--scenario",
+            "seed001",
+            "--seed",
+            "3",
+            "--fault",
+            "gnss:dropout:200:300",
+        ],
+        &raw,
+    );
     let out = ok(&[
         "refuse",
         s(&raw),

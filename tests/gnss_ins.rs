@@ -5,7 +5,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{messages, ok, s, sample, truth_at};
+use common::{messages, ok, refuse, s, sample, simulate, truth_at};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GroundTruth, ImuErrorModel};
 
 const PIPELINES: [&str; 4] = ["kf", "akf", "rls", "pu_rls"];
@@ -18,14 +18,7 @@ fn simulate_and_refuse(dir: &Path, extra: &[&str]) -> PathBuf {
     args.extend_from_slice(&["-o", s(&run)]);
     ok(&args);
     let fused = dir.join("run.fused.mcap");
-    ok(&[
-        "refuse",
-        s(&run),
-        "-c",
-        s(&sample("seed003.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    refuse(&run, "seed003.toml", &fused);
     fused
 }
 
@@ -140,14 +133,7 @@ fn real_eth_samples_no_fix_refused_and_the_standing_imus_offsets_measured() {
             "--quiet",
         ]);
         let fused = d.path().join(format!("{name}.fused.mcap"));
-        ok(&[
-            "refuse",
-            s(&log),
-            "-c",
-            s(&sample("seed003.toml")),
-            "-o",
-            s(&fused),
-        ]);
+        refuse(&log, "seed003.toml", &fused);
         fused
     };
     let sn1 = import("20221020_1030_R90117_Modena_SN1_sample.csv");
@@ -178,15 +164,7 @@ fn the_seed003_receiver_gives_rtk_at_5_hz_loses_satellites_in_cuttings_and_all_f
     use railfuse_catalog::messages::{FixType, GnssFix, Imu};
     let d = tempfile::tempdir().unwrap();
     let run = d.path().join("s3.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed003",
-        "--seed",
-        "1",
-        "-o",
-        s(&run),
-    ]);
+    simulate(&["--scenario", "seed003", "--seed", "1"], &run);
     let fixes: Vec<GnssFix> = messages(&run, "/gnss/fix");
     let t0 = fixes[0].stamp_ns;
     let at = |f: &GnssFix| (f.stamp_ns - t0) as f64 / 1e9;
@@ -238,17 +216,17 @@ fn learnt_imu_errors_carry_the_navigation_through_the_tunnel_after_a_bias_shift(
     let config = d.path().join("learning.toml");
     std::fs::write(&config, format!("{kf}{off}")).unwrap();
     let run = d.path().join("run.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "1",
-        "--fault",
-        "imu:bias=0.05:100:500",
-        "-o",
-        s(&run),
-    ]);
+    simulate(
+        &[
+            "--scenario",
+            "default",
+            "--seed",
+            "1",
+            "--fault",
+            "imu:bias=0.05:100:500",
+        ],
+        &run,
+    );
     let fused = d.path().join("run.fused.mcap");
     ok(&["refuse", s(&run), "-c", s(&config), "-o", s(&fused)]);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
@@ -400,17 +378,10 @@ fn a_bad_pre_filter_setting_is_one_line_naming_the_table() {
     let config = d.path().join("bad.toml");
     std::fs::write(&config, bad).unwrap();
     let run = d.path().join("run.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "1",
-        "--duration",
-        "20",
-        "-o",
-        s(&run),
-    ]);
+    simulate(
+        &["--scenario", "default", "--seed", "1", "--duration", "20"],
+        &run,
+    );
     let out = common::railfuse(&[
         "refuse",
         s(&run),
@@ -435,17 +406,10 @@ fn the_viewer_draws_the_plane_velocity_the_learnt_model_and_a_gap_through_the_gn
     let config = d.path().join("kf.toml");
     std::fs::write(&config, kf_pipeline()).unwrap();
     let run = d.path().join("s3.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed003",
-        "--seed",
-        "1",
-        "--duration",
-        "500",
-        "-o",
-        s(&run),
-    ]);
+    simulate(
+        &["--scenario", "seed003", "--seed", "1", "--duration", "500"],
+        &run,
+    );
     let fused = d.path().join("s3.fused.mcap");
     ok(&["refuse", s(&run), "-c", s(&config), "-o", s(&fused)]);
     let rrd = d.path().join("s3.rrd");

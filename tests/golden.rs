@@ -45,24 +45,8 @@ fn refuse_output_of_the_sample_runs_is_unchanged() {
     let short = sample("short-run.mcap");
     let seed000 = d.path().join("seed000.mcap");
     let seed001 = d.path().join("seed001.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed000",
-        "--seed",
-        "1",
-        "-o",
-        s(&seed000),
-    ]);
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--seed",
-        "1",
-        "-o",
-        s(&seed001),
-    ]);
+    simulate(&["--scenario", "seed000", "--seed", "1"], &seed000);
+    simulate(&["--scenario", "seed001", "--seed", "1"], &seed001);
     // Every other sample configuration on the run it was written for (fixed seeds, 300 s).
     let sim = |scenario: &str, name: &str| {
         let out = d.path().join(name);

@@ -29,23 +29,8 @@ fn rerun_ok(args: &[&str]) -> String {
 fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
-    ok(&[
-        "simulate",
-        "--seed",
-        "11",
-        "--duration",
-        "200",
-        "-o",
-        s(&raw),
-    ]);
-    ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    simulate(&["--seed", "11", "--duration", "200"], &raw);
+    refuse(&raw, "kalman.toml", &fused);
     let info: serde_json::Value =
         serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
 
@@ -319,23 +304,8 @@ fn rerun_verifies_the_recording_with_its_layout_and_every_pipelines_entities() {
 fn foxglove_twins_validate_against_foxglove_s_published_schemas() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("raw.mcap"), d.path().join("fused.mcap"));
-    ok(&[
-        "simulate",
-        "--duration",
-        "120",
-        "--seed",
-        "3",
-        "-o",
-        s(&raw),
-    ]);
-    ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    simulate(&["--duration", "120", "--seed", "3"], &raw);
+    refuse(&raw, "kalman.toml", &fused);
     let schemas = std::env::var("RAILFUSE_FOXGLOVE_SCHEMAS")
         .expect("RAILFUSE_FOXGLOVE_SCHEMAS: run the tests with tests/run, which fetches them");
     let r = python_ok("check_foxglove.py", &[s(&fused), &schemas]);
@@ -702,15 +672,7 @@ fn chunks_around_the_middle(
 fn a_corrupt_chunk_in_the_middle_costs_that_chunk_only_and_python_reads_the_rest() {
     let d = tempfile::tempdir().unwrap();
     let raw = d.path().join("run.mcap");
-    ok(&[
-        "simulate",
-        "--seed",
-        "2",
-        "--duration",
-        "120",
-        "-o",
-        s(&raw),
-    ]);
+    simulate(&["--seed", "2", "--duration", "120"], &raw);
     let original = python_ok("check_mcap.py", &[s(&raw)]);
     let (chunk, lost) = chunks_around_the_middle(&raw);
     let mut bytes = std::fs::read(&raw).unwrap();
@@ -833,7 +795,7 @@ fn close(a: &serde_json::Value, b: &serde_json::Value) {
 fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
     let d = tempfile::tempdir().unwrap();
     let raw = d.path().join("raw.mcap");
-    ok(&["simulate", "--seed", "6", "--duration", "60", "-o", s(&raw)]);
+    simulate(&["--seed", "6", "--duration", "60"], &raw);
     let config = sample("kalman.toml");
     let cli = d.path().join("cli.fused.mcap");
     ok(&["refuse", s(&raw), "-c", s(&config), "-o", s(&cli)]);

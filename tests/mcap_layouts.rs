@@ -91,14 +91,7 @@ fn every_valid_layout_reads_in_every_command_with_the_same_result() {
         );
 
         let fused = d.path().join(format!("{layout}.fused.mcap"));
-        ok(&[
-            "refuse",
-            s(&log),
-            "-c",
-            s(&sample("kalman.toml")),
-            "-o",
-            s(&fused),
-        ]);
+        refuse(&log, "kalman.toml", &fused);
         let got = accuracy(&fused);
         let base = *baseline.get_or_insert(got);
         if layout == "log_times_out_of_order" {

@@ -111,14 +111,7 @@ fn wrong_input_is_one_line_and_a_non_zero_exit_never_a_silent_zero() {
     let p = |name: &str| d.path().join(name);
     let run = sample("short-run.mcap");
     let fused = p("fused.mcap");
-    ok(&[
-        "refuse",
-        s(&run),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    refuse(&run, "kalman.toml", &fused);
     std::fs::write(p("receiver.nmea"), "$GPGGA,junk\n$GPRMC,also junk\n").unwrap();
     std::fs::write(
         p("LICENSE"),
@@ -331,14 +324,7 @@ fn a_short_live_run_refuses_with_the_sample_config_a_missing_sensor_said_not_fat
         s(&live),
     ]);
     let fused = d.path().join("live.fused.mcap");
-    let o = ok(&[
-        "refuse",
-        s(&live),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-    ]);
+    let o = refuse(&live, "kalman.toml", &fused);
     let err = stderr(&o);
     let warnings: Vec<&str> = err.lines().filter(|l| l.contains("/balise")).collect();
     assert_eq!(warnings.len(), 1, "{err}");
@@ -401,16 +387,7 @@ fn the_smaller_things_quiet_counts_folders_bench_flags_and_memory_in_mib() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("q.mcap");
     // -q: nothing on stderr but warnings and errors.
-    let o = ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--duration",
-        "5",
-        "-q",
-        "-o",
-        s(&out),
-    ]);
+    let o = simulate(&["--scenario", "seed001", "--duration", "5", "-q"], &out);
     assert_eq!(stderr(&o), "");
     let o = ok(&[
         "record",

@@ -183,7 +183,7 @@ fn truth(path: &Path) -> Vec<GroundTruth> {
 fn a_kind_registered_with_one_line_is_configured_replayed_written_and_evaluated() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
-    ok(&["simulate", "--seed", "3", "--duration", "60", "-o", s(&raw)]);
+    simulate(&["--seed", "3", "--duration", "60"], &raw);
     let truth = truth(&raw);
     let start = truth[0].chainage_m;
     let text = config(

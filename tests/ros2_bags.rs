@@ -113,14 +113,7 @@ fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
         d.path().join("native.fused.mcap"),
         d.path().join("bag.fused.mcap"),
     );
-    ok(&[
-        "refuse",
-        s(&native),
-        "-c",
-        s(&sample("seed001.toml")),
-        "-o",
-        s(&fused_native),
-    ]);
+    refuse(&native, "seed001.toml", &fused_native);
     let out = ok(&[
         "refuse",
         s(&bag),

@@ -5,7 +5,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{messages, ok, railfuse, s, sample, stderr};
+use common::{messages, ok, railfuse, s, sample, simulate, stderr};
 use railfuse_catalog::messages::{FusedState, GroundTruth, SafetyStatus};
 
 /// The truth's chainage at a stamp, interpolated.
@@ -32,20 +32,12 @@ fn availability_and_containment(status: &[SafetyStatus], truth: &[GroundTruth]) 
     )
 }
 
-fn simulate(dir: &Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
+/// A 320 s default run of seed 1 in `dir`, with `extra` arguments (faults).
+fn default_run(dir: &Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
     let run = dir.join(name);
-    let mut args = vec![
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "1",
-        "--duration",
-        "320",
-    ];
+    let mut args = vec!["--scenario", "default", "--seed", "1", "--duration", "320"];
     args.extend_from_slice(extra);
-    args.extend_from_slice(&["-o", s(&run)]);
-    ok(&args);
+    simulate(&args, &run);
     run
 }
 
@@ -67,7 +59,7 @@ fn refuse(run: &Path) -> std::path::PathBuf {
 /// containment over the whole run.
 fn check_failing_in(fault: &str, from_s: u64, to_s: u64, check: &str) -> (usize, usize, f64) {
     let d = tempfile::tempdir().unwrap();
-    let run = simulate(d.path(), "faulted.mcap", &["--fault", fault]);
+    let run = default_run(d.path(), "faulted.mcap", &["--fault", fault]);
     let fused = refuse(&run);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let start = truth[0].stamp_ns;
@@ -89,7 +81,7 @@ fn check_failing_in(fault: &str, from_s: u64, to_s: u64, check: &str) -> (usize,
 fn the_safe_interval_holds_the_truth_and_an_injected_jump_is_flagged_at_once() {
     let d = tempfile::tempdir().unwrap();
     // The GNSS jumps 20 m along the track from 250 s to 260 s.
-    let run = simulate(d.path(), "jump.mcap", &["--fault", "gnss:bias=20:250:260"]);
+    let run = default_run(d.path(), "jump.mcap", &["--fault", "gnss:bias=20:250:260"]);
     let fused = refuse(&run);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let start = truth[0].stamp_ns;
@@ -140,17 +132,10 @@ fn a_stuck_axle_is_diagnosed_and_nothing_is_usable_while_it_lasts() {
 fn bad_maps_and_roles_get_one_clear_line() {
     let d = tempfile::tempdir().unwrap();
     let run = d.path().join("run.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "2",
-        "--duration",
-        "30",
-        "-o",
-        s(&run),
-    ]);
+    simulate(
+        &["--scenario", "default", "--seed", "2", "--duration", "30"],
+        &run,
+    );
     let base = std::fs::read_to_string(sample("seed002.toml")).unwrap();
     // A map that crosses itself.
     let map = d.path().join("eight.geojson");
@@ -194,17 +179,10 @@ fn the_seed002_line_has_parallel_tracks_a_surveyed_map_and_multipath_at_stations
     use railfuse_catalog::messages::{GnssFix, TrackMap};
     let d = tempfile::tempdir().unwrap();
     let run = d.path().join("s2.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed002",
-        "--seed",
-        "3",
-        "--duration",
-        "60",
-        "-o",
-        s(&run),
-    ]);
+    simulate(
+        &["--scenario", "seed002", "--seed", "3", "--duration", "60"],
+        &run,
+    );
     let map: TrackMap = messages(&run, "/track/map").remove(0);
     assert_eq!(map.check(), Ok(()));
     assert!(
@@ -323,17 +301,10 @@ fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accurac
 fn a_map_far_from_the_run_fuses_nothing_and_says_why() {
     let d = tempfile::tempdir().unwrap();
     let run = d.path().join("run.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "default",
-        "--seed",
-        "4",
-        "--duration",
-        "20",
-        "-o",
-        s(&run),
-    ]);
+    simulate(
+        &["--scenario", "default", "--seed", "4", "--duration", "20"],
+        &run,
+    );
     // A valid line, 900 km from the run.
     let map = d.path().join("far.geojson");
     std::fs::write(

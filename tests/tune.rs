@@ -9,17 +9,11 @@ use std::path::{Path, PathBuf};
 use common::*;
 use serde_json::Value;
 
-fn simulate(dir: &Path, seed: u32, duration_s: u32) -> PathBuf {
+/// A default run of `seed` and `duration_s` in `dir`.
+fn default_run(dir: &Path, seed: u32, duration_s: u32) -> PathBuf {
     let log = dir.join(format!("run{seed}.mcap"));
-    ok(&[
-        "simulate",
-        "--seed",
-        &seed.to_string(),
-        "--duration",
-        &duration_s.to_string(),
-        "-o",
-        s(&log),
-    ]);
+    let (seed, duration) = (seed.to_string(), duration_s.to_string());
+    simulate(&["--seed", &seed, "--duration", &duration], &log);
     log
 }
 
@@ -62,7 +56,7 @@ fn tune(log: &Path, config: &Path, out: &Path, extra: &[&str]) -> Value {
 #[test]
 fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() {
     let d = tempfile::tempdir().unwrap();
-    let log = simulate(d.path(), 2, 240);
+    let log = default_run(d.path(), 2, 240);
     // The figures tune starts from are those refuse + eval give for the same file.
     let fused = d.path().join("fused.mcap");
     let refused: Value = serde_json::from_slice(
@@ -194,7 +188,7 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
 #[test]
 fn the_same_seed_gives_the_same_tuning_on_one_thread_or_two() {
     let d = tempfile::tempdir().unwrap();
-    let log = simulate(d.path(), 3, 120);
+    let log = default_run(d.path(), 3, 120);
     let bad = bad_config(d.path());
     let run = |name: &str, seed: &str, threads: &str| {
         let out = d.path().join(format!("{name}.toml"));
@@ -253,7 +247,7 @@ fn the_same_seed_gives_the_same_tuning_on_one_thread_or_two() {
 #[test]
 fn likelihood_tuning_without_a_reference_makes_the_innovations_consistent() {
     let d = tempfile::tempdir().unwrap();
-    let log = simulate(d.path(), 4, 180);
+    let log = default_run(d.path(), 4, 180);
     let bad = bad_config(d.path());
     let mut extra = vec!["--max-evals", "120"];
     extra.extend(&PARAMS[1..]);
@@ -276,19 +270,11 @@ fn likelihood_tuning_without_a_reference_makes_the_innovations_consistent() {
 #[test]
 fn bad_tuning_requests_get_one_clear_line_each() {
     let d = tempfile::tempdir().unwrap();
-    let log = simulate(d.path(), 5, 30);
+    let log = default_run(d.path(), 5, 30);
     let out = d.path().join("t.toml");
     let kalman = sample("kalman.toml");
     let seed001 = d.path().join("seed001.mcap");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "seed001",
-        "--duration",
-        "20",
-        "-o",
-        s(&seed001),
-    ]);
+    simulate(&["--scenario", "seed001", "--duration", "20"], &seed001);
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (
             vec!["--params", "motion.jerk_pds=0.01..1"],
@@ -480,7 +466,7 @@ fn refused(args: &[&str], expected: &[&str]) {
 #[test]
 fn ctrl_c_ends_the_search_and_writes_the_best_found() {
     let d = tempfile::tempdir().unwrap();
-    let log = simulate(d.path(), 7, 120);
+    let log = default_run(d.path(), 7, 120);
     let bad = bad_config(d.path());
     let out = d.path().join("stopped.toml");
     let mut args = vec![

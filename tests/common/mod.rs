@@ -25,6 +25,19 @@ pub fn ok(args: &[&str]) -> Output {
     out
 }
 
+/// `railfuse simulate ARGS… -o OUT`, which must succeed.
+pub fn simulate(args: &[&str], out: &Path) -> Output {
+    let mut all = vec!["simulate"];
+    all.extend_from_slice(args);
+    all.extend(["-o", s(out)]);
+    ok(&all)
+}
+
+/// `railfuse refuse RAW -c samples/CONFIG -o OUT`, which must succeed.
+pub fn refuse(raw: &Path, config: &str, out: &Path) -> Output {
+    ok(&["refuse", s(raw), "-c", s(&sample(config)), "-o", s(out)])
+}
+
 pub fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
