@@ -75,6 +75,37 @@ pub trait PipelineKind: Send + Sync {
     }
 }
 
+/// A kind whose `[pipeline.<section>]` table is one serde type (each of railfuse's):
+/// [`PipelineKind`] follows from its name, its section and its checks of the table read.
+pub trait TypedKind: Send + Sync {
+    /// `filter = "<NAME>"`.
+    const NAME: &'static str;
+    /// `[pipeline.<SECTION>]`.
+    const SECTION: &'static str;
+    type Settings: serde::de::DeserializeOwned + schemars::JsonSchema + Default;
+    /// The pipeline table checked, its settings read (the defaults where it has none).
+    fn spec(c: &PipelineConfig, settings: Self::Settings) -> Result<Arc<dyn KindSpec>, String>;
+}
+
+impl<K: TypedKind> PipelineKind for K {
+    fn name(&self) -> &'static str {
+        K::NAME
+    }
+    fn section(&self) -> &'static str {
+        K::SECTION
+    }
+    fn settings_schema(&self, g: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        g.subschema_for::<K::Settings>()
+    }
+    fn spec(
+        &self,
+        c: &PipelineConfig,
+        settings: Option<toml::Value>,
+    ) -> Result<Arc<dyn KindSpec>, String> {
+        K::spec(c, settings_of(K::SECTION, settings)?)
+    }
+}
+
 /// A kind's validated settings: what its pipeline is built from.
 pub trait KindSpec: Debug + Send + Sync {
     /// The kind's name (`filter = "…"`).

@@ -8,8 +8,8 @@ use crate::base::PipelineBase;
 use crate::config::PipelineConfig;
 use crate::error::Result;
 use crate::kinds::{
-    constant_acceleration, sensor_of, settings_of, settings_value, whole_message_sensors, KindSpec,
-    MessagePipeline, PipelineKind,
+    constant_acceleration, sensor_of, settings_value, whole_message_sensors, KindSpec,
+    MessagePipeline, TypedKind,
 };
 use crate::model::ConstantAcceleration;
 
@@ -24,22 +24,15 @@ struct Spec {
     motion: ConstantAcceleration,
 }
 
-impl PipelineKind for Kind {
-    fn name(&self) -> &'static str {
-        "eddy_current"
-    }
-    fn section(&self) -> &'static str {
-        "eddy_current"
-    }
-    fn settings_schema(&self, g: &mut schemars::SchemaGenerator) -> schemars::Schema {
-        g.subschema_for::<EddyCurrentSettings>()
-    }
+impl TypedKind for Kind {
+    const NAME: &'static str = "eddy_current";
+    const SECTION: &'static str = "eddy_current";
+    type Settings = EddyCurrentSettings;
+
     fn spec(
-        &self,
         c: &PipelineConfig,
-        settings: Option<toml::Value>,
+        settings: EddyCurrentSettings,
     ) -> Result<Arc<dyn KindSpec>, String> {
-        let settings: EddyCurrentSettings = settings_of(self.section(), settings)?;
         settings.check()?;
         let motion = constant_acceleration(
             &c.motion,
@@ -59,7 +52,7 @@ impl PipelineKind for Kind {
 
 impl KindSpec for Spec {
     fn name(&self) -> &'static str {
-        Kind.name()
+        Kind::NAME
     }
     fn settings(&self) -> toml::Value {
         settings_value(&self.settings)

@@ -7,8 +7,7 @@ use crate::base::PipelineBase;
 use crate::config::{FromMessage, PipelineConfig, Variance};
 use crate::error::Result;
 use crate::kinds::{
-    sensor_of, settings_of, settings_value, whole_message_sensors, KindSpec, MessagePipeline,
-    Outputs, PipelineKind,
+    sensor_of, settings_value, whole_message_sensors, KindSpec, MessagePipeline, Outputs, TypedKind,
 };
 
 use super::{GnssInsPipeline, GnssInsSettings, Roles};
@@ -22,22 +21,12 @@ struct Spec {
     roles: Roles,
 }
 
-impl PipelineKind for Kind {
-    fn name(&self) -> &'static str {
-        "gnss_ins"
-    }
-    fn section(&self) -> &'static str {
-        "gnss_ins"
-    }
-    fn settings_schema(&self, g: &mut schemars::SchemaGenerator) -> schemars::Schema {
-        g.subschema_for::<GnssInsSettings>()
-    }
-    fn spec(
-        &self,
-        c: &PipelineConfig,
-        settings: Option<toml::Value>,
-    ) -> Result<Arc<dyn KindSpec>, String> {
-        let settings: GnssInsSettings = settings_of(self.section(), settings)?;
+impl TypedKind for Kind {
+    const NAME: &'static str = "gnss_ins";
+    const SECTION: &'static str = "gnss_ins";
+    type Settings = GnssInsSettings;
+
+    fn spec(c: &PipelineConfig, settings: GnssInsSettings) -> Result<Arc<dyn KindSpec>, String> {
         settings.check()?;
         let roles = Roles {
             gnss: sensor_of(c, "gnss_ins.gnss", &settings.gnss)?,
@@ -64,7 +53,7 @@ impl PipelineKind for Kind {
 
 impl KindSpec for Spec {
     fn name(&self) -> &'static str {
-        Kind.name()
+        Kind::NAME
     }
     fn settings(&self) -> toml::Value {
         settings_value(&self.settings)

@@ -7,8 +7,8 @@ use crate::base::PipelineBase;
 use crate::config::PipelineConfig;
 use crate::error::Result;
 use crate::kinds::{
-    constant_acceleration, sensor_of, settings_of, settings_value, whole_message_sensors, KindSpec,
-    MessagePipeline, Outputs, PipelineKind,
+    constant_acceleration, sensor_of, settings_value, whole_message_sensors, KindSpec,
+    MessagePipeline, Outputs, TypedKind,
 };
 use crate::model::ConstantAcceleration;
 
@@ -25,22 +25,12 @@ struct Spec {
     motion: ConstantAcceleration,
 }
 
-impl PipelineKind for Kind {
-    fn name(&self) -> &'static str {
-        "ekf_safety"
-    }
-    fn section(&self) -> &'static str {
-        "safety"
-    }
-    fn settings_schema(&self, g: &mut schemars::SchemaGenerator) -> schemars::Schema {
-        g.subschema_for::<SafetySettings>()
-    }
-    fn spec(
-        &self,
-        c: &PipelineConfig,
-        settings: Option<toml::Value>,
-    ) -> Result<Arc<dyn KindSpec>, String> {
-        let settings: SafetySettings = settings_of(self.section(), settings)?;
+impl TypedKind for Kind {
+    const NAME: &'static str = "ekf_safety";
+    const SECTION: &'static str = "safety";
+    type Settings = SafetySettings;
+
+    fn spec(c: &PipelineConfig, settings: SafetySettings) -> Result<Arc<dyn KindSpec>, String> {
         settings.check()?;
         let motion = constant_acceleration(
             &c.motion,
@@ -74,7 +64,7 @@ impl PipelineKind for Kind {
 
 impl KindSpec for Spec {
     fn name(&self) -> &'static str {
-        Kind.name()
+        Kind::NAME
     }
     fn settings(&self) -> toml::Value {
         settings_value(&self.settings)
