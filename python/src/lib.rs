@@ -100,7 +100,7 @@ fn refuse(
 #[pyo3(signature = (input, reference = "/truth"))]
 fn evaluate(py: Python<'_>, input: PathBuf, reference: &str) -> PyResult<String> {
     let report = py
-        .detach(|| railfuse_refuse::eval::evaluate(&input, reference))
+        .detach(|| railfuse_eval::evaluate(&input, reference))
         .map_err(fail)?;
     json(&report)
 }

@@ -3,9 +3,9 @@ use std::path::PathBuf;
 use anyhow::Result;
 use railfuse_catalog::reference_track::MAX_GAP_PERIODS;
 use railfuse_catalog::topics;
-use railfuse_refuse::accuracy::{ConsistencySummary, ErrorSummary};
-use railfuse_refuse::eval::{evaluate, EvalReport};
-use railfuse_refuse::safety::summary::SafetyEval;
+use railfuse_eval::accuracy::{ConsistencySummary, ErrorSummary};
+use railfuse_eval::safety::SafetyEval;
+use railfuse_eval::{evaluate, EvalReport};
 
 use crate::table::Table;
 

@@ -3,7 +3,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use railfuse_catalog::topics;
-use railfuse_refuse::eval::EvalReport;
+use railfuse_eval::EvalReport;
 use railfuse_refuse::registry::Registry;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;

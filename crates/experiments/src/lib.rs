@@ -28,9 +28,9 @@ pub mod tuning;
 use std::path::Path;
 
 use railfuse_catalog::topics;
+use railfuse_eval::{PipelineEval, AFTER_FIRST_BALISE};
 use railfuse_record::simulator::FaultSpec;
 use railfuse_record::{simulate, Scenario};
-use railfuse_refuse::eval::{PipelineEval, AFTER_FIRST_BALISE};
 use railfuse_refuse::replay::{refuse, RefuseOptions};
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
@@ -137,7 +137,7 @@ fn fused_run<T>(
     (seed, duration_s, faults): (u64, Option<f64>, &[FaultSpec]),
     pipelines: &Pipelines,
     tag: &str,
-    score: impl FnOnce(&Path, railfuse_refuse::eval::EvalReport) -> Result<T>,
+    score: impl FnOnce(&Path, railfuse_eval::EvalReport) -> Result<T>,
 ) -> Result<(T, f64)> {
     let name = scenario.name();
     let raw = dir.join(format!("{name}-{tag}-seed{seed}.mcap"));

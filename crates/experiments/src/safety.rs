@@ -5,9 +5,9 @@
 
 use std::path::Path;
 
+use railfuse_eval::safety::SafetyEval;
 use railfuse_record::simulator::FaultSpec;
 use railfuse_refuse::config::embedded_path;
-use railfuse_refuse::safety::summary::SafetyEval;
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
 

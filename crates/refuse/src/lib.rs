@@ -22,20 +22,16 @@
 //! - [`eddy_current`]: source 004's eddy-current speed and distance: filtering, correlation,
 //!   warping;
 //! - [`safety`]: source 002's EKF in the plane with its safety checks and safe interval;
-//! - [`accuracy`]: error and consistency statistics against a reference;
-//! - [`eval`]: the accuracy table of a fused log, whole run and marked windows;
 //! - [`replay`]: the `refuse` run, streaming input to output.
 //!
 //! Tuning (`railfuse tune`) is the `railfuse-tune` crate, above this one.
 
-pub mod accuracy;
 pub mod base;
 pub mod config;
 pub mod config_reference;
 pub mod default_config;
 pub mod eddy_current;
 pub mod error;
-pub mod eval;
 pub mod fused;
 pub mod gnss_ins;
 pub mod kinds;

@@ -264,7 +264,7 @@ fn gnss(
     out: &mut Vec<Measurement>,
 ) -> Result<()> {
     let m: GnssFix = msg.decode(path)?;
-    let along = gnss_chainage(&m, ctx.track.as_ref());
+    let along = ctx.track.as_ref().and_then(|t| t.chainage_of_fix(&m));
     let (chainage, variance, heading) = along.unwrap_or((f64::NAN, None, None));
     out.push(one(
         m.stamp_ns,
@@ -287,27 +287,6 @@ fn gnss(
         m.fix_type.has_position() && speed.is_some(),
     ));
     Ok(())
-}
-
-/// Chainage of a fix on the track map, its variance along the track, and the track heading.
-pub(crate) fn gnss_chainage(
-    m: &GnssFix,
-    track: Option<&TrackMap>,
-) -> Option<(f64, Option<f64>, Option<f64>)> {
-    let track = track?;
-    if !m.fix_type.has_position() {
-        return None;
-    }
-    let (lat, lon) = (m.latitude_deg?, m.longitude_deg?);
-    let (e, n, _) = track
-        .origin
-        .to_enu(lat, lon, m.altitude_m.unwrap_or(track.origin.altitude_m));
-    let (chainage, heading) = track.project(e, n)?;
-    let variance = m.position_covariance_enu_m2.map(|c| {
-        let (ue, un) = (heading.sin(), heading.cos());
-        ue * ue * c[0] + ue * un * (c[1] + c[3]) + un * un * c[4]
-    });
-    Some((chainage, variance, Some(heading)))
 }
 
 #[cfg(test)]

@@ -17,8 +17,8 @@ use railfuse_catalog::reference_track::ReferenceSample;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use railfuse_refuse::accuracy::{AccuracyMeter, Consistency, ErrorStats, CHI2_95_1DOF};
-use railfuse_refuse::eval::{self, reference_kind, reference_sample};
+use railfuse_eval::accuracy::{AccuracyMeter, Consistency, ErrorStats, CHI2_95_1DOF};
+use railfuse_eval::{self as eval, reference_kind, reference_sample};
 use railfuse_refuse::measurement::{Measurement, SensorContext, SensorModel};
 use railfuse_refuse::pipeline::{AnyPipeline, Fused, PipelineCounts};
 use railfuse_refuse::spec::PipelineSpec;

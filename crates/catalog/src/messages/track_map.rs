@@ -95,6 +95,25 @@ impl TrackMap {
         crate::map_matching::locate_on(&self.vertices, chainage_m)
     }
 
+    /// Chainage of a GNSS fix on the main line, the fix's variance along the track (its ENU
+    /// covariance turned onto the track heading), and the track heading. None for a fix
+    /// without a position or off the line's ends.
+    pub fn chainage_of_fix(&self, fix: &super::GnssFix) -> Option<(f64, Option<f64>, Option<f64>)> {
+        if !fix.fix_type.has_position() {
+            return None;
+        }
+        let (lat, lon) = (fix.latitude_deg?, fix.longitude_deg?);
+        let (e, n, _) =
+            self.origin
+                .to_enu(lat, lon, fix.altitude_m.unwrap_or(self.origin.altitude_m));
+        let (chainage, heading) = self.project(e, n)?;
+        let variance = fix.position_covariance_enu_m2.map(|c| {
+            let (ue, un) = (heading.sin(), heading.cos());
+            ue * ue * c[0] + ue * un * (c[1] + c[3]) + un * un * c[4]
+        });
+        Some((chainage, variance, Some(heading)))
+    }
+
     /// Chainage and track heading of the point of the main line nearest to (east, north): map
     /// matching of a position fix without memory (see [`crate::map_matching::MapMatcher`]
     /// for matching along a run). Clamped to the ends of the line.

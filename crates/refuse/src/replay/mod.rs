@@ -1,7 +1,7 @@
 //! The `refuse` run: stream the input log once, copy every record to the output unchanged,
 //! feed each pipeline the measurements of its channels, write `/fused/<name>/state`,
 //! `/fused/<name>/diagnostics` (and `/fused/<name>/smoothed` where asked), and store each
-//! pipeline's configuration as metadata. Scoring the result is [`crate::eval`]'s job.
+//! pipeline's configuration as metadata. Scoring the result is [`railfuse_eval`]'s job.
 //!
 //! Memory is bounded by the reorder windows, never by the length of the log (the smoother
 //! spills to a temporary file).
@@ -23,10 +23,10 @@ use railfuse_catalog::topics;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
-use crate::eval::{self, EvalReport, Evaluator};
 use crate::measurement::{Measurement, Quantity, SensorContext, SensorModel};
 use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 use crate::spec::Pipelines;
+use railfuse_eval::{self as eval, EvalReport, Evaluator};
 
 mod outputs;
 

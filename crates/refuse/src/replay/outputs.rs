@@ -16,8 +16,8 @@ use railfuse_catalog::messages::{
 use railfuse_catalog::topics;
 
 use crate::error::{Error, Result};
-use crate::eval::Evaluator;
 use crate::spec::PipelineSpec;
+use railfuse_eval::Evaluator;
 
 use super::{observe, RefuseOptions, Replay, LOCATION_TWIN_EVERY_NS};
 

@@ -29,7 +29,6 @@ pub mod odometry_check;
 pub mod plane_filter;
 pub mod safe_interval;
 pub mod settings;
-pub mod summary;
 
 use std::path::Path;
 

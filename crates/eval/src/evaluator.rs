@@ -1,18 +1,3 @@
-//! Evaluation of a log's fused channels against a reference: for every pipeline's states (and
-//! its RTS-smoothed states), position and speed error RMSE, maximum and 95th percentile over
-//! the whole run and over each marked window (injected faults, tunnels, correction outages,
-//! reported device faults, from the `/events` channel; and, in a log with balises, the run
-//! after the first balise, where an absolute fix has been available); NEES of `[s, v]` and NIS of the
-//! innovations as the share of epochs inside the 95 % χ² interval.
-//!
-//! The reference is the ground-truth channel or any channel the user names: another
-//! pipeline's state, or a GNSS fix channel (an RTK receiver), matched on the track map.
-//!
-//! Streaming with bounded memory. Fused states lag the reference by at most a reorder window
-//! and are scored in file order; smoothed states sit at the end of the file (they exist only
-//! once the whole run is filtered), so they are scored in a second pass that walks the
-//! reference with a second reader in step with them.
-
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -30,9 +15,8 @@ use crate::accuracy::{
     AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, PlaneMeter, PlaneSample,
     PlaneSummary, Span, CHI2_95_1DOF,
 };
-use crate::error::Result;
-use crate::measurement::gnss_chainage;
-use crate::safety::summary::{SafetyEval, SafetyTally};
+use crate::safety::{SafetyEval, SafetyTally};
+use railfuse_catalog::Result;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct WindowEval {
@@ -168,7 +152,7 @@ pub fn reference_sample(
         }
         ReferenceKind::Gnss => {
             let g: GnssFix = m.decode(path)?;
-            match (gnss_chainage(&g, map), g.speed_mps) {
+            match (map.and_then(|t| t.chainage_of_fix(&g)), g.speed_mps) {
                 (Some((s, _, _)), Some(v)) => Some((g.stamp_ns, s, v)),
                 _ => None,
             }
