@@ -1,7 +1,7 @@
 //! WGS-84 geodetic (latitude, longitude, ellipsoidal height), Earth-centred Earth-fixed (ECEF)
 //! and local east/north/up coordinates around a track origin. Thin wrappers over `map_3d`, in
 //! degrees at the interface (as receivers report them); checked against pyproj to the
-//! millimetre over 100 km (tests/interop.rs).
+//! millimetre over 100 km (tests/interop/numerics.rs).
 
 use map_3d::Ellipsoid;
 use serde::{Deserialize, Serialize};

@@ -20,6 +20,7 @@ pub mod adaptive_noise;
 pub mod error_learning;
 pub mod error_state;
 pub mod kind;
+mod output;
 pub mod planar_ins;
 pub mod quality_gate;
 pub mod settings;
@@ -31,15 +32,13 @@ use nalgebra::{SMatrix, SVector};
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::map_matching::MapMatcher;
-use railfuse_catalog::messages::{
-    FusedState, GateDecision, GnssFix, Imu, PlanePosition, SensorStateEstimate, TrackMap,
-};
+use railfuse_catalog::messages::{GateDecision, GnssFix, Imu, TrackMap};
 use railfuse_catalog::seconds_between;
 
 use crate::base::PipelineBase;
 use crate::error::Result;
 use crate::filter::Innovation;
-use crate::fused::{measurement_record, Fused, PipelineCounts};
+use crate::fused::{Fused, PipelineCounts};
 use crate::kinds::MessagePipeline;
 use crate::measurement::SensorContext;
 use crate::noise::VarianceValue;
@@ -48,9 +47,7 @@ use crate::prefilter::PreFilter;
 use crate::reorder::ReorderQueue;
 use adaptive_noise::AdaptiveNoise;
 use error_learning::ErrorLearning;
-use error_state::{
-    position_rows, velocity_rows, ErrorMeasurement, ErrorStateFilter, BA, BG, PSI, V,
-};
+use error_state::{position_rows, velocity_rows, ErrorMeasurement, ErrorStateFilter, BG, PSI, V};
 pub use kind::Kind;
 use planar_ins::Navigation;
 use quality_gate::{GateTally, GateVerdict};
@@ -669,140 +666,5 @@ impl GnssInsPipeline {
         if self.nav.is_some() {
             self.output(t, topic, map, o);
         }
-    }
-
-    // --- output -----------------------------------------------------------------------
-
-    fn output(&mut self, t: u64, topic: &str, map: Option<&TrackMap>, o: &mut Out) {
-        let (Some(nav), Some(filter)) = (self.nav, self.filter.as_ref()) else {
-            return;
-        };
-        let p = filter.kf.estimate.covariance;
-        let (s, c) = nav.heading_rad.sin_cos();
-        let along = SVector::<f64, 6>::from_column_slice(&[s, c, 0.0, 0.0, 0.0, 0.0]);
-        let chainage_var = (along.transpose() * p * along)[0];
-        let chainage_speed = (along.transpose() * p.column(V))[0];
-        let chainage_m =
-            match map.and_then(|m| self.matcher.match_point(m, nav.east_m, nav.north_m, None)) {
-                Some(m) => m.chainage_m,
-                None => self.distance_m,
-            };
-        // The acceleration is the last reading's: its white noise over one IMU interval.
-        let white = self.settings.imu_noise.accel_noise_density.powi(2) / self.imu_interval_s;
-        let accel_var = p[(BA, BA)] + white;
-        let covariance = [
-            chainage_var,
-            chainage_speed,
-            0.0,
-            chainage_speed,
-            p[(V, V)],
-            0.0,
-            0.0,
-            0.0,
-            accel_var,
-        ];
-        let v = nav.speed_mps;
-        let j = SMatrix::<f64, 2, 2>::new(s, v * c, c, -v * s);
-        let pv = SMatrix::<f64, 2, 2>::new(p[(V, V)], p[(V, PSI)], p[(PSI, V)], p[(PSI, PSI)]);
-        let vc = j * pv * j.transpose();
-        let origin = self.origin.expect("set by the first fix");
-        let (lat, lon, _) = origin.to_geodetic(nav.east_m, nav.north_m, 0.0);
-        let (ve, vn) = nav.velocity();
-        let imu_topic = self.topic(self.roles.imu).to_owned();
-        let state = FusedState {
-            stamp_ns: t,
-            chainage_m,
-            speed_mps: v,
-            acceleration_mps2: self.last_acceleration,
-            covariance,
-            source: topic.to_owned(),
-            sensor_states: vec![
-                SensorStateEstimate {
-                    topic: imu_topic.clone(),
-                    kind: "accel_bias".into(),
-                    value: nav.accel_bias_mps2,
-                    std: p[(BA, BA)].max(0.0).sqrt(),
-                },
-                SensorStateEstimate {
-                    topic: imu_topic,
-                    kind: "gyro_bias".into(),
-                    value: nav.gyro_bias_radps,
-                    std: p[(BG, BG)].max(0.0).sqrt(),
-                },
-            ],
-            plane: Some(PlanePosition {
-                east_m: nav.east_m,
-                north_m: nav.north_m,
-                covariance_en_m2: [p[(0, 0)], p[(0, 1)], p[(1, 0)], p[(1, 1)]],
-                latitude_deg: lat,
-                longitude_deg: lon,
-                velocity_en_mps: Some([ve, vn]),
-                velocity_covariance_en: Some([vc[(0, 0)], vc[(0, 1)], vc[(1, 0)], vc[(1, 1)]]),
-                heading_rad: Some(nav.heading_rad),
-            }),
-        };
-        o.items.push(Fused {
-            state: Some(state),
-            ..Default::default()
-        });
-        let period = (self.settings.output_period_s * 1e9) as u64;
-        self.next_output_ns = t + period;
-        self.write_model(t, (nav.accel_bias_mps2, nav.gyro_bias_radps), o);
-    }
-
-    /// The learnt IMU model, once a second.
-    fn write_model(&mut self, t: u64, biases: (f64, f64), o: &mut Out) {
-        if t < self.next_model_ns {
-            return;
-        }
-        let standstill = self
-            .standstill
-            .estimate()
-            .map_or((0, 0.0), |s| (s.samples, s.seconds));
-        let model = self.learning.message(t, biases, standstill, self.in_loss);
-        o.items.push(Fused {
-            imu_error_model: Some(model),
-            ..Default::default()
-        });
-        self.next_model_ns = t + 1_000_000_000;
-    }
-
-    /// Before the filter starts: the static offsets of a standing train, once measured.
-    fn static_model(&mut self, t: u64, o: &mut Out) {
-        if let Some(s) = self.standstill.estimate() {
-            self.write_model(t, (s.forward_mps2, s.yaw_rate_radps), o);
-        }
-    }
-}
-
-impl Out {
-    #[allow(clippy::too_many_arguments)]
-    fn record(
-        &mut self,
-        stamp_ns: u64,
-        topic: &str,
-        axis: Option<&str>,
-        (z, r): (Option<f64>, Option<f64>),
-        i: Option<Innovation>,
-        decision: GateDecision,
-        reason: Option<&str>,
-    ) {
-        let d = measurement_record(stamp_ns, topic, axis, (z, r), i, decision, reason);
-        self.items.push(Fused {
-            diagnostics: Some(d),
-            ..Default::default()
-        });
-    }
-
-    fn diagnostics(&mut self, stamp_ns: u64, topic: &str, decision: GateDecision, why: &str) {
-        self.record(
-            stamp_ns,
-            topic,
-            None,
-            (None, None),
-            None,
-            decision,
-            Some(why),
-        );
     }
 }

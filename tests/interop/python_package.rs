@@ -1,0 +1,187 @@
+//! The Python package (pyo3), its Ray tasks and Ray Tune experiment, and the configuration schema
+//! as `jsonschema` reads it.
+
+use super::*;
+
+/// The Python package's `refuse` writes exactly what the CLI writes; its tables, tuning and
+/// errors are the CLI's.
+#[test]
+fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
+    let d = tempfile::tempdir().unwrap();
+    let raw = d.path().join("raw.mcap");
+    simulate(&["--seed", "6", "--duration", "60"], &raw);
+    let config = sample("kalman.toml");
+    let cli = d.path().join("cli.fused.mcap");
+    ok(&["refuse", s(&raw), "-c", s(&config), "-o", s(&cli)]);
+    let v = python_ok(
+        "python_package.py",
+        &[s(d.path()), s(&config), s(&cli), s(&raw)],
+    );
+    let py = d.path().join("py.fused.mcap");
+    assert_eq!(
+        std::fs::read(&cli).unwrap(),
+        std::fs::read(&py).unwrap(),
+        "railfuse.refuse and railfuse refuse write the same bytes"
+    );
+    let states: Vec<railfuse_catalog::messages::FusedState> = messages(&cli, "/fused/kalman/state");
+    assert_eq!(v["state_rows"].as_u64().unwrap() as usize, states.len());
+    assert_eq!(v["first_chainage"].as_f64().unwrap(), states[0].chainage_m);
+    assert_eq!(v["covariance_type"], "list<item: double>");
+    assert_eq!(v["state_columns"][0], "log_time_ns");
+    let radar: Vec<railfuse_catalog::messages::RadarSpeed> = messages(&raw, "/radar/speed");
+    assert_eq!(v["radar_rows"].as_u64().unwrap() as usize, radar.len());
+    // (refuse scores in the same pass, evaluate from the file: sums in another order)
+    close(&v["refuse_rmse"], &v["evaluate_rmse"]);
+    // Errors: the CLI's one line, as RailfuseError.
+    let e = &v["errors"];
+    let missing = d.path().join("nope.toml");
+    let cli_err = stderr(&railfuse(&[
+        "refuse",
+        s(&raw),
+        "-c",
+        s(&missing),
+        "-o",
+        s(&py),
+    ]));
+    assert!(
+        cli_err.contains(e["missing_config"].as_str().unwrap()),
+        "{cli_err} / {e}"
+    );
+    assert!(
+        e["missing_topic"]
+            .as_str()
+            .unwrap()
+            .contains("no channel /nope"),
+        "{e}"
+    );
+    assert!(
+        e["unknown_reference"]
+            .as_str()
+            .unwrap()
+            .contains("reference /nothere is not in the log"),
+        "{e}"
+    );
+    assert_eq!(v["pandas_rows"], v["state_rows"], "{v}");
+    assert!(
+        e["unknown_param"]
+            .as_str()
+            .unwrap()
+            .contains("motion.jerk_pds: not found"),
+        "{e}"
+    );
+    assert!(
+        e["unknown_scenario"]
+            .as_str()
+            .unwrap()
+            .contains("unknown scenario 'nope'"),
+        "{e}"
+    );
+    // Tuning from Python finds what the CLI finds.
+    let out = d.path().join("cli-tuned.toml");
+    let cli_tune: serde_json::Value = serde_json::from_slice(
+        &ok(&[
+            "tune",
+            s(&raw),
+            "-c",
+            s(&config),
+            "--pipeline",
+            "kalman",
+            "--reference",
+            "/truth",
+            "--params",
+            "motion.jerk_psd=0.001..10",
+            "--optimiser",
+            "grid",
+            "-o",
+            s(&out),
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(
+        v["tuned"]["motion.jerk_psd"],
+        cli_tune["params"][0]["after"]
+    );
+    assert_eq!(
+        std::fs::read_to_string(&out).unwrap(),
+        std::fs::read_to_string(d.path().join("py-tuned.toml")).unwrap()
+    );
+}
+
+/// railfuse.ray on a local Ray cluster: tasks give the local figures, and the Ray Tune grid
+/// search finds the values the local grid search finds.
+#[test]
+fn the_ray_path_refuses_many_logs_and_tunes_to_the_local_values() {
+    let d = tempfile::tempdir().unwrap();
+    let logs: Vec<std::path::PathBuf> = (1..=2)
+        .map(|seed| {
+            let log = d.path().join(format!("r{seed}.mcap"));
+            ok(&[
+                "simulate",
+                "--seed",
+                &seed.to_string(),
+                "--duration",
+                "60",
+                "-o",
+                s(&log),
+            ]);
+            log
+        })
+        .collect();
+    let config = sample("kalman.toml");
+    let mut args = vec![s(d.path()), s(&config)];
+    args.extend(logs.iter().map(|l| s(l)));
+    let v = python_ok("ray_fleet.py", &args);
+    for (i, log) in logs.iter().enumerate() {
+        let local = d.path().join(format!("local{i}.fused.mcap"));
+        let r: serde_json::Value = serde_json::from_slice(
+            &ok(&[
+                "refuse",
+                s(log),
+                "-c",
+                s(&config),
+                "-o",
+                s(&local),
+                "--json",
+            ])
+            .stdout,
+        )
+        .unwrap();
+        close(
+            &v["refuse_rmse"][i],
+            &r["eval"]["pipelines"][0]["position_error_m"]["rmse"],
+        );
+        close(&v["evaluate_rmse"][i], &v["refuse_rmse"][i]);
+    }
+    assert_eq!(v["ray"], v["local"], "{v}");
+    let (a, b) = (
+        v["ray_objective"].as_f64().unwrap(),
+        v["local_objective"].as_f64().unwrap(),
+    );
+    assert!((a - b).abs() <= 1e-9 * b.abs(), "{v}");
+    assert_eq!(v["trials"], 9);
+    assert!(
+        v["missing_log"].as_str().unwrap().contains("missing.mcap"),
+        "{v}"
+    );
+}
+
+/// The configuration schema (`refuse --config-schema`) checked by `jsonschema`: every sample
+/// configuration is valid, a misspelt key, a wrong type and an unknown setting are not.
+#[test]
+fn every_sample_configuration_is_valid_against_the_schema_jsonschema_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let schema = d.path().join("schema.json");
+    let out = ok(&["refuse", "--config-schema"]);
+    std::fs::write(&schema, &out.stdout).unwrap();
+    let samples = sample("");
+    let py = python("config_schema.py", &[s(&schema), s(&samples)]);
+    assert!(
+        py.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&py.stdout),
+        String::from_utf8_lossy(&py.stderr)
+    );
+    println!("{}", String::from_utf8_lossy(&py.stdout));
+}
