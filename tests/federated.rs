@@ -33,28 +33,7 @@ fn sharing(path: &std::path::Path, pipeline: &str) -> Vec<(f64, Shares)> {
 #[test]
 fn a_killed_device_gives_its_share_to_the_others_and_the_error_stays_within_the_source_targets() {
     let d = tempfile::tempdir().unwrap();
-    let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
-    simulate(
-        &[
-            "--scenario",
-            "seed001",
-            "--seed",
-            "4",
-            "--fault",
-            "radar:dropout:200:300",
-        ],
-        &raw,
-    );
-    let out = ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("seed001.toml")),
-        "-o",
-        s(&fused),
-        "--json",
-    ]);
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let (fused, r) = seed001_with(d.path(), "4", "radar:dropout:200:300");
 
     let rows = sharing(&fused, "fkf");
     assert!(
@@ -123,28 +102,7 @@ fn a_killed_device_gives_its_share_to_the_others_and_the_error_stays_within_the_
 #[test]
 fn a_biased_ins_is_caught_and_kept_out_until_it_agrees_again() {
     let d = tempfile::tempdir().unwrap();
-    let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
-    simulate(
-        &[
-            "--scenario",
-            "seed001",
-            "--seed",
-            "2",
-            "--fault",
-            "imu:bias=0.5:200:300",
-        ],
-        &raw,
-    );
-    let out = ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("seed001.toml")),
-        "-o",
-        s(&fused),
-        "--json",
-    ]);
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let (fused, r) = seed001_with(d.path(), "2", "imu:bias=0.5:200:300");
     let rows = sharing(&fused, "fkf");
     let ins_out = |t0: f64, t1: f64| {
         rows.iter()
@@ -179,20 +137,8 @@ fn a_biased_ins_is_caught_and_kept_out_until_it_agrees_again() {
 #[test]
 fn a_device_that_reports_its_own_fault_is_taken_out_and_back_by_its_events() {
     let d = tempfile::tempdir().unwrap();
-    let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
     // A 0.05 m/s radar bias is below what the gates see; only the radar's own report says so.
-    simulate(
-        &[
-            "--scenario",
-            "seed001",
-            "--seed",
-            "5",
-            "--fault",
-            "radar:bias=0.05:150:250:reported",
-        ],
-        &raw,
-    );
-    refuse(&raw, "seed001.toml", &fused);
+    let (fused, _) = seed001_with(d.path(), "5", "radar:bias=0.05:150:250:reported");
     let rows = sharing(&fused, "fkf");
     let radar_fault = |t0: f64, t1: f64| {
         rows.iter()
@@ -212,6 +158,22 @@ fn a_device_that_reports_its_own_fault_is_taken_out_and_back_by_its_events() {
     );
 }
 
+/// Source 001's scenario on `seed` with one injected `fault`, re-fused with seed001.toml: the
+/// fused file (in `dir`) and the run's report.
+fn seed001_with(
+    dir: &std::path::Path,
+    seed: &str,
+    fault: &str,
+) -> (std::path::PathBuf, serde_json::Value) {
+    let (raw, fused) = (dir.join("s1.mcap"), dir.join("s1.fused.mcap"));
+    simulate(
+        &["--scenario", "seed001", "--seed", seed, "--fault", fault],
+        &raw,
+    );
+    let r = refuse_json(&raw, "seed001.toml", &fused);
+    (fused, r)
+}
+
 /// The last fused state of `pipeline`.
 fn last_state(path: &std::path::Path, pipeline: &str) -> FusedState {
     messages::<FusedState>(path, &format!("/fused/{pipeline}/state"))
@@ -222,38 +184,9 @@ fn last_state(path: &std::path::Path, pipeline: &str) -> FusedState {
 #[test]
 fn sensor_states_learn_the_radar_scale_factor_and_carry_the_position_through_a_gnss_outage() {
     let d = tempfile::tempdir().unwrap();
-    let (raw, fused) = (d.path().join("s1.mcap"), d.path().join("s1.fused.mcap"));
     // GNSS, the only absolute position, dead for 100 s at up to 432 km/h.
-    simulate(
-        &[
-            "--scenario",
-            "seed001",
-            "--seed",
-            "3",
-            "--fault",
-            "gnss:dropout:200:300",
-        ],
-        &raw,
-    );
-    let out = ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("seed001.toml")),
-        "-o",
-        s(&fused),
-        "--json",
-    ]);
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let eval = |name: &str| {
-        r["eval"]["pipelines"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["name"] == name)
-            .unwrap()
-            .clone()
-    };
+    let (fused, r) = seed001_with(d.path(), "3", "gnss:dropout:200:300");
+    let eval = |name: &str| pipeline_eval(&r, name);
     let max_pos = |name: &str| eval(name)["position_error_m"]["max_abs"].as_f64().unwrap();
     // Without sensor states the radar's 0.3 % scale error dead-reckons tens of metres away;
     // with them the position stays within the source's 10 m.

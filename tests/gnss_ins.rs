@@ -5,7 +5,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{messages, ok, refuse, s, sample, simulate, truth_at};
+use common::{import_eth, messages, ok, refuse, s, sample, simulate, truth_at};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GroundTruth, ImuErrorModel};
 
 const PIPELINES: [&str; 4] = ["kf", "akf", "rls", "pu_rls"];
@@ -122,16 +122,7 @@ fn real_eth_samples_no_fix_refused_and_the_standing_imus_offsets_measured() {
     let d = tempfile::tempdir().unwrap();
     let import = |name: &str| {
         let log = d.path().join(format!("{name}.mcap"));
-        let src = sample("eth-pbl-railway").join(name);
-        ok(&[
-            "import",
-            "--format",
-            "eth",
-            s(&src),
-            "-o",
-            s(&log),
-            "--quiet",
-        ]);
+        import_eth(name, &log);
         let fused = d.path().join(format!("{name}.fused.mcap"));
         refuse(&log, "seed003.toml", &fused);
         fused

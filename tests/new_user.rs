@@ -244,19 +244,15 @@ fn help_lists_every_value_the_parser_takes_and_the_csv_mapping_has_an_example_of
     let d = tempfile::tempdir().unwrap();
     ok(&["import", "--example-map", s(d.path())]);
     let out = d.path().join("example.mcap");
-    let r: serde_json::Value = serde_json::from_slice(
-        &ok(&[
-            "import",
-            s(&d.path().join("example.csv")),
-            "--map",
-            s(&d.path().join("mapping.toml")),
-            "-o",
-            s(&out),
-            "--json",
-        ])
-        .stdout,
-    )
-    .unwrap();
+    let r: serde_json::Value = ok_json(&[
+        "import",
+        s(&d.path().join("example.csv")),
+        "--map",
+        s(&d.path().join("mapping.toml")),
+        "-o",
+        s(&out),
+        "--json",
+    ]);
     let kinds = railfuse_record::import::csv_map::EXAMPLE_KINDS;
     assert_eq!(r["messages"].as_u64(), Some(kinds.len() as u64), "{r}");
     assert_eq!(

@@ -162,9 +162,7 @@ fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets
     let out = d.path().join("killed.mcap");
     let partial = killed_recording(&out, 3000);
     let fixed = d.path().join("fixed.mcap");
-    let r: serde_json::Value =
-        serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout)
-            .unwrap();
+    let r: serde_json::Value = ok_json(&["recover", s(&partial), "-o", s(&fixed), "--json"]);
     let (v, _) = radar_speeds(&fixed);
     assert_eq!(
         v,
@@ -172,13 +170,7 @@ fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets
         "everything sent before the last closed chunk: {r}"
     );
     // The official Python reader reads the salvage and validates every message.
-    let py = python("check_mcap.py", &[s(&fixed)]);
-    assert!(
-        py.status.success(),
-        "{}",
-        String::from_utf8_lossy(&py.stderr)
-    );
-    let py: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    let py = python_ok("check_mcap.py", &[s(&fixed)]);
     assert_eq!(py["topics"]["/radar/speed"], 3000, "{py}");
 }
 
@@ -273,19 +265,15 @@ fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
     let d = tempfile::tempdir().unwrap();
     let (nmea, ubx) = captures(d.path());
     let (a, b) = (d.path().join("a.mcap"), d.path().join("b.mcap"));
-    let r: serde_json::Value = serde_json::from_slice(
-        &ok(&[
-            "import",
-            "--format",
-            "nmea",
-            s(&nmea),
-            "-o",
-            s(&a),
-            "--json",
-        ])
-        .stdout,
-    )
-    .unwrap();
+    let r: serde_json::Value = ok_json(&[
+        "import",
+        "--format",
+        "nmea",
+        s(&nmea),
+        "-o",
+        s(&a),
+        "--json",
+    ]);
     assert_eq!(
         (
             r["messages"].as_u64(),
@@ -299,10 +287,8 @@ fn nmea_and_ubx_captures_import_with_their_bad_sentences_counted() {
     assert!(fixes.iter().all(
         |f| f.fix_type == railfuse_catalog::messages::FixType::RtkFixed && f.satellites == 12
     ));
-    let r: serde_json::Value = serde_json::from_slice(
-        &ok(&["import", "--format", "ubx", s(&ubx), "-o", s(&b), "--json"]).stdout,
-    )
-    .unwrap();
+    let r: serde_json::Value =
+        ok_json(&["import", "--format", "ubx", s(&ubx), "-o", s(&b), "--json"]);
     assert_eq!(r["messages"], 1, "{r}");
     assert_eq!(gnss_fixes(&b)[0].satellites, 29);
 }
@@ -397,8 +383,7 @@ fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
     assert_eq!(files[0].file_name().unwrap(), "run-001.mcap");
     let mut total = 0u64;
     for f in &files {
-        let info: serde_json::Value =
-            serde_json::from_slice(&ok(&["info", s(f), "--json"]).stdout).unwrap();
+        let info: serde_json::Value = ok_json(&["info", s(f), "--json"]);
         let run = info["metadata"]
             .as_array()
             .unwrap()
@@ -505,9 +490,7 @@ fn a_disk_filling_mid_recording_keeps_every_closed_chunk() {
     );
     assert!(!out.exists() && partial.exists());
     let fixed = d.path().join("fixed.mcap");
-    let r: serde_json::Value =
-        serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout)
-            .unwrap();
+    let r: serde_json::Value = ok_json(&["recover", s(&partial), "-o", s(&fixed), "--json"]);
     let (v, diags) = radar_speeds(&fixed);
     // What was written before the disk filled is all there, in order, with nothing missing.
     assert!(

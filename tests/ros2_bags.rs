@@ -171,9 +171,7 @@ fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
     // The viewer draws the bag's sensors, with the fused results beside them: at least as
     // many rows as Rerun's own MCAP loader logs of the bag alone.
     let rrd = d.path().join("bag.rrd");
-    let viz: serde_json::Value =
-        serde_json::from_slice(&ok(&["viz", s(&fused_bag), "--save", s(&rrd), "--json"]).stdout)
-            .unwrap();
+    let viz: serde_json::Value = ok_json(&["viz", s(&fused_bag), "--save", s(&rrd), "--json"]);
     let entities = viz["entities"].as_array().unwrap();
     for shown in ["map/gnss/", "speed/radar", "map/fused/kf/position"] {
         assert!(
@@ -323,9 +321,7 @@ fn a_foxglove_logs_location_fixes_feed_the_gnss_sensor_in_json_and_protobuf() {
         assert_eq!(chainage_from_gps(&fused), written, "{args:?}");
         // The viewer draws them on the map, beside the fused track.
         let rrd = d.path().join("foxglove.rrd");
-        let viz: serde_json::Value =
-            serde_json::from_slice(&ok(&["viz", s(&fused), "--save", s(&rrd), "--json"]).stdout)
-                .unwrap();
+        let viz: serde_json::Value = ok_json(&["viz", s(&fused), "--save", s(&rrd), "--json"]);
         let entities = viz["entities"].as_array().unwrap();
         assert!(
             entities.iter().any(|e| e == "map/gnss/single"),
@@ -372,19 +368,15 @@ fn a_sqlite3_bag_imports_to_mcap_keeping_topics_types_qos_and_times_and_refuses_
     assert_eq!(ros2_bag_in(&native, d.path(), &["sqlite3"]), counts);
     let imported = d.path().join("imported.mcap");
     let sqlite = d.path().join("bag-sqlite3");
-    let r: serde_json::Value = serde_json::from_slice(
-        &ok(&[
-            "import",
-            "--format",
-            "rosbag2",
-            s(&sqlite),
-            "-o",
-            s(&imported),
-            "--json",
-        ])
-        .stdout,
-    )
-    .unwrap();
+    let r: serde_json::Value = ok_json(&[
+        "import",
+        "--format",
+        "rosbag2",
+        s(&sqlite),
+        "-o",
+        s(&imported),
+        "--json",
+    ]);
     assert_eq!(&r["per_topic"], &counts, "{r}");
     // Topics, types, encodings, QoS and times as rosbags' own MCAP storage has them.
     let bag = d.path().join("bag/bag.mcap");
@@ -524,8 +516,7 @@ fn a_bag_without_a_config_refuses_with_a_default_pipeline_that_says_what_it_used
     let maps: Vec<railfuse_catalog::messages::TrackMap> = messages(&out, "/track/map");
     assert_eq!(maps.len(), 1);
     let rrd = d.path().join("default.rrd");
-    let viz: serde_json::Value =
-        serde_json::from_slice(&ok(&["viz", s(&out), "--save", s(&rrd), "--json"]).stdout).unwrap();
+    let viz: serde_json::Value = ok_json(&["viz", s(&out), "--save", s(&rrd), "--json"]);
     let entities = viz["entities"].as_array().unwrap();
     for shown in [
         "map/track",

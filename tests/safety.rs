@@ -5,7 +5,7 @@ mod common;
 
 use std::path::Path;
 
-use common::{messages, ok, railfuse, s, sample, simulate, stderr};
+use common::{import_eth, messages, ok, railfuse, s, sample, simulate, stderr};
 use railfuse_catalog::messages::{FusedState, GroundTruth, SafetyStatus};
 
 /// The truth's chainage at a stamp, interpolated.
@@ -233,16 +233,7 @@ fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accurac
     ] {
         let log = d.path().join(format!("{name}.mcap"));
         let fused = d.path().join(format!("{name}.fused.mcap"));
-        let src = sample("eth-pbl-railway").join(name);
-        ok(&[
-            "import",
-            "--format",
-            "eth",
-            s(&src),
-            "-o",
-            s(&log),
-            "--quiet",
-        ]);
+        import_eth(name, &log);
         let out = ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
         let printed = String::from_utf8_lossy(&out.stdout).into_owned() + &stderr(&out);
         let status = messages::<SafetyStatus>(&fused, "/fused/gnss_s1/safety");

@@ -59,19 +59,15 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
     let log = default_run(d.path(), 2, 240);
     // The figures tune starts from are those refuse + eval give for the same file.
     let fused = d.path().join("fused.mcap");
-    let refused: Value = serde_json::from_slice(
-        &ok(&[
-            "refuse",
-            s(&log),
-            "-c",
-            s(&sample("kalman.toml")),
-            "-o",
-            s(&fused),
-            "--json",
-        ])
-        .stdout,
-    )
-    .unwrap();
+    let refused: Value = ok_json(&[
+        "refuse",
+        s(&log),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&fused),
+        "--json",
+    ]);
     let eval = &refused["eval"]["pipelines"][0];
     let start = tune(
         &log,
@@ -149,10 +145,8 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
         }
         // Re-fusing with the tuned file gives the figures the report promised.
         let check = d.path().join(format!("{optimiser}.fused.mcap"));
-        let refused: Value = serde_json::from_slice(
-            &ok(&["refuse", s(&log), "-c", s(&out), "-o", s(&check), "--json"]).stdout,
-        )
-        .unwrap();
+        let refused: Value =
+            ok_json(&["refuse", s(&log), "-c", s(&out), "-o", s(&check), "--json"]);
         assert!(close(
             &refused["eval"]["pipelines"][0]["position_error_m"]["rmse"],
             &r["after"]["position_rmse_m"]
@@ -190,24 +184,21 @@ fn the_same_seed_gives_the_same_tuning_on_one_thread_or_two() {
     let d = tempfile::tempdir().unwrap();
     let log = default_run(d.path(), 3, 120);
     let bad = bad_config(d.path());
-    let run = |name: &str, seed: &str, threads: &str| {
+    // One optimiser's run: the tuned config, the trace but for its elapsed times, the report.
+    let run = |name: &str, optimiser: &str, evals: &str, more: &[&str]| {
         let out = d.path().join(format!("{name}.toml"));
         let mut extra = vec![
             "--reference",
             "/truth",
             "--optimiser",
-            "pso",
+            optimiser,
             "--max-evals",
-            "40",
-            "--seed",
-            seed,
-            "--threads",
-            threads,
+            evals,
         ];
+        extra.extend(more);
         extra.extend(PARAMS);
         let r = tune(&log, &bad, &out, &extra);
         let trace = std::fs::read_to_string(out.with_extension("trace.csv")).unwrap();
-        // Everything but the elapsed time.
         let trace: Vec<String> = trace
             .lines()
             .map(|l| {
@@ -218,25 +209,15 @@ fn the_same_seed_gives_the_same_tuning_on_one_thread_or_two() {
             .collect();
         (std::fs::read_to_string(&out).unwrap(), trace, r)
     };
-    let (a, ta, ra) = run("a", "7", "1");
-    // Bayesian optimisation too: its design and model are seeded.
-    let bayes = |name: &str| {
-        let out = d.path().join(format!("{name}.toml"));
-        let mut extra = vec![
-            "--reference",
-            "/truth",
-            "--optimiser",
-            "bayesian",
-            "--max-evals",
-            "25",
-        ];
-        extra.extend(PARAMS);
-        tune(&log, &bad, &out, &extra);
-        std::fs::read_to_string(&out).unwrap()
+    let pso = |name: &str, seed: &str, threads: &str| {
+        run(name, "pso", "40", &["--seed", seed, "--threads", threads])
     };
+    let (a, ta, ra) = pso("a", "7", "1");
+    // Bayesian optimisation too: its design and model are seeded.
+    let bayes = |name: &str| run(name, "bayesian", "25", &[]).0;
     assert_eq!(bayes("bo1"), bayes("bo2"));
-    let (b, tb, _) = run("b", "7", "2");
-    let (c, tc, _) = run("c", "8", "2");
+    let (b, tb, _) = pso("b", "7", "2");
+    let (c, tc, _) = pso("c", "8", "2");
     assert_eq!(a, b);
     assert_eq!(ta, tb);
     assert_ne!(ta, tc, "another seed searches elsewhere");

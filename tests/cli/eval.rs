@@ -10,8 +10,7 @@ fn eval_scores_against_truth_another_pipeline_or_a_gnss_receiver() {
     simulate(&["--seed", "3", "--duration", "200"], &raw);
     refuse(&raw, "kalman.toml", &fused);
     let eval = |reference: &str| -> serde_json::Value {
-        serde_json::from_slice(&ok(&["eval", s(&fused), "--reference", reference, "--json"]).stdout)
-            .unwrap()
+        ok_json(&["eval", s(&fused), "--reference", reference, "--json"])
     };
     let truth = eval("/truth");
     let kalman = &truth["pipelines"][0];

@@ -111,21 +111,17 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
          [[channel]]\ntopic = \"/loop/position\"\nfields = { chainage_m = \"pos\" }\n",
     )
     .unwrap();
-    let r: serde_json::Value = serde_json::from_slice(
-        &ok(&[
-            "import",
-            "--format",
-            "csv",
-            "--map",
-            s(&map),
-            s(&csv),
-            "-o",
-            s(&out),
-            "--json",
-        ])
-        .stdout,
-    )
-    .unwrap();
+    let r: serde_json::Value = ok_json(&[
+        "import",
+        "--format",
+        "csv",
+        "--map",
+        s(&map),
+        s(&csv),
+        "-o",
+        s(&out),
+        "--json",
+    ]);
     assert_eq!(
         (
             r["per_topic"]["/radar/speed"].as_u64(),
@@ -140,8 +136,7 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
             && problems.contains("line 103: row does not make a valid message"),
         "{problems}"
     );
-    let info: serde_json::Value =
-        serde_json::from_slice(&ok(&["info", s(&out), "--json"]).stdout).unwrap();
+    let info: serde_json::Value = ok_json(&["info", s(&out), "--json"]);
     assert_eq!(info["channels"].as_array().unwrap().len(), 2);
     // A mapping naming a column the file does not have is refused, naming both.
     std::fs::write(&map, "time_column = \"t\"\ndelimiter = \";\"\n[[channel]]\ntopic = \"/radar/speed\"\nfields = { speed_mps = \"v\" }\n").unwrap();

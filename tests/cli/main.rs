@@ -43,8 +43,7 @@ fn info_reports_channels_rates_gaps_metadata_and_fused_pipelines() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
     simulate(&["--seed", "1", "--duration", "120"], &raw);
-    let info: serde_json::Value =
-        serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+    let info: serde_json::Value = ok_json(&["info", s(&raw), "--json"]);
     let topic = |t: &str| {
         info["channels"]
             .as_array()
@@ -78,8 +77,7 @@ fn info_reports_channels_rates_gaps_metadata_and_fused_pipelines() {
     assert_eq!(info["fused_pipelines"].as_array().unwrap().len(), 0);
 
     refuse(&raw, "kalman.toml", &fused);
-    let info: serde_json::Value =
-        serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
+    let info: serde_json::Value = ok_json(&["info", s(&fused), "--json"]);
     assert_eq!(info["fused_pipelines"], serde_json::json!(["kalman"]));
     let text = String::from_utf8(ok(&["info", s(&fused)]).stdout).unwrap();
     assert!(
@@ -97,16 +95,7 @@ fn refuse_copies_every_input_record_and_reports_accuracy() {
         d.path().join("g.mcap"),
     );
     simulate(&["--seed", "2", "--duration", "150"], &raw);
-    let out = ok(&[
-        "refuse",
-        s(&raw),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-        "--json",
-    ]);
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let r = refuse_json(&raw, "kalman.toml", &fused);
     let p = &r["eval"]["pipelines"][0];
     assert_eq!(r["eval"]["reference"], "/truth");
     assert_eq!(p["states"], r["refuse"]["pipelines"][0]["fused_states"]);
@@ -120,10 +109,8 @@ fn refuse_copies_every_input_record_and_reports_accuracy() {
     assert!(p["position_error_m"]["rmse"].as_f64().unwrap() < 1.0, "{p}");
     assert!(p["speed_error_mps"]["rmse"].as_f64().unwrap() < 0.3, "{p}");
 
-    let raw_info: serde_json::Value =
-        serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
-    let fused_info: serde_json::Value =
-        serde_json::from_slice(&ok(&["info", s(&fused), "--json"]).stdout).unwrap();
+    let raw_info: serde_json::Value = ok_json(&["info", s(&raw), "--json"]);
+    let fused_info: serde_json::Value = ok_json(&["info", s(&fused), "--json"]);
     for c in raw_info["channels"].as_array().unwrap() {
         let f = fused_info["channels"]
             .as_array()
@@ -135,8 +122,7 @@ fn refuse_copies_every_input_record_and_reports_accuracy() {
     }
     // Re-fusing a fused file replaces that pipeline's channels instead of adding more.
     refuse(&fused, "kalman.toml", &again);
-    let again_info: serde_json::Value =
-        serde_json::from_slice(&ok(&["info", s(&again), "--json"]).stdout).unwrap();
+    let again_info: serde_json::Value = ok_json(&["info", s(&again), "--json"]);
     let n = |v: &serde_json::Value| v["channels"].as_array().unwrap().len();
     assert_eq!(n(&again_info), n(&fused_info));
     let pipelines = again_info["metadata"]
@@ -215,19 +201,9 @@ fn sensor_states_shrink_the_default_runs_errors_and_make_its_covariance_honest()
         .map(|p| std::fs::read_to_string(p).unwrap())
         .join("\n");
     std::fs::write(&cfg, text).unwrap();
-    let r: serde_json::Value = serde_json::from_slice(
-        &ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]).stdout,
-    )
-    .unwrap();
-    let p = |name: &str| {
-        r["eval"]["pipelines"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["name"] == name)
-            .unwrap()
-            .clone()
-    };
+    let r: serde_json::Value =
+        ok_json(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused), "--json"]);
+    let p = |name: &str| pipeline_eval(&r, name);
     let (plain, cal) = (p("kalman"), p("kalman_cal"));
     let f = |p: &serde_json::Value, path: [&str; 2]| p[path[0]][path[1]].as_f64().unwrap();
     for path in [
@@ -251,10 +227,7 @@ fn sensor_states_shrink_the_default_runs_errors_and_make_its_covariance_honest()
     );
     // Against the GNSS, silent in the tunnel: no state inside the outage is scored against a
     // line drawn across it; they are counted as inside a gap of the reference.
-    let g: serde_json::Value = serde_json::from_slice(
-        &ok(&["eval", s(&fused), "--reference", "/gnss/fix", "--json"]).stdout,
-    )
-    .unwrap();
+    let g: serde_json::Value = ok_json(&["eval", s(&fused), "--reference", "/gnss/fix", "--json"]);
     for p in g["pipelines"].as_array().unwrap() {
         let tunnel = p["windows"]
             .as_array()
@@ -323,8 +296,7 @@ fn a_pipeline_without_a_position_sensor_starts_at_distance_zero_or_where_told() 
 fn foxglove_twins_are_added_beside_the_channels_and_left_out_on_request() {
     let d = tempfile::tempdir().unwrap();
     let topics = |path: &std::path::Path| -> Vec<(String, u64)> {
-        let info: serde_json::Value =
-            serde_json::from_slice(&ok(&["info", s(path), "--json"]).stdout).unwrap();
+        let info: serde_json::Value = ok_json(&["info", s(path), "--json"]);
         let mut t: Vec<_> = info["channels"]
             .as_array()
             .unwrap()

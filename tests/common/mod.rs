@@ -38,6 +38,50 @@ pub fn refuse(raw: &Path, config: &str, out: &Path) -> Output {
     ok(&["refuse", s(raw), "-c", s(&sample(config)), "-o", s(out)])
 }
 
+/// `railfuse ARGS`, which must succeed, with JSON on its standard output (`--json`).
+pub fn ok_json(args: &[&str]) -> serde_json::Value {
+    let out = ok(args);
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{args:?}: {e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+/// `railfuse import --format eth` of one of samples/eth-pbl-railway/ into `log`.
+pub fn import_eth(name: &str, log: &Path) {
+    let src = sample("eth-pbl-railway").join(name);
+    ok(&[
+        "import",
+        "--format",
+        "eth",
+        s(&src),
+        "-o",
+        s(log),
+        "--quiet",
+    ]);
+}
+
+/// `railfuse refuse --json` of `raw` with a sample config: the run's report as JSON.
+pub fn refuse_json(raw: &Path, config: &str, out: &Path) -> serde_json::Value {
+    let run = ok(&[
+        "refuse",
+        s(raw),
+        "-c",
+        s(&sample(config)),
+        "-o",
+        s(out),
+        "--json",
+    ]);
+    serde_json::from_slice(&run.stdout).unwrap()
+}
+
+/// The accuracy of pipeline `name` in a `--json` report of `refuse` (its `eval`) or `eval`.
+pub fn pipeline_eval(report: &serde_json::Value, name: &str) -> serde_json::Value {
+    let evals = report.get("eval").unwrap_or(report)["pipelines"].as_array();
+    evals
+        .and_then(|p| p.iter().find(|p| p["name"] == name))
+        .unwrap_or_else(|| panic!("no pipeline {name} in {report}"))
+        .clone()
+}
+
 pub fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -87,6 +131,27 @@ pub fn rerun(args: &[&str]) -> Output {
         .args(args)
         .output()
         .expect("rerun runs")
+}
+
+/// A Python client script that must succeed; its standard output as JSON.
+pub fn python_ok(script: &str, args: &[&str]) -> serde_json::Value {
+    let out = python(script, args);
+    assert!(
+        out.status.success(),
+        "{script} {args:?}: {}{}",
+        stderr(&out),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{script}: {e}: {}", String::from_utf8_lossy(&out.stdout)))
+}
+
+/// The `rerun` CLI, which must succeed; what it printed.
+pub fn rerun_ok(args: &[&str]) -> String {
+    let out = rerun(args);
+    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
+    assert!(out.status.success(), "rerun {args:?}: {text}");
+    text
 }
 
 /// Every message on `topic` of a log, decoded, in file order.

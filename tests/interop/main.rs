@@ -12,25 +12,6 @@ mod numerics;
 mod python_package;
 mod viewer;
 
-fn python_ok(script: &str, args: &[&str]) -> serde_json::Value {
-    let out = python(script, args);
-    assert!(
-        out.status.success(),
-        "{script} {args:?}: {}{}",
-        stderr(&out),
-        String::from_utf8_lossy(&out.stdout)
-    );
-    serde_json::from_slice(&out.stdout)
-        .unwrap_or_else(|e| panic!("{script}: {e}: {}", String::from_utf8_lossy(&out.stdout)))
-}
-
-fn rerun_ok(args: &[&str]) -> String {
-    let out = rerun(args);
-    let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), stderr(&out));
-    assert!(out.status.success(), "rerun {args:?}: {text}");
-    text
-}
-
 /// `railfuse refuse` of the short sample run with a config, and any further arguments.
 fn refuse_short_run(config: &std::path::Path, out: &std::path::Path, extra: &[&str]) {
     let run = sample("short-run.mcap");

@@ -9,8 +9,7 @@ fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
     let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
     simulate(&["--seed", "11", "--duration", "200"], &raw);
     refuse(&raw, "kalman.toml", &fused);
-    let info: serde_json::Value =
-        serde_json::from_slice(&ok(&["info", s(&raw), "--json"]).stdout).unwrap();
+    let info: serde_json::Value = ok_json(&["info", s(&raw), "--json"]);
 
     let r = python_ok("check_mcap.py", &[s(&raw)]);
     assert_eq!(r["messages"], info["messages"]);
@@ -117,9 +116,7 @@ fn a_log_killed_mid_write_is_recovered_and_the_python_reader_reads_it() {
         !out.exists(),
         "a killed run must not leave a file that looks complete"
     );
-    let r: serde_json::Value =
-        serde_json::from_slice(&ok(&["recover", s(&partial), "-o", s(&fixed), "--json"]).stdout)
-            .unwrap();
+    let r: serde_json::Value = ok_json(&["recover", s(&partial), "-o", s(&fixed), "--json"]);
     assert!(
         r["stopped_by"].as_str().unwrap().contains("truncated"),
         "{r}"
@@ -208,9 +205,7 @@ fn a_corrupt_chunk_in_the_middle_costs_that_chunk_only_and_python_reads_the_rest
     }
     assert!(lines.windows(2).all(|w| w[0] == w[1]), "{lines:?}");
     let fixed = d.path().join("fixed.mcap");
-    let r: serde_json::Value =
-        serde_json::from_slice(&ok(&["recover", s(&broken), "-o", s(&fixed), "--json"]).stdout)
-            .unwrap();
+    let r: serde_json::Value = ok_json(&["recover", s(&broken), "-o", s(&fixed), "--json"]);
     assert_eq!(r["skipped"].as_array().unwrap().len(), 1, "{r}");
     assert_eq!(r["skipped"][0]["offset"], chunk.start as u64, "{r}");
     // The official reader reads the salvage: every message of the original but the lost

@@ -78,27 +78,23 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
     );
     // Tuning from Python finds what the CLI finds.
     let out = d.path().join("cli-tuned.toml");
-    let cli_tune: serde_json::Value = serde_json::from_slice(
-        &ok(&[
-            "tune",
-            s(&raw),
-            "-c",
-            s(&config),
-            "--pipeline",
-            "kalman",
-            "--reference",
-            "/truth",
-            "--params",
-            "motion.jerk_psd=0.001..10",
-            "--optimiser",
-            "grid",
-            "-o",
-            s(&out),
-            "--json",
-        ])
-        .stdout,
-    )
-    .unwrap();
+    let cli_tune: serde_json::Value = ok_json(&[
+        "tune",
+        s(&raw),
+        "-c",
+        s(&config),
+        "--pipeline",
+        "kalman",
+        "--reference",
+        "/truth",
+        "--params",
+        "motion.jerk_psd=0.001..10",
+        "--optimiser",
+        "grid",
+        "-o",
+        s(&out),
+        "--json",
+    ]);
     assert_eq!(
         v["tuned"]["motion.jerk_psd"],
         cli_tune["params"][0]["after"]
@@ -135,19 +131,15 @@ fn the_ray_path_refuses_many_logs_and_tunes_to_the_local_values() {
     let v = python_ok("ray_fleet.py", &args);
     for (i, log) in logs.iter().enumerate() {
         let local = d.path().join(format!("local{i}.fused.mcap"));
-        let r: serde_json::Value = serde_json::from_slice(
-            &ok(&[
-                "refuse",
-                s(log),
-                "-c",
-                s(&config),
-                "-o",
-                s(&local),
-                "--json",
-            ])
-            .stdout,
-        )
-        .unwrap();
+        let r: serde_json::Value = ok_json(&[
+            "refuse",
+            s(log),
+            "-c",
+            s(&config),
+            "-o",
+            s(&local),
+            "--json",
+        ]);
         close(
             &v["refuse_rmse"][i],
             &r["eval"]["pipelines"][0]["position_error_m"]["rmse"],

@@ -229,13 +229,7 @@ fn sensor_states_reach_the_fused_file_and_the_viewer() {
     .unwrap();
     refuse_short_run(&config, &fused, &[]);
     // Every fused state, with its sensor state, fits the schema stored in the file.
-    let py = python("check_mcap.py", &[s(&fused)]);
-    assert!(
-        py.status.success(),
-        "{}",
-        String::from_utf8_lossy(&py.stderr)
-    );
-    let py: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
+    let py = python_ok("check_mcap.py", &[s(&fused)]);
     assert!(
         py["topics"]["/fused/sf/state"].as_u64().unwrap() > 100,
         "{py}"
@@ -271,6 +265,19 @@ fn rerun_server(dir: &std::path::Path) -> (std::process::Child, String, std::pat
         format!("rerun+http://127.0.0.1:{port}/proxy"),
         saved,
     )
+}
+
+/// What a stopped server saved, printed by `rerun rrd print -v`: the server was stopped
+/// mid-stream, so the file has no footer and is read as far as it goes.
+fn print_saved(saved: &std::path::Path) -> String {
+    rerun_ok(&[
+        "rrd",
+        "print",
+        "-v",
+        "--continue-on-error",
+        "true",
+        s(saved),
+    ])
 }
 
 /// Waits until the server has written what it received (the file stops growing), then stops it.
@@ -312,14 +319,7 @@ fn record_viz_streams_the_incoming_channels_to_a_running_viewer() {
     // The simulator runs in real time (×40): a machine busy with other work records fewer
     // messages in the 3 s, so only a working flow is asserted, not a rate.
     assert!(r["messages"].as_u64().unwrap() > 100, "{r}");
-    let printed = rerun_ok(&[
-        "rrd",
-        "print",
-        "-v",
-        "--continue-on-error",
-        "true",
-        s(&saved),
-    ]);
+    let printed = print_saved(&saved);
     for entity in [
         "/map/track",
         "/map/truth/train",
@@ -340,14 +340,7 @@ fn refuse_viz_streams_the_fused_channels_while_refusing() {
     let fused = d.path().join("f.mcap");
     refuse_short_run(&sample("kalman.toml"), &fused, &["--viz", &url]);
     stop_when_saved(server, &saved);
-    let printed = rerun_ok(&[
-        "rrd",
-        "print",
-        "-v",
-        "--continue-on-error",
-        "true",
-        s(&saved),
-    ]);
+    let printed = print_saved(&saved);
     let rows = rows_per_entity(&printed);
     // The pipeline's output as it was made, against the truth the replay read.
     for entity in [
@@ -379,14 +372,7 @@ fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
     stop_when_saved(server, &saved);
     assert!(streamed.status.success(), "{}", stderr(&streamed));
     // The server was stopped mid-stream, so the file has no footer: read what it holds.
-    let printed = rerun_ok(&[
-        "rrd",
-        "print",
-        "-v",
-        "--continue-on-error",
-        "true",
-        s(&saved),
-    ]);
+    let printed = print_saved(&saved);
     for entity in [
         "/map/track",
         "/speed/fused/kalman",
