@@ -43,6 +43,53 @@ def transition(psd, dt):
     return F, Q
 
 
+def copy_message(writer, schema_ids, channel_ids, schema, channel, message):
+    """The input message copied to the output, its schema and channel registered on first use."""
+    if channel.id not in channel_ids:
+        if schema.id not in schema_ids:
+            schema_ids[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+        channel_ids[channel.id] = writer.register_channel(
+            channel.topic, channel.message_encoding, schema_ids[schema.id], channel.metadata
+        )
+    writer.add_message(channel_ids[channel.id], message.log_time, message.data, message.publish_time, message.sequence)
+
+
+def start_filter(z, r, init):
+    """The filter started at the first position measurement, as railfuse's default starts."""
+    kf = KalmanFilter(dim_x=3, dim_z=1)
+    kf.x = np.array([[z], [init.get("speed_mps", 0.0)], [init.get("acceleration_mps2", 0.0)]])
+    kf.P = np.diag([r, init.get("speed_std_mps", 5.0) ** 2, init.get("acceleration_std_mps2", 1.0) ** 2])
+    return kf
+
+
+def errors_against_truth(states, truth_t, truth_s, truth_v):
+    """Position and speed errors of every state against the truth interpolated at its stamp."""
+    pos, spd = [], []
+    for stamp, s, v in states:
+        i = bisect.bisect_left(truth_t, stamp)
+        if i == 0 or i == len(truth_t):
+            continue
+        w = (stamp - truth_t[i - 1]) / (truth_t[i] - truth_t[i - 1])
+        pos.append(s - (truth_s[i - 1] + w * (truth_s[i] - truth_s[i - 1])))
+        spd.append(v - (truth_v[i - 1] + w * (truth_v[i] - truth_v[i - 1])))
+    return pos, spd
+
+
+def summary(messages, fused_states, elapsed, pos, spd):
+    """What `railfuse bench` reads of the peer's run: its rate and its accuracy."""
+    rms = lambda e: math.sqrt(sum(x * x for x in e) / len(e)) if e else None
+    return {
+        "messages": messages,
+        "fused_states": fused_states,
+        "elapsed_s": elapsed,
+        "messages_per_s": messages / elapsed,
+        "position_rmse_m": rms(pos),
+        "position_max_m": max(map(abs, pos), default=None),
+        "speed_rmse_mps": rms(spd),
+        "speed_max_mps": max(map(abs, spd), default=None),
+    }
+
+
 def main(inp, config_path, out):
     with open(config_path, "rb") as f:
         pipeline = tomllib.load(f)["pipeline"][0]
@@ -62,15 +109,7 @@ def main(inp, config_path, out):
         fused_schema = writer.register_schema("railfuse.FusedState", "jsonschema", b"{}")
         fused = writer.register_channel(f"/fused/{name}/state", "json", fused_schema)
         for schema, channel, message in reader.iter_messages(log_time_order=False):
-            if channel.id not in channel_ids:
-                if schema.id not in schema_ids:
-                    schema_ids[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
-                channel_ids[channel.id] = writer.register_channel(
-                    channel.topic, channel.message_encoding, schema_ids[schema.id], channel.metadata
-                )
-            writer.add_message(
-                channel_ids[channel.id], message.log_time, message.data, message.publish_time, message.sequence
-            )
+            copy_message(writer, schema_ids, channel_ids, schema, channel, message)
             messages += 1
             topic = channel.topic
             if topic == "/truth":
@@ -90,9 +129,7 @@ def main(inp, config_path, out):
             if kf is None:
                 if index != 0:
                     continue
-                kf = KalmanFilter(dim_x=3, dim_z=1)
-                kf.x = np.array([[z], [init.get("speed_mps", 0.0)], [init.get("acceleration_mps2", 0.0)]])
-                kf.P = np.diag([r, init.get("speed_std_mps", 5.0) ** 2, init.get("acceleration_std_mps2", 1.0) ** 2])
+                kf = start_filter(z, r, init)
                 t_filter = stamp
                 continue
             dt = (stamp - t_filter) / 1e9
@@ -125,31 +162,9 @@ def main(inp, config_path, out):
         for m in reader.iter_metadata():
             writer.add_metadata(m.name, m.metadata)
         writer.finish()
-    # Accuracy: every state against the truth interpolated at its stamp.
-    pos, spd = [], []
-    for stamp, s, v in states:
-        i = bisect.bisect_left(truth_t, stamp)
-        if i == 0 or i == len(truth_t):
-            continue
-        w = (stamp - truth_t[i - 1]) / (truth_t[i] - truth_t[i - 1])
-        pos.append(s - (truth_s[i - 1] + w * (truth_s[i] - truth_s[i - 1])))
-        spd.append(v - (truth_v[i - 1] + w * (truth_v[i] - truth_v[i - 1])))
+    pos, spd = errors_against_truth(states, truth_t, truth_s, truth_v)
     elapsed = time.perf_counter() - started
-    rms = lambda e: math.sqrt(sum(x * x for x in e) / len(e)) if e else None
-    print(
-        json.dumps(
-            {
-                "messages": messages,
-                "fused_states": len(states),
-                "elapsed_s": elapsed,
-                "messages_per_s": messages / elapsed,
-                "position_rmse_m": rms(pos),
-                "position_max_m": max(map(abs, pos), default=None),
-                "speed_rmse_mps": rms(spd),
-                "speed_max_mps": max(map(abs, spd), default=None),
-            }
-        )
-    )
+    print(json.dumps(summary(messages, len(states), elapsed, pos, spd)))
 
 
 if __name__ == "__main__":

@@ -64,6 +64,49 @@ def _trial(candidate: dict, *, logs, config, pipeline, reference, params, object
         ray_tune.report({"objective": total, "logs": i + 1})
 
 
+def _search_space(search: str, local, names: list, num_samples: int) -> tuple[dict, int]:
+    """Ray Tune's parameter space and sample count: railfuse's grid, or ``num_samples``
+    draws on each parameter's own scale."""
+    if search == "grid":
+        space = {n: ray_tune.grid_search(points) for n, points in zip(names, local.grid())}
+        samples = 1
+    elif search == "random":
+        space = {
+            p["path"]: (ray_tune.loguniform if p["scale"] == "log" else ray_tune.uniform)(
+                p["min"], p["max"]
+            )
+            for p in local.params
+        }
+        samples = num_samples
+    else:
+        raise railfuse.RailfuseError(f"ray tune: unknown search '{search}' (grid or random)")
+    return space, samples
+
+
+def _seeded_search(search: str, seed: int):
+    """Random search draws its candidates from ``seed``; grid search needs no generator."""
+    if search != "random":
+        return None
+    from ray.tune.search.basic_variant import BasicVariantGenerator
+
+    return BasicVariantGenerator(random_state=seed)
+
+
+def _best_complete(results, n_logs: int):
+    """The best trial of those that evaluated every log (an early-stopped one reports a
+    partial sum); a failed trial fails the search with its cause."""
+    errors = [r.error for r in results if r.error is not None]
+    if errors:
+        cause = errors[0]
+        while getattr(cause, "cause", None) is not None:
+            cause = cause.cause
+        raise railfuse.RailfuseError(f"ray tune: a trial failed: {cause}")
+    complete = [r for r in results if r.metrics and r.metrics.get("logs") == n_logs]
+    if not complete:
+        raise railfuse.RailfuseError("ray tune: no trial evaluated every log")
+    return min(complete, key=lambda r: r.metrics["objective"])
+
+
 def tune(
     logs: Iterable[os.PathLike | str],
     config: os.PathLike | str,
@@ -91,19 +134,7 @@ def tune(
     local = railfuse.Tuner(logs, config, pipeline, reference, params, objective)
     meta = local.params
     names = [p["path"] for p in meta]
-    if search == "grid":
-        space = {n: ray_tune.grid_search(points) for n, points in zip(names, local.grid())}
-        samples = 1
-    elif search == "random":
-        space = {
-            p["path"]: (ray_tune.loguniform if p["scale"] == "log" else ray_tune.uniform)(
-                p["min"], p["max"]
-            )
-            for p in meta
-        }
-        samples = num_samples
-    else:
-        raise railfuse.RailfuseError(f"ray tune: unknown search '{search}' (grid or random)")
+    space, samples = _search_space(search, local, names, num_samples)
     scheduler = None
     if early_stopping and len(logs) > 1:
         from ray.tune.schedulers import ASHAScheduler
@@ -126,12 +157,6 @@ def tune(
         # One failed candidate is a failed search (a bad log, a refused value): say why.
         failure_config=ray_tune.FailureConfig(fail_fast=True),
     )
-    if search == "random":
-        from ray.tune.search.basic_variant import BasicVariantGenerator
-
-        search_alg = BasicVariantGenerator(random_state=seed)
-    else:
-        search_alg = None
     experiment = ray_tune.Tuner(
         trainable,
         param_space=space,
@@ -140,22 +165,12 @@ def tune(
             mode="min",
             scheduler=scheduler,
             num_samples=samples,
-            search_alg=search_alg,
+            search_alg=_seeded_search(search, seed),
         ),
         run_config=run_config,
     )
     results = experiment.fit()
-    errors = [r.error for r in results if r.error is not None]
-    if errors:
-        cause = errors[0]
-        while getattr(cause, "cause", None) is not None:
-            cause = cause.cause
-        raise railfuse.RailfuseError(f"ray tune: a trial failed: {cause}")
-    # Only candidates that saw every log compete (an early-stopped one reports a partial sum).
-    complete = [r for r in results if r.metrics and r.metrics.get("logs") == len(logs)]
-    if not complete:
-        raise railfuse.RailfuseError("ray tune: no trial evaluated every log")
-    best = min(complete, key=lambda r: r.metrics["objective"])
+    best = _best_complete(results, len(logs))
     values = [best.config[n] for n in names]
     tuned = local.tuned_toml(values)
     if output is not None:

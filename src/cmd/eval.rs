@@ -87,6 +87,30 @@ pub fn print_eval(report: &EvalReport) {
         }
         None => println!("no usable reference channel: errors not computed (NIS and counts only)"),
     }
+    print!("{}", accuracy_table(report));
+    print_plane(report);
+    for p in &report.pipelines {
+        if let Some(safety) = &p.safety {
+            print_safety(&p.name, safety);
+        }
+    }
+    for p in &report.pipelines {
+        let (gaps, outside) = (p.states_in_reference_gaps, p.unmatched_states);
+        if gaps + outside > 0 {
+            println!(
+                "{}: {} of {} states not scored: {gaps} inside gaps of the reference (samples \
+                 more than {MAX_GAP_PERIODS} of its periods apart), {outside} outside its time \
+                 span",
+                p.name,
+                gaps + outside,
+                p.states
+            );
+        }
+    }
+}
+
+/// The whole-run row of each pipeline, its marked windows' rows below it.
+fn accuracy_table(report: &EvalReport) -> Table {
     let mut t = Table::new(&[
         "pipeline",
         "filter",
@@ -142,26 +166,7 @@ pub fn print_eval(report: &EvalReport) {
             t.row(row);
         }
     }
-    print!("{t}");
-    print_plane(report);
-    for p in &report.pipelines {
-        if let Some(safety) = &p.safety {
-            print_safety(&p.name, safety);
-        }
-    }
-    for p in &report.pipelines {
-        let (gaps, outside) = (p.states_in_reference_gaps, p.unmatched_states);
-        if gaps + outside > 0 {
-            println!(
-                "{}: {} of {} states not scored: {gaps} inside gaps of the reference (samples \
-                 more than {MAX_GAP_PERIODS} of its periods apart), {outside} outside its time \
-                 span",
-                p.name,
-                gaps + outside,
-                p.states
-            );
-        }
-    }
+    t
 }
 
 /// The 2-D pipelines' errors in the plane against the truth, east and north.

@@ -55,7 +55,9 @@ def compared(x, P, n):
     return list(x.ravel()[:3]) + list(P[:3, :3].ravel()) + [v for k in range(3, n) for v in (x.ravel()[k], np.sqrt(P[k, k]))]
 
 
-def main(path, tol):
+def read_fused(path):
+    """The pipelines' configurations, each topic's schema name, and per pipeline its states,
+    diagnostics and smoothed states, from a fused log."""
     with open(path, "rb") as f:
         reader = make_reader(f)
         configs = {}
@@ -72,6 +74,11 @@ def main(path, tol):
             if len(parts) == 4 and parts[1] == "fused":
                 d = json.loads(message.data)
                 {"state": states, "diagnostics": diags, "smoothed": smoothed}[parts[3]].setdefault(parts[2], []).append(d)
+    return configs, schema_of, states, diags, smoothed
+
+
+def main(path, tol):
+    configs, schema_of, states, diags, smoothed = read_fused(path)
     assert configs, "no railfuse.pipeline metadata"
     worst = 0.0
     compared_updates = 0

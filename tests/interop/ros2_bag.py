@@ -43,7 +43,7 @@ def main():
     ts = get_typestore(Stores.ROS2_HUMBLE)
     T = ts.types
     Header, Time = T["std_msgs/msg/Header"], T["builtin_interfaces/msg/Time"]
-    Vector3, Quaternion = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    Vector3 = T["geometry_msgs/msg/Vector3"]
     Twist, TwistCov = T["geometry_msgs/msg/Twist"], T["geometry_msgs/msg/TwistWithCovariance"]
 
     def header(stamp_ns, frame):
@@ -75,16 +75,7 @@ def main():
                 write_geojson(d, out / "line.geojson")
             elif t == "/gnss/fix":
                 has = d["fix_type"] != "none"
-                cov = d.get("position_covariance_enu_m2")
-                msg = T["sensor_msgs/msg/NavSatFix"](
-                    header=header(d["stamp_ns"], "gnss"),
-                    status=T["sensor_msgs/msg/NavSatStatus"](status=STATUS[d["fix_type"]], service=1),
-                    latitude=d.get("latitude_deg") or 0.0 if has else 0.0,
-                    longitude=d.get("longitude_deg") or 0.0 if has else 0.0,
-                    altitude=d.get("altitude_m") or 0.0 if has else 0.0,
-                    position_covariance=np.array(cov if cov else [0.0] * 9),
-                    position_covariance_type=3 if cov else 0,
-                )
+                msg = navsatfix(T, header(d["stamp_ns"], "gnss"), d)
                 n = counts.get("/fix", 0)
                 cut = None
                 if hostile and n % 100 == 0:
@@ -101,16 +92,7 @@ def main():
                     vel = twist(d["stamp_ns"], "gnss", v * math.sin(c), 0.0, y=v * math.cos(c))
                     write("/fix_velocity", "geometry_msgs/msg/TwistWithCovarianceStamped", vel, m.log_time)
             elif t == "/imu":
-                a, w = d["specific_force_mps2"], d["angular_rate_radps"]
-                msg = T["sensor_msgs/msg/Imu"](
-                    header=header(d["stamp_ns"], d["sensor_id"]),
-                    orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
-                    orientation_covariance=np.array([-1.0] + [0.0] * 8),
-                    angular_velocity=Vector3(x=w[0], y=w[1], z=w[2]),
-                    angular_velocity_covariance=np.zeros(9),
-                    linear_acceleration=Vector3(x=a[0], y=a[1], z=a[2]),
-                    linear_acceleration_covariance=np.zeros(9),
-                )
+                msg = imu(T, header(d["stamp_ns"], d["sensor_id"]), d)
                 write("/imu", "sensor_msgs/msg/Imu", msg, m.log_time)
             elif t == "/radar/speed":
                 speed = d["speed_mps"] if d["valid"] else float("nan")
@@ -120,6 +102,36 @@ def main():
                 msg = twist(d["stamp_ns"], d["sensor_id"], d["speed_mps"], 0.0)
                 write("/odom/" + t.rsplit("/", 1)[1], "geometry_msgs/msg/TwistWithCovarianceStamped", msg, m.log_time)
     print(json.dumps(counts))
+
+
+def navsatfix(T, header, d):
+    """A railfuse GNSS fix as sensor_msgs/NavSatFix (zeros and no covariance without a fix)."""
+    has = d["fix_type"] != "none"
+    cov = d.get("position_covariance_enu_m2")
+    return T["sensor_msgs/msg/NavSatFix"](
+        header=header,
+        status=T["sensor_msgs/msg/NavSatStatus"](status=STATUS[d["fix_type"]], service=1),
+        latitude=d.get("latitude_deg") or 0.0 if has else 0.0,
+        longitude=d.get("longitude_deg") or 0.0 if has else 0.0,
+        altitude=d.get("altitude_m") or 0.0 if has else 0.0,
+        position_covariance=np.array(cov if cov else [0.0] * 9),
+        position_covariance_type=3 if cov else 0,
+    )
+
+
+def imu(T, header, d):
+    """A railfuse IMU sample as sensor_msgs/Imu, without orientation (covariance[0] = -1)."""
+    Vector3, Quaternion = T["geometry_msgs/msg/Vector3"], T["geometry_msgs/msg/Quaternion"]
+    a, w = d["specific_force_mps2"], d["angular_rate_radps"]
+    return T["sensor_msgs/msg/Imu"](
+        header=header,
+        orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=np.array([-1.0] + [0.0] * 8),
+        angular_velocity=Vector3(x=w[0], y=w[1], z=w[2]),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=Vector3(x=a[0], y=a[1], z=a[2]),
+        linear_acceleration_covariance=np.zeros(9),
+    )
 
 
 def write_geojson(track, path):

@@ -10,7 +10,7 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::error::Result;
-use crate::log::{LogReader, LogRecord};
+use crate::log::{ChannelInfo, LogReader, LogRecord};
 use crate::{seconds_between, topics};
 
 #[derive(Debug, Clone, Serialize)]
@@ -92,6 +92,43 @@ impl Gaps {
     }
 }
 
+impl ChannelSummary {
+    fn new(c: &ChannelInfo) -> Self {
+        ChannelSummary {
+            topic: c.topic.clone(),
+            schema: c.schema_name().to_owned(),
+            message_encoding: c.message_encoding.clone(),
+            messages: 0,
+            first_log_time_ns: None,
+            last_log_time_ns: None,
+            mean_rate_hz: None,
+            largest_gap_s: None,
+            largest_gap_start_ns: None,
+        }
+    }
+
+    /// One message at log time `t` (a log need not be in time order).
+    fn add(&mut self, t: u64) {
+        self.messages += 1;
+        self.first_log_time_ns = Some(self.first_log_time_ns.map_or(t, |f| f.min(t)));
+        self.last_log_time_ns = Some(self.last_log_time_ns.map_or(t, |l| l.max(t)));
+    }
+
+    /// The end of the log: the mean rate, and the largest gap `(start, length)` if any.
+    fn close(&mut self, gap: Option<(u64, u64)>) {
+        if let Some((start, gap)) = gap {
+            self.largest_gap_s = Some(seconds_between(start, start + gap));
+            self.largest_gap_start_ns = Some(start);
+        }
+        if let (Some(a), Some(b)) = (self.first_log_time_ns, self.last_log_time_ns) {
+            let span = seconds_between(a, b);
+            if self.messages > 1 && span > 0.0 {
+                self.mean_rate_hz = Some((self.messages - 1) as f64 / span);
+            }
+        }
+    }
+}
+
 /// Reads the whole file once and summarises it.
 pub fn summarise(path: &Path) -> Result<LogSummary> {
     let mut reader = LogReader::open(path)?;
@@ -103,31 +140,15 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
     while let Some(record) = reader.next() {
         match record? {
             LogRecord::Channel(c) => {
-                channels.insert(
-                    c.id,
-                    ChannelSummary {
-                        topic: c.topic.clone(),
-                        schema: c.schema_name().to_owned(),
-                        message_encoding: c.message_encoding.clone(),
-                        messages: 0,
-                        first_log_time_ns: None,
-                        last_log_time_ns: None,
-                        mean_rate_hz: None,
-                        largest_gap_s: None,
-                        largest_gap_start_ns: None,
-                    },
-                );
+                channels.insert(c.id, ChannelSummary::new(&c));
             }
             LogRecord::Message(m) => {
                 messages += 1;
                 let c = channels
                     .get_mut(&m.channel.id)
                     .expect("the reader checks channel ids");
-                c.messages += 1;
+                c.add(m.log_time_ns);
                 gaps.entry(m.channel.id).or_default().push(m.log_time_ns);
-                let t = m.log_time_ns;
-                c.first_log_time_ns = Some(c.first_log_time_ns.map_or(t, |f| f.min(t)));
-                c.last_log_time_ns = Some(c.last_log_time_ns.map_or(t, |l| l.max(t)));
             }
             LogRecord::Metadata { name, metadata: m } => metadata.push((name, m)),
             LogRecord::Attachment {
@@ -143,19 +164,8 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
             LogRecord::Schema(_) => {}
         }
     }
-    for (id, g) in gaps {
-        if let (Some(c), Some((start, gap))) = (channels.get_mut(&id), g.finish()) {
-            c.largest_gap_s = Some(seconds_between(start, start + gap));
-            c.largest_gap_start_ns = Some(start);
-        }
-    }
-    for c in channels.values_mut() {
-        if let (Some(a), Some(b)) = (c.first_log_time_ns, c.last_log_time_ns) {
-            let span = seconds_between(a, b);
-            if c.messages > 1 && span > 0.0 {
-                c.mean_rate_hz = Some((c.messages - 1) as f64 / span);
-            }
-        }
+    for (id, c) in channels.iter_mut() {
+        c.close(gaps.remove(id).and_then(Gaps::finish));
     }
     let first = channels.values().filter_map(|c| c.first_log_time_ns).min();
     let last = channels.values().filter_map(|c| c.last_log_time_ns).max();

@@ -185,21 +185,7 @@ pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapErr
             .get("name")
             .and_then(|v| v.as_str())
             .map_or_else(|| format!("feature {i}"), str::to_owned);
-        let mut points = Vec::with_capacity(coordinates.len());
-        for (k, p) in coordinates.iter().enumerate() {
-            let c = p.as_slice();
-            let lon = c.first().copied().unwrap_or(f64::NAN);
-            let (lat, alt) = (c.get(1).copied().unwrap_or(f64::NAN), c.get(2).copied());
-            if !(lat.is_finite() && lon.is_finite() && alt.is_none_or(f64::is_finite))
-                || lat.abs() > 90.0
-                || lon.abs() > 180.0
-            {
-                return Err(invalid(format!(
-                    "track '{name}': vertex {k} is not a WGS-84 position ({c:?}: longitude within ±180°, latitude within ±90°)"
-                )));
-            }
-            points.push((lat, lon, alt.unwrap_or(0.0)));
-        }
+        let points = wgs84_points(coordinates, &name).map_err(invalid)?;
         let main = props.get("role").and_then(|v| v.as_str()) == Some("main");
         lines.push((name, points, props, main));
     }
@@ -246,6 +232,30 @@ pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapErr
     };
     map.check().map_err(|e| invalid(e.to_string()))?;
     Ok(map)
+}
+
+/// A LineString's positions as (latitude, longitude, altitude) in degrees and metres, each
+/// checked to be a WGS-84 position (altitude 0 where not given).
+fn wgs84_points(
+    coordinates: &[geojson::Position],
+    name: &str,
+) -> Result<Vec<(f64, f64, f64)>, String> {
+    let mut points = Vec::with_capacity(coordinates.len());
+    for (k, p) in coordinates.iter().enumerate() {
+        let c = p.as_slice();
+        let lon = c.first().copied().unwrap_or(f64::NAN);
+        let (lat, alt) = (c.get(1).copied().unwrap_or(f64::NAN), c.get(2).copied());
+        if !(lat.is_finite() && lon.is_finite() && alt.is_none_or(f64::is_finite))
+            || lat.abs() > 90.0
+            || lon.abs() > 180.0
+        {
+            return Err(format!(
+                "track '{name}': vertex {k} is not a WGS-84 position ({c:?}: longitude within ±180°, latitude within ±90°)"
+            ));
+        }
+        points.push((lat, lon, alt.unwrap_or(0.0)));
+    }
+    Ok(points)
 }
 
 /// The vertices in the local plane, with their chainage.

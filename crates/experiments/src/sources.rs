@@ -255,12 +255,33 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
         progress(done);
     };
 
-    // Source 000: every pipeline of samples/seed000.toml on both runs, no faults.
+    let source_000 = source_000_rows(dir, seeds, &c000, &mut step)?;
+    let source_001 = source_001_rows(dir, seeds, &mut step)?;
+    let source_001_mismatch = mismatch_rows(dir, seeds, &c001, &mut step)?;
+    let long_runs = long_runs(dir, seeds, LONG_RUN_S, &mut step)?;
+    let sharing = crate::sharing::run_all(dir, seeds, &c000, &c001, &mut step)?;
+    Ok(Results {
+        sharing,
+        seeds,
+        source_000,
+        source_001,
+        source_001_mismatch,
+        long_runs,
+    })
+}
+
+/// Source 000: every pipeline of samples/seed000.toml on both runs, no faults.
+fn source_000_rows(
+    dir: &Path,
+    seeds: u64,
+    c000: &Pipelines,
+    step: &mut dyn FnMut(),
+) -> Result<Vec<Source000Row>> {
     let names000: Vec<&str> = c000.names().collect();
     let mut source_000 = Vec::new();
     for scenario in SOURCE_000_SCENARIOS {
-        let env = envelopes(seeds, &names000, &mut step, |seed| {
-            run(dir, scenario, seed, &[], &c000, "clean")
+        let env = envelopes(seeds, &names000, step, |seed| {
+            run(dir, scenario, seed, &[], c000, "clean")
         })?;
         for (name, e) in names000.iter().zip(env) {
             source_000.push(Source000Row {
@@ -275,8 +296,11 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
             });
         }
     }
+    Ok(source_000)
+}
 
-    // Source 001: the federated filter (and the centralised one), clean and with faults.
+/// Source 001: the federated filter (and the centralised one), clean and with faults.
+fn source_001_rows(dir: &Path, seeds: u64, step: &mut dyn FnMut()) -> Result<Vec<Source001Row>> {
     let mut source_001 = Vec::new();
     for (ci, case) in SOURCE_001_CASES.iter().enumerate() {
         let faults = case
@@ -287,7 +311,7 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
             .expect("the built-in fault cases parse");
         let scenario = seed001_noise(case.noise);
         let pipelines = seed001_pipelines_for_noise(case.noise)?;
-        let env = envelopes(seeds, SOURCE_001_PIPELINES, &mut step, |seed| {
+        let env = envelopes(seeds, SOURCE_001_PIPELINES, step, |seed| {
             run_scenario(
                 dir,
                 &scenario,
@@ -310,12 +334,21 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
             });
         }
     }
-    // Source 001 with the simulated receiver's bias unlike the filters' model of it.
+    Ok(source_001)
+}
+
+/// Source 001 with the simulated receiver's bias unlike the filters' model of it.
+fn mismatch_rows(
+    dir: &Path,
+    seeds: u64,
+    c001: &Pipelines,
+    step: &mut dyn FnMut(),
+) -> Result<Vec<MismatchRow>> {
     let mut source_001_mismatch = Vec::new();
     for (mi, &(receiver, tau_s, scale)) in SOURCE_001_MISMATCHES.iter().enumerate() {
         let scenario = gnss_bias_variant(tau_s, scale);
-        let env = envelopes(seeds, SOURCE_001_MISMATCH_PIPELINES, &mut step, |seed| {
-            run_scenario(dir, &scenario, seed, None, &[], &c001, &format!("bias{mi}"))
+        let env = envelopes(seeds, SOURCE_001_MISMATCH_PIPELINES, step, |seed| {
+            run_scenario(dir, &scenario, seed, None, &[], c001, &format!("bias{mi}"))
         })?;
         for (name, e) in SOURCE_001_MISMATCH_PIPELINES.iter().zip(env) {
             source_001_mismatch.push(MismatchRow {
@@ -326,16 +359,7 @@ pub fn run_all(dir: &Path, seeds: u64, progress: &dyn Fn(u64)) -> Result<Results
             });
         }
     }
-    let long_runs = long_runs(dir, seeds, LONG_RUN_S, &mut step)?;
-    let sharing = crate::sharing::run_all(dir, seeds, &c000, &c001, &mut step)?;
-    Ok(Results {
-        sharing,
-        seeds,
-        source_000,
-        source_001,
-        source_001_mismatch,
-        long_runs,
-    })
+    Ok(source_001_mismatch)
 }
 
 /// The seed001 preset with every sensor's noise σ times `k` (GNSS position and speed, the

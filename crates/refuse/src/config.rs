@@ -15,6 +15,7 @@
 //! gate_nis = 25.0           # optional innovation gate
 //! ```
 
+use crate::checks::positive;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -323,15 +324,6 @@ impl MotionConfig {
                 )?,
             }),
         })
-    }
-}
-
-/// `v` if it is positive, else why not.
-pub fn positive(what: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{what} must be positive, not {v}"))
     }
 }
 

@@ -27,6 +27,7 @@
 //! Tuning (`railfuse tune`) is the `railfuse-tune` crate, above this one.
 
 pub mod base;
+pub mod checks;
 pub mod config;
 pub mod config_reference;
 pub mod default_config;

@@ -242,39 +242,54 @@ fn search_plan(
     Ok((optimiser, budget))
 }
 
+/// The pipeline the request names, as the configuration specifies it.
+fn pipeline_named(pipelines: &Pipelines, req: &TuneRequest) -> Result<PipelineSpec> {
+    pipelines
+        .pipeline
+        .iter()
+        .find(|p| p.name == req.pipeline)
+        .cloned()
+        .ok_or_else(|| {
+            let names: Vec<&str> = pipelines.names().collect();
+            Error::Request {
+                path: req.config.clone(),
+                pipeline: req.pipeline.clone(),
+                message: format!("no [[pipeline]] of that name (it has {})", names.join(", ")),
+            }
+        })
+}
+
+/// The parameters and their bounds: `[pipeline.tune.params]`, each overridden or added to
+/// by a `--params NAME=LO..HI[:STEPS]` argument.
+fn param_bounds(
+    table: &TuneConfig,
+    args: &[String],
+) -> std::result::Result<Vec<(String, ParamBounds)>, String> {
+    let mut bounds: Vec<(String, ParamBounds)> = table.params.clone().into_iter().collect();
+    for arg in args {
+        let (name, b) = parse_param_arg(arg)?;
+        match bounds.iter_mut().find(|(n, _)| *n == name) {
+            Some(slot) => slot.1 = b,
+            None => bounds.push((name, b)),
+        }
+    }
+    Ok(bounds)
+}
+
 impl Tuner {
     /// Reads the configuration, resolves the parameters and decodes every log (in parallel).
     pub fn open(req: &TuneRequest) -> Result<Self> {
         let (file, text) = PipelinesFile::load(&req.config)?;
         drop(file);
         let pipelines = Pipelines::parse(&text, &req.config)?;
-        let spec = pipelines
-            .pipeline
-            .iter()
-            .find(|p| p.name == req.pipeline)
-            .cloned()
-            .ok_or_else(|| {
-                let names: Vec<&str> = pipelines.names().collect();
-                Error::Request {
-                    path: req.config.clone(),
-                    pipeline: req.pipeline.clone(),
-                    message: format!("no [[pipeline]] of that name (it has {})", names.join(", ")),
-                }
-            })?;
+        let spec = pipeline_named(&pipelines, req)?;
         let fail = |message: String| Error::Request {
             path: req.config.clone(),
             pipeline: req.pipeline.clone(),
             message,
         };
         let table = spec.tune().cloned().unwrap_or_default();
-        let mut bounds: Vec<(String, ParamBounds)> = table.params.clone().into_iter().collect();
-        for arg in &req.params {
-            let (name, b) = parse_param_arg(arg).map_err(fail)?;
-            match bounds.iter_mut().find(|(n, _)| *n == name) {
-                Some(slot) => slot.1 = b,
-                None => bounds.push((name, b)),
-            }
-        }
+        let mut bounds = param_bounds(&table, &req.params).map_err(fail)?;
         let mut config = TunableConfig::new(&text, &req.config, &req.pipeline)?;
         // Nothing named: the pipeline's noise values, as a first tune wants.
         let noise_values = bounds.is_empty();

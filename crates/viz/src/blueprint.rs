@@ -293,6 +293,28 @@ impl Layout {
                 trails.push(format!("/{}", ent::TRUTH_PATH));
             }
         }
+        let (right, shares) = self.plots(main, span);
+        let top = container(
+            ContainerKind::Horizontal,
+            None,
+            vec![
+                map,
+                container(ContainerKind::Vertical, None, right, &shares),
+            ],
+            &[2.0, 3.0],
+        );
+        let events = events_view();
+        container(
+            ContainerKind::Vertical,
+            None,
+            vec![top, events],
+            &[4.0, 1.0],
+        )
+    }
+
+    /// The right-hand column beside the map: speed; a raw log's sensor plots, or a fused
+    /// log's errors against the truth and each pipeline's diagnostics tab; with their shares.
+    fn plots(&self, main: PlotStyle, span: Option<(i64, i64)>) -> (Vec<Node>, Vec<f32>) {
         let mut right = vec![plot("Speed (m/s)", "/speed", main)];
         let mut shares = vec![1.0];
         if self.pipelines.is_empty() {
@@ -340,36 +362,7 @@ impl Layout {
             ));
             shares.push(1.4);
         }
-        let top = container(
-            ContainerKind::Horizontal,
-            None,
-            vec![
-                map,
-                container(ContainerKind::Vertical, None, right, &shares),
-            ],
-            &[2.0, 3.0],
-        );
-        let mut events = view("TextLog", "Events", "/events");
-        if let Node::View { properties, .. } = &mut events {
-            let column = |kind, visible: bool| TextLogColumn {
-                visible: visible.into(),
-                kind,
-            };
-            properties.push((
-                "TextLogColumns",
-                Box::new(TextLogColumns::new().with_text_log_columns([
-                    column(TextLogColumnKind::LogLevel, true),
-                    column(TextLogColumnKind::Body, true),
-                    column(TextLogColumnKind::EntityPath, false),
-                ])),
-            ));
-        }
-        container(
-            ContainerKind::Vertical,
-            None,
-            vec![top, events],
-            &[4.0, 1.0],
-        )
+        (right, shares)
     }
 
     /// A tuning trace: per pipeline, the objective and the best so far over the search, and
@@ -538,4 +531,24 @@ impl PipelineLayout {
             &[2.0, 3.0],
         )
     }
+}
+
+/// The events channel as a text log: level and text, without the entity path column.
+fn events_view() -> Node {
+    let mut events = view("TextLog", "Events", "/events");
+    if let Node::View { properties, .. } = &mut events {
+        let column = |kind, visible: bool| TextLogColumn {
+            visible: visible.into(),
+            kind,
+        };
+        properties.push((
+            "TextLogColumns",
+            Box::new(TextLogColumns::new().with_text_log_columns([
+                column(TextLogColumnKind::LogLevel, true),
+                column(TextLogColumnKind::Body, true),
+                column(TextLogColumnKind::EntityPath, false),
+            ])),
+        ));
+    }
+    events
 }

@@ -55,55 +55,12 @@ pub fn log_track_map(rec: &RecordingStream, map: &TrackMap) -> Result<Vec<&'stat
             .with_radii([Radius::new_ui_points(1.5)]),
     )?;
     let mut logged = vec![ent::TRACK];
-    if let (Some(first), Some(last)) = (map.vertices.first(), map.vertices.last()) {
-        let km =
-            (first.chainage_m / 1000.0).ceil() as i64..=(last.chainage_m / 1000.0).floor() as i64;
-        // A mark every km; labels on a round step that leaves about a dozen, so they do not
-        // overlap when the whole line is in view.
-        let length_km = (last.chainage_m - first.chainage_m) / 1000.0;
-        let every = [1, 2, 5, 10, 20, 50, 100]
-            .into_iter()
-            .find(|&k| length_km / k as f64 <= 12.0)
-            .unwrap_or(200);
-        let (marks, labels): (Vec<_>, Vec<_>) = km
-            .filter_map(|k| {
-                let label = if k % every == 0 {
-                    format!("km {k}")
-                } else {
-                    String::new()
-                };
-                at(map, k as f64 * 1000.0).map(|p| (p, label))
-            })
-            .unzip();
-        log_static(
-            rec,
-            ent::KM_MARKS,
-            &Points2D::new(marks)
-                .with_labels(labels)
-                .with_colors([palette::km_mark()])
-                .with_radii([Radius::new_ui_points(2.5)]),
-        )?;
+    if let Some(marks) = km_marks(map) {
+        log_static(rec, ent::KM_MARKS, &marks)?;
         logged.push(ent::KM_MARKS);
     }
-    let tunnels: Vec<_> = map
-        .tunnels
-        .iter()
-        .map(|t| stretch(map, t.start_chainage_m, t.end_chainage_m))
-        .collect();
-    if !tunnels.is_empty() {
-        let names: Vec<_> = map
-            .tunnels
-            .iter()
-            .map(|t| format!("tunnel {}", t.name))
-            .collect();
-        log_static(
-            rec,
-            ent::TUNNELS,
-            &LineStrips2D::new(tunnels)
-                .with_labels(names)
-                .with_colors([palette::tunnel()])
-                .with_radii([Radius::new_ui_points(5.0)]),
-        )?;
+    if let Some(tunnels) = tunnel_strips(map) {
+        log_static(rec, ent::TUNNELS, &tunnels)?;
         logged.push(ent::TUNNELS);
     }
     // Balise ids would crowd the plan view: they show on hover.
@@ -136,6 +93,52 @@ pub fn log_track_map(rec: &RecordingStream, map: &TrackMap) -> Result<Vec<&'stat
     )?;
     logged.extend([ent::BALISES, ent::STATIONS]);
     Ok(logged)
+}
+
+/// A mark every km along the line; labels on a round step that leaves about a dozen, so they
+/// do not overlap when the whole line is in view.
+fn km_marks(map: &TrackMap) -> Option<Points2D> {
+    let (first, last) = (map.vertices.first()?, map.vertices.last()?);
+    let km = (first.chainage_m / 1000.0).ceil() as i64..=(last.chainage_m / 1000.0).floor() as i64;
+    let length_km = (last.chainage_m - first.chainage_m) / 1000.0;
+    let every = [1, 2, 5, 10, 20, 50, 100]
+        .into_iter()
+        .find(|&k| length_km / k as f64 <= 12.0)
+        .unwrap_or(200);
+    let (marks, labels): (Vec<_>, Vec<_>) = km
+        .filter_map(|k| {
+            let label = if k % every == 0 {
+                format!("km {k}")
+            } else {
+                String::new()
+            };
+            at(map, k as f64 * 1000.0).map(|p| (p, label))
+        })
+        .unzip();
+    Some(
+        Points2D::new(marks)
+            .with_labels(labels)
+            .with_colors([palette::km_mark()])
+            .with_radii([Radius::new_ui_points(2.5)]),
+    )
+}
+
+/// Each tunnel as a wide stretch of track, named.
+fn tunnel_strips(map: &TrackMap) -> Option<LineStrips2D> {
+    if map.tunnels.is_empty() {
+        return None;
+    }
+    let strips = map
+        .tunnels
+        .iter()
+        .map(|t| stretch(map, t.start_chainage_m, t.end_chainage_m));
+    let names = map.tunnels.iter().map(|t| format!("tunnel {}", t.name));
+    Some(
+        LineStrips2D::new(strips)
+            .with_labels(names)
+            .with_colors([palette::tunnel()])
+            .with_radii([Radius::new_ui_points(5.0)]),
+    )
 }
 
 /// The legend: a labelled dot per entry, stacked above the top-left corner of `bounds` (min

@@ -85,69 +85,90 @@ pub fn import(input: &Path, output: &Path) -> Result<ImportReport> {
     for path in db3_files(input)? {
         let db = Connection::open_with_flags(&path, OpenFlags::SQLITE_OPEN_READ_ONLY)
             .map_err(|e| sql(&path, e))?;
-        let defs = definitions(&db, &path)?;
-        let mut topics: BTreeMap<i64, (u16, String)> = BTreeMap::new();
-        let mut q = db
-            .prepare(
-                "SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics",
-            )
-            .map_err(|e| sql(&path, e))?;
-        let rows = q
-            .query_map([], |r| {
-                Ok((
-                    r.get::<_, i64>(0)?,
-                    r.get::<_, String>(1)?,
-                    r.get::<_, String>(2)?,
-                    r.get::<_, String>(3)?,
-                    r.get::<_, String>(4)?,
-                ))
-            })
-            .map_err(|e| sql(&path, e))?;
-        for row in rows {
-            let (id, name, ty, format, qos) = row.map_err(|e| sql(&path, e))?;
-            let next = schemas.len() as u16 + 1;
-            let schema = *schemas.entry(ty.clone()).or_insert(next);
-            let (encoding, text) = defs.get(&ty).cloned().unwrap_or_else(|| {
-                (
-                    "ros2msg".into(),
-                    ros2::definition(&ty).unwrap_or_default().to_owned(),
-                )
-            });
-            writer.copy_schema(schema, &ty, &encoding, text.as_bytes())?;
-            let next = channels.len() as u16 + 1;
-            let channel = *channels.entry(name.clone()).or_insert(next);
-            let metadata = BTreeMap::from([("offered_qos_profiles".to_owned(), qos)]);
-            writer.copy_channel(channel, schema, &name, &format, &metadata)?;
-            topics.insert(id, (channel, name));
-        }
-        drop(q);
-        let mut q = db
-            .prepare("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
-            .map_err(|e| sql(&path, e))?;
-        let mut rows = q.query([]).map_err(|e| sql(&path, e))?;
-        let mut sequence: HashMap<u16, u32> = HashMap::new();
-        while let Some(r) = rows.next().map_err(|e| sql(&path, e))? {
-            let (topic, time, data): (i64, i64, Vec<u8>) = (
-                r.get(0).map_err(|e| sql(&path, e))?,
-                r.get(1).map_err(|e| sql(&path, e))?,
-                r.get(2).map_err(|e| sql(&path, e))?,
-            );
-            report.lines += 1;
-            let (Some((channel, name)), Ok(time)) = (topics.get(&topic), u64::try_from(time))
-            else {
-                *report
-                    .skipped
-                    .entry("message of an unknown topic or a negative time".into())
-                    .or_insert(0) += 1;
-                continue;
-            };
-            let seq = sequence.entry(*channel).or_insert(0);
-            *seq += 1;
-            writer.write_raw(*channel, *seq, time, time, &data)?;
-            report.messages += 1;
-            *report.per_topic.entry(name.clone()).or_insert(0) += 1;
-        }
+        let topics = copy_topics(&db, &path, &mut writer, &mut channels, &mut schemas)?;
+        copy_messages(&db, &path, &topics, &mut writer, &mut report)?;
     }
     writer.finish()?;
     Ok(report)
+}
+
+/// The bag file's topics as channels (and their types as schemas), with ids by name and type
+/// kept across the bag's files; its topic ids mapped to channel id and name.
+fn copy_topics(
+    db: &Connection,
+    path: &Path,
+    writer: &mut LogWriter,
+    channels: &mut HashMap<String, u16>,
+    schemas: &mut HashMap<String, u16>,
+) -> Result<BTreeMap<i64, (u16, String)>> {
+    let defs = definitions(db, path)?;
+    let mut topics: BTreeMap<i64, (u16, String)> = BTreeMap::new();
+    let mut q = db
+        .prepare("SELECT id, name, type, serialization_format, offered_qos_profiles FROM topics")
+        .map_err(|e| sql(path, e))?;
+    let rows = q
+        .query_map([], |r| {
+            Ok((
+                r.get::<_, i64>(0)?,
+                r.get::<_, String>(1)?,
+                r.get::<_, String>(2)?,
+                r.get::<_, String>(3)?,
+                r.get::<_, String>(4)?,
+            ))
+        })
+        .map_err(|e| sql(path, e))?;
+    for row in rows {
+        let (id, name, ty, format, qos) = row.map_err(|e| sql(path, e))?;
+        let next = schemas.len() as u16 + 1;
+        let schema = *schemas.entry(ty.clone()).or_insert(next);
+        let (encoding, text) = defs.get(&ty).cloned().unwrap_or_else(|| {
+            (
+                "ros2msg".into(),
+                ros2::definition(&ty).unwrap_or_default().to_owned(),
+            )
+        });
+        writer.copy_schema(schema, &ty, &encoding, text.as_bytes())?;
+        let next = channels.len() as u16 + 1;
+        let channel = *channels.entry(name.clone()).or_insert(next);
+        let metadata = BTreeMap::from([("offered_qos_profiles".to_owned(), qos)]);
+        writer.copy_channel(channel, schema, &name, &format, &metadata)?;
+        topics.insert(id, (channel, name));
+    }
+    Ok(topics)
+}
+
+/// The bag file's messages in time order, copied byte for byte (CDR) onto their channels.
+fn copy_messages(
+    db: &Connection,
+    path: &Path,
+    topics: &BTreeMap<i64, (u16, String)>,
+    writer: &mut LogWriter,
+    report: &mut ImportReport,
+) -> Result<()> {
+    let mut q = db
+        .prepare("SELECT topic_id, timestamp, data FROM messages ORDER BY timestamp, id")
+        .map_err(|e| sql(path, e))?;
+    let mut rows = q.query([]).map_err(|e| sql(path, e))?;
+    let mut sequence: HashMap<u16, u32> = HashMap::new();
+    while let Some(r) = rows.next().map_err(|e| sql(path, e))? {
+        let (topic, time, data): (i64, i64, Vec<u8>) = (
+            r.get(0).map_err(|e| sql(path, e))?,
+            r.get(1).map_err(|e| sql(path, e))?,
+            r.get(2).map_err(|e| sql(path, e))?,
+        );
+        report.lines += 1;
+        let (Some((channel, name)), Ok(time)) = (topics.get(&topic), u64::try_from(time)) else {
+            *report
+                .skipped
+                .entry("message of an unknown topic or a negative time".into())
+                .or_insert(0) += 1;
+            continue;
+        };
+        let seq = sequence.entry(*channel).or_insert(0);
+        *seq += 1;
+        writer.write_raw(*channel, *seq, time, time, &data)?;
+        report.messages += 1;
+        *report.per_topic.entry(name.clone()).or_insert(0) += 1;
+    }
+    Ok(())
 }

@@ -175,10 +175,7 @@ impl FromStr for SourceSpec {
                 }
             }
             "tcp-client" | "tcp_client" => {
-                let (addr, fmt) = match args.rsplit_once(':') {
-                    Some((rest, f)) if is_format(f) => (rest, Some(f)),
-                    _ => (args, None),
-                };
+                let (addr, fmt) = split_format(args);
                 if !addr.contains(':') {
                     return Err(bad(spec, "HOST:PORT[:FORMAT]"));
                 }
@@ -189,29 +186,9 @@ impl FromStr for SourceSpec {
                     topic,
                 }
             }
-            "serial" => {
-                let parts: Vec<&str> = args.split(':').collect();
-                let (dev, baud, fmt) = match parts[..] {
-                    [d, b] => (d, b, None),
-                    [d, b, f] => (d, b, Some(f)),
-                    _ => return Err(bad(spec, "DEVICE:BAUD[:FORMAT]")),
-                };
-                let baud = baud
-                    .parse()
-                    .map_err(|_| bad(spec, format!("'{baud}' is not a baud rate")))?;
-                let (format, topic) = format_or(spec, fmt, StreamFormat::Nmea)?;
-                SourceSpec::Serial {
-                    path: dev.into(),
-                    baud,
-                    format,
-                    topic,
-                }
-            }
+            "serial" => serial(spec, args)?,
             "file" => {
-                let (path, fmt) = match args.rsplit_once(':') {
-                    Some((p, f)) if is_format(f) => (p, Some(f)),
-                    _ => (args, None),
-                };
+                let (path, fmt) = split_format(args);
                 let (format, topic) = format_or(spec, fmt, format_by_extension(Path::new(path)))?;
                 SourceSpec::File {
                     path: path.into(),
@@ -236,6 +213,34 @@ impl FromStr for SourceSpec {
             },
             other => return Err(bad(spec, format!("unknown source kind '{other}'"))),
         })
+    }
+}
+
+/// `serial:DEVICE:BAUD[:FORMAT]`, NMEA unless told.
+fn serial(spec: &str, args: &str) -> Result<SourceSpec, SpecError> {
+    let parts: Vec<&str> = args.split(':').collect();
+    let (dev, baud, fmt) = match parts[..] {
+        [d, b] => (d, b, None),
+        [d, b, f] => (d, b, Some(f)),
+        _ => return Err(bad(spec, "DEVICE:BAUD[:FORMAT]")),
+    };
+    let baud = baud
+        .parse()
+        .map_err(|_| bad(spec, format!("'{baud}' is not a baud rate")))?;
+    let (format, topic) = format_or(spec, fmt, StreamFormat::Nmea)?;
+    Ok(SourceSpec::Serial {
+        path: dev.into(),
+        baud,
+        format,
+        topic,
+    })
+}
+
+/// `ARGS[:FORMAT]`: the format named last, if the last part names one.
+fn split_format(args: &str) -> (&str, Option<&str>) {
+    match args.rsplit_once(':') {
+        Some((rest, f)) if is_format(f) => (rest, Some(f)),
+        _ => (args, None),
     }
 }
 

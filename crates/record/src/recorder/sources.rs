@@ -391,8 +391,7 @@ fn tcp_listen(
                 Err(e) => {
                     // Out of file descriptors (EMFILE) and the like: back off instead of
                     // spinning, and say so at once.
-                    backoff =
-                        (backoff * 2).clamp(Duration::from_millis(50), Duration::from_secs(1));
+                    backoff = next_backoff(backoff);
                     link.alert(format!(
                         "tcp {addr}: cannot accept a connection: {e}; retrying every {} ms",
                         backoff.as_millis()
@@ -410,24 +409,7 @@ fn tcp_listen(
             let (conn_link, topic, live_now) = (link.clone(), topic.clone(), live.clone());
             live.fetch_add(1, Ordering::Relaxed);
             let serve = move || {
-                let origin = Origin {
-                    peer: Some(peer.to_string()),
-                    topic: topic.as_deref(),
-                };
-                let _ = conn.set_nonblocking(false);
-                let _ = conn.set_read_timeout(Some(TICK));
-                let link = conn_link;
-                match catch_unwind(AssertUnwindSafe(|| {
-                    pump_with(conn, format, &origin, &link, false)
-                })) {
-                    Ok(Ok(())) => {}
-                    Ok(Err(e)) => lock(&link.stats).last_error = Some(format!("{peer}: {e}")),
-                    Err(payload) => {
-                        let why = panic_text(&*payload);
-                        let at = format!("connection from {peer}");
-                        lock(&link.stats).skip("connection ended by an internal error", &at, &why);
-                    }
-                }
+                serve_connection(conn, peer, format, topic.as_deref(), &conn_link);
                 live_now.fetch_sub(1, Ordering::Relaxed);
             };
             let spawned = std::thread::Builder::new()
@@ -438,8 +420,7 @@ fn tcp_listen(
                 Ok(_) => backoff = Duration::ZERO,
                 Err(e) => {
                     live.fetch_sub(1, Ordering::Relaxed);
-                    backoff =
-                        (backoff * 2).clamp(Duration::from_millis(50), Duration::from_secs(1));
+                    backoff = next_backoff(backoff);
                     link.alert(format!(
                         "tcp {addr}: cannot start a thread for the connection from {peer}: {e}; \
                          it was closed, the listener goes on"
@@ -450,6 +431,40 @@ fn tcp_listen(
         }
     });
     Ok(())
+}
+
+/// One accepted connection read until it closes or the recording stops; an internal error
+/// ends this connection only, counted with its cause.
+fn serve_connection(
+    conn: TcpStream,
+    peer: std::net::SocketAddr,
+    format: StreamFormat,
+    topic: Option<&str>,
+    link: &Link,
+) {
+    let origin = Origin {
+        peer: Some(peer.to_string()),
+        topic,
+    };
+    let _ = conn.set_nonblocking(false);
+    let _ = conn.set_read_timeout(Some(TICK));
+    match catch_unwind(AssertUnwindSafe(|| {
+        pump_with(conn, format, &origin, link, false)
+    })) {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => lock(&link.stats).last_error = Some(format!("{peer}: {e}")),
+        Err(payload) => {
+            let why = panic_text(&*payload);
+            let at = format!("connection from {peer}");
+            lock(&link.stats).skip("connection ended by an internal error", &at, &why);
+        }
+    }
+}
+
+/// Out of file descriptors (EMFILE), out of threads: wait twice as long as last time, from
+/// 50 ms up to a second, instead of spinning.
+fn next_backoff(backoff: Duration) -> Duration {
+    (backoff * 2).clamp(Duration::from_millis(50), Duration::from_secs(1))
 }
 
 fn sleep_unless_stopping(link: &Link, d: Duration) {

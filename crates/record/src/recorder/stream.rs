@@ -289,29 +289,12 @@ impl StreamDecoder {
                 }
                 Ok((frame, used)) => {
                     end_noise(&mut self.in_noise, stats);
-                    let refused = match (frame.class, frame.id) {
-                        NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
-                            Ok(pvt) => {
-                                if let Some(prev) = self.pairing.pvt(pvt) {
-                                    self.push_pvt(&prev, None, receive_ns, stats, out);
-                                }
-                                None
-                            }
-                            Err(e) => Some(e),
-                        },
-                        NavCov::CLASS_ID => match NavCov::decode(&frame) {
-                            Ok(c) => {
-                                if let Some((pvt, cov)) = self.pairing.cov(&c) {
-                                    self.push_pvt(&pvt, cov, receive_ns, stats, out);
-                                }
-                                None
-                            }
-                            Err(e) => Some(e),
-                        },
-                        (class, id) => {
-                            stats.count(&format!("UBX {class:02x}/{id:02x} (not decoded)"));
+                    let refused = match UbxMessage::decode(&frame) {
+                        Ok(message) => {
+                            self.ubx_message(message, receive_ns, stats, out);
                             None
                         }
+                        Err(e) => Some(e),
                     };
                     if let Some(e) = refused {
                         stats.malformed += 1;
@@ -332,6 +315,49 @@ impl StreamDecoder {
             self.offset += self.buf.len() as u64;
             self.buf.clear();
         }
+    }
+
+    /// One decoded UBX message: a NAV-PVT or NAV-COV paired into a fix and recorded, any
+    /// other class counted by its id.
+    fn ubx_message(
+        &mut self,
+        message: UbxMessage,
+        receive_ns: u64,
+        stats: &mut SourceStats,
+        out: &mut Vec<Item>,
+    ) {
+        match message {
+            UbxMessage::Pvt(pvt) => {
+                if let Some(prev) = self.pairing.pvt(pvt) {
+                    self.push_pvt(&prev, None, receive_ns, stats, out);
+                }
+            }
+            UbxMessage::Cov(c) => {
+                if let Some((pvt, cov)) = self.pairing.cov(&c) {
+                    self.push_pvt(&pvt, cov, receive_ns, stats, out);
+                }
+            }
+            UbxMessage::Other(class, id) => {
+                stats.count(&format!("UBX {class:02x}/{id:02x} (not decoded)"))
+            }
+        }
+    }
+}
+
+/// A UBX frame decoded: the two messages a fix is made of, or another class left as its id.
+enum UbxMessage {
+    Pvt(NavPvt),
+    Cov(NavCov),
+    Other(u8, u8),
+}
+
+impl UbxMessage {
+    fn decode(frame: &ubx::Frame<'_>) -> Result<Self, UbxError> {
+        Ok(match (frame.class, frame.id) {
+            NavPvt::CLASS_ID => UbxMessage::Pvt(NavPvt::decode(frame)?),
+            NavCov::CLASS_ID => UbxMessage::Cov(NavCov::decode(frame)?),
+            (class, id) => UbxMessage::Other(class, id),
+        })
     }
 }
 

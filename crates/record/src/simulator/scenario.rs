@@ -221,34 +221,8 @@ impl LineScenario {
             correction_outages_s: vec![(120.0, 45.0)],
             gnss_outages_s: vec![],
             truth_rate_hz: 100.0,
-            gnss: GnssParams {
-                rate_hz: 10.0,
-                latency_s: 0.04,
-                sigma_single_m: 1.8,
-                sigma_dgps_m: 0.7,
-                sigma_rtk_float_m: 0.25,
-                sigma_rtk_fixed_m: 0.02,
-                bias_tau_s: 60.0,
-                bias_scale: 1.0,
-                speed_sigma_mps: 0.05,
-                reacquire_none_s: 3.0,
-                reacquire_single_s: 6.0,
-                reacquire_float_s: 12.0,
-                rtk_rate_hz: None,
-            },
-            imu: ImuParams {
-                sensor_id: "imu0".into(),
-                rate_hz: 200.0,
-                latency_s: 0.001,
-                accel_noise_mps2: 0.012,
-                accel_bias_mps2: 0.02,
-                accel_bias_walk: 2e-4,
-                accel_lsb_mps2: 0.061e-3 * 9.80665,
-                gyro_noise_radps: 0.0012,
-                gyro_bias_radps: 5e-4,
-                gyro_bias_walk: 2e-5,
-                gyro_lsb_radps: 4.37e-3_f64.to_radians(),
-            },
+            gnss: Self::default_gnss(),
+            imu: Self::default_imu(),
             radar: RadarParams {
                 rate_hz: 20.0,
                 latency_s: 0.015,
@@ -286,6 +260,43 @@ impl LineScenario {
                 extra_switches_m: vec![],
             }),
             eddy_current: Some(Self::default_eddy_current()),
+        }
+    }
+
+    /// The default run's receiver: 10 Hz, RTK fixed to 2 cm, float to 25 cm, DGPS 0.7 m,
+    /// single point 1.8 m, with a slowly wandering (τ 60 s) bias.
+    pub fn default_gnss() -> GnssParams {
+        GnssParams {
+            rate_hz: 10.0,
+            latency_s: 0.04,
+            sigma_single_m: 1.8,
+            sigma_dgps_m: 0.7,
+            sigma_rtk_float_m: 0.25,
+            sigma_rtk_fixed_m: 0.02,
+            bias_tau_s: 60.0,
+            bias_scale: 1.0,
+            speed_sigma_mps: 0.05,
+            reacquire_none_s: 3.0,
+            reacquire_single_s: 6.0,
+            reacquire_float_s: 12.0,
+            rtk_rate_hz: None,
+        }
+    }
+
+    /// The default run's MEMS IMU at 200 Hz, with quantisation (16-bit, ±2 g, ±125 °/s).
+    pub fn default_imu() -> ImuParams {
+        ImuParams {
+            sensor_id: "imu0".into(),
+            rate_hz: 200.0,
+            latency_s: 0.001,
+            accel_noise_mps2: 0.012,
+            accel_bias_mps2: 0.02,
+            accel_bias_walk: 2e-4,
+            accel_lsb_mps2: 0.061e-3 * 9.80665,
+            gyro_noise_radps: 0.0012,
+            gyro_bias_radps: 5e-4,
+            gyro_bias_walk: 2e-5,
+            gyro_lsb_radps: 4.37e-3_f64.to_radians(),
         }
     }
 

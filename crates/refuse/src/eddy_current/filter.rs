@@ -138,25 +138,7 @@ impl EddyCurrentPipeline {
     ) {
         let r_v = m.speed_variance + self.settings.speed_noise_floor_mps.powi(2);
         if self.kf.is_none() {
-            // Started at the first measurement: chainage from the count where there is one.
-            let s0 = self.count_chainage().unwrap_or(self.odometer_m);
-            let (a0, va) = m.acceleration.unwrap_or((0.0, 1.0));
-            self.kf = Some(KalmanFilter::new(
-                Vector3::new(s0, m.speed_mps, a0),
-                nalgebra::Matrix3::from_diagonal(&Vector3::new(1.0, r_v, va)),
-            ));
-            self.kf_ns = m.stamp_ns;
-            self.record(
-                m.stamp_ns,
-                Some(m.speed_mps),
-                Some(r_v),
-                None,
-                GateDecision::BeforeInitialisation,
-                Some("the filter starts here"),
-                diag.clone(),
-                o,
-            );
-            self.filter_state(o);
+            self.start_filter(m, r_v, diag, o);
             return;
         }
         let late_s = self.advance(m.stamp_ns, true);
@@ -194,19 +176,12 @@ impl EddyCurrentPipeline {
         }
         self.gate_refusals = 0;
         let i = kf.update(&h_v, r_v, m.speed_mps);
-        let mut reason = None;
-        if let Some((acc, var)) = m.acceleration {
-            let gap = (acc - a_prior).abs();
-            let sigma = (var + p_aa).sqrt();
-            if gap > self.settings.acceleration_check_sigma * sigma {
-                reason = Some(format!(
-                    "warp acceleration {acc:+.2} m/s² and the filter's {a_prior:+.2} m/s² are {:.1} σ apart: divergence or a wrong warp; not fused",
-                    gap / sigma
-                ));
-            } else {
-                kf.update(&RowVector3::new(0.0, 0.0, 1.0), var, acc);
-            }
-        }
+        let reason = fuse_acceleration(
+            kf,
+            m,
+            self.settings.acceleration_check_sigma,
+            (a_prior, p_aa),
+        );
         self.record(
             m.stamp_ns,
             Some(m.speed_mps),
@@ -214,6 +189,35 @@ impl EddyCurrentPipeline {
             Some(i),
             GateDecision::Accepted,
             reason.as_deref(),
+            diag.clone(),
+            o,
+        );
+        self.filter_state(o);
+    }
+
+    /// The filter started at the first speed measurement: chainage from the sleeper count
+    /// where there is one, the warp's acceleration where it gave one.
+    fn start_filter(
+        &mut self,
+        m: &SpeedMeasurement,
+        r_v: f64,
+        diag: &mut EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        let s0 = self.count_chainage().unwrap_or(self.odometer_m);
+        let (a0, va) = m.acceleration.unwrap_or((0.0, 1.0));
+        self.kf = Some(KalmanFilter::new(
+            Vector3::new(s0, m.speed_mps, a0),
+            nalgebra::Matrix3::from_diagonal(&Vector3::new(1.0, r_v, va)),
+        ));
+        self.kf_ns = m.stamp_ns;
+        self.record(
+            m.stamp_ns,
+            Some(m.speed_mps),
+            Some(r_v),
+            None,
+            GateDecision::BeforeInitialisation,
+            Some("the filter starts here"),
             diag.clone(),
             o,
         );
@@ -246,4 +250,26 @@ impl EddyCurrentPipeline {
         );
         Some(i)
     }
+}
+
+/// The warp's acceleration fused as a measurement of `a`, unless it lies more than `sigmas`
+/// standard deviations from the filter's prior `(a, P_aa)`: then it is left out, and why is
+/// returned (a diverged filter or a wrong warp).
+fn fuse_acceleration(
+    kf: &mut KalmanFilter<3>,
+    m: &SpeedMeasurement,
+    sigmas: f64,
+    (a_prior, p_aa): (f64, f64),
+) -> Option<String> {
+    let (acc, var) = m.acceleration?;
+    let gap = (acc - a_prior).abs();
+    let sigma = (var + p_aa).sqrt();
+    if gap > sigmas * sigma {
+        return Some(format!(
+            "warp acceleration {acc:+.2} m/s² and the filter's {a_prior:+.2} m/s² are {:.1} σ apart: divergence or a wrong warp; not fused",
+            gap / sigma
+        ));
+    }
+    kf.update(&RowVector3::new(0.0, 0.0, 1.0), var, acc);
+    None
 }

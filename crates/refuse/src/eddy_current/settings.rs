@@ -1,6 +1,7 @@
 //! `[pipeline.eddy_current]`: the table of an `eddy_current` pipeline (every field has a
 //! default; [`EddyCurrentSettings::check`] validates).
 
+use crate::checks::all_positive;
 use serde::{Deserialize, Serialize};
 
 use super::speed::CorrelatorKind;
@@ -81,13 +82,7 @@ impl EddyCurrentSettings {
             ("acceleration_check_sigma", self.acceleration_check_sigma),
             ("sleeper_spacing_m", self.sleeper_spacing_m),
         ];
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!(
-                    "eddy_current.{name} must be a positive number, not {v}"
-                ));
-            }
-        }
+        all_positive("eddy_current", &positive)?;
         if !(self.initial_chainage_m.is_finite()
             && self.landmark_search_m.is_finite()
             && self.landmark_search_m >= 0.0)

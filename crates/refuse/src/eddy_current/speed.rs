@@ -39,6 +39,12 @@ const WARP_FROM_RHO: f64 = 0.2;
 /// A level's peak: level, peak, the window's signals and middle, whether acquired afresh.
 type Found = (usize, Peak, Vec<f64>, Vec<f64>, u64, bool);
 
+/// The standard deviation (samples) of a correlation peak's lag: a twentieth of a sample at a
+/// perfect match, growing as the correlation ρ falls.
+fn lag_std(rho: f64) -> f64 {
+    0.05 + 2.0 * (1.0 - rho).max(0.0)
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SpeedMeasurement {
     pub stamp_ns: u64,
@@ -144,29 +150,7 @@ impl SpeedEstimator {
             self.at_level(fe, q, l, Some(v_mid))
         });
         let mut best_rho = tracked.as_ref().map_or(0.0, |t| t.1.rho);
-        let found = tracked.or_else(|| {
-            // Every level's peak; the delay is real where levels of different window lengths
-            // agree on it (a chance peak of one short window is not confirmed by the longer
-            // ones), and its window spans enough track. The finest such level is taken.
-            let peaks: Vec<_> = (0..LEVELS)
-                .filter_map(|l| self.at_level(fe, q, l, None))
-                .collect();
-            let delay = |f: &Found| f.1.lag / fe.rate(f.0);
-            for f in &peaks {
-                best_rho = best_rho.max(f.1.rho);
-            }
-            peaks
-                .iter()
-                .position(|f| {
-                    let travel = q.spacing_m / delay(f) * WINDOW as f64 / fe.rate(f.0);
-                    let agree = peaks
-                        .iter()
-                        .filter(|g| (delay(g) / delay(f) - 1.0).abs() < ACQUIRE_AGREEMENT)
-                        .count();
-                    travel >= MIN_WINDOW_TRAVEL_M && agree >= 2
-                })
-                .map(|i| peaks[i].clone())
-        });
+        let found = tracked.or_else(|| self.acquire(fe, q, &mut best_rho));
         let Some((level, peak, a, b, mid, acquired)) = found else {
             self.lock = None;
             return match quiet {
@@ -179,7 +163,6 @@ impl SpeedEstimator {
         };
         let rate = fe.rate(level);
         let span_s = fe.span_s(level);
-        let lag_std = |rho: f64| 0.05 + 2.0 * (1.0 - rho).max(0.0);
         let mut m = SpeedMeasurement {
             stamp_ns: mid,
             speed_mps: q.spacing_m * rate / peak.lag,
@@ -194,20 +177,7 @@ impl SpeedEstimator {
         };
         m.speed_variance = (m.speed_mps * lag_std(peak.rho) / peak.lag).powi(2);
         if q.warp {
-            let k_max = q.max_acceleration_mps2 * span_s / (2.0 * m.speed_mps);
-            if let Some(w) = self.warp.search(&a, &b, peak.lag, k_max) {
-                let v = q.spacing_m * rate / w.peak.lag;
-                let acc = 2.0 * w.k * v / span_s;
-                // The warp factor's uncertainty grows as the correlation falls.
-                let k_std = 0.01 + 0.5 * (1.0 - w.peak.rho).max(0.0);
-                m.speed_mps = v;
-                m.speed_variance = (v * lag_std(w.peak.rho) / w.peak.lag).powi(2);
-                m.acceleration = Some((acc, (2.0 * k_std * v / span_s).powi(2)));
-                m.rho = w.peak.rho;
-                m.lag = w.peak.lag;
-                m.warp_k = Some(w.k);
-                m.unwarped_rho = Some(w.unwarped_rho);
-            }
+            self.refine_by_warp(q, rate, span_s, (&a, &b), &mut m);
         }
         if m.rho < q.min_rho {
             self.lock = None;
@@ -218,6 +188,59 @@ impl SpeedEstimator {
         }
         self.lock = Some((level, m.lag));
         Outcome::Moving(m)
+    }
+
+    /// Acquisition when tracking finds nothing: every level's peak (the best correlation
+    /// seen goes to `best_rho`).
+    /// Every level's peak; the delay is real where levels of different window lengths
+    /// agree on it (a chance peak of one short window is not confirmed by the longer
+    /// ones), and its window spans enough track. The finest such level is taken.
+    fn acquire(&mut self, fe: &FrontEnd, q: &Request, best_rho: &mut f64) -> Option<Found> {
+        let peaks: Vec<_> = (0..LEVELS)
+            .filter_map(|l| self.at_level(fe, q, l, None))
+            .collect();
+        let delay = |f: &Found| f.1.lag / fe.rate(f.0);
+        for f in &peaks {
+            *best_rho = best_rho.max(f.1.rho);
+        }
+        peaks
+            .iter()
+            .position(|f| {
+                let travel = q.spacing_m / delay(f) * WINDOW as f64 / fe.rate(f.0);
+                let agree = peaks
+                    .iter()
+                    .filter(|g| (delay(g) / delay(f) - 1.0).abs() < ACQUIRE_AGREEMENT)
+                    .count();
+                travel >= MIN_WINDOW_TRAVEL_M && agree >= 2
+            })
+            .map(|i| peaks[i].clone())
+    }
+
+    /// Source 004's warping: the window's second signal stretched by the factor k that best
+    /// matches the first, which gives the speed at the window's middle and the acceleration
+    /// over it, with variances that grow as the correlation falls.
+    fn refine_by_warp(
+        &mut self,
+        q: &Request,
+        rate: f64,
+        span_s: f64,
+        (a, b): (&[f64], &[f64]),
+        m: &mut SpeedMeasurement,
+    ) {
+        let k_max = q.max_acceleration_mps2 * span_s / (2.0 * m.speed_mps);
+        if let Some(w) = self.warp.search(a, b, m.lag, k_max) {
+            let v = q.spacing_m * rate / w.peak.lag;
+            let acc = 2.0 * w.k * v / span_s;
+            // The warp factor's uncertainty grows as the correlation falls.
+            let k_std = 0.01 + 0.5 * (1.0 - w.peak.rho).max(0.0);
+            m.speed_mps = v;
+            m.speed_variance = (v * lag_std(w.peak.rho) / w.peak.lag).powi(2);
+            m.acceleration = Some((acc, (2.0 * k_std * v / span_s).powi(2)));
+            m.rho = w.peak.rho;
+            m.lag = w.peak.lag;
+            m.warp_k = Some(w.k);
+            m.unwarped_rho = Some(w.unwarped_rho);
+        }
     }
 
     /// The correlation peak at level `l` (about `prior`'s delay, or over every lag), if one

@@ -397,31 +397,41 @@ impl GnssInsPipeline {
         let mut fused_any = self.update(0, position, [pe, pn], t, &topic, axes, Some(&class), o);
         if self.standing {
             fused_any |= self.standstill_update(t, &topic, o);
-        } else if let Some((v, cov)) = velocity {
-            let nav = self.nav.expect("started");
-            let filtered = [(2, v[0], cov[(0, 0)]), (3, v[1], cov[(1, 1)])]
-                .map(|(k, z, r)| self.prefilters[k].step(t, z, r));
-            let (ve, vn) = (filtered[0].value, filtered[1].value);
-            let r = match self.settings.prefilter.velocity {
-                crate::prefilter::PreFilterSettings::None => cov,
-                _ => {
-                    SMatrix::<f64, 2, 2>::new(filtered[0].variance, 0.0, 0.0, filtered[1].variance)
-                }
-            };
-            let (nve, nvn) = nav.velocity();
-            let m = ErrorMeasurement {
-                residual: SVector::<f64, 2>::new(ve - nve, vn - nvn),
-                rows: velocity_rows(&nav),
-                covariance: r,
-            };
-            let axes = ["velocity_east", "velocity_north"];
-            fused_any |= self.update(1, m, [ve, vn], t, &topic, axes, None, o);
+        } else if let Some(velocity) = velocity {
+            fused_any |= self.velocity_update(t, &topic, velocity, o);
         }
         if fused_any {
             self.inject_and_learn(t, verdict == GateVerdict::Reference);
             self.counts.accepted += 1;
         }
         self.after_fix(t, &topic, map, o);
+    }
+
+    /// The fix's velocity in the plane (from its speed and course), through its pre-filters,
+    /// as a measurement of the velocity error; whether it was fused.
+    fn velocity_update(
+        &mut self,
+        t: u64,
+        topic: &str,
+        (v, cov): (SVector<f64, 2>, SMatrix<f64, 2, 2>),
+        o: &mut Out,
+    ) -> bool {
+        let nav = self.nav.expect("started");
+        let filtered = [(2, v[0], cov[(0, 0)]), (3, v[1], cov[(1, 1)])]
+            .map(|(k, z, r)| self.prefilters[k].step(t, z, r));
+        let (ve, vn) = (filtered[0].value, filtered[1].value);
+        let r = match self.settings.prefilter.velocity {
+            crate::prefilter::PreFilterSettings::None => cov,
+            _ => SMatrix::<f64, 2, 2>::new(filtered[0].variance, 0.0, 0.0, filtered[1].variance),
+        };
+        let (nve, nvn) = nav.velocity();
+        let m = ErrorMeasurement {
+            residual: SVector::<f64, 2>::new(ve - nve, vn - nvn),
+            rows: velocity_rows(&nav),
+            covariance: r,
+        };
+        let axes = ["velocity_east", "velocity_north"];
+        self.update(1, m, [ve, vn], t, topic, axes, None, o)
     }
 
     /// The fix's place in the plane and its variance per axis, or why it cannot be used.

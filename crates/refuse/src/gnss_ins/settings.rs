@@ -1,6 +1,7 @@
 //! `[pipeline.gnss_ins]`: the table of a `gnss_ins` pipeline, the file form and the validated
 //! settings in one (every field has a default; [`GnssInsSettings::check`] validates).
 
+use crate::checks::all_positive;
 use serde::{Deserialize, Serialize};
 
 use super::adaptive_noise::AdaptiveNoiseSettings;
@@ -100,20 +101,19 @@ impl GnssInsSettings {
         ] {
             p.check().map_err(|e| format!("gnss_ins.{what}: {e}"))?;
         }
-        for (what, x) in [
-            ("speed_std_mps", self.speed_std_mps),
-            ("init_speed_mps", self.init_speed_mps),
-            ("max_specific_force_mps2", self.max_specific_force_mps2),
-            ("max_rate_radps", self.max_rate_radps),
-            ("max_distance_m", self.max_distance_m),
-            ("output_period_s", self.output_period_s),
-            ("learning.window_s", self.learning.window_s),
-            ("learning.loss_after_s", self.learning.loss_after_s),
-        ] {
-            if !(x > 0.0 && x.is_finite()) {
-                return Err(format!("gnss_ins.{what} = {x}: must be positive"));
-            }
-        }
+        all_positive(
+            "gnss_ins",
+            &[
+                ("speed_std_mps", self.speed_std_mps),
+                ("init_speed_mps", self.init_speed_mps),
+                ("max_specific_force_mps2", self.max_specific_force_mps2),
+                ("max_rate_radps", self.max_rate_radps),
+                ("max_distance_m", self.max_distance_m),
+                ("output_period_s", self.output_period_s),
+                ("learning.window_s", self.learning.window_s),
+                ("learning.loss_after_s", self.learning.loss_after_s),
+            ],
+        )?;
         if !(self.standstill_speed_mps >= 0.0 && self.standstill_speed_mps < self.init_speed_mps) {
             return Err(format!(
                 "gnss_ins.standstill_speed_mps = {} must be at least 0 and below init_speed_mps {}",

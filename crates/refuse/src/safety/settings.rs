@@ -5,6 +5,7 @@
 //! Source 002 leaves its thresholds open. Each default below is chosen for a stated reason:
 //! a target false-alarm rate under the filter's own statistics, or the sensors' specifications.
 
+use crate::checks::{all_at_least_zero, all_positive};
 use std::path::PathBuf;
 
 use railfuse_catalog::messages::FixType;
@@ -214,16 +215,8 @@ impl SafetySettings {
                 }
             }
         }
-        for (name, v) in positive {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("safety.{name} must be positive, not {v}"));
-            }
-        }
-        for (name, v) in at_least_zero {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("safety.{name} must be ≥ 0, not {v}"));
-            }
-        }
+        all_positive("safety", &positive)?;
+        all_at_least_zero("safety", &at_least_zero)?;
         if !(self.reserve_coefficient.is_finite() && self.reserve_coefficient >= 1.0) {
             return Err(format!(
                 "safety.reserve_coefficient must be ≥ 1 (the source's r), not {}",

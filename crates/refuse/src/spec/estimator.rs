@@ -1,13 +1,14 @@
 //! A pipeline's estimator validated: the four along the track with their settings
 //! (particle, federated: β tables by speed band), or a registered kind built from its table.
 
-use crate::config::{positive, FederatedConfig, FilterKind, PipelineConfig};
+use crate::checks::{at_least_zero, positive};
+use crate::config::{FederatedConfig, FilterKind, PipelineConfig};
 use crate::error::Result;
 use crate::filter::federated::FederatedSettings;
 use crate::filter::sharing::{SharingTable, SpeedBand};
 use crate::kinds::PipelineKind;
 
-use super::{at_least_zero, EstimatorSpec, DEFAULT_GATE_LOCKOUT};
+use super::{EstimatorSpec, DEFAULT_GATE_LOCKOUT};
 
 /// The estimator: one along the track with its settings, or the registered kind `kind` built
 /// from its table.

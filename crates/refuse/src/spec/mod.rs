@@ -15,9 +15,9 @@ use std::sync::Arc;
 use toml::Spanned;
 
 pub use crate::base::{InitialSpec, PipelineBase};
+use crate::checks::{at_least_zero, positive};
 use crate::config::{
-    line_column, positive, FilterKind, InitialConfig, PipelineConfig, PipelinesFile, Variance,
-    VarianceValue,
+    line_column, FilterKind, InitialConfig, PipelineConfig, PipelinesFile, Variance, VarianceValue,
 };
 use crate::error::{Error, Result};
 use crate::filter::federated::FederatedSettings;
@@ -276,11 +276,13 @@ pub struct PipelineSpec {
     source: PipelineConfig,
 }
 
-fn at_least_zero(what: &str, v: f64) -> Result<f64, String> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("{what} must be ≥ 0, not {v}"))
+/// A pipeline's name is part of its channels' topics (`/fused/<name>/state`): letters, digits,
+/// '_' and '-' only.
+fn check_name(name: &str) -> Result<(), String> {
+    let fits = |ch: char| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-';
+    match !name.is_empty() && name.chars().all(fits) {
+        true => Ok(()),
+        false => Err("the name may hold only letters, digits, '_' and '-'".into()),
     }
 }
 
@@ -306,16 +308,7 @@ impl PipelineSpec {
             span: table.span(),
             message,
         };
-        if c.name.is_empty()
-            || !c
-                .name
-                .chars()
-                .all(|ch| ch.is_ascii_alphanumeric() || ch == '_' || ch == '-')
-        {
-            return Err(here(
-                "the name may hold only letters, digits, '_' and '-'".into(),
-            ));
-        }
+        check_name(&c.name).map_err(here)?;
         let (filter, kind) = filter_and_kind(c, registry)?;
         let motion = c.motion.model().map_err(here)?;
         let reorder_window_s =

@@ -3,13 +3,14 @@
 
 use toml::Spanned;
 
-use crate::config::{positive, FilterKind, SensorConfig, Variance, VarianceValue};
+use crate::checks::{at_least_zero, positive};
+use crate::config::{FilterKind, SensorConfig, Variance, VarianceValue};
 use crate::error::Result;
 use crate::filter::MASTER;
 use crate::measurement::Quantity;
 use crate::model::SensorState;
 
-use super::{at_least_zero, Place, SensorSpec, MASTER_DEVICE};
+use super::{Place, SensorSpec, MASTER_DEVICE};
 
 /// The federated devices (sub-filters) in order of first mention, without the master.
 pub(super) fn devices(sensors: &[Spanned<SensorConfig>]) -> Vec<String> {

@@ -197,18 +197,20 @@ fn bad_federated_and_particle_configs_say_what_is_wrong() {
     );
 }
 
+/// The GOOD configuration with more keys in the loop's sensor table and the radar's.
+fn with(loop_extra: &str, radar_extra: &str) -> String {
+    GOOD.replace(
+        "variance = \"message\"\n",
+        &format!("variance = \"message\"\n{loop_extra}\n"),
+    )
+    .replace(
+        "gate_nis = 16.0\n",
+        &format!("gate_nis = 16.0\n{radar_extra}\n"),
+    )
+}
+
 #[test]
 fn sensor_states_parse_count_and_refuse_bad_values() {
-    let with = |loop_extra: &str, radar_extra: &str| {
-        GOOD.replace(
-            "variance = \"message\"\n",
-            &format!("variance = \"message\"\n{loop_extra}\n"),
-        )
-        .replace(
-            "gate_nis = 16.0\n",
-            &format!("gate_nis = 16.0\n{radar_extra}\n"),
-        )
-    };
     let good = with(
         "chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }",
         "scale_factor = { std = 0.01 }",
@@ -236,6 +238,10 @@ fn sensor_states_parse_count_and_refuse_bad_values() {
         "fields = [\"speed\"]\nchainage_bias = { std_m = 2.0, time_constant_s = 60.0 }"
     ))
     .contains("chainage is not among its fields"));
+}
+
+#[test]
+fn sensor_state_quantities_speed_windows_and_the_state_limit() {
     // A chainage scale for the loop; a speed window for a speed sensor only, on a model
     // with acceleration.
     let c = Pipelines::parse(

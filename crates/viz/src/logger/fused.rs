@@ -43,35 +43,7 @@ impl Logger {
             return Ok(());
         }
         if let Some(plane) = &f.plane {
-            // A 2-D pipeline: where it is in the plane, with its 3σ ellipse.
-            let ellipse = match self.pipelines[p].ellipse {
-                Some(id) => id,
-                None => {
-                    let entity = ent::fused_ellipse(&self.pipelines[p].name);
-                    let index = self.pipelines[p].index;
-                    self.static_(
-                        &entity,
-                        &rerun::LineStrips2D::update_fields()
-                            .with_colors([palette::band(index)])
-                            .with_radii([Radius::new_ui_points(1.5)]),
-                    )?;
-                    let id = self.columns.outlines(&entity);
-                    self.pipelines[p].ellipse = Some(id);
-                    id
-                }
-            };
-            let outline: Vec<[f32; 2]> = plane
-                .ellipse_3sigma(36)
-                .into_iter()
-                .map(|(e, n)| map::plan(e, n))
-                .collect();
-            self.columns.point(
-                &self.rec,
-                position,
-                t,
-                map::plan(plane.east_m, plane.north_m),
-            )?;
-            self.columns.outline(&self.rec, ellipse, t, outline)?;
+            self.plane_position(p, t, plane)?;
         } else if let Some(m) = &self.map {
             if let (Some(here), Some(behind), Some(ahead)) = (
                 map::at(m, f.chainage_m),
@@ -102,6 +74,41 @@ impl Logger {
                 self.band_value(p, &entity, &title, "3σ", t, e, 3.0 * var.max(0.0).sqrt())?;
             }
         }
+        Ok(())
+    }
+
+    /// A 2-D pipeline: where it is in the plane, with its 3σ ellipse (its entity styled on
+    /// first use).
+    fn plane_position(&mut self, p: usize, t: i64, plane: &PlanePosition) -> Result<(), Error> {
+        let position = self.pipelines[p].position;
+        let ellipse = match self.pipelines[p].ellipse {
+            Some(id) => id,
+            None => {
+                let entity = ent::fused_ellipse(&self.pipelines[p].name);
+                let index = self.pipelines[p].index;
+                self.static_(
+                    &entity,
+                    &rerun::LineStrips2D::update_fields()
+                        .with_colors([palette::band(index)])
+                        .with_radii([Radius::new_ui_points(1.5)]),
+                )?;
+                let id = self.columns.outlines(&entity);
+                self.pipelines[p].ellipse = Some(id);
+                id
+            }
+        };
+        let outline: Vec<[f32; 2]> = plane
+            .ellipse_3sigma(36)
+            .into_iter()
+            .map(|(e, n)| map::plan(e, n))
+            .collect();
+        self.columns.point(
+            &self.rec,
+            position,
+            t,
+            map::plan(plane.east_m, plane.north_m),
+        )?;
+        self.columns.outline(&self.rec, ellipse, t, outline)?;
         Ok(())
     }
 

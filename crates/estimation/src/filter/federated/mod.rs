@@ -427,6 +427,63 @@ fn inverse_spd<const N: usize>(p: &SMatrix<f64, N, N>) -> Option<SMatrix<f64, N,
     p.cholesky().map(|c| c.inverse())
 }
 
+impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
+    /// A measurement of the master (an absolute fix): gated and updated against the fused
+    /// estimate, then shared back to every sub-filter with a share β > 0 at once, whatever the
+    /// feedback mode; otherwise the next fusion would forget it.
+    fn process_master(&mut self, m: &ScalarMeasurement<N>, z: f64) -> Outcome {
+        let mut master = KalmanFilter {
+            estimate: self.estimate(),
+        };
+        let innovation = master.innovation(&m.h, m.r, z);
+        if !innovation.passes(m.gate_nis) {
+            return Outcome::RejectedGate(innovation);
+        }
+        if !LocalFilter::update(&mut master, &m.h, m.r, z) {
+            return Outcome::RejectedNumerics(innovation);
+        }
+        self.master = master;
+        self.beta = self.settings.sharing.shares(
+            self.speed(),
+            &self.healthy(),
+            self.settings.redistribution,
+        );
+        let fusion = self.settings.fusion;
+        for (d, &b) in self.devices.iter_mut().zip(&self.beta) {
+            if b > 0.0 {
+                d.filter.reset(&share_of(
+                    &self.master.estimate,
+                    fusion.reset_share(b),
+                    self.settings.feedback,
+                ));
+            }
+        }
+        Outcome::Accepted(innovation)
+    }
+
+    /// A measurement of a device out of the fusion: it either updates the device's own
+    /// sub-filter ungated (a shadow update: the next fusion sees where the device pulls), or
+    /// its disagreement with the fused estimate is the readmission test's evidence.
+    fn process_unhealthy(&mut self, m: &ScalarMeasurement<N>, z: f64) -> Outcome {
+        let (i, quantity) = (m.device, m.quantity);
+        let fused = KalmanFilter {
+            estimate: self.estimate(),
+        };
+        let innovation = fused.innovation(&m.h, m.r, z);
+        let d = &mut self.devices[i];
+        if d.health.must_prove_agreement() {
+            // Shadow update, ungated: the next fusion sees where the device pulls.
+            d.filter.update(&m.h, m.r, z);
+        } else {
+            d.disagreement[quantity] = innovation.residual * innovation.residual;
+            if d.health.on_readmission_test(!d.health.is_stuck(quantity)) {
+                self.health_changed(Some(i));
+            }
+        }
+        Outcome::RejectedDeviceFault(Some(innovation))
+    }
+}
+
 impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
     fn advance_to(&mut self, t_ns: u64) {
         if self.settings.fusion_period_ns > 0 {
@@ -449,35 +506,7 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
     fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome {
         let z = m.z - m.offset;
         if m.device == MASTER {
-            let mut master = KalmanFilter {
-                estimate: self.estimate(),
-            };
-            let innovation = master.innovation(&m.h, m.r, z);
-            if !innovation.passes(m.gate_nis) {
-                return Outcome::RejectedGate(innovation);
-            }
-            if !LocalFilter::update(&mut master, &m.h, m.r, z) {
-                return Outcome::RejectedNumerics(innovation);
-            }
-            // An absolute fix in the master is shared back at once, whatever the feedback mode:
-            // otherwise the next fusion would forget it.
-            self.master = master;
-            self.beta = self.settings.sharing.shares(
-                self.speed(),
-                &self.healthy(),
-                self.settings.redistribution,
-            );
-            let fusion = self.settings.fusion;
-            for (d, &b) in self.devices.iter_mut().zip(&self.beta) {
-                if b > 0.0 {
-                    d.filter.reset(&share_of(
-                        &self.master.estimate,
-                        fusion.reset_share(b),
-                        self.settings.feedback,
-                    ));
-                }
-            }
-            return Outcome::Accepted(innovation);
+            return self.process_master(m, z);
         }
         let moving = self.speed().abs() > 1.0;
         let quantity = m.quantity;
@@ -490,21 +519,7 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
             return Outcome::RejectedDeviceFault(None);
         }
         if !self.devices[i].health.healthy() {
-            let fused = KalmanFilter {
-                estimate: self.estimate(),
-            };
-            let innovation = fused.innovation(&m.h, m.r, z);
-            let d = &mut self.devices[i];
-            if d.health.must_prove_agreement() {
-                // Shadow update, ungated: the next fusion sees where the device pulls.
-                d.filter.update(&m.h, m.r, z);
-            } else {
-                d.disagreement[quantity] = innovation.residual * innovation.residual;
-                if d.health.on_readmission_test(!d.health.is_stuck(quantity)) {
-                    self.health_changed(Some(i));
-                }
-            }
-            return Outcome::RejectedDeviceFault(Some(innovation));
+            return self.process_unhealthy(m, z);
         }
         if self.devices[i].grace > 0 {
             // How far the fused estimate still is from this device (not its own sub-filter,

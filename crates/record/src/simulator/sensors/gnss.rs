@@ -99,10 +99,10 @@ impl Gnss {
             FixType::RtkFixed => (self.p.sigma_rtk_fixed_m, 0.0),
         }
     }
-}
 
-impl SimSensor for Gnss {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    /// Since when the sky and the corrections have been there (reacquisition times count
+    /// from those).
+    fn track_sky_and_corrections(&mut self, w: &World) {
         match (w.in_tunnel || w.gnss_outage, self.sky_since_ns) {
             (true, Some(_)) => self.sky_since_ns = None,
             (false, None) => self.sky_since_ns = Some(w.t_ns),
@@ -113,6 +113,30 @@ impl SimSensor for Gnss {
             (true, None) => self.corrections_since_ns = Some(w.t_ns),
             _ => {}
         }
+    }
+
+    /// The satellites in view: eighteen under an open sky, fewer in cuttings, none in a
+    /// tunnel, following slowly with noise; at most 3 without a fix, at least 5 with one.
+    fn satellites(&mut self, w: &World, fix: FixType) -> u8 {
+        let target_sats = if w.in_tunnel || w.gnss_outage {
+            0.0
+        } else {
+            18.0 * w.sky_view
+        };
+        self.satellites += 0.2 * (target_sats - self.satellites) + gauss(&mut self.rng, 0.3);
+        self.satellites = self.satellites.clamp(0.0, 32.0);
+        if fix == FixType::None {
+            self.satellites.min(3.0)
+        } else {
+            self.satellites.max(5.0)
+        }
+        .round() as u8
+    }
+}
+
+impl SimSensor for Gnss {
+    fn step(&mut self, w: &World, out: &mut Outbox) {
+        self.track_sky_and_corrections(w);
         if !self.schedule.due(w.t_ns) {
             return;
         }
@@ -126,19 +150,7 @@ impl SimSensor for Gnss {
             phi * self.bias.0 + gauss(&mut self.rng, q),
             phi * self.bias.1 + gauss(&mut self.rng, q),
         );
-        let target_sats = if w.in_tunnel || w.gnss_outage {
-            0.0
-        } else {
-            18.0 * w.sky_view
-        };
-        self.satellites += 0.2 * (target_sats - self.satellites) + gauss(&mut self.rng, 0.3);
-        self.satellites = self.satellites.clamp(0.0, 32.0);
-        let satellites = if fix == FixType::None {
-            self.satellites.min(3.0)
-        } else {
-            self.satellites.max(5.0)
-        }
-        .round() as u8;
+        let satellites = self.satellites(w, fix);
         let mut msg = GnssFix {
             stamp_ns: w.t_ns,
             fix_type: fix,
