@@ -256,66 +256,9 @@ fn learnt_imu_errors_carry_the_navigation_through_the_tunnel_after_a_bias_shift(
 
 #[test]
 fn bad_fixes_and_imu_samples_get_their_reason_nothing_fused_from_them_and_are_counted() {
-    use railfuse_catalog::log::LogWriter;
-    use railfuse_catalog::messages::{FixType, GnssFix, Imu};
-    // A train heading east at 10 m/s near Modena: RTK fixes at 10 Hz, an IMU at 100 Hz. Into
-    // it: a fix off the globe, a fix 5000 km away, a saturated IMU sample, and an IMU sample
-    // stamped a second in the past.
     let d = tempfile::tempdir().unwrap();
     let log = d.path().join("bad.mcap");
-    let origin = railfuse_catalog::geodesy::GeodeticOrigin {
-        latitude_deg: 44.6551,
-        longitude_deg: 10.9297,
-        altitude_m: 40.0,
-    };
-    let mut w = LogWriter::create(&log).unwrap();
-    let gnss = w.add_channel::<GnssFix>("/gnss/fix").unwrap();
-    let imu = w.add_channel::<Imu>("/imu").unwrap();
-    let t0 = 1_780_300_800_000_000_000u64;
-    let fix_at = |k: u64| {
-        let t = k as f64 * 0.1;
-        let (lat, lon, alt) = origin.to_geodetic(10.0 * t, 0.0, 0.0);
-        GnssFix {
-            stamp_ns: t0 + k * 100_000_000,
-            fix_type: FixType::RtkFixed,
-            satellites: 18,
-            hdop: Some(0.8),
-            latitude_deg: Some(lat),
-            longitude_deg: Some(lon),
-            altitude_m: Some(alt),
-            altitude_msl_m: None,
-            position_covariance_enu_m2: Some([4e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 1e-3]),
-            speed_mps: Some(10.0),
-            course_rad: Some(std::f64::consts::FRAC_PI_2),
-        }
-    };
-    for k in 0..600u64 {
-        let t = t0 + k * 10_000_000;
-        // A little noise on every axis, as a real sensor has.
-        let wobble = 1e-3 * ((k * 7919) % 13) as f64;
-        let mut m = Imu {
-            stamp_ns: t,
-            sensor_id: "imu".into(),
-            specific_force_mps2: [wobble, -wobble, 9.80665 + wobble],
-            angular_rate_radps: [wobble * 0.1, -wobble * 0.1, wobble * 0.01],
-        };
-        match k {
-            300 => m.specific_force_mps2[0] = 60.0,
-            400 => m.stamp_ns -= 1_000_000_000,
-            _ => {}
-        }
-        w.write(imu, t, &m).unwrap();
-        if k % 10 == 0 {
-            let mut f = fix_at(k / 10);
-            match k / 10 {
-                20 => f.latitude_deg = Some(95.0),
-                30 => f.latitude_deg = Some(f.latitude_deg.unwrap() + 45.0),
-                _ => {}
-            }
-            w.write(gnss, t, &f).unwrap();
-        }
-    }
-    w.finish().unwrap();
+    let t0 = write_east_run_with_bad_samples(&log);
     let config = d.path().join("kf.toml");
     std::fs::write(&config, kf_pipeline()).unwrap();
     let fused = d.path().join("bad.fused.mcap");
@@ -424,4 +367,66 @@ fn the_viewer_draws_the_plane_velocity_the_learnt_model_and_a_gap_through_the_gn
             .any(|l| l.contains("- /speed/gnss -") && l.contains("Clear")),
         "no break in /speed/gnss"
     );
+}
+
+/// A train heading east at 10 m/s near Modena: RTK fixes at 10 Hz, an IMU at 100 Hz. Into it:
+/// a fix off the globe, a fix 5000 km away, a saturated IMU sample, and an IMU sample stamped
+/// a second in the past. Returns the first stamp.
+fn write_east_run_with_bad_samples(log: &Path) -> u64 {
+    use railfuse_catalog::log::LogWriter;
+    use railfuse_catalog::messages::{FixType, GnssFix, Imu};
+    let origin = railfuse_catalog::geodesy::GeodeticOrigin {
+        latitude_deg: 44.6551,
+        longitude_deg: 10.9297,
+        altitude_m: 40.0,
+    };
+    let mut w = LogWriter::create(log).unwrap();
+    let gnss = w.add_channel::<GnssFix>("/gnss/fix").unwrap();
+    let imu = w.add_channel::<Imu>("/imu").unwrap();
+    let t0 = 1_780_300_800_000_000_000u64;
+    let fix_at = |k: u64| {
+        let t = k as f64 * 0.1;
+        let (lat, lon, alt) = origin.to_geodetic(10.0 * t, 0.0, 0.0);
+        GnssFix {
+            stamp_ns: t0 + k * 100_000_000,
+            fix_type: FixType::RtkFixed,
+            satellites: 18,
+            hdop: Some(0.8),
+            latitude_deg: Some(lat),
+            longitude_deg: Some(lon),
+            altitude_m: Some(alt),
+            altitude_msl_m: None,
+            position_covariance_enu_m2: Some([4e-4, 0.0, 0.0, 0.0, 4e-4, 0.0, 0.0, 0.0, 1e-3]),
+            speed_mps: Some(10.0),
+            course_rad: Some(std::f64::consts::FRAC_PI_2),
+        }
+    };
+    for k in 0..600u64 {
+        let t = t0 + k * 10_000_000;
+        // A little noise on every axis, as a real sensor has.
+        let wobble = 1e-3 * ((k * 7919) % 13) as f64;
+        let mut m = Imu {
+            stamp_ns: t,
+            sensor_id: "imu".into(),
+            specific_force_mps2: [wobble, -wobble, 9.80665 + wobble],
+            angular_rate_radps: [wobble * 0.1, -wobble * 0.1, wobble * 0.01],
+        };
+        match k {
+            300 => m.specific_force_mps2[0] = 60.0,
+            400 => m.stamp_ns -= 1_000_000_000,
+            _ => {}
+        }
+        w.write(imu, t, &m).unwrap();
+        if k % 10 == 0 {
+            let mut f = fix_at(k / 10);
+            match k / 10 {
+                20 => f.latitude_deg = Some(95.0),
+                30 => f.latitude_deg = Some(f.latitude_deg.unwrap() + 45.0),
+                _ => {}
+            }
+            w.write(gnss, t, &f).unwrap();
+        }
+    }
+    w.finish().unwrap();
+    t0
 }

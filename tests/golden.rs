@@ -50,17 +50,10 @@ fn refuse_output_of_the_sample_runs_is_unchanged() {
     // Every other sample configuration on the run it was written for (fixed seeds, 300 s).
     let sim = |scenario: &str, name: &str| {
         let out = d.path().join(name);
-        ok(&[
-            "simulate",
-            "--scenario",
-            scenario,
-            "--seed",
-            "1",
-            "--duration",
-            "300",
-            "-o",
-            s(&out),
-        ]);
+        simulate(
+            &["--scenario", scenario, "--seed", "1", "--duration", "300"],
+            &out,
+        );
         out
     };
     let (default, seed003, seed004) = (
@@ -69,88 +62,55 @@ fn refuse_output_of_the_sample_runs_is_unchanged() {
         sim("seed004", "seed004.mcap"),
     );
     let sn2 = d.path().join("sn2.mcap");
-    ok(&[
-        "import",
-        "--format",
-        "eth",
-        s(&sample(
-            "eth-pbl-railway/20221020_1030_R90117_Modena_SN2_sample.csv",
-        )),
-        "-o",
-        s(&sn2),
-    ]);
+    import_eth("20221020_1030_R90117_Modena_SN2_sample.csv", &sn2);
     let fused_once = d.path().join("short-run.kalman.mcap");
-    // (label, input, config, output)
-    let runs: Vec<(&str, &Path, &str, std::path::PathBuf)> = vec![
+    // (label, input, config, output name); each output in `d`.
+    let runs: [(&str, &Path, &str, &str); 10] = [
         (
             "short-run kalman",
             &short,
             "kalman.toml",
-            fused_once.clone(),
+            "short-run.kalman.mcap",
         ),
-        (
-            "short-run models",
-            &short,
-            "models.toml",
-            d.path().join("m.mcap"),
-        ),
+        ("short-run models", &short, "models.toml", "m.mcap"),
         (
             "short-run sensor-states",
             &short,
             "sensor-states.toml",
-            d.path().join("c.mcap"),
+            "c.mcap",
         ),
         // Re-fusing a fused file: the re-run pipeline's channels are replaced.
         (
             "short-run kalman again",
             &fused_once,
             "kalman.toml",
-            d.path().join("k2.mcap"),
+            "k2.mcap",
         ),
-        (
-            "seed000",
-            &seed000,
-            "seed000.toml",
-            d.path().join("s0.mcap"),
-        ),
-        (
-            "seed001",
-            &seed001,
-            "seed001.toml",
-            d.path().join("s1.mcap"),
-        ),
-        (
-            "seed002",
-            &default,
-            "seed002.toml",
-            d.path().join("s2.mcap"),
-        ),
-        (
-            "seed003",
-            &seed003,
-            "seed003.toml",
-            d.path().join("s3.mcap"),
-        ),
-        (
-            "seed004",
-            &seed004,
-            "seed004.toml",
-            d.path().join("s4.mcap"),
-        ),
-        ("gnss-s1", &sn2, "gnss-s1.toml", d.path().join("g1.mcap")),
+        ("seed000", &seed000, "seed000.toml", "s0.mcap"),
+        ("seed001", &seed001, "seed001.toml", "s1.mcap"),
+        ("seed002", &default, "seed002.toml", "s2.mcap"),
+        ("seed003", &seed003, "seed003.toml", "s3.mcap"),
+        ("seed004", &seed004, "seed004.toml", "s4.mcap"),
+        ("gnss-s1", &sn2, "gnss-s1.toml", "g1.mcap"),
     ];
     let mut text = String::new();
-    for (label, input, config, output) in &runs {
-        let config = sample(config);
-        ok(&["refuse", s(input), "-c", s(&config), "-o", s(output)]);
-        for (topic, (n, h)) in digests(output) {
+    for (label, input, config, output) in runs {
+        let output = d.path().join(output);
+        refuse(input, config, &output);
+        for (topic, (n, h)) in digests(&output) {
             writeln!(text, "{label}\t{topic}\t{n}\t{h}").unwrap();
         }
     }
+    same_as_golden_or_bless(&text);
+}
+
+/// The digests against tests/golden/refuse-digests.txt, every line that differs shown; with
+/// RAILFUSE_BLESS set, written there instead.
+fn same_as_golden_or_bless(text: &str) {
     let golden = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden/refuse-digests.txt");
     if std::env::var_os("RAILFUSE_BLESS").is_some() {
         std::fs::create_dir_all(golden.parent().unwrap()).unwrap();
-        std::fs::write(&golden, &text).unwrap();
+        std::fs::write(&golden, text).unwrap();
         return;
     }
     let want = std::fs::read_to_string(&golden).expect("tests/golden/refuse-digests.txt");

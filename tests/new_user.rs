@@ -166,6 +166,20 @@ fn wrong_input_is_one_line_and_a_non_zero_exit_never_a_silent_zero() {
             "no channel /nothere to take as the reference",
         ),
         (vec!["eval", s(&run)], "no fused pipelines to evaluate"),
+    ];
+    each_fails_and_leaves_nothing(&cases, &[&out, &rrd]);
+}
+
+#[test]
+fn wrong_viz_record_and_simulate_requests_are_one_line_and_leave_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    let (fused, out, rrd) = (
+        d.path().join("f.mcap"),
+        d.path().join("e.mcap"),
+        d.path().join("v.rrd"),
+    );
+    refuse(&sample("short-run.mcap"), "kalman.toml", &fused);
+    let cases: Vec<(Vec<&str>, &str)> = vec![
         (
             vec!["viz", s(&fused), "--pipelines", "nope", "--save", s(&rrd)],
             "no pipeline 'nope'",
@@ -205,11 +219,18 @@ fn wrong_input_is_one_line_and_a_non_zero_exit_never_a_silent_zero() {
             "starts at 200 s, after the run's end at 60 s",
         ),
     ];
+    each_fails_and_leaves_nothing(&cases, &[&out, &rrd]);
+}
+
+/// Each `(args, says)`: `railfuse args` fails with one line that says `says`, and none of
+/// `outputs` is left behind.
+fn each_fails_and_leaves_nothing(cases: &[(Vec<&str>, &str)], outputs: &[&Path]) {
     for (args, says) in cases {
-        let line = fails(&args);
+        let line = fails(args);
         assert!(line.contains(says), "{args:?}: {line}");
-        assert!(!exists(&out), "{args:?} left {out:?}");
-        assert!(!exists(&rrd), "{args:?} left v.rrd");
+        for out in outputs {
+            assert!(!exists(out), "{args:?} left {out:?}");
+        }
     }
 }
 

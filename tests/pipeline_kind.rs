@@ -226,12 +226,50 @@ fn a_kind_registered_with_one_line_is_configured_replayed_written_and_evaluated(
     assert!(travelled > 100.0, "the run moves: {travelled} m");
 
     // The output carries its states and its settings with the defaults written out.
-    let mut reader = LogReader::open(&fused).unwrap();
+    let (states, stored) = states_and_stored_config(&fused, "dr");
+    assert_eq!(states, odometer_samples);
+    assert!(
+        stored.contains("[pipeline.dead_reckoning]") && stored.contains("speed_variance = 0.01"),
+        "{stored}"
+    );
+}
+
+#[test]
+fn the_kind_checks_its_settings_table_with_the_line_of_the_pipeline() {
+    let path = Path::new("dr.toml");
+    let registry = Registry::standard().with(DeadReckoning);
+    let bad = config(
+        0.0,
+        "[pipeline.dead_reckoning]\nodometr = \"/odometer/1\"\n",
+    );
+    let e = Pipelines::parse_with(&bad, path, &registry)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 2") && e.contains("unknown field `odometr`"),
+        "{e}"
+    );
+    // A table of another kind is refused.
+    let other = config(0.0, "[pipeline.safety]\ngnss = \"/gnss/fix\"\n");
+    let e = Pipelines::parse_with(&other, path, &registry)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("a [safety] section, but filter = \"dead_reckoning\""),
+        "{e}"
+    );
+}
+
+/// The number of valid states on `/fused/<pipeline>/state` and the pipeline's configuration
+/// as stored in the file's metadata.
+fn states_and_stored_config(fused: &Path, pipeline: &str) -> (u64, String) {
+    let topic = format!("/fused/{pipeline}/state");
+    let mut reader = LogReader::open(fused).unwrap();
     let (mut states, mut stored) = (0, None);
     while let Some(r) = reader.next() {
         match r.unwrap() {
-            LogRecord::Message(m) if m.channel.topic == "/fused/dr/state" => {
-                let st: FusedState = m.decode(&fused).unwrap();
+            LogRecord::Message(m) if m.channel.topic == topic => {
+                let st: FusedState = m.decode(fused).unwrap();
                 assert!(st.chainage_m.is_finite() && st.covariance[0] >= 0.0);
                 states += 1;
             }
@@ -241,32 +279,5 @@ fn a_kind_registered_with_one_line_is_configured_replayed_written_and_evaluated(
             _ => {}
         }
     }
-    assert_eq!(states, odometer_samples);
-    let stored = stored.expect("the pipeline's config is stored");
-    assert!(
-        stored.contains("[pipeline.dead_reckoning]") && stored.contains("speed_variance = 0.01"),
-        "{stored}"
-    );
-
-    // Its settings table is checked by the kind, with the line of the pipeline.
-    let bad = config(
-        start,
-        "[pipeline.dead_reckoning]\nodometr = \"/odometer/1\"\n",
-    );
-    let e = Pipelines::parse_with(&bad, &path, &registry)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("line 2") && e.contains("unknown field `odometr`"),
-        "{e}"
-    );
-    // A table of another kind is refused.
-    let other = config(start, "[pipeline.safety]\ngnss = \"/gnss/fix\"\n");
-    let e = Pipelines::parse_with(&other, &path, &registry)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        e.contains("a [safety] section, but filter = \"dead_reckoning\""),
-        "{e}"
-    );
+    (states, stored.expect("the pipeline's config is stored"))
 }

@@ -136,95 +136,9 @@ fn a_ros2_bag_of_the_same_sensors_refuses_as_well_as_the_native_log() {
         "{report}"
     );
 
-    // The fused state for ROS tools, read by the official ROS 2 decoder for MCAP: as many as
-    // the pipeline's states, stamped as they are, on the track and at their speed.
-    let states: Vec<FusedState> = messages(&fused_bag, "/fused/kf/state");
-    let py = python("check_ros2_outputs.py", &[s(&fused_bag), "kf"]);
-    assert!(
-        py.status.success(),
-        "{}",
-        String::from_utf8_lossy(&py.stderr)
-    );
-    let ros: serde_json::Value = serde_json::from_slice(&py.stdout).unwrap();
-    let (fix, odom) = (&ros["/fused/kf/navsatfix"], &ros["/fused/kf/odometry"]);
-    assert_eq!(fix["count"].as_u64(), Some(states.len() as u64), "{ros}");
-    assert_eq!(odom["count"].as_u64(), Some(states.len() as u64), "{ros}");
-    let last = states.last().unwrap();
-    assert_eq!(
-        odom["last"]["stamp_ns"].as_u64(),
-        Some(last.stamp_ns),
-        "{ros}"
-    );
-    assert!((odom["last"]["speed"].as_f64().unwrap() - last.speed_mps).abs() < 1e-9);
-    assert!((odom["last"]["speed_variance"].as_f64().unwrap() - last.covariance[4]).abs() < 1e-12);
-    let along = fix["last"]["covariance"][0].as_f64().unwrap()
-        + fix["last"]["covariance"][4].as_f64().unwrap();
-    assert!(
-        (along - last.covariance[0]).abs() < 1e-6 * last.covariance[0].max(1.0),
-        "{ros}"
-    );
-    assert!(
-        fix["last"]["latitude"].as_f64().unwrap().abs() <= 90.0,
-        "{ros}"
-    );
-
-    // The viewer draws the bag's sensors, with the fused results beside them: at least as
-    // many rows as Rerun's own MCAP loader logs of the bag alone.
-    let rrd = d.path().join("bag.rrd");
-    let viz: serde_json::Value = ok_json(&["viz", s(&fused_bag), "--save", s(&rrd), "--json"]);
-    let entities = viz["entities"].as_array().unwrap();
-    for shown in ["map/gnss/", "speed/radar", "map/fused/kf/position"] {
-        assert!(
-            entities
-                .iter()
-                .any(|e| e.as_str().is_some_and(|e| e.starts_with(shown))),
-            "{shown}: {viz}"
-        );
-    }
-    assert!(rerun(&["rrd", "verify", s(&rrd)]).status.success());
-    let own = d.path().join("rerun-own.rrd");
-    assert!(rerun(&["mcap", "convert", s(&bag), "-o", s(&own)])
-        .status
-        .success());
-    let stats = String::from_utf8_lossy(&rerun(&["rrd", "stats", s(&own)]).stdout).into_owned();
-    let rows: u64 = stats
-        .lines()
-        .find_map(|l| l.strip_prefix("num_rows = "))
-        .map(|n| n.chars().filter(char::is_ascii_digit).collect::<String>())
-        .map(|n| n.parse().unwrap())
-        .unwrap_or_else(|| panic!("{stats}"));
-    assert!(
-        viz["rows"].as_u64().unwrap() >= rows,
-        "{viz} against Rerun's {rows}"
-    );
-
-    let truth: Vec<GroundTruth> = messages(&native, "/truth");
-    let names = ["fkf", "kf", "fkf_cal", "kf_cal"];
-    let (a, b) = (
-        worst_errors(&fused_native, &truth, &names),
-        worst_errors(&fused_bag, &truth, &names),
-    );
-    let mut table =
-        vec!["pipeline | native max |pos| m | bag | native max |speed| m/s | bag".to_owned()];
-    for ((name, n), r) in names.iter().zip(&a).zip(&b) {
-        table.push(format!(
-            "{name} | {:.3} | {:.3} | {:.4} | {:.4}",
-            n.0, r.0, n.1, r.1
-        ));
-    }
-    println!("{}", table.join("\n"));
-    for ((name, n), r) in names.iter().zip(&a).zip(&b) {
-        assert!(
-            r.0 <= 1.05 * n.0 + 0.01,
-            "{name}: position {r:?} against {n:?}\n{}",
-            table.join("\n")
-        );
-        assert!(
-            r.1 <= 1.05 * n.1 + 0.005,
-            "{name}: speed {r:?} against {n:?}\n{}",
-            table.join("\n")
-        );
-    }
+    ros_twins_match_the_states(&fused_bag);
+    the_viewer_shows_at_least_rerun_s_own_rows(&fused_bag, &bag, d.path());
+    bag_as_accurate_as_native(&native, &fused_native, &fused_bag);
 }
 
 #[test]
@@ -512,21 +426,7 @@ fn a_bag_without_a_config_refuses_with_a_default_pipeline_that_says_what_it_used
         )),
         "{err}"
     );
-    // The output carries the track it was fused on, so the viewer draws it under the fixes.
-    let maps: Vec<railfuse_catalog::messages::TrackMap> = messages(&out, "/track/map");
-    assert_eq!(maps.len(), 1);
-    let rrd = d.path().join("default.rrd");
-    let viz: serde_json::Value = ok_json(&["viz", s(&out), "--save", s(&rrd), "--json"]);
-    let entities = viz["entities"].as_array().unwrap();
-    for shown in [
-        "map/track",
-        "map/gnss/single",
-        "map/fused/default/position",
-        "speed/radar",
-    ] {
-        assert!(entities.iter().any(|e| e == shown), "{shown}: {viz}");
-    }
-    assert!(viz["not_shown"].get("/notes").is_some(), "{viz}");
+    the_viewer_draws_the_track_under_the_fixes(&out, d.path());
     // What it ran is what it saved: the saved file refuses to the same states.
     let again = d.path().join("again.mcap");
     ok(&["refuse", s(&bag), "-c", s(&saved), "-o", s(&again)]);
@@ -614,4 +514,115 @@ fn bad_messages_in_a_bag_are_each_said_in_one_line_and_nothing_else_is_lost() {
             && errors[0].contains("TwistWithCovarianceStamped"),
         "{err}"
     );
+}
+
+/// The fused state for ROS tools, read by the official ROS 2 decoder for MCAP: as many as
+/// the pipeline's states, stamped as they are, on the track and at their speed.
+fn ros_twins_match_the_states(fused_bag: &Path) {
+    let states: Vec<FusedState> = messages(fused_bag, "/fused/kf/state");
+    let ros = python_ok("check_ros2_outputs.py", &[s(fused_bag), "kf"]);
+    let (fix, odom) = (&ros["/fused/kf/navsatfix"], &ros["/fused/kf/odometry"]);
+    assert_eq!(fix["count"].as_u64(), Some(states.len() as u64), "{ros}");
+    assert_eq!(odom["count"].as_u64(), Some(states.len() as u64), "{ros}");
+    let last = states.last().unwrap();
+    assert_eq!(
+        odom["last"]["stamp_ns"].as_u64(),
+        Some(last.stamp_ns),
+        "{ros}"
+    );
+    assert!((odom["last"]["speed"].as_f64().unwrap() - last.speed_mps).abs() < 1e-9);
+    assert!((odom["last"]["speed_variance"].as_f64().unwrap() - last.covariance[4]).abs() < 1e-12);
+    let along = fix["last"]["covariance"][0].as_f64().unwrap()
+        + fix["last"]["covariance"][4].as_f64().unwrap();
+    assert!(
+        (along - last.covariance[0]).abs() < 1e-6 * last.covariance[0].max(1.0),
+        "{ros}"
+    );
+    assert!(
+        fix["last"]["latitude"].as_f64().unwrap().abs() <= 90.0,
+        "{ros}"
+    );
+}
+
+/// The viewer draws the bag's sensors, with the fused results beside them: at least as many
+/// rows as Rerun's own MCAP loader logs of the bag alone.
+fn the_viewer_shows_at_least_rerun_s_own_rows(fused_bag: &Path, bag: &Path, dir: &Path) {
+    let rrd = dir.join("bag.rrd");
+    let viz: serde_json::Value = ok_json(&["viz", s(fused_bag), "--save", s(&rrd), "--json"]);
+    let entities = viz["entities"].as_array().unwrap();
+    for shown in ["map/gnss/", "speed/radar", "map/fused/kf/position"] {
+        assert!(
+            entities
+                .iter()
+                .any(|e| e.as_str().is_some_and(|e| e.starts_with(shown))),
+            "{shown}: {viz}"
+        );
+    }
+    assert!(rerun(&["rrd", "verify", s(&rrd)]).status.success());
+    let own = dir.join("rerun-own.rrd");
+    assert!(rerun(&["mcap", "convert", s(bag), "-o", s(&own)])
+        .status
+        .success());
+    let stats = String::from_utf8_lossy(&rerun(&["rrd", "stats", s(&own)]).stdout).into_owned();
+    let rows: u64 = stats
+        .lines()
+        .find_map(|l| l.strip_prefix("num_rows = "))
+        .map(|n| n.chars().filter(char::is_ascii_digit).collect::<String>())
+        .map(|n| n.parse().unwrap())
+        .unwrap_or_else(|| panic!("{stats}"));
+    assert!(
+        viz["rows"].as_u64().unwrap() >= rows,
+        "{viz} against Rerun's {rows}"
+    );
+}
+
+/// Each pipeline's worst position and speed errors from the bag within 5 % of the native
+/// log's.
+fn bag_as_accurate_as_native(native: &Path, fused_native: &Path, fused_bag: &Path) {
+    let truth: Vec<GroundTruth> = messages(native, "/truth");
+    let names = ["fkf", "kf", "fkf_cal", "kf_cal"];
+    let (a, b) = (
+        worst_errors(fused_native, &truth, &names),
+        worst_errors(fused_bag, &truth, &names),
+    );
+    let mut table =
+        vec!["pipeline | native max |pos| m | bag | native max |speed| m/s | bag".to_owned()];
+    for ((name, n), r) in names.iter().zip(&a).zip(&b) {
+        table.push(format!(
+            "{name} | {:.3} | {:.3} | {:.4} | {:.4}",
+            n.0, r.0, n.1, r.1
+        ));
+    }
+    println!("{}", table.join("\n"));
+    for ((name, n), r) in names.iter().zip(&a).zip(&b) {
+        assert!(
+            r.0 <= 1.05 * n.0 + 0.01,
+            "{name}: position {r:?} against {n:?}\n{}",
+            table.join("\n")
+        );
+        assert!(
+            r.1 <= 1.05 * n.1 + 0.005,
+            "{name}: speed {r:?} against {n:?}\n{}",
+            table.join("\n")
+        );
+    }
+}
+
+/// The output carries the track it was fused on, so the viewer draws it under the fixes; the
+/// topic no sensor model reads is said to be not shown.
+fn the_viewer_draws_the_track_under_the_fixes(out: &Path, dir: &Path) {
+    let maps: Vec<railfuse_catalog::messages::TrackMap> = messages(out, "/track/map");
+    assert_eq!(maps.len(), 1);
+    let rrd = dir.join("default.rrd");
+    let viz: serde_json::Value = ok_json(&["viz", s(out), "--save", s(&rrd), "--json"]);
+    let entities = viz["entities"].as_array().unwrap();
+    for shown in [
+        "map/track",
+        "map/gnss/single",
+        "map/fused/default/position",
+        "speed/radar",
+    ] {
+        assert!(entities.iter().any(|e| e == shown), "{shown}: {viz}");
+    }
+    assert!(viz["not_shown"].get("/notes").is_some(), "{viz}");
 }

@@ -59,43 +59,31 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
     let log = default_run(d.path(), 2, 240);
     // The figures tune starts from are those refuse + eval give for the same file.
     let fused = d.path().join("fused.mcap");
-    let refused: Value = ok_json(&[
-        "refuse",
-        s(&log),
-        "-c",
-        s(&sample("kalman.toml")),
-        "-o",
-        s(&fused),
-        "--json",
-    ]);
+    let refused = refuse_json(&log, "kalman.toml", &fused);
     let eval = &refused["eval"]["pipelines"][0];
+    let extra = [
+        "--reference",
+        "/truth",
+        "--params=motion.jerk_psd=0.01..10",
+        "--max-evals",
+        "3",
+    ];
     let start = tune(
         &log,
         &sample("kalman.toml"),
         &d.path().join("same.toml"),
-        &[
-            "--reference",
-            "/truth",
-            "--params=motion.jerk_psd=0.01..10",
-            "--max-evals",
-            "3",
-        ],
+        &extra,
     );
     let before = &start["before"];
     let close = |a: &Value, b: &Value| (a.as_f64().unwrap() - b.as_f64().unwrap()).abs() < 1e-12;
-    assert!(
-        close(
-            &before["position_rmse_m"],
-            &eval["position_error_m"]["rmse"]
-        ),
-        "{before} {eval}"
-    );
-    assert!(close(
-        &before["speed_rmse_mps"],
-        &eval["speed_error_mps"]["rmse"]
-    ));
-    assert!(close(&before["nees_inside_95"], &eval["nees"]["inside_95"]));
-    assert!(close(&before["nis_inside_95"], &eval["nis"]["inside_95"]));
+    for (tuned, refused) in [
+        ("position_rmse_m", &eval["position_error_m"]["rmse"]),
+        ("speed_rmse_mps", &eval["speed_error_mps"]["rmse"]),
+        ("nees_inside_95", &eval["nees"]["inside_95"]),
+        ("nis_inside_95", &eval["nis"]["inside_95"]),
+    ] {
+        assert!(close(&before[tuned], refused), "{tuned}: {before} {eval}");
+    }
     assert_eq!(before["gated"], eval["gated"]);
 
     let bad = bad_config(d.path());
@@ -124,25 +112,7 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
             r["after"]["position_rmse_m"].as_f64() < r["before"]["position_rmse_m"].as_f64(),
             "{optimiser}: {r}"
         );
-        // The tuned file is the bad one with only the tuned numbers changed.
-        let (old, new) = (
-            std::fs::read_to_string(&bad).unwrap(),
-            std::fs::read_to_string(&out).unwrap(),
-        );
-        let changed: Vec<(&str, &str)> = old
-            .lines()
-            .zip(new.lines())
-            .filter(|(a, b)| a != b)
-            .collect();
-        assert_eq!(old.lines().count(), new.lines().count());
-        assert!(!changed.is_empty() && changed.len() <= 4, "{changed:?}");
-        for (a, b) in &changed {
-            assert!(
-                a.contains("variance") && b.contains("variance")
-                    || a.contains("jerk_psd") && b.contains("jerk_psd"),
-                "{a} -> {b}"
-            );
-        }
+        only_the_tuned_numbers_changed(&bad, &out);
         // Re-fusing with the tuned file gives the figures the report promised.
         let check = d.path().join(format!("{optimiser}.fused.mcap"));
         let refused: Value =
@@ -151,30 +121,14 @@ fn tune_starts_from_refuse_s_figures_and_every_optimiser_improves_a_bad_start() 
             &refused["eval"]["pipelines"][0]["position_error_m"]["rmse"],
             &r["after"]["position_rmse_m"]
         ));
-        // The trace: one row per evaluation, its best never rising, the first the file's.
-        let trace = std::fs::read_to_string(out.with_extension("trace.csv")).unwrap();
-        let rows: Vec<Vec<f64>> = trace
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
-            .collect();
-        assert_eq!(rows.len() as u64, r["evaluations"].as_u64().unwrap());
-        assert!(rows.len() <= 81);
-        // (serde_json reads floats to within an ulp, not exactly.)
-        assert!((rows[0][2] - b).abs() < 1e-12);
-        assert!(rows.windows(2).all(|w| w[1][3] <= w[0][3]));
-        assert!((rows.last().unwrap()[3] - a).abs() < 1e-12);
-        // The same trace as an MCAP channel, which viz lays out: objective, best, each value.
-        let mcap = out.with_extension("trace.mcap");
-        let trace: Vec<railfuse_catalog::messages::TuneEvaluation> =
-            messages(&mcap, "/tune/kalman/trace");
-        assert_eq!(trace.len(), rows.len());
-        assert!(trace.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
-        assert_eq!(trace[0].values.len(), 4);
-        assert_eq!(trace[0].values[0].name, "motion.jerk_psd");
-        assert_eq!(trace[0].values[0].value, 20.0);
+        the_trace_records_every_evaluation(&out, &r, (b, a));
         let rrd = d.path().join(format!("{optimiser}.rrd"));
-        let viz = ok(&["viz", s(&mcap), "--save", s(&rrd)]);
+        let viz = ok(&[
+            "viz",
+            s(&out.with_extension("trace.mcap")),
+            "--save",
+            s(&rrd),
+        ]);
         assert!(stderr(&viz).contains("on 6 entities"), "{}", stderr(&viz));
     }
 }
@@ -285,18 +239,7 @@ fn bad_tuning_requests_get_one_clear_line_each() {
         ),
     ];
     for (extra, expected) in cases {
-        let mut args = vec![
-            "tune",
-            s(&log),
-            "-c",
-            s(&kalman),
-            "--pipeline",
-            "kalman",
-            "-o",
-            s(&out),
-        ];
-        args.extend(extra.iter());
-        refused(&args, &[expected]);
+        tune_refused(&[&log], &kalman, "kalman", &extra, &out, &[expected]);
     }
     // A log without a sensor the pipeline requires, and a pipeline the file does not have.
     let requires_loop = d.path().join("requires_loop.toml");
@@ -308,36 +251,18 @@ fn bad_tuning_requests_get_one_clear_line_each() {
         ),
     )
     .unwrap();
-    refused(
-        &[
-            "tune",
-            s(&seed001),
-            "-c",
-            s(&requires_loop),
-            "--pipeline",
-            "kalman",
-            "--params",
-            "motion.jerk_psd=0.01..1",
-            "-o",
-            s(&out),
-        ],
-        &["/loop/position", "is not in the file"],
+    let jerk = ["--params", "motion.jerk_psd=0.01..1"];
+    let expected = ["/loop/position", "is not in the file"];
+    tune_refused(
+        &[&seed001],
+        &requires_loop,
+        "kalman",
+        &jerk,
+        &out,
+        &expected,
     );
-    refused(
-        &[
-            "tune",
-            s(&log),
-            "-c",
-            s(&kalman),
-            "--pipeline",
-            "nope",
-            "--params",
-            "motion.jerk_psd=0.01..1",
-            "-o",
-            s(&out),
-        ],
-        &["no [[pipeline]] of that name (it has kalman)"],
-    );
+    let expected = ["no [[pipeline]] of that name (it has kalman)"];
+    tune_refused(&[&log], &kalman, "nope", &jerk, &out, &expected);
     assert!(!out.exists(), "nothing written on a refused request");
 }
 
@@ -348,17 +273,18 @@ fn em_recovers_seed000_s_known_noise_from_a_start_ten_times_off() {
     let logs: Vec<PathBuf> = (1..=3)
         .map(|seed| {
             let log = d.path().join(format!("s{seed}.mcap"));
-            ok(&[
-                "simulate",
-                "--scenario",
-                "seed000",
-                "--seed",
-                &seed.to_string(),
-                "--duration",
-                "1000",
-                "-o",
-                s(&log),
-            ]);
+            let seed = seed.to_string();
+            simulate(
+                &[
+                    "--scenario",
+                    "seed000",
+                    "--seed",
+                    &seed,
+                    "--duration",
+                    "1000",
+                ],
+                &log,
+            );
             log
         })
         .collect();
@@ -385,17 +311,8 @@ fn em_recovers_seed000_s_known_noise_from_a_start_ten_times_off() {
         s(&out),
         "--json",
     ]);
-    let r: Value = serde_json::from_slice(&ok(&args).stdout).unwrap();
-    let found = |name: &str| {
-        r["params"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["name"] == name)
-            .unwrap()["after"]
-            .as_f64()
-            .unwrap()
-    };
+    let r = ok_json(&args);
+    let found = |name: &str| tuned_value(&r, name);
     // Three 1000 s runs: the variances to 5 %, the jerk (seen only through the motion) to 15 %.
     let jerk = found("motion.jerk_variance") / 0.001 - 1.0;
     let lp = found("sensor[/loop/position].variance") / 0.01 - 1.0;
@@ -405,33 +322,50 @@ fn em_recovers_seed000_s_known_noise_from_a_start_ten_times_off() {
         "{jerk} {lp} {radar}"
     );
     // The likelihood never falls from one EM iteration to the next.
-    let ll: Vec<f64> = r["em_log_likelihood"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect();
+    let ll: Vec<f64> = serde_json::from_value(r["em_log_likelihood"].clone()).unwrap();
     assert!(
         ll.len() > 3 && ll.windows(2).all(|w| w[1] >= w[0] - 1e-6 * w[0].abs()),
         "{ll:?}"
     );
     // EM refuses what it cannot estimate, in one line.
-    refused(
-        &[
-            "tune",
-            s(&logs[0]),
-            "-c",
-            s(&config),
-            "--pipeline",
-            "kf_no_balise",
-            "--optimiser",
-            "em",
-            "--params=initial.speed_std_mps=0.1..10",
-            "-o",
-            s(&out),
-        ],
-        &["em: estimates the motion noise"],
+    let extra = [
+        "--optimiser",
+        "em",
+        "--params=initial.speed_std_mps=0.1..10",
+    ];
+    let expected = ["em: estimates the motion noise"];
+    tune_refused(
+        &[&logs[0]],
+        &config,
+        "kf_no_balise",
+        &extra,
+        &out,
+        &expected,
     );
+}
+
+/// `railfuse tune LOGS -c CONFIG --pipeline PIPELINE EXTRA -o OUT` fails with one line
+/// holding every one of `expected`.
+fn tune_refused(
+    logs: &[&Path],
+    config: &Path,
+    pipeline: &str,
+    extra: &[&str],
+    out: &Path,
+    expected: &[&str],
+) {
+    let mut args = vec!["tune"];
+    args.extend(logs.iter().map(|l| s(l)));
+    args.extend(["-c", s(config), "--pipeline", pipeline, "-o", s(out)]);
+    args.extend(extra);
+    refused(&args, expected);
+}
+
+/// The tuned value of parameter `name` in a `tune --json` report.
+fn tuned_value(report: &Value, name: &str) -> f64 {
+    let params = report["params"].as_array().unwrap();
+    let p = params.iter().find(|p| p["name"] == name).unwrap();
+    p["after"].as_f64().unwrap()
 }
 
 /// `railfuse args` fails with one line on stderr holding every one of `expected`.
@@ -488,4 +422,53 @@ fn ctrl_c_ends_the_search_and_writes_the_best_found() {
     let tuned = std::fs::read_to_string(&out).unwrap();
     assert!(tuned.contains("[[pipeline.sensor]]"));
     assert!(out.with_extension("trace.csv").exists() && out.with_extension("trace.mcap").exists());
+}
+
+/// The tuned file is the bad one with only the tuned numbers changed.
+fn only_the_tuned_numbers_changed(bad: &Path, out: &Path) {
+    let (old, new) = (
+        std::fs::read_to_string(bad).unwrap(),
+        std::fs::read_to_string(out).unwrap(),
+    );
+    let changed: Vec<(&str, &str)> = old
+        .lines()
+        .zip(new.lines())
+        .filter(|(a, b)| a != b)
+        .collect();
+    assert_eq!(old.lines().count(), new.lines().count());
+    assert!(!changed.is_empty() && changed.len() <= 4, "{changed:?}");
+    for (a, b) in &changed {
+        assert!(
+            a.contains("variance") && b.contains("variance")
+                || a.contains("jerk_psd") && b.contains("jerk_psd"),
+            "{a} -> {b}"
+        );
+    }
+}
+
+/// The trace: one row per evaluation, its best never rising, the first the file's objective
+/// `b`, the last the tuned one `a`; the same trace as an MCAP channel, which viz lays out:
+/// objective, best, each value.
+fn the_trace_records_every_evaluation(out: &Path, r: &Value, (b, a): (f64, f64)) {
+    let trace = std::fs::read_to_string(out.with_extension("trace.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = trace
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len() as u64, r["evaluations"].as_u64().unwrap());
+    assert!(rows.len() <= 81);
+    // (serde_json reads floats to within an ulp, not exactly.)
+    assert!((rows[0][2] - b).abs() < 1e-12);
+    assert!(rows.windows(2).all(|w| w[1][3] <= w[0][3]));
+    assert!((rows.last().unwrap()[3] - a).abs() < 1e-12);
+    // The same trace as an MCAP channel, which viz lays out: objective, best, each value.
+    let mcap = out.with_extension("trace.mcap");
+    let trace: Vec<railfuse_catalog::messages::TuneEvaluation> =
+        messages(&mcap, "/tune/kalman/trace");
+    assert_eq!(trace.len(), rows.len());
+    assert!(trace.windows(2).all(|w| w[0].stamp_ns < w[1].stamp_ns));
+    assert_eq!(trace[0].values.len(), 4);
+    assert_eq!(trace[0].values[0].name, "motion.jerk_psd");
+    assert_eq!(trace[0].values[0].value, 20.0);
 }

@@ -135,34 +135,7 @@ fn rerun_verifies_the_recording_with_its_layout_and_every_pipelines_entities() {
             "{p}: {logged} error rows for {n} states"
         );
     }
-    // The layout travels in the file: a blueprint store with the views by name, and every
-    // pipeline's diagnostics tab.
-    let data = rerun_ok(&["rrd", "print", "-vvv", s(&rrd)]);
-    assert!(data.contains("Blueprint"), "no blueprint store");
-    for view in [
-        "Map (east →, north ↑)",
-        "Speed (m/s)",
-        "Chainage error: fused − truth, ±3σ (m)",
-        "Speed error: fused − truth, ±3σ (m/s)",
-        "β per device",
-        "effective sample size",
-        "Events",
-    ] {
-        assert!(data.contains(view), "blueprint lacks the view {view:?}");
-    }
-    for p in ["kf", "fkf", "pf"] {
-        assert!(data.contains(&format!("{p}: NIS")), "no NIS view for {p}");
-    }
-    // The log_time timeline carries the MCAP log time of the simulated run (2026-06-01), not
-    // the wall clock of the viz run.
-    assert!(
-        data.contains("index_name: log_time"),
-        "no log_time timeline"
-    );
-    assert!(
-        data.contains("2026-06-01T08:01"),
-        "log_time is not the run's time"
-    );
+    the_layout_and_the_run_s_time_travel_in_the_file(&rrd);
 }
 
 /// A 2-D pipeline's state (east/north with its covariance) is drawn on the map as its 3σ
@@ -395,4 +368,34 @@ fn viz_streams_to_a_running_viewer_and_refuses_an_absent_one() {
         stderr(&out)
     );
     assert!(t.elapsed() < Duration::from_secs(10));
+}
+
+/// The layout travels in the file: a blueprint store with the views by name, and every
+/// pipeline's diagnostics tab; the log_time timeline carries the MCAP log time of the
+/// simulated run (2026-06-01), not the wall clock of the viz run.
+fn the_layout_and_the_run_s_time_travel_in_the_file(rrd: &std::path::Path) {
+    let data = rerun_ok(&["rrd", "print", "-vvv", s(rrd)]);
+    assert!(data.contains("Blueprint"), "no blueprint store");
+    for view in [
+        "Map (east →, north ↑)",
+        "Speed (m/s)",
+        "Chainage error: fused − truth, ±3σ (m)",
+        "Speed error: fused − truth, ±3σ (m/s)",
+        "β per device",
+        "effective sample size",
+        "Events",
+    ] {
+        assert!(data.contains(view), "blueprint lacks the view {view:?}");
+    }
+    for p in ["kf", "fkf", "pf"] {
+        assert!(data.contains(&format!("{p}: NIS")), "no NIS view for {p}");
+    }
+    assert!(
+        data.contains("index_name: log_time"),
+        "no log_time timeline"
+    );
+    assert!(
+        data.contains("2026-06-01T08:01"),
+        "log_time is not the run's time"
+    );
 }

@@ -349,23 +349,14 @@ mod tests {
     }
 
     fn map(vertices: Vec<TrackVertex>, other_tracks: Vec<TrackLine>) -> TrackMap {
+        let origin = GeodeticOrigin {
+            latitude_deg: 44.6,
+            longitude_deg: 10.9,
+            altitude_m: 30.0,
+        };
         TrackMap {
-            stamp_ns: 0,
-            name: "t".into(),
-            origin: GeodeticOrigin {
-                latitude_deg: 44.6,
-                longitude_deg: 10.9,
-                altitude_m: 30.0,
-            },
-            vertices,
-            balises: vec![],
-            tunnels: vec![],
-            stations: vec![],
-            sleeper_spacing_m: 0.6,
-            loop_crossing_spacing_m: None,
             other_tracks,
-            sleeper_sections: Vec::new(),
-            switches: Vec::new(),
+            ..TrackMap::line("t", origin, vertices)
         }
     }
 

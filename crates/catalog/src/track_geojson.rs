@@ -217,18 +217,8 @@ pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapErr
     }
     let main_line = tracks.remove(main);
     let map = TrackMap {
-        stamp_ns: 0,
-        name: main_line.name,
-        origin,
-        vertices: main_line.vertices,
-        balises: vec![],
-        tunnels: vec![],
-        stations: vec![],
-        sleeper_spacing_m: 0.6,
-        loop_crossing_spacing_m: None,
         other_tracks: tracks,
-        sleeper_sections: Vec::new(),
-        switches: Vec::new(),
+        ..TrackMap::line(&main_line.name, origin, main_line.vertices)
     };
     map.check().map_err(|e| invalid(e.to_string()))?;
     Ok(map)

@@ -89,6 +89,25 @@ pub struct TrackMap {
 }
 
 impl TrackMap {
+    /// A map of the main line alone: these vertices, with nothing on or beside them (no
+    /// balises, tunnels, stations, other tracks or switches) and sleepers every 0.6 m.
+    pub fn line(name: &str, origin: GeodeticOrigin, vertices: Vec<TrackVertex>) -> TrackMap {
+        TrackMap {
+            stamp_ns: 0,
+            name: name.to_owned(),
+            origin,
+            vertices,
+            balises: vec![],
+            tunnels: vec![],
+            stations: vec![],
+            sleeper_spacing_m: 0.6,
+            loop_crossing_spacing_m: None,
+            other_tracks: vec![],
+            sleeper_sections: Vec::new(),
+            switches: Vec::new(),
+        }
+    }
+
     /// East, north and heading (clockwise from north) of the main line at a chainage,
     /// interpolated along the polyline; clamped to the ends.
     pub fn locate(&self, chainage_m: f64) -> Option<(f64, f64, f64)> {

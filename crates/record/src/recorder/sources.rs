@@ -141,14 +141,7 @@ fn pump_with(
                     return Ok(());
                 }
             }
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock
-                        | std::io::ErrorKind::TimedOut
-                        | std::io::ErrorKind::Interrupted
-                ) =>
-            {
+            Err(e) if nothing_waiting(&e) => {
                 // Nothing waiting: a stopping recording has all this peer sent.
                 if drain_until.is_some() {
                     break Ok(());
@@ -350,14 +343,7 @@ fn udp(addr: std::net::SocketAddr, link: &Link) -> Result<(), SourceError> {
                     return Ok(());
                 }
             }
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    std::io::ErrorKind::WouldBlock
-                        | std::io::ErrorKind::TimedOut
-                        | std::io::ErrorKind::Interrupted
-                ) =>
-            {
+            Err(e) if nothing_waiting(&e) => {
                 if drain_until.is_some() {
                     return Ok(());
                 }
@@ -465,6 +451,13 @@ fn serve_connection(
 /// 50 ms up to a second, instead of spinning.
 fn next_backoff(backoff: Duration) -> Duration {
     (backoff * 2).clamp(Duration::from_millis(50), Duration::from_secs(1))
+}
+
+/// A read that found nothing waiting (a time-out, a non-blocking socket with no data, a
+/// signal): not an error of the source.
+fn nothing_waiting(e: &std::io::Error) -> bool {
+    use std::io::ErrorKind::{Interrupted, TimedOut, WouldBlock};
+    matches!(e.kind(), WouldBlock | TimedOut | Interrupted)
 }
 
 fn sleep_unless_stopping(link: &Link, d: Duration) {

@@ -204,23 +204,14 @@ mod tests {
 
     /// A track map of these vertices and stations near Modena.
     fn line(vertices: Vec<TrackVertex>, stations: Vec<Station>) -> TrackMap {
+        let origin = GeodeticOrigin {
+            latitude_deg: 44.6,
+            longitude_deg: 10.9,
+            altitude_m: 0.0,
+        };
         TrackMap {
-            stamp_ns: 0,
-            name: "t".into(),
-            origin: GeodeticOrigin {
-                latitude_deg: 44.6,
-                longitude_deg: 10.9,
-                altitude_m: 0.0,
-            },
-            vertices,
-            balises: vec![],
-            tunnels: vec![],
             stations,
-            sleeper_spacing_m: 0.6,
-            loop_crossing_spacing_m: None,
-            other_tracks: vec![],
-            sleeper_sections: Vec::new(),
-            switches: Vec::new(),
+            ..TrackMap::line("t", origin, vertices)
         }
     }
 
