@@ -110,6 +110,7 @@ fn the_ray_path_refuses_many_logs_and_tunes_to_the_local_values() {
     let mut args = vec![s(d.path()), s(&config)];
     args.extend(logs.iter().map(|l| s(l)));
     let v = python_ok("ray_fleet.py", &args);
+    one_result_from_three_doors(d.path(), &config);
     for (i, log) in logs.iter().enumerate() {
         let local = d.path().join(format!("local{i}.fused.mcap"));
         let r: serde_json::Value = ok_json(&[
@@ -138,6 +139,59 @@ fn the_ray_path_refuses_many_logs_and_tunes_to_the_local_values() {
         v["missing_log"].as_str().unwrap().contains("missing.mcap"),
         "{v}"
     );
+}
+
+/// One result, three doors: the first log re-fused by a Ray task (absolute paths), by
+/// `railfuse.refuse` and by the CLI from another working directory with relative paths, and
+/// by the CLI with absolute paths, gives the same bytes; the provenance it records is the
+/// input's file name and digest and the configuration's file name.
+fn one_result_from_three_doors(dir: &std::path::Path, config: &std::path::Path) {
+    let work = dir.join("work");
+    std::fs::create_dir_all(&work).unwrap();
+    std::fs::copy(config, work.join("kalman.toml")).unwrap();
+    let relative = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
+        .current_dir(&work)
+        .args([
+            "refuse",
+            "../r1.mcap",
+            "-c",
+            "kalman.toml",
+            "-o",
+            "cli.fused.mcap",
+        ])
+        .output()
+        .unwrap();
+    assert!(relative.status.success(), "{}", stderr(&relative));
+    let absolute = dir.join("abs.fused.mcap");
+    refuse(&dir.join("r1.mcap"), "kalman.toml", &absolute);
+    let bytes = |p: &std::path::Path| std::fs::read(p).unwrap();
+    let ray = bytes(&dir.join("ray0.fused.mcap"));
+    for other in [
+        work.join("cli.fused.mcap"),
+        dir.join("py0.fused.mcap"),
+        absolute,
+    ] {
+        assert!(
+            bytes(&other) == ray,
+            "{other:?} differs from the Ray task's output"
+        );
+    }
+    let info = ok_json(&["info", s(&dir.join("ray0.fused.mcap")), "--json"]);
+    let meta = info["metadata"].to_string();
+    let digest = sha256_hex(&dir.join("r1.mcap"));
+    for said in ["\"input\":\"r1.mcap\"", "\"config_source\":\"kalman.toml\""] {
+        assert!(meta.contains(said), "{said}: {meta}");
+    }
+    assert!(meta.contains(&digest), "{digest}: {meta}");
+}
+
+/// The SHA-256 of a file, in hex, computed here (not by railfuse).
+fn sha256_hex(path: &std::path::Path) -> String {
+    use sha2::{Digest, Sha256};
+    Sha256::digest(std::fs::read(path).unwrap())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
 }
 
 /// The configuration schema (`refuse --config-schema`) checked by `jsonschema`: every sample

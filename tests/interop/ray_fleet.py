@@ -23,6 +23,8 @@ reports = railfuse.ray.refuse_many(
 summary["refuse_rmse"] = [r["eval"]["pipelines"][0]["position_error_m"]["rmse"] for r in reports]
 evals = railfuse.ray.evaluate_many([os.path.join(out_dir, f"ray{i}.fused.mcap") for i in range(len(logs))])
 summary["evaluate_rmse"] = [e["pipelines"][0]["position_error_m"]["rmse"] for e in evals]
+# The second door beside Ray's: the package's own refuse of the first log.
+railfuse.refuse(logs[0], config, os.path.join(out_dir, "py0.fused.mcap"))
 
 params = ["motion.jerk_psd=0.001..10,steps=3", "sensor[/radar/speed].variance=1e-4..1,steps=3"]
 local = railfuse.tune(logs, config, "kalman", params=params, optimiser="grid")

@@ -29,6 +29,7 @@ use crate::spec::Pipelines;
 use railfuse_eval::{self as eval, EvalReport, Evaluator};
 
 mod outputs;
+mod provenance;
 
 use outputs::{copy_channel, register_outputs, Output, TrackOutput};
 
@@ -148,6 +149,12 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
 
 fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
     let summary = read_summary(opts.input)?;
+    // The input's digest on a thread of its own, beside the replay: provenance that does
+    // not depend on where the command ran or how the path was written.
+    let digest = {
+        let input = opts.input.to_owned();
+        std::thread::spawn(move || provenance::sha256_of_file(&input))
+    };
     let mut replay = Replay::new(opts, summary)?;
     let mut items = ReadAhead::new(Scanner::open(opts.input)?, READ_AHEAD_BYTES);
     while let Some(item) = items.next() {
@@ -161,12 +168,19 @@ fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
         }
     }
     replay.report.input_bytes = items.position();
+    let digest = digest.join().expect("the digest thread does not panic");
+    replay.input_sha256 = Some(digest.map_err(|source| railfuse_catalog::Error::Io {
+        path: opts.input.to_owned(),
+        source,
+    })?);
     replay.finish()
 }
 
 /// One `refuse` run in progress.
 struct Replay<'a> {
     opts: &'a RefuseOptions<'a>,
+    /// The input file's SHA-256 (hex), known once the input is read.
+    input_sha256: Option<String>,
     /// The pipelines being run, whose earlier outputs the input may hold.
     names: BTreeSet<String>,
     writer: LogWriter,
@@ -215,6 +229,7 @@ impl<'a> Replay<'a> {
             .map(AnyPipeline::new)
             .collect::<Result<_>>()?;
         let mut replay = Self {
+            input_sha256: None,
             opts,
             names,
             writer,
@@ -731,8 +746,18 @@ impl<'a> Replay<'a> {
                 ("pipeline".to_owned(), p.name().to_owned()),
                 ("filter".to_owned(), p.spec().estimator.name().to_owned()),
                 ("config_toml".to_owned(), p.spec().to_toml()),
-                ("config_source".to_owned(), self.opts.config_source.clone()),
-                ("input".to_owned(), input.display().to_string()),
+                (
+                    "config_source".to_owned(),
+                    provenance::file_name(&self.opts.config_source),
+                ),
+                (
+                    "input".to_owned(),
+                    provenance::file_name(&input.to_string_lossy()),
+                ),
+                (
+                    "input_sha256".to_owned(),
+                    self.input_sha256.clone().unwrap_or_default(),
+                ),
                 (
                     "tool_version".to_owned(),
                     concat!("railfuse ", env!("CARGO_PKG_VERSION")).to_owned(),
