@@ -26,6 +26,12 @@ struct Cli {
     /// command writes.
     #[arg(long, global = true)]
     no_foxglove: bool,
+    /// How the logs this command writes encode their channels: `protobuf` for every message
+    /// type that has a protobuf form (eddy-current blocks so far), `json` for none. By
+    /// default the eddy-current blocks are protobuf (ADC counts, about 2 bytes a sample) and
+    /// the rest JSON. Every command reads both.
+    #[arg(long, global = true, value_name = "json|protobuf")]
+    encoding: Option<railfuse_catalog::protobuf::Encoding>,
     #[command(subcommand)]
     command: Command,
 }
@@ -84,6 +90,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     progress::set_quiet(cli.quiet);
     railfuse_catalog::foxglove::set_twins_by_default(!cli.no_foxglove);
+    if let Some(e) = cli.encoding {
+        use railfuse_catalog::protobuf::{set_policy_by_default, EncodingPolicy};
+        set_policy_by_default(EncodingPolicy::Only(e));
+    }
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),
         Command::Info(a) => cmd::info::run(a),

@@ -279,6 +279,7 @@ fn block(stamp_ns: u64, n: usize, rate: f64, spacing: f64) -> EddyCurrentBlock {
         sensor_a: (0..n).map(|k| (k as f32 * 0.05).sin()).collect(),
         // Two unrelated signals: nothing to correlate, so nothing here can become speed.
         sensor_b: (0..n).map(|k| (k as f32 * 0.0731).cos()).collect(),
+        volts_per_count: None,
     }
 }
 

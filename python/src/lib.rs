@@ -122,7 +122,12 @@ fn read_json_lines<'py>(
                 match record? {
                     LogRecord::Channel(c) if c.topic == topic => found = true,
                     LogRecord::Message(m) if m.channel.topic == topic => {
-                        let body = m.data.trim_ascii();
+                        // A protobuf channel of a railfuse type becomes its JSON form.
+                        let decoded = match m.channel.message_encoding.as_str() {
+                            "json" => None,
+                            _ => m.decode_any(&path)?.map(|any| any.to_json()),
+                        };
+                        let body = decoded.as_deref().unwrap_or(m.data).trim_ascii();
                         out.extend_from_slice(
                             format!("{{\"log_time_ns\":{}", m.log_time_ns).as_bytes(),
                         );

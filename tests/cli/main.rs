@@ -402,3 +402,38 @@ fn viz_shows_the_chosen_pipelines_topics_and_window() {
     ]);
     assert_one_clear_line(&bad, &["--from 60 must be before --to 30"]);
 }
+
+/// A log written by an older railfuse, every channel JSON (samples/short-run.mcap, kept as it
+/// was written, before protobuf): every command that reads logs reads it as it did.
+#[test]
+fn an_old_all_json_log_still_reads_in_every_command() {
+    let d = tempfile::tempdir().unwrap();
+    let old = sample("short-run.mcap");
+    let info = ok_json(&["info", s(&old), "--json"]);
+    let channels = info["channels"].as_array().unwrap();
+    assert!(channels.len() > 5, "{info}");
+    assert!(
+        channels.iter().all(|c| c["message_encoding"] == "json"),
+        "{info}"
+    );
+    let fused = d.path().join("f.mcap");
+    let r = refuse_json(&old, "kalman.toml", &fused);
+    assert!(
+        r["refuse"]["pipelines"][0]["fused_states"].as_u64() > Some(100),
+        "{r}"
+    );
+    let e = ok_json(&["eval", s(&fused), "--json"]);
+    // (The same figure, summed in another order: equal to the last bits.)
+    let rmse = |v: &serde_json::Value| v["position_error_m"]["rmse"].as_f64().unwrap();
+    let (a, b) = (rmse(&e["pipelines"][0]), rmse(&r["eval"]["pipelines"][0]));
+    assert!((a - b).abs() < 1e-12 * b, "{a} vs {b}");
+    ok(&["viz", s(&old), "--save", s(&d.path().join("v.rrd"))]);
+    let salvaged = ok_json(&[
+        "recover",
+        s(&old),
+        "-o",
+        s(&d.path().join("r.mcap")),
+        "--json",
+    ]);
+    assert_eq!(salvaged["messages"], info["messages"], "{salvaged}");
+}

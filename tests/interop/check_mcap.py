@@ -1,10 +1,12 @@
 """Reads every message of an MCAP file with the official Python reader and validates each
-JSON message against its channel's JSON schema. Prints a JSON summary; exits 1 on failure."""
+JSON message against its channel's JSON schema; protobuf messages are decoded through the
+file's own descriptors by mcap-protobuf-support. Prints a JSON summary; exits 1 on failure."""
 import json
 import sys
 
 import jsonschema
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 
 
 def main(path):
@@ -13,7 +15,17 @@ def main(path):
         summary = reader.get_summary()
         validators = {}
         counts = {}
+        protobuf = {}
+        protobuf_decoder = DecoderFactory()
         for schema, channel, message in reader.iter_messages():
+            if channel.message_encoding == "protobuf":
+                assert schema.encoding == "protobuf", f"{channel.topic}: schema encoding {schema.encoding}"
+                decode = protobuf_decoder.decoder_for(channel.message_encoding, schema)
+                doc = decode(message.data)
+                assert message.publish_time == doc.stamp_ns, f"{channel.topic}: publish_time != stamp_ns"
+                counts[channel.topic] = counts.get(channel.topic, 0) + 1
+                protobuf[channel.topic] = schema.name
+                continue
             if channel.id not in validators:
                 assert schema.encoding == "jsonschema", f"{channel.topic}: schema encoding {schema.encoding}"
                 assert channel.message_encoding == "json", f"{channel.topic}: message encoding"
@@ -33,7 +45,7 @@ def main(path):
         metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         print(json.dumps({"messages": total, "topics": counts, "chunks": len(summary.chunk_indexes),
                           "compression": sorted({c.compression for c in summary.chunk_indexes}),
-                          "metadata": sorted(metadata)}))
+                          "metadata": sorted(metadata), "protobuf": protobuf}))
 
 
 if __name__ == "__main__":

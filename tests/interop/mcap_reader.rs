@@ -248,3 +248,46 @@ fn every_message_kind_validates_against_its_schema_in_the_python_reader() {
         );
     }
 }
+
+/// The eddy-current blocks are protobuf by default (ADC counts with their step, the file's
+/// own descriptors as their schema): mcap-protobuf-support decodes every sample to the float
+/// the JSON log of the same run holds, the official reader validates the rest, and both logs
+/// re-fuse to the same fused channels. `--encoding json` writes the old form.
+#[test]
+fn eddy_current_blocks_in_protobuf_decode_elsewhere_to_the_json_samples_and_refuse_alike() {
+    let d = tempfile::tempdir().unwrap();
+    let (pb, js) = (d.path().join("pb.mcap"), d.path().join("js.mcap"));
+    let run = ["--scenario", "seed004", "--seed", "2", "--duration", "30"];
+    simulate(&run, &pb);
+    let mut args = vec!["--encoding", "json", "simulate"];
+    args.extend(run);
+    args.extend(["-o", s(&js)]);
+    ok(&args);
+    let same = python_ok("eddy_protobuf.py", &[s(&pb), s(&js)]);
+    assert_eq!(same["blocks"], 300, "{same}");
+    let (fpb, fjs) = (
+        d.path().join("pb.fused.mcap"),
+        d.path().join("js.fused.mcap"),
+    );
+    refuse(&pb, "seed004.toml", &fpb);
+    refuse(&js, "seed004.toml", &fjs);
+    let checked = python_ok("check_mcap.py", &[s(&fpb)]);
+    assert_eq!(
+        checked["protobuf"]["/eddy_current/block"], "railfuse.EddyCurrentBlock",
+        "{checked}"
+    );
+    for pipeline in ["plain", "warped", "warped_kf"] {
+        let topic = format!("/fused/{pipeline}/state");
+        use railfuse_catalog::messages::FusedState;
+        let (a, b): (Vec<FusedState>, Vec<FusedState>) =
+            (messages(&fpb, &topic), messages(&fjs, &topic));
+        assert!(!a.is_empty() && a == b, "{pipeline}");
+    }
+    let sizes = [&pb, &js].map(|p| std::fs::metadata(p).unwrap().len());
+    assert!(
+        sizes[0] < sizes[1],
+        "protobuf {} bytes, JSON {}",
+        sizes[0],
+        sizes[1]
+    );
+}

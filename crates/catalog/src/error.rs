@@ -34,6 +34,15 @@ pub enum Error {
         #[source]
         source: serde_json::Error,
     },
+    /// A payload that does not decode, for a cause other than JSON's (protobuf).
+    #[error("{path}: message on {topic} at log time {log_time_ns} ns does not decode as {schema}: {cause}")]
+    Undecodable {
+        path: PathBuf,
+        topic: String,
+        schema: String,
+        log_time_ns: u64,
+        cause: String,
+    },
     #[error("{path}: cannot write MCAP: {cause}")]
     Write { path: PathBuf, cause: String },
     #[error("{output}: this is the input {input} itself (the same file); write the salvaged log to another path")]

@@ -24,6 +24,7 @@ pub mod inspect;
 pub mod log;
 pub mod map_matching;
 pub mod messages;
+pub mod protobuf;
 pub mod reference_track;
 pub mod rejections;
 pub mod topics;

@@ -48,12 +48,6 @@ pub enum SourceError {
     UnknownScenario(String),
     #[error("simulated source: {0}")]
     Simulation(#[from] railfuse_catalog::Error),
-    #[error("simulated source: {topic}: {source}")]
-    SimulatedMessage {
-        topic: String,
-        #[source]
-        source: serde_json::Error,
-    },
     #[error("simulated source: temporary file: {0}")]
     TempFile(#[source] io::Error),
     #[error("ended by an internal error (a bug in railfuse; please report it): {0}")]

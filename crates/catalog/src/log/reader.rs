@@ -14,6 +14,7 @@ use super::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
 
 use crate::error::{Error, Result};
 use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
+use crate::protobuf::Encoding;
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct SchemaInfo {
@@ -43,6 +44,9 @@ impl ChannelInfo {
     }
 }
 
+/// Why a protobuf payload of a type without a protobuf form does not decode.
+const NO_PROTOBUF_FORM: &str = "protobuf, and railfuse has no protobuf form of this type";
+
 /// One message, its payload borrowed from the reader.
 #[derive(Debug)]
 pub struct LogMessage<'a> {
@@ -54,8 +58,20 @@ pub struct LogMessage<'a> {
 }
 
 impl LogMessage<'_> {
-    /// Decodes the JSON payload as `M`, naming the file, topic and time if it does not fit.
+    /// Whether the payload is protobuf (else JSON).
+    fn is_protobuf(&self) -> bool {
+        self.channel.message_encoding == Encoding::Protobuf.message_encoding()
+    }
+
+    /// Decodes the payload (JSON or protobuf, as its channel says) as `M`, naming the file,
+    /// topic and time if it does not fit.
     pub fn decode<M: ChannelMessage>(&self, path: &Path) -> Result<M> {
+        if self.is_protobuf() {
+            return match M::decode_protobuf(self.data) {
+                Some(m) => m.map_err(|cause| self.undecodable(path, M::SCHEMA_NAME, cause)),
+                None => Err(self.undecodable(path, M::SCHEMA_NAME, NO_PROTOBUF_FORM.into())),
+            };
+        }
         serde_json::from_slice(self.data).map_err(|source| Error::Decode {
             path: path.to_owned(),
             topic: self.channel.topic.clone(),
@@ -66,9 +82,21 @@ impl LogMessage<'_> {
     }
 
     /// Decodes some of the payload's fields (a struct naming a subset of its type's fields):
-    /// the others are skipped without being converted, which is cheaper on a hot path.
+    /// the others are skipped without being converted, which is cheaper on a hot path. A
+    /// protobuf payload is decoded whole and its fields taken from that.
     pub fn decode_fields<T: serde::de::DeserializeOwned>(&self, path: &Path) -> Result<T> {
-        serde_json::from_slice(self.data).map_err(|source| Error::Decode {
+        let whole;
+        let json = match self.is_protobuf() {
+            true => {
+                whole = self.decode_any(path)?.map(|m| m.to_json()).ok_or_else(|| {
+                    let schema = self.channel.schema_name();
+                    self.undecodable(path, schema, "not a railfuse message type".into())
+                })?;
+                &whole[..]
+            }
+            false => self.data,
+        };
+        serde_json::from_slice(json).map_err(|source| Error::Decode {
             path: path.to_owned(),
             topic: self.channel.topic.clone(),
             schema: self.channel.schema_name().to_owned(),
@@ -83,6 +111,14 @@ impl LogMessage<'_> {
         let Some(kind) = self.channel.kind() else {
             return Ok(None);
         };
+        if self.is_protobuf() {
+            return match kind.decode_protobuf(self.data) {
+                Some(m) => m
+                    .map(Some)
+                    .map_err(|cause| self.undecodable(path, kind.schema_name(), cause)),
+                None => Err(self.undecodable(path, kind.schema_name(), NO_PROTOBUF_FORM.into())),
+            };
+        }
         kind.decode(self.data)
             .map(Some)
             .map_err(|source| Error::Decode {
@@ -92,6 +128,17 @@ impl LogMessage<'_> {
                 log_time_ns: self.log_time_ns,
                 source,
             })
+    }
+
+    /// The error of a payload that does not decode as `schema`, for `cause`.
+    fn undecodable(&self, path: &Path, schema: &str, cause: String) -> Error {
+        Error::Undecodable {
+            path: path.to_owned(),
+            topic: self.channel.topic.clone(),
+            schema: schema.to_owned(),
+            log_time_ns: self.log_time_ns,
+            cause,
+        }
     }
 
     /// True when the channel's schema is `M`'s.

@@ -47,7 +47,8 @@ impl MessageKind {
             }),
             MessageKind::EddyCurrentBlock => json!({
                 "stamp_ns": T, "sample_rate_hz": 10_000.0, "spacing_m": 0.3,
-                "sensor_a": [0.1, 0.4, -0.2], "sensor_b": [0.0, 0.1, 0.4]
+                "sensor_a": [0.1, 0.4, -0.2], "sensor_b": [0.0, 0.1, 0.4],
+                "volts_per_count": 0.0005
             }),
             _ => return None,
         })

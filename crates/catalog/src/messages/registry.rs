@@ -8,7 +8,7 @@
 use super::*;
 
 macro_rules! registry {
-    ($($ty:ident),* $(,)?) => {
+    ($($ty:ident $(: $protobuf:literal)?),* $(,)?) => {
         $(
             impl ChannelMessage for $ty {
                 const SCHEMA_NAME: &'static str = concat!("railfuse.", stringify!($ty));
@@ -16,6 +16,16 @@ macro_rules! registry {
                 fn stamp_ns(&self) -> u64 {
                     self.stamp_ns
                 }
+                $(
+                    const PROTOBUF: bool = $protobuf;
+                    fn encode_protobuf(&self, buf: &mut Vec<u8>) -> bool {
+                        crate::protobuf::encode(self, buf);
+                        true
+                    }
+                    fn decode_protobuf(data: &[u8]) -> Option<Result<Self, String>> {
+                        Some(crate::protobuf::decode(data))
+                    }
+                )?
             }
 
             impl From<$ty> for AnyMessage {
@@ -62,6 +72,22 @@ macro_rules! registry {
                 }
             }
 
+            /// Whether the kind has a protobuf form.
+            pub fn has_protobuf(self) -> bool {
+                match self {
+                    $(MessageKind::$ty => <$ty as ChannelMessage>::PROTOBUF,)*
+                }
+            }
+
+            /// Decodes a protobuf payload of this kind; `None` for a kind without a protobuf
+            /// form.
+            pub fn decode_protobuf(self, data: &[u8]) -> Option<Result<AnyMessage, String>> {
+                match self {
+                    $(MessageKind::$ty => <$ty as ChannelMessage>::decode_protobuf(data)
+                        .map(|r| r.map(AnyMessage::$ty)),)*
+                }
+            }
+
             /// Decodes a JSON payload of this kind.
             pub fn decode(self, data: &[u8]) -> serde_json::Result<AnyMessage> {
                 match self {
@@ -98,6 +124,15 @@ macro_rules! registry {
                 }
             }
 
+            /// The protobuf payload, for a kind that has a protobuf form.
+            pub fn to_protobuf(&self) -> Option<Vec<u8>> {
+                let mut buf = Vec::new();
+                let written = match self {
+                    $(AnyMessage::$ty(m) => m.encode_protobuf(&mut buf),)*
+                };
+                written.then_some(buf)
+            }
+
             /// The JSON payload.
             pub fn to_json(&self) -> Vec<u8> {
                 let encoded = match self {
@@ -116,7 +151,7 @@ registry!(
     Odometer,
     LoopPosition,
     BalisePassage,
-    EddyCurrentBlock,
+    EddyCurrentBlock: true,
     TrackMap,
     GroundTruth,
     Event,

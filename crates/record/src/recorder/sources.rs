@@ -532,15 +532,9 @@ fn simulated(
         // Shift the run onto the live clock: sensor and log times keep their spacing.
         let shift = |t: u64| live0 + ((t.saturating_sub(t0)) as f64 / speed) as u64;
         // Messages of kinds the catalogue does not know are passed over.
-        let Some(kind) = MessageKind::from_schema(m.channel.schema_name()) else {
+        let Some(mut message) = m.decode_any(&path)? else {
             continue;
         };
-        let mut message = kind
-            .decode(m.data)
-            .map_err(|source| SourceError::SimulatedMessage {
-                topic: m.channel.topic.clone(),
-                source,
-            })?;
         let stamp = message.stamp_ns_mut();
         *stamp = shift(*stamp);
         lock(&link.stats).received += 1;

@@ -207,6 +207,7 @@ mod tests {
             spacing_m: 0.25,
             sensor_a: (0..n).map(|k| (k as f32 * 0.3).sin()).collect(),
             sensor_b: (0..n).map(|k| (k as f32 * 0.3).cos()).collect(),
+            volts_per_count: None,
         }
     }
 

@@ -6,6 +6,7 @@
 //! Memory is bounded by the reorder windows, never by the length of the log (the smoother
 //! spills to a temporary file).
 
+use railfuse_catalog::protobuf::Encoding;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -599,7 +600,14 @@ impl<'a> Replay<'a> {
             data: translated.as_deref().unwrap_or(m.data),
         };
         if let Some(observe) = self.opts.observer {
-            observe(&channel.topic, channel.schema_name(), h.log_time, m.data);
+            // The observer takes JSON: a protobuf message of a railfuse type is given as its
+            // JSON form.
+            let json = match channel.message_encoding == Encoding::Protobuf.message_encoding() {
+                true => msg.decode_any(self.opts.input)?.map(|any| any.to_json()),
+                false => None,
+            };
+            let data = json.as_deref().unwrap_or(m.data);
+            observe(&channel.topic, channel.schema_name(), h.log_time, data);
         }
         if evaluated {
             self.eval.message(&msg)?;

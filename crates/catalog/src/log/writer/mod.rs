@@ -6,7 +6,7 @@
 //! compresses, writes, and keeps the offsets the indexes need. A write error stops the worker;
 //! the next call returns it, with its cause ("No space left on device").
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
@@ -21,6 +21,7 @@ use super::format::{self, put_message, put_record, Records, FRAME, MAGIC};
 use super::scan::Chunk;
 use crate::error::{Error, Result};
 use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
+use crate::protobuf::{Encoding, EncodingPolicy, DESCRIPTORS};
 
 mod file_side;
 
@@ -39,6 +40,8 @@ pub struct WriterOptions {
     /// Write Foxglove twins of GNSS fixes, the track map and events beside them
     /// ([`crate::foxglove`]).
     pub foxglove: bool,
+    /// Which channels are written in protobuf ([`crate::protobuf`]).
+    pub encoding: EncodingPolicy,
 }
 
 impl Default for WriterOptions {
@@ -47,6 +50,7 @@ impl Default for WriterOptions {
             chunk_size: 1 << 20,
             zstd_level: 1,
             foxglove: crate::foxglove::twins_by_default(),
+            encoding: crate::protobuf::policy_by_default(),
         }
     }
 }
@@ -107,7 +111,12 @@ pub struct LogWriter {
     /// Chunk buffers the worker is done with, for the next chunks.
     spares: Receiver<Vec<u8>>,
     worker: Option<JoinHandle<Result<()>>>,
-    schema_ids: HashMap<String, u16>,
+    /// Schema ids by name and encoding (`jsonschema` or `protobuf`).
+    schema_ids: HashMap<(String, String), u16>,
+    /// The channels written in protobuf.
+    protobuf_channels: HashSet<u16>,
+    /// Which kinds are written in protobuf.
+    encoding: EncodingPolicy,
     /// Framed schema and channel records, repeated in the summary.
     schemas: BTreeMap<u16, Vec<u8>>,
     channels: BTreeMap<u16, Vec<u8>>,
@@ -167,11 +176,13 @@ impl LogWriter {
             spares,
             worker: Some(worker),
             schema_ids: HashMap::new(),
+            protobuf_channels: HashSet::new(),
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
             sequences: HashMap::new(),
             topics: HashMap::new(),
             foxglove: options.foxglove,
+            encoding: options.encoding,
             twins: HashMap::new(),
             open: OpenChunk::default(),
             stats: Statistics::default(),
@@ -212,21 +223,52 @@ impl LogWriter {
         self.add_channel_of(M::KIND, topic)
     }
 
-    /// Registers a channel of message kind `kind` on `topic`.
+    /// Registers a channel of message kind `kind` on `topic`, in the encoding the writer's
+    /// policy gives the kind.
     pub fn add_channel_of(&mut self, kind: MessageKind, topic: &str) -> Result<ChannelId> {
-        self.add_channel_named(kind.schema_name(), &kind.schema_bytes(), topic)
+        self.add_channel_encoded(kind, topic, self.encoding.for_kind(kind))
     }
 
-    /// Registers a channel on `topic` with the schema of that name (written on first use),
-    /// both on the lowest free ids.
+    /// Registers a channel of message kind `kind` on `topic` in `encoding`; JSON for a kind
+    /// without a protobuf form.
+    pub fn add_channel_encoded(
+        &mut self,
+        kind: MessageKind,
+        topic: &str,
+        encoding: Encoding,
+    ) -> Result<ChannelId> {
+        if encoding == Encoding::Protobuf && kind.has_protobuf() {
+            let c = self.add_channel_in(kind.schema_name(), DESCRIPTORS, topic, encoding)?;
+            self.protobuf_channels.insert(c.0);
+            Ok(c)
+        } else {
+            self.add_channel_named(kind.schema_name(), &kind.schema_bytes(), topic)
+        }
+    }
+
+    /// Registers a JSON channel on `topic` with the schema of that name (written on first
+    /// use), both on the lowest free ids.
     fn add_channel_named(&mut self, schema: &str, data: &[u8], topic: &str) -> Result<ChannelId> {
-        let schema_id = match self.schema_ids.get(schema) {
+        self.add_channel_in(schema, data, topic, Encoding::Json)
+    }
+
+    /// Registers a channel on `topic` in `encoding` with the schema of that name and encoding
+    /// (written on first use), both on the lowest free ids.
+    fn add_channel_in(
+        &mut self,
+        schema: &str,
+        data: &[u8],
+        topic: &str,
+        encoding: Encoding,
+    ) -> Result<ChannelId> {
+        let key = (schema.to_owned(), encoding.schema_encoding().to_owned());
+        let schema_id = match self.schema_ids.get(&key) {
             Some(&id) => id,
             None => {
                 let id = (1..=u16::MAX)
                     .find(|i| !self.schemas.contains_key(i))
                     .unwrap_or(0);
-                self.copy_schema(id, schema, super::SCHEMA_ENCODING, data)?;
+                self.copy_schema(id, schema, encoding.schema_encoding(), data)?;
                 id
             }
         };
@@ -237,7 +279,7 @@ impl LogWriter {
             id,
             schema_id,
             topic,
-            super::MESSAGE_ENCODING,
+            encoding.message_encoding(),
             &BTreeMap::new(),
         )?;
         Ok(ChannelId(id))
@@ -271,7 +313,8 @@ impl LogWriter {
             return Ok(());
         }
         let record = schema_record(id, name, encoding, data);
-        self.schema_ids.entry(name.to_owned()).or_insert(id);
+        let key = (name.to_owned(), encoding.to_owned());
+        self.schema_ids.entry(key).or_insert(id);
         self.schemas.insert(id, record.clone());
         self.send(Job::Records(record))
     }
@@ -311,11 +354,18 @@ impl LogWriter {
     ) -> Result<()> {
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
-        serde_json::to_writer(&mut buf, msg).map_err(|e| Error::write(&self.partial, e))?;
+        let protobuf = self.protobuf_channels.contains(&channel.0) && msg.encode_protobuf(&mut buf);
+        if !protobuf {
+            serde_json::to_writer(&mut buf, msg).map_err(|e| Error::write(&self.partial, e))?;
+        }
         let sequence = self.next_sequence(channel.0);
         let result = self
             .write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &buf)
-            .and_then(|()| self.twin_after(M::KIND, channel, log_time_ns, &buf));
+            .and_then(|()| match protobuf {
+                // (No protobuf type has a Foxglove twin yet.)
+                true => Ok(()),
+                false => self.twin_after(M::KIND, channel, log_time_ns, &buf),
+            });
         self.buf = buf;
         result
     }
@@ -346,6 +396,11 @@ impl LogWriter {
         msg: &AnyMessage,
     ) -> Result<()> {
         let sequence = self.next_sequence(channel.0);
+        if self.protobuf_channels.contains(&channel.0) {
+            if let Some(data) = msg.to_protobuf() {
+                return self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &data);
+            }
+        }
         let json = msg.to_json();
         self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &json)?;
         self.twin_after(msg.kind(), channel, log_time_ns, &json)

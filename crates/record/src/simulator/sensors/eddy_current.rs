@@ -333,6 +333,7 @@ impl SimSensor for EddyCurrentSensor {
                     spacing_m: self.p.spacing_m,
                     sensor_a: std::mem::replace(&mut self.block_a, Vec::with_capacity(per_block)),
                     sensor_b: std::mem::replace(&mut self.block_b, Vec::with_capacity(per_block)),
+                    volts_per_count: (self.p.lsb_v > 0.0).then_some(self.p.lsb_v),
                 };
                 out.push(t + seconds(self.p.latency_s), Emit::EddyCurrent(block));
             }
