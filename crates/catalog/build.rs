@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use prost::Message;
 
 fn main() {
-    let files = ["railfuse/eddy_current.proto"];
+    let files = ["railfuse/eddy_current.proto", "railfuse/fused.proto"];
     for f in files {
         println!("cargo:rerun-if-changed=proto/{f}");
     }

@@ -291,3 +291,52 @@ fn eddy_current_blocks_in_protobuf_decode_elsewhere_to_the_json_samples_and_refu
         sizes[1]
     );
 }
+
+/// `--encoding protobuf` writes the fused states in protobuf: mcap-protobuf-support decodes
+/// them through the file's descriptors, and railfuse reads them back to the very states, and
+/// the same accuracy, as the JSON run's.
+#[test]
+fn fused_states_in_protobuf_decode_elsewhere_and_read_back_to_the_json_run_s_states() {
+    use railfuse_catalog::messages::FusedState;
+    let d = tempfile::tempdir().unwrap();
+    let (pb, js) = (d.path().join("pb.mcap"), d.path().join("js.mcap"));
+    let run = sample("short-run.mcap");
+    let config = sample("kalman.toml");
+    let args = |out: &std::path::Path| {
+        ["refuse", s(&run), "-c", s(&config), "-o", s(out), "--json"].map(str::to_owned)
+    };
+    let mut with_protobuf = vec!["--encoding".to_owned(), "protobuf".to_owned()];
+    with_protobuf.extend(args(&pb));
+    let r_pb = ok_json(&with_protobuf.iter().map(String::as_str).collect::<Vec<_>>());
+    let r_js = ok_json(&args(&js).iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(r_pb["eval"]["pipelines"], r_js["eval"]["pipelines"]);
+    let checked = python_ok("check_mcap.py", &[s(&pb)]);
+    assert_eq!(
+        checked["protobuf"]["/fused/kalman/state"], "railfuse.FusedState",
+        "{checked}"
+    );
+    let topic = "/fused/kalman/state";
+    let (a, b): (Vec<FusedState>, Vec<FusedState>) = (messages(&pb, topic), messages(&js, topic));
+    // (serde_json reads a float to within an ulp; protobuf carries its bits.)
+    assert!(a.len() > 1000 && a.len() == b.len());
+    let close = |x: f64, y: f64| (x - y).abs() <= 4.0 * f64::EPSILON * x.abs().max(y.abs());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!((x.stamp_ns, &x.source), (y.stamp_ns, &y.source));
+        let (fx, fy) = (
+            [x.chainage_m, x.speed_mps, x.acceleration_mps2],
+            [y.chainage_m, y.speed_mps, y.acceleration_mps2],
+        );
+        for (u, v) in fx
+            .iter()
+            .chain(&x.covariance)
+            .zip(fy.iter().chain(&y.covariance))
+        {
+            assert!(close(*u, *v), "{x:?} vs {y:?}");
+        }
+    }
+    let e = ok_json(&["eval", s(&pb), "--json"]);
+    assert_eq!(
+        e["pipelines"][0]["states"],
+        r_js["eval"]["pipelines"][0]["states"]
+    );
+}

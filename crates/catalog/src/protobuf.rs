@@ -127,6 +127,25 @@ pub trait ProtobufForm: Sized {
     fn from_protobuf(m: Self::Message) -> Result<Self, String>;
 }
 
+/// A repeated field that must hold exactly `N` values (a fixed-size array of the type).
+pub fn fixed<const N: usize>(values: Vec<f64>, field: &str) -> Result<[f64; N], String> {
+    let n = values.len();
+    values
+        .try_into()
+        .map_err(|_| format!("{field} has {n} values, not {N}"))
+}
+
+/// A repeated field that holds `N` values or none (an optional fixed-size array).
+pub fn optional_fixed<const N: usize>(
+    values: Vec<f64>,
+    field: &str,
+) -> Result<Option<[f64; N]>, String> {
+    match values.is_empty() {
+        true => Ok(None),
+        false => fixed(values, field).map(Some),
+    }
+}
+
 /// `m` encoded as protobuf, appended to `buf`.
 pub fn encode<M: ProtobufForm>(m: &M, buf: &mut Vec<u8>) {
     m.to_protobuf()

@@ -1,3 +1,5 @@
+use crate::protobuf::types as pb;
+use crate::protobuf::{fixed, optional_fixed, ProtobufForm};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -136,6 +138,81 @@ pub struct SensorStateEstimate {
     pub value: f64,
     /// Its standard deviation.
     pub std: f64,
+}
+
+impl ProtobufForm for FusedState {
+    type Message = pb::FusedState;
+
+    fn to_protobuf(&self) -> pb::FusedState {
+        pb::FusedState {
+            stamp_ns: self.stamp_ns,
+            chainage_m: self.chainage_m,
+            speed_mps: self.speed_mps,
+            acceleration_mps2: self.acceleration_mps2,
+            covariance: self.covariance.to_vec(),
+            source: self.source.clone(),
+            sensor_states: self
+                .sensor_states
+                .iter()
+                .map(|s| pb::SensorStateEstimate {
+                    topic: s.topic.clone(),
+                    kind: s.kind.clone(),
+                    value: s.value,
+                    std: s.std,
+                })
+                .collect(),
+            plane: self.plane.as_ref().map(|p| pb::PlanePosition {
+                east_m: p.east_m,
+                north_m: p.north_m,
+                covariance_en_m2: p.covariance_en_m2.to_vec(),
+                latitude_deg: p.latitude_deg,
+                longitude_deg: p.longitude_deg,
+                velocity_en_mps: p.velocity_en_mps.map_or_else(Vec::new, |v| v.to_vec()),
+                velocity_covariance_en: p
+                    .velocity_covariance_en
+                    .map_or_else(Vec::new, |v| v.to_vec()),
+                heading_rad: p.heading_rad,
+            }),
+        }
+    }
+
+    fn from_protobuf(m: pb::FusedState) -> Result<Self, String> {
+        let plane = match m.plane {
+            None => None,
+            Some(p) => Some(PlanePosition {
+                east_m: p.east_m,
+                north_m: p.north_m,
+                covariance_en_m2: fixed(p.covariance_en_m2, "plane.covariance_en_m2")?,
+                latitude_deg: p.latitude_deg,
+                longitude_deg: p.longitude_deg,
+                velocity_en_mps: optional_fixed(p.velocity_en_mps, "plane.velocity_en_mps")?,
+                velocity_covariance_en: optional_fixed(
+                    p.velocity_covariance_en,
+                    "plane.velocity_covariance_en",
+                )?,
+                heading_rad: p.heading_rad,
+            }),
+        };
+        Ok(FusedState {
+            stamp_ns: m.stamp_ns,
+            chainage_m: m.chainage_m,
+            speed_mps: m.speed_mps,
+            acceleration_mps2: m.acceleration_mps2,
+            covariance: fixed(m.covariance, "covariance")?,
+            source: m.source,
+            sensor_states: m
+                .sensor_states
+                .into_iter()
+                .map(|s| SensorStateEstimate {
+                    topic: s.topic,
+                    kind: s.kind,
+                    value: s.value,
+                    std: s.std,
+                })
+                .collect(),
+            plane,
+        })
+    }
 }
 
 impl FusedState {

@@ -155,7 +155,7 @@ registry!(
     TrackMap,
     GroundTruth,
     Event,
-    FusedState,
+    FusedState: true,
     FusedDiagnostics,
     SafetyStatus,
     ImuErrorModel,

@@ -293,17 +293,26 @@ impl LogWriter {
         channel_id: u16,
         topic: &str,
     ) -> Result<ChannelId> {
+        let encoding = self.encoding.for_kind(M::KIND);
         if !self.schemas.contains_key(&schema_id) {
-            let data = M::schema_bytes();
-            self.copy_schema(schema_id, M::SCHEMA_NAME, super::SCHEMA_ENCODING, &data)?;
+            let data = match encoding {
+                Encoding::Json => M::schema_bytes(),
+                Encoding::Protobuf => DESCRIPTORS.to_vec(),
+            };
+            let name = M::SCHEMA_NAME;
+            self.copy_schema(schema_id, name, encoding.schema_encoding(), &data)?;
         }
+        let message_encoding = encoding.message_encoding();
         self.copy_channel(
             channel_id,
             schema_id,
             topic,
-            super::MESSAGE_ENCODING,
+            message_encoding,
             &BTreeMap::new(),
         )?;
+        if encoding == Encoding::Protobuf {
+            self.protobuf_channels.insert(channel_id);
+        }
         Ok(ChannelId(channel_id))
     }
 
