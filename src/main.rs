@@ -27,7 +27,7 @@ struct Cli {
     #[arg(long, global = true)]
     no_foxglove: bool,
     /// How the logs this command writes encode their channels: `protobuf` for every message
-    /// type that has a protobuf form (eddy-current blocks and fused states so far), `json` for none. By
+    /// type that has a protobuf form (eddy-current blocks, fused states and diagnostics so far), `json` for none. By
     /// default the eddy-current blocks are protobuf (ADC counts, about 2 bytes a sample) and
     /// the rest JSON. Every command reads both.
     #[arg(long, global = true, value_name = "json|protobuf")]

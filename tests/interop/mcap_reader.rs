@@ -292,11 +292,11 @@ fn eddy_current_blocks_in_protobuf_decode_elsewhere_to_the_json_samples_and_refu
     );
 }
 
-/// `--encoding protobuf` writes the fused states in protobuf: mcap-protobuf-support decodes
+/// `--encoding protobuf` writes the fused states and diagnostics in protobuf: mcap-protobuf-support decodes
 /// them through the file's descriptors, and railfuse reads them back to the very states, and
 /// the same accuracy, as the JSON run's.
 #[test]
-fn fused_states_in_protobuf_decode_elsewhere_and_read_back_to_the_json_run_s_states() {
+fn fused_states_and_diagnostics_in_protobuf_decode_elsewhere_and_read_back_as_the_json_run_s() {
     use railfuse_catalog::messages::FusedState;
     let d = tempfile::tempdir().unwrap();
     let (pb, js) = (d.path().join("pb.mcap"), d.path().join("js.mcap"));
@@ -339,4 +339,24 @@ fn fused_states_in_protobuf_decode_elsewhere_and_read_back_to_the_json_run_s_sta
         e["pipelines"][0]["states"],
         r_js["eval"]["pipelines"][0]["states"]
     );
+    // The diagnostics too: every measurement's decision, reason and NIS.
+    assert_eq!(
+        checked["protobuf"]["/fused/kalman/diagnostics"], "railfuse.FusedDiagnostics",
+        "{checked}"
+    );
+    use railfuse_catalog::messages::FusedDiagnostics;
+    let topic = "/fused/kalman/diagnostics";
+    let (a, b): (Vec<FusedDiagnostics>, Vec<FusedDiagnostics>) =
+        (messages(&pb, topic), messages(&js, topic));
+    assert!(a.len() > 1000 && a.len() == b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(
+            (x.stamp_ns, x.decision, &x.reason),
+            (y.stamp_ns, y.decision, &y.reason)
+        );
+        match (x.nis, y.nis) {
+            (Some(u), Some(v)) => assert!(close(u, v), "{x:?} vs {y:?}"),
+            (u, v) => assert_eq!(u, v),
+        }
+    }
 }

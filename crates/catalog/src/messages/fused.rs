@@ -334,6 +334,126 @@ pub struct DeviceShare {
     pub fault: Option<String>,
 }
 
+impl ProtobufForm for FusedDiagnostics {
+    type Message = pb::FusedDiagnostics;
+
+    fn to_protobuf(&self) -> pb::FusedDiagnostics {
+        pb::FusedDiagnostics {
+            stamp_ns: self.stamp_ns,
+            source: self.source.clone(),
+            measurement: self.measurement,
+            measurement_variance: self.measurement_variance,
+            innovation: self.innovation,
+            innovation_variance: self.innovation_variance,
+            nis: self.nis,
+            decision: pb::GateDecision::from(self.decision) as i32,
+            device: self.device.clone(),
+            axis: self.axis.clone(),
+            reason: self.reason.clone(),
+            effective_sample_size: self.effective_sample_size,
+            resampled: self.resampled,
+            sharing: self.sharing.as_ref().map(|devices| pb::DeviceShares {
+                devices: devices
+                    .iter()
+                    .map(|d| pb::DeviceShare {
+                        device: d.device.clone(),
+                        beta: d.beta,
+                        fault: d.fault.clone(),
+                    })
+                    .collect(),
+            }),
+            eddy_current: self
+                .eddy_current
+                .as_ref()
+                .map(|e| pb::EddyCurrentDiagnostics {
+                    rho: e.rho,
+                    unwarped_rho: e.unwarped_rho,
+                    warp_k: e.warp_k,
+                    warp_acceleration_mps2: e.warp_acceleration_mps2,
+                    filter_acceleration_mps2: e.filter_acceleration_mps2,
+                    delay_s: e.delay_s,
+                    level: e.level,
+                    sleepers_a: e.sleepers_a,
+                    sleepers_b: e.sleepers_b,
+                    window: e.window.clone(),
+                }),
+        }
+    }
+
+    fn from_protobuf(m: pb::FusedDiagnostics) -> Result<Self, String> {
+        let decision = pb::GateDecision::try_from(m.decision)
+            .map_err(|_| format!("decision {} is not a gate decision", m.decision))?;
+        Ok(FusedDiagnostics {
+            stamp_ns: m.stamp_ns,
+            source: m.source,
+            measurement: m.measurement,
+            measurement_variance: m.measurement_variance,
+            innovation: m.innovation,
+            innovation_variance: m.innovation_variance,
+            nis: m.nis,
+            decision: decision.into(),
+            device: m.device,
+            axis: m.axis,
+            reason: m.reason,
+            effective_sample_size: m.effective_sample_size,
+            resampled: m.resampled,
+            sharing: m.sharing.map(|s| {
+                s.devices
+                    .into_iter()
+                    .map(|d| DeviceShare {
+                        device: d.device,
+                        beta: d.beta,
+                        fault: d.fault,
+                    })
+                    .collect()
+            }),
+            eddy_current: m.eddy_current.map(|e| EddyCurrentDiagnostics {
+                rho: e.rho,
+                unwarped_rho: e.unwarped_rho,
+                warp_k: e.warp_k,
+                warp_acceleration_mps2: e.warp_acceleration_mps2,
+                filter_acceleration_mps2: e.filter_acceleration_mps2,
+                delay_s: e.delay_s,
+                level: e.level,
+                sleepers_a: e.sleepers_a,
+                sleepers_b: e.sleepers_b,
+                window: e.window,
+            }),
+        })
+    }
+}
+
+/// The gate decisions name for name, both ways.
+macro_rules! gate_decisions {
+    ($($name:ident),* $(,)?) => {
+        impl From<GateDecision> for pb::GateDecision {
+            fn from(d: GateDecision) -> Self {
+                match d {
+                    $(GateDecision::$name => pb::GateDecision::$name,)*
+                }
+            }
+        }
+
+        impl From<pb::GateDecision> for GateDecision {
+            fn from(d: pb::GateDecision) -> Self {
+                match d {
+                    $(pb::GateDecision::$name => GateDecision::$name,)*
+                }
+            }
+        }
+    };
+}
+
+gate_decisions!(
+    Accepted,
+    AcceptedAfterLockout,
+    RejectedGate,
+    RejectedInvalid,
+    RejectedLate,
+    BeforeInitialisation,
+    RejectedDeviceFault,
+);
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -156,7 +156,7 @@ registry!(
     GroundTruth,
     Event,
     FusedState: true,
-    FusedDiagnostics,
+    FusedDiagnostics: true,
     SafetyStatus,
     ImuErrorModel,
     RecorderDiagnostics,
