@@ -150,12 +150,7 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
 
 fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
     let summary = read_summary(opts.input)?;
-    // The input's digest on a thread of its own, beside the replay: provenance that does
-    // not depend on where the command ran or how the path was written.
-    let digest = {
-        let input = opts.input.to_owned();
-        std::thread::spawn(move || provenance::sha256_of_file(&input))
-    };
+    let digest = provenance::InputDigest::start(opts.input);
     let mut replay = Replay::new(opts, summary)?;
     let mut items = ReadAhead::new(Scanner::open(opts.input)?, READ_AHEAD_BYTES);
     while let Some(item) = items.next() {
@@ -169,11 +164,7 @@ fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
         }
     }
     replay.report.input_bytes = items.position();
-    let digest = digest.join().expect("the digest thread does not panic");
-    replay.input_sha256 = Some(digest.map_err(|source| railfuse_catalog::Error::Io {
-        path: opts.input.to_owned(),
-        source,
-    })?);
+    replay.input_sha256 = Some(digest.finish()?);
     replay.finish()
 }
 

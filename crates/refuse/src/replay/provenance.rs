@@ -3,9 +3,42 @@
 //! task): file names and a content digest, never a path as it was typed.
 
 use std::io::Read;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::thread::JoinHandle;
 
-use sha2::{Digest, Sha256};
+use sha2::{Digest as _, Sha256};
+
+/// The input's digest, computed on a thread of its own beside the replay.
+pub struct InputDigest {
+    path: PathBuf,
+    thread: JoinHandle<std::io::Result<String>>,
+}
+
+impl InputDigest {
+    pub fn start(path: &Path) -> Self {
+        let input = path.to_owned();
+        let thread = std::thread::Builder::new()
+            .name("input-digest".into())
+            .spawn(move || sha256_of_file(&input))
+            .expect("a thread starts");
+        InputDigest {
+            path: path.to_owned(),
+            thread,
+        }
+    }
+
+    /// The digest (hex), or the error of reading the input.
+    pub fn finish(self) -> Result<String, railfuse_catalog::Error> {
+        let digest = self
+            .thread
+            .join()
+            .expect("the digest thread does not panic");
+        digest.map_err(|source| railfuse_catalog::Error::Io {
+            path: self.path,
+            source,
+        })
+    }
+}
 
 /// The SHA-256 of a file's content, in lower-case hex; read in 1 MiB blocks.
 pub fn sha256_of_file(path: &Path) -> std::io::Result<String> {
