@@ -1,13 +1,13 @@
 """The peer that `railfuse bench` runs beside `railfuse refuse`: the same job written the
 obvious way in Python, with clients written by others (the official `mcap` reader and writer,
-filterpy's KalmanFilter).
+filterpy's KalmanFilter, mcap-protobuf-support for protobuf channels).
 
     python bench/peer_refuse.py IN.mcap PIPELINE.toml OUT.mcap
 
 It copies every schema, channel, message and metadata record of IN into OUT, runs the first
 pipeline of PIPELINE.toml (a Kalman filter on the constant-acceleration model) over the
 pipeline's sensors in file order (variance fixed or from the message, NIS gate per sensor),
-writes a fused state per accepted measurement to /fused/<name>/state, and scores the states
+writes a fused state per accepted measurement to /fused/<name>/state (JSON), and scores the states
 against /truth (RMSE and maximum of position and speed error). Prints one JSON line: messages,
 seconds, messages per second, and the accuracy figures."""
 import bisect
@@ -20,6 +20,7 @@ import tomllib
 import numpy as np
 from filterpy.kalman import KalmanFilter
 from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
 from mcap.writer import CompressionType, Writer
 
 # What each sensor schema measures: (field, state index, variance field or None, validity field).
@@ -29,6 +30,23 @@ MEASURES = {
     "railfuse.RadarSpeed": ("speed_mps", 1, "speed_variance_m2ps2", "valid"),
     "railfuse.Odometer": ("speed_mps", 1, None, None),
 }
+
+
+def decoded(decoders, schema, channel, data):
+    """A message's fields by name (None for one it does not carry), JSON or protobuf."""
+    if channel.message_encoding != "protobuf":
+        return json.loads(data).get
+    m = decoders.decoder_for("protobuf", schema)(data)
+
+    def get(name):
+        try:
+            if not m.HasField(name):
+                return None
+        except ValueError:  # a proto3 field without presence: always there
+            pass
+        return getattr(m, name)
+
+    return get
 
 
 def transition(psd, dt):
@@ -105,7 +123,7 @@ def main(inp, config_path, out):
         reader = make_reader(f)
         writer = Writer(g, compression=CompressionType.ZSTD)
         writer.start(profile="railfuse", library="railfuse bench peer")
-        schema_ids, channel_ids = {}, {}
+        schema_ids, channel_ids, decoders = {}, {}, DecoderFactory()
         fused_schema = writer.register_schema("railfuse.FusedState", "jsonschema", b"{}")
         fused = writer.register_channel(f"/fused/{name}/state", "json", fused_schema)
         for schema, channel, message in reader.iter_messages(log_time_order=False):
@@ -113,19 +131,21 @@ def main(inp, config_path, out):
             messages += 1
             topic = channel.topic
             if topic == "/truth":
-                d = json.loads(message.data)
-                truth_t.append(d["stamp_ns"]), truth_s.append(d["chainage_m"]), truth_v.append(d["speed_mps"])
+                d = decoded(decoders, schema, channel, message.data)
+                truth_t.append(d("stamp_ns")), truth_s.append(d("chainage_m")), truth_v.append(d("speed_mps"))
                 continue
             sensor = sensors.get(topic)
             if sensor is None:
                 continue
             field, index, var_field, valid_field = MEASURES[schema.name]
-            d = json.loads(message.data)
-            z = d.get(field)
-            r = d.get(var_field) if sensor["variance"] == "message" else sensor["variance"]
-            if z is None or r is None or (valid_field and not d[valid_field]):
+            d = decoded(decoders, schema, channel, message.data)
+            z = d(field)
+            r = sensor["variance"]
+            if r == "message":
+                r = d(var_field) if var_field else None
+            if z is None or r is None or (valid_field and not d(valid_field)):
                 continue
-            stamp = d["stamp_ns"]
+            stamp = d("stamp_ns")
             if kf is None:
                 if index != 0:
                     continue

@@ -26,10 +26,9 @@ struct Cli {
     /// command writes.
     #[arg(long, global = true)]
     no_foxglove: bool,
-    /// How the logs this command writes encode their channels: `protobuf` for every message
-    /// type that has a protobuf form (eddy-current blocks, fused states and diagnostics so far), `json` for none. By
-    /// default the eddy-current blocks are protobuf (ADC counts, about 2 bytes a sample) and
-    /// the rest JSON. Every command reads both.
+    /// How the logs this command writes encode railfuse's channels (and their Foxglove
+    /// twins): `protobuf` (the default; schemas embedded as a FileDescriptorSet) or `json`
+    /// (railfuse's first encoding). Every command reads both.
     #[arg(long, global = true, value_name = "json|protobuf")]
     encoding: Option<railfuse_catalog::protobuf::Encoding>,
     #[command(subcommand)]
@@ -91,8 +90,7 @@ fn main() -> ExitCode {
     progress::set_quiet(cli.quiet);
     railfuse_catalog::foxglove::set_twins_by_default(!cli.no_foxglove);
     if let Some(e) = cli.encoding {
-        use railfuse_catalog::protobuf::{set_policy_by_default, EncodingPolicy};
-        set_policy_by_default(EncodingPolicy::Only(e));
+        railfuse_catalog::protobuf::set_encoding_by_default(e);
     }
     let result = match cli.command {
         Command::Simulate(a) => cmd::simulate::run(a),

@@ -287,7 +287,12 @@ fn block(stamp_ns: u64, n: usize, rate: f64, spacing: f64) -> EddyCurrentBlock {
 fn bad_blocks_are_refused_or_restart_the_stream_with_their_reason_and_never_become_speed() {
     let d = tempfile::tempdir().unwrap();
     let log = d.path().join("bad.mcap");
-    let mut w = LogWriter::create(&log).unwrap();
+    // JSON, where a NaN sample can only arrive as a null (protobuf carries the NaN itself).
+    let json_log = railfuse_catalog::log::WriterOptions {
+        encoding: railfuse_catalog::protobuf::Encoding::Json,
+        ..Default::default()
+    };
+    let mut w = LogWriter::create_with(&log, &json_log).unwrap();
     let ch = w
         .add_channel::<EddyCurrentBlock>("/eddy_current/block")
         .unwrap();

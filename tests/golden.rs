@@ -19,7 +19,9 @@ use common::*;
 use railfuse_catalog::log::{LogReader, LogRecord};
 use sha2::{Digest, Sha256};
 
-/// Per topic: message count and SHA-256 over (log time, publish time, payload) in file order.
+/// Per topic: message count and SHA-256 over (log time, publish time, content) in file order.
+/// A railfuse message's content is its JSON form, whatever its encoding (so the digest moves
+/// with what the channel says, not how it is spelled); any other message's is its payload.
 fn digests(path: &Path) -> BTreeMap<String, (u64, String)> {
     let mut hashers: BTreeMap<String, (u64, Sha256)> = BTreeMap::new();
     let mut r = LogReader::open(path).unwrap();
@@ -29,8 +31,10 @@ fn digests(path: &Path) -> BTreeMap<String, (u64, String)> {
             *n += 1;
             h.update(m.log_time_ns.to_le_bytes());
             h.update(m.publish_time_ns.to_le_bytes());
-            h.update((m.data.len() as u64).to_le_bytes());
-            h.update(m.data);
+            let content = m.decode_any(path).unwrap().map(|any| any.to_json());
+            let content = content.as_deref().unwrap_or(m.data);
+            h.update((content.len() as u64).to_le_bytes());
+            h.update(content);
         }
     }
     hashers

@@ -133,14 +133,20 @@ fn viz_spawn_without_a_viewer_on_path_says_so_in_one_line() {
 /// and no fused state or diagnostic carries anything but finite numbers.
 #[test]
 fn undecodable_and_non_finite_measurements_are_counted_and_never_fused() {
-    use railfuse_catalog::log::LogWriter;
+    use railfuse_catalog::log::{LogWriter, WriterOptions};
     use railfuse_catalog::messages::{LoopPosition, RadarSpeed};
+    use railfuse_catalog::protobuf::Encoding;
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (
         d.path().join("other.mcap"),
         d.path().join("other.fused.mcap"),
     );
-    let mut w = LogWriter::create(&raw).unwrap();
+    // A JSON log: the other recorder's text is what goes wrong.
+    let json_log = WriterOptions {
+        encoding: Encoding::Json,
+        ..WriterOptions::default()
+    };
+    let mut w = LogWriter::create_with(&raw, &json_log).unwrap();
     let lp = w.add_channel::<LoopPosition>("/loop/position").unwrap();
     let radar = w.add_channel::<RadarSpeed>("/radar/speed").unwrap();
     let mut bad = 0;

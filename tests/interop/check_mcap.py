@@ -6,7 +6,7 @@ import sys
 
 import jsonschema
 from mcap.reader import make_reader
-from mcap_protobuf.decoder import DecoderFactory
+from railfuse_messages import json_form
 
 
 def main(path):
@@ -16,13 +16,13 @@ def main(path):
         validators = {}
         counts = {}
         protobuf = {}
-        protobuf_decoder = DecoderFactory()
         for schema, channel, message in reader.iter_messages():
             if channel.message_encoding == "protobuf":
                 assert schema.encoding == "protobuf", f"{channel.topic}: schema encoding {schema.encoding}"
-                decode = protobuf_decoder.decoder_for(channel.message_encoding, schema)
-                doc = decode(message.data)
-                assert message.publish_time == doc.stamp_ns, f"{channel.topic}: publish_time != stamp_ns"
+                doc = json_form(schema, channel, message.data)
+                t = doc.get("timestamp")
+                stamp = doc["stamp_ns"] if "stamp_ns" in doc else t and t["sec"] * 10**9 + t["nsec"]
+                assert message.publish_time == (stamp or message.publish_time), f"{channel.topic}: publish_time != stamp_ns"
                 counts[channel.topic] = counts.get(channel.topic, 0) + 1
                 protobuf[channel.topic] = schema.name
                 continue

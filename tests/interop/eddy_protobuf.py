@@ -7,6 +7,7 @@ import sys
 import numpy as np
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
+from railfuse_messages import eddy_current_volts
 
 TOPIC = "/eddy_current/block"
 
@@ -16,10 +17,8 @@ def protobuf_blocks(path):
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         for schema, channel, _, m in reader.iter_decoded_messages(topics=[TOPIC]):
             assert channel.message_encoding == "protobuf" and schema.name == "railfuse.EddyCurrentBlock"
-            assert len(m.sensor_a) == 0, "samples on the grid travel as counts"
-            step = m.volts_per_count
-            volts = lambda c: (np.asarray(c, dtype=np.float64) * step).astype(np.float32)
-            yield m.stamp_ns, volts(m.sensor_a_counts), volts(m.sensor_b_counts)
+            assert len(m.sensor_a) == 0 and m.counts_i16, "samples on the grid travel as counts"
+            yield (m.stamp_ns, *eddy_current_volts(m))
 
 
 def json_blocks(path):

@@ -13,6 +13,7 @@ import tomllib
 import numpy as np
 from filterpy.kalman import KalmanFilter, rts_smoother
 from mcap.reader import make_reader
+from railfuse_messages import json_form
 
 POSITION_SCHEMAS = {"railfuse.LoopPosition", "railfuse.BalisePassage"}
 
@@ -69,10 +70,10 @@ def read_fused(path):
         for ch in summary.channels.values():
             schema_of[ch.topic] = summary.schemas[ch.schema_id].name
         states, diags, smoothed = {}, {}, {}
-        for _, channel, message in reader.iter_messages():
+        for schema, channel, message in reader.iter_messages():
             parts = channel.topic.split("/")
             if len(parts) == 4 and parts[1] == "fused":
-                d = json.loads(message.data)
+                d = json_form(schema, channel, message.data)
                 {"state": states, "diagnostics": diags, "smoothed": smoothed}[parts[3]].setdefault(parts[2], []).append(d)
     return configs, schema_of, states, diags, smoothed
 

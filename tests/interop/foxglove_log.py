@@ -10,6 +10,7 @@ import json
 import sys
 
 from mcap.reader import make_reader
+from railfuse_messages import json_form
 from mcap.writer import Writer
 
 LOCATION_FIX_SCHEMA = {
@@ -73,12 +74,12 @@ def main():
             elif not c.topic.startswith("/foxglove"):
                 channels[cid] = w.register_channel(c.topic, c.message_encoding, schemas[c.schema_id], dict(c.metadata))
         n = 0
-        for _, c, m in reader.iter_messages():
+        for s, c, m in reader.iter_messages():
             if c.id not in channels:
                 continue
             data = m.data
             if c.id == gps:
-                d = json.loads(data)
+                d = json_form(s, c, data)
                 if d.get("latitude_deg") is None:
                     continue  # a LocationFix is a position: no fix, no message
                 cov = d.get("position_covariance_enu_m2")

@@ -45,39 +45,63 @@ fn python_mcap_reads_and_validates_every_message_and_rerun_accepts_the_files() {
     }
 }
 
+/// The Foxglove twins, in protobuf (the default: decoded by Foxglove's own generated classes,
+/// read the same through the file's descriptors) and in JSON (`--encoding json`), validate
+/// against Foxglove's published schemas, and there is one for every fix with a position, every
+/// event, the map, and each pipeline's position at most 10 times a second.
 #[test]
 fn foxglove_twins_validate_against_foxglove_s_published_schemas() {
-    let d = tempfile::tempdir().unwrap();
-    let (raw, fused) = (d.path().join("raw.mcap"), d.path().join("fused.mcap"));
-    simulate(&["--duration", "120", "--seed", "3"], &raw);
-    refuse(&raw, "kalman.toml", &fused);
     let schemas = std::env::var("RAILFUSE_FOXGLOVE_SCHEMAS")
         .expect("RAILFUSE_FOXGLOVE_SCHEMAS: run the tests with tests/run, which fetches them");
-    let r = python_ok("check_foxglove.py", &[s(&fused), &schemas]);
-    // Every fix with a position, every event and the map have a twin.
-    let counts = python_ok("check_mcap.py", &[s(&fused)]);
-    let n = |topic: &str| counts["topics"][topic].as_u64().unwrap_or(0);
-    let twins = |topic: &str| r["topics"][topic].as_u64().unwrap_or(0);
-    assert!(
-        twins("/foxglove/gnss/fix") > 0 && twins("/foxglove/gnss/fix") <= n("/gnss/fix"),
-        "{r}"
-    );
-    assert_eq!(twins("/foxglove/events"), n("/events"), "{r}");
-    assert_eq!(twins("/foxglove/track/map"), 1, "{r}");
-    // Positions at 10 a second at most (the states come at about 70): a 120 s run holds at
-    // most 1 201 of them.
-    let fused = twins("/foxglove/fused/kalman/state");
-    assert!(
-        fused > 500 && fused <= 1201 && fused < n("/fused/kalman/state"),
-        "{r}"
-    );
-    assert_eq!(r["geojson_type"], "FeatureCollection", "{r}");
-    assert!(r["track_points"].as_u64().unwrap() > 10, "{r}");
-    assert_eq!(
-        r["geometries"],
-        serde_json::json!(["LineString", "Point"]),
-        "{r}"
-    );
+    let d = tempfile::tempdir().unwrap();
+    for encoding in ["protobuf", "json"] {
+        let (raw, fused) = (
+            d.path().join(format!("raw-{encoding}.mcap")),
+            d.path().join(format!("fused-{encoding}.mcap")),
+        );
+        let e = ["--encoding", encoding];
+        ok(&[
+            &e[..],
+            &[
+                "simulate",
+                "--duration",
+                "120",
+                "--seed",
+                "3",
+                "-o",
+                s(&raw),
+            ],
+        ]
+        .concat());
+        let cfg = sample("kalman.toml");
+        ok(&[&e[..], &["refuse", s(&raw), "-c", s(&cfg), "-o", s(&fused)]].concat());
+        let r = python_ok("check_foxglove.py", &[s(&fused), &schemas]);
+        let all = r["encodings"].as_object().unwrap();
+        assert!(all.len() == 4 && all.values().all(|v| v == encoding), "{r}");
+        let counts = python_ok("check_mcap.py", &[s(&fused)]);
+        let n = |topic: &str| counts["topics"][topic].as_u64().unwrap_or(0);
+        let twins = |topic: &str| r["topics"][topic].as_u64().unwrap_or(0);
+        assert!(
+            twins("/foxglove/gnss/fix") > 0 && twins("/foxglove/gnss/fix") <= n("/gnss/fix"),
+            "{r}"
+        );
+        assert_eq!(twins("/foxglove/events"), n("/events"), "{r}");
+        assert_eq!(twins("/foxglove/track/map"), 1, "{r}");
+        // Positions at 10 a second at most (the states come at about 70): a 120 s run holds
+        // at most 1 201 of them.
+        let fused = twins("/foxglove/fused/kalman/state");
+        assert!(
+            fused > 500 && fused <= 1201 && fused < n("/fused/kalman/state"),
+            "{r}"
+        );
+        assert_eq!(r["geojson_type"], "FeatureCollection", "{r}");
+        assert!(r["track_points"].as_u64().unwrap() > 10, "{r}");
+        assert_eq!(
+            r["geometries"],
+            serde_json::json!(["LineString", "Point"]),
+            "{r}"
+        );
+    }
 }
 
 /// A recording killed with SIGKILL mid-write (here the simulator, which writes the same way):
@@ -169,7 +193,7 @@ fn chunks_around_the_middle(
 fn a_corrupt_chunk_in_the_middle_costs_that_chunk_only_and_python_reads_the_rest() {
     let d = tempfile::tempdir().unwrap();
     let raw = d.path().join("run.mcap");
-    simulate(&["--seed", "2", "--duration", "120"], &raw);
+    simulate(&["--seed", "2", "--duration", "240"], &raw);
     let original = python_ok("check_mcap.py", &[s(&raw)]);
     let (chunk, lost) = chunks_around_the_middle(&raw);
     let mut bytes = std::fs::read(&raw).unwrap();

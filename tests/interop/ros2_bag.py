@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 from mcap.reader import make_reader
+from railfuse_messages import json_form
 from pyproj import Transformer
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
@@ -69,7 +70,7 @@ def main():
             counts[topic] = counts.get(topic, 0) + 1
 
         for schema, channel, m in make_reader(f).iter_messages():
-            d = json.loads(m.data)
+            d = json_form(schema, channel, m.data)
             t = channel.topic
             if t == "/track/map":
                 write_geojson(d, out / "line.geojson")

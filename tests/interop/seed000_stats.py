@@ -5,6 +5,7 @@ import json
 import sys
 
 from mcap.reader import make_reader
+from railfuse_messages import json_form
 
 STATED = {"loop": 0.01, "radar": 0.01, "jerk": 0.001}
 
@@ -12,8 +13,8 @@ STATED = {"loop": 0.01, "radar": 0.01, "jerk": 0.001}
 def residuals(path):
     truth, loop, radar = {}, [], []
     with open(path, "rb") as f:
-        for _, ch, m in make_reader(f).iter_messages(topics=["/truth", "/loop/position", "/radar/speed"]):
-            d = json.loads(m.data)
+        for schema, ch, m in make_reader(f).iter_messages(topics=["/truth", "/loop/position", "/radar/speed"]):
+            d = json_form(schema, ch, m.data)
             if ch.topic == "/truth":
                 truth[d["stamp_ns"]] = d
             elif ch.topic == "/loop/position":

@@ -4,13 +4,19 @@
 //! `foxglove.GeoJSON`, events as `foxglove.Log`. The twin of `/gnss/fix` is on
 //! `/foxglove/gnss/fix`: every twin's topic is its source's under [`TOPIC_PREFIX`].
 //!
-//! The schemas are copies of `@foxglove/schemas` 2.1.0 (npm; `dist/jsonschema`); the interop
-//! tests validate the twins against the package itself.
+//! A twin is in its source channel's encoding. The JSON schemas are copies of
+//! `@foxglove/schemas` 2.1.0 (npm; `dist/jsonschema`), the protobuf ones (proto/foxglove/)
+//! declare the fields railfuse writes with Foxglove's numbers; the interop tests validate the
+//! JSON twins against the package itself and decode the protobuf ones with Foxglove's own
+//! generated classes.
 
 use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use crate::messages::{Event, FixType, FusedState, GnssFix, MessageKind, Severity, TrackMap};
+use crate::messages::{AnyMessage, Event, FixType, FusedState, GnssFix, Severity, TrackMap};
+use crate::protobuf::Encoding;
+
+mod protobuf;
 
 static TWINS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(true);
 
@@ -60,12 +66,14 @@ impl TwinKind {
         }
     }
 
-    /// Its JSON schema, as the package publishes it.
-    pub fn schema_bytes(self) -> &'static [u8] {
-        match self {
-            TwinKind::LocationFix => include_bytes!("LocationFix.json"),
-            TwinKind::GeoJson => include_bytes!("GeoJSON.json"),
-            TwinKind::Log => include_bytes!("Log.json"),
+    /// Its schema data in `encoding`: the JSON schema as the package publishes it, or the
+    /// FileDescriptorSet of proto/foxglove/.
+    pub fn schema_bytes(self, encoding: Encoding) -> &'static [u8] {
+        match (encoding, self) {
+            (Encoding::Protobuf, _) => crate::protobuf::schema_data(self.schema_name()),
+            (Encoding::Json, TwinKind::LocationFix) => include_bytes!("LocationFix.json"),
+            (Encoding::Json, TwinKind::GeoJson) => include_bytes!("GeoJSON.json"),
+            (Encoding::Json, TwinKind::Log) => include_bytes!("Log.json"),
         }
     }
 }
@@ -89,16 +97,34 @@ impl Twin {
         t.sec * 1_000_000_000 + t.nsec as u64
     }
 
-    /// The twin of a railfuse message given as its kind and JSON payload, if its kind has one
-    /// (fixes without a position have none).
-    pub fn of(kind: MessageKind, json: &[u8]) -> Option<Twin> {
-        match kind {
-            MessageKind::GnssFix => location_fix(&serde_json::from_slice(json).ok()?),
-            MessageKind::TrackMap => {
-                Some(Twin::GeoJson(geojson(&serde_json::from_slice(json).ok()?)))
-            }
-            MessageKind::Event => Some(Twin::Log(log(&serde_json::from_slice(json).ok()?))),
+    /// The twin of a railfuse message, if its kind has one (fixes without a position have
+    /// none).
+    pub fn of<M: 'static>(msg: &M) -> Option<Twin> {
+        let any = msg as &dyn std::any::Any;
+        if let Some(fix) = any.downcast_ref::<GnssFix>() {
+            location_fix(fix)
+        } else if let Some(map) = any.downcast_ref::<TrackMap>() {
+            Some(Twin::GeoJson(geojson(map)))
+        } else {
+            any.downcast_ref::<Event>().map(|e| Twin::Log(log(e)))
+        }
+    }
+
+    /// [`Twin::of`] a message of any kind.
+    pub fn of_any(msg: &AnyMessage) -> Option<Twin> {
+        match msg {
+            AnyMessage::GnssFix(m) => Twin::of(m),
+            AnyMessage::TrackMap(m) => Twin::of(m),
+            AnyMessage::Event(m) => Twin::of(m),
             _ => None,
+        }
+    }
+
+    /// The message in `encoding`.
+    pub fn encode(&self, encoding: Encoding) -> Vec<u8> {
+        match encoding {
+            Encoding::Json => serde_json::to_vec(self).expect("a twin serialises"),
+            Encoding::Protobuf => protobuf::encode(self),
         }
     }
 }
@@ -294,7 +320,7 @@ pub fn log(e: &Event) -> Log {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::messages::{AnyMessage, EventKind};
+    use crate::messages::{EventKind, MessageKind};
 
     fn example(kind: MessageKind) -> AnyMessage {
         kind.example()

@@ -44,9 +44,6 @@ impl ChannelInfo {
     }
 }
 
-/// Why a protobuf payload of a type without a protobuf form does not decode.
-const NO_PROTOBUF_FORM: &str = "protobuf, and railfuse has no protobuf form of this type";
-
 /// One message, its payload borrowed from the reader.
 #[derive(Debug)]
 pub struct LogMessage<'a> {
@@ -67,10 +64,8 @@ impl LogMessage<'_> {
     /// topic and time if it does not fit.
     pub fn decode<M: ChannelMessage>(&self, path: &Path) -> Result<M> {
         if self.is_protobuf() {
-            return match M::decode_protobuf(self.data) {
-                Some(m) => m.map_err(|cause| self.undecodable(path, M::SCHEMA_NAME, cause)),
-                None => Err(self.undecodable(path, M::SCHEMA_NAME, NO_PROTOBUF_FORM.into())),
-            };
+            return crate::protobuf::decode(self.data)
+                .map_err(|cause| self.undecodable(path, M::SCHEMA_NAME, cause));
         }
         serde_json::from_slice(self.data).map_err(|source| Error::Decode {
             path: path.to_owned(),
@@ -112,12 +107,10 @@ impl LogMessage<'_> {
             return Ok(None);
         };
         if self.is_protobuf() {
-            return match kind.decode_protobuf(self.data) {
-                Some(m) => m
-                    .map(Some)
-                    .map_err(|cause| self.undecodable(path, kind.schema_name(), cause)),
-                None => Err(self.undecodable(path, kind.schema_name(), NO_PROTOBUF_FORM.into())),
-            };
+            return kind
+                .decode_protobuf(self.data)
+                .map(Some)
+                .map_err(|cause| self.undecodable(path, kind.schema_name(), cause));
         }
         kind.decode(self.data)
             .map(Some)

@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// A balise passage: the reader antenna was over the balise at `stamp_ns`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct BalisePassage {
@@ -12,3 +14,10 @@ pub struct BalisePassage {
     #[serde(default)]
     pub variance_m2: Option<f64>,
 }
+
+protobuf_form!(BalisePassage {
+    stamp_ns,
+    balise_id,
+    chainage_m,
+    variance_m2
+});

@@ -16,24 +16,38 @@ pub struct EddyCurrentBlock {
     /// The trailing sensor's samples (volts), same length as `sensor_a`.
     pub sensor_b: Vec<f32>,
     /// The converter's step (V per count), where the samples are on its grid: each sample is
-    /// `(count × volts_per_count) as f32`. In protobuf such samples travel as counts.
+    /// `(count × volts_per_count) as f32`. In protobuf such samples travel as 16-bit counts.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub volts_per_count: Option<f64>,
 }
 
-impl EddyCurrentBlock {
-    /// The samples as counts of `step`, if every one of them is exactly `(count × step) as
-    /// f32`: what makes counts a lossless encoding.
-    fn counts(samples: &[f32], step: f64) -> Option<Vec<i32>> {
-        samples
-            .iter()
-            .map(|&v| {
-                let c = (v as f64 / step).round();
-                let fits = c.abs() <= i32::MAX as f64 && (c * step) as f32 == v;
-                fits.then_some(c as i32)
-            })
-            .collect()
-    }
+/// The samples as 16-bit counts of `step`, if every one is exactly `(count × step) as f32`
+/// with the count in range: what makes counts a lossless encoding.
+fn counts(samples: &[f32], step: f64) -> Option<Vec<i16>> {
+    samples
+        .iter()
+        .map(|&v| {
+            let c = (v as f64 / step).round();
+            let fits = c.abs() <= i16::MAX as f64 && (c * step) as f32 == v;
+            fits.then_some(c as i16)
+        })
+        .collect()
+}
+
+/// Counts byte-planed: every count's low byte, then every count's high byte.
+fn planed(counts: &[i16]) -> Vec<u8> {
+    let low = counts.iter().map(|c| c.to_le_bytes()[0]);
+    let high = counts.iter().map(|c| c.to_le_bytes()[1]);
+    low.chain(high).collect()
+}
+
+/// [`planed`] undone.
+fn unplaned(bytes: &[u8]) -> Vec<i16> {
+    let (low, high) = bytes.split_at(bytes.len() / 2);
+    low.iter()
+        .zip(high)
+        .map(|(&l, &h)| i16::from_le_bytes([l, h]))
+        .collect()
 }
 
 impl ProtobufForm for EddyCurrentBlock {
@@ -41,11 +55,11 @@ impl ProtobufForm for EddyCurrentBlock {
 
     fn to_protobuf(&self) -> Self::Message {
         let step = self.volts_per_count.filter(|s| s.is_finite() && *s > 0.0);
-        let counts = step.and_then(|s| {
-            Some((
-                Self::counts(&self.sensor_a, s)?,
-                Self::counts(&self.sensor_b, s)?,
-            ))
+        let same_length = self.sensor_a.len() == self.sensor_b.len();
+        let counts = step.filter(|_| same_length).and_then(|s| {
+            let mut both = counts(&self.sensor_a, s)?;
+            both.extend(counts(&self.sensor_b, s)?);
+            Some(planed(&both))
         });
         let mut m = Self::Message {
             stamp_ns: self.stamp_ns,
@@ -55,25 +69,34 @@ impl ProtobufForm for EddyCurrentBlock {
             ..Default::default()
         };
         match counts {
-            Some((a, b)) => (m.sensor_a_counts, m.sensor_b_counts) = (a, b),
+            Some(c) => m.counts_i16 = c,
             None => (m.sensor_a, m.sensor_b) = (self.sensor_a.clone(), self.sensor_b.clone()),
         }
         m
     }
 
     fn from_protobuf(m: Self::Message) -> Result<Self, String> {
-        let has_counts = !(m.sensor_a_counts.is_empty() && m.sensor_b_counts.is_empty());
         let step = m.volts_per_count;
-        let (sensor_a, sensor_b) = if has_counts {
+        let (sensor_a, sensor_b) = if m.counts_i16.is_empty() {
+            (m.sensor_a, m.sensor_b)
+        } else {
             if !(step.is_finite() && step > 0.0) {
                 return Err(format!(
                     "counts without a positive volts_per_count ({step})"
                 ));
             }
-            let volts = |c: &[i32]| c.iter().map(|&c| (c as f64 * step) as f32).collect();
-            (volts(&m.sensor_a_counts), volts(&m.sensor_b_counts))
-        } else {
-            (m.sensor_a, m.sensor_b)
+            if m.counts_i16.len() % 4 != 0 {
+                let n = m.counts_i16.len();
+                return Err(format!(
+                    "counts_i16 has {n} bytes, not two sensors' 16-bit counts"
+                ));
+            }
+            let volts: Vec<f32> = unplaned(&m.counts_i16)
+                .into_iter()
+                .map(|c| (c as f64 * step) as f32)
+                .collect();
+            let (a, b) = volts.split_at(volts.len() / 2);
+            (a.to_vec(), b.to_vec())
         };
         Ok(EddyCurrentBlock {
             stamp_ns: m.stamp_ns,

@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::{protobuf_enum, protobuf_form};
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum EventKind {
@@ -67,3 +69,23 @@ impl Event {
         }
     }
 }
+
+protobuf_enum!(EventKind {
+    StationArrival,
+    StationDeparture,
+    CorrectionLinkUp,
+    CorrectionLinkDown,
+    TunnelEntry,
+    TunnelExit,
+    OperatorNote,
+    FaultInjected,
+    FaultCleared,
+    DeviceFault,
+    DeviceRecovered,
+});
+
+protobuf_form!(Event {
+    stamp_ns,
+    kind,
+    text
+});

@@ -1,5 +1,5 @@
 use crate::protobuf::types as pb;
-use crate::protobuf::{fixed, optional_fixed, ProtobufForm};
+use crate::protobuf::{protobuf_enum, protobuf_form, Wire};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -140,80 +140,32 @@ pub struct SensorStateEstimate {
     pub std: f64,
 }
 
-impl ProtobufForm for FusedState {
-    type Message = pb::FusedState;
-
-    fn to_protobuf(&self) -> pb::FusedState {
-        pb::FusedState {
-            stamp_ns: self.stamp_ns,
-            chainage_m: self.chainage_m,
-            speed_mps: self.speed_mps,
-            acceleration_mps2: self.acceleration_mps2,
-            covariance: self.covariance.to_vec(),
-            source: self.source.clone(),
-            sensor_states: self
-                .sensor_states
-                .iter()
-                .map(|s| pb::SensorStateEstimate {
-                    topic: s.topic.clone(),
-                    kind: s.kind.clone(),
-                    value: s.value,
-                    std: s.std,
-                })
-                .collect(),
-            plane: self.plane.as_ref().map(|p| pb::PlanePosition {
-                east_m: p.east_m,
-                north_m: p.north_m,
-                covariance_en_m2: p.covariance_en_m2.to_vec(),
-                latitude_deg: p.latitude_deg,
-                longitude_deg: p.longitude_deg,
-                velocity_en_mps: p.velocity_en_mps.map_or_else(Vec::new, |v| v.to_vec()),
-                velocity_covariance_en: p
-                    .velocity_covariance_en
-                    .map_or_else(Vec::new, |v| v.to_vec()),
-                heading_rad: p.heading_rad,
-            }),
-        }
-    }
-
-    fn from_protobuf(m: pb::FusedState) -> Result<Self, String> {
-        let plane = match m.plane {
-            None => None,
-            Some(p) => Some(PlanePosition {
-                east_m: p.east_m,
-                north_m: p.north_m,
-                covariance_en_m2: fixed(p.covariance_en_m2, "plane.covariance_en_m2")?,
-                latitude_deg: p.latitude_deg,
-                longitude_deg: p.longitude_deg,
-                velocity_en_mps: optional_fixed(p.velocity_en_mps, "plane.velocity_en_mps")?,
-                velocity_covariance_en: optional_fixed(
-                    p.velocity_covariance_en,
-                    "plane.velocity_covariance_en",
-                )?,
-                heading_rad: p.heading_rad,
-            }),
-        };
-        Ok(FusedState {
-            stamp_ns: m.stamp_ns,
-            chainage_m: m.chainage_m,
-            speed_mps: m.speed_mps,
-            acceleration_mps2: m.acceleration_mps2,
-            covariance: fixed(m.covariance, "covariance")?,
-            source: m.source,
-            sensor_states: m
-                .sensor_states
-                .into_iter()
-                .map(|s| SensorStateEstimate {
-                    topic: s.topic,
-                    kind: s.kind,
-                    value: s.value,
-                    std: s.std,
-                })
-                .collect(),
-            plane,
-        })
-    }
-}
+protobuf_form!(FusedState {
+    stamp_ns,
+    chainage_m,
+    speed_mps,
+    acceleration_mps2,
+    covariance,
+    source,
+    sensor_states,
+    plane,
+});
+protobuf_form!(SensorStateEstimate {
+    topic,
+    kind,
+    value,
+    std
+});
+protobuf_form!(PlanePosition {
+    east_m,
+    north_m,
+    covariance_en_m2,
+    latitude_deg,
+    longitude_deg,
+    velocity_en_mps,
+    velocity_covariance_en,
+    heading_rad,
+});
 
 impl FusedState {
     pub fn chainage_std_m(&self) -> f64 {
@@ -334,117 +286,41 @@ pub struct DeviceShare {
     pub fault: Option<String>,
 }
 
-impl ProtobufForm for FusedDiagnostics {
-    type Message = pb::FusedDiagnostics;
-
-    fn to_protobuf(&self) -> pb::FusedDiagnostics {
-        pb::FusedDiagnostics {
-            stamp_ns: self.stamp_ns,
-            source: self.source.clone(),
-            measurement: self.measurement,
-            measurement_variance: self.measurement_variance,
-            innovation: self.innovation,
-            innovation_variance: self.innovation_variance,
-            nis: self.nis,
-            decision: pb::GateDecision::from(self.decision) as i32,
-            device: self.device.clone(),
-            axis: self.axis.clone(),
-            reason: self.reason.clone(),
-            effective_sample_size: self.effective_sample_size,
-            resampled: self.resampled,
-            sharing: self.sharing.as_ref().map(|devices| pb::DeviceShares {
-                devices: devices
-                    .iter()
-                    .map(|d| pb::DeviceShare {
-                        device: d.device.clone(),
-                        beta: d.beta,
-                        fault: d.fault.clone(),
-                    })
-                    .collect(),
-            }),
-            eddy_current: self
-                .eddy_current
-                .as_ref()
-                .map(|e| pb::EddyCurrentDiagnostics {
-                    rho: e.rho,
-                    unwarped_rho: e.unwarped_rho,
-                    warp_k: e.warp_k,
-                    warp_acceleration_mps2: e.warp_acceleration_mps2,
-                    filter_acceleration_mps2: e.filter_acceleration_mps2,
-                    delay_s: e.delay_s,
-                    level: e.level,
-                    sleepers_a: e.sleepers_a,
-                    sleepers_b: e.sleepers_b,
-                    window: e.window.clone(),
-                }),
-        }
-    }
-
-    fn from_protobuf(m: pb::FusedDiagnostics) -> Result<Self, String> {
-        let decision = pb::GateDecision::try_from(m.decision)
-            .map_err(|_| format!("decision {} is not a gate decision", m.decision))?;
-        Ok(FusedDiagnostics {
-            stamp_ns: m.stamp_ns,
-            source: m.source,
-            measurement: m.measurement,
-            measurement_variance: m.measurement_variance,
-            innovation: m.innovation,
-            innovation_variance: m.innovation_variance,
-            nis: m.nis,
-            decision: decision.into(),
-            device: m.device,
-            axis: m.axis,
-            reason: m.reason,
-            effective_sample_size: m.effective_sample_size,
-            resampled: m.resampled,
-            sharing: m.sharing.map(|s| {
-                s.devices
-                    .into_iter()
-                    .map(|d| DeviceShare {
-                        device: d.device,
-                        beta: d.beta,
-                        fault: d.fault,
-                    })
-                    .collect()
-            }),
-            eddy_current: m.eddy_current.map(|e| EddyCurrentDiagnostics {
-                rho: e.rho,
-                unwarped_rho: e.unwarped_rho,
-                warp_k: e.warp_k,
-                warp_acceleration_mps2: e.warp_acceleration_mps2,
-                filter_acceleration_mps2: e.filter_acceleration_mps2,
-                delay_s: e.delay_s,
-                level: e.level,
-                sleepers_a: e.sleepers_a,
-                sleepers_b: e.sleepers_b,
-                window: e.window,
-            }),
-        })
-    }
-}
-
-/// The gate decisions name for name, both ways.
-macro_rules! gate_decisions {
-    ($($name:ident),* $(,)?) => {
-        impl From<GateDecision> for pb::GateDecision {
-            fn from(d: GateDecision) -> Self {
-                match d {
-                    $(GateDecision::$name => pb::GateDecision::$name,)*
-                }
-            }
-        }
-
-        impl From<pb::GateDecision> for GateDecision {
-            fn from(d: pb::GateDecision) -> Self {
-                match d {
-                    $(pb::GateDecision::$name => GateDecision::$name,)*
-                }
-            }
-        }
-    };
-}
-
-gate_decisions!(
+protobuf_form!(FusedDiagnostics {
+    stamp_ns,
+    source,
+    measurement,
+    measurement_variance,
+    innovation,
+    innovation_variance,
+    nis,
+    decision,
+    device,
+    axis,
+    reason,
+    effective_sample_size,
+    resampled,
+    sharing,
+    eddy_current,
+});
+protobuf_form!(DeviceShare {
+    device,
+    beta,
+    fault
+});
+protobuf_form!(EddyCurrentDiagnostics {
+    rho,
+    unwarped_rho,
+    warp_k,
+    warp_acceleration_mps2,
+    filter_acceleration_mps2,
+    delay_s,
+    level,
+    sleepers_a,
+    sleepers_b,
+    window,
+});
+protobuf_enum!(GateDecision {
     Accepted,
     AcceptedAfterLockout,
     RejectedGate,
@@ -452,7 +328,21 @@ gate_decisions!(
     RejectedLate,
     BeforeInitialisation,
     RejectedDeviceFault,
-);
+});
+
+/// The devices' shares travel in a message of their own, so that "no devices" and "not
+/// federated" differ.
+impl Wire for Option<Vec<DeviceShare>> {
+    type W = Option<pb::DeviceShares>;
+    fn to_wire(&self) -> Self::W {
+        self.as_ref().map(|d| pb::DeviceShares {
+            devices: d.to_wire(),
+        })
+    }
+    fn from_wire(w: Self::W, field: &str) -> Result<Self, String> {
+        w.map(|s| Wire::from_wire(s.devices, field)).transpose()
+    }
+}
 
 #[cfg(test)]
 mod tests {

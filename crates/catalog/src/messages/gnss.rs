@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::{protobuf_enum, protobuf_form};
+
 /// Quality of a GNSS solution as the receiver reports it. `None` means "no position: do not
 /// use": a fix message with `None` carries no latitude or longitude.
 #[derive(
@@ -63,3 +65,25 @@ pub struct GnssFix {
     #[serde(default)]
     pub course_rad: Option<f64>,
 }
+
+protobuf_enum!(FixType {
+    None,
+    Single,
+    Dgps,
+    RtkFloat,
+    RtkFixed
+});
+
+protobuf_form!(GnssFix {
+    stamp_ns,
+    fix_type,
+    satellites,
+    hdop,
+    latitude_deg,
+    longitude_deg,
+    altitude_m,
+    altitude_msl_m,
+    position_covariance_enu_m2,
+    speed_mps,
+    course_rad,
+});

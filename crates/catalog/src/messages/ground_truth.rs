@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// The true state of the train (simulation only).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct GroundTruth {
@@ -15,3 +17,15 @@ pub struct GroundTruth {
     /// Track heading, clockwise from north.
     pub heading_rad: f64,
 }
+
+protobuf_form!(GroundTruth {
+    stamp_ns,
+    chainage_m,
+    speed_mps,
+    acceleration_mps2,
+    east_m,
+    north_m,
+    latitude_deg,
+    longitude_deg,
+    heading_rad,
+});

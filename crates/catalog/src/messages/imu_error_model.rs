@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// What a GNSS/INS pipeline has learnt of its IMU's errors (source 003's `ε = Aδ + Bσ + Cψ`),
 /// written at every fused GNSS fix and whenever GNSS is lost or comes back.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -27,3 +29,17 @@ pub struct ImuErrorModel {
     /// True while GNSS is lost and the learnt model corrects the inertial solution.
     pub applied: bool,
 }
+
+protobuf_form!(ImuErrorModel {
+    stamp_ns,
+    accel_bias_mps2,
+    gyro_bias_radps,
+    standstill_samples,
+    standstill_s,
+    speed_residual_mps2,
+    speed_residual_std_mps2,
+    heading_residual_radps,
+    heading_residual_std_radps,
+    learnt_s,
+    applied,
+});

@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// Along-track position from a cross-induction loop (the cable crosses every few metres; each
 /// crossing detected is a position fix at the crossing's surveyed chainage).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -14,3 +16,10 @@ pub struct LoopPosition {
     #[serde(default)]
     pub variance_m2: Option<f64>,
 }
+
+protobuf_form!(LoopPosition {
+    stamp_ns,
+    chainage_m,
+    crossing,
+    variance_m2
+});

@@ -44,27 +44,16 @@ pub use tuning::{TuneEvaluation, TunedValue};
 use serde::{de::DeserializeOwned, Serialize};
 
 /// A message type that travels on a railfuse channel.
-pub trait ChannelMessage: Serialize + DeserializeOwned + schemars::JsonSchema {
+pub trait ChannelMessage:
+    Serialize + DeserializeOwned + schemars::JsonSchema + crate::protobuf::ProtobufForm + 'static
+{
     /// The MCAP schema name, `railfuse.<Type>`.
     const SCHEMA_NAME: &'static str;
     /// Its entry in the registry.
     const KIND: MessageKind;
 
-    /// Whether the type has a protobuf form ([`crate::protobuf::ProtobufForm`]).
-    const PROTOBUF: bool = false;
-
     /// The sensor's own timestamp, ns since the Unix epoch.
     fn stamp_ns(&self) -> u64;
-
-    /// Appends the protobuf form to `buf`; false (nothing written) for a type without one.
-    fn encode_protobuf(&self, _buf: &mut Vec<u8>) -> bool {
-        false
-    }
-
-    /// Decodes a protobuf payload; `None` for a type without a protobuf form.
-    fn decode_protobuf(_data: &[u8]) -> Option<Result<Self, String>> {
-        None
-    }
 
     /// The JSON schema of this type (draft 2020-12), as stored in the MCAP schema record.
     fn schema_bytes() -> Vec<u8> {

@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// A wheel/axle odometer (pulse generator) sample.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Odometer {
@@ -22,3 +24,13 @@ pub struct Odometer {
     /// Speed over the last sample interval, m/s.
     pub speed_mps: f64,
 }
+
+protobuf_form!(Odometer {
+    stamp_ns,
+    sensor_id,
+    pulse_count,
+    pulses_per_revolution,
+    wheel_diameter_m,
+    distance_increment_m,
+    speed_mps,
+});

@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// Doppler radar speed over the track.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RadarSpeed {
@@ -15,3 +17,11 @@ pub struct RadarSpeed {
     #[serde(default)]
     pub speed_variance_m2ps2: Option<f64>,
 }
+
+protobuf_form!(RadarSpeed {
+    stamp_ns,
+    speed_mps,
+    quality,
+    valid,
+    speed_variance_m2ps2
+});

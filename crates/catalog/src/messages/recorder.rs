@@ -3,6 +3,8 @@ use std::collections::BTreeMap;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// What one recorder source has done so far (counters since the start of the recording).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SourceStats {
@@ -88,3 +90,24 @@ pub struct RecorderDiagnostics {
     /// Bytes written to the log so far.
     pub bytes_written: u64,
 }
+
+protobuf_form!(RecorderDiagnostics {
+    stamp_ns,
+    sources,
+    bytes_written
+});
+protobuf_form!(SourceStats {
+    name,
+    received,
+    written,
+    malformed,
+    checksum_failures,
+    oversized,
+    dropped,
+    kernel_dropped,
+    reconnects,
+    connected,
+    last_error,
+    skipped,
+    first_problems,
+});

@@ -8,7 +8,7 @@
 use super::*;
 
 macro_rules! registry {
-    ($($ty:ident $(: $protobuf:literal)?),* $(,)?) => {
+    ($($ty:ident),* $(,)?) => {
         $(
             impl ChannelMessage for $ty {
                 const SCHEMA_NAME: &'static str = concat!("railfuse.", stringify!($ty));
@@ -16,16 +16,6 @@ macro_rules! registry {
                 fn stamp_ns(&self) -> u64 {
                     self.stamp_ns
                 }
-                $(
-                    const PROTOBUF: bool = $protobuf;
-                    fn encode_protobuf(&self, buf: &mut Vec<u8>) -> bool {
-                        crate::protobuf::encode(self, buf);
-                        true
-                    }
-                    fn decode_protobuf(data: &[u8]) -> Option<Result<Self, String>> {
-                        Some(crate::protobuf::decode(data))
-                    }
-                )?
             }
 
             impl From<$ty> for AnyMessage {
@@ -72,19 +62,10 @@ macro_rules! registry {
                 }
             }
 
-            /// Whether the kind has a protobuf form.
-            pub fn has_protobuf(self) -> bool {
+            /// Decodes a protobuf payload of this kind.
+            pub fn decode_protobuf(self, data: &[u8]) -> Result<AnyMessage, String> {
                 match self {
-                    $(MessageKind::$ty => <$ty as ChannelMessage>::PROTOBUF,)*
-                }
-            }
-
-            /// Decodes a protobuf payload of this kind; `None` for a kind without a protobuf
-            /// form.
-            pub fn decode_protobuf(self, data: &[u8]) -> Option<Result<AnyMessage, String>> {
-                match self {
-                    $(MessageKind::$ty => <$ty as ChannelMessage>::decode_protobuf(data)
-                        .map(|r| r.map(AnyMessage::$ty)),)*
+                    $(MessageKind::$ty => crate::protobuf::decode::<$ty>(data).map(AnyMessage::$ty),)*
                 }
             }
 
@@ -124,13 +105,13 @@ macro_rules! registry {
                 }
             }
 
-            /// The protobuf payload, for a kind that has a protobuf form.
-            pub fn to_protobuf(&self) -> Option<Vec<u8>> {
+            /// The protobuf payload.
+            pub fn to_protobuf(&self) -> Vec<u8> {
                 let mut buf = Vec::new();
-                let written = match self {
-                    $(AnyMessage::$ty(m) => m.encode_protobuf(&mut buf),)*
-                };
-                written.then_some(buf)
+                match self {
+                    $(AnyMessage::$ty(m) => crate::protobuf::encode(m, &mut buf),)*
+                }
+                buf
             }
 
             /// The JSON payload.
@@ -151,12 +132,12 @@ registry!(
     Odometer,
     LoopPosition,
     BalisePassage,
-    EddyCurrentBlock: true,
+    EddyCurrentBlock,
     TrackMap,
     GroundTruth,
     Event,
-    FusedState: true,
-    FusedDiagnostics: true,
+    FusedState,
+    FusedDiagnostics,
     SafetyStatus,
     ImuErrorModel,
     RecorderDiagnostics,

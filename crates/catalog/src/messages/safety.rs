@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// The safety view of one epoch of a positioning pipeline (source 002): which checks ran and
 /// passed, the first that failed and why, whether the position may be used, and then the safe
 /// interval along the track that contains the true position with the pipeline's stated
@@ -59,3 +61,25 @@ impl SafeInterval {
         (self.low_m..=self.high_m).contains(&chainage_m)
     }
 }
+
+protobuf_form!(SafetyStatus {
+    stamp_ns,
+    usable,
+    checks,
+    first_failure,
+    reason,
+    safe_interval,
+});
+protobuf_form!(SafetyCheck {
+    check,
+    passed,
+    value,
+    limit,
+    reason
+});
+protobuf_form!(SafeInterval {
+    chainage_m,
+    chainage_std_m,
+    low_m,
+    high_m
+});

@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 use crate::geodesy::GeodeticOrigin;
 
 /// A point of the track's centre line with its chainage.
@@ -184,3 +186,49 @@ impl TrackMap {
             .find(|t| (t.start_chainage_m..=t.end_chainage_m).contains(&chainage_m))
     }
 }
+
+protobuf_form!(TrackMap {
+    stamp_ns,
+    name,
+    origin,
+    vertices,
+    balises,
+    tunnels,
+    stations,
+    sleeper_spacing_m,
+    loop_crossing_spacing_m,
+    other_tracks,
+    sleeper_sections,
+    switches,
+});
+protobuf_form!(GeodeticOrigin {
+    latitude_deg,
+    longitude_deg,
+    altitude_m
+});
+protobuf_form!(TrackVertex {
+    chainage_m,
+    east_m,
+    north_m
+});
+protobuf_form!(TrackBalise {
+    balise_id,
+    chainage_m
+});
+protobuf_form!(Tunnel {
+    name,
+    start_chainage_m,
+    end_chainage_m
+});
+protobuf_form!(Station { name, chainage_m });
+protobuf_form!(SleeperSection {
+    start_chainage_m,
+    end_chainage_m,
+    spacing_m
+});
+protobuf_form!(TrackSwitch {
+    name,
+    start_chainage_m,
+    end_chainage_m
+});
+protobuf_form!(TrackLine { name, vertices });

@@ -1,6 +1,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::protobuf::protobuf_form;
+
 /// One evaluation of a `railfuse tune` search, on `/tune/<pipeline>/trace`: the candidate, its
 /// objective, and the best objective so far (the convergence trace).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -26,3 +28,12 @@ pub struct TunedValue {
     pub name: String,
     pub value: f64,
 }
+
+protobuf_form!(TuneEvaluation {
+    stamp_ns,
+    evaluation,
+    objective,
+    best,
+    values
+});
+protobuf_form!(TunedValue { name, value });

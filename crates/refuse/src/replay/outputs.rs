@@ -394,9 +394,8 @@ impl TrackOutput {
         log_time_ns: u64,
         track: &TrackMap,
     ) -> Result<()> {
-        let json = serde_json::to_vec(track).expect("a track map serialises");
-        writer.write_encoded(self.map, log_time_ns, track.stamp_ns(), &json)?;
-        let twin = railfuse_catalog::foxglove::Twin::of(MessageKind::TrackMap, &json);
+        writer.write_message(self.map, log_time_ns, track)?;
+        let twin = railfuse_catalog::foxglove::Twin::of(track);
         if let (Some(channel), Some(twin)) = (self.twin, twin) {
             writer.write_twin(channel, log_time_ns, &twin)?;
         }

@@ -20,8 +20,9 @@ use mcap::records::{
 use super::format::{self, put_message, put_record, Records, FRAME, MAGIC};
 use super::scan::Chunk;
 use crate::error::{Error, Result};
+use crate::foxglove::{Twin, TwinKind};
 use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
-use crate::protobuf::{Encoding, EncodingPolicy, DESCRIPTORS};
+use crate::protobuf::{schema_data, Encoding};
 
 mod file_side;
 
@@ -40,8 +41,8 @@ pub struct WriterOptions {
     /// Write Foxglove twins of GNSS fixes, the track map and events beside them
     /// ([`crate::foxglove`]).
     pub foxglove: bool,
-    /// Which channels are written in protobuf ([`crate::protobuf`]).
-    pub encoding: EncodingPolicy,
+    /// The encoding of railfuse's channels ([`crate::protobuf`]).
+    pub encoding: Encoding,
 }
 
 impl Default for WriterOptions {
@@ -50,7 +51,7 @@ impl Default for WriterOptions {
             chunk_size: 1 << 20,
             zstd_level: 1,
             foxglove: crate::foxglove::twins_by_default(),
-            encoding: crate::protobuf::policy_by_default(),
+            encoding: crate::protobuf::encoding_by_default(),
         }
     }
 }
@@ -116,7 +117,7 @@ pub struct LogWriter {
     /// The channels written in protobuf.
     protobuf_channels: HashSet<u16>,
     /// Which kinds are written in protobuf.
-    encoding: EncodingPolicy,
+    encoding: Encoding,
     /// Framed schema and channel records, repeated in the summary.
     schemas: BTreeMap<u16, Vec<u8>>,
     channels: BTreeMap<u16, Vec<u8>>,
@@ -223,22 +224,21 @@ impl LogWriter {
         self.add_channel_of(M::KIND, topic)
     }
 
-    /// Registers a channel of message kind `kind` on `topic`, in the encoding the writer's
-    /// policy gives the kind.
+    /// Registers a channel of message kind `kind` on `topic`, in the writer's encoding.
     pub fn add_channel_of(&mut self, kind: MessageKind, topic: &str) -> Result<ChannelId> {
-        self.add_channel_encoded(kind, topic, self.encoding.for_kind(kind))
+        self.add_channel_encoded(kind, topic, self.encoding)
     }
 
-    /// Registers a channel of message kind `kind` on `topic` in `encoding`; JSON for a kind
-    /// without a protobuf form.
+    /// Registers a channel of message kind `kind` on `topic` in `encoding`.
     pub fn add_channel_encoded(
         &mut self,
         kind: MessageKind,
         topic: &str,
         encoding: Encoding,
     ) -> Result<ChannelId> {
-        if encoding == Encoding::Protobuf && kind.has_protobuf() {
-            let c = self.add_channel_in(kind.schema_name(), DESCRIPTORS, topic, encoding)?;
+        if encoding == Encoding::Protobuf {
+            let name = kind.schema_name();
+            let c = self.add_channel_in(name, schema_data(name), topic, encoding)?;
             self.protobuf_channels.insert(c.0);
             Ok(c)
         } else {
@@ -293,11 +293,11 @@ impl LogWriter {
         channel_id: u16,
         topic: &str,
     ) -> Result<ChannelId> {
-        let encoding = self.encoding.for_kind(M::KIND);
+        let encoding = self.encoding;
         if !self.schemas.contains_key(&schema_id) {
             let data = match encoding {
                 Encoding::Json => M::schema_bytes(),
-                Encoding::Protobuf => DESCRIPTORS.to_vec(),
+                Encoding::Protobuf => schema_data(M::SCHEMA_NAME).to_vec(),
             };
             let name = M::SCHEMA_NAME;
             self.copy_schema(schema_id, name, encoding.schema_encoding(), &data)?;
@@ -354,8 +354,23 @@ impl LogWriter {
         self.send(Job::Records(record))
     }
 
-    /// Writes `msg` with the given receive time; `publish_time` is the message's own stamp.
+    /// Writes `msg` with the given receive time (`publish_time` is the message's own stamp),
+    /// and its Foxglove twin if twins are on and its kind has one.
     pub fn write<M: ChannelMessage>(
+        &mut self,
+        channel: ChannelId,
+        log_time_ns: u64,
+        msg: &M,
+    ) -> Result<()> {
+        self.write_message(channel, log_time_ns, msg)?;
+        match self.foxglove.then(|| Twin::of(msg)).flatten() {
+            Some(twin) => self.write_twin_of(channel, log_time_ns, &twin),
+            None => Ok(()),
+        }
+    }
+
+    /// Writes `msg` alone, without a twin (whose channel the caller registers itself).
+    pub fn write_message<M: ChannelMessage>(
         &mut self,
         channel: ChannelId,
         log_time_ns: u64,
@@ -363,38 +378,15 @@ impl LogWriter {
     ) -> Result<()> {
         let mut buf = std::mem::take(&mut self.buf);
         buf.clear();
-        let protobuf = self.protobuf_channels.contains(&channel.0) && msg.encode_protobuf(&mut buf);
-        if !protobuf {
+        if self.protobuf_channels.contains(&channel.0) {
+            crate::protobuf::encode(msg, &mut buf);
+        } else {
             serde_json::to_writer(&mut buf, msg).map_err(|e| Error::write(&self.partial, e))?;
         }
         let sequence = self.next_sequence(channel.0);
-        let result = self
-            .write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &buf)
-            .and_then(|()| match protobuf {
-                // (No protobuf type has a Foxglove twin yet.)
-                true => Ok(()),
-                false => self.twin_after(M::KIND, channel, log_time_ns, &buf),
-            });
+        let result = self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &buf);
         self.buf = buf;
         result
-    }
-
-    /// The Foxglove twin of a message just written, if twins are on and its kind has one.
-    fn twin_after(
-        &mut self,
-        kind: MessageKind,
-        channel: ChannelId,
-        log_time_ns: u64,
-        json: &[u8],
-    ) -> Result<()> {
-        match self
-            .foxglove
-            .then(|| crate::foxglove::Twin::of(kind, json))
-            .flatten()
-        {
-            Some(twin) => self.write_twin_of(channel, log_time_ns, &twin),
-            None => Ok(()),
-        }
     }
 
     /// Writes a message of any kind (the channel must be of its kind).
@@ -405,31 +397,45 @@ impl LogWriter {
         msg: &AnyMessage,
     ) -> Result<()> {
         let sequence = self.next_sequence(channel.0);
-        if self.protobuf_channels.contains(&channel.0) {
-            if let Some(data) = msg.to_protobuf() {
-                return self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &data);
-            }
+        let data = match self.protobuf_channels.contains(&channel.0) {
+            true => msg.to_protobuf(),
+            false => msg.to_json(),
+        };
+        self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &data)?;
+        match self.foxglove.then(|| Twin::of_any(msg)).flatten() {
+            Some(twin) => self.write_twin_of(channel, log_time_ns, &twin),
+            None => Ok(()),
         }
-        let json = msg.to_json();
-        self.write_raw(channel.0, sequence, log_time_ns, msg.stamp_ns(), &json)?;
-        self.twin_after(msg.kind(), channel, log_time_ns, &json)
+    }
+
+    /// The encoding of a channel this writer registered.
+    pub fn encoding_of(&self, channel: ChannelId) -> Encoding {
+        match self.protobuf_channels.contains(&channel.0) {
+            true => Encoding::Protobuf,
+            false => Encoding::Json,
+        }
     }
 
     /// Writes the Foxglove twin of a message of `source` on its twin channel (registered on
-    /// first use, `/foxglove` + the source's topic).
+    /// first use, `/foxglove` + the source's topic, in the source's encoding).
     pub fn write_twin_of(
         &mut self,
         source: ChannelId,
         log_time_ns: u64,
-        twin: &crate::foxglove::Twin,
+        twin: &Twin,
     ) -> Result<()> {
         let channel = match self.twins.get(&source.0) {
             Some(&c) => c,
             None => {
                 let kind = twin.kind();
+                let encoding = self.encoding_of(source);
                 let topic = self.topics.get(&source.0).map_or("", String::as_str);
                 let topic = crate::foxglove::twin_topic(topic);
-                let c = self.add_channel_named(kind.schema_name(), kind.schema_bytes(), &topic)?;
+                let data = kind.schema_bytes(encoding);
+                let c = self.add_channel_in(kind.schema_name(), data, &topic, encoding)?;
+                if encoding == Encoding::Protobuf {
+                    self.protobuf_channels.insert(c.0);
+                }
                 self.twins.insert(source.0, c);
                 c
             }
@@ -437,39 +443,37 @@ impl LogWriter {
         self.write_twin(channel, log_time_ns, twin)
     }
 
-    /// Registers a channel for Foxglove twins with explicit ids (beside copied input records).
+    /// Registers a channel for Foxglove twins in the writer's encoding with explicit ids (beside copied
+    /// input records).
     pub fn add_twin_channel_with_ids(
         &mut self,
-        kind: crate::foxglove::TwinKind,
+        kind: TwinKind,
         schema_id: u16,
         channel_id: u16,
         topic: &str,
     ) -> Result<ChannelId> {
-        self.copy_schema(
-            schema_id,
-            kind.schema_name(),
-            super::SCHEMA_ENCODING,
-            kind.schema_bytes(),
-        )?;
+        let encoding = self.encoding;
+        let data = kind.schema_bytes(encoding);
+        let name = kind.schema_name();
+        self.copy_schema(schema_id, name, encoding.schema_encoding(), data)?;
+        let message_encoding = encoding.message_encoding();
         self.copy_channel(
             channel_id,
             schema_id,
             topic,
-            super::MESSAGE_ENCODING,
+            message_encoding,
             &BTreeMap::new(),
         )?;
+        if encoding == Encoding::Protobuf {
+            self.protobuf_channels.insert(channel_id);
+        }
         Ok(ChannelId(channel_id))
     }
 
-    /// Writes a Foxglove twin on its own channel.
-    pub fn write_twin(
-        &mut self,
-        channel: ChannelId,
-        log_time_ns: u64,
-        twin: &crate::foxglove::Twin,
-    ) -> Result<()> {
-        let json = serde_json::to_vec(twin).map_err(|e| Error::write(&self.partial, e))?;
-        self.write_encoded(channel, log_time_ns, twin.stamp_ns(), &json)
+    /// Writes a Foxglove twin on its own channel, in the channel's encoding.
+    pub fn write_twin(&mut self, channel: ChannelId, log_time_ns: u64, twin: &Twin) -> Result<()> {
+        let data = twin.encode(self.encoding_of(channel));
+        self.write_encoded(channel, log_time_ns, twin.stamp_ns(), &data)
     }
 
     /// Writes a message already encoded in its channel's encoding (a ROS 2 CDR payload), with
