@@ -410,6 +410,8 @@ fn write_east_run_with_bad_samples(log: &Path) -> u64 {
             sensor_id: "imu".into(),
             specific_force_mps2: [wobble, -wobble, 9.80665 + wobble],
             angular_rate_radps: [wobble * 0.1, -wobble * 0.1, wobble * 0.01],
+            accel_lsb_mps2: None,
+            gyro_lsb_radps: None,
         };
         match k {
             300 => m.specific_force_mps2[0] = 60.0,

@@ -3,7 +3,8 @@ has: JSON through json.loads, protobuf through mcap-protobuf-support (the file's
 descriptors) and then the JSON form's conventions: an optional field that is not set and an
 empty repeated field are left out, a railfuse enum is its snake_case word (`rtk_fixed`), a
 timestamp is {sec, nsec}, and an eddy-current block's ADC counts are volts (count × step, as a
-float32) in sensor_a and sensor_b (unplaned as the .proto describes, with numpy)."""
+float32) in sensor_a and sensor_b (unplaned as the .proto describes, with numpy), an IMU's
+counts its values (count × step)."""
 import json
 import re
 
@@ -47,6 +48,13 @@ def as_json_form(msg):
             continue
         else:
             out[field.name] = _value(field, value)
+    if msg.DESCRIPTOR.full_name == "railfuse.Imu":
+        for counts, step, values in (("specific_force_counts", "accel_lsb_mps2", "specific_force_mps2"),
+                                     ("angular_rate_counts", "gyro_lsb_radps", "angular_rate_radps")):
+            if counts in out:
+                out[values] = [c * out[step] for c in out.pop(counts)]
+            if out.get(step) == 0.0:
+                del out[step]
     if msg.DESCRIPTOR.full_name == "railfuse.EddyCurrentBlock" and out.pop("counts_i16", None):
         a, b = eddy_current_volts(msg)
         out["sensor_a"], out["sensor_b"] = [float(v) for v in a], [float(v) for v in b]

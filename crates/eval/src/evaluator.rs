@@ -136,14 +136,7 @@ pub fn reference_sample(
 ) -> Result<Option<(u64, f64, f64)>> {
     Ok(match kind {
         ReferenceKind::Truth => {
-            // The three fields scored; the others are skipped unconverted (100 Hz channel).
-            #[derive(serde::Deserialize)]
-            struct Sample {
-                stamp_ns: u64,
-                chainage_m: f64,
-                speed_mps: f64,
-            }
-            let t: Sample = m.decode_fields(path)?;
+            let t: GroundTruth = m.decode(path)?;
             Some((t.stamp_ns, t.chainage_m, t.speed_mps))
         }
         ReferenceKind::Fused => {
@@ -276,16 +269,7 @@ impl Evaluator {
         match self.roles.get(&m.channel.id).copied() {
             Some(Role::Reference(ReferenceKind::Truth)) => {
                 // The fields scored along the track and in the plane, in one parse (100 Hz).
-                #[derive(serde::Deserialize)]
-                struct Truth {
-                    stamp_ns: u64,
-                    chainage_m: f64,
-                    speed_mps: f64,
-                    east_m: f64,
-                    north_m: f64,
-                    heading_rad: f64,
-                }
-                let g: Truth = m.decode_fields(path)?;
+                let g: GroundTruth = m.decode(path)?;
                 self.reference_sample(g.stamp_ns, g.chainage_m, g.speed_mps);
                 let (sin, cos) = g.heading_rad.sin_cos();
                 let sample = PlaneSample {

@@ -18,7 +18,8 @@ use std::path::Path;
 use nalgebra::RowSVector;
 use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::messages::{
-    BalisePassage, GnssFix, LoopPosition, MessageKind, RadarSpeed, TrackMap,
+    BalisePassage, FusedState, GnssFix, Imu, LoopPosition, MessageKind, Odometer, RadarSpeed,
+    TrackMap,
 };
 
 use crate::error::Result;
@@ -178,23 +179,12 @@ impl SensorModel {
                     m.valid,
                 ));
             }
-            // The high-rate channels: only the fields used are decoded (no sensor id string).
             SensorModel::OdometerSpeed => {
-                #[derive(serde::Deserialize)]
-                struct Speed {
-                    stamp_ns: u64,
-                    speed_mps: f64,
-                }
-                let m: Speed = msg.decode_fields(path)?;
+                let m: Odometer = msg.decode(path)?;
                 out.push(one(m.stamp_ns, Quantity::Speed, m.speed_mps, None, true));
             }
             SensorModel::ImuAcceleration => {
-                #[derive(serde::Deserialize)]
-                struct SpecificForce {
-                    stamp_ns: u64,
-                    specific_force_mps2: [f64; 3],
-                }
-                let m: SpecificForce = msg.decode_fields(path)?;
+                let m: Imu = msg.decode(path)?;
                 out.push(one(
                     m.stamp_ns,
                     Quantity::Acceleration,
@@ -230,14 +220,7 @@ fn one(
 
 /// Another pipeline's state (or smoothed state) as chainage and speed measurements.
 fn fused_state(msg: &LogMessage<'_>, path: &Path, out: &mut Vec<Measurement>) -> Result<()> {
-    #[derive(serde::Deserialize)]
-    struct State {
-        stamp_ns: u64,
-        chainage_m: f64,
-        speed_mps: f64,
-        covariance: [f64; 9],
-    }
-    let m: State = msg.decode_fields(path)?;
+    let m: FusedState = msg.decode(path)?;
     let var = |v: f64| (v.is_finite() && v > 0.0).then_some(v);
     out.push(one(
         m.stamp_ns,

@@ -452,6 +452,8 @@ fn imu(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Translated, For
             sensor_id: m.header.frame_id,
             specific_force_mps2: [a.x, a.y, a.z],
             angular_rate_radps: [w.x, w.y, w.z],
+            accel_lsb_mps2: None,
+            gyro_lsb_radps: None,
         }),
         took_log_time,
     })

@@ -76,30 +76,6 @@ impl LogMessage<'_> {
         })
     }
 
-    /// Decodes some of the payload's fields (a struct naming a subset of its type's fields):
-    /// the others are skipped without being converted, which is cheaper on a hot path. A
-    /// protobuf payload is decoded whole and its fields taken from that.
-    pub fn decode_fields<T: serde::de::DeserializeOwned>(&self, path: &Path) -> Result<T> {
-        let whole;
-        let json = match self.is_protobuf() {
-            true => {
-                whole = self.decode_any(path)?.map(|m| m.to_json()).ok_or_else(|| {
-                    let schema = self.channel.schema_name();
-                    self.undecodable(path, schema, "not a railfuse message type".into())
-                })?;
-                &whole[..]
-            }
-            false => self.data,
-        };
-        serde_json::from_slice(json).map_err(|source| Error::Decode {
-            path: path.to_owned(),
-            topic: self.channel.topic.clone(),
-            schema: self.channel.schema_name().to_owned(),
-            log_time_ns: self.log_time_ns,
-            source,
-        })
-    }
-
     /// Decodes the payload as whatever catalogue kind its channel carries; `None` for a
     /// schema the catalogue does not know.
     pub fn decode_any(&self, path: &Path) -> Result<Option<AnyMessage>> {

@@ -1,7 +1,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::protobuf::ProtobufForm;
+use crate::protobuf::{whole_steps, ProtobufForm};
 
 /// A block of raw samples from the two eddy-current sensors, which sit `spacing_m` apart
 /// along the track. `stamp_ns` is the time of the first sample.
@@ -21,17 +21,10 @@ pub struct EddyCurrentBlock {
     pub volts_per_count: Option<f64>,
 }
 
-/// The samples as 16-bit counts of `step`, if every one is exactly `(count × step) as f32`
-/// with the count in range: what makes counts a lossless encoding.
+/// The samples as 16-bit counts of `step`, if every one is exactly `(count × step) as f32`.
 fn counts(samples: &[f32], step: f64) -> Option<Vec<i16>> {
-    samples
-        .iter()
-        .map(|&v| {
-            let c = (v as f64 / step).round();
-            let fits = c.abs() <= i16::MAX as f64 && (c * step) as f32 == v;
-            fits.then_some(c as i16)
-        })
-        .collect()
+    let counts = whole_steps(samples, step, i16::MAX as f64, |v| v as f32)?;
+    Some(counts.into_iter().map(|c| c as i16).collect())
 }
 
 /// Counts byte-planed: every count's low byte, then every count's high byte.

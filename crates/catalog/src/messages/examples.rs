@@ -28,7 +28,8 @@ impl MessageKind {
             }),
             MessageKind::Imu => json!({
                 "stamp_ns": T, "sensor_id": "imu0",
-                "specific_force_mps2": [0.31, -0.02, 9.81], "angular_rate_radps": [0.0, 0.001, 0.02]
+                "specific_force_mps2": [0.31, -0.02, 9.81], "angular_rate_radps": [0.0, 0.001, 0.02],
+                "accel_lsb_mps2": 0.01, "gyro_lsb_radps": 0.001
             }),
             MessageKind::RadarSpeed => json!({
                 "stamp_ns": T, "speed_mps": 22.4, "quality": 0.93, "valid": true,

@@ -184,6 +184,9 @@ impl EthImport {
                 w(4) * ACCEL_MPS2_PER_LSB,
                 w(5) * ACCEL_MPS2_PER_LSB,
             ],
+            // The sensor's own counts: they travel as counts again in protobuf.
+            accel_lsb_mps2: Some(ACCEL_MPS2_PER_LSB),
+            gyro_lsb_radps: Some(GYRO_RADPS_PER_LSB),
         };
         self.write(self.imu, topics::IMU, now, &m)
     }

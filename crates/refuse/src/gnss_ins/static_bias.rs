@@ -188,6 +188,8 @@ mod tests {
             sensor_id: "imu".into(),
             specific_force_mps2: f,
             angular_rate_radps: w,
+            accel_lsb_mps2: None,
+            gyro_lsb_radps: None,
         }
     }
 

@@ -86,6 +86,8 @@ impl SimSensor for ImuSensor {
             sensor_id: p.sensor_id.clone(),
             specific_force_mps2,
             angular_rate_radps,
+            accel_lsb_mps2: (p.accel_lsb_mps2 > 0.0).then_some(p.accel_lsb_mps2),
+            gyro_lsb_radps: (p.gyro_lsb_radps > 0.0).then_some(p.gyro_lsb_radps),
         };
         out.push(w.t_ns + seconds(p.latency_s), Emit::Imu(msg));
     }
