@@ -114,9 +114,9 @@ pub struct LogWriter {
     worker: Option<JoinHandle<Result<()>>>,
     /// Schema ids by name and encoding (`jsonschema` or `protobuf`).
     schema_ids: HashMap<(String, String), u16>,
-    /// The channels written in protobuf.
+    /// The channels whose `message_encoding` is protobuf (registered or copied).
     protobuf_channels: HashSet<u16>,
-    /// Which kinds are written in protobuf.
+    /// The encoding of the channels this writer registers.
     encoding: Encoding,
     /// Framed schema and channel records, repeated in the summary.
     schemas: BTreeMap<u16, Vec<u8>>,
@@ -236,20 +236,8 @@ impl LogWriter {
         topic: &str,
         encoding: Encoding,
     ) -> Result<ChannelId> {
-        if encoding == Encoding::Protobuf {
-            let name = kind.schema_name();
-            let c = self.add_channel_in(name, schema_data(name), topic, encoding)?;
-            self.protobuf_channels.insert(c.0);
-            Ok(c)
-        } else {
-            self.add_channel_named(kind.schema_name(), &kind.schema_bytes(), topic)
-        }
-    }
-
-    /// Registers a JSON channel on `topic` with the schema of that name (written on first
-    /// use), both on the lowest free ids.
-    fn add_channel_named(&mut self, schema: &str, data: &[u8], topic: &str) -> Result<ChannelId> {
-        self.add_channel_in(schema, data, topic, Encoding::Json)
+        let data = schema_of(kind, encoding);
+        self.add_channel_in(kind.schema_name(), &data, topic, encoding)
     }
 
     /// Registers a channel on `topic` in `encoding` with the schema of that name and encoding
@@ -295,10 +283,7 @@ impl LogWriter {
     ) -> Result<ChannelId> {
         let encoding = self.encoding;
         if !self.schemas.contains_key(&schema_id) {
-            let data = match encoding {
-                Encoding::Json => M::schema_bytes(),
-                Encoding::Protobuf => schema_data(M::SCHEMA_NAME).to_vec(),
-            };
+            let data = schema_of(M::KIND, encoding);
             let name = M::SCHEMA_NAME;
             self.copy_schema(schema_id, name, encoding.schema_encoding(), &data)?;
         }
@@ -310,9 +295,6 @@ impl LogWriter {
             message_encoding,
             &BTreeMap::new(),
         )?;
-        if encoding == Encoding::Protobuf {
-            self.protobuf_channels.insert(channel_id);
-        }
         Ok(ChannelId(channel_id))
     }
 
@@ -341,6 +323,9 @@ impl LogWriter {
             return Ok(());
         }
         self.topics.insert(id, topic.to_owned());
+        if Encoding::of_channel(encoding) == Some(Encoding::Protobuf) {
+            self.protobuf_channels.insert(id);
+        }
         let channel = Channel {
             id,
             schema_id,
@@ -433,9 +418,6 @@ impl LogWriter {
                 let topic = crate::foxglove::twin_topic(topic);
                 let data = kind.schema_bytes(encoding);
                 let c = self.add_channel_in(kind.schema_name(), data, &topic, encoding)?;
-                if encoding == Encoding::Protobuf {
-                    self.protobuf_channels.insert(c.0);
-                }
                 self.twins.insert(source.0, c);
                 c
             }
@@ -464,9 +446,6 @@ impl LogWriter {
             message_encoding,
             &BTreeMap::new(),
         )?;
-        if encoding == Encoding::Protobuf {
-            self.protobuf_channels.insert(channel_id);
-        }
         Ok(ChannelId(channel_id))
     }
 
@@ -788,4 +767,13 @@ fn schema_record(id: u16, name: &str, encoding: &str, data: &[u8]) -> Vec<u8> {
     let mut record = Vec::new();
     put_record(&mut record, op::SCHEMA, &body);
     record
+}
+
+/// The schema data of a channel of `kind` in `encoding`: its JSON schema, or the descriptors
+/// of its .proto file.
+fn schema_of(kind: MessageKind, encoding: Encoding) -> std::borrow::Cow<'static, [u8]> {
+    match encoding {
+        Encoding::Json => kind.schema_bytes().into(),
+        Encoding::Protobuf => schema_data(kind.schema_name()).into(),
+    }
 }
