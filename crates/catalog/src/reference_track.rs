@@ -62,17 +62,22 @@ impl ReferenceTrack {
             return false;
         }
         if let Some(last) = self.samples.back() {
-            if self.intervals.len() == INTERVALS {
-                self.intervals.pop_front();
+            let interval = sample.stamp_ns - last.stamp_ns;
+            let dropped = match self.intervals.len() == INTERVALS {
+                true => self.intervals.pop_front(),
+                false => None,
+            };
+            self.intervals.push_back(interval);
+            // A regular reference drops the interval it adds: the median stands.
+            if dropped != Some(interval) || self.period_ns.is_none() {
+                // The median, on the stack.
+                let mut recent = [0u64; INTERVALS];
+                let n = self.intervals.len();
+                for (slot, &i) in recent.iter_mut().zip(&self.intervals) {
+                    *slot = i;
+                }
+                self.period_ns = Some(*recent[..n].select_nth_unstable(n / 2).1);
             }
-            self.intervals.push_back(sample.stamp_ns - last.stamp_ns);
-            // The median, on the stack: this runs for every sample of a 100 Hz truth.
-            let mut recent = [0u64; INTERVALS];
-            let n = self.intervals.len();
-            for (slot, &i) in recent.iter_mut().zip(&self.intervals) {
-                *slot = i;
-            }
-            self.period_ns = Some(*recent[..n].select_nth_unstable(n / 2).1);
         }
         self.samples.push_back(sample);
         let keep_from = sample.stamp_ns.saturating_sub(self.retain_ns);

@@ -230,7 +230,7 @@ impl Translator {
 /// reader and its own code, so that it sees catalogue messages only.
 #[derive(Default)]
 pub struct ForeignChannels {
-    read_as: std::collections::HashMap<u16, (Translator, Arc<ChannelInfo>)>,
+    read_as: crate::log::IdMap<(Translator, Arc<ChannelInfo>)>,
 }
 
 impl ForeignChannels {

@@ -16,7 +16,12 @@ pub use reader::{
     SchemaInfo,
 };
 pub use recover::{recover, RecoverReport};
-pub use writer::{partial_path, ChannelId, LogWriter, WriterOptions};
+pub use writer::{partial_path, ChannelId, ChunkTally, LogWriter, WriterOptions};
+
+/// A map keyed by MCAP channel or schema id (u16), looked up once or more per message: the
+/// standard map with a fast fixed hash (SipHash cost a few percent of a replay; u16 keys
+/// from a file cannot be chosen to collide in bulk).
+pub type IdMap<V> = std::collections::HashMap<u16, V, foldhash::fast::FixedState>;
 
 /// MCAP profile name railfuse writes (no ROS semantics: plain JSON channels).
 pub const PROFILE: &str = "railfuse";

@@ -1,7 +1,7 @@
 //! Streaming MCAP reader yielding schemas, channels, messages, metadata and attachments in file
 //! order, borrowing message payloads from the decompressed chunk (no copy per message).
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{ErrorKind, Read};
 use std::path::{Path, PathBuf};
@@ -11,6 +11,7 @@ use mcap::records::{op, AttachmentHeader, MessageHeader, Metadata, Record};
 
 use super::format::{self, Records, FRAME};
 use super::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
+use super::IdMap;
 
 use crate::error::{Error, Result};
 use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
@@ -139,8 +140,8 @@ pub enum LogRecord<'a> {
 pub struct LogReader {
     path: PathBuf,
     items: ReadAhead,
-    schemas: HashMap<u16, Arc<SchemaInfo>>,
-    channels: HashMap<u16, Arc<ChannelInfo>>,
+    schemas: IdMap<Arc<SchemaInfo>>,
+    channels: IdMap<Arc<ChannelInfo>>,
     done: bool,
     /// The chunk being walked and where in its records.
     chunk: Option<Chunk>,
@@ -178,8 +179,8 @@ impl LogReader {
         Ok(Self {
             path,
             items: ReadAhead::new(scanner, READ_AHEAD_BYTES),
-            schemas: HashMap::new(),
-            channels: HashMap::new(),
+            schemas: IdMap::default(),
+            channels: IdMap::default(),
             done: false,
             chunk: None,
             at: 0,
@@ -424,7 +425,7 @@ pub fn read_summary(path: &Path) -> Result<Option<LogSummary>> {
     let Some(raw) = read_summary_records(path)? else {
         return Ok(None);
     };
-    let mut schemas: HashMap<u16, Arc<SchemaInfo>> = HashMap::new();
+    let mut schemas: IdMap<Arc<SchemaInfo>> = IdMap::default();
     let mut channels = Vec::new();
     let (mut longest_chunk_ns, mut message_span_ns) = (None::<u64>, None);
     for framed in Records::new(&raw) {

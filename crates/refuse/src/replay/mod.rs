@@ -7,7 +7,7 @@
 //! spills to a temporary file).
 
 use railfuse_catalog::protobuf::Encoding;
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -16,7 +16,8 @@ use railfuse_catalog::foreign::{ros2, Translated, Translator};
 use railfuse_catalog::log::format::{self, Records};
 use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
 use railfuse_catalog::log::{
-    read_summary, ChannelId, ChannelInfo, LogMessage, LogSummary, LogWriter, SchemaInfo,
+    read_summary, ChannelId, ChannelInfo, ChunkTally, IdMap, LogMessage, LogSummary, LogWriter,
+    SchemaInfo,
 };
 use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, TrackMap};
 use railfuse_catalog::rejections::Rejections;
@@ -179,9 +180,9 @@ struct Replay<'a> {
     pipelines: Vec<AnyPipeline>,
     outputs: Vec<Output>,
     context: SensorContext,
-    schemas: HashMap<u16, Arc<SchemaInfo>>,
-    channels: HashMap<u16, Arc<ChannelInfo>>,
-    routes: HashMap<u16, Route>,
+    schemas: IdMap<Arc<SchemaInfo>>,
+    channels: IdMap<Arc<ChannelInfo>>,
+    routes: IdMap<Route>,
     /// For a ROS 2 input, each pipeline's state also as NavSatFix and Odometry in CDR
     /// (registered when the first CDR channel is met).
     ros_outputs: Vec<(ChannelId, ChannelId)>,
@@ -231,9 +232,9 @@ impl<'a> Replay<'a> {
             context: SensorContext {
                 track: opts.config.track.clone(),
             },
-            schemas: HashMap::new(),
-            channels: HashMap::new(),
-            routes: HashMap::new(),
+            schemas: IdMap::default(),
+            channels: IdMap::default(),
+            routes: IdMap::default(),
             ros_outputs: Vec::new(),
             track_output,
             track_written: false,
@@ -287,6 +288,7 @@ impl<'a> Replay<'a> {
     /// gave rise to follow it in a chunk of their own. Returns its records buffer, to reuse.
     fn chunk(&mut self, chunk: Chunk) -> Result<Vec<u8>> {
         let mut rewrite = false;
+        let mut tally = ChunkTally::default();
         for record in Records::new(&chunk.records) {
             let record = record.map_err(|e| self.damaged(chunk.offset, e))?;
             match record.opcode {
@@ -297,15 +299,18 @@ impl<'a> Replay<'a> {
                         self.damaged(chunk.offset, "a message record is cut short".into())
                     })?;
                     rewrite |= !self.message(&m)?;
+                    tally.message(record.offset, &m.header);
+                    continue;
                 }
                 _ => {}
             }
+            tally.record(&record);
         }
         let records = if rewrite {
             self.rewrite(&chunk)?;
             chunk.records
         } else {
-            self.writer.copy_chunk(chunk)?
+            self.writer.copy_tallied_chunk(chunk, tally)?
         };
         self.writer.close_chunk()?;
         Ok(records)

@@ -19,6 +19,7 @@ use mcap::records::{
 
 use super::format::{self, put_message, put_record, Records, FRAME, MAGIC};
 use super::scan::Chunk;
+use super::IdMap;
 use crate::error::{Error, Result};
 use crate::foxglove::{Twin, TwinKind};
 use crate::messages::{AnyMessage, ChannelMessage, MessageKind};
@@ -57,6 +58,48 @@ impl Default for WriterOptions {
 }
 
 type Index = BTreeMap<u16, Vec<MessageIndexEntry>>;
+
+/// What a chunk copied byte for byte brings to the output's indexes, gathered in one walk
+/// over its records: each message's index entry, and the schema and channel records it
+/// defines. A caller that walks the chunk for its own reasons feeds each record here, so that
+/// the copy ([`LogWriter::copy_tallied_chunk`]) needs no second walk.
+#[derive(Default)]
+pub struct ChunkTally {
+    index: Index,
+    /// (opcode, id, framed record) of each schema and channel record.
+    definitions: Vec<(u8, u16, Vec<u8>)>,
+}
+
+impl ChunkTally {
+    /// One record of the chunk, in order.
+    pub fn record(&mut self, record: &format::Framed<'_>) {
+        match record.opcode {
+            op::MESSAGE => {
+                if let Some(m) = format::parse_message(record.body) {
+                    self.message(record.offset, &m.header);
+                }
+            }
+            op::SCHEMA | op::CHANNEL => {
+                let mut framed = Vec::with_capacity(FRAME + record.body.len());
+                put_record(&mut framed, record.opcode, record.body);
+                let id = channel_of(record.body);
+                self.definitions.push((record.opcode, id, framed));
+            }
+            _ => {}
+        }
+    }
+
+    /// A message record at `offset` in the chunk, its header parsed by the caller.
+    pub fn message(&mut self, offset: usize, header: &MessageHeader) {
+        self.index
+            .entry(header.channel_id)
+            .or_default()
+            .push(MessageIndexEntry {
+                log_time: header.log_time,
+                offset: offset as u64,
+            });
+    }
+}
 
 /// Work for the file side.
 enum Job {
@@ -121,12 +164,12 @@ pub struct LogWriter {
     /// Framed schema and channel records, repeated in the summary.
     schemas: BTreeMap<u16, Vec<u8>>,
     channels: BTreeMap<u16, Vec<u8>>,
-    sequences: HashMap<u16, u32>,
+    sequences: IdMap<u32>,
     /// Topics by channel id, to name twin channels.
-    topics: HashMap<u16, String>,
+    topics: IdMap<String>,
     /// Foxglove twins: on, and the twin channel of each source channel.
     foxglove: bool,
-    twins: HashMap<u16, ChannelId>,
+    twins: IdMap<ChannelId>,
     open: OpenChunk,
     stats: Statistics,
     buf: Vec<u8>,
@@ -180,11 +223,11 @@ impl LogWriter {
             protobuf_channels: HashSet::new(),
             schemas: BTreeMap::new(),
             channels: BTreeMap::new(),
-            sequences: HashMap::new(),
-            topics: HashMap::new(),
+            sequences: IdMap::default(),
+            topics: IdMap::default(),
             foxglove: options.foxglove,
             encoding: options.encoding,
-            twins: HashMap::new(),
+            twins: IdMap::default(),
             open: OpenChunk::default(),
             stats: Statistics::default(),
             buf: Vec::with_capacity(1024),
@@ -537,41 +580,46 @@ impl LogWriter {
     ///
     /// [`ReadAhead::recycle`]: super::scan::ReadAhead::recycle
     pub fn copy_chunk(&mut self, chunk: Chunk) -> Result<Vec<u8>> {
-        let mut index = Index::new();
+        let mut tally = ChunkTally::default();
         for record in Records::new(&chunk.records) {
-            let record = record.map_err(|e| Error::mcap(&self.partial, e))?;
-            match record.opcode {
-                op::MESSAGE => {
-                    let Some(m) = format::parse_message(record.body) else {
-                        continue;
-                    };
-                    let (channel, log_time) = (m.header.channel_id, m.header.log_time);
-                    let offset = record.offset as u64;
-                    index
-                        .entry(channel)
-                        .or_default()
-                        .push(MessageIndexEntry { log_time, offset });
-                    count_message(&mut self.stats, channel, log_time);
-                }
-                op::SCHEMA | op::CHANNEL => {
-                    let mut framed = Vec::with_capacity(FRAME + record.body.len());
-                    put_record(&mut framed, record.opcode, record.body);
-                    let id = channel_of(record.body);
-                    let table = if record.opcode == op::SCHEMA {
-                        &mut self.schemas
-                    } else {
-                        &mut self.channels
-                    };
-                    table.entry(id).or_insert(framed);
-                }
-                _ => {}
+            tally.record(&record.map_err(|e| Error::mcap(&self.partial, e))?);
+        }
+        self.copy_tallied_chunk(chunk, tally)
+    }
+
+    /// [`copy_chunk`](Self::copy_chunk) for a caller that has walked the chunk's records
+    /// already and fed each to `tally`.
+    pub fn copy_tallied_chunk(&mut self, chunk: Chunk, tally: ChunkTally) -> Result<Vec<u8>> {
+        for (&channel, entries) in &tally.index {
+            let (Some(first), Some(last)) = (entries.first(), entries.last()) else {
+                continue;
+            };
+            let stats = &mut self.stats;
+            let (start, end) = entries
+                .iter()
+                .fold((first.log_time, last.log_time), |(a, b), e| {
+                    (a.min(e.log_time), b.max(e.log_time))
+                });
+            if stats.message_count == 0 {
+                (stats.message_start_time, stats.message_end_time) = (start, end);
             }
+            stats.message_count += entries.len() as u64;
+            stats.message_start_time = stats.message_start_time.min(start);
+            stats.message_end_time = stats.message_end_time.max(end);
+            *stats.channel_message_counts.entry(channel).or_insert(0) += entries.len() as u64;
+        }
+        for (opcode, id, framed) in tally.definitions {
+            let table = match opcode {
+                op::SCHEMA => &mut self.schemas,
+                _ => &mut self.channels,
+            };
+            table.entry(id).or_insert(framed);
         }
         self.stats.chunk_count += 1;
         self.send(Job::Copy {
             raw: chunk.raw,
             header: chunk.header,
-            index,
+            index: tally.index,
         })?;
         Ok(chunk.records)
     }
