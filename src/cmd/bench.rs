@@ -199,10 +199,10 @@ fn refuse_row(
         safety_epochs: Vec::new(),
     };
     let rate = sim.messages as f64 / ours.wall_s;
-    // The peer runs the Kalman job only (source 001's federated filters it has not).
-    let theirs = match (peer, scenario) {
-        (Some((py, peer)), "default") => Some(peer_child(py, peer, &raw, config, &a.dir)?),
-        _ => None,
+    // The peer writes the same records (bench/peer_refuse.py says what it leaves out).
+    let theirs = match peer {
+        Some((py, peer)) => Some(peer_child(py, peer, &raw, config, &a.dir)?),
+        None => None,
     };
     let mib = std::fs::metadata(&raw)?.len() as f64 / (1 << 20) as f64;
     let (peer_s, peer_rate, ratio) = match theirs {

@@ -2,6 +2,7 @@
 //! Kalman filter and RTS smoother, pykalman's EM, pyproj's geodesy, numpy's statistics.
 
 use super::*;
+use std::path::Path;
 
 #[test]
 fn the_kalman_pipeline_and_its_rts_smoother_equal_filterpy_on_the_same_measurements() {
@@ -159,5 +160,72 @@ fn geodesy_agrees_with_pyproj_to_the_millimetre_over_100_km() {
     assert_eq!(v["points"], 206);
     for (what, worst) in v["worst_m"].as_object().unwrap() {
         assert!(worst.as_f64().unwrap() < 1e-3, "{what}: {worst} m: {v}");
+    }
+}
+
+/// The bench's Python peer (bench/peer_refuse.py) writes the records railfuse writes for the
+/// same pipelines: every fused channel, a diagnostics record per measurement as railfuse, the
+/// states and twins within a tenth (its filter starts, gates and ticks on its own: in file
+/// order, without railfuse's reorder window), so that the bench's ratio compares the same work.
+#[test]
+fn the_bench_peer_writes_the_records_railfuse_writes() {
+    let d = tempfile::tempdir().unwrap();
+    let python = client("RAILFUSE_PYTHON", "python");
+    let peer = Path::new(env!("CARGO_MANIFEST_DIR")).join("bench/peer_refuse.py");
+    for (scenario, config, duration) in [
+        ("seed001", "seed001.toml", "40"),
+        ("default", "kalman.toml", "120"),
+    ] {
+        let raw = d.path().join(format!("{scenario}.mcap"));
+        let (ours, theirs) = (
+            raw.with_extension("fused.mcap"),
+            raw.with_extension("peer.mcap"),
+        );
+        ok(&[
+            "simulate",
+            "--scenario",
+            scenario,
+            "--duration",
+            duration,
+            "-o",
+            s(&raw),
+        ]);
+        ok(&["refuse", s(&raw), "-c", s(&sample(config)), "-o", s(&ours)]);
+        let out = std::process::Command::new(&python)
+            .args([s(&peer), s(&raw), s(&sample(config)), s(&theirs)])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{}", stderr(&out));
+        let counts = |log: &Path| -> std::collections::BTreeMap<String, u64> {
+            let info = ok_json(&["info", "--json", s(log)]);
+            info["channels"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|c| {
+                    (
+                        c["topic"].as_str().unwrap().to_owned(),
+                        c["messages"].as_u64().unwrap(),
+                    )
+                })
+                .filter(|(t, _)| t.contains("/fused/"))
+                .collect()
+        };
+        let (ours, theirs) = (counts(&ours), counts(&theirs));
+        assert_eq!(
+            ours.keys().collect::<Vec<_>>(),
+            theirs.keys().collect::<Vec<_>>(),
+            "{scenario}"
+        );
+        for (topic, &n) in &ours {
+            let m = theirs[topic];
+            if topic.ends_with("/diagnostics") {
+                assert_eq!(n, m, "{scenario} {topic}");
+            }
+            assert!(
+                n > 100 && n.abs_diff(m) <= 2 + n / 10,
+                "{scenario} {topic}: railfuse {n}, peer {m}"
+            );
+        }
     }
 }
