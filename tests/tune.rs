@@ -21,9 +21,12 @@ fn default_run(dir: &Path, seed: u32, duration_s: u32) -> PathBuf {
 /// variances 100x too low.
 fn bad_config(dir: &Path) -> PathBuf {
     let text = std::fs::read_to_string(sample("kalman.toml")).unwrap();
+    // Without the resets to absolute fixes, which would rescue the bad start themselves: the
+    // optimisers must undo it.
     let bad = text
         .replace("jerk_psd = 0.2", "jerk_psd = 20.0")
-        .replace("variance = 0.1\n", "variance = 0.001\n");
+        .replace("variance = 0.1\n", "variance = 0.001\n")
+        .replace("variance = \"message\"\n", "variance = \"message\"\nreset_after = 0\n");
     assert_ne!(text, bad);
     let path = dir.join("bad.toml");
     std::fs::write(&path, bad).unwrap();

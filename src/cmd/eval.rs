@@ -122,10 +122,13 @@ fn accuracy_table(report: &EvalReport) -> Table {
         "speed p95 m/s",
         "speed max m/s",
         "NEES in 95%",
+        "beyond 3σ",
         "NIS in 95%",
         "gated",
+        "resets",
     ]);
     let f = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{x:.3}"));
+    let percent = |x: Option<f64>| x.map_or("-".to_owned(), |x| format!("{:.1}%", 100.0 * x));
     let share = |c: Option<&ConsistencySummary>| {
         c.map_or("-".to_owned(), |c| format!("{:.1}%", 100.0 * c.inside_95))
     };
@@ -151,8 +154,10 @@ fn accuracy_table(report: &EvalReport) -> Table {
         ));
         row.extend([
             share(p.nees.as_ref()),
+            percent(p.beyond_3_sigma),
             share(p.nis.as_ref()),
             p.gated.to_string(),
+            p.resets_to_fix.to_string(),
         ]);
         t.row(row);
         for w in &p.windows {
@@ -162,7 +167,13 @@ fn accuracy_table(report: &EvalReport) -> Table {
                 w.position_error_m.as_ref(),
                 w.speed_error_mps.as_ref(),
             ));
-            row.extend([String::new(), String::new(), String::new()]);
+            row.extend([
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+                String::new(),
+            ]);
             t.row(row);
         }
     }

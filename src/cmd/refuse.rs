@@ -244,10 +244,11 @@ pub fn print_counts(report: &RefuseReport) {
     for p in &report.pipelines {
         let c = &p.counts;
         println!(
-            "{}: {} accepted, {} after a gate lockout, {} gated, {} invalid, {} late, {} from failed devices, {} before initialisation",
+            "{}: {} accepted, {} after a gate lockout, {} resets to a fix, {} gated, {} invalid, {} late, {} from failed devices, {} before initialisation",
             p.name,
             c.accepted,
             c.accepted_after_lockout,
+            c.resets_to_fix,
             c.rejected_gate,
             c.rejected_invalid,
             c.rejected_late,

@@ -83,6 +83,7 @@ def main(path, tol):
     assert configs, "no railfuse.pipeline metadata"
     worst = 0.0
     compared_updates = 0
+    resets_compared = 0
     smoothed_compared = 0
 
     def check(name, stamp, ours, theirs):
@@ -103,9 +104,9 @@ def main(path, tol):
         tables = [b for _, b in biased]
         n = 3 + len(biased)
         # The filter advances to every measurement that reached the gate, used or not.
-        reached = [d for d in diags[name] if d["decision"] in ("accepted", "rejected_gate")]
+        reached = [d for d in diags[name] if d["decision"] in ("accepted", "rejected_gate", "reset_to_fix")]
         st = states[name]
-        assert sum(d["decision"] == "accepted" for d in reached) == len(st), f"{name}: accepted measurements and states differ"
+        assert sum(d["decision"] != "rejected_gate" for d in reached) == len(st), f"{name}: accepted measurements and states differ"
         kf = KalmanFilter(dim_x=n, dim_z=1)
         first = st[0]
         kf.x = np.array([[first["chainage_m"]], [first["speed_mps"]], [first["acceleration_mps2"]]] + [[b["value"]] for b in first.get("sensor_states", [])])
@@ -125,7 +126,7 @@ def main(path, tol):
                 kf.predict()
                 ep_x.append(None), ep_p.append(None), ep_f.append(kf.F.copy()), ep_q.append(kf.Q.copy()), ep_t.append(d["stamp_ns"])
             t = d["stamp_ns"]
-            if d["decision"] != "accepted":
+            if d["decision"] == "rejected_gate":
                 ep_x[-1], ep_p[-1] = kf.x.copy(), kf.P.copy()
                 continue
             s = next(states_left)
@@ -136,9 +137,23 @@ def main(path, tol):
                     H[0, bias_index[d["source"]]] = 1.0
             else:
                 H[0, 1] = 1.0
-            kf.H = H
-            kf.R = np.array([[d["measurement_variance"]]])
-            kf.update(np.array([[d["measurement"]]]))
+            z, r = d["measurement"], d["measurement_variance"]
+            if d["decision"] == "reset_to_fix":
+                # The position reset to the fix from the prediction, as PX4 resets: chainage
+                # onto the fix, its variance the fix's, uncorrelated; the smoother is told the
+                # jump was unpredictable (a prior of 1e6 times its scale on chainage).
+                nu = z - (H @ kf.x)[0, 0]
+                ep_q[-1] = ep_q[-1].copy()
+                ep_q[-1][0, 0] += 1e6 * (nu * nu + kf.P[0, 0] + r)
+                kf.x[0, 0] += nu / H[0, 0]
+                kf.P[0, :] = 0.0
+                kf.P[:, 0] = 0.0
+                kf.P[0, 0] = r / H[0, 0] ** 2
+                resets_compared += 1
+            else:
+                kf.H = H
+                kf.R = np.array([[r]])
+                kf.update(np.array([[z]]))
             check(name, d["stamp_ns"], full_state(s, n), compared(kf.x, kf.P, n))
             ep_x[-1], ep_p[-1] = kf.x.copy(), kf.P.copy()
             compared_updates += 1
@@ -152,7 +167,7 @@ def main(path, tol):
                 assert s["stamp_ns"] == ep_t[k], f"{name}: smoothed epoch {k} at {s['stamp_ns']}, expected {ep_t[k]}"
                 check(name + " (smoothed)", s["stamp_ns"], full_state(s, n), compared(xs[k], ps[k], n))
                 smoothed_compared += 1
-    print(json.dumps({"pipelines": sorted(kalman), "not_compared": sorted(set(configs) - set(kalman)), "updates_compared": compared_updates, "smoothed_compared": smoothed_compared, "worst_relative_difference": worst}))
+    print(json.dumps({"pipelines": sorted(kalman), "not_compared": sorted(set(configs) - set(kalman)), "updates_compared": compared_updates, "resets_compared": resets_compared, "smoothed_compared": smoothed_compared, "worst_relative_difference": worst}))
 
 
 if __name__ == "__main__":

@@ -180,6 +180,36 @@ impl Consistency {
     }
 }
 
+/// How often an error exceeded 3σ of the estimate's own variance (σ² = `variance`; an
+/// estimate without a finite positive variance is not counted).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Exceedance {
+    pub checked: u64,
+    pub beyond: u64,
+}
+
+impl Exceedance {
+    pub fn add(&mut self, error: f64, variance: f64) {
+        if !(variance.is_finite() && variance > 0.0 && error.is_finite()) {
+            return;
+        }
+        self.checked += 1;
+        if error * error > 9.0 * variance {
+            self.beyond += 1;
+        }
+    }
+
+    pub fn merge(&mut self, other: &Exceedance) {
+        self.checked += other.checked;
+        self.beyond += other.beyond;
+    }
+
+    /// The share beyond 3σ, where any was checked.
+    pub fn share(&self) -> Option<f64> {
+        (self.checked > 0).then(|| self.beyond as f64 / self.checked as f64)
+    }
+}
+
 /// `eᵀ P⁻¹ e` for the `[s, v]` error of a fused state against its own covariance.
 pub fn nees(state: &FusedState, position_error: f64, speed_error: f64) -> f64 {
     let (pss, psv, pvv) = (
@@ -273,6 +303,9 @@ pub struct AccuracyMeter {
     pub position: ErrorStats,
     pub speed: ErrorStats,
     pub nees: Consistency,
+    /// Estimates whose position error exceeded 3σ of their own chainage variance: a filter
+    /// that has diverged from the reference while sure of itself shows here in one number.
+    pub beyond_3_sigma: Exceedance,
     /// Estimates that fell outside the reference's time span.
     pub unmatched: u64,
     /// Estimates inside a gap of the reference (see [`ReferenceTrack`]): not scored.
@@ -290,6 +323,7 @@ impl AccuracyMeter {
             position: ErrorStats::default(),
             speed: ErrorStats::default(),
             nees: Consistency::default(),
+            beyond_3_sigma: Exceedance::default(),
             unmatched: 0,
             in_reference_gaps: 0,
             windows: Vec::new(),
@@ -420,6 +454,7 @@ impl AccuracyMeter {
                     plane: None,
                 };
                 self.nees.add(nees(&probe, de, ve), CHI2_95_2DOF);
+                self.beyond_3_sigma.add(de, pss);
             }
             Lookup::Gap => self.in_reference_gaps += 1,
             Lookup::Outside => self.unmatched += 1,

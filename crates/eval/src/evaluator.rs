@@ -36,11 +36,17 @@ pub struct PipelineEval {
     pub speed_error_mps: Option<ErrorSummary>,
     /// NEES of `[s, v]` against the state's own covariance.
     pub nees: Option<ConsistencySummary>,
+    /// The share of states whose position error exceeded 3σ of their own chainage variance
+    /// (a silent divergence in one number; about 0.3 % for a consistent filter).
+    pub beyond_3_sigma: Option<f64>,
     /// NIS of the measurements that reached the gate.
     pub nis: Option<ConsistencySummary>,
     pub gated: u64,
     /// Measurements used after a gate lockout (the filter's variance widened first).
     pub lockout_recoveries: u64,
+    /// Absolute fixes the estimate was reset to (the gate had rejected their sensor too often
+    /// in a row).
+    pub resets_to_fix: u64,
     pub device_fault_rejections: u64,
     /// States outside the reference's time span.
     pub unmatched_states: u64,
@@ -104,6 +110,7 @@ struct Scored {
     nis: Consistency,
     gated: u64,
     lockouts: u64,
+    resets: u64,
     device_fault: u64,
     safety: Option<SafetyTally>,
     plane: PlaneMeter,
@@ -120,6 +127,7 @@ impl Scored {
             nis: Consistency::default(),
             gated: 0,
             lockouts: 0,
+            resets: 0,
             device_fault: 0,
             safety: None,
             plane: PlaneMeter::new(lag_s),
@@ -381,6 +389,10 @@ impl Evaluator {
                 s.lockouts += 1;
                 return;
             }
+            GateDecision::ResetToFix => {
+                s.resets += 1;
+                return;
+            }
             GateDecision::RejectedDeviceFault => s.device_fault += 1,
             _ => return,
         }
@@ -462,9 +474,11 @@ impl Evaluator {
                     position_error_m: s.meter.position.summary(),
                     speed_error_mps: s.meter.speed.summary(),
                     nees: s.meter.nees.summary(),
+                    beyond_3_sigma: s.meter.beyond_3_sigma.share(),
                     nis: s.nis.summary(),
                     gated: s.gated,
                     lockout_recoveries: s.lockouts,
+                    resets_to_fix: s.resets,
                     device_fault_rejections: s.device_fault,
                     unmatched_states: s.meter.unmatched,
                     states_in_reference_gaps: s.meter.in_reference_gaps,

@@ -445,6 +445,15 @@ pub struct SensorConfig {
     /// 6.63 keeps 99 %, 10.83 keeps 99.9 %).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gate_nis: Option<f64>,
+    /// An absolute fix (a balise, the loop, GNSS chainage): once the gate has rejected this
+    /// many of its chainage measurements in a row, the last of them is taken as the truth of
+    /// the position, as PX4's ekf2 resets after its innovation checks fail for a while: the
+    /// filter's position is set to the fix, with the fix's variance (diagnostics decision
+    /// `reset_to_fix`). Default: 1 for a balise (a surveyed position in a telegram), 3 for the
+    /// loop, 10 for GNSS (a second at 10 Hz: multipath passes). 0: never, the gate alone (the
+    /// sources' behaviour, which a filter too sure of itself never recovers from).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reset_after: Option<u32>,
     /// Estimate this sensor's along-track position bias as a state (a GNSS receiver's slowly
     /// wandering error, which white measurement noise cannot describe).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -18,6 +18,9 @@ pub struct PipelineCounts {
     pub rejected_late: u64,
     pub rejected_device_fault: u64,
     pub before_initialisation: u64,
+    /// Absolute fixes the estimate was reset to, after the gate had rejected their sensor
+    /// `reset_after` times in a row.
+    pub resets_to_fix: u64,
 }
 
 /// The diagnostics record of one measurement of a pipeline that reads whole messages

@@ -126,6 +126,18 @@ impl SensorModel {
         Self::for_kind(MessageKind::from_schema(schema)?)
     }
 
+    /// Gate rejections in a row of its chainage after which a pipeline resets its position to
+    /// it (config `reset_after`): an absolute fix must win over a filter that went wrong. 0
+    /// for what is not an absolute fix.
+    pub fn default_reset_after(self) -> u32 {
+        match self {
+            SensorModel::BalisePosition => 1,
+            SensorModel::LoopPosition => 3,
+            SensorModel::GnssFix => 10,
+            _ => 0,
+        }
+    }
+
     /// The quantities this model can give.
     pub fn quantities(self) -> &'static [Quantity] {
         match self {

@@ -16,14 +16,14 @@ use crate::filter::federated::Federated;
 use crate::filter::rts::EpochRecorder;
 use crate::filter::{
     Centralised, Estimator, KalmanFilter, Outcome, ParticleFilter, ScalarMeasurement,
-    StateAndCovariance,
+    StateAndCovariance, MASTER,
 };
 use crate::kinds::MessagePipeline;
 use crate::measurement::{Measurement, ObservationRow, Quantity, SensorContext};
 use crate::model::SensorState;
 use crate::noise::VarianceValue;
 use crate::reorder::ReorderQueue;
-use crate::spec::{EstimatorSpec, PipelineSpec, SensorBinding, MAX_STATES};
+use crate::spec::{EstimatorSpec, PipelineSpec, SensorBinding, SensorSpec, MAX_STATES};
 
 pub use crate::fused::{measurement_record, Fused, PipelineCounts};
 
@@ -54,6 +54,49 @@ pub struct StateLayout {
 /// A sensor's fields as rows of the observation matrix, once it is bound to its channel.
 struct Sensor<const N: usize> {
     fields: Vec<Field<N>>,
+    /// Gate rejections in a row of its chainage after which the estimate is reset to it (0:
+    /// never), and the current run of them.
+    reset_after: u32,
+    rejected_in_row: u32,
+}
+
+/// The innovation check an ungated absolute fix must pass not to count towards a reset:
+/// NIS 25, the 5σ of PX4's default position gate.
+const FIX_CHECK_NIS: f64 = 25.0;
+
+/// Whether the chainage fix `m` of a sensor (`spec`, `bound`) is the one to reset the position to, and why:
+/// it fails the innovation check (the sensor's gate, or, ungated in a centralised
+/// pipeline, NIS > 25: PX4's 5σ) for the `reset_after`-th time in a row. Judged on the
+/// prediction, before any update, so that a reset starts from the same prior whether the
+/// fix was gated or not. A federated pipeline's devices have their fault detector; its
+/// master fixes (a balise) are checked.
+fn fix_check<const N: usize>(
+    spec: &SensorSpec,
+    bound: &mut Sensor<N>,
+    e: &dyn Estimator<N>,
+    m: &ScalarMeasurement<N>,
+) -> Option<String> {
+    let centralised = spec.device_name.is_none();
+    if m.quantity != Quantity::Chainage.index()
+        || bound.reset_after == 0
+        || !(centralised || spec.device == MASTER)
+    {
+        return None;
+    }
+    let check = spec.gate_nis.or(centralised.then_some(FIX_CHECK_NIS))?;
+    if e.innovation(m).passes(Some(check)) {
+        bound.rejected_in_row = 0;
+        return None;
+    }
+    bound.rejected_in_row += 1;
+    if bound.rejected_in_row < bound.reset_after {
+        return None;
+    }
+    let n = std::mem::take(&mut bound.rejected_in_row);
+    Some(format!(
+        "failed the innovation check (NIS > {check}) {n} time(s) in a row: position reset \
+         to this fix"
+    ))
 }
 
 struct Pending {
@@ -108,7 +151,11 @@ impl<const N: usize> Pipeline<N> {
             sensors: spec
                 .sensors
                 .iter()
-                .map(|_| Sensor { fields: Vec::new() })
+                .map(|_| Sensor {
+                    fields: Vec::new(),
+                    reset_after: 0,
+                    rejected_in_row: 0,
+                })
                 .collect(),
             gives_chainage: vec![true; spec.sensors.len()],
             spec,
@@ -164,6 +211,9 @@ impl<const N: usize> Pipeline<N> {
             .filter_map(|&(q, v)| field(q, v))
             .collect();
         self.gives_chainage[sensor] = binding.fields.iter().any(|(q, _)| *q == Quantity::Chainage);
+        self.sensors[sensor].reset_after = self.spec.sensors[sensor]
+            .reset_after
+            .unwrap_or(binding.model.default_reset_after());
     }
 
     /// Queues the measurements of one message of sensor `sensor`, received at `log_time_ns`,
@@ -455,7 +505,7 @@ impl<const N: usize> Pipeline<N> {
             .is_linearised()
             .then(|| e.linearisation_point(sensor.device));
         let (h, offset) = row.at(x.as_ref());
-        let outcome = e.process(&ScalarMeasurement {
+        let scalar = ScalarMeasurement {
             device: sensor.device,
             quantity: m.quantity.index(),
             h,
@@ -463,7 +513,14 @@ impl<const N: usize> Pipeline<N> {
             r,
             z: m.value,
             gate_nis: sensor.gate_nis,
-        });
+        };
+        let outcome = match fix_check(sensor, &mut self.sensors[p.sensor], e.as_ref(), &scalar) {
+            Some(reason) => {
+                diagnostics.reason = Some(reason);
+                e.reset_to_fix(&scalar)
+            }
+            None => e.process(&scalar),
+        };
         if let Some(i) = outcome.innovation() {
             diagnostics.innovation = Some(i.residual);
             diagnostics.innovation_variance = Some(i.variance);
@@ -488,10 +545,11 @@ impl<const N: usize> Pipeline<N> {
             Outcome::RejectedGate(_) => GateDecision::RejectedGate,
             Outcome::RejectedNumerics(_) => GateDecision::RejectedInvalid,
             Outcome::RejectedDeviceFault(_) => GateDecision::RejectedDeviceFault,
+            Outcome::Reset(_) => GateDecision::ResetToFix,
         };
         let used = matches!(
             decision,
-            GateDecision::Accepted | GateDecision::AcceptedAfterLockout
+            GateDecision::Accepted | GateDecision::AcceptedAfterLockout | GateDecision::ResetToFix
         );
         // With an output rate, states come from the ticks; otherwise one per update.
         let state = (used && self.output_period_ns.is_none())
@@ -509,6 +567,7 @@ impl<const N: usize> Pipeline<N> {
             GateDecision::RejectedLate => &mut c.rejected_late,
             GateDecision::RejectedDeviceFault => &mut c.rejected_device_fault,
             GateDecision::BeforeInitialisation => &mut c.before_initialisation,
+            GateDecision::ResetToFix => &mut c.resets_to_fix,
         } += 1;
     }
 

@@ -99,6 +99,7 @@ impl Score {
         a.rejected_invalid += b.rejected_invalid;
         a.rejected_late += b.rejected_late;
         a.rejected_device_fault += b.rejected_device_fault;
+        a.resets_to_fix += b.resets_to_fix;
         a.before_initialisation += b.before_initialisation;
     }
 

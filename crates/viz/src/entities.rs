@@ -122,6 +122,7 @@ pub fn gate_decision_name(decision: GateDecision) -> &'static str {
         GateDecision::RejectedLate => "rejected_late",
         GateDecision::BeforeInitialisation => "before_initialisation",
         GateDecision::RejectedDeviceFault => "rejected_device_fault",
+        GateDecision::ResetToFix => "reset_to_fix",
     }
 }
 

@@ -200,6 +200,10 @@ pub enum GateDecision {
     BeforeInitialisation,
     /// Its device is out of a federated fusion (failed): not used.
     RejectedDeviceFault,
+    /// An absolute fix (balise, loop, GNSS) the gate had rejected `reset_after` times in a
+    /// row: the filter, not the fix, was wrong, and its position was reset to the fix (the
+    /// innovation is the one before the reset).
+    ResetToFix,
 }
 
 /// What one measurement did to one pipeline.
@@ -328,6 +332,7 @@ protobuf_enum!(GateDecision {
     RejectedLate,
     BeforeInitialisation,
     RejectedDeviceFault,
+    ResetToFix,
 });
 
 /// The devices' shares travel in a message of their own, so that "no devices" and "not

@@ -9,7 +9,8 @@
 
 use super::rts::EpochRecorder;
 use super::{
-    Estimator, EstimatorDiagnostics, LocalFilter, Outcome, ScalarMeasurement, StateAndCovariance,
+    fix_reset, Estimator, EstimatorDiagnostics, Innovation, LocalFilter, Outcome,
+    ScalarMeasurement, StateAndCovariance,
 };
 use crate::model::TransitionModel;
 
@@ -112,6 +113,28 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Centralised<N, F> {
 
     fn estimate(&self) -> StateAndCovariance<N> {
         self.filter.estimate()
+    }
+
+    fn innovation(&self, m: &ScalarMeasurement<N>) -> Innovation {
+        self.filter.innovation(&m.h, m.r, m.z - m.offset)
+    }
+
+    fn reset_to_fix(&mut self, m: &ScalarMeasurement<N>) -> Outcome {
+        let before = self.filter.estimate();
+        let innovation = Estimator::innovation(self, m);
+        let Some(after) = fix_reset(&before, m) else {
+            return Outcome::RejectedNumerics(innovation);
+        };
+        self.filter.reset(&after);
+        let k = m.quantity;
+        if let Some(r) = &mut self.recorder {
+            // A reset is a jump the model did not predict: the smoother must not carry the
+            // estimate before it across (a prior that knows nothing of k on the jump's scale).
+            let scale = innovation.residual * innovation.residual + before.covariance[(k, k)] + m.r;
+            r.widen_prediction(k, 1e6 * scale);
+        }
+        self.rejections[k] = 0;
+        Outcome::Reset(innovation)
     }
 
     fn take_smoother(&mut self) -> Option<EpochRecorder<N>> {

@@ -116,6 +116,10 @@ pub enum Outcome {
     RejectedGate(Innovation),
     /// The update would have made the estimate non-finite: not used.
     RejectedNumerics(Innovation),
+    /// An absolute fix taken as the truth of its component after the gate had rejected the
+    /// sensor too often in a row ([`Estimator::reset_to_fix`]); the innovation is the one
+    /// before the reset.
+    Reset(Innovation),
     /// Its device is failed (out of the fusion); the innovation is against the fused estimate.
     RejectedDeviceFault(Option<Innovation>),
 }
@@ -126,7 +130,8 @@ impl Outcome {
             Outcome::Accepted(i)
             | Outcome::AcceptedAfterLockout(i)
             | Outcome::RejectedGate(i)
-            | Outcome::RejectedNumerics(i) => Some(i),
+            | Outcome::RejectedNumerics(i)
+            | Outcome::Reset(i) => Some(i),
             Outcome::RejectedDeviceFault(i) => i,
         }
     }
@@ -167,6 +172,15 @@ pub trait Estimator<const N: usize> {
     /// Gates and uses one measurement taken at the current time.
     fn process(&mut self, m: &ScalarMeasurement<N>) -> Outcome;
     fn estimate(&self) -> StateAndCovariance<N>;
+    /// Takes an absolute fix as the truth of the component it measures, as PX4's ekf2 resets
+    /// its position once the innovation checks have failed for too long: the filter, not the
+    /// fix, is wrong (a drifting loop it trusted, a slip it did not model), and a gate that
+    /// keeps rejecting the fix would keep it wrong for ever. See [`fix_reset`]. Returns
+    /// [`Outcome::Reset`], or [`Outcome::RejectedNumerics`] when the fix cannot be taken.
+    fn reset_to_fix(&mut self, m: &ScalarMeasurement<N>) -> Outcome;
+    /// The innovation `m` would produce against the estimate it would update, without using
+    /// it (what its gate would judge).
+    fn innovation(&self, m: &ScalarMeasurement<N>) -> Innovation;
     /// The state a non-linear measurement of `device` is linearised at: the estimate that
     /// measurement will update (a federated filter's device sub-filter; else the estimate).
     fn linearisation_point(&self, _device: usize) -> SVector<f64, N> {
@@ -182,6 +196,35 @@ pub trait Estimator<const N: usize> {
     fn take_smoother(&mut self) -> Option<rts::EpochRecorder<N>> {
         None
     }
+}
+
+/// The estimate `e` reset to the fix `m` (measuring component `k = m.quantity`):
+///
+/// ```text
+/// x_k ← x_k + (z − offset − H x) / H_k        (H x̂ now equals the fix)
+/// P_kj = P_jk ← 0 for j ≠ k,   P_kk ← r / H_k²  (the fix's variance, uncorrelated)
+/// ```
+///
+/// The other components keep their estimates and covariances (speed and a sensor's bias
+/// are not what the fix measures). `None` when the row does not measure `k` or the result is
+/// not finite.
+pub fn fix_reset<const N: usize>(
+    e: &StateAndCovariance<N>,
+    m: &ScalarMeasurement<N>,
+) -> Option<StateAndCovariance<N>> {
+    let k = m.quantity;
+    let hk = *m.h.get(k)?;
+    if hk == 0.0 || !(m.r > 0.0) {
+        return None;
+    }
+    let mut out = e.clone();
+    out.state[k] += (m.z - m.offset - (m.h * e.state)[0]) / hk;
+    for j in 0..N {
+        out.covariance[(k, j)] = 0.0;
+        out.covariance[(j, k)] = 0.0;
+    }
+    out.covariance[(k, k)] = m.r / (hk * hk);
+    (out.state.iter().all(|x| x.is_finite())).then_some(out)
 }
 
 /// Symmetrises a covariance after arithmetic that may have broken its symmetry by rounding.
@@ -207,4 +250,54 @@ pub fn sqrt_psd<const N: usize>(q: &SMatrix<f64, N, N>) -> SMatrix<f64, N, N> {
         }
     }
     l
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix4, RowVector4, Vector4};
+
+    /// A fix `z = s + b` (a loop with a chainage bias state) taken as the truth of s: the
+    /// row now predicts the fix exactly, s carries the fix's variance and no correlation, and
+    /// speed, acceleration and the bias keep theirs.
+    #[test]
+    fn a_fix_reset_moves_its_component_onto_the_fix_and_leaves_the_others() {
+        let a = Matrix4::new(
+            2.0, 0.3, 0.1, 0.2, //
+            0.0, 0.5, 0.1, 0.0, //
+            0.0, 0.0, 0.2, 0.05, //
+            0.0, 0.0, 0.0, 0.4,
+        );
+        let e = StateAndCovariance {
+            state: Vector4::new(1000.0, 20.0, 0.5, 1.5),
+            covariance: a * a.transpose(),
+        };
+        let m = ScalarMeasurement {
+            device: 0,
+            quantity: 0,
+            h: RowVector4::new(1.0, 0.0, 0.0, 1.0),
+            offset: 0.0,
+            r: 0.04,
+            z: 1010.0,
+            gate_nis: Some(9.0),
+        };
+        let out = fix_reset(&e, &m).unwrap();
+        assert!(((m.h * out.state)[0] - m.z).abs() < 1e-9);
+        assert_eq!(out.state.fixed_rows::<3>(1), e.state.fixed_rows::<3>(1));
+        assert_eq!(out.covariance[(0, 0)], 0.04);
+        for j in 1..4 {
+            assert_eq!((out.covariance[(0, j)], out.covariance[(j, 0)]), (0.0, 0.0));
+            for i in 1..4 {
+                assert_eq!(out.covariance[(i, j)], e.covariance[(i, j)]);
+            }
+        }
+        assert!(out.covariance.symmetric_eigenvalues().min() > 0.0);
+        // A row that does not measure the component, or a fix without a variance, is no fix.
+        let blind = ScalarMeasurement {
+            h: RowVector4::new(0.0, 1.0, 0.0, 0.0),
+            ..m
+        };
+        assert!(fix_reset(&e, &blind).is_none());
+        assert!(fix_reset(&e, &ScalarMeasurement { r: 0.0, ..m }).is_none());
+    }
 }

@@ -238,6 +238,9 @@ pub struct SensorSpec {
     pub fields: Option<Vec<Quantity>>,
     pub variance: Variance,
     pub gate_nis: Option<f64>,
+    /// Gate rejections in a row of its chainage after which the estimate is reset to it
+    /// (config `reset_after`; `None`: its sensor model's default).
+    pub reset_after: Option<u32>,
     /// Its calibration states, in state order.
     pub states: Vec<SensorState>,
     /// The window its speed is the mean over, s (config `speed_window_s`).

@@ -88,6 +88,7 @@ pub(super) fn sensor(
         fields: s.fields.clone(),
         variance: s.variance.clone(),
         gate_nis,
+        reset_after: s.reset_after,
         states,
         speed_window_s,
         required: s.required,

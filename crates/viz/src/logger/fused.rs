@@ -255,15 +255,17 @@ impl Logger {
                 let id = self.gate_series(p, decision)?;
                 let y = d.nis.map_or(NIS_AXIS_MAX, |n| n.min(NIS_AXIS_MAX)) * 0.97;
                 self.columns.push(&self.rec, id, t, &[y])?;
-                if decision == GateDecision::AcceptedAfterLockout {
-                    self.text(
-                        d.stamp_ns,
-                        format!(
-                            "{name}: {} accepted after a gate lockout (variance widened)",
-                            d.source
-                        ),
-                        "WARN",
-                    )?;
+                let warning = match decision {
+                    GateDecision::AcceptedAfterLockout => {
+                        Some("accepted after a gate lockout (variance widened)")
+                    }
+                    GateDecision::ResetToFix => {
+                        Some("rejected too often in a row: position reset to it")
+                    }
+                    _ => None,
+                };
+                if let Some(what) = warning {
+                    self.text(d.stamp_ns, format!("{name}: {} {what}", d.source), "WARN")?;
                 }
             }
         }
@@ -394,7 +396,9 @@ impl Logger {
         }
         let entity = ent::gate_decisions(&self.pipelines[p].name, decision);
         let (marker, color) = match decision {
-            GateDecision::AcceptedAfterLockout => (MarkerShape::Diamond, palette::after_lockout()),
+            GateDecision::AcceptedAfterLockout | GateDecision::ResetToFix => {
+                (MarkerShape::Diamond, palette::after_lockout())
+            }
             GateDecision::RejectedGate => (MarkerShape::Cross, palette::rejected()),
             _ => (MarkerShape::Asterisk, palette::bound()),
         };

@@ -54,8 +54,8 @@ use nalgebra::{SMatrix, SVector};
 use super::sharing::{Redistribution, SharingTable};
 use super::working_state::{DetectorSettings, WorkingState};
 use super::{
-    DeviceShare, Estimator, EstimatorDiagnostics, KalmanFilter, LocalFilter, Outcome,
-    ScalarMeasurement, StateAndCovariance, MASTER,
+    fix_reset, DeviceShare, Estimator, EstimatorDiagnostics, Innovation, KalmanFilter, LocalFilter,
+    Outcome, ScalarMeasurement, StateAndCovariance, MASTER,
 };
 use crate::model::TransitionModel;
 
@@ -443,6 +443,13 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
             return Outcome::RejectedNumerics(innovation);
         }
         self.master = master;
+        self.share_master();
+        Outcome::Accepted(innovation)
+    }
+
+    /// The master's estimate shared back to every sub-filter with a share β > 0 at once,
+    /// whatever the feedback mode (an absolute fix the next fusion must not forget).
+    fn share_master(&mut self) {
         self.beta = self.settings.sharing.shares(
             self.speed(),
             &self.healthy(),
@@ -458,7 +465,6 @@ impl<const N: usize, F: LocalFilter<N>> Federated<N, F> {
                 ));
             }
         }
-        Outcome::Accepted(innovation)
     }
 
     /// A measurement of a device out of the fusion: it either updates the device's own
@@ -551,6 +557,34 @@ impl<const N: usize, F: LocalFilter<N>> Estimator<N> for Federated<N, F> {
 
     fn estimate(&self) -> StateAndCovariance<N> {
         self.fuse().unwrap_or_else(|| self.master.estimate.clone())
+    }
+
+    /// Against the fused estimate for the master's fixes and a failed device's measurements;
+    /// against its sub-filter for a healthy device's.
+    fn innovation(&self, m: &ScalarMeasurement<N>) -> Innovation {
+        let z = m.z - m.offset;
+        match self.devices.get(m.device) {
+            Some(d) if d.health.healthy() => d.filter.innovation(&m.h, m.r, z),
+            _ => KalmanFilter {
+                estimate: self.estimate(),
+            }
+            .innovation(&m.h, m.r, z),
+        }
+    }
+
+    /// The fused estimate reset to the fix, and shared to every sub-filter: an absolute fix
+    /// is the truth of the train's position, not one device's view of it.
+    fn reset_to_fix(&mut self, m: &ScalarMeasurement<N>) -> Outcome {
+        let fused = KalmanFilter {
+            estimate: self.estimate(),
+        };
+        let innovation = fused.innovation(&m.h, m.r, m.z - m.offset);
+        let Some(after) = fix_reset(&fused.estimate, m) else {
+            return Outcome::RejectedNumerics(innovation);
+        };
+        self.master.estimate = after;
+        self.share_master();
+        Outcome::Reset(innovation)
     }
 
     fn linearisation_point(&self, device: usize) -> SVector<f64, N> {
