@@ -26,7 +26,10 @@ fn bad_config(dir: &Path) -> PathBuf {
     let bad = text
         .replace("jerk_psd = 0.2", "jerk_psd = 20.0")
         .replace("variance = 0.1\n", "variance = 0.001\n")
-        .replace("variance = \"message\"\n", "variance = \"message\"\nreset_after = 0\n");
+        .replace(
+            "variance = \"message\"\n",
+            "variance = \"message\"\nreset_after = 0\n",
+        );
     assert_ne!(text, bad);
     let path = dir.join("bad.toml");
     std::fs::write(&path, bad).unwrap();

@@ -210,6 +210,7 @@ fn particle(c: &mut Criterion) {
                 ess_threshold: 0.5,
                 roughening: 0.1,
                 seed: 1,
+                reseed_nis: 25.0,
             };
             let mut pf = ParticleFilter::new(settings, &init);
             let mut k = 0u64;

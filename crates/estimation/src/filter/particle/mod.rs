@@ -38,6 +38,12 @@ pub struct ParticleSettings {
     /// Roughening constant K after resampling (0 turns roughening off).
     pub roughening: f64,
     pub seed: u64,
+    /// A measurement whose NIS against the cloud (its mean and spread) exceeds this has
+    /// missed the cloud: weighting would leave all the weight on the nearest particle and the
+    /// cloud collapsed for good. Instead the cloud is drawn afresh from the Kalman update of
+    /// its Gaussian (a re-seed). Default 25 (5σ, PX4's position gate); 0: never (the
+    /// sources' bootstrap filter).
+    pub reseed_nis: f64,
 }
 
 impl Default for ParticleSettings {
@@ -48,6 +54,7 @@ impl Default for ParticleSettings {
             ess_threshold: 0.5,
             roughening: 0.1,
             seed: 1,
+            reseed_nis: 25.0,
         }
     }
 }
@@ -68,6 +75,12 @@ impl ParticleSettings {
             return Err(format!(
                 "particle.roughening must be ≥ 0, not {}",
                 self.roughening
+            ));
+        }
+        if !(self.reseed_nis.is_finite() && self.reseed_nis >= 0.0) {
+            return Err(format!(
+                "particle.reseed_nis must be ≥ 0, not {}",
+                self.reseed_nis
             ));
         }
         Ok(())
@@ -176,6 +189,20 @@ impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
     }
 
     fn update(&mut self, h: &RowSVector<f64, N>, r: f64, z: f64) -> bool {
+        if self.settings.reseed_nis > 0.0 && self.innovation(h, r, z).nis > self.settings.reseed_nis
+        {
+            let mut g = super::KalmanFilter {
+                estimate: self.estimate(),
+            };
+            if !LocalFilter::update(&mut g, h, r, z) {
+                return false;
+            }
+            let e = g.estimate();
+            self.reset(&e);
+            self.last_ess = self.particles.len() as f64;
+            self.last_resampled = true;
+            return true;
+        }
         let log_lik: Vec<f64> = self
             .particles
             .iter()
@@ -262,6 +289,7 @@ mod tests {
             ess_threshold: 0.5,
             roughening: 0.0,
             seed,
+            reseed_nis: 0.0,
         };
         let mut pf = ParticleFilter::new(settings, &init);
         let mut kf = KalmanFilter::new(init.state, init.covariance);
@@ -345,6 +373,7 @@ mod tests {
             ess_threshold: 0.5,
             roughening: 0.2,
             seed: 1,
+            reseed_nis: 0.0,
         };
         let mut pf = ParticleFilter::new(settings, &init);
         assert!(LocalFilter::update(
@@ -354,5 +383,42 @@ mod tests {
             1e6
         ));
         assert!(pf.estimate().is_finite());
+    }
+
+    /// A precise fix far outside the cloud: weighted as the bootstrap filter does, every
+    /// weight goes to the nearest particle and the cloud collapses onto it (far from the fix,
+    /// no spread left); re-seeded (`reseed_nis`), the cloud is drawn from the Kalman update
+    /// of its Gaussian, and the speed, which the fix does not measure, keeps its spread.
+    #[test]
+    fn a_fix_that_missed_the_cloud_reseeds_it_instead_of_collapsing_it() {
+        let init = StateAndCovariance {
+            state: Vector2::new(0.0, 10.0),
+            covariance: Matrix2::new(0.01, 0.0, 0.0, 1.0),
+        };
+        let h = RowVector2::new(1.0, 0.0);
+        let after = |reseed_nis: f64| {
+            let settings = ParticleSettings {
+                particles: 2000,
+                reseed_nis,
+                roughening: 0.0,
+                ..ParticleSettings::default()
+            };
+            let mut pf = ParticleFilter::new(settings, &init);
+            assert!(LocalFilter::update(&mut pf, &h, 1e-4, 5.0));
+            pf.estimate()
+        };
+        let (stated, reseeded) = (after(0.0), after(25.0));
+        // Collapsed: short of the fix by metres, nothing left of its spread.
+        assert!(5.0 - stated.state[0] > 4.0, "{stated:?}");
+        assert!(stated.covariance[(1, 1)] < 1e-6, "{stated:?}");
+        // Re-seeded: at the Kalman posterior of the cloud's Gaussian and the fix (mean
+        // 5 · 0.01 / 0.0101, variance 0.01 · 1e-4 / 0.0101); the speed keeps its spread.
+        let (mean, var) = (5.0 * 0.01 / 0.0101, 0.01 * 1e-4 / 0.0101);
+        assert!((reseeded.state[0] - mean).abs() < 0.01, "{reseeded:?}");
+        assert!(
+            (reseeded.covariance[(0, 0)] / var - 1.0).abs() < 0.1,
+            "{reseeded:?}"
+        );
+        assert!((reseeded.covariance[(1, 1)] - 1.0).abs() < 0.1);
     }
 }
