@@ -546,7 +546,7 @@ impl LogWriter {
                 offset,
             });
         put_message(&mut open.records, &header, data);
-        count_message(&mut self.stats, channel, log_time_ns);
+        count_messages(&mut self.stats, channel, 1, (log_time_ns, log_time_ns));
         if self.open.records.len() >= self.chunk_size {
             self.close_chunk()?;
         }
@@ -591,22 +591,12 @@ impl LogWriter {
     /// already and fed each to `tally`.
     pub fn copy_tallied_chunk(&mut self, chunk: Chunk, tally: ChunkTally) -> Result<Vec<u8>> {
         for (&channel, entries) in &tally.index {
-            let (Some(first), Some(last)) = (entries.first(), entries.last()) else {
-                continue;
-            };
-            let stats = &mut self.stats;
-            let (start, end) = entries
-                .iter()
-                .fold((first.log_time, last.log_time), |(a, b), e| {
-                    (a.min(e.log_time), b.max(e.log_time))
-                });
-            if stats.message_count == 0 {
-                (stats.message_start_time, stats.message_end_time) = (start, end);
+            let span = entries.iter().fold((u64::MAX, 0), |(a, b), e| {
+                (a.min(e.log_time), b.max(e.log_time))
+            });
+            if !entries.is_empty() {
+                count_messages(&mut self.stats, channel, entries.len() as u64, span);
             }
-            stats.message_count += entries.len() as u64;
-            stats.message_start_time = stats.message_start_time.min(start);
-            stats.message_end_time = stats.message_end_time.max(end);
-            *stats.channel_message_counts.entry(channel).or_insert(0) += entries.len() as u64;
         }
         for (opcode, id, framed) in tally.definitions {
             let table = match opcode {
@@ -793,14 +783,15 @@ fn channel_of(body: &[u8]) -> u16 {
     u16::from_le_bytes([body[0], body[1]])
 }
 
-fn count_message(stats: &mut Statistics, channel: u16, log_time: u64) {
+/// `n` messages of `channel` logged between `start` and `end` (ns) into the statistics.
+fn count_messages(stats: &mut Statistics, channel: u16, n: u64, (start, end): (u64, u64)) {
     if stats.message_count == 0 {
-        (stats.message_start_time, stats.message_end_time) = (log_time, log_time);
+        (stats.message_start_time, stats.message_end_time) = (start, end);
     }
-    stats.message_count += 1;
-    stats.message_start_time = stats.message_start_time.min(log_time);
-    stats.message_end_time = stats.message_end_time.max(log_time);
-    *stats.channel_message_counts.entry(channel).or_insert(0) += 1;
+    stats.message_count += n;
+    stats.message_start_time = stats.message_start_time.min(start);
+    stats.message_end_time = stats.message_end_time.max(end);
+    *stats.channel_message_counts.entry(channel).or_insert(0) += n;
 }
 
 fn schema_record(id: u16, name: &str, encoding: &str, data: &[u8]) -> Vec<u8> {

@@ -136,6 +136,22 @@ impl<const N: usize> ParticleFilter<N> {
         SVector::from_fn(|_, _| StandardNormal.sample(&mut self.rng))
     }
 
+    /// `H p` of every particle.
+    fn projected(&self, h: &RowSVector<f64, N>) -> Vec<f64> {
+        self.particles.iter().map(|p| (h * p)[0]).collect()
+    }
+
+    /// The innovation against the cloud's weighted mean and spread of `H p` (`hx`).
+    fn innovation_of(&self, hx: &[f64], r: f64, z: f64) -> Innovation {
+        let mean: f64 = hx.iter().zip(&self.weights).map(|(x, w)| w * x).sum();
+        let var: f64 = hx
+            .iter()
+            .zip(&self.weights)
+            .map(|(x, w)| w * (x - mean).powi(2))
+            .sum();
+        Innovation::new(z - mean, var + r)
+    }
+
     fn resample(&mut self) {
         let mut idx = std::mem::take(&mut self.scratch);
         self.settings
@@ -173,23 +189,14 @@ impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
     }
 
     fn innovation(&self, h: &RowSVector<f64, N>, r: f64, z: f64) -> Innovation {
-        let mean: f64 = self
-            .particles
-            .iter()
-            .zip(&self.weights)
-            .map(|(p, w)| w * (h * p)[0])
-            .sum();
-        let var: f64 = self
-            .particles
-            .iter()
-            .zip(&self.weights)
-            .map(|(p, w)| w * ((h * p)[0] - mean).powi(2))
-            .sum();
-        Innovation::new(z - mean, var + r)
+        self.innovation_of(&self.projected(h), r, z)
     }
 
     fn update(&mut self, h: &RowSVector<f64, N>, r: f64, z: f64) -> bool {
-        if self.settings.reseed_nis > 0.0 && self.innovation(h, r, z).nis > self.settings.reseed_nis
+        // Each particle projected once: for the re-seed check and for its weight.
+        let mut log_lik = self.projected(h);
+        if self.settings.reseed_nis > 0.0
+            && self.innovation_of(&log_lik, r, z).nis > self.settings.reseed_nis
         {
             let mut g = super::KalmanFilter {
                 estimate: self.estimate(),
@@ -203,11 +210,9 @@ impl<const N: usize> LocalFilter<N> for ParticleFilter<N> {
             self.last_resampled = true;
             return true;
         }
-        let log_lik: Vec<f64> = self
-            .particles
-            .iter()
-            .map(|p| -0.5 * (z - (h * p)[0]).powi(2) / r)
-            .collect();
+        for l in &mut log_lik {
+            *l = -0.5 * (z - *l).powi(2) / r;
+        }
         let max = log_lik.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if !max.is_finite() {
             return false;
