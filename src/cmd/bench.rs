@@ -282,17 +282,19 @@ fn safety(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
 /// command timed.
 fn gnss_ins(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
     let all = railfuse_experiments::gnss_ins::SEED003_PIPELINES;
-    // The last pipeline of the sample, with the sample's opening comments.
-    let start = all.rfind("[[pipeline]]").expect("the sample has pipelines");
-    let pu_rls = &all[start..];
-    if !pu_rls.contains("name = \"pu_rls\"") {
-        bail!("samples/seed003.toml no longer ends with the pu_rls pipeline");
-    }
+    // The sample's pu_rls pipeline, alone.
+    let Some(pu_rls) = all
+        .split("[[pipeline]]")
+        .find(|p| p.contains("name = \"pu_rls\""))
+        .map(|p| format!("[[pipeline]]{p}"))
+    else {
+        bail!("samples/seed003.toml no longer has the pu_rls pipeline");
+    };
     let (sim, all) = timed_runs(
         dir,
         "default",
         secs,
-        ("seed003-pu_rls.toml", pu_rls),
+        ("seed003-pu_rls.toml", &pu_rls),
         repeat,
     )?;
     let m = &all[all.len() / 2];

@@ -19,8 +19,15 @@ use crate::{Error, Result};
 
 pub const SEED003_PIPELINES: &str = include_str!("../../../samples/seed003.toml");
 
-/// The pipelines compared, the plain KF first (the improvements are over it).
-pub const PIPELINES: [&str; 4] = ["kf", "akf", "rls", "pu_rls"];
+/// The pipelines compared, the plain KF first (the improvements are over it); the source's
+/// four, then railfuse's with the train's constraints (and its speed sensors).
+pub const PIPELINES: [&str; 6] = ["kf", "akf", "rls", "pu_rls", "kf_track", "kf_track_speed"];
+
+/// railfuse's pipelines, which the source has no counterpart of.
+pub const TRAIN_PIPELINES: [&str; 2] = ["kf_track", "kf_track_speed"];
+
+/// The 95 % interval of χ² with one degree of freedom.
+const NEES_95: (f64, f64) = (0.000_982, 5.024);
 
 /// The scenarios, and the GNSS loss each has (s from the start, length), if scored.
 pub const SCENARIOS: [(&str, Option<(f64, f64)>); 2] =
@@ -58,6 +65,29 @@ impl Spread {
     }
 }
 
+/// How often the along-track NEES lay inside its 95 % interval.
+#[derive(Debug, Default, Clone, Copy, Serialize)]
+pub struct Consistency {
+    pub n: u64,
+    pub inside: u64,
+}
+
+impl Consistency {
+    fn push(&mut self, error: f64, variance: f64) {
+        if !(error.is_finite() && variance > 0.0) {
+            return;
+        }
+        let nees = error * error / variance;
+        self.n += 1;
+        self.inside += u64::from(nees >= NEES_95.0 && nees <= NEES_95.1);
+    }
+
+    /// The share inside, 0–1 (NaN with no samples).
+    pub fn share(&self) -> f64 {
+        self.inside as f64 / self.n as f64
+    }
+}
+
 /// One pipeline on one scenario, pooled over the seeds.
 #[derive(Debug, Default, Clone, Serialize)]
 pub struct PlaneErrors {
@@ -71,6 +101,11 @@ pub struct PlaneErrors {
     /// Through the GNSS loss only.
     pub outage_east: Spread,
     pub outage_north: Spread,
+    /// Along-track (chainage) error through the loss.
+    pub outage_along: Spread,
+    /// The chainage's NEES against its variance, over the whole run and through the loss.
+    pub nees: Consistency,
+    pub outage_nees: Consistency,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -148,8 +183,10 @@ fn score(fused: &Path, outage: Option<(f64, f64)>, acc: &mut [PlaneErrors]) -> R
         };
         let a = &mut acc[k];
         let (ee, en) = (p.east_m - g.east_m, p.north_m - g.north_m);
+        let along = s.chainage_m - g.chainage_m;
         a.position_east.push(ee);
         a.position_north.push(en);
+        a.nees.push(along, s.covariance[0]);
         if let Some([ve, vn]) = p.velocity_en_mps {
             let (te, tn) = (
                 g.speed_mps * g.heading_rad.sin(),
@@ -162,6 +199,8 @@ fn score(fused: &Path, outage: Option<(f64, f64)>, acc: &mut [PlaneErrors]) -> R
         if outage.is_some_and(|(start, len)| at >= start && at < start + len) {
             a.outage_east.push(ee);
             a.outage_north.push(en);
+            a.outage_along.push(along);
+            a.outage_nees.push(along, s.covariance[0]);
         }
     }
     Ok(())
@@ -175,6 +214,7 @@ fn truth_at(truth: &[GroundTruth], t: u64) -> Option<GroundTruth> {
     let lerp = |x: f64, y: f64| x + w * (y - x);
     Some(GroundTruth {
         stamp_ns: t,
+        chainage_m: lerp(a.chainage_m, b.chainage_m),
         east_m: lerp(a.east_m, b.east_m),
         north_m: lerp(a.north_m, b.north_m),
         speed_mps: lerp(a.speed_mps, b.speed_mps),

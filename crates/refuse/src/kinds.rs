@@ -16,10 +16,10 @@ use std::sync::Arc;
 use railfuse_catalog::log::LogMessage;
 
 use crate::base::PipelineBase;
-use crate::config::{MotionConfig, PipelineConfig};
+use crate::config::{MotionConfig, PipelineConfig, SensorConfig};
 use crate::error::Result;
 use crate::fused::{Fused, PipelineCounts};
-use crate::measurement::SensorContext;
+use crate::measurement::{SensorContext, SensorModel};
 use crate::model::{ConstantAcceleration, MotionModel};
 use crate::noise::VarianceValue;
 
@@ -120,6 +120,10 @@ pub trait KindSpec: Debug + Send + Sync {
     fn reads_raw_blocks(&self) -> bool {
         false
     }
+    /// Whether sensor `sensor` may be a channel of this model; why not, if it may not.
+    fn accepts(&self, _sensor: usize, _model: SensorModel) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 /// A kind's settings table read into its type (`None`: the defaults).
@@ -151,19 +155,26 @@ pub fn sensor_of(c: &PipelineConfig, role: &str, topic: &str) -> Result<usize, S
 
 /// Refuses a sensor with a setting only pipelines along the track read.
 pub fn whole_message_sensors(c: &PipelineConfig) -> Result<(), String> {
-    match c.sensor.iter().map(|s| s.get_ref()).find(|s| {
-        s.chainage_bias.is_some()
-            || s.acceleration_bias.is_some()
-            || s.scale_factor.is_some()
-            || s.speed_window_s.is_some()
-            || s.fields.is_some()
-    }) {
-        Some(s) => Err(format!(
-            "sensor {}: an {} pipeline's sensors take a topic, a variance and a gate \
+    c.sensor
+        .iter()
+        .try_for_each(|s| whole_message_sensor(c.filter.get_ref(), s.get_ref()))
+}
+
+/// Refuses one sensor of a `filter` pipeline with a setting only pipelines along the track
+/// read.
+pub fn whole_message_sensor(filter: &str, s: &SensorConfig) -> Result<(), String> {
+    match s.chainage_bias.is_some()
+        || s.acceleration_bias.is_some()
+        || s.scale_factor.is_some()
+        || s.speed_window_s.is_some()
+        || s.fields.is_some()
+    {
+        true => Err(format!(
+            "sensor {}: an {filter} pipeline's sensors take a topic, a variance and a gate \
              only (no fields, sensor states or speed window)",
-            s.topic, c.filter
+            s.topic
         )),
-        None => Ok(()),
+        false => Ok(()),
     }
 }
 

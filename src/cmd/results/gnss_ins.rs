@@ -3,7 +3,7 @@
 
 use anyhow::Result;
 use railfuse_experiments::gnss_ins::{
-    self, GnssInsResults, PlaneErrors, SourceFigures, Spread, SOURCE,
+    self, Consistency, GnssInsResults, PlaneErrors, SourceFigures, Spread, SOURCE, TRAIN_PIPELINES,
 };
 
 use super::page::{with_progress, write_page, Args, Template};
@@ -59,6 +59,7 @@ fn markdown(r: &GnssInsResults) -> Result<String> {
         .set("n", r.seeds)
         .set("errors", errors(r).markdown())
         .set("improvement", improvement(r).markdown())
+        .set("constraints", constraints(r).markdown())
         .set("baseline", baseline)
         .render()
 }
@@ -76,13 +77,12 @@ fn errors(r: &GnssInsResults) -> Table {
             "mean abs N",
             "loss std E",
             "loss std N",
+            "loss std along",
+            "NEES in 95 %",
+            "loss NEES in 95 %",
         ],
-        "llrrrrrrrr",
+        "llrrrrrrrrrrr",
     );
-    let loss = |s: &Spread| match s.n {
-        0 => "–".to_owned(),
-        _ => f(s.std()),
-    };
     for row in &r.rows {
         t.row([
             row.scenario.clone(),
@@ -95,6 +95,102 @@ fn errors(r: &GnssInsResults) -> Table {
             f(row.position_north.mean_abs()),
             loss(&row.outage_east),
             loss(&row.outage_north),
+            loss(&row.outage_along),
+            share(&row.nees),
+            share(&row.outage_nees),
+        ]);
+    }
+    t
+}
+
+/// A spread's std, or a dash where it has no samples (no loss in the scenario).
+fn loss(s: &Spread) -> String {
+    match s.n {
+        0 => "–".to_owned(),
+        _ => f(s.std()),
+    }
+}
+
+fn share(c: &Consistency) -> String {
+    match c.n {
+        0 => "–".to_owned(),
+        _ => format!("{:.1} %", 100.0 * c.share()),
+    }
+}
+
+/// The goal each train pipeline is held to through seed003's loss (issue 31): the bound on
+/// its position-error std east and north, whether strictly below it, and what it is.
+fn goal(pipeline: &str) -> Option<(f64, f64, bool, &'static str)> {
+    let pu_rls = SOURCE
+        .iter()
+        .find(|s| s.pipeline == "pu_rls")?
+        .outage_std_en?;
+    match pipeline {
+        "kf_track" => Some((pu_rls.0, pu_rls.1, true, "below the source's PU-RLS")),
+        "kf_track_speed" => Some((1.0, 1.0, false, "at most 1 m")),
+        _ => None,
+    }
+}
+
+/// railfuse's train pipelines through seed003's loss, beside the source's best.
+fn constraints(r: &GnssInsResults) -> Table {
+    let mut t = Table::new(
+        [
+            "pipeline",
+            "loss std E",
+            "loss std N",
+            "source PU-RLS E / N",
+            "goal",
+            "verdict",
+            "loss NEES in 95 %",
+        ],
+        "lrrrlll",
+    );
+    let pu_rls = SOURCE
+        .iter()
+        .find(|s| s.pipeline == "pu_rls")
+        .and_then(|s| s.outage_std_en);
+    for row in r
+        .rows
+        .iter()
+        .filter(|x| x.scenario == "seed003" && TRAIN_PIPELINES.contains(&x.pipeline.as_str()))
+    {
+        let (e, n) = (row.outage_east.std(), row.outage_north.std());
+        let (goal, verdict) = match goal(&row.pipeline) {
+            Some((ge, gn, strict, what)) => {
+                let within = |x: f64, bound: f64| if strict { x < bound } else { x <= bound };
+                let met = within(e, ge) && within(n, gn);
+                let op = if strict { "<" } else { "≤" };
+                (
+                    format!("{what}: E {op} {ge:.2}, N {op} {gn:.2}"),
+                    match met {
+                        true => "met".to_owned(),
+                        false => "**not met**".to_owned(),
+                    },
+                )
+            }
+            None => ("–".into(), "–".into()),
+        };
+        let nees = row.outage_nees;
+        let nees = match nees.n {
+            0 => "–".to_owned(),
+            _ => format!(
+                "{} ({})",
+                share(&nees),
+                match nees.share() >= 0.9 {
+                    true => "≥ 90 %: met",
+                    false => "**below 90 %**",
+                }
+            ),
+        };
+        t.row([
+            format!("`{}`", row.pipeline),
+            f(e),
+            f(n),
+            pu_rls.map_or("–".into(), |(se, sn)| format!("{se:.2} / {sn:.2}")),
+            goal,
+            verdict,
+            nees,
         ]);
     }
     t
@@ -167,7 +263,10 @@ fn improvement(r: &GnssInsResults) -> Table {
         let Some(kf) = rows.iter().find(|x| x.pipeline == "kf") else {
             continue;
         };
-        for row in rows.iter().filter(|x| x.pipeline != "kf") {
+        let source_pipelines = rows
+            .iter()
+            .filter(|x| x.pipeline != "kf" && !TRAIN_PIPELINES.contains(&x.pipeline.as_str()));
+        for row in source_pipelines {
             let src = SOURCE.iter().find(|s| s.pipeline == row.pipeline);
             for fig in &FIGURES {
                 if fig.name.starts_with("loss") && row.outage_east.n == 0 {

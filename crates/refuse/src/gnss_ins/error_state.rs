@@ -1,12 +1,17 @@
 //! The error-state Kalman filter of the planar INS: it estimates what the navigation got
-//! wrong, `δx = x_true − x_nav = [δe, δn, δv, δψ, δb_a, δb_g]`, from GNSS, and the correction
-//! is put into the navigation after each update (the error state then starts again at zero).
+//! wrong, `δx = x_true − x_nav = [δe, δn, δu, δw, δψ, δb_x, δb_y, δb_g, δg_e, δg_n, δk_1 … δk_3]`
+//! (forward and lateral body speed, heading, the forward and lateral accelerometer biases,
+//! the yaw gyro's, the GNSS receiver's slowly wandering position bias east and north, and the
+//! scale factors of up to three speed sensors), from GNSS, the train's constraints and its
+//! speed sensors; the correction is put into the navigation (and the [`Calibration`]) after
+//! each update (the error state then starts again at zero).
 //!
-//! Linearised about the navigation (`ψ`, `v`):
+//! Linearised about the navigation (`ψ`, `u`, `w`, `ω` the bias-corrected rate about up):
 //!
 //! ```text
-//! δė = sin ψ δv + v cos ψ δψ          δv̇ = −δb_a + w_a          δḃ_a = −δb_a / τ_a + w_ba
-//! δṅ = cos ψ δv − v sin ψ δψ          δψ̇ =  δb_g + w_g          δḃ_g = −δb_g / τ_g + w_bg
+//! δė = sin ψ δu − cos ψ δw + (u cos ψ + w sin ψ) δψ      δu̇ = −δb_x + ω δw − w δb_g + w_a
+//! δṅ = cos ψ δu + sin ψ δw + (w cos ψ − u sin ψ) δψ      δẇ = −δb_y − ω δu + u δb_g + w_a
+//! δψ̇ = δb_g + w_g        δḃ = −δb / τ + w_b        δġ = −δg / τ_g + w_g'        δk̇_j = w_k
 //! ```
 //!
 //! `w_a`, `w_g` are the sensors' white noise (velocity and angle random walk, PSD the noise
@@ -24,10 +29,50 @@ use crate::model::TransitionModel;
 
 pub const E: usize = 0;
 pub const N: usize = 1;
+/// Forward speed (along the body's x axis).
 pub const V: usize = 2;
-pub const PSI: usize = 3;
-pub const BA: usize = 4;
-pub const BG: usize = 5;
+/// Lateral speed (body y, to the left): zero for a train on its rails.
+pub const W: usize = 3;
+pub const PSI: usize = 4;
+/// Forward accelerometer bias.
+pub const BA: usize = 5;
+/// Lateral accelerometer bias.
+pub const BY: usize = 6;
+pub const BG: usize = 7;
+/// The GNSS receiver's position bias, east and north.
+pub const GE: usize = 8;
+pub const GN: usize = 9;
+/// The first speed sensor's scale factor; sensor `j` has `K + j`.
+pub const K: usize = 10;
+/// Speed sensors with a scale-factor state, at most.
+pub const MAX_SPEED_SENSORS: usize = 3;
+/// The error state's dimension.
+pub const DIM: usize = K + MAX_SPEED_SENSORS;
+
+/// A vector or a row over the error state.
+pub type ErrorVector = SVector<f64, DIM>;
+pub type ErrorMatrix = SMatrix<f64, DIM, DIM>;
+
+/// What the filter estimates about its sensors beside the navigation, the nominal values
+/// the error state corrects.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Calibration {
+    /// Each speed sensor's scale factor `k` (it reads `(1 + k)` times the speed).
+    pub speed_scales: [f64; MAX_SPEED_SENSORS],
+    /// The receiver's position bias east and north, m.
+    pub receiver_bias_m: [f64; 2],
+}
+
+impl Calibration {
+    /// The receiver's bias decays towards zero over `dt` (a first-order Gauss–Markov
+    /// process's mean).
+    pub fn decay(&mut self, dt: f64, time_constant_s: f64) {
+        let phi = (-dt / time_constant_s).exp();
+        for b in &mut self.receiver_bias_m {
+            *b *= phi;
+        }
+    }
+}
 
 /// The IMU's error model (`[pipeline.gnss_ins.imu]`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -83,38 +128,63 @@ impl ImuNoise {
 pub struct ErrorDynamics<'a> {
     pub navigation: &'a Navigation,
     pub noise: &'a ImuNoise,
+    /// The bias-corrected rate about the up axis, rad/s (counter-clockwise).
+    pub rate_radps: f64,
+    /// Each speed sensor's scale-factor random-walk PSD, 1/s (0: constant).
+    pub scale_walk: &'a [f64; MAX_SPEED_SENSORS],
+    /// The receiver bias's correlation time, s, and its driving PSD per axis, m²/s (0: no
+    /// bias states).
+    pub receiver_bias: (f64, f64),
 }
 
 impl ErrorDynamics<'_> {
-    fn f(&self) -> SMatrix<f64, 6, 6> {
-        let (s, c) = self.navigation.heading_rad.sin_cos();
-        let v = self.navigation.speed_mps;
-        let mut f = SMatrix::<f64, 6, 6>::zeros();
+    fn f(&self) -> ErrorMatrix {
+        let nav = self.navigation;
+        let (s, c) = nav.heading_rad.sin_cos();
+        let (u, w, omega) = (nav.speed_mps, nav.lateral_mps, self.rate_radps);
+        let mut f = ErrorMatrix::zeros();
         f[(E, V)] = s;
-        f[(E, PSI)] = v * c;
+        f[(E, W)] = -c;
+        f[(E, PSI)] = u * c + w * s;
         f[(N, V)] = c;
-        f[(N, PSI)] = -v * s;
+        f[(N, W)] = s;
+        f[(N, PSI)] = w * c - u * s;
+        f[(V, W)] = omega;
         f[(V, BA)] = -1.0;
+        f[(V, BG)] = -w;
+        f[(W, V)] = -omega;
+        f[(W, BY)] = -1.0;
+        f[(W, BG)] = u;
         f[(PSI, BG)] = 1.0;
         f[(BA, BA)] = -1.0 / self.noise.accel_bias_time_s;
+        f[(BY, BY)] = -1.0 / self.noise.accel_bias_time_s;
         f[(BG, BG)] = -1.0 / self.noise.gyro_bias_time_s;
+        f[(GE, GE)] = -1.0 / self.receiver_bias.0;
+        f[(GN, GN)] = -1.0 / self.receiver_bias.0;
         f
     }
 }
 
-impl TransitionModel<6> for ErrorDynamics<'_> {
-    fn transition(&self, dt: f64) -> SMatrix<f64, 6, 6> {
+impl TransitionModel<DIM> for ErrorDynamics<'_> {
+    fn transition(&self, dt: f64) -> ErrorMatrix {
         let fdt = self.f() * dt;
-        SMatrix::identity() + fdt + fdt * fdt * 0.5
+        ErrorMatrix::identity() + fdt + fdt * fdt * 0.5
     }
 
-    fn process_noise(&self, dt: f64) -> SMatrix<f64, 6, 6> {
+    fn process_noise(&self, dt: f64) -> ErrorMatrix {
         let n = self.noise;
-        let mut gqg = SMatrix::<f64, 6, 6>::zeros();
+        let mut gqg = ErrorMatrix::zeros();
         gqg[(V, V)] = n.accel_noise_density.powi(2);
+        gqg[(W, W)] = n.accel_noise_density.powi(2);
         gqg[(PSI, PSI)] = n.gyro_noise_density.powi(2);
         gqg[(BA, BA)] = 2.0 * n.accel_bias_std_mps2.powi(2) / n.accel_bias_time_s;
+        gqg[(BY, BY)] = gqg[(BA, BA)];
         gqg[(BG, BG)] = 2.0 * n.gyro_bias_std_radps.powi(2) / n.gyro_bias_time_s;
+        gqg[(GE, GE)] = self.receiver_bias.1;
+        gqg[(GN, GN)] = self.receiver_bias.1;
+        for (j, q) in self.scale_walk.iter().enumerate() {
+            gqg[(K + j, K + j)] = *q;
+        }
         let phi = self.transition(dt);
         (phi * gqg * phi.transpose() + gqg) * (0.5 * dt)
     }
@@ -123,54 +193,53 @@ impl TransitionModel<6> for ErrorDynamics<'_> {
 /// The filter: the error state (zero between updates) and its covariance.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ErrorStateFilter {
-    pub kf: KalmanFilter<6>,
+    pub kf: KalmanFilter<DIM>,
 }
 
-/// The rows of `h(δx)` for GNSS east/north velocity at the navigation state.
-pub fn velocity_rows(nav: &Navigation) -> [SVector<f64, 6>; 2] {
+/// The rows of `h(δx)` for east/north velocity at the navigation state.
+pub fn velocity_rows(nav: &Navigation) -> [ErrorVector; 2] {
     let (s, c) = nav.heading_rad.sin_cos();
-    let v = nav.speed_mps;
-    let mut east = SVector::<f64, 6>::zeros();
+    let (u, w) = (nav.speed_mps, nav.lateral_mps);
+    let mut east = ErrorVector::zeros();
     east[V] = s;
-    east[PSI] = v * c;
-    let mut north = SVector::<f64, 6>::zeros();
+    east[W] = -c;
+    east[PSI] = u * c + w * s;
+    let mut north = ErrorVector::zeros();
     north[V] = c;
-    north[PSI] = -v * s;
+    north[W] = s;
+    north[PSI] = w * c - u * s;
     [east, north]
 }
 
-/// The rows for GNSS east/north position.
-pub fn position_rows() -> [SVector<f64, 6>; 2] {
-    let mut east = SVector::<f64, 6>::zeros();
-    east[E] = 1.0;
-    let mut north = SVector::<f64, 6>::zeros();
-    north[N] = 1.0;
-    [east, north]
+/// The rows for a GNSS fix's east/north position: the place and the receiver's bias.
+pub fn position_rows() -> [ErrorVector; 2] {
+    [unit(E) + unit(GE), unit(N) + unit(GN)]
+}
+
+/// The row that picks state `i`.
+pub fn unit(i: usize) -> ErrorVector {
+    let mut r = ErrorVector::zeros();
+    r[i] = 1.0;
+    r
 }
 
 /// One scalar or a correlated pair of measurements of the error state.
 pub struct ErrorMeasurement {
     /// `z − h(x_nav)` per row.
     pub residual: SVector<f64, 2>,
-    pub rows: [SVector<f64, 6>; 2],
+    pub rows: [ErrorVector; 2],
     pub covariance: SMatrix<f64, 2, 2>,
 }
 
 impl ErrorStateFilter {
-    pub fn new(covariance: SMatrix<f64, 6, 6>) -> Self {
+    pub fn new(covariance: ErrorMatrix) -> Self {
         Self {
             kf: KalmanFilter::new(SVector::zeros(), covariance),
         }
     }
 
-    pub fn predict(&mut self, nav: &Navigation, noise: &ImuNoise, dt: f64) {
-        self.kf.predict(
-            &ErrorDynamics {
-                navigation: nav,
-                noise,
-            },
-            dt,
-        );
+    pub fn predict(&mut self, dynamics: &ErrorDynamics<'_>, dt: f64) {
+        self.kf.predict(dynamics, dt);
     }
 
     /// The innovations of a pair of measurements with correlated noise, whitened: with
@@ -182,7 +251,7 @@ impl ErrorStateFilter {
         let l_inv = l.try_inverse()?;
         let z = l_inv * m.residual;
         let h_rows =
-            SMatrix::<f64, 2, 6>::from_rows(&[m.rows[0].transpose(), m.rows[1].transpose()]);
+            SMatrix::<f64, 2, DIM>::from_rows(&[m.rows[0].transpose(), m.rows[1].transpose()]);
         let hw = l_inv * h_rows;
         let a = self.kf.update(&hw.row(0).into_owned(), 1.0, z[0]);
         let b = self.kf.update(&hw.row(1).into_owned(), 1.0, z[1]);
@@ -190,21 +259,29 @@ impl ErrorStateFilter {
     }
 
     /// The projection `H P Hᵀ` of the covariance on the pair's rows.
-    pub fn projected(&self, rows: &[SVector<f64, 6>; 2]) -> SMatrix<f64, 2, 2> {
-        let h = SMatrix::<f64, 2, 6>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);
+    pub fn projected(&self, rows: &[ErrorVector; 2]) -> SMatrix<f64, 2, 2> {
+        let h = SMatrix::<f64, 2, DIM>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);
         h * self.kf.estimate.covariance * h.transpose()
     }
 
-    /// Puts the estimated error into the navigation and starts the error state again at zero.
-    pub fn inject(&mut self, nav: &mut Navigation) {
+    /// Puts the estimated error into the navigation and the calibration and starts the error
+    /// state again at zero.
+    pub fn inject(&mut self, nav: &mut Navigation, calibration: &mut Calibration) {
         let dx = self.kf.estimate.state;
         nav.east_m += dx[E];
         nav.north_m += dx[N];
         nav.speed_mps += dx[V];
+        nav.lateral_mps += dx[W];
         nav.heading_rad = (nav.heading_rad + dx[PSI]).rem_euclid(std::f64::consts::TAU);
         nav.accel_bias_mps2 += dx[BA];
+        nav.lateral_bias_mps2 += dx[BY];
         nav.gyro_bias_radps += dx[BG];
-        self.kf.estimate.state = SVector::zeros();
+        calibration.receiver_bias_m[0] += dx[GE];
+        calibration.receiver_bias_m[1] += dx[GN];
+        for (j, k) in calibration.speed_scales.iter_mut().enumerate() {
+            *k += dx[K + j];
+        }
+        self.kf.estimate.state = ErrorVector::zeros();
     }
 }
 
@@ -214,49 +291,55 @@ mod tests {
 
     fn nav(heading: f64, speed: f64) -> Navigation {
         Navigation {
-            east_m: 0.0,
-            north_m: 0.0,
             speed_mps: speed,
             heading_rad: heading,
-            accel_bias_mps2: 0.0,
-            gyro_bias_radps: 0.0,
+            ..Navigation::default()
         }
     }
 
     #[test]
     fn the_linearisation_matches_the_navigation_it_linearises() {
-        // Perturb the start by δx, dead-reckon both for 1 s, compare with Φ δx.
+        // Perturb the start by δx, dead-reckon both for 1 s through a turn, compare with Φ δx.
         let noise = ImuNoise::default();
-        let base = nav(0.7, 15.0);
-        let dx = SVector::<f64, 6>::from_column_slice(&[0.3, -0.2, 0.1, 0.002, 0.01, 1e-4]);
+        let mut base = nav(0.7, 15.0);
+        base.lateral_mps = 0.05;
+        let dx: [f64; 8] = [0.3, -0.2, 0.1, -0.04, 0.002, 0.01, -0.008, 1e-4];
         let mut a = base;
         let mut b = Navigation {
             east_m: base.east_m + dx[E],
             north_m: base.north_m + dx[N],
             speed_mps: base.speed_mps + dx[V],
+            lateral_mps: base.lateral_mps + dx[W],
             heading_rad: base.heading_rad + dx[PSI],
-            // The error state is truth − nav: the truth has the bias the nav lacks, and
+            // The error state is truth − nav: the truth has the biases the nav lacks, and
             // `f − b` makes the truth's acceleration smaller.
             accel_bias_mps2: dx[BA],
+            lateral_bias_mps2: dx[BY],
             gyro_bias_radps: dx[BG],
         };
-        let dt = 0.01;
-        let mut phi = SMatrix::<f64, 6, 6>::identity();
+        let (dt, yaw_rate, lateral_force) = (0.01, 0.01, 0.15);
+        let mut phi = ErrorMatrix::identity();
         for _ in 0..100 {
             let model = ErrorDynamics {
                 navigation: &a,
                 noise: &noise,
+                rate_radps: yaw_rate - a.gyro_bias_radps,
+                scale_walk: &[0.0; MAX_SPEED_SENSORS],
+                receiver_bias: (60.0, 0.0),
             };
             phi = model.transition(dt) * phi;
-            a.propagate(0.0, 0.0, dt);
+            a.propagate([0.2, lateral_force], yaw_rate, dt);
             // The truth integrates the same raw readings with its own biases.
-            b.propagate(0.0, 0.0, dt);
+            b.propagate([0.2, lateral_force], yaw_rate, dt);
         }
-        let predicted = phi * dx;
+        let mut x = ErrorVector::zeros();
+        x.fixed_rows_mut::<8>(0).copy_from_slice(&dx);
+        let predicted = phi * x;
         let actual = [
             b.east_m - a.east_m,
             b.north_m - a.north_m,
             b.speed_mps - a.speed_mps,
+            b.lateral_mps - a.lateral_mps,
             b.heading_rad - a.heading_rad,
         ];
         for (i, x) in actual.iter().enumerate() {
@@ -272,9 +355,10 @@ mod tests {
 
     #[test]
     fn a_whitened_pair_equals_the_vector_update() {
-        let p = SMatrix::<f64, 6, 6>::from_diagonal(&SVector::from_column_slice(&[
-            4.0, 4.0, 1.0, 0.01, 1e-4, 1e-8,
-        ]));
+        let mut diag = ErrorVector::from_element(1e-4);
+        diag.fixed_rows_mut::<5>(0)
+            .copy_from_slice(&[4.0, 4.0, 1.0, 0.04, 0.01]);
+        let p = ErrorMatrix::from_diagonal(&diag);
         let mut f = ErrorStateFilter::new(p);
         let n = nav(0.4, 10.0);
         let m = ErrorMeasurement {
@@ -282,11 +366,11 @@ mod tests {
             rows: velocity_rows(&n),
             covariance: SMatrix::<f64, 2, 2>::new(0.04, 0.01, 0.01, 0.09),
         };
-        let h = SMatrix::<f64, 2, 6>::from_rows(&[m.rows[0].transpose(), m.rows[1].transpose()]);
+        let h = SMatrix::<f64, 2, DIM>::from_rows(&[m.rows[0].transpose(), m.rows[1].transpose()]);
         let s = h * p * h.transpose() + m.covariance;
         let k = p * h.transpose() * s.try_inverse().unwrap();
         let x = k * m.residual;
-        let pk = (SMatrix::<f64, 6, 6>::identity() - k * h) * p;
+        let pk = (ErrorMatrix::identity() - k * h) * p;
         f.update_pair(&m).unwrap();
         assert!((f.kf.estimate.state - x).norm() < 1e-10);
         assert!((f.kf.estimate.covariance - pk).norm() < 1e-10);

@@ -6,7 +6,9 @@
 //! | gate | [`quality_gate`] | each fix judged on fix type, satellites and HDOP: RTK fixed taken as the reference, weaker fixes pre-filtered, the rest refused with the reason |
 //! | pre-filter | [`crate::prefilter`] | RLS, adaptive RLS or PU-RLS per GNSS axis (position, velocity); the unscented transform for speed and course to velocity |
 //! | navigation | [`planar_ins`] | heading from the yaw rate, speed from the forward specific force, both bias-corrected, dead-reckoned at the IMU's rate |
-//! | fusion | [`error_state`] | the error-state filter `[δe, δn, δv, δψ, δb_a, δb_g]`, Joseph form, its estimate put into the navigation after each fix |
+//! | fusion | [`error_state`] | the error-state filter `[δe, δn, δu, δw, δψ, δb_x, δb_y, δb_g, δk…]`, Joseph form, its estimate put into the navigation after each update |
+//! | train | [`constraints`] | railfuse's, not the source's: zero lateral speed (NHC) and the track map's centre line and heading, as pseudo-measurements |
+//! | speed | [`speed_sensors`] | a radar's or an odometer's speed, with a scale-factor state each |
 //! | AKF | [`adaptive_noise`] | R from the innovations, the source's other baseline |
 //! | learning | [`error_learning`] | while GNSS is good the residual error rates are learnt; through a loss they keep correcting the navigation |
 //!
@@ -17,6 +19,7 @@
 //! bias is measured whether or not the filter has started.
 
 pub mod adaptive_noise;
+mod constraints;
 pub mod error_learning;
 pub mod error_state;
 pub mod kind;
@@ -24,6 +27,7 @@ mod output;
 pub mod planar_ins;
 pub mod quality_gate;
 pub mod settings;
+mod speed_sensors;
 mod static_bias;
 
 use std::path::Path;
@@ -36,18 +40,22 @@ use railfuse_catalog::messages::{GateDecision, GnssFix, Imu, TrackMap};
 use railfuse_catalog::seconds_between;
 
 use crate::base::PipelineBase;
+use crate::config::ScaleFactorConfig;
 use crate::error::Result;
 use crate::filter::Innovation;
 use crate::fused::{Fused, PipelineCounts};
 use crate::kinds::MessagePipeline;
-use crate::measurement::SensorContext;
+use crate::measurement::{Measurement, SensorContext};
 use crate::noise::VarianceValue;
 use crate::prefilter::unscented::velocity_from_speed_and_course;
 use crate::prefilter::PreFilter;
 use crate::reorder::ReorderQueue;
 use adaptive_noise::AdaptiveNoise;
 use error_learning::ErrorLearning;
-use error_state::{position_rows, velocity_rows, ErrorMeasurement, ErrorStateFilter, BG, PSI, V};
+use error_state::{
+    position_rows, unit, velocity_rows, Calibration, ErrorDynamics, ErrorMatrix, ErrorMeasurement,
+    ErrorStateFilter, ErrorVector, BA, BG, BY, GE, GN, K, MAX_SPEED_SENSORS, PSI, V, W,
+};
 pub use kind::Kind;
 use planar_ins::Navigation;
 use quality_gate::{GateTally, GateVerdict};
@@ -55,16 +63,31 @@ pub use settings::GnssInsSettings;
 use static_bias::{ImuHealth, StaticBias};
 
 /// Which of the pipeline's sensors is which.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Roles {
     pub gnss: usize,
     pub imu: usize,
+    /// Every other sensor: a radar's or an odometer's speed.
+    pub speed: Vec<SpeedSensor>,
+}
+
+/// A speed sensor of the pipeline.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedSensor {
+    /// Its index among the pipeline's sensors.
+    pub sensor: usize,
+    /// Its scale factor's state, if estimated (the sensor's `scale_factor`).
+    pub scale: Option<ScaleFactorConfig>,
+    /// The window its speed is the mean over, s (`speed_window_s`; 0: instantaneous).
+    pub window_s: f64,
 }
 
 #[derive(Debug, Clone)]
 enum Input {
     Fix(GnssFix),
     Imu(Imu),
+    /// The `j`-th speed sensor's speed.
+    Speed(usize, Measurement),
 }
 
 /// σ of the zero-speed pseudo-measurement of a standing train, m/s: a creeping train at the
@@ -79,13 +102,22 @@ pub struct GnssInsPipeline {
     settings: GnssInsSettings,
     roles: Roles,
     gnss_variance: Option<VarianceValue>,
+    /// Each speed sensor's variance setting.
+    speed_variance: Vec<Option<VarianceValue>>,
+    /// The speed sensors' scale factors and the receiver's bias; the scale factors'
+    /// random-walk PSD, and the bias's driving PSD (set by the latest fix).
+    calibration: Calibration,
+    scale_walk: [f64; MAX_SPEED_SENSORS],
+    receiver_bias_psd: f64,
+    /// A speed message's measurements, decoded.
+    scratch: Vec<Measurement>,
     queue: ReorderQueue<Input>,
     origin: Option<GeodeticOrigin>,
     nav: Option<Navigation>,
     filter: Option<ErrorStateFilter>,
     time_ns: u64,
-    /// The latest healthy IMU reading: forward specific force, yaw rate.
-    held: Option<(f64, f64)>,
+    /// The latest healthy IMU reading: forward and lateral specific force, yaw rate.
+    held: Option<([f64; 2], f64)>,
     last_acceleration: f64,
     /// The latest interval between IMU samples, s.
     imu_interval_s: f64,
@@ -106,6 +138,7 @@ pub struct GnssInsPipeline {
     next_model_ns: u64,
     pub counts: PipelineCounts,
     gate: GateTally,
+    constraints: constraints::State,
 }
 
 /// What one step wrote.
@@ -127,10 +160,19 @@ impl GnssInsPipeline {
         let akf = settings
             .adaptive
             .map(|a| [AdaptiveNoise::new(a), AdaptiveNoise::new(a)]);
+        let mut scale_walk = [0.0; MAX_SPEED_SENSORS];
+        for (j, s) in roles.speed.iter().enumerate() {
+            scale_walk[j] = s.scale.map_or(0.0, |f| f.walk_per_s);
+        }
         Ok(Self {
             base,
-            roles,
             gnss_variance: None,
+            speed_variance: vec![None; roles.speed.len()],
+            calibration: Calibration::default(),
+            scale_walk,
+            receiver_bias_psd: 0.0,
+            scratch: Vec::with_capacity(1),
+            roles,
             queue: ReorderQueue::default(),
             origin: None,
             nav: None,
@@ -154,6 +196,7 @@ impl GnssInsPipeline {
             next_model_ns: 0,
             counts: PipelineCounts::default(),
             gate: GateTally::default(),
+            constraints: constraints::State::default(),
             settings,
         })
     }
@@ -167,8 +210,11 @@ impl MessagePipeline for GnssInsPipeline {
     fn report(&self) -> Option<String> {
         let g = self.gate;
         Some(format!(
-            "GNSS gate: {} fixes taken as the reference, {} pre-filtered, {} refused",
-            g.reference, g.pre_filtered, g.refused
+            "GNSS gate: {} fixes taken as the reference, {} pre-filtered, {} refused; {}",
+            g.reference,
+            g.pre_filtered,
+            g.refused,
+            self.constraints.report(&self.settings)
         ))
     }
 
@@ -177,6 +223,9 @@ impl MessagePipeline for GnssInsPipeline {
     fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
         if sensor == self.roles.gnss {
             self.gnss_variance = variance;
+        }
+        if let Some(j) = self.speed_index(sensor) {
+            self.speed_variance[j] = variance;
         }
     }
 
@@ -192,9 +241,15 @@ impl MessagePipeline for GnssInsPipeline {
         let item = if sensor == self.roles.gnss {
             let fix: GnssFix = msg.decode(input)?;
             (fix.stamp_ns, Input::Fix(fix))
-        } else {
+        } else if sensor == self.roles.imu {
             let imu: Imu = msg.decode(input)?;
             (imu.stamp_ns, Input::Imu(imu))
+        } else {
+            let j = self
+                .speed_index(sensor)
+                .expect("every other sensor is a speed sensor");
+            let m = self.decode_speed(msg, input, context)?;
+            (m.stamp_ns, Input::Speed(j, m))
         };
         self.queue.push(item.0, item.1);
         let up_to = msg.log_time_ns.saturating_sub(self.base.reorder_window_ns);
@@ -223,6 +278,19 @@ impl MessagePipeline for GnssInsPipeline {
 }
 
 impl GnssInsPipeline {
+    /// Which speed sensor (its index in [`Roles::speed`]) sensor `sensor` is, if one.
+    fn speed_index(&self, sensor: usize) -> Option<usize> {
+        self.roles.speed.iter().position(|s| s.sensor == sensor)
+    }
+
+    /// Brings the navigation to `t` with the latest IMU reading (for a measurement between
+    /// two samples).
+    fn advance_to(&mut self, t: u64) {
+        if let Some((force, yaw_rate)) = self.held {
+            self.advance(t, force, yaw_rate, seconds_between(self.time_ns, t));
+        }
+    }
+
     /// The stamp of the last standstill sample (0 before any).
     fn standstill_end_ns(&self) -> u64 {
         self.standstill.last_ns().unwrap_or(0)
@@ -236,6 +304,7 @@ impl GnssInsPipeline {
                 let topic = match &item {
                     Input::Fix(_) => self.topic(self.roles.gnss),
                     Input::Imu(_) => self.topic(self.roles.imu),
+                    Input::Speed(j, _) => self.topic(self.roles.speed[*j].sensor),
                 }
                 .to_owned();
                 o.diagnostics(
@@ -248,6 +317,7 @@ impl GnssInsPipeline {
                 match item {
                     Input::Fix(fix) => self.fix(&fix, ctx.track.as_ref(), &mut o),
                     Input::Imu(imu) => self.imu(&imu, ctx.track.as_ref(), &mut o),
+                    Input::Speed(j, m) => self.speed(j, &m, &mut o),
                 }
             }
             out.extend(o.items.into_iter().map(|mut f| {
@@ -273,7 +343,11 @@ impl GnssInsPipeline {
             }
             return;
         }
-        let (mut forward, mut yaw_rate) = (m.specific_force_mps2[0], m.angular_rate_radps[2]);
+        let (mut forward, lateral, mut yaw_rate) = (
+            m.specific_force_mps2[0],
+            m.specific_force_mps2[1],
+            m.angular_rate_radps[2],
+        );
         if self.standing {
             self.standstill.push(m);
         }
@@ -295,27 +369,43 @@ impl GnssInsPipeline {
             forward = self.prefilters[4].step(m.stamp_ns, forward, rf).value;
             yaw_rate = self.prefilters[5].step(m.stamp_ns, yaw_rate, rw).value;
         }
-        self.held = Some((forward, yaw_rate));
+        self.held = Some(([forward, lateral], yaw_rate));
         if self.nav.is_none() {
             return self.static_model(m.stamp_ns, o);
         }
-        self.advance(m.stamp_ns, forward, yaw_rate, dt);
+        self.advance(m.stamp_ns, [forward, lateral], yaw_rate, dt);
+        self.constrain(m.stamp_ns, map);
         if m.stamp_ns >= self.next_output_ns {
             self.output(m.stamp_ns, &topic, map, o);
         }
     }
 
-    /// Dead-reckons navigation and error covariance by `dt` with one IMU reading; through a
-    /// GNSS loss the learnt error model keeps correcting.
-    fn advance(&mut self, t_ns: u64, forward: f64, yaw_rate: f64, dt: f64) {
+    /// Dead-reckons navigation and error covariance by `dt` with one IMU reading (forward and
+    /// lateral specific force, yaw rate); through a GNSS loss the learnt error model keeps
+    /// correcting.
+    fn advance(&mut self, t_ns: u64, force: [f64; 2], yaw_rate: f64, dt: f64) {
         let (Some(nav), Some(filter)) = (self.nav.as_mut(), self.filter.as_mut()) else {
             return;
         };
         if dt <= 0.0 {
             return;
         }
-        filter.predict(nav, &self.settings.imu_noise, dt);
-        self.last_acceleration = nav.propagate(forward, yaw_rate, dt);
+        filter.predict(
+            &ErrorDynamics {
+                navigation: nav,
+                noise: &self.settings.imu_noise,
+                rate_radps: yaw_rate - nav.gyro_bias_radps,
+                scale_walk: &self.scale_walk,
+                receiver_bias: (
+                    self.settings.receiver_bias.time_constant_s,
+                    self.receiver_bias_psd,
+                ),
+            },
+            dt,
+        );
+        self.calibration
+            .decay(dt, self.settings.receiver_bias.time_constant_s);
+        self.last_acceleration = nav.propagate(force, yaw_rate, dt);
         self.distance_m += nav.speed_mps * dt;
         let lost = self
             .last_fused_ns
@@ -377,31 +467,51 @@ impl GnssInsPipeline {
             self.start(fix, (e, n, re.max(rn)), speed, &topic, o);
             return self.after_fix(t, &topic, map, o);
         }
-        // Bring the navigation to the fix with the latest reading.
-        if let Some((forward, yaw_rate)) = self.held {
-            self.advance(t, forward, yaw_rate, seconds_between(self.time_ns, t));
-        }
+        self.advance_to(t);
         let (Some(nav), Some(_)) = (self.nav, self.filter.as_ref()) else {
             return self.after_fix(t, &topic, map, o);
         };
+        // A fix beside the track is multipath, whatever its covariance says: at least as
+        // wrong as its offset, and beyond the gate its position stays out (its Doppler speed
+        // and course do not).
+        let beside = match map {
+            Some(m) => self.track_check(m, (pe, pn), rpe.max(rpn)),
+            None => Ok(0.0),
+        };
+        // The fix's bias share is the receiver bias state's; the rest is white.
+        let bias = self.settings.receiver_bias;
+        let share2 = bias.share(fix.fix_type).powi(2);
+        self.receiver_bias_psd = 2.0 * share2 * rpe.max(rpn) / bias.time_constant_s;
+        let [be, bn] = self.calibration.receiver_bias_m;
+        let white = |r: f64| (1.0 - share2) * r + beside.as_ref().map_or(0.0, |x| *x);
         let position = ErrorMeasurement {
-            residual: SVector::<f64, 2>::new(pe - nav.east_m, pn - nav.north_m),
+            residual: SVector::<f64, 2>::new(pe - nav.east_m - be, pn - nav.north_m - bn),
             rows: position_rows(),
-            covariance: SMatrix::<f64, 2, 2>::new(rpe, 0.0, 0.0, rpn),
+            covariance: SMatrix::<f64, 2, 2>::new(white(rpe), 0.0, 0.0, white(rpn)),
         };
         let class = match use_filtered {
             true => format!("pre-filtered: fix type {}", fix.fix_type.name()),
             false => format!("reference: fix type {}", fix.fix_type.name()),
         };
         let axes = ["east", "north"];
-        let mut fused_any = self.update(0, position, [pe, pn], t, &topic, axes, Some(&class), o);
+        let position_fused = match beside {
+            Err(why) => {
+                self.counts.rejected_gate += 1;
+                let z = (Some(pe), Some(rpe));
+                let decision = GateDecision::RejectedGate;
+                o.record(t, &topic, Some("east"), z, None, decision, Some(&why));
+                false
+            }
+            Ok(_) => self.update(0, position, [pe, pn], t, &topic, axes, Some(&class), o),
+        };
+        let mut fused_any = position_fused;
         if self.standing {
             fused_any |= self.standstill_update(t, &topic, o);
         } else if let Some(velocity) = velocity {
             fused_any |= self.velocity_update(t, &topic, velocity, o);
         }
         if fused_any {
-            self.inject_and_learn(t, verdict == GateVerdict::Reference);
+            self.inject_and_learn(t, position_fused && verdict == GateVerdict::Reference);
             self.counts.accepted += 1;
         }
         self.after_fix(t, &topic, map, o);
@@ -534,16 +644,27 @@ impl GnssInsPipeline {
             heading_rad: course,
             accel_bias_mps2: bias.map_or(0.0, |b| b.forward_mps2),
             gyro_bias_radps: bias.map_or(0.0, |b| b.yaw_rate_radps),
+            ..Navigation::default()
         };
         let heading_std = s.speed_std_mps / v + 0.02;
-        let p = SMatrix::<f64, 6, 6>::from_diagonal(&SVector::<f64, 6>::from_column_slice(&[
-            r,
-            r,
-            s.speed_std_mps.powi(2),
-            heading_std.powi(2),
-            n_.accel_bias_std_mps2.powi(2),
-            n_.gyro_bias_std_radps.powi(2),
-        ]));
+        let mut diagonal = ErrorVector::zeros();
+        diagonal[0] = r;
+        diagonal[1] = r;
+        diagonal[V] = s.speed_std_mps.powi(2);
+        // The course says the velocity's direction: the lateral speed is as uncertain as the
+        // speed.
+        diagonal[W] = s.speed_std_mps.powi(2);
+        diagonal[PSI] = heading_std.powi(2);
+        diagonal[BA] = n_.accel_bias_std_mps2.powi(2);
+        diagonal[BY] = n_.accel_bias_std_mps2.powi(2);
+        diagonal[BG] = n_.gyro_bias_std_radps.powi(2);
+        let bias = s.receiver_bias.share(fix.fix_type).powi(2) * r;
+        diagonal[GE] = bias;
+        diagonal[GN] = bias;
+        for (j, sensor) in self.roles.speed.iter().enumerate() {
+            diagonal[K + j] = sensor.scale.map_or(0.0, |f| f.std.powi(2));
+        }
+        let p = ErrorMatrix::from_diagonal(&diagonal);
         self.nav = Some(nav);
         self.filter = Some(ErrorStateFilter::new(p));
         self.time_ns = fix.stamp_ns;
@@ -615,10 +736,8 @@ impl GnssInsPipeline {
     fn standstill_update(&mut self, t: u64, topic: &str, o: &mut Out) -> bool {
         let nav = self.nav.expect("started");
         let filter = self.filter.as_mut().expect("started");
-        let mut speed_row = nalgebra::RowSVector::<f64, 6>::zeros();
-        speed_row[V] = 1.0;
         let r = STANDSTILL_SPEED_STD_MPS.powi(2);
-        let i = filter.kf.update(&speed_row, r, -nav.speed_mps);
+        let i = filter.kf.update(&unit(V).transpose(), r, -nav.speed_mps);
         o.record(
             t,
             topic,
@@ -629,12 +748,12 @@ impl GnssInsPipeline {
             None,
         );
         if let Some(rate) = self.standstill.since_last_take() {
-            let mut bias_row = nalgebra::RowSVector::<f64, 6>::zeros();
-            bias_row[BG] = 1.0;
             let r = self.settings.imu_noise.gyro_noise_density.powi(2) / rate.seconds.max(1e-3);
-            let i = filter
-                .kf
-                .update(&bias_row, r, rate.mean_yaw_rate - nav.gyro_bias_radps);
+            let i = filter.kf.update(
+                &unit(BG).transpose(),
+                r,
+                rate.mean_yaw_rate - nav.gyro_bias_radps,
+            );
             o.record(
                 t,
                 topic,
@@ -657,7 +776,7 @@ impl GnssInsPipeline {
             return;
         };
         let dx = filter.kf.estimate.state;
-        filter.inject(nav);
+        filter.inject(nav, &mut self.calibration);
         match (self.last_reference_ns, reference) {
             (Some(last), true) => {
                 let dt = seconds_between(last, t);

@@ -2,12 +2,12 @@
 //! covariance, the IMU biases as sensor states) at the output rate, the learnt IMU error model
 //! once a second, and a diagnostics record per measurement.
 
-use nalgebra::{SMatrix, SVector};
+use nalgebra::SMatrix;
 use railfuse_catalog::messages::{
     FusedState, GateDecision, PlanePosition, SensorStateEstimate, TrackMap,
 };
 
-use super::error_state::{BA, BG, PSI, V};
+use super::error_state::{velocity_rows, ErrorVector, BA, BG, BY, DIM, E, K, N, V};
 use super::{GnssInsPipeline, Out};
 use crate::filter::Innovation;
 use crate::fused::{measurement_record, Fused};
@@ -19,7 +19,9 @@ impl GnssInsPipeline {
         };
         let p = filter.kf.estimate.covariance;
         let (s, c) = nav.heading_rad.sin_cos();
-        let along = SVector::<f64, 6>::from_column_slice(&[s, c, 0.0, 0.0, 0.0, 0.0]);
+        let mut along = ErrorVector::zeros();
+        along[E] = s;
+        along[N] = c;
         let chainage_var = (along.transpose() * p * along)[0];
         let chainage_speed = (along.transpose() * p.column(V))[0];
         let chainage_m =
@@ -42,13 +44,31 @@ impl GnssInsPipeline {
             accel_var,
         ];
         let v = nav.speed_mps;
-        let j = SMatrix::<f64, 2, 2>::new(s, v * c, c, -v * s);
-        let pv = SMatrix::<f64, 2, 2>::new(p[(V, V)], p[(V, PSI)], p[(PSI, V)], p[(PSI, PSI)]);
-        let vc = j * pv * j.transpose();
+        let rows = velocity_rows(&nav);
+        let h = SMatrix::<f64, 2, DIM>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);
+        let vc = h * p * h.transpose();
         let origin = self.origin.expect("set by the first fix");
         let (lat, lon, _) = origin.to_geodetic(nav.east_m, nav.north_m, 0.0);
         let (ve, vn) = nav.velocity();
-        let imu_topic = self.topic(self.roles.imu).to_owned();
+        let imu_topic = self.topic(self.roles.imu);
+        let state = |topic: &str, kind: &str, value: f64, i: usize| SensorStateEstimate {
+            topic: topic.to_owned(),
+            kind: kind.into(),
+            value,
+            std: p[(i, i)].max(0.0).sqrt(),
+        };
+        let mut sensor_states = vec![
+            state(imu_topic, "accel_bias", nav.accel_bias_mps2, BA),
+            state(imu_topic, "lateral_accel_bias", nav.lateral_bias_mps2, BY),
+            state(imu_topic, "gyro_bias", nav.gyro_bias_radps, BG),
+        ];
+        for (j, sensor) in self.roles.speed.iter().enumerate() {
+            if sensor.scale.is_some() {
+                let topic = self.topic(sensor.sensor);
+                let k = self.calibration.speed_scales[j];
+                sensor_states.push(state(topic, "scale_factor", k, K + j));
+            }
+        }
         let state = FusedState {
             stamp_ns: t,
             chainage_m,
@@ -56,20 +76,7 @@ impl GnssInsPipeline {
             acceleration_mps2: self.last_acceleration,
             covariance,
             source: topic.to_owned(),
-            sensor_states: vec![
-                SensorStateEstimate {
-                    topic: imu_topic.clone(),
-                    kind: "accel_bias".into(),
-                    value: nav.accel_bias_mps2,
-                    std: p[(BA, BA)].max(0.0).sqrt(),
-                },
-                SensorStateEstimate {
-                    topic: imu_topic,
-                    kind: "gyro_bias".into(),
-                    value: nav.gyro_bias_radps,
-                    std: p[(BG, BG)].max(0.0).sqrt(),
-                },
-            ],
+            sensor_states,
             plane: Some(PlanePosition {
                 east_m: nav.east_m,
                 north_m: nav.north_m,

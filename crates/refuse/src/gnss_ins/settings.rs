@@ -1,7 +1,8 @@
 //! `[pipeline.gnss_ins]`: the table of a `gnss_ins` pipeline, the file form and the validated
 //! settings in one (every field has a default; [`GnssInsSettings::check`] validates).
 
-use crate::checks::all_positive;
+use crate::checks::{all_at_least_zero, all_positive, positive};
+use railfuse_catalog::messages::FixType;
 use serde::{Deserialize, Serialize};
 
 use super::adaptive_noise::AdaptiveNoiseSettings;
@@ -19,6 +20,134 @@ pub struct PreFilters {
     pub position: PreFilterSettings,
     pub velocity: PreFilterSettings,
     pub imu: PreFilterSettings,
+}
+
+/// `[pipeline.gnss_ins.nhc]`: the non-holonomic constraint. A train's body neither slides
+/// sideways nor lifts off its rails: its lateral speed is zero, fused as a pseudo-measurement.
+/// Off, the navigation is a free planar INS whose lateral accelerometer bias moves it
+/// sideways (source 003's car INS).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct NonHolonomic {
+    pub enabled: bool,
+    /// σ of the zero lateral speed, m/s: a bogie's hunting and the body's sway on its
+    /// springs, a few centimetres a second.
+    pub lateral_std_mps: f64,
+    /// Fused at most this often, s.
+    pub period_s: f64,
+}
+
+impl Default for NonHolonomic {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            lateral_std_mps: 0.05,
+            period_s: 0.1,
+        }
+    }
+}
+
+/// `[pipeline.gnss_ins.track]`: the track constraint. A train cannot leave its track: the
+/// navigation's offset from the track map's centre line (the map in the log, the one every
+/// pipeline uses) is a measurement of zero, and the track's heading there one of the train's
+/// (either way along the track). Through a curve the heading also tells where along the track
+/// the train is (`∂ψ_track/∂s = κ`). Without a map in the log it does nothing, and says so.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackConstraint {
+    pub enabled: bool,
+    /// σ of the cross-track offset, m: the map's survey error and the antenna's and IMU's
+    /// place on the body.
+    pub cross_track_std_m: f64,
+    /// σ of the heading against the track's, rad (0: position only): the map's heading error
+    /// between its vertices and the body's yaw on its bogies.
+    pub heading_std_rad: f64,
+    /// Fused at most this often, s. A map's error wanders over hundreds of metres: fused
+    /// ten times a second as if independent, it made the along-track covariance too small
+    /// (seed003, seeds 1–5: NEES inside its 95 % interval 76 % at 0.1 s, 84 % at 1 s).
+    pub period_s: f64,
+    /// A fix further from the track than this many σ (its own and the map's) is multipath:
+    /// its position is refused, its speed and course fused (0: off). A station building's
+    /// reflection puts an RTK fix claiming 2 cm metres beside the rails.
+    pub max_fix_offset_sigma: f64,
+}
+
+impl Default for TrackConstraint {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            cross_track_std_m: 0.3,
+            heading_std_rad: 0.01,
+            period_s: 1.0,
+            max_fix_offset_sigma: 4.0,
+        }
+    }
+}
+
+/// `[pipeline.gnss_ins.receiver_bias]`: a receiver's error is not white. Part of what its
+/// covariance reports is a bias that wanders over a minute (multipath, the atmosphere, an
+/// RTK solution converging after a loss); fused as white noise, a hundred fixes look like a
+/// hundred independent ones and the covariance shrinks far below the error. Here that part
+/// is a first-order Gauss–Markov state east and north, of stationary σ `share × reported σ`
+/// for each fix type (the rest white), correlation time `time_constant_s`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReceiverBias {
+    pub enabled: bool,
+    pub time_constant_s: f64,
+    /// The share of a fix's reported σ that is bias, per fix type, 0–1 (0.99 at most).
+    pub single: f64,
+    pub dgps: f64,
+    pub rtk_float: f64,
+    pub rtk_fixed: f64,
+}
+
+impl Default for ReceiverBias {
+    /// A single-frequency receiver: half of a single-point or DGPS σ is bias, a third of an
+    /// RTK float's, a tenth of an RTK fixed's.
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            time_constant_s: 60.0,
+            single: 0.5,
+            dgps: 0.5,
+            rtk_float: 0.3,
+            rtk_fixed: 0.1,
+        }
+    }
+}
+
+impl ReceiverBias {
+    /// The bias's share of a fix of type `fix`'s σ (0 when off).
+    pub fn share(&self, fix: FixType) -> f64 {
+        match (self.enabled, fix) {
+            (false, _) | (true, FixType::None) => 0.0,
+            (true, FixType::Single) => self.single,
+            (true, FixType::Dgps) => self.dgps,
+            (true, FixType::RtkFloat) => self.rtk_float,
+            (true, FixType::RtkFixed) => self.rtk_fixed,
+        }
+    }
+
+    fn check(&self) -> Result<(), String> {
+        positive(
+            "gnss_ins.receiver_bias.time_constant_s",
+            self.time_constant_s,
+        )?;
+        for (what, x) in [
+            ("single", self.single),
+            ("dgps", self.dgps),
+            ("rtk_float", self.rtk_float),
+            ("rtk_fixed", self.rtk_fixed),
+        ] {
+            if !(0.0..=0.99).contains(&x) {
+                return Err(format!(
+                    "gnss_ins.receiver_bias.{what} = {x}: a share of the fix's σ, 0 to 0.99"
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -44,6 +173,11 @@ pub struct GnssInsSettings {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub adaptive: Option<AdaptiveNoiseSettings>,
     pub imu_noise: ImuNoise,
+    /// The train's constraints (railfuse's, not source 003's): zero lateral speed, and the
+    /// track map.
+    pub nhc: NonHolonomic,
+    pub track: TrackConstraint,
+    pub receiver_bias: ReceiverBias,
     pub learning: LearningSettings,
     /// The filter starts at the first gated fix with at least this speed and a course, m/s:
     /// the heading comes from the course, and below it the course is noise.
@@ -78,6 +212,9 @@ impl Default for GnssInsSettings {
             min_course_speed_mps: 1.0,
             adaptive: None,
             imu_noise: ImuNoise::default(),
+            nhc: NonHolonomic::default(),
+            track: TrackConstraint::default(),
+            receiver_bias: ReceiverBias::default(),
             learning: LearningSettings::default(),
             init_speed_mps: 2.0,
             standstill_speed_mps: 0.2,
@@ -94,6 +231,7 @@ impl GnssInsSettings {
     pub fn check(&self) -> Result<(), String> {
         self.gate.check()?;
         self.imu_noise.check()?;
+        self.receiver_bias.check()?;
         for (what, p) in [
             ("prefilter.position", &self.prefilter.position),
             ("prefilter.velocity", &self.prefilter.velocity),
@@ -112,6 +250,20 @@ impl GnssInsSettings {
                 ("output_period_s", self.output_period_s),
                 ("learning.window_s", self.learning.window_s),
                 ("learning.loss_after_s", self.learning.loss_after_s),
+                ("nhc.lateral_std_mps", self.nhc.lateral_std_mps),
+                ("nhc.period_s", self.nhc.period_s),
+                ("track.cross_track_std_m", self.track.cross_track_std_m),
+                ("track.period_s", self.track.period_s),
+            ],
+        )?;
+        all_at_least_zero(
+            "gnss_ins",
+            &[
+                ("track.heading_std_rad", self.track.heading_std_rad),
+                (
+                    "track.max_fix_offset_sigma",
+                    self.track.max_fix_offset_sigma,
+                ),
             ],
         )?;
         if !(self.standstill_speed_mps >= 0.0 && self.standstill_speed_mps < self.init_speed_mps) {

@@ -451,6 +451,10 @@ impl PipelineSpec {
                     .into(),
             }));
         }
+        if let EstimatorSpec::Messages(k) = &self.estimator {
+            k.accepts(sensor, model)
+                .map_err(|why| fail(format!("has schema '{schema}': {why}")))?;
+        }
         let gives: Vec<&str> = model.quantities().iter().map(|q| q.name()).collect();
         let wanted = s.fields.as_deref().unwrap_or(model.quantities());
         let mut fields = Vec::new();

@@ -1,0 +1,120 @@
+//! Speed sensors in the GNSS/INS (railfuse's, not source 003's): every train has wheel
+//! odometers and many a Doppler radar, and through a GNSS loss they hold the along-track error
+//! the IMU alone lets grow. Each measures the forward speed, scaled by its own factor (a worn
+//! wheel, a radar's beam angle):
+//!
+//! ```text
+//! z_j = (1 + k_j) |u − a W_j / 2|      H: δu ↦ (1 + k_j) sgn,  δk_j ↦ |u − a W_j / 2|
+//! ```
+//!
+//! `W_j` the window its speed is the mean over (`speed_window_s`), `a` the latest forward
+//! acceleration, and `k_j` a state only for a sensor with a `scale_factor` (else 0). A wheel
+//! slipping or sliding disagrees with the rest: the sensor's NIS gate (`gate_nis`) keeps it
+//! out.
+
+use std::path::Path;
+
+use railfuse_catalog::log::LogMessage;
+use railfuse_catalog::messages::GateDecision;
+
+use super::error_state::{unit, K, V};
+use super::{GnssInsPipeline, Out};
+use crate::error::{Error, Result};
+use crate::measurement::{Measurement, SensorContext, SensorModel};
+use crate::noise::VarianceValue;
+
+impl GnssInsPipeline {
+    /// A speed sensor's message as its speed measurement; an error for a channel that is no
+    /// speed sensor.
+    pub(super) fn decode_speed(
+        &mut self,
+        msg: &LogMessage<'_>,
+        input: &Path,
+        context: &SensorContext,
+    ) -> Result<Measurement> {
+        let schema = msg.channel.schema_name();
+        let problem = match SensorModel::for_schema(schema) {
+            Some(model @ (SensorModel::RadarSpeed | SensorModel::OdometerSpeed)) => {
+                model.decode(msg, input, context, &mut self.scratch)?;
+                match self.scratch.pop() {
+                    Some(m) => return Ok(m),
+                    None => "gives no speed".to_owned(),
+                }
+            }
+            _ => format!(
+                "has schema '{schema}': besides its GNSS and IMU a gnss_ins pipeline reads \
+                 speed sensors only (a radar, an odometer)"
+            ),
+        };
+        Err(Error::Channel {
+            input: input.to_owned(),
+            pipeline: self.base.name.clone(),
+            topic: msg.channel.topic.clone(),
+            declared: "a gnss_ins speed sensor".into(),
+            problem,
+        })
+    }
+
+    /// The `j`-th speed sensor's measurement, fused (or gated, or refused with the reason).
+    pub(super) fn speed(&mut self, j: usize, m: &Measurement, o: &mut Out) {
+        let sensor = self.roles.speed[j];
+        let topic = self.topic(sensor.sensor).to_owned();
+        if self.nav.is_none() {
+            self.counts.before_initialisation += 1;
+            return;
+        }
+        let variance = match self.speed_variance[j] {
+            Some(VarianceValue::Fixed(v)) => Some(v),
+            _ => m.reported_variance,
+        };
+        let refused = match variance {
+            _ if !m.valid => Some("flagged invalid by the sensor"),
+            _ if !(m.value.is_finite() && m.value >= 0.0) => Some("not a finite speed ≥ 0"),
+            None => Some("a speed without its variance"),
+            Some(r) if !(r > 0.0 && r.is_finite()) => Some("a variance that is not positive"),
+            Some(_) => None,
+        };
+        if let Some(why) = refused {
+            self.counts.rejected_invalid += 1;
+            o.diagnostics(m.stamp_ns, &topic, GateDecision::RejectedInvalid, why);
+            return;
+        }
+        let r = variance.expect("checked");
+        self.advance_to(m.stamp_ns);
+        let (Some(nav), Some(filter)) = (self.nav.as_mut(), self.filter.as_mut()) else {
+            return;
+        };
+        let mean = nav.speed_mps - 0.5 * self.last_acceleration * sensor.window_s;
+        let scale = 1.0 + self.calibration.speed_scales[j];
+        let mut row = unit(V) * scale * mean.signum();
+        if sensor.scale.is_some() {
+            row[K + j] = mean.abs();
+        }
+        let row = row.transpose();
+        let residual = m.value - scale * mean.abs();
+        let innovation = filter.kf.innovation(&row, r, residual);
+        let gated = self.base.gates[sensor.sensor].is_some_and(|g| innovation.nis > g);
+        let decision = match gated {
+            true => GateDecision::RejectedGate,
+            false => {
+                filter.kf.update(&row, r, residual);
+                filter.inject(nav, &mut self.calibration);
+                GateDecision::Accepted
+            }
+        };
+        match gated {
+            true => self.counts.rejected_gate += 1,
+            false => self.counts.accepted += 1,
+        }
+        let z = (Some(m.value), Some(r));
+        o.record(
+            m.stamp_ns,
+            &topic,
+            Some("speed"),
+            z,
+            Some(innovation),
+            decision,
+            gated.then_some("NIS beyond the gate"),
+        );
+    }
+}
