@@ -9,8 +9,8 @@ mod common;
 use common::*;
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision};
 
-/// `samples/seed000.toml`'s pipeline `name`, renamed `as`, with `extra` lines added to the
-/// sensor tables of `topics`.
+/// `samples/seed000.toml`'s pipeline `name`, renamed `as`, without its adaptive variances,
+/// with `extra` lines added to the sensor tables of `topics`.
 fn pipeline(name: &str, renamed: &str, topics: &[&str], extra: &str) -> String {
     let text = std::fs::read_to_string(sample("seed000.toml")).unwrap();
     let block = text
@@ -21,7 +21,11 @@ fn pipeline(name: &str, renamed: &str, topics: &[&str], extra: &str) -> String {
             &format!("name = \"{name}\""),
             &format!("name = \"{renamed}\""),
         )
-        .replace("smoother = true\n", "");
+        .replace("smoother = true\n", "")
+        .lines()
+        .filter(|l| !l.starts_with("adaptive_variance"))
+        .map(|l| format!("{l}\n"))
+        .collect::<String>();
     let mut out = String::from("[[pipeline]]");
     for (i, table) in block.split("[[pipeline.sensor]]").enumerate() {
         if i > 0 {
@@ -167,4 +171,55 @@ fn a_particle_filter_that_missed_a_fix_is_reseeded_instead_of_collapsing() {
             .unwrap()
     };
     assert!(beyond("pf_as_stated") > 0.3, "{eval}");
+}
+
+/// A loop worse than it says (its error grows with distance, its variance claims 0.1 m):
+/// trusted as stated, it pulls the estimate back to its own error after every balise; weighted
+/// by its innovations, it stops doing so once a balise has shown it off, and the diagnostics
+/// say with what variance each reading went in.
+#[test]
+fn a_loop_worse_than_it_says_is_weighted_by_its_innovations() {
+    let d = tempfile::tempdir().unwrap();
+    let config = pipeline("kf_balise", "kf_stated", &[], "")
+        + &pipeline(
+            "kf_balise",
+            "kf_adaptive",
+            &["/loop/position"],
+            "adaptive_variance = { window = 10 }\n",
+        );
+    let (fused, eval) = drift_run(d.path(), &config);
+    let max = |name| {
+        pipeline_eval(&eval, name)["position_error_m"]["max_abs"]
+            .as_f64()
+            .unwrap()
+    };
+    // Seed 11: 4.5 m as stated, 1.3 m weighted by its innovations.
+    assert!(
+        max("kf_adaptive") < 0.5 * max("kf_stated"),
+        "{} vs {}",
+        max("kf_adaptive"),
+        max("kf_stated")
+    );
+    let loop_records = |name: &str| -> Vec<FusedDiagnostics> {
+        messages::<FusedDiagnostics>(&fused, &format!("/fused/{name}/diagnostics"))
+            .into_iter()
+            .filter(|m| m.source == "/loop/position")
+            .collect()
+    };
+    let adapted: Vec<FusedDiagnostics> = loop_records("kf_adaptive")
+        .into_iter()
+        .filter(|m| {
+            m.reason
+                .as_deref()
+                .is_some_and(|r| r.contains("from its innovations"))
+        })
+        .collect();
+    assert!(adapted.len() > 20, "{} adapted", adapted.len());
+    assert!(adapted
+        .iter()
+        .all(|m| m.measurement_variance.unwrap() > 0.01));
+    // Never below the stated variance, and as stated nothing is adapted.
+    assert!(loop_records("kf_stated")
+        .iter()
+        .all(|m| m.measurement_variance == Some(0.01) && m.reason.is_none()));
 }

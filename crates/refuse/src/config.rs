@@ -454,6 +454,12 @@ pub struct SensorConfig {
     /// sources' behaviour, which a filter too sure of itself never recovers from).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reset_after: Option<u32>,
+    /// Weight this sensor by what its innovations show rather than by its variance alone
+    /// (covariance matching over its last `window` innovations), never above its stated
+    /// weight: a loop whose error accumulates with distance, once a balise has shown it off,
+    /// stops pulling the estimate back to its own error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive_variance: Option<AdaptiveVarianceConfig>,
     /// Estimate this sensor's along-track position bias as a state (a GNSS receiver's slowly
     /// wandering error, which white measurement noise cannot describe).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -476,6 +482,14 @@ pub struct SensorConfig {
     /// warning, and the pipeline runs on the others.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub required: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AdaptiveVarianceConfig {
+    /// The innovations its variance is estimated from (at least 2): 20 at 1 Hz forgets a
+    /// surprise in 20 s.
+    pub window: u32,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]

@@ -164,6 +164,7 @@ pub fn whole_message_sensors(c: &PipelineConfig) -> Result<(), String> {
 /// read.
 pub fn whole_message_sensor(filter: &str, s: &SensorConfig) -> Result<(), String> {
     match s.chainage_bias.is_some()
+        || s.adaptive_variance.is_some()
         || s.acceleration_bias.is_some()
         || s.scale_factor.is_some()
         || s.speed_window_s.is_some()
@@ -171,7 +172,7 @@ pub fn whole_message_sensor(filter: &str, s: &SensorConfig) -> Result<(), String
     {
         true => Err(format!(
             "sensor {}: an {filter} pipeline's sensors take a topic, a variance and a gate \
-             only (no fields, sensor states or speed window)",
+             only (no fields, sensor states, adaptive variance or speed window)",
             s.topic
         )),
         false => Ok(()),

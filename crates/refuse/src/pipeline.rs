@@ -12,6 +12,7 @@ use nalgebra::{SMatrix, SVector};
 use railfuse_catalog::messages::{FusedDiagnostics, FusedState, GateDecision, SensorStateEstimate};
 
 use crate::error::{Error, Result};
+use crate::filter::covariance_matching::CovarianceMatching;
 use crate::filter::federated::Federated;
 use crate::filter::rts::EpochRecorder;
 use crate::filter::{
@@ -31,6 +32,8 @@ struct Field<const N: usize> {
     quantity: Quantity,
     row: ObservationRow<N>,
     variance: VarianceValue,
+    /// Its variance from its innovations (config `adaptive_variance`).
+    matching: Option<CovarianceMatching>,
 }
 
 impl<const N: usize> Field<N> {
@@ -203,6 +206,9 @@ impl<const N: usize> Pipeline<N> {
                     scale_state,
                 },
                 variance,
+                matching: self.spec.sensors[sensor]
+                    .adaptive_window
+                    .map(CovarianceMatching::new),
             })
         };
         self.sensors[sensor].fields = binding
@@ -505,7 +511,7 @@ impl<const N: usize> Pipeline<N> {
             .is_linearised()
             .then(|| e.linearisation_point(sensor.device));
         let (h, offset) = row.at(x.as_ref());
-        let scalar = ScalarMeasurement {
+        let mut scalar = ScalarMeasurement {
             device: sensor.device,
             quantity: m.quantity.index(),
             h,
@@ -514,6 +520,16 @@ impl<const N: usize> Pipeline<N> {
             z: m.value,
             gate_nis: sensor.gate_nis,
         };
+        if let Some(m) = self.sensors[p.sensor].fields[p.field].matching.as_mut() {
+            scalar.r = m.variance(r, &e.innovation(&scalar));
+            if scalar.r > r {
+                diagnostics.measurement_variance = Some(scalar.r);
+                diagnostics.reason = Some(format!(
+                    "variance {:.4} from its innovations (stated {r:.4})",
+                    scalar.r
+                ));
+            }
+        }
         let outcome = match fix_check(sensor, &mut self.sensors[p.sensor], e.as_ref(), &scalar) {
             Some(reason) => {
                 diagnostics.reason = Some(reason);

@@ -10,6 +10,7 @@
 //! [`rts`] smooths a Kalman pipeline's output backwards over the whole run.
 
 mod centralised;
+pub mod covariance_matching;
 pub mod em;
 pub mod federated;
 pub mod kalman;

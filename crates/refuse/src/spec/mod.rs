@@ -241,6 +241,9 @@ pub struct SensorSpec {
     /// Gate rejections in a row of its chainage after which the estimate is reset to it
     /// (config `reset_after`; `None`: its sensor model's default).
     pub reset_after: Option<u32>,
+    /// Its variance estimated from its last this many innovations (config
+    /// `adaptive_variance`), never below the stated one.
+    pub adaptive_window: Option<usize>,
     /// Its calibration states, in state order.
     pub states: Vec<SensorState>,
     /// The window its speed is the mean over, s (config `speed_window_s`).

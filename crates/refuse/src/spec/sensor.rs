@@ -80,6 +80,15 @@ pub(super) fn sensor(
             ),
         },
     };
+    let adaptive_window = match s.adaptive_variance {
+        Some(a) if a.window < 2 => {
+            return Err(format!(
+                "adaptive_variance.window = {}: at least 2 innovations",
+                a.window
+            ))
+        }
+        a => a.map(|a| a.window as usize),
+    };
     Ok(SensorSpec {
         topic: s.topic.clone(),
         role: s.role,
@@ -89,6 +98,7 @@ pub(super) fn sensor(
         variance: s.variance.clone(),
         gate_nis,
         reset_after: s.reset_after,
+        adaptive_window,
         states,
         speed_window_s,
         required: s.required,

@@ -233,6 +233,13 @@ fn sensor_states_parse_count_and_refuse_bad_values() {
         "scale_factor = { std = 0.01, walk_per_s = -1.0 }"
     ))
     .contains("walk_per_s must be ≥ 0"));
+    assert!(err(&with("adaptive_variance = { window = 1 }", ""))
+        .contains("adaptive_variance.window = 1: at least 2 innovations"));
+    assert!(Pipelines::parse(
+        &with("adaptive_variance = { window = 10 }", ""),
+        Path::new("p.toml")
+    )
+    .is_ok());
     assert!(err(&with(
         "",
         "fields = [\"speed\"]\nchainage_bias = { std_m = 2.0, time_constant_s = 60.0 }"
