@@ -62,6 +62,12 @@ impl<const N: usize> KalmanFilter<N> {
         self.estimate.state += bu;
     }
 
+    /// Predict with a transition `f` and process noise `q` already computed (a model whose
+    /// `Q` is built from its `Φ`, computed once).
+    pub fn predict_matrices(&mut self, f: SMatrix<f64, N, N>, q: SMatrix<f64, N, N>) {
+        self.predict_scaled(f, q);
+    }
+
     fn predict_scaled(&mut self, f: SMatrix<f64, N, N>, q: SMatrix<f64, N, N>) {
         let e = &mut self.estimate;
         e.state = f * e.state;

@@ -172,21 +172,32 @@ impl TransitionModel<DIM> for ErrorDynamics<'_> {
     }
 
     fn process_noise(&self, dt: f64) -> ErrorMatrix {
+        self.process_noise_with(&self.transition(dt), dt)
+    }
+}
+
+impl ErrorDynamics<'_> {
+    /// `Q` over a step whose `Φ` is `phi`. `G Qc Gᵀ` is diagonal, so `Φ G Qc Gᵀ` is `Φ` with
+    /// its columns scaled: one matrix product, not two (the filter runs at the IMU's rate).
+    pub fn process_noise_with(&self, phi: &ErrorMatrix, dt: f64) -> ErrorMatrix {
         let n = self.noise;
-        let mut gqg = ErrorMatrix::zeros();
-        gqg[(V, V)] = n.accel_noise_density.powi(2);
-        gqg[(W, W)] = n.accel_noise_density.powi(2);
-        gqg[(PSI, PSI)] = n.gyro_noise_density.powi(2);
-        gqg[(BA, BA)] = 2.0 * n.accel_bias_std_mps2.powi(2) / n.accel_bias_time_s;
-        gqg[(BY, BY)] = gqg[(BA, BA)];
-        gqg[(BG, BG)] = 2.0 * n.gyro_bias_std_radps.powi(2) / n.gyro_bias_time_s;
-        gqg[(GE, GE)] = self.receiver_bias.1;
-        gqg[(GN, GN)] = self.receiver_bias.1;
+        let mut gqg = ErrorVector::zeros();
+        gqg[V] = n.accel_noise_density.powi(2);
+        gqg[W] = n.accel_noise_density.powi(2);
+        gqg[PSI] = n.gyro_noise_density.powi(2);
+        gqg[BA] = 2.0 * n.accel_bias_std_mps2.powi(2) / n.accel_bias_time_s;
+        gqg[BY] = gqg[BA];
+        gqg[BG] = 2.0 * n.gyro_bias_std_radps.powi(2) / n.gyro_bias_time_s;
+        gqg[GE] = self.receiver_bias.1;
+        gqg[GN] = self.receiver_bias.1;
         for (j, q) in self.scale_walk.iter().enumerate() {
-            gqg[(K + j, K + j)] = *q;
+            gqg[K + j] = *q;
         }
-        let phi = self.transition(dt);
-        (phi * gqg * phi.transpose() + gqg) * (0.5 * dt)
+        let mut scaled = *phi;
+        for (j, mut column) in scaled.column_iter_mut().enumerate() {
+            column *= gqg[j];
+        }
+        (scaled * phi.transpose() + ErrorMatrix::from_diagonal(&gqg)) * (0.5 * dt)
     }
 }
 
@@ -239,7 +250,9 @@ impl ErrorStateFilter {
     }
 
     pub fn predict(&mut self, dynamics: &ErrorDynamics<'_>, dt: f64) {
-        self.kf.predict(dynamics, dt);
+        let phi = dynamics.transition(dt);
+        let q = dynamics.process_noise_with(&phi, dt);
+        self.kf.predict_matrices(phi, q);
     }
 
     /// The innovations of a pair of measurements with correlated noise, whitened: with
@@ -351,6 +364,33 @@ mod tests {
                 predicted[i]
             );
         }
+    }
+
+    #[test]
+    fn the_process_noise_is_the_trapezoid_of_the_dense_form() {
+        let noise = ImuNoise::default();
+        let mut n = nav(0.9, 22.0);
+        n.lateral_mps = 0.03;
+        let model = ErrorDynamics {
+            navigation: &n,
+            noise: &noise,
+            rate_radps: 0.02,
+            scale_walk: &[1e-8, 0.0, 2e-8],
+            receiver_bias: (60.0, 0.05),
+        };
+        let dt = 0.005;
+        let phi = model.transition(dt);
+        let mut diagonal = ErrorVector::zeros();
+        let q = model.process_noise_with(&ErrorMatrix::identity(), 1.0) * 2.0;
+        for i in 0..DIM {
+            diagonal[i] = q[(i, i)] / 2.0;
+        }
+        let gqg = ErrorMatrix::from_diagonal(&diagonal);
+        let dense = (phi * gqg * phi.transpose() + gqg) * (0.5 * dt);
+        let fast = model.process_noise(dt);
+        assert!((dense - fast).norm() <= 1e-15 * dense.norm().max(1.0));
+        // Symmetric to rounding (the filter symmetrises P after every step).
+        assert!((fast - fast.transpose()).norm() <= 1e-15 * fast.norm());
     }
 
     #[test]
