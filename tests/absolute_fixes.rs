@@ -193,9 +193,9 @@ fn a_loop_worse_than_it_says_is_weighted_by_its_innovations() {
             .as_f64()
             .unwrap()
     };
-    // Seed 11: 4.5 m as stated, 1.3 m weighted by its innovations.
+    // Seed 11: 4.5 m as stated, 0.9 m weighted by its innovations.
     assert!(
-        max("kf_adaptive") < 0.5 * max("kf_stated"),
+        max("kf_adaptive") < 0.3 * max("kf_stated"),
         "{} vs {}",
         max("kf_adaptive"),
         max("kf_stated")

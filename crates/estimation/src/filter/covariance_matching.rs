@@ -12,6 +12,13 @@
 //! before it is used, so that the first of a run of surprising measurements is already
 //! down-weighted: after a balise moves the estimate metres off a drifting loop, the loop's
 //! next reading pulls it back by centimetres, not by half the gap.
+//!
+//! The innovations of a consistent filter are white (Mehra's test). A sensor whose error
+//! drifts makes them correlated, and then its readings carry less information than their
+//! count: with `ρ` the lag-one correlation over the window, where it stands out of chance
+//! (`ρ > 2/√n`), `R̂` is multiplied by `(1 + ρ)/(1 − ρ)` (`ρ` at most 0.9), the variance of
+//! the mean of an AR(1) sequence over that of a white one. A filter that follows a drifting
+//! loop sees innovations no larger than its stated noise, but correlated.
 
 use std::collections::VecDeque;
 
@@ -23,6 +30,8 @@ pub struct CovarianceMatching {
     window: usize,
     /// `ν² − H P Hᵀ` of the last `window` innovations.
     excess: VecDeque<f64>,
+    /// The last `window` innovations, for their correlation.
+    residuals: VecDeque<f64>,
 }
 
 impl CovarianceMatching {
@@ -32,6 +41,7 @@ impl CovarianceMatching {
         Self {
             window,
             excess: VecDeque::with_capacity(window),
+            residuals: VecDeque::with_capacity(window),
         }
     }
 
@@ -45,9 +55,34 @@ impl CovarianceMatching {
             }
             self.excess.push_back(excess);
         }
+        if i.residual.is_finite() {
+            if self.residuals.len() == self.window {
+                self.residuals.pop_front();
+            }
+            self.residuals.push_back(i.residual);
+        }
         // Summed afresh: a window is tens of samples, and a running sum would drift.
         let n = self.excess.len().max(1) as f64;
-        stated.max(self.excess.iter().sum::<f64>() / n)
+        let matched = stated.max(self.excess.iter().sum::<f64>() / n);
+        matched * self.correlation_inflation()
+    }
+
+    /// `(1 + ρ)/(1 − ρ)` for a lag-one correlation `ρ` of the innovations that chance does
+    /// not explain; 1 otherwise.
+    fn correlation_inflation(&self) -> f64 {
+        let r = &self.residuals;
+        let n = r.len();
+        if n < 3 {
+            return 1.0;
+        }
+        let power: f64 = r.iter().map(|x| x * x).sum();
+        let lag: f64 = r.iter().zip(r.iter().skip(1)).map(|(a, b)| a * b).sum();
+        let rho = (lag / power.max(f64::MIN_POSITIVE)).clamp(0.0, 0.9);
+        // Only a correlation the window can tell from chance.
+        if rho < 2.0 / (n as f64).sqrt() {
+            return 1.0;
+        }
+        (1.0 + rho) / (1.0 - rho)
     }
 }
 
@@ -91,20 +126,40 @@ mod tests {
     fn the_first_surprise_is_already_down_weighted_and_the_weight_comes_back() {
         let mut m = CovarianceMatching::new(20);
         let (stated, hph) = (0.01, 0.02);
-        for _ in 0..20 {
-            m.variance(stated, &Innovation::new(0.1, hph + stated));
+        // Small readings of either sign: white.
+        let sign = |k: usize| if k % 2 == 0 { 1.0 } else { -1.0 };
+        for k in 0..20 {
+            m.variance(stated, &Innovation::new(0.1 * sign(k), hph + stated));
         }
         // A 3 m jump: the first reading already fused with a twentieth of its square.
         let r = m.variance(stated, &Innovation::new(3.0, hph + stated));
         assert!(r > 0.4, "{r}");
         // Twenty good readings later the stated variance is back.
-        for _ in 0..20 {
-            m.variance(stated, &Innovation::new(0.05, hph + stated));
+        for k in 0..20 {
+            m.variance(stated, &Innovation::new(0.05 * sign(k), hph + stated));
         }
         assert_eq!(
             m.variance(stated, &Innovation::new(0.05, hph + stated)),
             stated
         );
+    }
+
+    #[test]
+    fn correlated_innovations_weigh_less_than_their_size_says() {
+        // Innovations no larger than the stated noise, but following each other (a drift):
+        // an AR(1) sequence with ρ = 0.8.
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let white = Normal::new(0.0, 0.1).unwrap();
+        let (stated, hph) = (0.01, 0.0);
+        let mut m = CovarianceMatching::new(10);
+        let mut x = 0.0;
+        let mut total = 0.0;
+        for _ in 0..2000 {
+            x = 0.8 * x + 0.6 * white.sample(&mut rng);
+            total += m.variance(stated, &Innovation::new(x, hph + stated));
+        }
+        let mean = total / 2000.0;
+        assert!(mean > 3.0 * stated, "{mean}");
     }
 
     #[test]
