@@ -97,16 +97,20 @@ impl GnssInsPipeline {
         self.write_model(t, (nav.accel_bias_mps2, nav.gyro_bias_radps), o);
     }
 
-    /// The learnt IMU model, once a second.
+    /// The learnt IMU model, once a second; none with learning off (`applied` would claim a
+    /// correction that is not made, and the viewer would say it learns).
     pub(super) fn write_model(&mut self, t: u64, biases: (f64, f64), o: &mut Out) {
-        if t < self.next_model_ns {
+        let learning = &self.settings.learning;
+        if t < self.next_model_ns || !learning.enabled {
             return;
         }
         let standstill = self
             .standstill
             .estimate()
             .map_or((0, 0.0), |s| (s.samples, s.seconds));
-        let model = self.learning.message(t, biases, standstill, self.in_loss);
+        // Applied: GNSS lost and the model learnt long enough to correct with.
+        let applied = self.in_loss && self.learning.correction(0.0, learning).is_some();
+        let model = self.learning.message(t, biases, standstill, applied);
         o.items.push(Fused {
             imu_error_model: Some(model),
             ..Default::default()
