@@ -24,34 +24,27 @@ use crate::measurement::{Measurement, SensorContext, SensorModel};
 use crate::noise::VarianceValue;
 
 impl GnssInsPipeline {
-    /// A speed sensor's message as its speed measurement; an error for a channel that is no
-    /// speed sensor.
+    /// A speed sensor's message as its speed measurement. The channel was bound as a radar
+    /// or an odometer (the kind's `accepts` refused anything else), so only a message without
+    /// a speed is an error here.
     pub(super) fn decode_speed(
         &mut self,
         msg: &LogMessage<'_>,
         input: &Path,
         context: &SensorContext,
     ) -> Result<Measurement> {
-        let schema = msg.channel.schema_name();
-        let problem = match SensorModel::for_schema(schema) {
-            Some(model @ (SensorModel::RadarSpeed | SensorModel::OdometerSpeed)) => {
-                model.decode(msg, input, context, &mut self.scratch)?;
-                match self.scratch.pop() {
-                    Some(m) => return Ok(m),
-                    None => "gives no speed".to_owned(),
-                }
+        if let Some(model) = SensorModel::for_schema(msg.channel.schema_name()) {
+            model.decode(msg, input, context, &mut self.scratch)?;
+            if let Some(m) = self.scratch.pop() {
+                return Ok(m);
             }
-            _ => format!(
-                "has schema '{schema}': besides its GNSS and IMU a gnss_ins pipeline reads \
-                 speed sensors only (a radar, an odometer)"
-            ),
-        };
+        }
         Err(Error::Channel {
             input: input.to_owned(),
             pipeline: self.base.name.clone(),
             topic: msg.channel.topic.clone(),
             declared: "a gnss_ins speed sensor".into(),
-            problem,
+            problem: "gives no speed".into(),
         })
     }
 
