@@ -8,8 +8,23 @@ use std::path::{Path, PathBuf};
 
 use common::{messages, ok, python, rerun, s, sample, simulate, stderr, truth_at};
 use railfuse_catalog::log::LogWriter;
-use railfuse_catalog::messages::{EddyCurrentBlock, FusedDiagnostics, FusedState, GroundTruth};
+use railfuse_catalog::messages::{
+    EddyCurrentBlock, FusedDiagnostics, FusedState, GateDecision, GroundTruth,
+};
 use railfuse_refuse::eddy_current::butterworth::Butterworth;
+
+/// Pipeline `name`'s table of config `path`, its sensors included.
+fn pipeline_of(path: &Path, name: &str) -> String {
+    let text = std::fs::read_to_string(path).unwrap();
+    let start = text
+        .find(&format!("[[pipeline]]\nname = \"{name}\"\n"))
+        .unwrap_or_else(|| panic!("{name} in {path:?}"));
+    let rest = &text[start + 1..];
+    let end = rest
+        .find("[[pipeline]]\nname")
+        .map_or(text.len(), |e| start + 1 + e);
+    text[start..end].to_owned()
+}
 
 /// The first 200 s of seed004, seed 1: the yard's two shunts and stops, then the start and
 /// the run to 40 m/s.
@@ -181,8 +196,7 @@ fn a_start_from_standstill_is_measured_by_the_start_fit_within_two_and_a_half_se
     let d = tempfile::tempdir().unwrap();
     // `warped_kf` as the sample has it, and the same without the start's fit.
     let config = d.path().join("starts.toml");
-    let sample_text = std::fs::read_to_string(sample("seed004.toml")).unwrap();
-    let kf = &sample_text[sample_text.rfind("[[pipeline]]").unwrap()..];
+    let kf = &pipeline_of(&sample("seed004.toml"), "warped_kf");
     let without = kf
         .replace("name = \"warped_kf\"", "name = \"no_start_fit\"")
         .replace("kalman = true", "kalman = true\nstart_fit = false");
@@ -514,16 +528,15 @@ fn the_closed_loop_correlator_tracks_like_the_open_loop_one() {
     // The same run with `correlator = "closed_loop"` on the warped pipeline: Newton–Raphson
     // from the last delay instead of every lag, the open loop only to (re)acquire.
     let d = tempfile::tempdir().unwrap();
-    let text = std::fs::read_to_string(sample("seed004.toml")).unwrap();
-    let start = text.find("[[pipeline]]\nname = \"warped_kf\"").unwrap();
-    let closed = text[start..]
+    let kf = pipeline_of(&sample("seed004.toml"), "warped_kf");
+    let closed = kf
         .replace("name = \"warped_kf\"", "name = \"closed\"")
         .replace(
             "kalman = true",
             "kalman = true\ncorrelator = \"closed_loop\"",
         );
     let config = d.path().join("closed.toml");
-    std::fs::write(&config, format!("{}{closed}", &text[start..])).unwrap();
+    std::fs::write(&config, format!("{kf}{closed}")).unwrap();
     let fused = seed004(d.path(), &config);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let line_rmse = |name: &str| {
@@ -540,5 +553,172 @@ fn the_closed_loop_correlator_tracks_like_the_open_loop_one() {
     assert!(
         closed < 0.1 && closed < 1.5 * open,
         "closed loop {closed}, open loop {open}"
+    );
+}
+
+/// Each stop in the truth: how long until the states said so for good (every state from
+/// then until the train moved off under 0.01 m/s), s, and how far their chainage moved from
+/// then on, m.
+fn stops(truth: &[GroundTruth], states: &[FusedState]) -> Vec<(f64, f64)> {
+    let edge = |w: &[GroundTruth], stopping: bool| match stopping {
+        true => w[0].speed_mps > 0.0 && w[1].speed_mps == 0.0,
+        false => w[0].speed_mps == 0.0 && w[1].speed_mps > 0.0,
+    };
+    let stopped: Vec<u64> = truth
+        .windows(2)
+        .filter(|w| edge(w, true))
+        .map(|w| w[1].stamp_ns)
+        .collect();
+    let moved: Vec<u64> = truth
+        .windows(2)
+        .filter(|w| edge(w, false))
+        .map(|w| w[0].stamp_ns)
+        .collect();
+    stopped
+        .iter()
+        .map(|&t0| {
+            let t1 = moved.iter().copied().find(|&m| m > t0).unwrap_or(u64::MAX);
+            let during: Vec<&FusedState> = states
+                .iter()
+                .filter(|st| st.stamp_ns >= t0 && st.stamp_ns < t1)
+                .collect();
+            let from = during
+                .iter()
+                .rposition(|st| st.speed_mps.abs() >= 0.01)
+                .map_or(0, |i| i + 1);
+            match during.get(from) {
+                None => (f64::INFINITY, f64::INFINITY),
+                Some(first) => (
+                    (first.stamp_ns - t0) as f64 / 1e9,
+                    during[from..]
+                        .iter()
+                        .map(|st| (st.chainage_m - first.chainage_m).abs())
+                        .fold(0.0, f64::max),
+                ),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn a_wheel_odometer_gives_the_starts_and_stops_the_correlator_cannot_see() {
+    let d = tempfile::tempdir().unwrap();
+    let config = d.path().join("aided.toml");
+    let sample = sample("seed004.toml");
+    let aided = pipeline_of(&sample, "warped_kf_odometer");
+    // The same wheel at a variance too large to matter: what the aiding itself changes.
+    let numb = aided
+        .replace("name = \"warped_kf_odometer\"", "name = \"numb_wheel\"")
+        .replace("variance = 0.0009", "variance = 100.0");
+    assert_ne!(numb, aided.replace("warped_kf_odometer", "numb_wheel"));
+    let kf = pipeline_of(&sample, "warped_kf");
+    std::fs::write(&config, format!("{kf}\n{aided}\n{numb}")).unwrap();
+    let fused = seed004(d.path(), &config);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let states = |p: &str| messages::<FusedState>(&fused, &format!("/fused/{p}/state"));
+    let (kf, aided, numb) = (
+        states("warped_kf"),
+        states("warped_kf_odometer"),
+        states("numb_wheel"),
+    );
+
+    // The starts: the wheel counts pulses from the first centimetre, the correlator is blind
+    // for the first 1.7 s.
+    let ((kf_rmse, kf_delays), (aided_rmse, aided_delays), (numb_rmse, _)) = (
+        starts(&truth, &kf),
+        starts(&truth, &aided),
+        starts(&truth, &numb),
+    );
+    assert!(aided_rmse < 0.1, "starts' speed RMSE {aided_rmse} m/s");
+    assert!(
+        aided_rmse < 0.3 * kf_rmse && aided_rmse < 0.3 * numb_rmse,
+        "starts' speed RMSE {aided_rmse} against {kf_rmse} without the wheel, {numb_rmse} with it numb"
+    );
+    // Within 10 % of the truth: under 1 s (the wheel's 0.067 m/s steps are 10 % of the
+    // speed 0.6 s into a start), against the start fit's 1.7 s and more.
+    for (aided, kf) in aided_delays.iter().zip(&kf_delays) {
+        assert!(*aided < 1.0 && aided < kf, "{aided_delays:?} {kf_delays:?}");
+    }
+
+    // The stops: seen within 0.5 s (a window of zero pulses), and held there.
+    let (aided_stops, kf_stops) = (stops(&truth, &aided), stops(&truth, &kf));
+    assert_eq!(aided_stops.len(), 2, "{aided_stops:?}");
+    for (seen_s, moved_m) in &aided_stops {
+        assert!(*seen_s <= 0.5 && *moved_m < 0.05, "{aided_stops:?}");
+    }
+    assert!(
+        kf_stops.iter().all(|(seen_s, _)| *seen_s > 1.0),
+        "{kf_stops:?}"
+    );
+
+    // At line speed the correlator, not the wheel, sets the speed: no worse than without.
+    let line_rmse = |states: &[FusedState]| {
+        let e: Vec<f64> = states
+            .iter()
+            .map(|st| (st.speed_mps, truth_at(&truth, st.stamp_ns).speed_mps))
+            .filter(|(_, v)| *v > 5.0)
+            .map(|(x, v)| x - v)
+            .collect();
+        (e.iter().map(|e| e * e).sum::<f64>() / e.len() as f64).sqrt()
+    };
+    let (kf_line, aided_line) = (line_rmse(&kf), line_rmse(&aided));
+    assert!(
+        aided_line < 1.1 * kf_line,
+        "above 5 m/s: {aided_line} m/s against {kf_line} without the wheel"
+    );
+
+    // Each wheel sample is in the diagnostics under its own topic, with its decision.
+    let diags: Vec<FusedDiagnostics> = messages(&fused, "/fused/warped_kf_odometer/diagnostics");
+    let wheel = diags
+        .iter()
+        .filter(|d| d.source == "/odometer/2" && d.decision == GateDecision::Accepted)
+        .count();
+    // 25 Hz over 200 s, a few gated or waiting for the filter's start.
+    assert!(wheel > 4500, "{wheel}");
+    assert!(diags.iter().any(|d| d
+        .reason
+        .as_deref()
+        .is_some_and(|r| r.starts_with("standstill: the wheel turned no pulse"))));
+}
+
+#[test]
+fn an_eddy_current_pipelines_speed_sensors_are_checked_when_read() {
+    let d = tempfile::tempdir().unwrap();
+    let run = d.path().join("s4.mcap");
+    simulate(
+        &["--scenario", "seed004", "--seed", "1", "--duration", "5"],
+        &run,
+    );
+    let aided = pipeline_of(&sample("seed004.toml"), "warped_kf_odometer");
+    let refuse_with = |table: String| {
+        let config = d.path().join("c.toml");
+        std::fs::write(&config, table).unwrap();
+        let out = common::railfuse(&[
+            "refuse",
+            s(&run),
+            "-c",
+            s(&config),
+            "-o",
+            s(&d.path().join("o.mcap")),
+        ]);
+        assert!(!out.status.success());
+        let e = stderr(&out);
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+        e
+    };
+    let e = refuse_with(aided.replace("kalman = true", "kalman = false"));
+    assert!(e.contains("need eddy_current.kalman = true"), "{e}");
+    let e = refuse_with(aided.replace("topic = \"/odometer/2\"", "topic = \"/imu\""));
+    assert!(
+        e.contains("/imu") && e.contains("speed sensors only"),
+        "{e}"
+    );
+    let e = refuse_with(aided.replace(
+        "speed_window_s = 0.2",
+        "speed_window_s = 0.2\nchainage_bias = { std_m = 1.0, time_constant_s = 10.0 }",
+    ));
+    assert!(
+        e.contains("/odometer/2") && e.contains("speed window only"),
+        "{e}"
     );
 }

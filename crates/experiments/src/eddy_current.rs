@@ -22,8 +22,12 @@ use crate::{Error, Result};
 
 pub const SEED004_PIPELINES: &str = include_str!("../../../samples/seed004.toml");
 
-/// The pipelines compared, simplest first.
-pub const PIPELINES: [&str; 3] = ["plain", "warped", "warped_kf"];
+/// The pipelines compared, simplest first; the last is railfuse's, the filter aided by a
+/// wheel odometer.
+pub const PIPELINES: [&str; 4] = ["plain", "warped", "warped_kf", "warped_kf_odometer"];
+
+/// A state under this speed, m/s, says the train stands (the standstill band's edge).
+pub const STANDING_MPS: f64 = 0.01;
 
 /// Speed bands (m/s, true speed): standstill, shunting, and two line bands.
 pub const BANDS: [(&str, f64, f64); 4] = [
@@ -131,6 +135,10 @@ pub struct PipelineErrors {
     pub starting: Errors,
     #[serde(skip)]
     pub slow_otherwise: Errors,
+    /// Every stop: how long after the train stopped the states said so for good (∞: never),
+    /// and how far the chainage moved from then until the train moved off.
+    pub stop_latency_s: Vec<f64>,
+    pub standing_drift_m: Vec<f64>,
     /// Per run: distance error as a share of the distance travelled, and the count error.
     pub distance_share: Vec<f64>,
     pub count_error: Vec<i64>,
@@ -287,20 +295,39 @@ impl Run {
     }
 }
 
-/// The truth, interpolated to any stamp, and when the train moved off from each standstill.
+/// The truth, interpolated to any stamp, and when the train stopped and moved off.
 struct Truth {
     samples: Vec<GroundTruth>,
     onsets: Vec<u64>,
+    stops: Vec<u64>,
 }
 
 impl Truth {
     fn new(samples: Vec<GroundTruth>) -> Self {
-        let onsets = samples
-            .windows(2)
-            .filter(|w| w[0].speed_mps == 0.0 && w[1].speed_mps > 0.0)
-            .map(|w| w[0].stamp_ns)
-            .collect();
-        Self { samples, onsets }
+        let edges = |starting: bool| {
+            samples
+                .windows(2)
+                .filter(|w| match starting {
+                    true => w[0].speed_mps == 0.0 && w[1].speed_mps > 0.0,
+                    false => w[0].speed_mps > 0.0 && w[1].speed_mps == 0.0,
+                })
+                .map(|w| w[usize::from(!starting)].stamp_ns)
+                .collect()
+        };
+        let (onsets, stops) = (edges(true), edges(false));
+        Self {
+            samples,
+            onsets,
+            stops,
+        }
+    }
+
+    /// Each stop: when the train stopped, and when it moved off again (the end of the run).
+    fn stands(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
+        self.stops.iter().map(|&stop| {
+            let off = self.onsets.iter().find(|&&o| o > stop);
+            (stop, off.copied().unwrap_or(u64::MAX))
+        })
     }
 
     fn at(&self, t: u64) -> Option<GroundTruth> {
@@ -362,7 +389,18 @@ fn score_pipeline(
             }
         }
     }
-    let (Some(first), Some(last)) = (states.first(), states.last()) else {
+    for (stop, off) in truth.stands() {
+        let (latency, drift) = standstill(states, stop, off);
+        a.stop_latency_s.push(latency);
+        a.standing_drift_m.extend(drift);
+    }
+    // The first and the last state the truth covers (a wheel's last sample may come after
+    // the truth's).
+    let covered = |s: &&FusedState| truth.at(s.stamp_ns).is_some();
+    let (Some(first), Some(last)) = (
+        states.iter().find(covered),
+        states.iter().rev().find(covered),
+    ) else {
         return;
     };
     if let (Some(g0), Some(g1)) = (truth.at(first.stamp_ns), truth.at(last.stamp_ns)) {
@@ -379,4 +417,26 @@ fn score_pipeline(
             a.count_error.push((c1 - c0) as i64 - n as i64);
         }
     }
+}
+
+/// One stop from `stop` to `off`: how long until the states said it for good (from their
+/// first state under [`STANDING_MPS`] after which every one is), and how far their chainage
+/// moved from then on. ∞ and nothing if they never did.
+fn standstill(states: &[FusedState], stop: u64, off: u64) -> (f64, Option<f64>) {
+    let during: Vec<&FusedState> = states
+        .iter()
+        .filter(|s| s.stamp_ns >= stop && s.stamp_ns < off)
+        .collect();
+    let moving = during
+        .iter()
+        .rposition(|s| s.speed_mps.abs() >= STANDING_MPS);
+    let from = moving.map_or(0, |i| i + 1);
+    let Some(first) = during.get(from) else {
+        return (f64::INFINITY, None);
+    };
+    let drift = during[from..]
+        .iter()
+        .map(|s| (s.chainage_m - first.chainage_m).abs())
+        .fold(0.0, f64::max);
+    ((first.stamp_ns - stop) as f64 / 1e9, Some(drift))
 }

@@ -46,3 +46,23 @@ impl Variance {
         }
     }
 }
+
+/// A speed sensor's sample's variance: the configured one (`Fixed`), else the one it
+/// reported; or why the sample cannot be used (one wording for every pipeline that reads
+/// speed sensors whole).
+pub fn speed_variance(
+    m: &crate::measurement::Measurement,
+    configured: Option<VarianceValue>,
+) -> Result<f64, &'static str> {
+    let variance = match configured {
+        Some(VarianceValue::Fixed(v)) => Some(v),
+        _ => m.reported_variance,
+    };
+    match variance {
+        _ if !m.valid => Err("flagged invalid by the sensor"),
+        _ if !(m.value.is_finite() && m.value >= 0.0) => Err("not a finite speed ≥ 0"),
+        None => Err("a speed without its variance (give the sensor one)"),
+        Some(r) if !(r > 0.0 && r.is_finite()) => Err("a variance that is not positive"),
+        Some(r) => Ok(r),
+    }
+}

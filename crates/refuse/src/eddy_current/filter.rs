@@ -70,6 +70,7 @@ impl EddyCurrentPipeline {
             sensor_states: Vec::new(),
             plane: None,
         };
+        self.last_state_ns = self.kf_ns;
         push_state(state, o);
     }
 
@@ -88,9 +89,17 @@ impl EddyCurrentPipeline {
             due = self.crossings.pop_front();
         }
         if let (Some((tc, counted)), Some(origin), true) = (due, self.count_origin, count) {
-            if tc > self.kf_ns {
-                self.predict_to(tc);
-                self.fuse_count(origin + counted);
+            match tc > self.kf_ns {
+                true => {
+                    self.predict_to(tc);
+                    self.fuse_count(origin + counted, 0.0);
+                }
+                // The filter is ahead of the crossing (a wheel took it there): the chainage
+                // then, `s − v Δ + a Δ² / 2`.
+                false if !self.aiding.aids.is_empty() => {
+                    self.fuse_count(origin + counted, (self.kf_ns - tc) as f64 / 1e9)
+                }
+                false => {}
             }
         }
         if t > self.kf_ns {
@@ -141,6 +150,22 @@ impl EddyCurrentPipeline {
             self.start_filter(m, r_v, diag, o);
             return;
         }
+        if self.aiding.standing_before(m.stamp_ns) {
+            // The wheels have seen the stop this window leads up to, and the filter stands.
+            let why = "a window of the approach to a stop the wheels have already seen";
+            self.counts.rejected_late += 1;
+            self.record(
+                m.stamp_ns,
+                Some(m.speed_mps),
+                Some(r_v),
+                None,
+                GateDecision::RejectedLate,
+                Some(why),
+                diag.clone(),
+                o,
+            );
+            return;
+        }
         let late_s = self.advance(m.stamp_ns, true);
         let kf = self.kf.as_mut().expect("started");
         let a_prior = kf.estimate.state[2];
@@ -175,6 +200,7 @@ impl EddyCurrentPipeline {
             return;
         }
         self.gate_refusals = 0;
+        self.last_correlation_ns = Some(m.stamp_ns);
         let i = kf.update(&h_v, r_v, m.speed_mps);
         let reason = fuse_acceleration(
             kf,
@@ -224,10 +250,10 @@ impl EddyCurrentPipeline {
         self.filter_state(o);
     }
 
-    /// The counted distance `s` as a chainage measurement at the filter's time.
-    pub(super) fn fuse_count(&mut self, s: f64) {
+    /// The counted distance `s` as a chainage measurement `late_s` before the filter's time.
+    pub(super) fn fuse_count(&mut self, s: f64, late_s: f64) {
         if let Some(kf) = self.kf.as_mut() {
-            let h = RowVector3::new(1.0, 0.0, 0.0);
+            let h = RowVector3::new(1.0, -late_s, late_s * late_s / 2.0);
             if kf.innovation(&h, COUNT_STD_M.powi(2), s).nis <= COUNT_GATE_NIS {
                 kf.update(&h, COUNT_STD_M.powi(2), s);
             }
@@ -237,6 +263,11 @@ impl EddyCurrentPipeline {
     pub(super) fn filter_standstill(&mut self, t: u64) -> Option<Innovation> {
         self.kf.as_ref()?;
         self.advance(t, false);
+        self.zero_velocity()
+    }
+
+    /// Zero speed and zero acceleration, at the filter's time: the train stands.
+    pub(super) fn zero_velocity(&mut self) -> Option<Innovation> {
         let kf = self.kf.as_mut()?;
         let i = kf.update(
             &RowVector3::new(0.0, 1.0, 0.0),

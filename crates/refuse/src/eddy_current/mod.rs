@@ -9,10 +9,12 @@
 //! | warp | [`warping`] | the constant-acceleration warp factor `k` that maximises the correlation: the window's mean speed and acceleration |
 //! | filter | here | a constant-acceleration Kalman filter (Joseph form) over speed and warp acceleration; the two accelerations cross-checked; zero speed at a standstill |
 //! | distance | [`sleeper_count`] | sleepers counted on both sensors in the space domain against the map's atlas, outliers rejected, switches bridged |
+//! | aiding | [`aiding`] | wheel odometers, if the pipeline has any besides the block channel, fused into the filter (railfuse's: the starts and stops the correlator cannot see) |
 //!
 //! Without the Kalman filter (`kalman = false`, the source's plain and warped correlators
 //! on their own) the state is the latest measurement held until the next one.
 
+pub mod aiding;
 pub mod butterworth;
 pub mod correlation;
 pub mod departure;
@@ -45,6 +47,7 @@ use crate::kinds::MessagePipeline;
 use crate::measurement::SensorContext;
 use crate::model::ConstantAcceleration;
 use crate::noise::VarianceValue;
+use aiding::Aiding;
 use departure::Departure;
 use front_end::{FrontEnd, WINDOW};
 use input_check::Continuity;
@@ -114,6 +117,14 @@ pub struct EddyCurrentPipeline {
     /// The last window that measured (a speed or a standstill).
     last_measured_ns: Option<u64>,
     switches: landmark::SwitchDetector,
+    /// The pipeline's sensor that is the block channel.
+    block_sensor: usize,
+    /// Speed sensors beside it (odometers), and their samples waiting for the signal.
+    aiding: Aiding,
+    /// The last correlation speed the filter accepted.
+    last_correlation_ns: Option<u64>,
+    /// The filter's last state's stamp.
+    last_state_ns: u64,
     /// The atlas as last looked up: at which sample, spacing, over a switch.
     atlas_here: Option<(u64, f64, bool)>,
 }
@@ -123,6 +134,8 @@ impl EddyCurrentPipeline {
         base: PipelineBase,
         settings: EddyCurrentSettings,
         model: ConstantAcceleration,
+        block_sensor: usize,
+        aids: Vec<aiding::SpeedAid>,
     ) -> Result<Self> {
         let start_m = settings.initial_chainage_m;
         Ok(EddyCurrentPipeline {
@@ -150,6 +163,10 @@ impl EddyCurrentPipeline {
             switches: landmark::SwitchDetector::default(),
             atlas_here: None,
             odometer_m: start_m,
+            block_sensor,
+            aiding: Aiding::new(aids),
+            last_correlation_ns: None,
+            last_state_ns: 0,
         })
     }
 }
@@ -159,19 +176,29 @@ impl MessagePipeline for EddyCurrentPipeline {
         &self.counts
     }
 
-    fn bind(&mut self, _sensor: usize, _variance: Option<VarianceValue>) {}
+    fn bind(&mut self, sensor: usize, variance: Option<VarianceValue>) {
+        if let Some(j) = self.aiding.index(sensor) {
+            self.aiding.tracks[j].variance = variance;
+        }
+    }
 
     fn push(
         &mut self,
-        _sensor: usize,
+        sensor: usize,
         msg: &LogMessage<'_>,
         input: &Path,
         context: &SensorContext,
         out: &mut Vec<Fused>,
     ) -> Result<()> {
-        let block: EddyCurrentBlock = msg.decode(input)?;
         let mut o = Vec::new();
-        self.block(&block, context.track.as_ref(), &mut o);
+        match self.aiding.index(sensor) {
+            Some(j) => self.aid_message(j, msg, input, context, &mut o)?,
+            None => {
+                debug_assert_eq!(sensor, self.block_sensor);
+                let block: EddyCurrentBlock = msg.decode(input)?;
+                self.block(&block, context.track.as_ref(), &mut o);
+            }
+        }
         out.extend(o.into_iter().map(|mut f| {
             f.log_time_ns = msg.log_time_ns;
             f
@@ -179,7 +206,14 @@ impl MessagePipeline for EddyCurrentPipeline {
         Ok(())
     }
 
-    fn finish(&mut self, _log_time_ns: u64, _context: &SensorContext, _out: &mut Vec<Fused>) {}
+    fn finish(&mut self, log_time_ns: u64, _context: &SensorContext, out: &mut Vec<Fused>) {
+        let mut o = Vec::new();
+        self.drain_aids(u64::MAX, &mut o);
+        out.extend(o.into_iter().map(|mut f| {
+            f.log_time_ns = log_time_ns;
+            f
+        }));
+    }
 }
 
 impl EddyCurrentPipeline {
@@ -264,6 +298,7 @@ impl EddyCurrentPipeline {
             let f = front.push(a as f64, bb as f64);
             let t = front.now_ns();
             let samples = front.samples;
+            self.drain_aids(t.saturating_sub(aiding::AID_WAIT_NS), o);
             let ds = self.speed_now(t) / fs;
             self.odometer_m += ds;
             if self.settings.count_sleepers {
@@ -402,7 +437,25 @@ impl EddyCurrentPipeline {
         diag: EddyCurrentDiagnostics,
         o: &mut Vec<Fused>,
     ) {
-        let mut d = measurement_record(stamp_ns, &self.topic(), None, (z, r), i, decision, reason);
+        let topic = self.topic();
+        self.record_as(&topic, stamp_ns, z, r, i, decision, reason, diag, o);
+    }
+
+    /// A diagnostics record of sensor `topic`'s measurement.
+    #[allow(clippy::too_many_arguments)]
+    fn record_as(
+        &self,
+        topic: &str,
+        stamp_ns: u64,
+        z: Option<f64>,
+        r: Option<f64>,
+        i: Option<Innovation>,
+        decision: GateDecision,
+        reason: Option<&str>,
+        diag: EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        let mut d = measurement_record(stamp_ns, topic, None, (z, r), i, decision, reason);
         d.eddy_current = Some(diag);
         o.push(Fused {
             diagnostics: Some(d),

@@ -1,7 +1,7 @@
 //! `[pipeline.eddy_current]`: the table of an `eddy_current` pipeline (every field has a
 //! default; [`EddyCurrentSettings::check`] validates).
 
-use crate::checks::all_positive;
+use crate::checks::{all_positive, at_least_zero};
 use serde::{Deserialize, Serialize};
 
 use super::speed::CorrelatorKind;
@@ -46,6 +46,10 @@ pub struct EddyCurrentSettings {
     /// A switch seen in the signal is looked for in the map this far either side of where
     /// the pipeline thinks it is, m (0: no landmarks).
     pub landmark_search_m: f64,
+    /// A speed sensor's (an odometer's) error in proportion to the speed, `k`: its variance
+    /// gains `(k v)²` (a worn wheel, a slip under the gate; 0.01 = 1 %), so that at line
+    /// speed the correlator, not the wheel, sets the speed.
+    pub speed_sensor_scale_std: f64,
 }
 
 impl Default for EddyCurrentSettings {
@@ -67,6 +71,7 @@ impl Default for EddyCurrentSettings {
             count_sleepers: true,
             initial_chainage_m: 0.0,
             landmark_search_m: 50.0,
+            speed_sensor_scale_std: 0.01,
         }
     }
 }
@@ -83,6 +88,10 @@ impl EddyCurrentSettings {
             ("sleeper_spacing_m", self.sleeper_spacing_m),
         ];
         all_positive("eddy_current", &positive)?;
+        at_least_zero(
+            "eddy_current.speed_sensor_scale_std",
+            self.speed_sensor_scale_std,
+        )?;
         if !(self.initial_chainage_m.is_finite()
             && self.landmark_search_m.is_finite()
             && self.landmark_search_m >= 0.0)

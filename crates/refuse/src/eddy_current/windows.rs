@@ -29,6 +29,12 @@ impl EddyCurrentPipeline {
             sleepers_b: self.counters[1].sleepers,
             ..Default::default()
         };
+        // The wheels' samples up to the time this window measures go first.
+        let measures_ns = match &outcome {
+            Outcome::Moving(m) => m.stamp_ns,
+            Outcome::Standstill { stamp_ns } | Outcome::NoLock { stamp_ns, .. } => *stamp_ns,
+        };
+        self.drain_aids(measures_ns, o);
         match outcome {
             Outcome::Moving(m) => self.moving(t, m, start, diag, o),
             Outcome::Standstill { stamp_ns } => self.standstill(t, stamp_ns, diag, o),
@@ -146,6 +152,22 @@ impl EddyCurrentPipeline {
         mut diag: EddyCurrentDiagnostics,
         o: &mut Vec<Fused>,
     ) {
+        if self.aiding.turning_at(t) {
+            // A wheel turns: the track under the sensors is as quiet as the noise floor (the
+            // first centimetres of a start), not the train standing.
+            let why = "quiet, but a wheel turns: not a standstill";
+            self.record(
+                stamp_ns,
+                None,
+                None,
+                None,
+                GateDecision::RejectedInvalid,
+                Some(why),
+                diag,
+                o,
+            );
+            return;
+        }
         self.last_measured_ns = Some(t);
         self.last_standstill_ns = Some(t);
         self.standing = true;

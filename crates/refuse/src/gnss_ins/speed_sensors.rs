@@ -21,7 +21,6 @@ use super::error_state::{unit, K, V};
 use super::{GnssInsPipeline, Out};
 use crate::error::{Error, Result};
 use crate::measurement::{Measurement, SensorContext, SensorModel};
-use crate::noise::VarianceValue;
 
 impl GnssInsPipeline {
     /// A speed sensor's message as its speed measurement. The channel was bound as a radar
@@ -56,23 +55,14 @@ impl GnssInsPipeline {
             self.counts.before_initialisation += 1;
             return;
         }
-        let variance = match self.speed_variance[j] {
-            Some(VarianceValue::Fixed(v)) => Some(v),
-            _ => m.reported_variance,
+        let r = match crate::noise::speed_variance(m, self.speed_variance[j]) {
+            Ok(r) => r,
+            Err(why) => {
+                self.counts.rejected_invalid += 1;
+                o.diagnostics(m.stamp_ns, &topic, GateDecision::RejectedInvalid, why);
+                return;
+            }
         };
-        let refused = match variance {
-            _ if !m.valid => Some("flagged invalid by the sensor"),
-            _ if !(m.value.is_finite() && m.value >= 0.0) => Some("not a finite speed ≥ 0"),
-            None => Some("a speed without its variance"),
-            Some(r) if !(r > 0.0 && r.is_finite()) => Some("a variance that is not positive"),
-            Some(_) => None,
-        };
-        if let Some(why) = refused {
-            self.counts.rejected_invalid += 1;
-            o.diagnostics(m.stamp_ns, &topic, GateDecision::RejectedInvalid, why);
-            return;
-        }
-        let r = variance.expect("checked");
         self.advance_to(m.stamp_ns);
         let (Some(nav), Some(filter)) = (self.nav.as_mut(), self.filter.as_mut()) else {
             return;

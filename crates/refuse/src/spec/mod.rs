@@ -442,17 +442,12 @@ impl PipelineSpec {
                 railfuse_catalog::foreign::Translator::schemas().join(", ")
             )));
         };
+        // An eddy_current pipeline says which of its sensors is the block channel (`accepts`).
         let eddy = matches!(&self.estimator, EstimatorSpec::Messages(k) if k.reads_raw_blocks());
-        if eddy != (model == SensorModel::EddyCurrent) {
-            return Err(fail(match eddy {
-                true => format!(
-                    "has schema '{schema}'; an eddy_current pipeline reads {}",
-                    railfuse_catalog::messages::MessageKind::EddyCurrentBlock.schema_name()
-                ),
-                false => "carries raw eddy-current blocks, which only an eddy_current \
-                          pipeline reads"
-                    .into(),
-            }));
+        if !eddy && model == SensorModel::EddyCurrent {
+            return Err(fail(
+                "carries raw eddy-current blocks, which only an eddy_current pipeline reads".into(),
+            ));
         }
         if let EstimatorSpec::Messages(k) = &self.estimator {
             k.accepts(sensor, model)
