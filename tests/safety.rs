@@ -359,3 +359,57 @@ fn a_map_offset_is_caught_by_the_map_check_where_the_train_runs_over_it() {
         stderr(&out)
     );
 }
+
+#[test]
+fn degraded_modes_leave_out_a_stuck_axle_and_name_it_where_the_sources_rule_gives_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    // Axle 2 stuck from 200 s to 230 s of a 320 s default run.
+    let run = default_run(
+        d.path(),
+        "stuck.mcap",
+        &["--fault", "odometer2:stuck:200:230"],
+    );
+    let fused = refuse(&run);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let start = truth[0].stamp_ns;
+    let during = |s: &&SafetyStatus| {
+        s.stamp_ns >= start + 202_000_000_000 && s.stamp_ns < start + 230_000_000_000
+    };
+    let statuses = |p: &str| messages::<SafetyStatus>(&fused, &format!("/fused/{p}/safety"));
+    let (cal, degraded) = (statuses("ekf_safety_cal"), statuses("ekf_safety_degraded"));
+    let usable = |v: &[SafetyStatus]| {
+        let w: Vec<&SafetyStatus> = v.iter().filter(during).collect();
+        w.iter().filter(|s| s.usable).count() as f64 / w.len() as f64
+    };
+    // The source's rule: the stuck axle takes the position away; degraded, it is left out.
+    assert!(usable(&cal) < 0.1, "cal {}", usable(&cal));
+    assert!(usable(&degraded) > 0.9, "degraded {}", usable(&degraded));
+    // Named, in the check it passes, with why it failed.
+    let named = degraded
+        .iter()
+        .filter(during)
+        .filter(|s| s.usable)
+        .all(|s| {
+            s.checks.iter().any(|c| {
+                c.check == "s1_axle_2"
+                    && c.passed
+                    && c.reason.is_some()
+                    && c.degraded
+                        .as_deref()
+                        .is_some_and(|d| d.starts_with("axle 2 left out"))
+            })
+        });
+    assert!(named);
+    // And the interval still holds the truth, every usable epoch of the run.
+    let (available, contained) = availability_and_containment(&degraded, &truth);
+    let (cal_available, _) = availability_and_containment(&cal, &truth);
+    assert!(contained == 1.0, "containment {contained}");
+    assert!(
+        available > cal_available + 0.05,
+        "{available} against {cal_available}"
+    );
+    // Off (the source's rule), no check is ever degraded.
+    assert!(cal
+        .iter()
+        .all(|s| s.checks.iter().all(|c| c.degraded.is_none())));
+}

@@ -27,6 +27,8 @@ pub struct CheckEval {
     /// epoch of a stretch to the next epoch where it passed.
     pub episodes: u64,
     pub failed_s: f64,
+    /// Epochs in which it passed in a degraded mode (something left out).
+    pub degraded_epochs: u64,
 }
 
 /// An injected fault and whether the safety checks caught it.
@@ -34,11 +36,12 @@ pub struct CheckEval {
 pub struct FaultEval {
     pub label: String,
     pub start_s: f64,
-    /// An epoch after the fault began was unusable before it ended.
+    /// An epoch after the fault began was unusable, or usable only in a degraded mode that
+    /// names what it left out, before the fault ended.
     pub flagged: bool,
-    /// From the fault's start to the first unusable epoch (s).
+    /// From the fault's start to the first such epoch (s).
     pub delay_s: Option<f64>,
-    /// The check that failed first there.
+    /// The check that failed first there (or passed degraded).
     pub by: Option<String>,
 }
 
@@ -46,6 +49,8 @@ pub struct FaultEval {
 pub struct SafetyEval {
     pub epochs: u64,
     pub usable_epochs: u64,
+    /// Usable epochs in which some check passed only in a degraded mode.
+    pub degraded_epochs: u64,
     /// Usable epochs over all epochs.
     pub availability: f64,
     pub containment: Containment,
@@ -70,6 +75,7 @@ const TRANSITIONS_KEPT: usize = 256;
 pub struct SafetyTally {
     epochs: u64,
     usable: u64,
+    degraded: u64,
     checks: BTreeMap<String, Tally>,
     /// Per fault window (label, start): the first unusable epoch at or after its start.
     faults: Vec<(Span, Option<(u64, String)>)>,
@@ -88,9 +94,12 @@ impl SafetyTally {
         self.usable += u64::from(s.usable);
         self.first_ns.get_or_insert(s.stamp_ns);
         self.last_ns = self.last_ns.max(s.stamp_ns);
+        let degraded = s.checks.iter().find(|c| c.degraded.is_some());
+        self.degraded += u64::from(s.usable && degraded.is_some());
         for c in &s.checks {
             let t = self.checks.entry(c.check.clone()).or_default();
             t.eval.check.clone_from(&c.check);
+            t.eval.degraded_epochs += u64::from(c.degraded.is_some());
             match (c.passed, t.failing_since_ns) {
                 (false, None) => {
                     t.failing_since_ns = Some(s.stamp_ns);
@@ -136,8 +145,12 @@ impl SafetyTally {
             }) {
                 span.end_ns = Some(end);
             }
-            if caught.is_none() && !s.usable && span.contains(s.stamp_ns) {
-                *caught = Some((s.stamp_ns, s.first_failure.clone().unwrap_or_default()));
+            let by = match s.usable {
+                false => Some(s.first_failure.clone().unwrap_or_default()),
+                true => degraded.map(|c| format!("{} (degraded)", c.check)),
+            };
+            if let (None, Some(by), true) = (&caught, by, span.contains(s.stamp_ns)) {
+                *caught = Some((s.stamp_ns, by));
             }
         }
     }
@@ -166,6 +179,7 @@ impl SafetyTally {
         SafetyEval {
             epochs: self.epochs,
             usable_epochs: self.usable,
+            degraded_epochs: self.degraded,
             availability: self.usable as f64 / self.epochs.max(1) as f64,
             containment,
             containment_share: (containment.checked > 0)
@@ -204,6 +218,7 @@ mod tests {
                 value: None,
                 limit: None,
                 reason: None,
+                degraded: None,
             })
             .collect();
         SafetyStatus {

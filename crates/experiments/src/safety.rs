@@ -15,8 +15,9 @@ use crate::Result;
 
 pub const SEED002_PIPELINES: &str = include_str!("../../../samples/seed002.toml");
 
-/// The pipelines compared: the source as stated, and with sensor states.
-pub const PIPELINES: [&str; 2] = ["ekf_safety", "ekf_safety_cal"];
+/// The pipelines compared: the source as stated, with sensor states, and with sensor states
+/// and railfuse's degraded modes.
+pub const PIPELINES: [&str; 3] = ["ekf_safety", "ekf_safety_cal", "ekf_safety_degraded"];
 
 /// One case: a scenario and the faults injected into it.
 pub struct Case {
@@ -84,6 +85,8 @@ pub struct CaseResult {
     pub runs: u64,
     pub epochs: u64,
     pub usable_epochs: u64,
+    /// Usable epochs in a degraded mode (something left out, named).
+    pub degraded_epochs: u64,
     /// The lowest availability of any run.
     pub availability_min: f64,
     pub intervals_checked: u64,
@@ -130,6 +133,7 @@ pub fn run_all(dir: &Path, seeds: u64, step: &dyn Fn(u64)) -> Result<SafetyResul
                 runs: 0,
                 epochs: 0,
                 usable_epochs: 0,
+                degraded_epochs: 0,
                 availability_min: 1.0,
                 intervals_checked: 0,
                 intervals_contained: 0,
@@ -169,6 +173,7 @@ fn add(a: &mut CaseResult, s: &SafetyEval, rmse: f64) {
     a.runs += 1;
     a.epochs += s.epochs;
     a.usable_epochs += s.usable_epochs;
+    a.degraded_epochs += s.degraded_epochs;
     a.availability_min = a.availability_min.min(s.availability);
     a.intervals_checked += s.containment.checked;
     a.intervals_contained += s.containment.contained;

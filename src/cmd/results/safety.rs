@@ -22,6 +22,7 @@ fn markdown(r: &SafetyResults) -> Result<String> {
             "pipeline",
             "usable epochs",
             "availability (lowest run)",
+            "of them degraded",
             "containment (lowest run)",
             "goal met",
             "faults flagged",
@@ -29,7 +30,7 @@ fn markdown(r: &SafetyResults) -> Result<String> {
             "flagged first by",
             "pos RMSE (m)",
         ],
-        "lllrrrlrrlr",
+        "lllrrrrlrrlr",
     );
     for c in &r.cases {
         cases.row(case_row(c));
@@ -44,10 +45,12 @@ fn case_row(c: &CaseResult) -> Vec<String> {
     let availability = c.usable_epochs as f64 / c.epochs.max(1) as f64;
     let containment = c.intervals_contained as f64 / c.intervals_checked.max(1) as f64;
     let fault_free = c.faults == 0;
-    let goal = match (containment >= 0.9999, fault_free, availability > 0.99) {
-        (true, true, true) | (true, false, _) => "yes",
-        (true, true, false) => "containment yes; availability falls short",
-        (false, _, _) => "**falls short** (containment)",
+    // The aims: containment ≥ 99.99 %; availability ≥ 99 % fault-free, ≥ 97 % with a fault.
+    let aim = if fault_free { 0.99 } else { 0.97 };
+    let goal = match (containment >= 0.9999, availability >= aim) {
+        (true, true) => "yes",
+        (true, false) => "containment yes; availability falls short",
+        (false, _) => "**falls short** (containment)",
     };
     let by: Vec<String> = c
         .flagged_by
@@ -64,6 +67,10 @@ fn case_row(c: &CaseResult) -> Vec<String> {
             "{:.2} % ({:.2} %)",
             100.0 * availability,
             100.0 * c.availability_min
+        ),
+        format!(
+            "{:.2} %",
+            100.0 * c.degraded_epochs as f64 / c.epochs.max(1) as f64
         ),
         format!(
             "{:.4} % ({:.4} %)",

@@ -43,6 +43,17 @@ pub struct SafetyCheck {
     /// Why it failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
+    /// Passed in a degraded mode (railfuse's, `degraded = true`): what was left out (a faulty
+    /// axle, a fix beside the track), and why the interval still holds without it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degraded: Option<String>,
+}
+
+impl SafetyCheck {
+    /// Failed, or passed only by leaving something out: worth a user's attention.
+    pub fn flags(&self) -> bool {
+        !self.passed || self.degraded.is_some()
+    }
 }
 
 /// `U_safe = [d − ησ − m, d + ησ + m]` along the track (S6).
@@ -75,7 +86,8 @@ protobuf_form!(SafetyCheck {
     passed,
     value,
     limit,
-    reason
+    reason,
+    degraded
 });
 protobuf_form!(SafeInterval {
     chainage_m,

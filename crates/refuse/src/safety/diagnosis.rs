@@ -226,6 +226,7 @@ pub fn verdict(check: &str, failure: Option<String>) -> SafetyCheck {
         value: None,
         limit: None,
         reason: failure,
+        degraded: None,
     }
 }
 
@@ -238,6 +239,7 @@ pub fn compared(check: &str, value: f64, limit: f64, what: impl FnOnce() -> Stri
         value: value.is_finite().then_some(value),
         limit: Some(limit),
         reason: (!passed).then(what),
+        degraded: None,
     }
 }
 

@@ -13,6 +13,7 @@
 //! | S4 | [`map_check`] | the fix's lateral deviation from the track below λσ |
 //! | S5 | [`odometry_check`] | the filter's distance against axle 2's over windows ΔT |
 //! | S6 | [`safe_interval`] | when all pass, `U_safe = [d − ησ − m, d + ησ + m]` |
+//! | – | [`degraded`] | (railfuse's, `degraded = true`) a faulty axle or a fix beside the track left out instead of no position, named in the check it passes |
 //! | S7 | [`summary`] | per check: how often, how long, how often first; availability, containment, caught faults (in `eval`) |
 //!
 //! Each epoch writes the fused state (along the track, with east/north and lat/lon in its
@@ -21,6 +22,7 @@
 //! the first failure and its reason.
 
 pub mod acceleration_input;
+pub mod degraded;
 pub mod diagnosis;
 pub mod divergence;
 pub mod kind;
@@ -96,6 +98,10 @@ pub struct SafetyPipeline {
     divergence: DivergenceTests,
     odometry: OdometryCheck,
     map_check: Option<SafetyCheck>,
+    /// Degraded modes: since when fixes have not fitted the map, and whether the last was
+    /// dropped.
+    unfitting_since: Option<u64>,
+    fix_dropped: bool,
     /// Without a map, S1 still judges the fixes, in a plane around the first of them.
     local_origin: Option<GeodeticOrigin>,
     queue: ReorderQueue<Input>,
@@ -144,6 +150,8 @@ impl SafetyPipeline {
             divergence: DivergenceTests::default(),
             odometry: OdometryCheck::default(),
             map_check: None,
+            unfitting_since: None,
+            fix_dropped: false,
             local_origin: None,
             queue: ReorderQueue::default(),
             counts: PipelineCounts::default(),
@@ -313,6 +321,14 @@ impl SafetyPipeline {
             Err(why) => {
                 self.counts.rejected_invalid += 1;
                 epoch.refused(&topic, &why);
+                // Degraded mode: a fix that does not fit the map while the filter does.
+                let on_map = self.filter.as_ref().is_some_and(|f| {
+                    let (fe, fn_) = f.position();
+                    let place = self.state_matcher.match_point(map, fe, fn_, None);
+                    place.is_some_and(|p| !p.beyond_end)
+                });
+                self.drop_fix(fix.stamp_ns, true);
+                self.fix_dropped &= on_map;
                 return Some(self.finish_epoch(epoch, map));
             }
         };
@@ -335,12 +351,34 @@ impl SafetyPipeline {
             self.settings.map_std_m,
             self.settings.lambda,
         ));
+        let s4_failed = self.map_check.as_ref().is_some_and(|c| !c.passed);
+        if self.drop_fix(fix.stamp_ns, s4_failed) {
+            epoch.refused(&topic, "beside the track (S4): not fused (degraded mode)");
+            return Some(self.finish_epoch(epoch, map));
+        }
         self.update_axes(
             InnovationKind::Position,
             &mut epoch,
             [(Axis::East, e, re), (Axis::North, n, rn)],
         );
         Some(self.finish_epoch(epoch, map))
+    }
+
+    /// Degraded mode: whether a fix that does not fit the map (`failed`: beside the track by
+    /// S4, or beyond its ends) is dropped instead of the epoch: fixes have not fitted for at
+    /// most `max_dropped_fix_s`.
+    fn drop_fix(&mut self, t_ns: u64, failed: bool) -> bool {
+        let since = match failed {
+            true => *self.unfitting_since.get_or_insert(t_ns),
+            false => {
+                self.unfitting_since = None;
+                t_ns
+            }
+        };
+        self.fix_dropped = self.settings.degraded
+            && failed
+            && railfuse_catalog::seconds_between(since, t_ns) <= self.settings.max_dropped_fix_s;
+        self.fix_dropped
     }
 
     /// Map matching of a fix (S1 map), near where the filter expects the train: the match, or
@@ -537,7 +575,11 @@ impl SafetyPipeline {
             e.hypot(n)
         });
         self.diagnosis.axle(1, m, variances, speed, &self.settings);
-        self.odometry.axle_2(m);
+        let healthy = self.diagnosis.checks(m.stamp_ns, &self.settings)[2].passed;
+        match (healthy, self.settings.degraded) {
+            (false, true) => self.odometry.restart(),
+            _ => self.odometry.axle_2(m),
+        }
     }
 
     /// The estimated receiver bias and axle speed error per axis, where modelled.
@@ -638,6 +680,9 @@ impl SafetyPipeline {
                 Some("no odometry window completed yet".into()),
             )
         }));
+        if s.degraded {
+            degraded::degrade(&mut checks, self.fix_dropped);
+        }
         let interval = safe_interval::safe_interval(
             place.chainage_m,
             chainage_std,

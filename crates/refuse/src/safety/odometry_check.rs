@@ -76,6 +76,13 @@ impl OdometryCheck {
     }
 
     /// The check of the last window ended, if one has.
+    /// Axle 2 left out (degraded): the window starts again with its next sample; the last
+    /// verdict stands until then.
+    pub fn restart(&mut self) {
+        self.start = None;
+        self.distance_m = 0.0;
+    }
+
     pub fn last(&self) -> Option<&SafetyCheck> {
         self.last.as_ref()
     }

@@ -121,6 +121,17 @@ pub struct SafetySettings {
     pub eta: f64,
     /// The map margin in σ_map (the source's 1 to 1.5): m = map_margin σ_map.
     pub map_margin: f64,
+
+    // Degraded modes (railfuse's; `degraded.rs`, argued from the fault tree in
+    // docs/safety.md).
+    /// Instead of no position, leave out what failed where what remains still bounds the
+    /// error: a faulty axle while the other is healthy, a fix beside the track for at most
+    /// `max_dropped_fix_s`. Each is named in the check it passes (`degraded`). Off: the
+    /// source's rule, any fault and no position.
+    pub degraded: bool,
+    /// Fixes beside the track (S4) are dropped for at most this long, s (a reflection near a
+    /// station lasts seconds); beyond it the map or the receiver is wrong, and S4 fails.
+    pub max_dropped_fix_s: f64,
 }
 
 /// A first-order Gauss–Markov sensor error.
@@ -164,6 +175,8 @@ impl Default for SafetySettings {
             odometry_window_s: 5.0,
             odometry_sigmas: 4.0,
             axle_2_scale_std: 0.01,
+            degraded: false,
+            max_dropped_fix_s: 5.0,
             eta: ETA_9999,
             map_margin: 1.5,
         }
@@ -196,6 +209,7 @@ impl SafetySettings {
             ("slip_fraction", self.slip_fraction),
             ("map_std_m", self.map_std_m),
             ("axle_2_scale_std", self.axle_2_scale_std),
+            ("max_dropped_fix_s", self.max_dropped_fix_s),
             ("map_margin", self.map_margin),
         ];
         for (name, b) in [
