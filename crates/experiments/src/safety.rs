@@ -27,7 +27,8 @@ pub struct Case {
 }
 
 /// The cases: each preset fault-free, then source 002's faults on its line (a GNSS position
-/// jump, a stuck axle, an axle slipping far beyond spec, a map offset), each for 10–30 s.
+/// jump, a stuck axle, an axle slipping far beyond spec, map offsets of 1 to 10 m), each for
+/// 10–30 s.
 pub const CASES: &[Case] = &[
     Case {
         scenario: "seed002",
@@ -64,10 +65,26 @@ pub const CASES: &[Case] = &[
         label: "axle 2 stuck (200–230 s)",
         faults: &["odometer2:stuck:200:230"],
     },
+    // Map offsets from 1 m to 10 m: the smallest that S4 catches in every run.
+    Case {
+        scenario: "seed002",
+        label: "map offset 1 m where the train runs 300–330 s",
+        faults: &["map:offset=1:300:330"],
+    },
     Case {
         scenario: "seed002",
         label: "map offset 3 m where the train runs 300–330 s",
         faults: &["map:offset=3:300:330"],
+    },
+    Case {
+        scenario: "seed002",
+        label: "map offset 5 m where the train runs 300–330 s",
+        faults: &["map:offset=5:300:330"],
+    },
+    Case {
+        scenario: "seed002",
+        label: "map offset 7 m where the train runs 300–330 s",
+        faults: &["map:offset=7:300:330"],
     },
     Case {
         scenario: "seed002",
