@@ -722,3 +722,67 @@ fn an_eddy_current_pipelines_speed_sensors_are_checked_when_read() {
         "{e}"
     );
 }
+
+#[test]
+fn bad_and_shuffled_wheel_samples_are_refused_or_taken_late_never_a_panic() {
+    let d = tempfile::tempdir().unwrap();
+    let log = d.path().join("wheel.mcap");
+    let mut w = LogWriter::create(&log).unwrap();
+    let blocks = w
+        .add_channel::<EddyCurrentBlock>("/eddy_current/block")
+        .unwrap();
+    let wheel = w
+        .add_channel::<railfuse_catalog::messages::Odometer>("/odometer/2")
+        .unwrap();
+    let t0 = 1_700_000_000_000_000_000u64;
+    let ms = 1_000_000u64;
+    for k in 0..20 {
+        let b = block(t0 + k * 100 * ms, 1000, 10_000.0, 0.25);
+        w.write(blocks, b.stamp_ns, &b).unwrap();
+    }
+    // 25 Hz, with a NaN, a negative speed, and stamps that run backwards by 0.3 s.
+    for k in 0..50u64 {
+        let stamp = match k % 7 {
+            3 => t0 + k * 40 * ms - 300 * ms,
+            _ => t0 + k * 40 * ms,
+        };
+        let speed = match k {
+            10 => f64::NAN,
+            11 => -1.0,
+            _ => 2.0,
+        };
+        let m = railfuse_catalog::messages::Odometer {
+            stamp_ns: stamp,
+            sensor_id: "axle2".into(),
+            pulse_count: None,
+            pulses_per_revolution: None,
+            wheel_diameter_m: None,
+            distance_increment_m: None,
+            speed_mps: speed,
+        };
+        w.write(wheel, t0 + k * 40 * ms, &m).unwrap();
+    }
+    w.finish().unwrap();
+    let config = d.path().join("aided.toml");
+    let aided = pipeline_of(&sample("seed004.toml"), "warped_kf_odometer");
+    std::fs::write(&config, aided).unwrap();
+    let fused = d.path().join("wheel.fused.mcap");
+    ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
+    let diags: Vec<FusedDiagnostics> = messages(&fused, "/fused/warped_kf_odometer/diagnostics");
+    let wheel = |why: &str| {
+        diags
+            .iter()
+            .filter(|d| d.source == "/odometer/2")
+            .filter(|d| d.reason.as_deref().is_some_and(|r| r.contains(why)))
+            .count()
+    };
+    assert_eq!(wheel("not a finite speed"), 2, "{diags:?}");
+    // The wheel alone drives the filter (nothing correlates): 2 m/s, every state finite.
+    let states: Vec<FusedState> = messages(&fused, "/fused/warped_kf_odometer/state");
+    assert!(!states.is_empty());
+    assert!(states
+        .iter()
+        .all(|st| st.speed_mps.is_finite() && st.covariance.iter().all(|c| c.is_finite())));
+    let last = states.last().unwrap();
+    assert!((last.speed_mps - 2.0).abs() < 0.2, "{last:?}");
+}

@@ -237,7 +237,7 @@ impl EddyCurrentPipeline {
             let correlating = self
                 .last_correlation_ns
                 .is_some_and(|c| t.saturating_sub(c) < CORRELATING_NS);
-            if t - since >= AID_RESTART_NS && !correlating {
+            if t.saturating_sub(since) >= AID_RESTART_NS && !correlating {
                 // Refused for a second with nothing else to go by: it is the filter that is
                 // wrong. Start it over from the wheel.
                 self.kf = None;
