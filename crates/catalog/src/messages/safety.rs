@@ -49,13 +49,6 @@ pub struct SafetyCheck {
     pub degraded: Option<String>,
 }
 
-impl SafetyCheck {
-    /// Failed, or passed only by leaving something out: worth a user's attention.
-    pub fn flags(&self) -> bool {
-        !self.passed || self.degraded.is_some()
-    }
-}
-
 /// `U_safe = [d − ησ − m, d + ησ + m]` along the track (S6).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SafeInterval {

@@ -327,8 +327,7 @@ impl SafetyPipeline {
                     let place = self.state_matcher.match_point(map, fe, fn_, None);
                     place.is_some_and(|p| !p.beyond_end)
                 });
-                self.drop_fix(fix.stamp_ns, true);
-                self.fix_dropped &= on_map;
+                self.fix_dropped = self.drop_fix(fix.stamp_ns, true) && on_map;
                 return Some(self.finish_epoch(epoch, map));
             }
         };
@@ -352,7 +351,8 @@ impl SafetyPipeline {
             self.settings.lambda,
         ));
         let s4_failed = self.map_check.as_ref().is_some_and(|c| !c.passed);
-        if self.drop_fix(fix.stamp_ns, s4_failed) {
+        self.fix_dropped = self.drop_fix(fix.stamp_ns, s4_failed);
+        if self.fix_dropped {
             epoch.refused(&topic, "beside the track (S4): not fused (degraded mode)");
             return Some(self.finish_epoch(epoch, map));
         }
@@ -375,10 +375,9 @@ impl SafetyPipeline {
                 t_ns
             }
         };
-        self.fix_dropped = self.settings.degraded
+        self.settings.degraded
             && failed
-            && railfuse_catalog::seconds_between(since, t_ns) <= self.settings.max_dropped_fix_s;
-        self.fix_dropped
+            && railfuse_catalog::seconds_between(since, t_ns) <= self.settings.max_dropped_fix_s
     }
 
     /// Map matching of a fix (S1 map), near where the filter expects the train: the match, or
