@@ -413,3 +413,74 @@ fn degraded_modes_leave_out_a_stuck_axle_and_name_it_where_the_sources_rule_give
         .iter()
         .all(|s| s.checks.iter().all(|c| c.degraded.is_none())));
 }
+
+#[test]
+fn degraded_modes_widen_the_interval_through_the_tunnel_and_judge_the_first_odometry_window() {
+    // The default run's tunnel: no fixes from about 322 s to 349 s of the run.
+    let d = tempfile::tempdir().unwrap();
+    let run = d.path().join("tunnel.mcap");
+    simulate(
+        &["--scenario", "default", "--seed", "1", "--duration", "380"],
+        &run,
+    );
+    let fused = refuse(&run);
+    let truth: Vec<GroundTruth> = messages(&fused, "/truth");
+    let start = truth[0].stamp_ns;
+    let statuses = |p: &str| messages::<SafetyStatus>(&fused, &format!("/fused/{p}/safety"));
+    let (cal, degraded) = (statuses("ekf_safety_cal"), statuses("ekf_safety_degraded"));
+    let check =
+        |s: &SafetyStatus, name: &str| s.checks.iter().find(|c| c.check == name).cloned().unwrap();
+    // The source's rule: σ beyond 2 m in the tunnel and no position.
+    let sigma_failed: Vec<u64> = cal
+        .iter()
+        .filter(|s| !check(s, "s3c_covariance").passed)
+        .map(|s| s.stamp_ns)
+        .collect();
+    assert!(sigma_failed.len() > 100, "{}", sigma_failed.len());
+    assert!(sigma_failed
+        .iter()
+        .all(|&t| t > start + 330_000_000_000 && t < start + 350_000_000_000));
+    // Degraded: the same epochs usable, with a wider interval that says so and holds the truth.
+    let at = |t: u64| degraded.iter().find(|s| s.stamp_ns == t).unwrap();
+    let widths: Vec<f64> = sigma_failed
+        .iter()
+        .map(|&t| {
+            let s = at(t);
+            let c = check(s, "s3c_covariance");
+            assert!(s.usable && c.passed && c.reason.is_some(), "{s:?}");
+            assert!(c
+                .degraded
+                .as_deref()
+                .unwrap()
+                .starts_with("a wide interval"));
+            let u = s.safe_interval.unwrap();
+            (u.high_m - u.low_m) / 2.0
+        })
+        .collect();
+    let widest = widths.iter().cloned().fold(0.0, f64::max);
+    // S3c's own interval is η · 2 m + 1.5 σ_map = 7.93 m.
+    assert!(widest > 7.93 && widest < 7.93 + 0.05 * 1000.0, "{widest}");
+    let (available, contained) = availability_and_containment(&degraded, &truth);
+    assert!(
+        contained == 1.0 && available > 0.99,
+        "{available} {contained}"
+    );
+    // The first odometry window: no verdict for 5 s by the source's rule, judged as it grows.
+    // (passed against a limit, marked degraded)
+    let first_window = |v: &[SafetyStatus]| -> Vec<(bool, bool)> {
+        v.iter()
+            .filter(|s| s.stamp_ns > start + 1_000_000_000 && s.stamp_ns < start + 4_000_000_000)
+            .map(|s| {
+                let c = check(s, "s5_odometry");
+                (c.passed && c.limit.is_some(), c.degraded.is_some())
+            })
+            .collect()
+    };
+    assert!(first_window(&cal).iter().all(|&(p, _)| !p));
+    let judged = first_window(&degraded);
+    assert!(!judged.is_empty() && judged.iter().all(|&(p, d)| p && !d));
+    // Off, nothing is widened.
+    assert!(cal
+        .iter()
+        .all(|s| s.checks.iter().all(|c| c.degraded.is_none())));
+}

@@ -37,7 +37,7 @@ pub struct FaultEval {
     pub label: String,
     pub start_s: f64,
     /// An epoch after the fault began was unusable, or usable only in a degraded mode that
-    /// names what it left out, before the fault ended.
+    /// names what it left out (a wide interval names no fault), before the fault ended.
     pub flagged: bool,
     /// From the fault's start to the first such epoch (s).
     pub delay_s: Option<f64>,
@@ -147,7 +147,11 @@ impl SafetyTally {
             }
             let by = match s.usable {
                 false => Some(s.first_failure.clone().unwrap_or_default()),
-                true => degraded.map(|c| format!("{} (degraded)", c.check)),
+                true => s
+                    .checks
+                    .iter()
+                    .find(|c| c.left_out())
+                    .map(|c| format!("{} (degraded)", c.check)),
             };
             if let (None, Some(by), true) = (&caught, by, span.contains(s.stamp_ns)) {
                 *caught = Some((s.stamp_ns, by));

@@ -44,9 +44,18 @@ pub struct SafetyCheck {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reason: Option<String>,
     /// Passed in a degraded mode (railfuse's, `degraded = true`): what was left out (a faulty
-    /// axle, a fix beside the track), and why the interval still holds without it.
+    /// axle, a fix beside the track) and why the interval still holds without it, or, for
+    /// `s3c_covariance`, how far the interval widened.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub degraded: Option<String>,
+}
+
+impl SafetyCheck {
+    /// Passed degraded with an input left out: a fault named. A wide interval (`s3c_covariance`
+    /// degraded) leaves nothing out and names none.
+    pub fn left_out(&self) -> bool {
+        self.degraded.is_some() && self.check != "s3c_covariance"
+    }
 }
 
 /// `U_safe = [d − ησ − m, d + ησ + m]` along the track (S6).

@@ -102,6 +102,9 @@ pub struct SafetyPipeline {
     /// dropped.
     unfitting_since: Option<u64>,
     fix_dropped: bool,
+    /// Where the position σ was last within `max_position_std_m` (S3c passed): the wide
+    /// interval's allowance grows with the distance from there.
+    last_useful_chainage_m: Option<f64>,
     /// Without a map, S1 still judges the fixes, in a plane around the first of them.
     local_origin: Option<GeodeticOrigin>,
     queue: ReorderQueue<Input>,
@@ -152,6 +155,7 @@ impl SafetyPipeline {
             map_check: None,
             unfitting_since: None,
             fix_dropped: false,
+            last_useful_chainage_m: None,
             local_origin: None,
             queue: ReorderQueue::default(),
             counts: PipelineCounts::default(),
@@ -665,29 +669,55 @@ impl SafetyPipeline {
                 .clone()
                 .unwrap_or_else(|| diagnosis::verdict("s4_map", Some("no fix checked yet".into()))),
         );
-        let odometry = self.odometry.epoch(
-            epoch.stamp_ns,
-            place.chainage_m,
-            p[(0, 0)],
-            s.odometry_window_s,
-            s.odometry_sigmas,
-            s.axle_2_scale_std,
-        );
-        checks.push(odometry.cloned().unwrap_or_else(|| {
+        let sigma_max = pos_cov.symmetric_eigenvalues().max().max(0.0).sqrt();
+        if sigma_max <= s.max_position_std_m {
+            self.last_useful_chainage_m = Some(place.chainage_m);
+        }
+        let odometry = self
+            .odometry
+            .epoch(
+                epoch.stamp_ns,
+                place.chainage_m,
+                p[(0, 0)],
+                s.odometry_window_s,
+                s.odometry_sigmas,
+                s.axle_2_scale_std,
+            )
+            .cloned();
+        let margin = s.map_margin * s.map_std_m;
+        let cover = s.degraded.then(|| degraded::Cover {
+            fix_dropped: self.fix_dropped,
+            wide_interval: self.last_useful_chainage_m.map(|at| {
+                let since_useful_m = (place.chainage_m - at).abs();
+                degraded::WideInterval {
+                    half_width_m: s.eta * sigma_max + margin,
+                    allowance_m: s.eta * s.max_position_std_m
+                        + margin
+                        + s.wide_interval_fraction * since_useful_m,
+                    since_useful_m,
+                }
+            }),
+            odometry_so_far: match odometry {
+                Some(_) => None,
+                None => self.odometry.judge(
+                    epoch.stamp_ns,
+                    place.chainage_m,
+                    p[(0, 0)],
+                    s.odometry_sigmas,
+                    s.axle_2_scale_std,
+                ),
+            },
+        });
+        checks.push(odometry.unwrap_or_else(|| {
             diagnosis::verdict(
                 "s5_odometry",
                 Some("no odometry window completed yet".into()),
             )
         }));
-        if s.degraded {
-            degraded::degrade(&mut checks, self.fix_dropped);
+        if let Some(cover) = cover {
+            degraded::degrade(&mut checks, &cover);
         }
-        let interval = safe_interval::safe_interval(
-            place.chainage_m,
-            chainage_std,
-            s.eta,
-            s.map_margin * s.map_std_m,
-        );
+        let interval = safe_interval::safe_interval(place.chainage_m, chainage_std, s.eta, margin);
         epoch.safety = Some(status(epoch.stamp_ns, checks, Some(interval)));
         epoch
     }

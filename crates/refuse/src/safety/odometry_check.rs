@@ -50,29 +50,43 @@ impl OdometryCheck {
         sigmas: f64,
         scale_std: f64,
     ) -> Option<&SafetyCheck> {
-        let Some((t0, s0, var0)) = self.start else {
+        let Some((t0, _, _)) = self.start else {
             self.start = Some((t_ns, chainage_m, variance_m2));
             return None;
         };
         if railfuse_catalog::seconds_between(t0, t_ns) >= window_s {
-            let filter = chainage_m - s0;
-            let axle = self.distance_m;
-            let sigma =
-                (var0 + variance_m2 + (scale_std * axle).powi(2) + (2.0 * self.quantum_m).powi(2))
-                    .sqrt();
-            let limit = sigmas * sigma;
-            let diff = (filter - axle).abs();
-            self.last = Some(compared("s5_odometry", diff, limit, || {
-                format!(
-                    "over {:.1} s the filter moved {filter:.2} m and axle 2 {axle:.2} m: {diff:.2} m \
-                     apart, limit {limit:.2} m",
-                    railfuse_catalog::seconds_between(t0, t_ns)
-                )
-            }));
+            self.last = self.judge(t_ns, chainage_m, variance_m2, sigmas, scale_std);
             self.start = Some((t_ns, chainage_m, variance_m2));
             self.distance_m = 0.0;
         }
         self.last.as_ref()
+    }
+
+    /// The comparison over the window so far, ending at `t_ns` (None before it has started).
+    /// Before the first window ends, the degraded mode judges it as it grows.
+    pub fn judge(
+        &self,
+        t_ns: u64,
+        chainage_m: f64,
+        variance_m2: f64,
+        sigmas: f64,
+        scale_std: f64,
+    ) -> Option<SafetyCheck> {
+        let (t0, s0, var0) = self.start?;
+        let filter = chainage_m - s0;
+        let axle = self.distance_m;
+        let sigma =
+            (var0 + variance_m2 + (scale_std * axle).powi(2) + (2.0 * self.quantum_m).powi(2))
+                .sqrt();
+        let limit = sigmas * sigma;
+        let diff = (filter - axle).abs();
+        Some(compared("s5_odometry", diff, limit, || {
+            format!(
+                "over {:.1} s the filter moved {filter:.2} m and axle 2 {axle:.2} m: {diff:.2} m \
+                 apart, limit {limit:.2} m",
+                railfuse_catalog::seconds_between(t0, t_ns)
+            )
+        }))
     }
 
     /// The check of the last window ended, if one has.

@@ -129,9 +129,18 @@ pub struct SafetySettings {
     /// `max_dropped_fix_s`. Each is named in the check it passes (`degraded`). Off: the
     /// source's rule, any fault and no position.
     pub degraded: bool,
-    /// Fixes beside the track (S4) are dropped for at most this long, s (a reflection near a
-    /// station lasts seconds); beyond it the map or the receiver is wrong, and S4 fails.
+    /// Fixes that do not fit the map (S4, S1 map) are dropped for at most this long, s:
+    /// a dropped fix is as good as none, and without fixes the filter may coast on the axles
+    /// as long as in a tunnel (`gnss_timeout_s`), S3c and its wide interval bounding σ.
+    /// Beyond it the map or the receiver is wrong for longer than any tunnel, and S4 fails.
     pub max_dropped_fix_s: f64,
+    /// A σ beyond `max_position_std_m` (S3c) passes degraded while the safe interval it gives
+    /// (with the position ellipse's largest σ, `η σ_max + m`) has grown beyond S3c's own
+    /// (`η max_position_std_m + m`) by at most this fraction of the distance travelled since
+    /// σ was last within the limit. ETCS (SUBSET-041) asks a train's odometry to be within
+    /// ±(5 m + 5 % s) since its last balise group, and an interlocking takes that interval:
+    /// 5 %, with the 5 m left out.
+    pub wide_interval_fraction: f64,
 }
 
 /// A first-order Gauss–Markov sensor error.
@@ -176,7 +185,8 @@ impl Default for SafetySettings {
             odometry_sigmas: 4.0,
             axle_2_scale_std: 0.01,
             degraded: false,
-            max_dropped_fix_s: 5.0,
+            max_dropped_fix_s: 60.0,
+            wide_interval_fraction: 0.05,
             eta: ETA_9999,
             map_margin: 1.5,
         }
@@ -210,6 +220,7 @@ impl SafetySettings {
             ("map_std_m", self.map_std_m),
             ("axle_2_scale_std", self.axle_2_scale_std),
             ("max_dropped_fix_s", self.max_dropped_fix_s),
+            ("wide_interval_fraction", self.wide_interval_fraction),
             ("map_margin", self.map_margin),
         ];
         for (name, b) in [
