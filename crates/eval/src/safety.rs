@@ -8,7 +8,7 @@
 //!
 //! Memory is a few counters per check and per fault window, whatever the log's length.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use railfuse_catalog::messages::SafetyStatus;
 use serde::Serialize;
@@ -43,6 +43,8 @@ pub struct FaultEval {
     pub delay_s: Option<f64>,
     /// The check that failed first there (or passed degraded).
     pub by: Option<String>,
+    /// Every check that failed, or passed only by leaving an input out, while it lasted.
+    pub checks: Vec<String>,
 }
 
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -77,8 +79,9 @@ pub struct SafetyTally {
     usable: u64,
     degraded: u64,
     checks: BTreeMap<String, Tally>,
-    /// Per fault window (label, start): the first unusable epoch at or after its start.
-    faults: Vec<(Span, Option<(u64, String)>)>,
+    /// Per fault window (label, start): the first unusable epoch at or after its start, and
+    /// every check that flagged it while it lasted.
+    faults: Vec<(Span, Option<(u64, String)>, BTreeSet<String>)>,
     /// The latest changes between usable and not (stamp, usable, first failure), so that a
     /// fault window whose event is read after the statuses of its first moments is judged
     /// on them; at most [`TRANSITIONS_KEPT`].
@@ -130,13 +133,14 @@ impl SafetyTally {
             if !self
                 .faults
                 .iter()
-                .any(|(f, _)| f.label == span.label && f.start_ns == span.start_ns)
+                .any(|(f, ..)| f.label == span.label && f.start_ns == span.start_ns)
             {
                 let caught = self.caught_so_far(span);
-                self.faults.push((span.clone(), caught));
+                let flagged_by = caught.iter().map(|c| c.1.clone()).collect();
+                self.faults.push((span.clone(), caught, flagged_by));
             }
         }
-        for (span, caught) in &mut self.faults {
+        for (span, caught, flagged_by) in &mut self.faults {
             if let Some(end) = span.end_ns.or_else(|| {
                 spans
                     .iter()
@@ -153,8 +157,16 @@ impl SafetyTally {
                     .find(|c| c.left_out())
                     .map(|c| format!("{} (degraded)", c.check)),
             };
-            if let (None, Some(by), true) = (&caught, by, span.contains(s.stamp_ns)) {
-                *caught = Some((s.stamp_ns, by));
+            if span.contains(s.stamp_ns) {
+                flagged_by.extend(
+                    s.checks
+                        .iter()
+                        .filter(|c| !c.passed || c.left_out())
+                        .map(|c| c.check.clone()),
+                );
+                if let (None, Some(by)) = (&caught, by) {
+                    *caught = Some((s.stamp_ns, by));
+                }
             }
         }
     }
@@ -192,11 +204,12 @@ impl SafetyTally {
             faults: self
                 .faults
                 .into_iter()
-                .map(|(span, caught)| FaultEval {
+                .map(|(span, caught, flagged_by)| FaultEval {
                     start_s: seconds(t0_ns, span.start_ns),
                     flagged: caught.is_some(),
                     delay_s: caught.as_ref().map(|(t, _)| seconds(span.start_ns, *t)),
                     by: caught.map(|(_, c)| c),
+                    checks: flagged_by.into_iter().collect(),
                     label: span.label,
                 })
                 .collect(),

@@ -116,6 +116,8 @@ pub struct CaseResult {
     pub delay_max_s: Option<f64>,
     /// The checks that flagged the faults first, with how often.
     pub flagged_by: Vec<(String, u64)>,
+    /// Each check with the number of fault windows it flagged at any time while they lasted.
+    pub flagged_at_all_by: Vec<(String, u64)>,
     /// Mean position RMSE over runs, m.
     pub position_rmse_m: f64,
 }
@@ -159,6 +161,7 @@ pub fn run_all(dir: &Path, seeds: u64, step: &dyn Fn(u64)) -> Result<SafetyResul
                 faults: 0,
                 delay_max_s: None,
                 flagged_by: Vec::new(),
+                flagged_at_all_by: Vec::new(),
                 position_rmse_m: 0.0,
             })
             .collect();
@@ -202,12 +205,19 @@ fn add(a: &mut CaseResult, s: &SafetyEval, rmse: f64) {
         if f.flagged {
             a.faults_flagged += 1;
             a.delay_max_s = Some(a.delay_max_s.unwrap_or(0.0).max(f.delay_s.unwrap_or(0.0)));
-            let by = f.by.clone().unwrap_or_default();
-            match a.flagged_by.iter_mut().find(|(c, _)| *c == by) {
-                Some((_, n)) => *n += 1,
-                None => a.flagged_by.push((by, 1)),
-            }
+            count(&mut a.flagged_by, f.by.clone().unwrap_or_default());
+        }
+        for check in &f.checks {
+            count(&mut a.flagged_at_all_by, check.clone());
         }
     }
     a.position_rmse_m += rmse;
+}
+
+/// One more for `key` in a tally kept in first-seen order.
+fn count(tally: &mut Vec<(String, u64)>, key: String) {
+    match tally.iter_mut().find(|(c, _)| *c == key) {
+        Some((_, n)) => *n += 1,
+        None => tally.push((key, 1)),
+    }
 }

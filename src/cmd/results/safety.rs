@@ -80,6 +80,16 @@ fn case_row(c: &CaseResult) -> Vec<String> {
         goal.to_owned(),
         match fault_free {
             true => "–".to_owned(),
+            // A map fault's own check: how often S4 flagged it, whatever came first.
+            false if c.label.starts_with("map") => {
+                let s4 = c.flagged_at_all_by.iter().find(|(k, _)| k == "s4_map");
+                format!(
+                    "{} of {} (S4 in {})",
+                    c.faults_flagged,
+                    c.faults,
+                    s4.map_or(0, |(_, n)| *n)
+                )
+            }
             false => format!("{} of {}", c.faults_flagged, c.faults),
         },
         c.delay_max_s.map_or("–".to_owned(), |d| format!("{d:.2}")),

@@ -10,10 +10,10 @@
 //! | S1 | [`diagnosis`] | each sensor diagnosed: GNSS fix type, staleness, jumps, non-finite values; each axle's staleness, range, stuck pulses, slip/slide; the map's matching |
 //! | S2 | [`plane_filter`] | the constant-acceleration filter per axis (east, north), GNSS coordinates and axle-1 speed resolved with the map heading, axle-1's smoothed acceleration as the input U ([`acceleration_input`]) |
 //! | S3 | [`divergence`] | the three divergence tests on the innovations |
-//! | S4 | [`map_check`] | the fix's lateral deviation from the track below λσ |
+//! | S4 | [`map_check`] | the fix's lateral deviation from the track below λσ; with `map_step_window_s` (railfuse's) also its change over a few seconds, which a map off over a stretch steps faster than the receiver's bias moves |
 //! | S5 | [`odometry_check`] | the filter's distance against axle 2's over windows ΔT |
 //! | S6 | [`safe_interval`] | when all pass, `U_safe = [d − ησ − m, d + ησ + m]` |
-//! | – | [`degraded`] | (railfuse's, `degraded = true`) a faulty axle or a fix beside the track left out instead of no position, named in the check it passes |
+//! | – | [`degraded`] | (railfuse's, `degraded = true`) a faulty axle or a fix beside the track left out, or a wider interval while σ grows within ETCS's odometry allowance, instead of no position; named in the check it passes |
 //! | S7 | [`summary`] | per check: how often, how long, how often first; availability, containment, caught faults (in `eval`) |
 //!
 //! Each epoch writes the fused state (along the track, with east/north and lat/lon in its
@@ -98,6 +98,7 @@ pub struct SafetyPipeline {
     divergence: DivergenceTests,
     odometry: OdometryCheck,
     map_check: Option<SafetyCheck>,
+    map_step: map_check::MapStepTest,
     /// Degraded modes: since when fixes have not fitted the map, and whether the last was
     /// dropped.
     unfitting_since: Option<u64>,
@@ -153,6 +154,7 @@ impl SafetyPipeline {
             divergence: DivergenceTests::default(),
             odometry: OdometryCheck::default(),
             map_check: None,
+            map_step: map_check::MapStepTest::default(),
             unfitting_since: None,
             fix_dropped: false,
             last_useful_chainage_m: None,
@@ -344,17 +346,31 @@ impl SafetyPipeline {
             return Some(self.finish_epoch(epoch, map));
         }
         self.predict_to(fix.stamp_ns, map);
-        // S4 on the predicted position.
+        // S4 on the predicted position, then its step test. A fix beside the track may be
+        // dropped (degraded); a step says the map may be off as well as the fix, so it only
+        // fails the check: the fix is still fused, and the map heading not trusted alone.
+        let s = &self.settings;
         let p = self.filter.as_ref()?.position_covariance();
-        self.map_check = Some(map_check::map_check(
-            m.lateral_m,
-            m.heading_rad,
-            &p,
-            &Matrix2::new(re, 0.0, 0.0, rn),
-            self.settings.map_std_m,
-            self.settings.lambda,
-        ));
-        let s4_failed = self.map_check.as_ref().is_some_and(|c| !c.passed);
+        let r = Matrix2::new(re, 0.0, 0.0, rn);
+        let s4 = map_check::map_check(m.lateral_m, m.heading_rad, &p, &r, s.map_std_m, s.lambda);
+        let s4_failed = !s4.passed;
+        let step = match s.map_step_window_s > 0.0 {
+            true => self.map_step.check(
+                fix.stamp_ns,
+                m.track,
+                m.lateral_m,
+                map_check::across(m.heading_rad, &r),
+                s.map_step_window_s,
+                s.gnss_bias,
+                s.map_std_m,
+                s.lambda,
+            ),
+            false => None,
+        };
+        self.map_check = Some(match step {
+            Some(step) if !s4_failed && !step.passed => step,
+            _ => s4,
+        });
         self.fix_dropped = self.drop_fix(fix.stamp_ns, s4_failed);
         if self.fix_dropped {
             epoch.refused(&topic, "beside the track (S4): not fused (degraded mode)");

@@ -107,6 +107,14 @@ pub struct SafetySettings {
     pub lambda: f64,
     /// σ_map, the survey error of the track map (m).
     pub map_std_m: f64,
+    /// S4's step test (railfuse's; 0: off, the source's S4 alone): the fix's lateral
+    /// deviation is also compared with the deviation this many seconds earlier, against λ
+    /// times the σ of their difference under the receiver's bias model (`gnss_bias`), the
+    /// fixes' noise and the map's survey error. A map off over a stretch steps the deviation
+    /// faster than the bias moves; S4 alone, whose σ holds the bias's whole spread (about
+    /// 1.5 m), lets offsets below about 6 m through. 5 s: the time a surveyed map's offset
+    /// takes to come in at line speed, with the bias moving 0.6 m σ in it.
+    pub map_step_window_s: f64,
 
     // S5: odometry check.
     /// ΔT, the window over which the filter's distance is compared with axle 2's (s).
@@ -181,6 +189,7 @@ impl Default for SafetySettings {
             max_position_std_m: 2.0,
             lambda: 4.0,
             map_std_m: 0.1,
+            map_step_window_s: 0.0,
             odometry_window_s: 5.0,
             odometry_sigmas: 4.0,
             axle_2_scale_std: 0.01,
@@ -218,6 +227,7 @@ impl SafetySettings {
             ("heading_std_rad", self.heading_std_rad),
             ("slip_fraction", self.slip_fraction),
             ("map_std_m", self.map_std_m),
+            ("map_step_window_s", self.map_step_window_s),
             ("axle_2_scale_std", self.axle_2_scale_std),
             ("max_dropped_fix_s", self.max_dropped_fix_s),
             ("wide_interval_fraction", self.wide_interval_fraction),
