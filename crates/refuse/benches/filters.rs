@@ -211,6 +211,7 @@ fn particle(c: &mut Criterion) {
                 roughening: 0.1,
                 seed: 1,
                 reseed_nis: 25.0,
+                reseed_ess: 0.01,
             };
             let mut pf = ParticleFilter::new(settings, &init);
             let mut k = 0u64;
