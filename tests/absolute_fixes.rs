@@ -148,7 +148,10 @@ fn a_particle_filter_that_missed_a_fix_is_reseeded_instead_of_collapsing() {
             &["/loop/position", "/balise"],
             "reset_after = 0\n",
         )
-        .replace("seed = 1 }", "seed = 1, reseed_nis = 0.0, reseed_ess = 0.0 }");
+        .replace(
+            "seed = 1 }",
+            "seed = 1, reseed_nis = 0.0, reseed_ess = 0.0 }",
+        );
     let (_, eval) = drift_run(d.path(), &config);
     let max = |name| {
         pipeline_eval(&eval, name)["position_error_m"]["max_abs"]

@@ -520,3 +520,37 @@ fn the_step_test_catches_a_3_m_map_offset_that_s4_alone_lets_through() {
     let (_, contained) = availability_and_containment(&degraded, &truth);
     assert!(contained == 1.0, "{contained}");
 }
+
+#[test]
+fn a_fix_dropped_beside_the_track_is_no_reference_for_the_step_test() {
+    // seed002 seed 1: the fixes jump 8 m from 250 s to 260 s, are beside the track and
+    // dropped; the first good fix after them must not look like a step against them.
+    let d = tempfile::tempdir().unwrap();
+    let run = d.path().join("jump.mcap");
+    simulate(
+        &[
+            "--scenario",
+            "seed002",
+            "--seed",
+            "1",
+            "--duration",
+            "300",
+            "--fault",
+            "gnss:bias=8:250:260",
+        ],
+        &run,
+    );
+    let fused = refuse(&run);
+    let degraded = messages::<SafetyStatus>(&fused, "/fused/ekf_safety_degraded/safety");
+    let s4 = |s: &SafetyStatus| s.checks.iter().find(|c| c.check == "s4_map").cloned();
+    assert!(degraded
+        .iter()
+        .filter_map(s4)
+        .any(|c| c.passed && c.degraded.is_some()));
+    let steps: Vec<_> = degraded
+        .iter()
+        .filter_map(s4)
+        .filter(|c| c.reason.as_deref().is_some_and(|r| r.contains("moved")))
+        .collect();
+    assert!(steps.is_empty(), "{:?}", steps.first());
+}

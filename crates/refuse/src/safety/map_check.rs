@@ -62,8 +62,9 @@ pub struct MapStepTest {
 
 impl MapStepTest {
     /// The test of a fix `lateral_m` beside track `track` (variance `lateral_var_m2` across
-    /// it) against the last fix at least `window_s` before it; None until there is one, or
-    /// when that one matched another track (a station's parallel track).
+    /// it) against the last fix given at least `window_s` before it; None until there is one,
+    /// or when that one matched another track (a station's parallel track). Give it only the
+    /// fixes that passed S4: the references must fit the map.
     #[allow(clippy::too_many_arguments)]
     pub fn check(
         &mut self,

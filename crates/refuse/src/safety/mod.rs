@@ -354,7 +354,9 @@ impl SafetyPipeline {
         let r = Matrix2::new(re, 0.0, 0.0, rn);
         let s4 = map_check::map_check(m.lateral_m, m.heading_rad, &p, &r, s.map_std_m, s.lambda);
         let s4_failed = !s4.passed;
-        let step = match s.map_step_window_s > 0.0 {
+        // Only fixes that fit the map are a reference: a dropped one (a jump, a reflection)
+        // would make the next good fix look like a step.
+        let step = match s.map_step_window_s > 0.0 && !s4_failed {
             true => self.map_step.check(
                 fix.stamp_ns,
                 m.track,
@@ -368,7 +370,7 @@ impl SafetyPipeline {
             false => None,
         };
         self.map_check = Some(match step {
-            Some(step) if !s4_failed && !step.passed => step,
+            Some(step) if !step.passed => step,
             _ => s4,
         });
         self.fix_dropped = self.drop_fix(fix.stamp_ns, s4_failed);
