@@ -32,6 +32,11 @@ fn availability_and_containment(status: &[SafetyStatus], truth: &[GroundTruth]) 
     )
 }
 
+/// The safety statuses pipeline `pipeline` wrote into `fused`.
+fn safety(fused: &Path, pipeline: &str) -> Vec<SafetyStatus> {
+    messages(fused, &format!("/fused/{pipeline}/safety"))
+}
+
 /// A 320 s default run of seed 1 in `dir`, with `extra` arguments (faults).
 fn default_run(dir: &Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
     let run = dir.join(name);
@@ -63,7 +68,7 @@ fn check_failing_in(fault: &str, from_s: u64, to_s: u64, check: &str) -> (usize,
     let fused = refuse(&run);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let start = truth[0].stamp_ns;
-    let cal: Vec<SafetyStatus> = messages(&fused, "/fused/ekf_safety_cal/safety");
+    let cal = safety(&fused, "ekf_safety_cal");
     let (a, b) = (start + from_s * 1_000_000_000, start + to_s * 1_000_000_000);
     let window: Vec<&SafetyStatus> = cal
         .iter()
@@ -85,7 +90,7 @@ fn the_safe_interval_holds_the_truth_and_an_injected_jump_is_flagged_at_once() {
     let fused = refuse(&run);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let start = truth[0].stamp_ns;
-    let cal: Vec<SafetyStatus> = messages(&fused, "/fused/ekf_safety_cal/safety");
+    let cal = safety(&fused, "ekf_safety_cal");
     let (available, contained) = availability_and_containment(&cal, &truth);
     assert!(contained == 1.0, "containment {contained}");
     assert!(available > 0.8, "availability {available}");
@@ -110,7 +115,7 @@ fn the_safe_interval_holds_the_truth_and_an_injected_jump_is_flagged_at_once() {
         && s.plane.as_ref().is_some_and(|p| p.latitude_deg.is_finite())));
     // The source as stated (white-noise sensors) claims more than it holds: the sensor states
     // are what makes the interval honest.
-    let plain: Vec<SafetyStatus> = messages(&fused, "/fused/ekf_safety/safety");
+    let plain = safety(&fused, "ekf_safety");
     let (_, plain_contained) = availability_and_containment(&plain, &truth);
     assert!(
         plain_contained < 0.99,
@@ -236,7 +241,7 @@ fn real_eth_fixes_go_through_s1_no_fix_refused_3d_fixes_taken_with_their_accurac
         import_eth(name, &log);
         let out = ok(&["refuse", s(&log), "-c", s(&config), "-o", s(&fused)]);
         let printed = String::from_utf8_lossy(&out.stdout).into_owned() + &stderr(&out);
-        let status = messages::<SafetyStatus>(&fused, "/fused/gnss_s1/safety");
+        let status = safety(&fused, "gnss_s1");
         let diagnostics = messages::<FusedDiagnostics>(&fused, "/fused/gnss_s1/diagnostics");
         assert_eq!(
             status.len(),
@@ -375,8 +380,10 @@ fn degraded_modes_leave_out_a_stuck_axle_and_name_it_where_the_sources_rule_give
     let during = |s: &&SafetyStatus| {
         s.stamp_ns >= start + 202_000_000_000 && s.stamp_ns < start + 230_000_000_000
     };
-    let statuses = |p: &str| messages::<SafetyStatus>(&fused, &format!("/fused/{p}/safety"));
-    let (cal, degraded) = (statuses("ekf_safety_cal"), statuses("ekf_safety_degraded"));
+    let (cal, degraded) = (
+        safety(&fused, "ekf_safety_cal"),
+        safety(&fused, "ekf_safety_degraded"),
+    );
     let usable = |v: &[SafetyStatus]| {
         let w: Vec<&SafetyStatus> = v.iter().filter(during).collect();
         w.iter().filter(|s| s.usable).count() as f64 / w.len() as f64
@@ -426,8 +433,10 @@ fn degraded_modes_widen_the_interval_through_the_tunnel_and_judge_the_first_odom
     let fused = refuse(&run);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let start = truth[0].stamp_ns;
-    let statuses = |p: &str| messages::<SafetyStatus>(&fused, &format!("/fused/{p}/safety"));
-    let (cal, degraded) = (statuses("ekf_safety_cal"), statuses("ekf_safety_degraded"));
+    let (cal, degraded) = (
+        safety(&fused, "ekf_safety_cal"),
+        safety(&fused, "ekf_safety_degraded"),
+    );
     let check =
         |s: &SafetyStatus, name: &str| s.checks.iter().find(|c| c.check == name).cloned().unwrap();
     // The source's rule: σ beyond 2 m in the tunnel and no position.
@@ -497,7 +506,7 @@ fn the_step_test_catches_a_3_m_map_offset_that_s4_alone_lets_through() {
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let start = truth[0].stamp_ns;
     let s4_failures = |p: &str| -> Vec<(f64, String)> {
-        messages::<SafetyStatus>(&fused, &format!("/fused/{p}/safety"))
+        safety(&fused, p)
             .into_iter()
             .filter_map(|s| {
                 let c = s.checks.into_iter().find(|c| c.check == "s4_map")?;
@@ -516,7 +525,7 @@ fn the_step_test_catches_a_3_m_map_offset_that_s4_alone_lets_through() {
     assert_eq!(at(295.0, 322.0), caught.len(), "{:?}", caught.first());
     assert!(caught.iter().all(|(_, why)| why.contains("moved")));
     // It fails the check but keeps the fix: the interval still holds the truth.
-    let degraded = messages::<SafetyStatus>(&fused, "/fused/ekf_safety_degraded/safety");
+    let degraded = safety(&fused, "ekf_safety_degraded");
     let (_, contained) = availability_and_containment(&degraded, &truth);
     assert!(contained == 1.0, "{contained}");
 }
@@ -541,7 +550,7 @@ fn a_fix_dropped_beside_the_track_is_no_reference_for_the_step_test() {
         &run,
     );
     let fused = refuse(&run);
-    let degraded = messages::<SafetyStatus>(&fused, "/fused/ekf_safety_degraded/safety");
+    let degraded = safety(&fused, "ekf_safety_degraded");
     let s4 = |s: &SafetyStatus| s.checks.iter().find(|c| c.check == "s4_map").cloned();
     assert!(degraded
         .iter()
