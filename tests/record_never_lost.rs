@@ -69,22 +69,8 @@ fn a_non_ascii_byte_in_an_nmea_field_is_counted_by_import_and_record_and_loses_n
     assert_eq!(gnss_fixes_in(&out).len(), 60);
 
     // The same bytes to a live recorder over TCP: the source goes on, the file is finished.
-    let tcp = free_port();
     let rec = d.path().join("live.mcap");
-    let child = spawn(&[
-        "record",
-        "-o",
-        s(&rec),
-        "--tcp",
-        &format!("{tcp}:nmea"),
-        "--json",
-    ]);
-    wait_listening(tcp);
-    let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
-    conn.write_all(text.as_bytes()).unwrap();
-    drop(conn);
-    std::thread::sleep(Duration::from_millis(500));
-    let r = stop(child);
+    let r = record_nmea_over_tcp(text.as_bytes(), &rec);
     let src = &r["sources"][0];
     assert_eq!(
         src["skipped"]["NMEA sentence with a non-ASCII byte"], 1,
@@ -92,6 +78,26 @@ fn a_non_ascii_byte_in_an_nmea_field_is_counted_by_import_and_record_and_loses_n
     );
     assert_eq!(src["written"], 60, "{r}");
     assert_eq!(gnss_fixes_in(&rec).len(), 60);
+}
+
+/// `bytes` sent in one go to a live recorder's NMEA TCP listener recording to `rec`; its
+/// closing report.
+fn record_nmea_over_tcp(bytes: &[u8], rec: &std::path::Path) -> serde_json::Value {
+    let tcp = free_port();
+    let child = spawn(&[
+        "record",
+        "-o",
+        s(rec),
+        "--tcp",
+        &format!("{tcp}:nmea"),
+        "--json",
+    ]);
+    wait_listening(tcp);
+    let mut conn = TcpStream::connect(("127.0.0.1", tcp)).unwrap();
+    conn.write_all(bytes).unwrap();
+    drop(conn);
+    std::thread::sleep(Duration::from_millis(500));
+    stop(child)
 }
 
 fn gnss_fixes_in(path: &std::path::Path) -> Vec<GnssFix> {
@@ -502,4 +508,168 @@ fn a_listener_serves_at_most_its_connection_cap_and_counts_the_rest() {
         "{r}"
     );
     assert_eq!(radar_count(&out), cap);
+}
+
+/// Captures in the manner of real receivers (issue 44), timed a minute ago so that a live
+/// recorder's clock and the import date them alike: ST Teseo LIV4F (`$$` before every
+/// sentence), Quectel EG25-G (an outage: GNS with mode NNN, untimed GGA/RMC/GSA, then the
+/// first fix), SiRFstarV (GPGGA + GLGGA + GNGSA), Telit PLS83-W (GPGGA + GAGGA + GNGNS).
+fn receiver_captures() -> Vec<(&'static str, String, Vec<(bool, u8)>)> {
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs()
+        - 60;
+    let days = (now / 86_400) as i64;
+    // Civil date of `days` (Howard Hinnant's algorithm, as the decoder's own calendar).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    let date = format!("{d:02}{m:02}{:02}", y % 100);
+    let t = |k: u64| {
+        let s = (now + k) % 86_400;
+        format!("{:02}{:02}{:02}.00", s / 3600, s / 60 % 60, s % 60)
+    };
+    let b = |s: String| s;
+    let mut captures = Vec::new();
+    let teseo: Vec<String> = (0..6)
+        .flat_map(|k| {
+            [
+                b(format!(
+                    "GNRMC,{},A,4723.00484,N,00045.88150,E,0.5,120.9,{date},,,A,C",
+                    t(k)
+                )),
+                format!(
+                    "GNGGA,{},4723.00484,N,00045.88150,E,1,13,1.7,063.64,M,48.3,M,,",
+                    t(k)
+                ),
+                "GNGSA,A,3,27,08,07,,,,,,,,,,2.5,1.7,1.8,1".into(),
+            ]
+        })
+        .collect();
+    let teseo = nmea_text(&teseo)
+        .lines()
+        .map(|l| format!("${l}\r\n"))
+        .collect();
+    captures.push(("teseo", teseo, vec![(true, 13); 6]));
+    let mut quectel = Vec::new();
+    for k in 0..3 {
+        quectel.extend([
+            format!("GNGNS,{},,,,,NNN,,,,,,", t(k)),
+            "GPVTG,,T,,M,,N,,K,N".into(),
+            "GPGSA,A,1,,,,,,,,,,,,,,,,".into(),
+            "GPGGA,,,,,,0,,,,,,,,".into(),
+            "GPRMC,,V,,,,,,,,,,N".into(),
+        ]);
+    }
+    for k in 3..6 {
+        quectel.extend([
+            format!(
+                "GPGGA,{},3645.876324,N,03124.670280,E,1,03,1.3,-6.7,M,32.0,M,,",
+                t(k)
+            ),
+            format!(
+                "GNGNS,{},3645.876324,N,03124.670280,E,AAN,08,1.3,-6.7,32.0,,,V",
+                t(k)
+            ),
+            format!(
+                "GPRMC,{},A,3645.876324,N,03124.670280,E,1.3,300.5,{date},3.6,E,A,V",
+                t(k)
+            ),
+            "GPGSA,A,3,13,15,17,,,,,,,,,,2.9,1.3,2.6,1".into(),
+        ]);
+    }
+    let mut want = vec![(false, 0); 3];
+    want.extend([(true, 8); 3]);
+    captures.push(("quectel", nmea_text(&quectel), want));
+    let sirf: Vec<String> = (0..4)
+        .flat_map(|k| {
+            [
+                format!(
+                    "GPGGA,{},4404.1351,N,12118.8556,W,1,08,0.9,1123.9,M,-19.6,M,,0000",
+                    t(k)
+                ),
+                format!(
+                    "GLGGA,{},4404.1351,N,12118.8556,W,1,02,0.9,1123.9,M,-19.6,M,,0000",
+                    t(k)
+                ),
+                "GNGSA,A,3,15,17,30,28,01,19,24,11,,,,,1.8,0.9,1.5".into(),
+                "GNGSA,A,3,73,82,,,,,,,,,,,1.8,0.9,1.5".into(),
+                format!(
+                    "GNRMC,{},A,4404.1351,N,12118.8556,W,0.04,359.11,{date},,,A",
+                    t(k)
+                ),
+            ]
+        })
+        .collect();
+    captures.push(("sirfstarv", nmea_text(&sirf), vec![(true, 10); 4]));
+    let telit: Vec<String> = (0..4)
+        .flat_map(|k| {
+            [
+                format!(
+                    "GPGGA,{},4333.190206,N,00127.618380,E,1,05,1.3,250.8,M,50.0,M,,",
+                    t(k)
+                ),
+                format!(
+                    "GAGGA,{},4333.190206,N,00127.618380,E,1,01,1.3,250.8,M,50.0,M,,",
+                    t(k)
+                ),
+                format!(
+                    "GNGNS,{},4333.190206,N,00127.618380,E,AAAAN,14,1.3,250.8,50.0,,,V",
+                    t(k)
+                ),
+                format!(
+                    "GPRMC,{},A,4333.190206,N,00127.618380,E,0.0,,{date},1.7,W,A,V",
+                    t(k)
+                ),
+            ]
+        })
+        .collect();
+    captures.push(("telit", nmea_text(&telit), vec![(true, 14); 4]));
+    captures
+}
+
+#[test]
+fn real_receivers_captures_decode_alike_in_import_and_record() {
+    let d = tempfile::tempdir().unwrap();
+    for (name, text, want) in receiver_captures() {
+        let capture = d.path().join(format!("{name}.nmea"));
+        std::fs::write(&capture, &text).unwrap();
+        let out = d.path().join(format!("{name}.mcap"));
+        let r = json(&ok(&["import", s(&capture), "-o", s(&out), "--json"]));
+        let imported = gnss_fixes_in(&out);
+        let got: Vec<(bool, u8)> = imported
+            .iter()
+            .map(|f| (f.latitude_deg.is_some(), f.satellites))
+            .collect();
+        assert_eq!(got, want, "{name}: {r}");
+
+        let rec = d.path().join(format!("{name}-live.mcap"));
+        let live = record_nmea_over_tcp(text.as_bytes(), &rec);
+        assert_eq!(
+            gnss_fixes_in(&rec),
+            imported,
+            "{name}: record and import differ\n{live}"
+        );
+        // The same counts under the same reasons (none is an empty table in either).
+        let reasons = |v: &serde_json::Value| v.as_object().cloned().unwrap_or_default();
+        assert_eq!(
+            reasons(&live["sources"][0]["skipped"]),
+            reasons(&r["skipped"]),
+            "{name}"
+        );
+        if name == "teseo" {
+            assert_eq!(
+                r["skipped"][railfuse_record::decode::nmea::JUNK_REASON],
+                18,
+                "{r}"
+            );
+        }
+    }
 }

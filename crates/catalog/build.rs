@@ -16,7 +16,10 @@ fn main() {
         let set = out.join(format!("{package}.fds"));
         std::fs::write(set, fds.encode_to_vec()).expect("OUT_DIR is writable");
         prost_build::Config::new()
-            .btree_map([".railfuse.SourceStats.skipped"])
+            .btree_map([
+                ".railfuse.SourceStats.skipped",
+                ".railfuse.SourceStats.warnings",
+            ])
             .compile_fds(fds)
             .expect("prost-build generates the types");
     }

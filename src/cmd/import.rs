@@ -1,6 +1,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
+use railfuse_record::decode::nmea;
 use railfuse_record::import::{csv_map, eth, gnss_file, ImportReport};
 use railfuse_record::recorder::StreamFormat;
 
@@ -13,7 +14,7 @@ pub struct Args {
     #[arg(short, long, required_unless_present = "example_map")]
     pub output: Option<PathBuf>,
     /// Input format. Without it, it is told from the input: a directory with metadata.yaml
-    /// is a ROS 2 bag, bytes B5 62 UBX, lines starting `$` NMEA, `HH:MM:SS.ffffff,X,hex`
+    /// is a ROS 2 bag, bytes B5 62 UBX, a line that checks as an NMEA sentence NMEA, `HH:MM:SS.ffffff,X,hex`
     /// lines an ETH node log, and `--map` a CSV table.
     #[arg(long, value_enum)]
     pub format: Option<Format>,
@@ -90,11 +91,8 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
     std::fs::File::open(input)
         .and_then(|f| f.take(512).read_to_end(&mut head))
         .map_err(|e| anyhow::anyhow!("{}: {e}", input.display()))?;
-    let first_line = String::from_utf8_lossy(&head);
-    let first_line = first_line
-        .lines()
-        .find(|l| !l.trim().is_empty())
-        .unwrap_or("");
+    let text = String::from_utf8_lossy(&head);
+    let first_line = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("");
     let eth_line = |l: &str| {
         let mut fields = l.split(',');
         let time = fields.next().unwrap_or("");
@@ -113,6 +111,9 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if head.starts_with(&[0xb5, 0x62]) => Ok(Format::Ubx),
         _ if first_line.starts_with('$') => Ok(Format::Nmea),
         _ if eth_line(first_line) => Ok(Format::Eth),
+        // A line that checks as a sentence (from its last `$`: a capture that starts
+        // mid-sentence or under a comment header).
+        _ if text.lines().any(|l| nmea::parse(l).is_ok()) => Ok(Format::Nmea),
         _ => anyhow::bail!(
             "{}: cannot tell its format from its first line; name it with --format \
              (eth, nmea, ubx, csv with --map, rosbag2)",
@@ -233,6 +234,9 @@ fn print_report(report: &ImportReport) {
     }
     for p in &report.first_problems {
         println!("  {p}");
+    }
+    for (warning, n) in &report.warnings {
+        println!("warning: {n} × {warning}");
     }
 }
 

@@ -364,6 +364,9 @@ fn print_report(report: &railfuse_record::recorder::RecordReport, files: &[Strin
         for p in &s.first_problems {
             println!("    {p}");
         }
+        for (warning, n) in &s.warnings {
+            println!("    warning {n:>8}  {warning}");
+        }
     }
     if report.lost_to_write_error > 0 {
         println!(

@@ -56,7 +56,8 @@ fn the_eth_railway_samples_import_with_the_documented_values() {
     let h = fixes[0].position_covariance_enu_m2.unwrap();
     assert!((h[0] + h[4]).sqrt() < 1.5, "NAV-COV horizontal σ {h:?}");
     assert_eq!(
-        report["skipped"]["NMEA sentence type not used (GSV, GLL, …)"],
+        report["skipped"]
+            ["NMEA sentence beside UBX NAV-PVT (the same receiver's solutions; NAV-PVT used)"],
         4
     );
     let (fixes, imu, _) = read("20221019_1252_R90120_Formigine_SN1_sample");
@@ -156,4 +157,60 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
         "{}",
         stderr(&bad)
     );
+}
+
+/// Receiver captures as they come off a real device: a comment header and `$$` before every
+/// sentence (ST Teseo LIV4F) are told as NMEA without `--format` and import, the junk counted;
+/// a capture with unreadable lines imports the rest and says how much was skipped; one that
+/// is not NMEA at all is one line naming the file, and nothing is left behind.
+#[test]
+fn receiver_captures_are_told_imported_and_their_junk_counted() {
+    let d = tempfile::tempdir().unwrap();
+    let nmea = |body: &str| format!("${body}*{:02X}", body.bytes().fold(0u8, |a, b| a ^ b));
+    let mut text = String::from("# Name: ST Teseo-liv4f\n# Date: 2025-03-26\n");
+    for k in 0..12 {
+        for body in [
+            format!("GNRMC,1358{k:02}.000,A,4723.00484,N,00045.88150,E,0.5,120.9,210325,,,A,C"),
+            format!("GNGGA,1358{k:02}.000,4723.00484,N,00045.88150,E,1,13,1.7,063.64,M,48.3,M,,"),
+        ] {
+            text.push_str(&format!("${}\r\n", nmea(&body)));
+        }
+    }
+    text.push_str("$$GPGSV,3,1,09,16,71,196,27*00\r\n"); // a bad checksum, as the capture has
+    let capture = d.path().join("teseo.log");
+    std::fs::write(&capture, &text).unwrap();
+    let out = d.path().join("teseo.mcap");
+    let r = ok(&["import", s(&capture), "-o", s(&out)]);
+    let said = String::from_utf8_lossy(&r.stdout);
+    assert!(said.contains("as 12 messages"), "{said}");
+    assert!(
+        said.contains("not used: 24 × NMEA line with bytes before its last `$`"),
+        "{said}"
+    );
+    assert!(
+        said.contains("not used: 1 × NMEA checksum failure"),
+        "{said}"
+    );
+    assert!(
+        said.contains("not used: 2 × not an NMEA sentence"),
+        "{said}"
+    );
+    assert!(said.contains("line 27: NMEA checksum"), "{said}");
+
+    let junk = d.path().join("notes.nmea");
+    std::fs::write(
+        &junk,
+        "these are a field engineer's notes,\nnot a receiver's capture\n",
+    )
+    .unwrap();
+    let bad = d.path().join("bad.mcap");
+    assert_one_clear_line(
+        &railfuse(&["import", "--format", "nmea", s(&junk), "-o", s(&bad)]),
+        &[
+            s(&junk),
+            "no nmea message in it",
+            "2 × not an NMEA sentence",
+        ],
+    );
+    assert!(!bad.exists());
 }

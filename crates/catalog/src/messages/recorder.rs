@@ -36,6 +36,10 @@ pub struct SourceStats {
     /// The first few problems, each with where it was (line, byte offset) and its cause.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub first_problems: Vec<String>,
+    /// What was recorded but looks wrong (a receiver's date 1024 weeks early), counted once
+    /// under its reason: kept as it came, never changed.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub warnings: BTreeMap<String, u64>,
 }
 
 impl SourceStats {
@@ -62,6 +66,11 @@ impl SourceStats {
         }
     }
 
+    /// Counts one message recorded as it came but under `warning`.
+    pub fn warn(&mut self, warning: &str) {
+        *self.warnings.entry(warning.to_owned()).or_insert(0) += 1;
+    }
+
     /// Adds the counts of `other` (one connection's, into its listener's figures).
     pub fn absorb(&mut self, other: &SourceStats) {
         self.received += other.received;
@@ -72,6 +81,9 @@ impl SourceStats {
         self.kernel_dropped += other.kernel_dropped;
         for (reason, n) in &other.skipped {
             *self.skipped.entry(reason.clone()).or_insert(0) += n;
+        }
+        for (warning, n) in &other.warnings {
+            *self.warnings.entry(warning.clone()).or_insert(0) += n;
         }
         let room = Self::FIRST_PROBLEMS.saturating_sub(self.first_problems.len());
         self.first_problems
@@ -110,4 +122,5 @@ protobuf_form!(SourceStats {
     last_error,
     skipped,
     first_problems,
+    warnings,
 });

@@ -2,6 +2,9 @@
 //! against the calendar (month 1–12, the month's own days, 23:59:60 only as a leap second):
 //! an impossible date is an error, never normalised into another day.
 
+/// A UTC calendar date (year, month, day).
+pub type Date = (i64, u32, u32);
+
 /// Days from 1970-01-01 to a proleptic Gregorian date (Howard Hinnant's algorithm).
 pub fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
     let y = if month <= 2 { year - 1 } else { year };

@@ -1,11 +1,13 @@
 //! u-blox UBX frames: `b5 62`, class, id, little-endian u16 length, payload, Fletcher-8
-//! checksum over class..payload. Decoded: NAV-PVT (position, velocity, time, fix type) and
-//! NAV-COV (position covariance, NED).
+//! checksum over class..payload. Decoded: NAV-PVT (position, velocity, time, fix type),
+//! NAV-COV (position covariance, NED) and NAV-HPPOSLLH (the position to 0.1 mm, which
+//! replaces NAV-PVT's 1e-7° and 1 mm in the fix).
 //!
 //! What a receiver marks invalid is not used: a NAV-PVT without `validDate` and `validTime`
 //! has no UTC (and a date off the calendar or `nano` outside ±1 s counts as none), one with
-//! `flags3.invalidLlh` or a latitude/longitude off the globe has no position, and a NAV-COV
-//! with a non-finite value or a negative variance is refused.
+//! `gnssFixOK` 0 (the u-blox docs: "do not use"), `flags3.invalidLlh` or a latitude/longitude
+//! off the globe has no position, a NAV-HPPOSLLH with `invalidLlh` is not applied, and a
+//! NAV-COV with a non-finite value or a negative variance is refused.
 
 use railfuse_catalog::messages::{FixType, GnssFix};
 
@@ -134,18 +136,23 @@ fn f32le(p: &[u8], o: usize) -> f32 {
     f32::from_bits(u32le(p, o))
 }
 
+/// The payload of `f` when it is message `class_id` of `len` bytes.
+fn payload<'a>(f: &Frame<'a>, class_id: (u8, u8), len: usize) -> Result<&'a [u8], UbxError> {
+    if (f.class, f.id) != class_id || f.payload.len() != len {
+        return Err(UbxError::BadPayload {
+            class: f.class,
+            id: f.id,
+            len: f.payload.len(),
+        });
+    }
+    Ok(f.payload)
+}
+
 impl NavPvt {
     pub const CLASS_ID: (u8, u8) = (0x01, 0x07);
 
     pub fn decode(f: &Frame<'_>) -> Result<Self, UbxError> {
-        let p = f.payload;
-        if (f.class, f.id) != Self::CLASS_ID || p.len() != 92 {
-            return Err(UbxError::BadPayload {
-                class: f.class,
-                id: f.id,
-                len: p.len(),
-            });
-        }
+        let p = payload(f, Self::CLASS_ID, 92)?;
         let valid = p[11];
         let utc_ns = (valid & 0x03 == 0x03)
             .then(|| {
@@ -234,14 +241,7 @@ impl NavCov {
     pub const CLASS_ID: (u8, u8) = (0x01, 0x36);
 
     pub fn decode(f: &Frame<'_>) -> Result<Self, UbxError> {
-        let p = f.payload;
-        if (f.class, f.id) != Self::CLASS_ID || p.len() != 64 {
-            return Err(UbxError::BadPayload {
-                class: f.class,
-                id: f.id,
-                len: p.len(),
-            });
-        }
+        let p = payload(f, Self::CLASS_ID, 64)?;
         let c = |o| f32le(p, o) as f64;
         let (nn, ne, nd, ee, ed, dd) = (c(16), c(20), c(24), c(28), c(32), c(36));
         let finite = [nn, ne, nd, ee, ed, dd].iter().all(|x| x.is_finite());
@@ -275,38 +275,130 @@ pub fn hex_into(text: &str, out: &mut Vec<u8>) -> bool {
     true
 }
 
-/// Pairs each NAV-PVT with the NAV-COV of its epoch (the receiver sends it right after):
-/// the solution is released with its covariance when that arrives, without it when the next
-/// NAV-PVT comes first or the stream ends.
+/// UBX-NAV-HPPOSLLH (class 0x01, id 0x14, 36 bytes): the position to 0.1 mm (F9 receivers).
+#[derive(Debug, Clone, PartialEq)]
+pub struct NavHpPosLlh {
+    pub itow_ms: u32,
+    /// flags.invalidLlh.
+    pub invalid_llh: bool,
+    pub lon_deg: f64,
+    pub lat_deg: f64,
+    pub height_m: f64,
+    pub height_msl_m: f64,
+    pub h_acc_m: f64,
+    pub v_acc_m: f64,
+}
+
+impl NavHpPosLlh {
+    pub const CLASS_ID: (u8, u8) = (0x01, 0x14);
+
+    pub fn decode(f: &Frame<'_>) -> Result<Self, UbxError> {
+        let p = payload(f, Self::CLASS_ID, 36)?;
+        // The standard part (1e-7 °, mm) plus the high-precision part (1e-9 °, 0.1 mm).
+        let hp = |o: usize| p[o] as i8 as f64;
+        Ok(NavHpPosLlh {
+            itow_ms: u32le(p, 4),
+            invalid_llh: p[3] & 0x01 != 0,
+            lon_deg: i32le(p, 8) as f64 * 1e-7 + hp(24) * 1e-9,
+            lat_deg: i32le(p, 12) as f64 * 1e-7 + hp(25) * 1e-9,
+            height_m: (i32le(p, 16) as f64 + hp(26) * 0.1) * 1e-3,
+            height_msl_m: (i32le(p, 20) as f64 + hp(27) * 0.1) * 1e-3,
+            h_acc_m: u32le(p, 28) as f64 * 1e-4,
+            v_acc_m: u32le(p, 32) as f64 * 1e-4,
+        })
+    }
+}
+
+/// A solution ready: the NAV-PVT (with its epoch's NAV-HPPOSLLH precision applied) and its
+/// epoch's NAV-COV covariance when the receiver sent one and marked it valid.
+pub type Solution = (NavPvt, Option<[f64; 9]>);
+
+/// Collects each NAV-PVT with the NAV-COV and NAV-HPPOSLLH of its epoch (same iTOW). A
+/// solution is released when every message kind the stream has sent so far came for its
+/// epoch, or, short of that, when the next NAV-PVT comes or the stream ends. NAV-COV follows
+/// its NAV-PVT; NAV-HPPOSLLH may come on either side of it.
 #[derive(Debug, Default, Clone)]
 pub struct PvtCovPairing {
-    pending: Option<NavPvt>,
+    pending: Option<(NavPvt, Option<Option<[f64; 9]>>, bool)>,
+    /// A NAV-HPPOSLLH that came before its NAV-PVT.
+    early_hp: Option<NavHpPosLlh>,
+    cov_seen: bool,
+    hp_seen: bool,
 }
 
 impl PvtCovPairing {
-    /// A NAV-PVT arrived: the one waiting before it, if any, is released without covariance.
-    pub fn pvt(&mut self, pvt: NavPvt) -> Option<NavPvt> {
-        self.pending.replace(pvt)
+    /// A NAV-PVT arrived: the solution waiting before it, if any, is released as it is.
+    pub fn pvt(&mut self, mut pvt: NavPvt) -> Option<Solution> {
+        let before = self.release();
+        let hp = self.early_hp.take().filter(|h| h.itow_ms == pvt.itow_ms);
+        let precise = hp.is_some_and(|h| apply_hp(&mut pvt, &h));
+        self.pending = Some((pvt, None, precise));
+        before
     }
 
-    /// A NAV-COV arrived: the waiting NAV-PVT of its epoch with its covariance (when the
-    /// receiver marks it valid), or `None` when no NAV-PVT of that epoch waits.
-    pub fn cov(&mut self, cov: &NavCov) -> Option<(NavPvt, Option<[f64; 9]>)> {
-        match self.pending.take() {
-            Some(pvt) if pvt.itow_ms == cov.itow_ms => {
-                Some((pvt, cov.pos_valid.then_some(cov.enu_m2)))
+    /// A NAV-COV arrived: the waiting NAV-PVT of its epoch takes it; released when complete.
+    pub fn cov(&mut self, cov: &NavCov) -> Option<Solution> {
+        self.cov_seen = true;
+        match &mut self.pending {
+            Some((pvt, c, _)) if pvt.itow_ms == cov.itow_ms => {
+                *c = Some(cov.pos_valid.then_some(cov.enu_m2))
             }
-            other => {
-                self.pending = other;
-                None
+            _ => return None,
+        }
+        self.if_complete()
+    }
+
+    /// A NAV-HPPOSLLH arrived: the waiting NAV-PVT of its epoch takes its precision (or it
+    /// waits for that NAV-PVT); released when complete.
+    pub fn hp(&mut self, hp: NavHpPosLlh) -> Option<Solution> {
+        self.hp_seen = true;
+        match &mut self.pending {
+            Some((pvt, _, precise)) if pvt.itow_ms == hp.itow_ms => {
+                *precise = apply_hp(pvt, &hp) || *precise
+            }
+            _ => {
+                self.early_hp = Some(hp);
+                return None;
             }
         }
+        self.if_complete()
     }
 
     /// End of the stream: the solution still waiting, if any.
-    pub fn finish(&mut self) -> Option<NavPvt> {
-        self.pending.take()
+    pub fn finish(&mut self) -> Option<Solution> {
+        self.release()
     }
+
+    fn release(&mut self) -> Option<Solution> {
+        self.pending
+            .take()
+            .map(|(pvt, cov, _)| (pvt, cov.flatten()))
+    }
+
+    fn if_complete(&mut self) -> Option<Solution> {
+        let (_, cov, precise) = self.pending.as_ref()?;
+        let complete = (cov.is_some() || !self.cov_seen) && (*precise || !self.hp_seen);
+        if complete {
+            self.release()
+        } else {
+            None
+        }
+    }
+}
+
+/// The NAV-PVT's position to NAV-HPPOSLLH's precision; false (unchanged) where the receiver
+/// marks the precise position invalid.
+fn apply_hp(pvt: &mut NavPvt, hp: &NavHpPosLlh) -> bool {
+    if hp.invalid_llh {
+        return false;
+    }
+    pvt.lat_deg = hp.lat_deg;
+    pvt.lon_deg = hp.lon_deg;
+    pvt.height_m = hp.height_m;
+    pvt.height_msl_m = hp.height_msl_m;
+    pvt.h_acc_m = hp.h_acc_m;
+    pvt.v_acc_m = hp.v_acc_m;
+    true
 }
 
 #[cfg(test)]
@@ -358,6 +450,92 @@ mod tests {
             let got = NavCov::decode(&parse_frame(&f).unwrap().0);
             assert_eq!(got, Err(UbxError::BadCovariance), "offset {at}: {value}");
         }
+    }
+
+    /// A NAV-PVT payload of a valid 3D fix at `itow_ms`.
+    fn pvt_payload(itow_ms: u32) -> Vec<u8> {
+        let mut p = vec![0u8; 92];
+        p[0..4].copy_from_slice(&itow_ms.to_le_bytes());
+        p[4..6].copy_from_slice(&2025u16.to_le_bytes());
+        (p[6], p[7], p[8], p[9], p[10], p[11]) = (3, 21, 13, 58, 6, 0x07);
+        (p[20], p[21], p[23]) = (3, 0x01 | 0x02 | (2 << 6), 21); // 3D, gnssFixOK, RTK fixed
+        p[24..28].copy_from_slice(&7_647_025i32.to_le_bytes());
+        p[28..32].copy_from_slice(&473_834_140i32.to_le_bytes());
+        p[32..36].copy_from_slice(&111_936i32.to_le_bytes());
+        p[36..40].copy_from_slice(&63_640i32.to_le_bytes());
+        p
+    }
+
+    fn pvt(p: &[u8]) -> NavPvt {
+        let f = frame(0x01, 0x07, p);
+        NavPvt::decode(&parse_frame(&f).unwrap().0).unwrap()
+    }
+
+    #[test]
+    fn gnss_fix_ok_0_is_no_position_whatever_the_fix_type() {
+        let mut p = pvt_payload(1000);
+        assert_eq!(pvt(&p).railfuse_fix_type(), FixType::RtkFixed);
+        p[21] &= !0x01;
+        let f = pvt(&p).to_fix(1, None);
+        assert_eq!(
+            (f.fix_type, f.latitude_deg, f.satellites),
+            (FixType::None, None, 21)
+        );
+    }
+
+    #[test]
+    fn hpposllh_gives_the_position_to_a_tenth_of_a_millimetre_in_either_order() {
+        let hp = |itow: u32, invalid: bool| {
+            let mut h = vec![0u8; 36];
+            h[3] = u8::from(invalid);
+            h[4..8].copy_from_slice(&itow.to_le_bytes());
+            h[8..12].copy_from_slice(&7_647_025i32.to_le_bytes());
+            h[12..16].copy_from_slice(&473_834_140i32.to_le_bytes());
+            h[16..20].copy_from_slice(&111_936i32.to_le_bytes());
+            h[20..24].copy_from_slice(&63_640i32.to_le_bytes());
+            (h[24], h[25], h[26], h[27]) = (37, (-42i8) as u8, 7, (-3i8) as u8);
+            h[28..32].copy_from_slice(&141u32.to_le_bytes()); // 14.1 mm
+            h[32..36].copy_from_slice(&235u32.to_le_bytes());
+            let f = frame(0x01, 0x14, &h);
+            NavHpPosLlh::decode(&parse_frame(&f).unwrap().0).unwrap()
+        };
+        let want_lat = 47.383_414 - 42e-9;
+        let check = |(p, _): Solution| {
+            assert!((p.lat_deg - want_lat).abs() < 1e-12, "{}", p.lat_deg);
+            assert!((p.lon_deg - (0.764_702_5 + 37e-9)).abs() < 1e-12);
+            assert!(
+                (p.height_m - 111.9367).abs() < 1e-9 && (p.height_msl_m - 63.6397).abs() < 1e-9
+            );
+            assert!((p.h_acc_m - 0.0141).abs() < 1e-12);
+        };
+        // PVT, then HPPOSLLH: a stream without NAV-COV releases it at once.
+        let mut pairing = PvtCovPairing::default();
+        assert!(pairing.pvt(pvt(&pvt_payload(1000))).is_none());
+        check(pairing.hp(hp(1000, false)).unwrap());
+        // HPPOSLLH first (another message order), and NAV-COV in the stream: the solution
+        // waits for both.
+        let mut pairing = PvtCovPairing::default();
+        assert!(pairing.hp(hp(2000, false)).is_none());
+        assert!(pairing.pvt(pvt(&pvt_payload(2000))).is_none());
+        let mut c = vec![0u8; 64];
+        c[0..4].copy_from_slice(&2000u32.to_le_bytes());
+        c[5] = 1;
+        let f = frame(0x01, 0x36, &c);
+        let cov = NavCov::decode(&parse_frame(&f).unwrap().0).unwrap();
+        let solution = pairing.cov(&cov).unwrap();
+        assert!(solution.1.is_some());
+        check(solution);
+        // Marked invalid: NAV-PVT's own position stands; another epoch's is not applied.
+        let mut pairing = PvtCovPairing::default();
+        pairing.pvt(pvt(&pvt_payload(3000)));
+        let (p, _) = pairing
+            .hp(hp(3000, true))
+            .map_or_else(|| pairing.finish().unwrap(), |s| s);
+        assert!((p.lat_deg - 47.383_414).abs() < 1e-12);
+        let mut pairing = PvtCovPairing::default();
+        assert!(pairing.hp(hp(999, false)).is_none());
+        pairing.pvt(pvt(&pvt_payload(4000)));
+        assert!((pairing.finish().unwrap().0.lat_deg - 47.383_414).abs() < 1e-12);
     }
 
     #[test]

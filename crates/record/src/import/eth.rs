@@ -6,7 +6,7 @@
 //! |---|---|---|
 //! | `I` | 12 bytes hex: gyro x, y, z then accel x, y, z, int16 | `/imu` (`Imu`, SI units) |
 //! | `U` | one UBX frame as hex | NAV-PVT (+ NAV-COV of the same epoch) → `/gnss/fix` |
-//! | `N` | an NMEA sentence | GGA (+ RMC/VTG/GSA/GST) → `/gnss/fix` |
+//! | `N` | an NMEA sentence | in a log without timed NAV-PVT: one fix per cycle → `/gnss/fix` |
 //! | `BRK` | `RTCM CONNECTED` / `SARA DISCONNECTED` | `/events` correction link up / down |
 //! | `ARR`, `DEP` | station name | `/events` station arrival / departure |
 //!
@@ -33,6 +33,10 @@ use railfuse_catalog::{topics, Error, Result};
 use super::{read_line_bounded, ImportReport};
 use crate::decode::nmea::{self, Decoded, FixAssembler};
 use crate::decode::ubx::{self, hex_into, NavCov, NavPvt, PvtCovPairing};
+
+/// Why an NMEA line of a log with NAV-PVT solutions was not decoded.
+const NMEA_BESIDE_PVT: &str =
+    "NMEA sentence beside UBX NAV-PVT (the same receiver's solutions; NAV-PVT used)";
 
 const GYRO_RADPS_PER_LSB: f64 = 4.37e-3 * std::f64::consts::PI / 180.0;
 const ACCEL_MPS2_PER_LSB: f64 = 0.061e-3 * 9.806_65;
@@ -218,8 +222,8 @@ impl EthImport {
         match (frame.class, frame.id) {
             NavPvt::CLASS_ID => match NavPvt::decode(&frame) {
                 Ok(pvt) => {
-                    if let Some(prev) = self.pairing.pvt(pvt) {
-                        self.fix(now, &prev.to_fix(prev.utc_ns.unwrap_or(now), None))?;
+                    if let Some((prev, cov)) = self.pairing.pvt(pvt) {
+                        self.fix(now, &prev.to_fix(prev.utc_ns.unwrap_or(now), cov))?;
                     }
                 }
                 Err(e) => self.report.skip(n, "UBX NAV-PVT rejected", e),
@@ -241,16 +245,22 @@ impl EthImport {
         Ok(())
     }
 
-    /// `N`: one NMEA sentence. With the node clock on UTC, a GGA before any RMC takes the day
-    /// nearest it.
+    /// `N`: one NMEA sentence. The node's receiver also logs UBX NAV-PVT: where the log has a
+    /// timed one, its NMEA sentences are the same solutions again and make no second fix.
+    /// Without one the node clock is not on UTC, so fixes take their date from RMC or ZDA.
     fn nmea_sentence(&mut self, n: u64, now: u64, data: &str) -> Result<()> {
-        let clock = self.offset.map(|_| now);
-        match nmea::parse(data).and_then(|s| self.nmea.feed(&s, clock)) {
-            Ok(Decoded::Used) => {}
-            Ok(Decoded::NoFixYet) => {
-                self.count("NMEA GGA without a time (the receiver has no fix yet)".into())
+        if self.offset.is_some() {
+            self.count(NMEA_BESIDE_PVT.into());
+            return Ok(());
+        }
+        match nmea::parse(data).and_then(|s| {
+            if s.junk > 0 {
+                self.count(nmea::JUNK_REASON.into());
             }
-            Ok(Decoded::Skipped) => self.count("NMEA sentence type not used (GSV, GLL, …)".into()),
+            self.nmea.feed(&s, None)
+        }) {
+            Ok(Decoded::Used) => {}
+            Ok(Decoded::Skipped) => self.count(Decoded::SKIPPED_REASON.into()),
             Err(e) => self.report.skip(n, e.reason(), e),
         }
         while let Some(fix) = self.nmea.next_fix() {
@@ -378,8 +388,8 @@ impl EthImport {
 
     /// The last PVT's fix, and the last NMEA reporting cycle, which ends with the file.
     fn finish_cycles(&mut self) -> Result<()> {
-        if let (Some(pvt), Some(now)) = (self.pairing.finish(), self.last_now) {
-            self.fix(now, &pvt.to_fix(pvt.utc_ns.unwrap_or(now), None))?;
+        if let (Some((pvt, cov)), Some(now)) = (self.pairing.finish(), self.last_now) {
+            self.fix(now, &pvt.to_fix(pvt.utc_ns.unwrap_or(now), cov))?;
         }
         // The last NMEA reporting cycle ends with the file.
         let clock = self.offset.and(self.last_now);

@@ -63,6 +63,7 @@ pub fn import(
     report.lines = decoder.lines();
     report.skipped = stats.skipped;
     report.first_problems = stats.first_problems;
+    report.warnings = stats.warnings;
     writer.finish()?;
     Ok(report)
 }

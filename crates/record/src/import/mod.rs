@@ -34,6 +34,9 @@ pub struct ImportReport {
     pub first_problems: Vec<String>,
     /// How sensor time was established.
     pub time_base: String,
+    /// What was imported but looks wrong (a receiver's date 1024 weeks early), by reason.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub warnings: BTreeMap<String, u64>,
 }
 
 impl ImportReport {

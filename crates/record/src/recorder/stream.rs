@@ -8,7 +8,7 @@ use railfuse_catalog::topics;
 
 use super::message::{parse_json_line, Item};
 use crate::decode::nmea::{self, Decoded, FixAssembler, NmeaError};
-use crate::decode::ubx::{self, NavCov, NavPvt, PvtCovPairing, UbxError};
+use crate::decode::ubx::{self, NavCov, NavHpPosLlh, NavPvt, PvtCovPairing, UbxError};
 
 /// Longest line accepted on a text stream.
 pub const MAX_LINE: usize = 64 << 10;
@@ -55,10 +55,21 @@ pub struct StreamDecoder {
     nmea: FixAssembler,
     pairing: PvtCovPairing,
     undated_pvt: u64,
+    /// The clock a file's fixes are checked against for the week-number rollover (a live
+    /// source's are checked against their receive time).
+    opened_ns: u64,
 }
 
 /// Why a fix without a time was not written.
 const NMEA_UNDATED: &str = "NMEA fixes with no date (no RMC/ZDA after them; give --date)";
+/// A receiver's date this far before the clock is the GPS week-number rollover's (1024
+/// weeks early; four weeks of margin for a capture read a little after it was made).
+const ROLLOVER_NS: u64 = 1020 * 7 * 86_400 * 1_000_000_000;
+const ROLLOVER_WARNING: &str = "GNSS fixes dated about 1024 weeks (19.6 years) before the \
+                                clock: a receiver caught by the GPS week-number rollover? \
+                                Kept as the receiver dated them";
+
+const NMEA_UNTIMED: &str = "NMEA epochs the receiver sent without a time (no fix to stamp)";
 const UBX_UNDATED: &str = "UBX NAV-PVT without a valid UTC time";
 
 impl StreamDecoder {
@@ -79,6 +90,9 @@ impl StreamDecoder {
             nmea: FixAssembler::with_date(date),
             pairing: PvtCovPairing::default(),
             undated_pvt: 0,
+            opened_ns: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos() as u64),
         }
     }
 
@@ -121,7 +135,13 @@ impl StreamDecoder {
         out: &mut Vec<Item>,
     ) {
         match pvt.utc_ns.or((receive_ns > 0).then_some(receive_ns)) {
-            Some(stamp) => push_fix(pvt.to_fix(stamp, cov), receive_ns, stats, out),
+            Some(stamp) => push_fix(
+                pvt.to_fix(stamp, cov),
+                receive_ns,
+                self.opened_ns,
+                stats,
+                out,
+            ),
             None => self.undated_pvt += 1,
         }
     }
@@ -182,16 +202,17 @@ impl StreamDecoder {
             self.line(&line, receive_ns, stats, out);
         }
         let clock = (receive_ns > 0).then_some(receive_ns);
-        let before = self.nmea.undated;
+        // The stream's totals: finish ends it.
         self.nmea.finish(clock);
         while let Some(fix) = self.nmea.next_fix() {
-            push_fix(fix, receive_ns, stats, out);
+            push_fix(fix, receive_ns, self.opened_ns, stats, out);
         }
-        if let Some(pvt) = self.pairing.finish() {
-            self.push_pvt(&pvt, None, receive_ns, stats, out);
+        if let Some((pvt, cov)) = self.pairing.finish() {
+            self.push_pvt(&pvt, cov, receive_ns, stats, out);
         }
         for (reason, n) in [
-            (NMEA_UNDATED, self.nmea.undated - before),
+            (NMEA_UNDATED, std::mem::take(&mut self.nmea.undated)),
+            (NMEA_UNTIMED, std::mem::take(&mut self.nmea.untimed)),
             (UBX_UNDATED, std::mem::take(&mut self.undated_pvt)),
         ] {
             if n > 0 {
@@ -229,9 +250,14 @@ impl StreamDecoder {
             StreamFormat::Nmea => {
                 // A live source's receive time is a UTC clock; a file's is 0 (none).
                 let clock = (receive_ns > 0).then_some(receive_ns);
-                let fed = nmea::parse(text).and_then(|s| self.nmea.feed(&s, clock));
+                let fed = nmea::parse(text).and_then(|s| {
+                    if s.junk > 0 {
+                        stats.count(nmea::JUNK_REASON);
+                    }
+                    self.nmea.feed(&s, clock)
+                });
                 while let Some(fix) = self.nmea.next_fix() {
-                    push_fix(fix, receive_ns, stats, out);
+                    push_fix(fix, receive_ns, self.opened_ns, stats, out);
                 }
                 let at = self.place(0);
                 count_nmea_outcome(fed, &at, stats);
@@ -326,28 +352,26 @@ impl StreamDecoder {
         stats: &mut SourceStats,
         out: &mut Vec<Item>,
     ) {
-        match message {
-            UbxMessage::Pvt(pvt) => {
-                if let Some(prev) = self.pairing.pvt(pvt) {
-                    self.push_pvt(&prev, None, receive_ns, stats, out);
-                }
-            }
-            UbxMessage::Cov(c) => {
-                if let Some((pvt, cov)) = self.pairing.cov(&c) {
-                    self.push_pvt(&pvt, cov, receive_ns, stats, out);
-                }
-            }
+        let solution = match message {
+            UbxMessage::Pvt(pvt) => self.pairing.pvt(pvt),
+            UbxMessage::Cov(c) => self.pairing.cov(&c),
+            UbxMessage::HpPosLlh(hp) => self.pairing.hp(hp),
             UbxMessage::Other(class, id) => {
-                stats.count(&format!("UBX {class:02x}/{id:02x} (not decoded)"))
+                stats.count(&format!("UBX {class:02x}/{id:02x} (not decoded)"));
+                None
             }
+        };
+        if let Some((pvt, cov)) = solution {
+            self.push_pvt(&pvt, cov, receive_ns, stats, out);
         }
     }
 }
 
-/// A UBX frame decoded: the two messages a fix is made of, or another class left as its id.
+/// A UBX frame decoded: the messages a fix is made of, or another class left as its id.
 enum UbxMessage {
     Pvt(NavPvt),
     Cov(NavCov),
+    HpPosLlh(NavHpPosLlh),
     Other(u8, u8),
 }
 
@@ -356,6 +380,7 @@ impl UbxMessage {
         Ok(match (frame.class, frame.id) {
             NavPvt::CLASS_ID => UbxMessage::Pvt(NavPvt::decode(frame)?),
             NavCov::CLASS_ID => UbxMessage::Cov(NavCov::decode(frame)?),
+            NavHpPosLlh::CLASS_ID => UbxMessage::HpPosLlh(NavHpPosLlh::decode(frame)?),
             (class, id) => UbxMessage::Other(class, id),
         })
     }
@@ -370,7 +395,22 @@ fn end_noise(in_noise: &mut Option<bool>, stats: &mut SourceStats) {
     }
 }
 
-fn push_fix(fix: GnssFix, receive_ns: u64, stats: &mut SourceStats, out: &mut Vec<Item>) {
+/// Records `fix`, received at `receive_ns` (0 from a file, checked against `opened_ns`).
+fn push_fix(
+    fix: GnssFix,
+    receive_ns: u64,
+    opened_ns: u64,
+    stats: &mut SourceStats,
+    out: &mut Vec<Item>,
+) {
+    let clock = if receive_ns > 0 {
+        receive_ns
+    } else {
+        opened_ns
+    };
+    if fix.stamp_ns > 0 && clock.saturating_sub(fix.stamp_ns) >= ROLLOVER_NS {
+        stats.warn(ROLLOVER_WARNING);
+    }
     stats.received += 1;
     out.push(Item {
         topic: topics::GNSS_FIX.to_owned(),
@@ -383,12 +423,7 @@ fn push_fix(fix: GnssFix, receive_ns: u64, stats: &mut SourceStats, out: &mut Ve
 fn count_nmea_outcome(fed: Result<Decoded, NmeaError>, at: &str, stats: &mut SourceStats) {
     let e = match fed {
         Ok(Decoded::Used) => return,
-        Ok(Decoded::NoFixYet) => {
-            return stats.count("NMEA GGA without a time (the receiver has no fix yet)")
-        }
-        Ok(Decoded::Skipped) => {
-            return stats.count("NMEA sentence type not used (GSV, GLL, TXT, …)")
-        }
+        Ok(Decoded::Skipped) => return stats.count(Decoded::SKIPPED_REASON),
         Err(e) => e,
     };
     match e {
@@ -440,6 +475,69 @@ mod tests {
         for chunk in [1, 2, 3, 7] {
             assert_eq!(decode(chunk), whole, "split every {chunk} bytes");
         }
+    }
+
+    /// `body` with its `$` and checksum.
+    fn nmea(body: &str) -> String {
+        format!("${body}*{:02X}", body.bytes().fold(0u8, |a, b| a ^ b))
+    }
+
+    /// An NMEA capture decoded as `import` and `record` decode it, received at `receive_ns`.
+    fn decode_nmea(text: &str, receive_ns: u64) -> (SourceStats, Vec<GnssFix>) {
+        let mut d = StreamDecoder::new(StreamFormat::Nmea);
+        let (mut stats, mut out) = (SourceStats::default(), Vec::new());
+        d.feed(text.as_bytes(), receive_ns, &mut stats, &mut out);
+        d.finish(receive_ns, &mut stats, &mut out);
+        let fixes = out
+            .into_iter()
+            .filter_map(|i| match i.message {
+                AnyMessage::GnssFix(f) => Some(f),
+                _ => None,
+            })
+            .collect();
+        (stats, fixes)
+    }
+
+    #[test]
+    fn junk_before_dollar_is_counted_per_line_and_every_fix_decoded() {
+        // An ST Teseo LIV4F capture: `$$` before every sentence.
+        let mut text = String::new();
+        for k in 0..12 {
+            let t = format!("1358{:02}.000", k);
+            for body in [
+                format!("GNRMC,{t},A,4723.00484,N,00045.88150,E,0.5,120.9,210325,,,A,C"),
+                format!("GNGGA,{t},4723.00484,N,00045.88150,E,1,13,1.7,063.64,M,48.3,M,,"),
+                "GNGSA,A,3,27,08,07,,,,,,,,,,2.5,1.7,1.8,1".to_owned(),
+            ] {
+                text.push_str(&format!("${}\r\n", nmea(&body)));
+            }
+        }
+        let (stats, fixes) = decode_nmea(&text, 0);
+        assert_eq!(fixes.len(), 12);
+        assert!(fixes
+            .iter()
+            .all(|f| f.satellites == 13 && f.latitude_deg.is_some()));
+        assert_eq!(stats.skipped[nmea::JUNK_REASON], 36);
+        assert_eq!(stats.checksum_failures, 0);
+    }
+
+    #[test]
+    fn a_date_1024_weeks_early_is_kept_and_warned_of() {
+        // A receiver caught by the rollover dates 2025-03-21 as 2005-08-05 (1024 weeks early).
+        let epoch = |date: &str| {
+            nmea(&format!(
+                "GPRMC,135806.000,A,4723.00484,N,00045.88150,E,0.5,120.9,{date},,,A"
+            )) + "\r\n"
+        };
+        let live = 1_742_565_486 * 1_000_000_000; // 2025-03-21 13:58:06 UTC
+        let (stats, fixes) = decode_nmea(&epoch("050805"), live);
+        assert_eq!(fixes[0].stamp_ns, live - 1024 * 7 * 86_400 * 1_000_000_000);
+        assert_eq!(stats.warnings[ROLLOVER_WARNING], 1);
+        let (stats, fixes) = decode_nmea(&epoch("210325"), live);
+        assert_eq!((fixes[0].stamp_ns, stats.warnings.len()), (live, 0));
+        // From a file, against the clock when the import ran.
+        let (stats, _) = decode_nmea(&epoch("050805"), 0);
+        assert_eq!(stats.warnings[ROLLOVER_WARNING], 1);
     }
 
     #[test]

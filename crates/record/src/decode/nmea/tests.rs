@@ -1,4 +1,5 @@
 use super::*;
+use railfuse_catalog::messages::{FixType, GnssFix};
 
 /// Feeds whole lines, then ends the stream; returns the fixes.
 fn fixes(a: &mut FixAssembler, lines: &[&str], clock: Option<u64>) -> Vec<GnssFix> {
@@ -74,6 +75,7 @@ fn a_non_ascii_byte_with_a_good_checksum_is_refused_not_a_panic() {
         talker: "GP",
         kind: "GGA",
         fields: vec!["2é5959.00", "4é07.038", "S", "é1131.000", "W", "1"],
+        junk: 0,
     };
     assert!(FixAssembler::default().feed(&s, None).is_err());
 }
