@@ -313,13 +313,23 @@ impl NavHpPosLlh {
 /// epoch's NAV-COV covariance when the receiver sent one and marked it valid.
 pub type Solution = (NavPvt, Option<[f64; 9]>);
 
+/// A NAV-PVT waiting for the rest of its epoch.
+#[derive(Debug, Clone)]
+struct Epoch {
+    pvt: NavPvt,
+    /// Its NAV-COV arrived (`Some`), with the covariance when marked valid.
+    cov: Option<Option<[f64; 9]>>,
+    /// Its NAV-HPPOSLLH precision was applied.
+    precise: bool,
+}
+
 /// Collects each NAV-PVT with the NAV-COV and NAV-HPPOSLLH of its epoch (same iTOW). A
 /// solution is released when every message kind the stream has sent so far came for its
 /// epoch, or, short of that, when the next NAV-PVT comes or the stream ends. NAV-COV follows
 /// its NAV-PVT; NAV-HPPOSLLH may come on either side of it.
 #[derive(Debug, Default, Clone)]
 pub struct PvtCovPairing {
-    pending: Option<(NavPvt, Option<Option<[f64; 9]>>, bool)>,
+    pending: Option<Epoch>,
     /// A NAV-HPPOSLLH that came before its NAV-PVT.
     early_hp: Option<NavHpPosLlh>,
     cov_seen: bool,
@@ -332,7 +342,11 @@ impl PvtCovPairing {
         let before = self.release();
         let hp = self.early_hp.take().filter(|h| h.itow_ms == pvt.itow_ms);
         let precise = hp.is_some_and(|h| apply_hp(&mut pvt, &h));
-        self.pending = Some((pvt, None, precise));
+        self.pending = Some(Epoch {
+            pvt,
+            cov: None,
+            precise,
+        });
         before
     }
 
@@ -340,8 +354,8 @@ impl PvtCovPairing {
     pub fn cov(&mut self, cov: &NavCov) -> Option<Solution> {
         self.cov_seen = true;
         match &mut self.pending {
-            Some((pvt, c, _)) if pvt.itow_ms == cov.itow_ms => {
-                *c = Some(cov.pos_valid.then_some(cov.enu_m2))
+            Some(e) if e.pvt.itow_ms == cov.itow_ms => {
+                e.cov = Some(cov.pos_valid.then_some(cov.enu_m2))
             }
             _ => return None,
         }
@@ -353,8 +367,8 @@ impl PvtCovPairing {
     pub fn hp(&mut self, hp: NavHpPosLlh) -> Option<Solution> {
         self.hp_seen = true;
         match &mut self.pending {
-            Some((pvt, _, precise)) if pvt.itow_ms == hp.itow_ms => {
-                *precise = apply_hp(pvt, &hp) || *precise
+            Some(e) if e.pvt.itow_ms == hp.itow_ms => {
+                e.precise = apply_hp(&mut e.pvt, &hp) || e.precise
             }
             _ => {
                 self.early_hp = Some(hp);
@@ -370,14 +384,12 @@ impl PvtCovPairing {
     }
 
     fn release(&mut self) -> Option<Solution> {
-        self.pending
-            .take()
-            .map(|(pvt, cov, _)| (pvt, cov.flatten()))
+        self.pending.take().map(|e| (e.pvt, e.cov.flatten()))
     }
 
     fn if_complete(&mut self) -> Option<Solution> {
-        let (_, cov, precise) = self.pending.as_ref()?;
-        let complete = (cov.is_some() || !self.cov_seen) && (*precise || !self.hp_seen);
+        let e = self.pending.as_ref()?;
+        let complete = (e.cov.is_some() || !self.cov_seen) && (e.precise || !self.hp_seen);
         if complete {
             self.release()
         } else {
@@ -528,9 +540,11 @@ mod tests {
         // Marked invalid: NAV-PVT's own position stands; another epoch's is not applied.
         let mut pairing = PvtCovPairing::default();
         pairing.pvt(pvt(&pvt_payload(3000)));
-        let (p, _) = pairing
-            .hp(hp(3000, true))
-            .map_or_else(|| pairing.finish().unwrap(), |s| s);
+        assert!(
+            pairing.hp(hp(3000, true)).is_none(),
+            "waits: no precise position came"
+        );
+        let (p, _) = pairing.finish().unwrap();
         assert!((p.lat_deg - 47.383_414).abs() < 1e-12);
         let mut pairing = PvtCovPairing::default();
         assert!(pairing.hp(hp(999, false)).is_none());
