@@ -48,6 +48,9 @@ enum Command {
     Record(Box<cmd::record::Args>),
     /// Convert an existing log (the ETH-PBL railway dataset) into railfuse channels.
     Import(cmd::import::Args),
+    /// Write a run's files (split parts, several recorders' files, a bag) as one log, merged
+    /// by time, or as parts of a chosen size or span.
+    Merge(cmd::merge::Args),
     /// Salvage every intact record of a damaged log (crash, power cut) into a complete log.
     Recover(cmd::recover::Args),
     /// Tune a pipeline's noise values (process noise, sensor variances, sensor states, gates)
@@ -99,6 +102,7 @@ fn main() -> ExitCode {
         Command::Eval(a) => cmd::eval::run(a),
         Command::Tune(a) => cmd::tune::run(a),
         Command::Recover(a) => cmd::recover::run(a),
+        Command::Merge(a) => cmd::merge::run(a),
         Command::Import(a) => cmd::import::run(a),
         Command::Record(a) => cmd::record::run(*a),
         Command::Viz(a) => cmd::viz::run(a),

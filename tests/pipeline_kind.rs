@@ -203,7 +203,7 @@ fn a_kind_registered_with_one_line_is_configured_replayed_written_and_evaluated(
     let registry = Registry::standard().with(DeadReckoning);
     let pipelines = Pipelines::parse_with(&text, &path, &registry).unwrap();
     let (report, eval) = refuse(&RefuseOptions {
-        input: &raw,
+        run: &railfuse_catalog::run::Run::file(&raw),
         output: &fused,
         config: &pipelines,
         config_source: "dr.toml".into(),

@@ -481,7 +481,7 @@ fn bad_messages_in_a_bag_are_each_said_in_one_line_and_nothing_else_is_lost() {
     );
     // Every input record is in the output, the bad ones and the unread topic too.
     for topic in ["/fix", "/notes", "/radar", "/imu"] {
-        let n = railfuse_catalog::inspect::summarise(&out)
+        let n = railfuse_catalog::inspect::summarise(&railfuse_catalog::run::Run::file(&out))
             .unwrap()
             .channels
             .iter()

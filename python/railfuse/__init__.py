@@ -29,6 +29,16 @@ __all__ = [
 ]
 
 PathLike = str | os.PathLike
+#: A run: one log file, a directory of its parts or a ROS 2 bag, or a list of files (the
+#: parts of a split recording, several recorders' files), read as one log.
+RunLike = PathLike | Sequence[PathLike]
+
+
+def _run(run: RunLike) -> list[str]:
+    """The files and directories of a run, as the extension takes them."""
+    if isinstance(run, (str, os.PathLike)):
+        return [os.fspath(run)]
+    return [os.fspath(p) for p in run]
 
 
 def simulate(
@@ -48,38 +58,40 @@ def simulate(
 
 
 def refuse(
-    input: PathLike, config: PathLike, output: PathLike, reference: str = "/truth"
+    input: RunLike, config: PathLike, output: PathLike, reference: str = "/truth"
 ) -> dict:
-    """Re-fuse ``input`` with the pipelines of ``config`` into ``output``, as ``railfuse
-    refuse`` does. Returns ``{"refuse": …, "eval": …}``: what each pipeline did, and the
-    accuracy table against ``reference``."""
+    """Re-fuse the run ``input`` (a file, a directory of parts, a bag, or a list of files)
+    with the pipelines of ``config`` into ``output``, as ``railfuse refuse`` does. Returns
+    ``{"refuse": …, "eval": …}``: what each pipeline did, and the accuracy table against
+    ``reference``."""
     return json.loads(
-        _railfuse.refuse(os.fspath(input), os.fspath(config), os.fspath(output), reference)
+        _railfuse.refuse(_run(input), os.fspath(config), os.fspath(output), reference)
     )
 
 
-def evaluate(input: PathLike, reference: str | None = None) -> dict:
+def evaluate(input: RunLike, reference: str | None = None) -> dict:
     """The accuracy table of a fused log's pipelines against ``reference`` (ground truth, a
     GNSS channel, another pipeline's state). Without one, the ground truth (``/truth``) where
     the log has it, else NIS and counts only; a reference named that the log does not have,
     or that gives no samples, raises :class:`RailfuseError`, as ``railfuse eval`` fails."""
-    report = json.loads(_railfuse.evaluate(os.fspath(input), reference or "/truth"))
+    report = json.loads(_railfuse.evaluate(_run(input), reference or "/truth"))
     if reference is not None and report.get("reference") is None:
         raise RailfuseError(
-            f"{os.fspath(input)}: reference {reference} is not in the log or gives no samples"
+            f"{_run(input)[0]}: reference {reference} is not in the log or gives no samples"
         )
     return report
 
 
-def read(path: PathLike, topic: str):
-    """Every message of ``topic`` as a ``pyarrow.Table``: one row per message, a column per
+def read(path: RunLike, topic: str):
+    """Every message of ``topic`` in the run ``path`` (a file, a directory of parts, a bag,
+    or a list of files) as a ``pyarrow.Table``: one row per message, a column per
     field (nested fields as structs and lists), ``log_time_ns`` first. Fused states and
     diagnostics (``/fused/<pipeline>/state``) read like any other channel. For
     ``Table.to_pandas()``, install the ``pandas`` extra: ``pip install 'railfuse[pandas]'``."""
     import pyarrow as pa
     import pyarrow.json as pajson
 
-    lines = _railfuse.read_json_lines(os.fspath(path), topic)
+    lines = _railfuse.read_json_lines(_run(path), topic)
     if not lines:
         return pa.table({"log_time_ns": pa.array([], pa.int64())})
     return pajson.read_json(

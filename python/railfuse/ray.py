@@ -24,34 +24,39 @@ import railfuse
 
 
 @ray.remote
-def _refuse(input: str, config: str, output: str, reference: str) -> dict:
+def _refuse(input: list[str], config: str, output: str, reference: str) -> dict:
     return railfuse.refuse(input, config, output, reference)
 
 
 @ray.remote
-def _evaluate(input: str, reference: str | None) -> dict:
+def _evaluate(input: list[str], reference: str | None) -> dict:
     return railfuse.evaluate(input, reference)
 
 
+def _absolute(run: railfuse.RunLike) -> list[str]:
+    """A run's files and directories as absolute paths, for any node of the cluster."""
+    return [os.path.abspath(p) for p in railfuse._run(run)]
+
+
 def refuse_many(
-    inputs: Iterable[os.PathLike | str],
+    inputs: Iterable[railfuse.RunLike],
     config: os.PathLike | str,
     outputs: Iterable[os.PathLike | str] | None = None,
     reference: str = "/truth",
 ) -> list[dict]:
-    """Re-fuse every log as a Ray task (outputs default to ``<input>.fused.mcap``); the
-    reports in input order."""
-    inputs = [os.path.abspath(p) for p in inputs]
+    """Re-fuse every run (a log file, a directory of parts, a bag, or a list of files) as a
+    Ray task (outputs default to ``<first input>.fused.mcap``); the reports in input order."""
+    inputs = [_absolute(run) for run in inputs]
     if outputs is None:
-        outputs = [p.removesuffix(".mcap") + ".fused.mcap" for p in inputs]
+        outputs = [run[0].rstrip("/").removesuffix(".mcap") + ".fused.mcap" for run in inputs]
     outputs = [os.path.abspath(p) for p in outputs]
     config = os.path.abspath(config)
     return ray.get([_refuse.remote(i, config, o, reference) for i, o in zip(inputs, outputs)])
 
 
-def evaluate_many(inputs: Iterable[os.PathLike | str], reference: str | None = None) -> list[dict]:
-    """The accuracy table of every fused log, one Ray task each, in input order."""
-    return ray.get([_evaluate.remote(os.path.abspath(p), reference) for p in inputs])
+def evaluate_many(inputs: Iterable[railfuse.RunLike], reference: str | None = None) -> list[dict]:
+    """The accuracy table of every fused run, one Ray task each, in input order."""
+    return ray.get([_evaluate.remote(_absolute(run), reference) for run in inputs])
 
 
 def _trial(candidate: dict, *, logs, config, pipeline, reference, params, objective, names):

@@ -10,7 +10,8 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
-use railfuse_catalog::log::{LogReader, LogRecord};
+use railfuse_catalog::log::LogRecord;
+use railfuse_catalog::run::Run;
 use railfuse_refuse::config::{ObjectiveKind, OptimiserKind};
 use railfuse_refuse::replay::{refuse as refuse_log, RefuseOptions};
 use railfuse_refuse::spec::Pipelines;
@@ -67,22 +68,28 @@ fn simulate(
     json(&report)
 }
 
-/// Re-fuses `input` with the pipelines of `config` into `output`, as `railfuse refuse` does
-/// (the same bytes); the refuse report and the accuracy table as JSON.
+/// The run of `inputs` (files, directories of parts, bags), as the command line reads it.
+fn open_run(inputs: &[PathBuf]) -> PyResult<Run> {
+    Run::open(inputs, &Default::default()).map_err(fail)
+}
+
+/// Re-fuses the run `inputs` with the pipelines of `config` into `output`, as `railfuse
+/// refuse` does (the same bytes); the refuse report and the accuracy table as JSON.
 #[pyfunction]
-#[pyo3(signature = (input, config, output, reference = "/truth"))]
+#[pyo3(signature = (inputs, config, output, reference = "/truth"))]
 fn refuse(
     py: Python<'_>,
-    input: PathBuf,
+    inputs: Vec<PathBuf>,
     config: PathBuf,
     output: PathBuf,
     reference: &str,
 ) -> PyResult<String> {
     let pipelines = Pipelines::load(&config).map_err(fail)?;
+    let run = open_run(&inputs)?;
     let (report, eval) = py
         .detach(|| {
             refuse_log(&RefuseOptions {
-                input: &input,
+                run: &run,
                 output: &output,
                 config: &pipelines,
                 config_source: config.display().to_string(),
@@ -95,12 +102,13 @@ fn refuse(
     json(&serde_json::json!({ "refuse": report, "eval": eval }))
 }
 
-/// The accuracy table of a fused log against `reference`, as JSON.
+/// The accuracy table of a fused run against `reference`, as JSON.
 #[pyfunction]
-#[pyo3(signature = (input, reference = "/truth"))]
-fn evaluate(py: Python<'_>, input: PathBuf, reference: &str) -> PyResult<String> {
+#[pyo3(signature = (inputs, reference = "/truth"))]
+fn evaluate(py: Python<'_>, inputs: Vec<PathBuf>, reference: &str) -> PyResult<String> {
+    let run = open_run(&inputs)?;
     let report = py
-        .detach(|| railfuse_eval::evaluate(&input, reference))
+        .detach(|| railfuse_eval::evaluate(&run, reference))
         .map_err(fail)?;
     json(&report)
 }
@@ -110,14 +118,16 @@ fn evaluate(py: Python<'_>, input: PathBuf, reference: &str) -> PyResult<String>
 #[pyfunction]
 fn read_json_lines<'py>(
     py: Python<'py>,
-    path: PathBuf,
+    inputs: Vec<PathBuf>,
     topic: &str,
 ) -> PyResult<Bound<'py, PyBytes>> {
+    let run = open_run(&inputs)?;
+    let path = run.name().to_owned();
     let lines = py
         .detach(|| -> Result<Option<Vec<u8>>, railfuse_catalog::Error> {
             let mut out = Vec::new();
             let mut found = false;
-            let mut reader = LogReader::open(&path)?;
+            let mut reader = run.reader()?;
             while let Some(record) = reader.next() {
                 match record? {
                     LogRecord::Channel(c) if c.topic == topic => found = true,
@@ -148,7 +158,7 @@ fn read_json_lines<'py>(
         .map_err(fail)?;
     match lines {
         Some(lines) => Ok(PyBytes::new(py, &lines)),
-        None => Err(fail(format!("{}: no channel {topic}", path.display()))),
+        None => Err(fail(format!("{}: no channel {topic}", run.display()))),
     }
 }
 

@@ -20,7 +20,7 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
     let (text, pipelines) = railfuse_experiments::long_runs::side_by_side()?;
     std::fs::write(&config, text)?;
     let (report, _) = railfuse_refuse::replay::refuse(&railfuse_refuse::replay::RefuseOptions {
-        input: &raw,
+        run: &railfuse_catalog::run::Run::file(&raw),
         output: &fused,
         config: &pipelines,
         config_source: config.display().to_string(),

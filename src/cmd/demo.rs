@@ -38,7 +38,7 @@ pub fn run(a: Args) -> Result<()> {
         railfuse_catalog::topics::GROUND_TRUTH,
     )?;
     let viz = visualize(
-        &fused,
+        &railfuse_catalog::run::Run::file(&fused),
         &Sink::Save(rrd.clone()),
         &Default::default(),
         &|_| {},

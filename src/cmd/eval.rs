@@ -1,18 +1,19 @@
-use std::path::PathBuf;
-
 use anyhow::Result;
 use railfuse_catalog::reference_track::MAX_GAP_PERIODS;
+use railfuse_catalog::run::Run;
 use railfuse_catalog::topics;
 use railfuse_eval::accuracy::{ConsistencySummary, ErrorSummary};
 use railfuse_eval::safety::SafetyEval;
 use railfuse_eval::{evaluate, EvalReport};
 
+use super::run_input::RunArgs;
 use crate::table::Table;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// A fused MCAP log (the output of `railfuse refuse`).
-    pub input: PathBuf,
+    /// A fused log (the output of `railfuse refuse`), or every file of a fused run.
+    #[command(flatten)]
+    pub run: RunArgs,
     /// The reference: the ground-truth channel, another pipeline's state
     /// (`/fused/<name>/state`) or a GNSS fix channel (an RTK receiver). Without it, the
     /// ground truth (`/truth`) where the log has one, else NIS and counts only.
@@ -24,19 +25,20 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
+    let run = a.run.open()?;
     if let Some(topic) = &a.reference {
-        check_reference_in_log(&a.input, topic)?;
+        check_reference_in_log(&run, topic)?;
     }
     let topic = a.reference.as_deref().unwrap_or(topics::GROUND_TRUTH);
-    let report = evaluate(&a.input, topic)?;
+    let report = evaluate(&run, topic)?;
     if report.pipelines.is_empty() {
         anyhow::bail!(
             "{}: no fused pipelines to evaluate: re-fuse it first (railfuse refuse {} -c CONFIG -o OUT)",
-            a.input.display(),
-            a.input.display()
+            run.display(),
+            run.name().display()
         );
     }
-    check_reference_used(&a.input, a.reference.as_deref(), &report)?;
+    check_reference_used(&run, a.reference.as_deref(), &report)?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -46,9 +48,10 @@ pub fn run(a: Args) -> Result<()> {
 }
 
 /// A reference named on the command line is in the log: said before any work, where the
-/// log's summary lists its channels.
-pub fn check_reference_in_log(input: &std::path::Path, topic: &str) -> Result<()> {
-    let Some(channels) = railfuse_catalog::log::read_channels(input)? else {
+/// run's summaries list its channels.
+pub fn check_reference_in_log(input: &Run, topic: &str) -> Result<()> {
+    let reader = input.reader()?;
+    let Some(channels) = reader.summary().and_then(|s| s.channels.as_ref()) else {
         return Ok(());
     };
     if channels.iter().any(|c| c.topic == topic) {
@@ -63,11 +66,7 @@ pub fn check_reference_in_log(input: &std::path::Path, topic: &str) -> Result<()
 }
 
 /// A reference named on the command line was one the table could use.
-pub fn check_reference_used(
-    input: &std::path::Path,
-    named: Option<&str>,
-    report: &EvalReport,
-) -> Result<()> {
+pub fn check_reference_used(input: &Run, named: Option<&str>, report: &EvalReport) -> Result<()> {
     match (named, &report.reference) {
         (Some(topic), None) => anyhow::bail!(
             "{}: reference {topic} is not in the log or gives no samples (a reference is ground \

@@ -1,21 +1,22 @@
-use std::path::PathBuf;
-
 use anyhow::Result;
-use railfuse_catalog::inspect::summarise;
+use railfuse_catalog::inspect::{summarise, LogSummary};
 
+use super::run_input::RunArgs;
 use crate::table::Table;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The MCAP file.
-    pub file: PathBuf,
+    /// The log: a file, or every file of a run.
+    #[command(flatten)]
+    pub run: RunArgs,
     /// Print JSON instead of tables.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let s = summarise(&a.file)?;
+    let run = a.run.open()?;
+    let s = summarise(&run)?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
         return Ok(());
@@ -27,6 +28,15 @@ pub fn run(a: Args) -> Result<()> {
         s.duration_s,
         s.file_bytes as f64 / (1 << 20) as f64
     );
+    let t0 = s.first_log_time_ns.unwrap_or(0);
+    let rel = |t: Option<u64>| {
+        t.map_or("-".into(), |t| {
+            format!("{:.3}", t.saturating_sub(t0) as f64 / 1e9)
+        })
+    };
+    if s.files.len() > 1 {
+        print_files(&s, &rel);
+    }
     let mut t = Table::new(&[
         "topic",
         "schema",
@@ -36,8 +46,6 @@ pub fn run(a: Args) -> Result<()> {
         "last s",
         "largest gap s",
     ]);
-    let t0 = s.first_log_time_ns.unwrap_or(0);
-    let rel = |t: Option<u64>| t.map_or("-".into(), |t| format!("{:.3}", (t - t0) as f64 / 1e9));
     for c in &s.channels {
         t.row(vec![
             c.topic.clone(),
@@ -73,4 +81,44 @@ pub fn run(a: Args) -> Result<()> {
         println!("fused pipelines: {}", s.fused_pipelines.join(", "));
     }
     Ok(())
+}
+
+/// One line per file of the run (its span on the run's clock, messages, clock), then the
+/// gaps between files.
+fn print_files(s: &LogSummary, rel: &dyn Fn(Option<u64>) -> String) {
+    let mut t = Table::new(&[
+        "file",
+        "messages",
+        "MiB",
+        "first s",
+        "last s",
+        "clock offset s",
+        "drift ppm",
+    ]);
+    for f in &s.files {
+        t.row(vec![
+            f.path.clone(),
+            f.messages.to_string(),
+            format!("{:.1}", f.bytes as f64 / (1 << 20) as f64),
+            rel(f.first_log_time_ns),
+            rel(f.last_log_time_ns),
+            format!("{:+.3}", f.clock.offset_s()),
+            format!("{:+.1}", f.clock.drift_ppm),
+        ]);
+    }
+    print!("{t}");
+    for g in &s.gaps_between_files {
+        println!(
+            "gap between files: {:.3} s from {} s (end of {}) to {} s (start of {}){}",
+            (g.end_ns - g.start_ns) as f64 / 1e9,
+            rel(Some(g.start_ns)),
+            g.after,
+            rel(Some(g.end_ns)),
+            g.before,
+            match &g.missing {
+                Some(m) => format!(": the missing part {m}"),
+                None => String::new(),
+            }
+        );
+    }
 }

@@ -14,12 +14,13 @@ use railfuse_refuse::spec::Pipelines;
 
 use super::eval::print_eval;
 use super::measure::{peak_rss_kib, RunStats};
+use super::run_input::RunArgs;
+use railfuse_catalog::run::Run;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The input MCAP log.
-    #[arg(required_unless_present = "config_schema")]
-    pub input: Option<PathBuf>,
+    #[command(flatten)]
+    pub run: RunArgs,
     /// Pipeline configuration (TOML); see samples/kalman.toml. Without one, a default
     /// pipeline is picked from what the log's topics decode to, and which topics it used and
     /// why it left the others out is printed.
@@ -61,9 +62,11 @@ pub fn run(a: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&schema)?);
         return Ok(());
     }
-    let (Some(input), Some(output)) = (a.input.as_deref(), a.output.as_deref()) else {
+    let Some(output) = a.output.as_deref() else {
         anyhow::bail!("refuse needs an input log and -o OUTPUT");
     };
+    let run = a.run.open()?;
+    let input = &run;
     if let Some(topic) = &a.reference {
         super::eval::check_reference_in_log(input, topic)?;
     }
@@ -107,7 +110,7 @@ pub fn run(a: Args) -> Result<()> {
 /// The default pipeline of a log given no configuration, with what it used and left out said
 /// on stderr (and its configuration written to `save`, when given).
 fn default_pipeline(
-    input: &Path,
+    input: &Run,
     track: Option<&Path>,
     save: Option<&Path>,
 ) -> Result<(Pipelines, String)> {
@@ -183,7 +186,7 @@ impl LiveView {
 }
 
 pub fn refuse_with(
-    input: &Path,
+    input: &Run,
     output: &Path,
     config: &Pipelines,
     source: String,
@@ -191,11 +194,10 @@ pub fn refuse_with(
     observer: Option<Observer<'_>>,
 ) -> Result<(RefuseReport, EvalReport, RunStats)> {
     let started = Instant::now();
-    let size = std::fs::metadata(input).map_or(0, |m| m.len());
-    let bar = crate::progress::Progress::bytes("refuse", size);
+    let bar = crate::progress::Progress::bytes("refuse", input.total_bytes());
     let progress = |done: u64| bar.set(done);
     let (report, eval) = refuse(&RefuseOptions {
-        input,
+        run: input,
         output,
         config,
         config_source: source,
@@ -229,6 +231,12 @@ pub fn refuse_with(
     }
     for (reason, n) in &report.skipped {
         eprintln!("note: {n} messages skipped: {reason}");
+    }
+    if report.merge.duplicates_dropped > 0 {
+        eprintln!(
+            "note: {} messages were in two files of the run (a split boundary): read once",
+            report.merge.duplicates_dropped
+        );
     }
     if report.out_of_order_messages > 0 {
         eprintln!(
@@ -269,7 +277,8 @@ pub fn refuse_and_evaluate(
     source: String,
     reference: &str,
 ) -> Result<(RefuseReport, EvalReport)> {
-    let (report, eval, _) = refuse_with(input, output, config, source, reference, None)?;
+    let run = Run::file(input);
+    let (report, eval, _) = refuse_with(&run, output, config, source, reference, None)?;
     print_eval(&eval);
     Ok((report, eval))
 }

@@ -16,7 +16,8 @@ use crate::table::Table;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// The logs to tune on (raw or fused MCAP): the objective is pooled over all of them.
+    /// The runs to tune on, each a file, a directory of its parts or a ROS 2 bag (raw or
+    /// fused): the objective is pooled over all of them.
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
     /// The pipeline configuration (TOML) holding the pipeline.

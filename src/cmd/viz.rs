@@ -1,13 +1,17 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use railfuse_catalog::run::Run;
+
+use super::run_input::RunArgs;
 use railfuse_viz::{visualize, Sink, VizOptions};
 
 #[derive(clap::Args)]
 #[command(group(clap::ArgGroup::new("sink").args(["save", "connect", "spawn"])))]
 pub struct Args {
-    /// The MCAP log (raw or fused).
-    pub input: PathBuf,
+    /// The log (raw or fused): a file, or every file of the run.
+    #[command(flatten)]
+    pub run: RunArgs,
     /// Write a Rerun recording (.rrd), its layout included.
     #[arg(long, value_name = "OUT.rrd")]
     pub save: Option<PathBuf>,
@@ -73,8 +77,9 @@ impl ShowArgs {
 
 /// What `--pipelines`, `--topics`, `--from` and `--to` name is in the log: said before any
 /// work, where the log's summary lists its channels and span.
-fn check_selection(input: &std::path::Path, show: &ShowArgs) -> Result<()> {
-    let Some(summary) = railfuse_catalog::log::read_summary(input)? else {
+fn check_selection(input: &Run, show: &ShowArgs) -> Result<()> {
+    let reader = input.reader()?;
+    let Some(summary) = reader.summary() else {
         return Ok(());
     };
     if let Some(channels) = &summary.channels {
@@ -122,16 +127,16 @@ fn check_selection(input: &std::path::Path, show: &ShowArgs) -> Result<()> {
 
 pub fn run(a: Args) -> Result<()> {
     let options = a.show.options()?;
-    check_selection(&a.input, &a.show)?;
+    let run = a.run.open()?;
+    check_selection(&run, &a.show)?;
     let sink = match (a.save, a.connect) {
         (Some(p), _) => Sink::Save(p),
         (None, Some(url)) => Sink::Connect(url),
         (None, None) => Sink::Spawn,
     };
     let started = std::time::Instant::now();
-    let size = std::fs::metadata(&a.input).map_or(0, |m| m.len());
-    let bar = crate::progress::Progress::bytes("viz", size);
-    let report = visualize(&a.input, &sink, &options, &|done| bar.set(done))?;
+    let bar = crate::progress::Progress::bytes("viz", run.total_bytes());
+    let report = visualize(&run, &sink, &options, &|done| bar.set(done))?;
     bar.finish();
     // What could not be shown is said, one line each, and nothing shown is never silent.
     for (topic, why) in &report.not_shown {
@@ -143,7 +148,7 @@ pub fn run(a: Args) -> Result<()> {
     if report.logged == 0 {
         eprintln!(
             "warning: {}: nothing to show: none of its {} messages is of a type railfuse draws",
-            a.input.display(),
+            run.display(),
             report.messages
         );
     }

@@ -23,6 +23,10 @@ pub enum Error {
         offset: u64,
         cause: String,
     },
+    /// A run (files, a directory, a bag) that cannot be read as one: a missing part, a bag's
+    /// unreadable metadata.yaml, two sources on one topic.
+    #[error("{path}: {cause}")]
+    Run { path: PathBuf, cause: String },
     #[error("{path}: the file is empty")]
     Empty { path: PathBuf },
     #[error("{path}: message on {topic} at log time {log_time_ns} ns does not decode as {schema}: {source}")]
@@ -70,6 +74,12 @@ impl Error {
         Error::Write {
             path: path.to_owned(),
             cause,
+        }
+    }
+    pub(crate) fn run(path: &std::path::Path, cause: impl std::fmt::Display) -> Self {
+        Error::Run {
+            path: path.to_owned(),
+            cause: cause.to_string(),
         }
     }
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {

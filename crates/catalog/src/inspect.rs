@@ -1,16 +1,18 @@
-//! What a log holds: per-channel counts, rates and gaps, metadata, attachments, and which
-//! fused pipelines it carries. One streaming pass; memory grows with channels, not messages.
+//! What a run holds: per-channel counts, rates and gaps, metadata, attachments, which fused
+//! pipelines it carries, and for a run of several files one line per file (its span,
+//! messages and clock) and the gaps between files. One streaming pass; memory grows with
+//! channels and files, not messages.
 //! Log times may run out of file order (MCAP allows it): spans are minimum to maximum, and gaps
 //! are measured in log-time order, through a bounded reorder window per channel.
 
 use std::cmp::Reverse;
 use std::collections::{BTreeMap, BTreeSet, BinaryHeap, HashMap};
-use std::path::Path;
 
 use serde::Serialize;
 
 use crate::error::Result;
-use crate::log::{ChannelInfo, LogReader, LogRecord};
+use crate::log::{ChannelInfo, LogRecord};
+use crate::run::{ClockMap, Run};
 use crate::{seconds_between, topics};
 
 #[derive(Debug, Clone, Serialize)]
@@ -36,10 +38,40 @@ pub struct AttachmentSummary {
     pub bytes: usize,
 }
 
+/// One file of a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct FileSummary {
+    pub path: String,
+    pub bytes: u64,
+    pub messages: u64,
+    /// Log times on the run's clock (its offset applied).
+    pub first_log_time_ns: Option<u64>,
+    pub last_log_time_ns: Option<u64>,
+    pub clock: ClockMap,
+}
+
+/// A stretch of the run that no file covers (after one file ends and before the next
+/// begins), or that a part the bag lists but lacks held.
+#[derive(Debug, Clone, Serialize)]
+pub struct GapBetweenFiles {
+    pub after: String,
+    pub before: String,
+    pub start_ns: u64,
+    pub end_ns: u64,
+    /// The part that is not there, where the bag's metadata.yaml lists one.
+    pub missing: Option<String>,
+}
+
+/// A gap between files shorter than this is the interval between two messages.
+pub const GAP_BETWEEN_FILES_NS: u64 = 1_000_000_000;
+
 #[derive(Debug, Clone, Serialize)]
 pub struct LogSummary {
     pub file: String,
     pub file_bytes: u64,
+    /// Each file of the run, in the run's order (one for a one-file run).
+    pub files: Vec<FileSummary>,
+    pub gaps_between_files: Vec<GapBetweenFiles>,
     pub messages: u64,
     pub first_log_time_ns: Option<u64>,
     pub last_log_time_ns: Option<u64>,
@@ -129,21 +161,38 @@ impl ChannelSummary {
     }
 }
 
-/// Reads the whole file once and summarises it.
-pub fn summarise(path: &Path) -> Result<LogSummary> {
-    let mut reader = LogReader::open(path)?;
+/// Reads the whole run once and summarises it.
+pub fn summarise(run: &Run) -> Result<LogSummary> {
+    let mut reader = run.reader()?;
+    let mut files: Vec<FileSummary> = run
+        .parts()
+        .iter()
+        .map(|p| FileSummary {
+            path: p.path.display().to_string(),
+            bytes: std::fs::metadata(&p.path).map_or(0, |m| m.len()),
+            messages: 0,
+            first_log_time_ns: None,
+            last_log_time_ns: None,
+            clock: p.clock,
+        })
+        .collect();
     let mut channels: BTreeMap<u16, ChannelSummary> = BTreeMap::new();
     let mut metadata = Vec::new();
     let mut attachments = Vec::new();
     let mut messages = 0u64;
     let mut gaps: HashMap<u16, Gaps> = HashMap::new();
-    while let Some(record) = reader.next() {
-        match record? {
+    while let Some(record) = reader.next_with_part() {
+        let (part, record) = record?;
+        match record {
             LogRecord::Channel(c) => {
                 channels.insert(c.id, ChannelSummary::new(&c));
             }
             LogRecord::Message(m) => {
                 messages += 1;
+                let (f, t) = (&mut files[part], m.log_time_ns);
+                f.messages += 1;
+                f.first_log_time_ns = Some(f.first_log_time_ns.map_or(t, |a| a.min(t)));
+                f.last_log_time_ns = Some(f.last_log_time_ns.map_or(t, |b| b.max(t)));
                 let c = channels
                     .get_mut(&m.channel.id)
                     .expect("the reader checks channel ids");
@@ -174,9 +223,12 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
         .filter_map(|c| topics::fused_pipeline_of(&c.topic))
         .map(str::to_owned)
         .collect();
+    let gaps_between_files = gaps_between(&files, run);
     Ok(LogSummary {
-        file: path.display().to_string(),
-        file_bytes: std::fs::metadata(path).map(|m| m.len()).unwrap_or(0),
+        file: run.display(),
+        file_bytes: run.total_bytes(),
+        files,
+        gaps_between_files,
         messages,
         first_log_time_ns: first,
         last_log_time_ns: last,
@@ -189,4 +241,37 @@ pub fn summarise(path: &Path) -> Result<LogSummary> {
         attachments,
         fused_pipelines: fused.into_iter().collect(),
     })
+}
+
+/// Stretches no file covers, longer than [`GAP_BETWEEN_FILES_NS`], and the spans of the parts
+/// a bag lists but lacks.
+fn gaps_between(files: &[FileSummary], run: &Run) -> Vec<GapBetweenFiles> {
+    let mut spans: Vec<(u64, u64, &str)> = files
+        .iter()
+        .filter_map(|f| Some((f.first_log_time_ns?, f.last_log_time_ns?, f.path.as_str())))
+        .collect();
+    spans.sort();
+    let mut gaps = Vec::new();
+    let mut covered: Option<(u64, &str)> = None;
+    for &(first, last, path) in &spans {
+        if let Some((end, before)) = covered {
+            if first > end && first - end > GAP_BETWEEN_FILES_NS {
+                let missing = run
+                    .missing()
+                    .iter()
+                    .find(|m| m.start_ns.is_some_and(|t| t >= end && t <= first));
+                gaps.push(GapBetweenFiles {
+                    after: before.to_owned(),
+                    before: path.to_owned(),
+                    start_ns: end,
+                    end_ns: first,
+                    missing: missing.map(|m| m.path.display().to_string()),
+                });
+            }
+        }
+        if covered.is_none_or(|(end, _)| last >= end) {
+            covered = Some((last, path));
+        }
+    }
+    gaps
 }

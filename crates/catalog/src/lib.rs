@@ -27,6 +27,7 @@ pub mod messages;
 pub mod protobuf;
 pub mod reference_track;
 pub mod rejections;
+pub mod run;
 pub mod topics;
 pub mod track_geojson;
 

@@ -3,11 +3,12 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use railfuse_catalog::foreign::ForeignChannels;
-use railfuse_catalog::log::{read_summary, ChannelInfo, LogMessage, LogReader, LogRecord};
+use railfuse_catalog::log::{ChannelInfo, LogMessage, LogRecord};
 use railfuse_catalog::messages::{
     BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision,
     GnssFix, GroundTruth, SafetyStatus, TrackMap,
 };
+use railfuse_catalog::run::{Run, RunReader};
 use railfuse_catalog::topics::{self, FusedChannel};
 use serde::Serialize;
 
@@ -355,7 +356,7 @@ impl Evaluator {
         &mut self,
         id: u16,
         state: &FusedState,
-        reference_log: &Path,
+        reference_log: &Run,
     ) -> Result<()> {
         let Some(Role::Smoothed(i)) = self.roles.get(&id).copied() else {
             return Ok(());
@@ -427,9 +428,9 @@ impl Evaluator {
         }
     }
 
-    /// The report. Smoothed states not fed directly are scored from `log` (a file holding
+    /// The report. Smoothed states not fed directly are scored from `log` (a run holding
     /// them and the reference) in passes of their own.
-    pub fn finish(mut self, log: &Path) -> Result<EvalReport> {
+    pub fn finish(mut self, log: &Run) -> Result<EvalReport> {
         if self.smoothed_channels && self.reference.is_some() {
             let channels: Vec<(u16, usize)> = self
                 .roles
@@ -520,12 +521,12 @@ pub fn lag_allowance_s(longest_chunk_ns: Option<u64>) -> f64 {
     5.0 + longest_chunk_ns.unwrap_or(0) as f64 / 1e9
 }
 
-/// The accuracy table of a log's fused channels against `reference_topic`.
-pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
-    let longest = read_summary(input)?.and_then(|s| s.longest_chunk_ns);
-    let mut eval = Evaluator::new(input, reference_topic, lag_allowance_s(longest));
+/// The accuracy table of a run's fused channels against `reference_topic`.
+pub fn evaluate(run: &Run, reference_topic: &str) -> Result<EvalReport> {
+    let mut reader = run.reader()?;
+    let longest = reader.summary().and_then(|s| s.longest_chunk_ns);
+    let mut eval = Evaluator::new(run.name(), reference_topic, lag_allowance_s(longest));
     let mut reads = std::collections::HashSet::new();
-    let mut reader = LogReader::open(input)?;
     let (mut foreign, mut translated) = (ForeignChannels::default(), Vec::new());
     while let Some(record) = reader.next() {
         match record? {
@@ -548,7 +549,7 @@ pub fn evaluate(input: &Path, reference_topic: &str) -> Result<EvalReport> {
             _ => {}
         }
     }
-    eval.finish(input)
+    eval.finish(run)
 }
 
 /// `c` as the evaluation reads it: another tool's reference channel (a ROS bag's NavSatFix)
@@ -569,7 +570,7 @@ fn reference_channel(
 /// each state's stamp.
 struct ReferenceWalk {
     path: PathBuf,
-    reader: LogReader,
+    reader: RunReader,
     topic: String,
     roles: BTreeMap<u16, Role>,
     map: Option<TrackMap>,
@@ -579,10 +580,10 @@ struct ReferenceWalk {
 }
 
 impl ReferenceWalk {
-    fn open(path: &Path, topic: &str) -> Result<Self> {
+    fn open(run: &Run, topic: &str) -> Result<Self> {
         Ok(Self {
-            path: path.to_owned(),
-            reader: LogReader::open(path)?,
+            path: run.name().to_owned(),
+            reader: run.reader()?,
             topic: topic.to_owned(),
             roles: BTreeMap::new(),
             map: None,
@@ -650,14 +651,14 @@ pub fn reference_kind(schema: &str) -> Option<ReferenceKind> {
 /// Later passes for the smoothed channels of `log` not fed to the evaluator directly, one
 /// per channel: one reader walks its states, another the reference, in step.
 fn score_smoothed(
-    log: &Path,
+    log: &Run,
     reference_topic: &str,
     channels: &[(u16, usize)],
     scored: &mut [Scored],
     spans: &[Span],
 ) -> Result<()> {
     for &(channel, i) in channels {
-        let mut estimates = LogReader::open(log)?;
+        let mut estimates = log.reader()?;
         let mut walk = ReferenceWalk::open(log, reference_topic)?;
         while let Some(record) = estimates.next() {
             let LogRecord::Message(m) = record? else {
@@ -666,7 +667,7 @@ fn score_smoothed(
             if m.channel.id != channel {
                 continue;
             }
-            let st: FusedState = m.decode(log)?;
+            let st: FusedState = m.decode(log.name())?;
             walk.feed_until(&mut scored[i].meter, st.stamp_ns, spans)?;
             scored[i].meter.add_estimate(&st, spans);
             scored[i].states += 1;

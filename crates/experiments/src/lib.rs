@@ -144,7 +144,7 @@ fn fused_run<T>(
     let fused = dir.join(format!("{name}-{tag}-seed{seed}.fused.mcap"));
     let sim = simulate(scenario, seed, duration_s, faults, &raw)?;
     let result = refuse(&RefuseOptions {
-        input: &raw,
+        run: &railfuse_catalog::run::Run::file(&raw),
         output: &fused,
         config: pipelines,
         config_source: pipelines.path.display().to_string(),

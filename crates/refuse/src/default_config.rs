@@ -17,8 +17,9 @@ use std::path::Path;
 use std::sync::Arc;
 
 use railfuse_catalog::foreign::{Role, Translator};
-use railfuse_catalog::log::{ChannelInfo, LogReader, LogRecord};
+use railfuse_catalog::log::{ChannelInfo, LogRecord};
 use railfuse_catalog::messages::MessageKind;
+use railfuse_catalog::run::Run;
 use railfuse_catalog::{foxglove, topics};
 
 use crate::error::{Error, Result};
@@ -61,8 +62,9 @@ struct Sensor {
 
 /// The default pipeline for the log at `input`; `track` is a track file (GeoJSON or CSV)
 /// for a log without one, which GNSS fixes need to give chainage.
-pub fn default_config(input: &Path, track: Option<&Path>) -> Result<DefaultConfig> {
-    let channels = channels(input)?;
+pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> {
+    let channels = channels(run)?;
+    let input = run.name();
     let track_in_log = channels
         .iter()
         .any(|c| c.kind() == Some(MessageKind::TrackMap));
@@ -126,12 +128,12 @@ pub fn default_config(input: &Path, track: Option<&Path>) -> Result<DefaultConfi
 
 /// Every channel of the log, by topic: from the summary, or from the data section where the
 /// summary does not list them.
-fn channels(input: &Path) -> Result<Vec<Arc<ChannelInfo>>> {
-    let mut channels = match railfuse_catalog::log::read_channels(input)? {
+fn channels(run: &Run) -> Result<Vec<Arc<ChannelInfo>>> {
+    let mut reader = run.reader()?;
+    let mut channels = match reader.summary().and_then(|s| s.channels.clone()) {
         Some(c) => c,
         None => {
             let mut found = Vec::new();
-            let mut reader = LogReader::open(input)?;
             while let Some(record) = reader.next() {
                 if let LogRecord::Channel(c) = record? {
                     found.push(c);

@@ -9,11 +9,12 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use railfuse_catalog::foreign::ForeignChannels;
-use railfuse_catalog::log::{ChannelInfo, LogMessage, LogReader, LogRecord};
+use railfuse_catalog::log::{ChannelInfo, LogMessage, LogRecord};
 use railfuse_catalog::messages::{
     ChannelMessage, Event, EventKind, FusedState, GateDecision, TrackMap,
 };
 use railfuse_catalog::reference_track::ReferenceSample;
+use railfuse_catalog::run::Run;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
@@ -139,7 +140,7 @@ pub struct Metrics {
 }
 
 impl Recording {
-    /// Reads `path` once: the measurements of `spec`'s sensors and, when `reference` is
+    /// Reads `path` (a file, a directory of parts, a bag) once: the measurements of `spec`'s sensors and, when `reference` is
     /// given, its samples. Every sensor's channel must be in the log, and the reference too.
     ///
     /// Other tools' channels (a ROS 2 bag's) are read as the catalogue kinds they translate
@@ -163,7 +164,9 @@ impl Recording {
                 .into());
         }
         let mut loader = Loader::new(path, spec, reference, track);
-        let mut reader = LogReader::open(path)?;
+        // A log is one run: a file, a directory of its parts, or a bag.
+        let run = Run::open(&[path.to_owned()], &Default::default())?;
+        let mut reader = run.reader()?;
         while let Some(record) = reader.next() {
             match record? {
                 LogRecord::Channel(c) => loader.channel(c)?,

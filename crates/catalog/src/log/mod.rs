@@ -6,11 +6,13 @@
 //! complete.
 
 pub mod format;
+mod parts;
 mod reader;
 mod recover;
 pub mod scan;
 mod writer;
 
+pub use parts::{part_path, PartWriter, SplitRule};
 pub use reader::{
     read_channels, read_summary, ChannelInfo, LogMessage, LogReader, LogRecord, LogSummary,
     SchemaInfo,

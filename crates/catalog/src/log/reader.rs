@@ -149,6 +149,17 @@ pub struct LogReader {
     /// The top-level record being handed out (unchunked messages, attachments).
     top: Vec<u8>,
     emit: Emit,
+    /// The message handed out last, until the next record: a run's merge holds it as the
+    /// head of its file while it hands out those of other files.
+    held: Option<Held>,
+}
+
+/// Where the last message handed out lies.
+#[derive(Clone, Copy)]
+struct Held {
+    header: MessageHeader,
+    /// In the chunk's records at `start..end`, else the top-level record's payload.
+    in_chunk: Option<(usize, usize)>,
 }
 
 /// What `next` hands out, found before the borrow that returns it.
@@ -186,6 +197,7 @@ impl LogReader {
             at: 0,
             top: Vec::new(),
             emit: Emit::Nothing,
+            held: None,
         })
     }
 
@@ -205,6 +217,7 @@ impl LogReader {
     /// The next record in file order, or `None` at the end of the data section.
     #[allow(clippy::should_implement_trait)] // a lending iterator: records borrow the reader
     pub fn next(&mut self) -> Option<Result<LogRecord<'_>>> {
+        self.held = None;
         match self.advance() {
             Ok(true) => Some(Ok(self.emitted())),
             Ok(false) => None,
@@ -349,40 +362,55 @@ impl LogReader {
     }
 
     fn emitted(&mut self) -> LogRecord<'_> {
-        let chunk = self.chunk.as_ref().map_or(&[][..], |c| &c.records[..]);
-        match std::mem::replace(&mut self.emit, Emit::Nothing) {
-            Emit::Schema(id) => LogRecord::Schema(self.schemas[&id].clone()),
-            Emit::Channel(id) => LogRecord::Channel(self.channels[&id].clone()),
-            Emit::ChunkMessage { header, start, end } => LogRecord::Message(LogMessage {
-                channel: &self.channels[&header.channel_id],
-                sequence: header.sequence,
-                log_time_ns: header.log_time,
-                publish_time_ns: header.publish_time,
-                data: &chunk[start..end],
-            }),
-            Emit::TopMessage { header } => LogRecord::Message(LogMessage {
-                channel: &self.channels[&header.channel_id],
-                sequence: header.sequence,
-                log_time_ns: header.log_time,
-                publish_time_ns: header.publish_time,
-                data: &self.top[format::MESSAGE_HEADER..],
-            }),
+        let held = match std::mem::replace(&mut self.emit, Emit::Nothing) {
+            Emit::Schema(id) => return LogRecord::Schema(self.schemas[&id].clone()),
+            Emit::Channel(id) => return LogRecord::Channel(self.channels[&id].clone()),
+            Emit::ChunkMessage { header, start, end } => Held {
+                header,
+                in_chunk: Some((start, end)),
+            },
+            Emit::TopMessage { header } => Held {
+                header,
+                in_chunk: None,
+            },
             Emit::Metadata(m) => {
                 let m = m.expect("set by accept");
-                LogRecord::Metadata {
+                return LogRecord::Metadata {
                     name: m.name,
                     metadata: m.metadata,
+                };
+            }
+            Emit::Attachment { header, start, end } => {
+                return LogRecord::Attachment {
+                    name: header.name,
+                    media_type: header.media_type,
+                    log_time_ns: header.log_time,
+                    create_time_ns: header.create_time,
+                    data: &self.top[start..end],
                 }
             }
-            Emit::Attachment { header, start, end } => LogRecord::Attachment {
-                name: header.name,
-                media_type: header.media_type,
-                log_time_ns: header.log_time,
-                create_time_ns: header.create_time,
-                data: &self.top[start..end],
-            },
             Emit::Nothing => unreachable!("emitted() follows a successful advance()"),
-        }
+        };
+        self.held = Some(held);
+        LogRecord::Message(self.current_message().expect("just held"))
+    }
+
+    /// The message [`next`](Self::next) handed out last, while no other record has followed
+    /// it.
+    pub fn current_message(&self) -> Option<LogMessage<'_>> {
+        let held = self.held?;
+        let data = match (held.in_chunk, &self.chunk) {
+            (Some((start, end)), Some(chunk)) => &chunk.records[start..end],
+            (Some(_), None) => return None,
+            (None, _) => &self.top[format::MESSAGE_HEADER..],
+        };
+        Some(LogMessage {
+            channel: &self.channels[&held.header.channel_id],
+            sequence: held.header.sequence,
+            log_time_ns: held.header.log_time,
+            publish_time_ns: held.header.publish_time,
+            data,
+        })
     }
 }
 

@@ -26,7 +26,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use railfuse_catalog::log::{partial_path, LogWriter};
+use railfuse_catalog::log::{part_path, partial_path, LogWriter};
 use railfuse_catalog::messages::{RecorderDiagnostics, SourceStats};
 use railfuse_catalog::topics;
 use serde::Serialize;
@@ -111,16 +111,6 @@ fn join_source(name: String, handle: SourceThread, failed: &mut Vec<String>) {
     if let Err(e) = joined {
         failed.push(format!("{name}: {e}"));
     }
-}
-
-/// The path of part `n` (1-based) when splitting: `run.mcap` → `run-001.mcap`.
-pub fn part_path(output: &Path, n: u32) -> PathBuf {
-    let stem = output.file_stem().and_then(|s| s.to_str()).unwrap_or("run");
-    let ext = output
-        .extension()
-        .and_then(|s| s.to_str())
-        .unwrap_or("mcap");
-    output.with_file_name(format!("{stem}-{n:03}.{ext}"))
 }
 
 /// A `.partial` of `path` left by an earlier recording that did not finish, if it holds data,

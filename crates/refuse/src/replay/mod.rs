@@ -16,11 +16,12 @@ use railfuse_catalog::foreign::{ros2, Translated, Translator};
 use railfuse_catalog::log::format::{self, Records};
 use railfuse_catalog::log::scan::{Chunk, Item, ReadAhead, Scanner, READ_AHEAD_BYTES};
 use railfuse_catalog::log::{
-    read_summary, ChannelId, ChannelInfo, ChunkTally, IdMap, LogMessage, LogSummary, LogWriter,
-    SchemaInfo,
+    read_summary, ChannelId, ChannelInfo, ChunkTally, IdMap, LogMessage, LogRecord, LogSummary,
+    LogWriter, SchemaInfo,
 };
 use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, TrackMap};
 use railfuse_catalog::rejections::Rejections;
+use railfuse_catalog::run::{MergeCounts, Run};
 use railfuse_catalog::topics;
 use serde::Serialize;
 
@@ -36,7 +37,8 @@ mod provenance;
 use outputs::{copy_channel, register_outputs, Output, TrackOutput};
 
 pub struct RefuseOptions<'a> {
-    pub input: &'a Path,
+    /// The run to re-fuse: one file, or every file that holds it.
+    pub run: &'a Run,
     pub output: &'a Path,
     pub config: &'a Pipelines,
     /// Where the configuration came from (a path, or "embedded default"), for the metadata.
@@ -95,6 +97,8 @@ pub struct RefuseReport {
     pub input_messages: u64,
     pub input_bytes: u64,
     pub fused_messages: u64,
+    /// What merging the run's files did (one file: nothing).
+    pub merge: MergeCounts,
     /// Messages whose log time is earlier than the one before them in the file.
     pub out_of_order_messages: u64,
     /// Sensor messages the pipelines read that did not decode: skipped (copied unchanged),
@@ -150,10 +154,21 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
 }
 
 fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
-    let summary = read_summary(opts.input)?;
-    let digest = provenance::InputDigest::start(opts.input);
-    let mut replay = Replay::new(opts, summary)?;
-    let mut items = ReadAhead::new(Scanner::open(opts.input)?, READ_AHEAD_BYTES);
+    let parts = opts.run.parts().iter().map(|p| p.path.clone()).collect();
+    let digest = provenance::InputDigest::start(parts);
+    let mut replay = match opts.run.single_file() {
+        Some(file) => read_file(opts, file)?,
+        None => read_run(opts)?,
+    };
+    replay.input_sha256 = Some(digest.finish()?);
+    replay.finish()
+}
+
+/// A run that is one file, read chunk by chunk: a chunk that holds no replaced channel is
+/// copied to the output byte for byte.
+fn read_file<'a>(opts: &'a RefuseOptions<'a>, file: &Path) -> Result<Replay<'a>> {
+    let mut replay = Replay::new(opts, read_summary(file)?)?;
+    let mut items = ReadAhead::new(Scanner::open(file)?, READ_AHEAD_BYTES);
     while let Some(item) = items.next() {
         if let Some(progress) = opts.progress {
             progress(items.position());
@@ -165,8 +180,52 @@ fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
         }
     }
     replay.report.input_bytes = items.position();
-    replay.input_sha256 = Some(digest.finish()?);
-    replay.finish()
+    Ok(replay)
+}
+
+/// A run of several files (or one read on another clock or time basis), merged by time:
+/// every record is written again under the run's ids.
+fn read_run<'a>(opts: &'a RefuseOptions<'a>) -> Result<Replay<'a>> {
+    let mut reader = opts.run.reader()?;
+    let mut replay = Replay::new(opts, reader.summary().cloned())?;
+    let mut count = 0u64;
+    while let Some(record) = reader.next() {
+        match record? {
+            LogRecord::Schema(s) => replay.schema_info(s, true)?,
+            LogRecord::Channel(c) => replay.channel_info(c, true).map(|_| ())?,
+            LogRecord::Message(m) => {
+                let view = format::MessageView {
+                    header: mcap::records::MessageHeader {
+                        channel_id: m.channel.id,
+                        sequence: m.sequence,
+                        log_time: m.log_time_ns,
+                        publish_time: m.publish_time_ns,
+                    },
+                    data: m.data,
+                };
+                if replay.message(&view)? {
+                    replay.writer.copy_message(&view)?;
+                }
+            }
+            LogRecord::Metadata { name, metadata } => replay.metadata(name, metadata)?,
+            LogRecord::Attachment {
+                name,
+                media_type,
+                log_time_ns,
+                create_time_ns,
+                data,
+            } => replay
+                .writer
+                .attach(&name, &media_type, log_time_ns, create_time_ns, data)?,
+        }
+        count += 1;
+        if let Some(progress) = opts.progress.filter(|_| count.is_multiple_of(4096)) {
+            progress(reader.bytes_read());
+        }
+    }
+    replay.report.input_bytes = reader.bytes_read();
+    replay.report.merge = reader.counts().clone();
+    Ok(replay)
 }
 
 /// One `refuse` run in progress.
@@ -205,7 +264,7 @@ impl<'a> Replay<'a> {
     /// Checks the pipelines against the file's channels (when it has a summary), opens the
     /// output and registers the fused channels.
     fn new(opts: &'a RefuseOptions<'a>, summary: Option<LogSummary>) -> Result<Self> {
-        let input = opts.input;
+        let input = opts.run.name();
         let names: BTreeSet<String> = opts.config.names().map(str::to_owned).collect();
         let known = summary.as_ref().and_then(|s| s.channels.as_ref());
         let mut writer = LogWriter::create(opts.output)?;
@@ -249,6 +308,7 @@ impl<'a> Replay<'a> {
                 input_messages: 0,
                 input_bytes: 0,
                 fused_messages: 0,
+                merge: MergeCounts::default(),
                 out_of_order_messages: 0,
                 undecodable: Rejections::default(),
                 missing_sensors: BTreeSet::new(),
@@ -339,17 +399,7 @@ impl<'a> Replay<'a> {
                 Ok(())
             }
             op::METADATA | op::ATTACHMENT => match mcap::parse_record(opcode, body) {
-                Ok(mcap::records::Record::Metadata(m)) => {
-                    let replaced = m.name == topics::metadata::PIPELINE
-                        && m.metadata
-                            .get("pipeline")
-                            .is_some_and(|p| self.names.contains(p));
-                    if !replaced {
-                        self.eval.metadata(&m.name, &m.metadata);
-                        self.writer.write_metadata(&m.name, m.metadata)?;
-                    }
-                    Ok(())
-                }
+                Ok(mcap::records::Record::Metadata(m)) => self.metadata(m.name, m.metadata),
                 Ok(mcap::records::Record::Attachment {
                     header: h, data, ..
                 }) => Ok(self.writer.attach(
@@ -366,9 +416,28 @@ impl<'a> Replay<'a> {
         }
     }
 
+    /// A metadata record: copied, unless it is the configuration of a pipeline this run
+    /// re-runs (which writes its own).
+    fn metadata(&mut self, name: String, metadata: BTreeMap<String, String>) -> Result<()> {
+        let replaced = name == topics::metadata::PIPELINE
+            && metadata
+                .get("pipeline")
+                .is_some_and(|p| self.names.contains(p));
+        if !replaced {
+            self.eval.metadata(&name, &metadata);
+            self.writer.write_metadata(&name, metadata)?;
+        }
+        Ok(())
+    }
+
+    /// The run's name, for messages.
+    fn input(&self) -> &'a Path {
+        self.opts.run.name()
+    }
+
     fn damaged(&self, offset: u64, cause: String) -> Error {
         Error::Log(railfuse_catalog::Error::Damaged {
-            path: self.opts.input.to_owned(),
+            path: self.input().to_owned(),
             offset,
             cause,
         })
@@ -389,11 +458,19 @@ impl<'a> Replay<'a> {
             encoding: header.encoding,
             data: data.into_owned(),
         };
+        self.schema_info(Arc::new(info), top_level)
+    }
+
+    /// Takes in a schema (written to the output when outside a copied chunk).
+    fn schema_info(&mut self, info: Arc<SchemaInfo>, top_level: bool) -> Result<()> {
+        if self.schemas.contains_key(&info.id) {
+            return Ok(());
+        }
         if top_level {
             self.writer
                 .copy_schema(info.id, &info.name, &info.encoding, &info.data)?;
         }
-        self.schemas.insert(info.id, Arc::new(info));
+        self.schemas.insert(info.id, info);
         Ok(())
     }
 
@@ -421,6 +498,14 @@ impl<'a> Replay<'a> {
                 })
             }
         };
+        self.channel_info(info, top_level)
+    }
+
+    /// Routes a channel met in the input (written to the output when outside a copied chunk);
+    /// false when it is replaced.
+    fn channel_info(&mut self, info: Arc<ChannelInfo>, top_level: bool) -> Result<bool> {
+        // Routed already when the summary listed it: that one carries its schema.
+        let info = self.channels.get(&info.id).cloned().unwrap_or(info);
         let kept = self.route(info.clone())?;
         if kept && top_level {
             copy_channel(&mut self.writer, &info)?;
@@ -457,9 +542,10 @@ impl<'a> Replay<'a> {
                 _ => None,
             };
             route.evaluated = self.eval.channel(info.id, &info.topic, schema);
+            let input = self.input();
             for (pi, p) in self.pipelines.iter_mut().enumerate() {
                 if let Some(si) = p.spec().sensor_for(&info.topic) {
-                    let binding = p.spec().bind(self.opts.input, si, schema)?;
+                    let binding = p.spec().bind(input, si, schema)?;
                     p.bind(si, &binding);
                     route.sensors.push((pi, si));
                     route.model = Some(binding.model);
@@ -494,11 +580,11 @@ impl<'a> Replay<'a> {
             if p.spec().sensors[*si].role != role {
                 let problem =
                     format!("is read with another role by an earlier pipeline ({role:?})");
-                return Err(p.spec().channel_error(self.opts.input, *si, problem));
+                return Err(p.spec().channel_error(self.input(), *si, problem));
             }
         }
         Translator::for_channel(info, role)
-            .map_err(|why| first.spec().channel_error(self.opts.input, first_si, why))
+            .map_err(|why| first.spec().channel_error(self.input(), first_si, why))
     }
 
     /// Every sensor of every pipeline has met its channel, or is said missing (an error for
@@ -515,12 +601,12 @@ impl<'a> Replay<'a> {
                 .filter(|&si| !self.seen_topics.contains(&p.sensors[si].topic))
                 .collect();
             for &si in &missing {
-                let warning = p.missing_channel(self.opts.input, si, &have)?;
+                let warning = p.missing_channel(self.input(), si, &have)?;
                 self.report.missing_sensors.insert(warning);
             }
             if !p.sensors.is_empty() && missing.len() == p.sensors.len() {
                 return Err(p.channel_error(
-                    self.opts.input,
+                    self.input(),
                     0,
                     "is not in the file, nor is any other channel of the pipeline".into(),
                 ));
@@ -547,7 +633,7 @@ impl<'a> Replay<'a> {
                     .is_none_or(|f| f.contains(&Quantity::Chainage));
                 if !matches!(p, AnyPipeline::Messages(..)) && chainage {
                     return Err(p.spec().channel_error(
-                        self.opts.input,
+                        self.input(),
                         si,
                         "gives chainage only on a track map, and neither the log (no /track/map) \
                          nor the configuration has one: name a GeoJSON line at its top with \
@@ -581,7 +667,7 @@ impl<'a> Replay<'a> {
         if context.is_none() && model.is_none() && !evaluated {
             return Ok(true); // passes through untouched
         }
-        let input = self.opts.input;
+        let input = self.input();
         let channel = self.channels[&h.channel_id].clone();
         let translated = match self.translate(&channel, h.channel_id, m) {
             Read::AsItIs => None,
@@ -599,7 +685,7 @@ impl<'a> Replay<'a> {
             // The observer takes JSON: a protobuf message of a railfuse type is given as its
             // JSON form.
             let json = match channel.message_encoding == Encoding::Protobuf.message_encoding() {
-                true => msg.decode_any(self.opts.input)?.map(|any| any.to_json()),
+                true => msg.decode_any(self.input())?.map(|any| any.to_json()),
                 false => None,
             };
             let data = json.as_deref().unwrap_or(m.data);
@@ -662,7 +748,7 @@ impl<'a> Replay<'a> {
                 {
                     eprintln!(
                         "{}: {}: messages carry no header.stamp: their log time is used",
-                        self.opts.input.display(),
+                        self.input().display(),
                         channel.topic
                     );
                 }
@@ -683,7 +769,7 @@ impl<'a> Replay<'a> {
 
     /// The track map, or a device's own fault report, which the pipelines act on.
     fn context_message(&mut self, kind: Option<ContextKind>, msg: &LogMessage<'_>) -> Result<()> {
-        let input = self.opts.input;
+        let input = self.input();
         match kind {
             Some(ContextKind::TrackMap) => self.context.track = Some(msg.decode(input)?),
             Some(ContextKind::Events) => {
@@ -706,7 +792,7 @@ impl<'a> Replay<'a> {
 
     /// A sensor message (its measurements decoded) to every pipeline sensor it feeds.
     fn feed(&mut self, id: u16, msg: &LogMessage<'_>) -> Result<()> {
-        let input = self.opts.input;
+        let input = self.input();
         let sensors = std::mem::take(&mut self.routes.get_mut(&id).expect("routed").sensors);
         let result = (|| {
             for &(pi, si) in &sensors {
@@ -735,7 +821,6 @@ impl<'a> Replay<'a> {
     /// Flushes the pipelines, writes smoothed states and each pipeline's metadata, closes the
     /// output and finishes the evaluation.
     fn finish(mut self) -> Result<(RefuseReport, EvalReport)> {
-        let input = self.opts.input;
         // Without a summary, the channels are known only now.
         if !self.bound_checked {
             self.check_every_sensor_bound(&[])?;
@@ -754,10 +839,7 @@ impl<'a> Replay<'a> {
                     "config_source".to_owned(),
                     provenance::file_name(&self.opts.config_source),
                 ),
-                (
-                    "input".to_owned(),
-                    provenance::file_name(&input.to_string_lossy()),
-                ),
+                ("input".to_owned(), provenance::run_name(self.opts.run)),
                 (
                     "input_sha256".to_owned(),
                     self.input_sha256.clone().unwrap_or_default(),
@@ -777,10 +859,10 @@ impl<'a> Replay<'a> {
         }
         // Smoothed states not scored on the way are in the input beside its reference, unless
         // the reference is this run's own output.
-        let log = if self.reference_is_ours() {
-            self.opts.output
-        } else {
-            self.opts.input
+        let output = Run::file(self.opts.output);
+        let log = match self.reference_is_ours() {
+            true => &output,
+            false => self.opts.run,
         };
         self.writer.finish()?;
         for (p, out) in self.pipelines.iter().zip(&self.outputs) {

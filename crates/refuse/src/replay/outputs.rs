@@ -192,8 +192,7 @@ impl Replay<'_> {
             );
             self.writer.write(channel, state.stamp_ns, &state)?;
             if !self.reference_is_ours() {
-                self.eval
-                    .smoothed_state(channel.0, &state, self.opts.input)?;
+                self.eval.smoothed_state(channel.0, &state, self.opts.run)?;
             }
             self.report.fused_messages += 1;
             self.outputs[pi].smoothed_states += 1;

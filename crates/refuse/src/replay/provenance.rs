@@ -8,23 +8,19 @@ use std::thread::JoinHandle;
 
 use sha2::{Digest as _, Sha256};
 
-/// The input's digest, computed on a thread of its own beside the replay.
+/// The input's digest, computed on a thread of its own beside the replay: of the content of
+/// its files one after the other (one file: that file's SHA-256).
 pub struct InputDigest {
-    path: PathBuf,
-    thread: JoinHandle<std::io::Result<String>>,
+    thread: JoinHandle<Result<String, (PathBuf, std::io::Error)>>,
 }
 
 impl InputDigest {
-    pub fn start(path: &Path) -> Self {
-        let input = path.to_owned();
+    pub fn start(files: Vec<PathBuf>) -> Self {
         let thread = std::thread::Builder::new()
             .name("input-digest".into())
-            .spawn(move || sha256_of_file(&input))
+            .spawn(move || sha256_of_files(&files))
             .expect("a thread starts");
-        InputDigest {
-            path: path.to_owned(),
-            thread,
-        }
+        InputDigest { thread }
     }
 
     /// The digest (hex), or the error of reading the input.
@@ -33,24 +29,25 @@ impl InputDigest {
             .thread
             .join()
             .expect("the digest thread does not panic");
-        digest.map_err(|source| railfuse_catalog::Error::Io {
-            path: self.path,
-            source,
-        })
+        digest.map_err(|(path, source)| railfuse_catalog::Error::Io { path, source })
     }
 }
 
-/// The SHA-256 of a file's content, in lower-case hex; read in 1 MiB blocks.
-pub fn sha256_of_file(path: &Path) -> std::io::Result<String> {
-    let mut file = std::fs::File::open(path)?;
+/// The SHA-256 of the files' contents one after the other, in lower-case hex; read in 1 MiB
+/// blocks.
+fn sha256_of_files(files: &[PathBuf]) -> Result<String, (PathBuf, std::io::Error)> {
     let mut hasher = Sha256::new();
     let mut block = vec![0u8; 1 << 20];
-    loop {
-        let n = file.read(&mut block)?;
-        if n == 0 {
-            break;
+    for path in files {
+        let fail = |e| (path.clone(), e);
+        let mut file = std::fs::File::open(path).map_err(fail)?;
+        loop {
+            let n = file.read(&mut block).map_err(fail)?;
+            if n == 0 {
+                break;
+            }
+            hasher.update(&block[..n]);
         }
-        hasher.update(&block[..n]);
     }
     Ok(hasher
         .finalize()
@@ -67,6 +64,15 @@ pub fn file_name(given: &str) -> String {
         .map_or_else(|| given.to_owned(), |n| n.to_string_lossy().into_owned())
 }
 
+/// The run's inputs by file name, joined by " + ".
+pub fn run_name(run: &railfuse_catalog::run::Run) -> String {
+    run.inputs()
+        .iter()
+        .map(|i| file_name(&i.to_string_lossy()))
+        .collect::<Vec<_>>()
+        .join(" + ")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -81,7 +87,7 @@ mod tests {
         std::fs::write(&p, b"abc").unwrap();
         // FIPS 180-2's example.
         assert_eq!(
-            sha256_of_file(&p).unwrap(),
+            sha256_of_files(&[p]).unwrap(),
             "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
         );
     }

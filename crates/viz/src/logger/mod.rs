@@ -8,10 +8,11 @@ use std::time::Duration;
 
 use railfuse_catalog::foreign::Translator;
 use railfuse_catalog::geodesy::GeodeticOrigin;
-use railfuse_catalog::log::{ChannelInfo, LogMessage, LogReader, LogRecord};
+use railfuse_catalog::log::{ChannelInfo, LogMessage, LogRecord};
 use railfuse_catalog::messages::fused::CHI2_95_1DOF;
 use railfuse_catalog::messages::*;
 use railfuse_catalog::reference_track::ReferenceTrack;
+use railfuse_catalog::run::Run;
 use railfuse_catalog::topics::{self, FusedChannel};
 use rerun::{Color, Points2D, Radius, RecordingStream, SeriesLines};
 
@@ -148,9 +149,9 @@ fn open_stream(sink: &Sink) -> Result<RecordingStream, Error> {
     Ok(rec)
 }
 
-/// Logs the whole file to the sink, streaming. `progress` is told the bytes read so far.
+/// Logs the whole run to the sink, streaming. `progress` is told the bytes read so far.
 pub fn visualize(
-    path: &Path,
+    path: &Run,
     sink: &Sink,
     options: &VizOptions,
     progress: &dyn Fn(u64),
@@ -186,13 +187,14 @@ pub fn visualize(
 }
 
 fn visualize_into(
-    path: &Path,
+    run: &Run,
     sink: &Sink,
     options: &VizOptions,
     progress: &dyn Fn(u64),
 ) -> Result<VizReport, Error> {
-    let mut reader = LogReader::open(path)?;
-    let summary = railfuse_catalog::log::read_summary(path)?;
+    let mut reader = run.reader()?;
+    let summary = reader.summary().cloned();
+    let path = run.name();
     // Fused states may trail the truth in file order by a chunk (railfuse writes the fused
     // chunk of an input chunk right after it): the truth is kept that much longer.
     let longest_chunk_ns = summary

@@ -238,6 +238,11 @@ impl LogWriter {
         &self.path
     }
 
+    /// Bytes of the working file on disk so far (what the worker has written).
+    pub fn bytes_on_disk(&self) -> u64 {
+        std::fs::metadata(&self.partial).map_or(0, |m| m.len())
+    }
+
     fn send(&mut self, job: Job) -> Result<()> {
         let sent = self
             .jobs
