@@ -626,3 +626,49 @@ fn the_viewer_draws_the_track_under_the_fixes(out: &Path, dir: &Path) {
     }
     assert!(viz["not_shown"].get("/notes").is_some(), "{viz}");
 }
+
+/// (topic, log time, payload) of every fused record of a log, in file order.
+fn fused_records(path: &Path) -> Vec<(String, u64, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut r = railfuse_catalog::log::LogReader::open(path).unwrap();
+    while let Some(rec) = r.next() {
+        if let railfuse_catalog::log::LogRecord::Message(m) = rec.unwrap() {
+            if m.channel.topic.contains("/fused/") {
+                out.push((m.channel.topic.clone(), m.log_time_ns, m.data.to_vec()));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_bag_split_in_four_files_by_rosbags_is_one_run() {
+    let d = tempfile::tempdir().unwrap();
+    let native = seed001(d.path(), 120);
+    ros2_bag(&native, d.path());
+    let (bag, split) = (d.path().join("bag"), d.path().join("split"));
+    // rosbags' own Reader reads the split bag back whole: it is a bag as rosbag2 writes them.
+    let py = python_ok("split_bag.py", &[s(&bag), s(&split), "30,61.5,90"]);
+    assert_eq!(py["files"].as_array().unwrap().len(), 4, "{py}");
+    let info = String::from_utf8(ok(&["info", s(&split)]).stdout).unwrap();
+    for f in ["split_0.mcap", "split_3.mcap"] {
+        assert!(info.contains(f), "{info}");
+    }
+    let whole = ok_json(&["info", s(&bag), "--json"]);
+    assert_eq!(whole["messages"], py["messages"]);
+    let config = bag_config(d.path(), |t| t);
+    let (a, b) = (
+        d.path().join("whole.fused.mcap"),
+        d.path().join("split.fused.mcap"),
+    );
+    ok(&["refuse", s(&bag), "-c", s(&config), "-o", s(&a)]);
+    let report = ok_json(&["refuse", s(&split), "-c", s(&config), "-o", s(&b), "--json"]);
+    assert_eq!(report["refuse"]["merge"]["parts_read"], 4, "{report}");
+    let (fa, fb) = (fused_records(&a), fused_records(&b));
+    assert!(
+        fa.len() > 1000 && fa == fb,
+        "{} vs {} fused records",
+        fa.len(),
+        fb.len()
+    );
+}

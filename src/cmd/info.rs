@@ -1,5 +1,6 @@
 use anyhow::Result;
 use railfuse_catalog::inspect::{summarise, LogSummary};
+use railfuse_catalog::run::Run;
 
 use super::run_input::RunArgs;
 use crate::table::Table;
@@ -34,8 +35,8 @@ pub fn run(a: Args) -> Result<()> {
             format!("{:.3}", t.saturating_sub(t0) as f64 / 1e9)
         })
     };
-    if s.files.len() > 1 {
-        print_files(&s, &rel);
+    if s.files.len() > 1 || !run.missing().is_empty() {
+        print_files(&s, &run, &rel);
     }
     let mut t = Table::new(&[
         "topic",
@@ -85,7 +86,7 @@ pub fn run(a: Args) -> Result<()> {
 
 /// One line per file of the run (its span on the run's clock, messages, clock), then the
 /// gaps between files.
-fn print_files(s: &LogSummary, rel: &dyn Fn(Option<u64>) -> String) {
+fn print_files(s: &LogSummary, run: &Run, rel: &dyn Fn(Option<u64>) -> String) {
     let mut t = Table::new(&[
         "file",
         "messages",
@@ -104,6 +105,17 @@ fn print_files(s: &LogSummary, rel: &dyn Fn(Option<u64>) -> String) {
             rel(f.last_log_time_ns),
             format!("{:+.3}", f.clock.offset_s()),
             format!("{:+.1}", f.clock.drift_ppm),
+        ]);
+    }
+    for m in run.missing() {
+        t.row(vec![
+            format!("{} (missing)", m.path.display()),
+            m.messages.map_or("-".into(), |n| n.to_string()),
+            "-".into(),
+            rel(m.start_ns),
+            rel(m.start_ns.zip(m.duration_ns).map(|(a, d)| a + d)),
+            "-".into(),
+            "-".into(),
         ]);
     }
     print!("{t}");
