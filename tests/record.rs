@@ -381,7 +381,6 @@ fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
         .collect();
     assert!(files.len() >= 3, "{r}");
     assert_eq!(files[0].file_name().unwrap(), "run-001.mcap");
-    let mut total = 0u64;
     for f in &files {
         let info: serde_json::Value = ok_json(&["info", s(f), "--json"]);
         let run = info["metadata"]
@@ -396,23 +395,112 @@ fn a_recording_splits_into_numbered_complete_files_carrying_the_run_metadata() {
             text.contains("ETR103") && text.contains("override") && text.contains("\"part\""),
             "{text}"
         );
-        total += info["channels"]
-            .as_array()
-            .unwrap()
-            .iter()
-            // What the recorder received: not its diagnostics, nor the Foxglove twins it adds.
-            .filter(|c| {
-                let topic = c["topic"].as_str().unwrap();
-                topic != "/recorder/diagnostics" && !topic.starts_with("/foxglove/")
-            })
-            .map(|c| c["messages"].as_u64().unwrap())
-            .sum::<u64>();
     }
+    // The folder is the run (its manifest, metadata.yaml): every message once, the state
+    // each part repeats read as the repeats they are.
+    let info = ok_json(&["info", s(d.path()), "--json"]);
+    assert_eq!(info["files"].as_array().unwrap().len(), files.len());
     assert_eq!(
-        total,
+        received(&info),
         r["messages"].as_u64().unwrap(),
-        "every message in exactly one part"
+        "every message once"
     );
+}
+
+/// Messages the recorder received in an `info --json`: not its diagnostics, nor the Foxglove
+/// twins it adds.
+fn received(info: &serde_json::Value) -> u64 {
+    info["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| {
+            let topic = c["topic"].as_str().unwrap();
+            topic != "/recorder/diagnostics" && !topic.starts_with("/foxglove/")
+        })
+        .map(|c| c["messages"].as_u64().unwrap())
+        .sum::<u64>()
+}
+
+#[test]
+fn every_part_of_a_split_recording_opens_with_the_run_s_state_and_a_manifest() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("run.mcap");
+    let o = ok(&[
+        "record", "-o", s(&out), "--speed", "40", "--duration", "4", "--split-every", "1",
+        "--json",
+    ]);
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let files: Vec<String> = r["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f.as_str().unwrap().to_owned())
+        .collect();
+    assert!(files.len() >= 3, "{r}");
+    // Each part after the first opens with the track map and the last of every channel.
+    for f in &files[1..] {
+        let maps: Vec<railfuse_catalog::messages::TrackMap> =
+            messages(std::path::Path::new(f), "/track/map");
+        assert_eq!(maps.len(), 1, "{f}: the track map repeated");
+        let first = ok_json(&["info", f, "--json"]);
+        let topics = first["channels"].as_array().unwrap().len();
+        assert!(topics >= 8, "{f}: {topics} channels");
+    }
+    // The manifest lists every part with the times of its own messages.
+    let manifest = std::fs::read_to_string(d.path().join("metadata.yaml")).unwrap();
+    for f in &files {
+        let name = std::path::Path::new(f).file_name().unwrap().to_str().unwrap();
+        assert!(manifest.contains(&format!("\"{name}\"")), "{manifest}");
+    }
+    let run = ok_json(&["info", s(d.path()), "--json"]);
+    assert_eq!(received(&run), r["messages"].as_u64().unwrap());
+    // A part re-fused alone starts from the state it repeats: its default pipeline finds
+    // the track map and so takes chainage from the GNSS fixes from its first one.
+    let alone = ok(&["refuse", &files[1], "-o", s(&d.path().join("alone.fused.mcap"))]);
+    let said = stderr(&alone);
+    assert!(
+        said.contains("uses /gnss/fix: railfuse.GnssFix: GNSS fixes, their chainage on the track"),
+        "{said}"
+    );
+}
+
+#[test]
+fn a_split_recording_cut_off_opens_as_its_parts_and_names_the_one_to_recover() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("run.mcap");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
+        .args(["record", "-o", s(&out), "--speed", "20", "--split-every", "1"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Killed (no chance to finish) once three parts are done.
+    let done = |n: u32| d.path().join(format!("run-{n:03}.mcap")).exists();
+    let started = std::time::Instant::now();
+    while !done(3) && started.elapsed().as_secs() < 60 {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let manifest = std::fs::read_to_string(d.path().join("metadata.yaml")).unwrap();
+    assert!(manifest.contains("run-003.mcap"), "{manifest}");
+    let cut = (1..)
+        .find(|&n| !done(n))
+        .map(|n| format!("run-{n:03}.mcap"))
+        .unwrap();
+    let whole = railfuse(&["info", s(d.path())]);
+    let e = stderr(&whole);
+    assert!(!whole.status.success());
+    assert!(
+        e.contains(&cut) && e.contains("railfuse recover") && e.contains("--allow-missing-parts"),
+        "{e}"
+    );
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    ok(&["info", s(d.path()), "--allow-missing-parts"]);
+    let partial = d.path().join(format!("{cut}.partial"));
+    ok(&["recover", s(&partial), "-o", s(&d.path().join(&cut))]);
+    ok(&["info", s(d.path())]);
 }
 
 #[test]

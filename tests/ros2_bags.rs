@@ -328,6 +328,12 @@ fn a_sqlite3_bag_imports_to_mcap_keeping_topics_types_qos_and_times_and_refuses_
     ok(&["refuse", s(&imported), "-c", s(&config), "-o", s(&b)]);
     let states = |p: &Path| messages::<FusedState>(p, "/fused/kf_cal/state");
     assert_eq!(states(&a), states(&b));
+    // The sqlite3 bag directory is a run as it is: read in place, it refuses the same.
+    let c = d.path().join("c.mcap");
+    ok(&["refuse", s(&sqlite), "-c", s(&config), "-o", s(&c)]);
+    assert_eq!(states(&a), states(&c));
+    let info = ok_json(&["info", s(&sqlite), "--json"]);
+    assert_eq!(info["messages"], r["messages"], "{info}");
 }
 
 #[test]

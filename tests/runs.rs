@@ -106,6 +106,42 @@ fn a_split_run_refuses_to_the_fused_channels_of_the_whole_run_byte_for_byte() {
     ]);
     assert_eq!(std::fs::read_dir(&parts).unwrap().count(), 4);
     assert_eq!(same_fused(&whole, &parts, "kalman.toml", d.path()), 4);
+    // Fused parts beside the raw parts: split where the input's parts begin, they hold the
+    // whole run's fused records between them, each in the part of its time.
+    let out = d.path().join("fused-parts");
+    std::fs::create_dir(&out).unwrap();
+    let report = ok_json(&[
+        "refuse",
+        s(&parts),
+        "-c",
+        s(&sample("kalman.toml")),
+        "-o",
+        s(&out.join("run.fused.mcap")),
+        "--split-as-input",
+        "--json",
+    ]);
+    let written: Vec<String> = report["parts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_str().unwrap().to_owned())
+        .collect();
+    assert_eq!(written.len(), 4, "{}", report["parts"]);
+    assert!(!out.join("run.fused.mcap").exists());
+    let mut split_fused = Vec::new();
+    for (i, part) in written.iter().enumerate() {
+        let raw = parts.join(format!("run-{:03}.mcap", i + 1));
+        let first_raw = ok_json(&["info", s(&raw), "--json"])["first_log_time_ns"]
+            .as_u64()
+            .unwrap();
+        let fused = fused_records(Path::new(part));
+        assert!(
+            fused.iter().all(|r| r.1 >= first_raw || i == 0),
+            "{part} holds fused records from before its raw part"
+        );
+        split_fused.extend(fused);
+    }
+    assert!(split_fused == fused_records(&d.path().join("whole.fused.mcap")));
     // One part alone is a log too.
     let alone = d.path().join("alone.fused.mcap");
     refuse(&parts.join("run-002.mcap"), "kalman.toml", &alone);
@@ -245,11 +281,20 @@ fn a_run_that_cannot_be_read_as_one_says_why_naming_the_file() {
     simulate(&["--duration", "20", "--seed", "1"], &a);
     simulate(&["--duration", "20", "--seed", "2"], &b);
     let out = d.path().join("out.mcap");
-    // Two recorders both claiming /imu over the same time.
     let config = sample("kalman.toml");
+    // A file of another run (its run metadata says so).
     fails_saying(
         &["refuse", s(&a), s(&b), "-c", s(&config), "-o", s(&out)],
-        &["b.mcap", "is also in", "two sources on one topic"],
+        &["b.mcap", "of run 'sim-default-seed2'", "a file of another run"],
+    );
+    assert!(!out.exists());
+    // Two recorders of one run both claiming /imu over the same time: the same samples
+    // until 5 s are the same messages, read once; from there they differ.
+    let c = d.path().join("c.mcap");
+    simulate(&["--duration", "20", "--seed", "1", "--fault", "imu:bias=1:5:10"], &c);
+    fails_saying(
+        &["refuse", s(&a), s(&c), "-c", s(&config), "-o", s(&out)],
+        &["c.mcap", "is also in", "two sources on one topic"],
     );
     assert!(!out.exists());
     let empty = d.path().join("empty");
@@ -269,6 +314,31 @@ fn a_run_that_cannot_be_read_as_one_says_why_naming_the_file() {
         text.contains("bag_0.mcap") && text.contains("bag_1.mcap (missing)"),
         "{text}"
     );
+    // Where the bag says when the missing part ran, eval names the gap among its windows.
+    let first = ok_json(&["info", s(&a), "--json"])["first_log_time_ns"]
+        .as_u64()
+        .unwrap();
+    let listed = format!(
+        "{yaml}  files:\n    - path: bag_1.mcap\n      starting_time:\n        nanoseconds_since_epoch: {}\n      duration:\n        nanoseconds: 5000000000\n      message_count: 10\n",
+        first + 30_000_000_000
+    );
+    std::fs::write(bag.join("metadata.yaml"), listed).unwrap();
+    let fused = d.path().join("bag.fused.mcap");
+    let report = ok_json(&[
+        "refuse",
+        s(&bag),
+        "--allow-missing-parts",
+        "-c",
+        s(&config),
+        "-o",
+        s(&fused),
+        "--json",
+    ]);
+    let windows = report["eval"]["windows"].to_string();
+    assert!(
+        windows.contains("missing part") && windows.contains("bag_1.mcap") && windows.contains("35"),
+        "{windows}"
+    );
     std::fs::write(
         bag.join("metadata.yaml"),
         "rosbag2_bagfile_information: {version: 9",
@@ -278,8 +348,74 @@ fn a_run_that_cannot_be_read_as_one_says_why_naming_the_file() {
         &["eval", s(&bag)],
         &["metadata.yaml", "not a rosbag2 metadata.yaml"],
     );
+    // A damaged part: the run is read up to the damage, which is named with the remedy.
+    let split = d.path().join("split");
+    std::fs::create_dir(&split).unwrap();
+    ok(&["merge", s(&a), "--split-every", "10", "-o", s(&split.join("run.mcap"))]);
+    let second = split.join("run-002.mcap");
+    let mut bytes = std::fs::read(&second).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0xff;
+    std::fs::write(&second, bytes).unwrap();
+    fails_saying(
+        &["refuse", s(&split), "-c", s(&config), "-o", s(&out)],
+        &["run-002.mcap", "damaged at byte", "railfuse recover"],
+    );
+    assert!(!out.exists());
     // A usage error, as clap gives it (with the usage line below).
     let out = railfuse(&["info", s(&a), "--clock-offset", "a.mcap=soon"]);
     assert!(!out.status.success() && stderr(&out).contains("offset 'soon' is not a number"));
     fails_saying(&["info", s(&a), s(&a)], &["given twice"]);
+}
+
+#[test]
+fn time_stamp_orders_a_run_by_each_message_s_own_stamp() {
+    let d = tempfile::tempdir().unwrap();
+    let whole = d.path().join("run.mcap");
+    simulate(&["--duration", "60"], &whole);
+    let parts = d.path().join("parts");
+    std::fs::create_dir(&parts).unwrap();
+    ok(&["merge", s(&whole), "--split-every", "20", "-o", s(&parts.join("run.mcap"))]);
+    let stamped = d.path().join("stamped.mcap");
+    ok(&["merge", s(&parts), "--time", "stamp", "-o", s(&stamped)]);
+    // Every message once, each at its own stamp, in stamp order.
+    let (mut n, mut last, mut out_of_order) = (0, 0u64, 0);
+    let mut r = LogReader::open(&stamped).unwrap();
+    while let Some(rec) = r.next() {
+        let LogRecord::Message(m) = rec.unwrap() else { continue };
+        if m.channel.topic.starts_with("/foxglove/") {
+            continue;
+        }
+        let any = m.decode_any(&stamped).unwrap().unwrap();
+        if any.kind() != railfuse_catalog::messages::MessageKind::TrackMap {
+            assert_eq!(m.log_time_ns, any.stamp_ns(), "{}", m.channel.topic);
+        }
+        out_of_order += usize::from(m.log_time_ns < last);
+        last = last.max(m.log_time_ns);
+        n += 1;
+    }
+    let original = ok_json(&["info", s(&whole), "--json"]);
+    let foxglove: u64 = original["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|c| c["topic"].as_str().unwrap().starts_with("/foxglove/"))
+        .map(|c| c["messages"].as_u64().unwrap())
+        .sum();
+    assert_eq!(n as u64, original["messages"].as_u64().unwrap() - foxglove);
+    assert_eq!(out_of_order, 0);
+    // In log time the same file is not in stamp order: the sensors' latencies differ.
+    let mut stamps_back = 0;
+    let mut last = 0u64;
+    let mut r = LogReader::open(&whole).unwrap();
+    while let Some(rec) = r.next() {
+        let LogRecord::Message(m) = rec.unwrap() else { continue };
+        if let Ok(Some(any)) = m.decode_any(&whole) {
+            if any.kind() != railfuse_catalog::messages::MessageKind::TrackMap {
+                stamps_back += usize::from(any.stamp_ns() < last);
+                last = last.max(any.stamp_ns());
+            }
+        }
+    }
+    assert!(stamps_back > 100, "{stamps_back}");
 }

@@ -68,24 +68,30 @@ fn simulate(
     json(&report)
 }
 
-/// The run of `inputs` (files, directories of parts, bags), as the command line reads it.
-fn open_run(inputs: &[PathBuf]) -> PyResult<Run> {
-    Run::open(inputs, &Default::default()).map_err(fail)
+/// The run of `inputs` (files, directories of parts, bags), as the command line reads it,
+/// its recorders put on one clock with `align = "gnss"`.
+fn open_run(inputs: &[PathBuf], align: &str) -> PyResult<Run> {
+    let options = railfuse_catalog::run::RunOptions {
+        align: align.parse().map_err(fail)?,
+        ..Default::default()
+    };
+    Run::open(inputs, &options).map_err(fail)
 }
 
 /// Re-fuses the run `inputs` with the pipelines of `config` into `output`, as `railfuse
 /// refuse` does (the same bytes); the refuse report and the accuracy table as JSON.
 #[pyfunction]
-#[pyo3(signature = (inputs, config, output, reference = "/truth"))]
+#[pyo3(signature = (inputs, config, output, reference = "/truth", align = "none"))]
 fn refuse(
     py: Python<'_>,
     inputs: Vec<PathBuf>,
     config: PathBuf,
     output: PathBuf,
     reference: &str,
+    align: &str,
 ) -> PyResult<String> {
     let pipelines = Pipelines::load(&config).map_err(fail)?;
-    let run = open_run(&inputs)?;
+    let run = open_run(&inputs, align)?;
     let (report, eval) = py
         .detach(|| {
             refuse_log(&RefuseOptions {
@@ -104,9 +110,14 @@ fn refuse(
 
 /// The accuracy table of a fused run against `reference`, as JSON.
 #[pyfunction]
-#[pyo3(signature = (inputs, reference = "/truth"))]
-fn evaluate(py: Python<'_>, inputs: Vec<PathBuf>, reference: &str) -> PyResult<String> {
-    let run = open_run(&inputs)?;
+#[pyo3(signature = (inputs, reference = "/truth", align = "none"))]
+fn evaluate(
+    py: Python<'_>,
+    inputs: Vec<PathBuf>,
+    reference: &str,
+    align: &str,
+) -> PyResult<String> {
+    let run = open_run(&inputs, align)?;
     let report = py
         .detach(|| railfuse_eval::evaluate(&run, reference))
         .map_err(fail)?;
@@ -121,7 +132,7 @@ fn read_json_lines<'py>(
     inputs: Vec<PathBuf>,
     topic: &str,
 ) -> PyResult<Bound<'py, PyBytes>> {
-    let run = open_run(&inputs)?;
+    let run = open_run(&inputs, "none")?;
     let path = run.name().to_owned();
     let lines = py
         .detach(|| -> Result<Option<Vec<u8>>, railfuse_catalog::Error> {

@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
-use super::measure::{find_python, mib_of, RunStats};
+use super::measure::{find_python, mib_of, refuse_run_child, Measured};
 use railfuse_experiments::sources::SEED001_PIPELINES;
 
 use super::DEFAULT_PIPELINES;
@@ -18,7 +18,7 @@ const PEER: &str = include_str!("../../bench/peer_refuse.py");
 
 #[derive(clap::Args)]
 // One measurement a run: a second mode flag is refused, not silently dropped.
-#[command(group(clap::ArgGroup::new("mode").args(["record", "viz", "tune", "em", "safety", "gnss_ins", "eddy_current"])))]
+#[command(group(clap::ArgGroup::new("mode").args(["record", "viz", "tune", "em", "safety", "gnss_ins", "eddy_current", "runs"])))]
 pub struct Args {
     /// Durations (s) of the simulated default-scenario logs to measure with samples/kalman.toml;
     /// memory should not grow with them.
@@ -79,15 +79,12 @@ pub struct Args {
     /// on a default run (two sensors at 10 kHz) of this many seconds, against real time.
     #[arg(long, value_name = "SECONDS")]
     pub eddy_current: Option<f64>,
+    /// Measure runs of many files instead: a default run of this many seconds re-fused whole,
+    /// as 20 parts, and as three recorders' files with --align gnss (time and peak memory).
+    #[arg(long, value_name = "SECONDS")]
+    pub runs: Option<f64>,
 }
 
-/// One measured `refuse` run.
-struct Measured {
-    wall_s: f64,
-    peak_rss_kib: Option<u64>,
-    /// Epochs of each pipeline with safety checks.
-    safety_epochs: Vec<u64>,
-}
 
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
@@ -111,6 +108,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let Some(secs) = a.eddy_current {
         return eddy_current(&a.dir, secs, a.repeat);
+    }
+    if let Some(secs) = a.runs {
+        return super::bench_runs::run(&a.dir, secs, a.repeat);
     }
     refuse_table(&a)
 }
@@ -351,32 +351,7 @@ fn eddy_current(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
 /// `railfuse refuse` in a child process, timed from spawn to exit, so its peak memory is its
 /// own and the time is what a user waits.
 fn refuse_child(raw: &Path, config: &Path, fused: &Path) -> Result<Measured> {
-    let exe = std::env::current_exe()?;
-    let started = Instant::now();
-    let out = Command::new(&exe)
-        .args(["refuse", "--json", "-c"])
-        .arg(config)
-        .arg("-o")
-        .arg(fused)
-        .arg(raw)
-        .output()?;
-    let wall_s = started.elapsed().as_secs_f64();
-    if !out.status.success() {
-        bail!("refuse failed: {}", String::from_utf8_lossy(&out.stderr));
-    }
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
-    let stats: RunStats = serde_json::from_value(v["run"].clone())?;
-    let safety_epochs = v["eval"]["pipelines"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .filter_map(|p| p["safety"]["epochs"].as_u64())
-        .collect();
-    Ok(Measured {
-        wall_s,
-        peak_rss_kib: stats.peak_rss_kib,
-        safety_epochs,
-    })
+    refuse_run_child(&[raw], &[], config, fused)
 }
 
 /// The Python peer on the same file, timed the same way (interpreter start included).

@@ -1,6 +1,6 @@
 use anyhow::Result;
 use railfuse_catalog::inspect::{summarise, LogSummary};
-use railfuse_catalog::run::Run;
+use railfuse_catalog::run::{Alignment, Run};
 
 use super::run_input::RunArgs;
 use crate::table::Table;
@@ -37,6 +37,9 @@ pub fn run(a: Args) -> Result<()> {
     };
     if s.files.len() > 1 || !run.missing().is_empty() {
         print_files(&s, &run, &rel);
+    }
+    if let Some(clocks) = &s.clocks {
+        print_clocks(clocks, run.alignment().is_some());
     }
     let mut t = Table::new(&[
         "topic",
@@ -132,5 +135,50 @@ fn print_files(s: &LogSummary, run: &Run, rel: &dyn Fn(Option<u64>) -> String) {
                 None => String::new(),
             }
         );
+    }
+}
+
+/// Each input's clock against GNSS time, and whether `--align gnss` applied it.
+fn print_clocks(a: &Alignment, applied: bool) {
+    let mut t = Table::new(&[
+        "input",
+        "GNSS time from",
+        "pairs",
+        "offset s",
+        "drift ppm",
+        "residual rms ms",
+        "span s",
+    ]);
+    for e in &a.estimates {
+        match e {
+            Ok(e) => t.row(vec![
+                e.input.display().to_string(),
+                format!("{} ({})", e.source.label(), e.topics.join(", ")),
+                e.pairs.to_string(),
+                format!("{:+.6}", e.clock.offset_s()),
+                format!("{:+.2}", e.clock.drift_ppm),
+                format!("{:.3}", e.residual_rms_ns / 1e6),
+                format!("{:.1}", e.span_s),
+            ]),
+            Err(n) => t.row(vec![
+                n.input.display().to_string(),
+                n.cause.clone(),
+                "-".into(),
+                "-".into(),
+                "-".into(),
+                "-".into(),
+                "-".into(),
+            ]),
+        }
+    }
+    println!("clocks against GNSS time (local − GNSS at each input's first pair):");
+    print!("{t}");
+    match (applied, a.reference) {
+        (true, Some(r)) => println!(
+            "--align gnss: every input on the clock of {} (the file table's clock columns)",
+            a.estimates[r].as_ref().map_or(String::new(), |e| e.input.display().to_string())
+        ),
+        (false, Some(_)) => println!("--align gnss puts every input on the first one's clock"),
+        _ => {}
     }
 }

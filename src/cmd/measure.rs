@@ -1,7 +1,11 @@
 //! What a run costs, as the commands and benchmarks report it: wall time and throughput, this
 //! process's peak memory, and the Python a benchmark compares against.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{bail, Result};
 
 /// A command's wall time, throughput and peak memory (`refuse --json`, the benchmarks).
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
@@ -32,3 +36,49 @@ pub fn find_python() -> Option<PathBuf> {
     let venv = PathBuf::from(".venv-interop/bin/python");
     venv.exists().then_some(venv)
 }
+
+/// One measured `refuse` run.
+pub struct Measured {
+    pub wall_s: f64,
+    pub peak_rss_kib: Option<u64>,
+    /// Epochs of each pipeline with safety checks.
+    pub safety_epochs: Vec<u64>,
+}
+
+/// `railfuse refuse` of a run (its inputs, with more options) in a child process, timed
+/// from spawn to exit, so its peak memory is its own and the time is what a user waits.
+pub fn refuse_run_child(
+    inputs: &[&Path],
+    options: &[&str],
+    config: &Path,
+    fused: &Path,
+) -> Result<Measured> {
+    let exe = std::env::current_exe()?;
+    let started = Instant::now();
+    let out = Command::new(&exe)
+        .args(["refuse", "--json", "-q", "-c"])
+        .arg(config)
+        .arg("-o")
+        .arg(fused)
+        .args(options)
+        .args(inputs)
+        .output()?;
+    let wall_s = started.elapsed().as_secs_f64();
+    if !out.status.success() {
+        bail!("refuse failed: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout)?;
+    let stats: RunStats = serde_json::from_value(v["run"].clone())?;
+    let safety_epochs = v["eval"]["pipelines"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|p| p["safety"]["epochs"].as_u64())
+        .collect();
+    Ok(Measured {
+        wall_s,
+        peak_rss_kib: stats.peak_rss_kib,
+        safety_epochs,
+    })
+}
+

@@ -14,7 +14,7 @@ use railfuse_refuse::spec::Pipelines;
 
 use super::eval::print_eval;
 use super::measure::{peak_rss_kib, RunStats};
-use super::run_input::RunArgs;
+use super::run_input::{RunArgs, SplitArgs};
 use railfuse_catalog::run::Run;
 
 #[derive(clap::Args)]
@@ -38,6 +38,9 @@ pub struct Args {
     /// itself: it is replaced only once the new file is complete.
     #[arg(short, long, required_unless_present = "config_schema")]
     pub output: Option<PathBuf>,
+    /// The output in parts (OUTPUT-001.mcap, …), as `merge` writes them.
+    #[command(flatten)]
+    pub split: SplitArgs,
     /// Reference trajectory for the accuracy table (ground truth, another pipeline's state or
     /// a GNSS fix channel). Without it, the ground truth (`/truth`) where the log has one.
     #[arg(long)]
@@ -67,6 +70,12 @@ pub fn run(a: Args) -> Result<()> {
     };
     let run = a.run.open()?;
     let input = &run;
+    let rule = a.split.rule(input)?;
+    // A split output is written whole first, then cut into its parts.
+    let whole = match rule.splits() {
+        true => output.with_extension("whole.mcap.partial"),
+        false => output.to_owned(),
+    };
     if let Some(topic) = &a.reference {
         super::eval::check_reference_in_log(input, topic)?;
     }
@@ -82,7 +91,7 @@ pub fn run(a: Args) -> Result<()> {
     let observer = live.as_ref().map(LiveView::observer);
     let (report, eval, stats) = refuse_with(
         input,
-        output,
+        &whole,
         &config,
         source,
         reference,
@@ -92,11 +101,15 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(live) = live {
         live.finish();
     }
+    let parts = match rule.splits() {
+        true => Some(split_output(&whole, output, rule)?),
+        false => None,
+    };
     if a.json {
         println!(
             "{}",
             serde_json::to_string_pretty(
-                &serde_json::json!({ "refuse": report, "eval": eval, "run": stats })
+                &serde_json::json!({ "refuse": report, "eval": eval, "run": stats, "parts": parts })
             )?
         );
     } else {
@@ -105,6 +118,36 @@ pub fn run(a: Args) -> Result<()> {
     }
     // The fused log is written; the table the user asked for could not be made.
     super::eval::check_reference_used(input, a.reference.as_deref(), &eval)
+}
+
+/// Cuts the fused log `whole` into the parts of `output` by `rule`, then removes it.
+fn split_output(
+    whole: &Path,
+    output: &Path,
+    rule: railfuse_catalog::log::SplitRule,
+) -> Result<Vec<PathBuf>> {
+    let written = railfuse_catalog::run::merge(
+        &Run::file(whole),
+        output,
+        rule,
+        &railfuse_catalog::log::WriterOptions::default(),
+    );
+    let written = match written {
+        Ok(r) => r,
+        Err(e) => anyhow::bail!("{e} (the whole fused log is kept in {})", whole.display()),
+    };
+    std::fs::remove_file(whole).map_err(|e| anyhow::anyhow!("{}: {e}", whole.display()))?;
+    crate::say!(
+        "fused log in {} parts: {}",
+        written.outputs.len(),
+        written
+            .outputs
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(written.outputs)
 }
 
 /// The default pipeline of a log given no configuration, with what it used and left out said

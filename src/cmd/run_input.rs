@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use railfuse_catalog::run::{ClockOffset, Run, RunOptions, TimeBasis};
+use railfuse_catalog::log::SplitRule;
+use railfuse_catalog::run::{Align, ClockOffset, Run, RunOptions, TimeBasis};
 
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct RunArgs {
@@ -16,13 +17,18 @@ pub struct RunArgs {
     /// for a clock ahead (its times are moved back). May be given for each file.
     #[arg(long = "clock-offset", value_name = "FILE=SECONDS")]
     pub clock_offsets: Vec<ClockOffset>,
-    /// The time that orders the merged run and is each message's time: log (when recorded)
-    /// or publish (when sent).
-    #[arg(long = "time", value_name = "log|publish", default_value = "log")]
+    /// The time that orders the merged run and is each message's time: log (when recorded),
+    /// publish (when sent) or stamp (when the sensor measured it, each part held back 2 s).
+    #[arg(long = "time", value_name = "log|publish|stamp", default_value = "log")]
     pub time: TimeBasis,
     /// Read a bag whose metadata.yaml lists a file that is not there, naming the gap.
     #[arg(long)]
     pub allow_missing_parts: bool,
+    /// Put several recorders on one clock: gnss estimates each input's offset and drift from
+    /// the GNSS time it logged (time references, else GNSS fixes) and moves every input onto
+    /// the first one's clock, the stamps it took included. A --clock-offset given wins.
+    #[arg(long, value_name = "none|gnss", default_value = "none")]
+    pub align: Align,
 }
 
 impl RunArgs {
@@ -37,8 +43,33 @@ impl RunArgs {
                 time: self.time,
                 clock_offsets: self.clock_offsets.clone(),
                 allow_missing_parts: self.allow_missing_parts,
+                align: self.align,
             },
         )?;
+        if let Some(alignment) = run.alignment() {
+            for e in alignment.estimates.iter().flatten() {
+                crate::say!(
+                    "{}",
+                    format!(
+                    "{}: clock {:+.6} s, {:+.2} ppm against GNSS time (from {} pairs of {}, residual rms {:.3} ms)",
+                    e.input.display(),
+                    e.clock.offset_s(),
+                    e.clock.drift_ppm,
+                    e.pairs,
+                    e.source.label(),
+                    e.residual_rms_ns / 1e6
+                    )
+                );
+            }
+            for n in alignment.unaligned() {
+                eprintln!(
+                    "warning: {}: left on its own clock: {}; give --clock-offset {}=SECONDS",
+                    n.input.display(),
+                    n.cause,
+                    n.input.display()
+                );
+            }
+        }
         for missing in run.missing() {
             eprintln!(
                 "warning: {}: listed in the bag's metadata.yaml but not there: {} messages{} left out",
@@ -54,5 +85,91 @@ impl RunArgs {
             );
         }
         Ok(run)
+    }
+}
+
+/// How a command that writes a run writes it in parts (merge, refuse).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct SplitArgs {
+    /// Write parts of about this many MiB each: OUT-001.mcap, OUT-002.mcap, …
+    #[arg(long, value_name = "MIB")]
+    pub split_size: Option<f64>,
+    /// Write parts spanning this many seconds each.
+    #[arg(long, value_name = "SECONDS")]
+    pub split_every: Option<f64>,
+    /// Begin a new part at each of these times (seconds from the run's first message).
+    #[arg(long, value_delimiter = ',', value_name = "SECONDS,…")]
+    pub split_at: Vec<f64>,
+    /// Begin a new part where each file of the input begins: fused parts beside raw parts.
+    #[arg(long)]
+    pub split_as_input: bool,
+}
+
+/// Where a part begins after every part before it has ended (within 1 s: a split boundary's
+/// messages may straddle it), from the run's first message: a split run's boundaries, none
+/// for recorders that run side by side.
+fn sequential_starts(spans: &[Option<(u64, u64)>]) -> Vec<u64> {
+    const STRADDLE_NS: u64 = 1_000_000_000;
+    let mut spans: Vec<(u64, u64)> = spans.iter().flatten().copied().collect();
+    spans.sort_unstable();
+    let Some(&(first, end)) = spans.first() else {
+        return Vec::new();
+    };
+    let mut ended = end;
+    let mut starts = Vec::new();
+    for &(a, b) in &spans[1..] {
+        if a + STRADDLE_NS >= ended && a > first {
+            starts.push(a - first);
+        }
+        ended = ended.max(b);
+    }
+    starts
+}
+
+/// Seconds as given on the command line, checked, in ns.
+fn seconds_ns(flag: &str, s: f64) -> Result<u64> {
+    anyhow::ensure!(s.is_finite() && s > 0.0, "{flag} {s}: expected seconds > 0");
+    Ok((s * 1e9).round() as u64)
+}
+
+impl SplitArgs {
+    /// The rule, checked; the input's part starts for --split-as-input.
+    pub fn rule(&self, run: &Run) -> Result<SplitRule> {
+        let mut at_ns = self
+            .split_at
+            .iter()
+            .map(|&s| seconds_ns("--split-at", s))
+            .collect::<Result<Vec<_>>>()?;
+        if self.split_as_input {
+            let splits = sequential_starts(&run.part_spans()?);
+            if splits.is_empty() {
+                eprintln!(
+                    "warning: --split-as-input: {}'s files run side by side (several \
+                     recorders), not one after another: the output is one file",
+                    run.display()
+                );
+            }
+            at_ns.extend(splits);
+        }
+        at_ns.sort_unstable();
+        at_ns.dedup();
+        let bytes = match self.split_size {
+            Some(mib) => {
+                anyhow::ensure!(
+                    mib.is_finite() && mib > 0.0,
+                    "--split-size {mib}: expected MiB > 0"
+                );
+                Some((mib * (1 << 20) as f64) as u64)
+            }
+            None => None,
+        };
+        Ok(SplitRule {
+            bytes,
+            every_ns: self
+                .split_every
+                .map(|s| seconds_ns("--split-every", s))
+                .transpose()?,
+            at_ns,
+        })
     }
 }

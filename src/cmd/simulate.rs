@@ -2,8 +2,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Result};
-use railfuse_record::simulator::FaultSpec;
-use railfuse_record::{simulate, Scenario, SimulationReport};
+use railfuse_record::simulator::{FaultSpec, MAX_RECORDERS};
+use railfuse_record::{simulate, simulate_recorders, Scenario, SimRecorder, SimulationReport};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -19,7 +19,13 @@ pub struct Args {
     pub duration: Option<f64>,
     #[arg(long = "fault", value_name = "DEVICE:MODE:START:END[:reported]", help = fault_help())]
     pub faults: Vec<FaultSpec>,
-    /// Output MCAP file.
+    /// Write the run as several recorders on a train write it, each its own file on its own
+    /// clock with a PPS time reference: NAME[=SECONDS[,DRIFTppm]], one to three times. The
+    /// first logs GNSS, IMU, map, events and truth; the second the odometry (and the radar,
+    /// without a third); the third the radar. OUTPUT is then a folder of NAME.mcap files.
+    #[arg(long = "recorder", value_name = "NAME[=SECONDS[,DRIFTppm]]")]
+    pub recorders: Vec<SimRecorder>,
+    /// Output MCAP file (a folder with --recorder).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Print the report as JSON.
@@ -28,11 +34,58 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    let report = simulate_to(&a.scenario, a.seed, a.duration, &a.faults, &a.output)?;
+    let report = match a.recorders.is_empty() {
+        true => simulate_to(&a.scenario, a.seed, a.duration, &a.faults, &a.output)?,
+        false => simulate_recorders_to(&a)?,
+    };
     if a.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     }
     Ok(())
+}
+
+/// A run written by several recorders, one file each in the output folder.
+fn simulate_recorders_to(a: &Args) -> Result<SimulationReport> {
+    let preset = preset(&a.scenario, a.duration, &a.faults)?;
+    if a.recorders.len() > MAX_RECORDERS {
+        bail!("--recorder: at most {MAX_RECORDERS} recorders (GNSS/INS box, odometry rack, radar)");
+    }
+    let report = simulate_recorders(
+        &preset,
+        a.seed,
+        a.duration,
+        &a.faults,
+        &a.recorders,
+        &a.output,
+    )?;
+    if let Err(e) = Scenario::faults_within(report.duration_s, &a.faults) {
+        report.files.iter().for_each(|f| drop(std::fs::remove_file(f)));
+        bail!("--{e}");
+    }
+    crate::say!(
+        "simulated '{}' seed {}: {:.1} s of run, {} messages by {} recorders -> {}",
+        report.scenario,
+        a.seed,
+        report.duration_s,
+        report.messages,
+        a.recorders.len(),
+        report.files.join(", ")
+    );
+    Ok(report)
+}
+
+/// The scenario preset, checked against the duration and faults asked for.
+fn preset(scenario: &str, duration: Option<f64>, faults: &[FaultSpec]) -> Result<Scenario> {
+    let Some(preset) = Scenario::preset(scenario) else {
+        bail!(
+            "unknown scenario '{scenario}' (presets: {})",
+            Scenario::NAMES.join(", ")
+        );
+    };
+    preset
+        .check(duration, faults)
+        .map_err(|e| anyhow::anyhow!("--{e}"))?;
+    Ok(preset)
 }
 
 /// Simulates and prints a one-paragraph summary to stderr; shared with `demo` and `bench`.
@@ -43,15 +96,7 @@ pub fn simulate_to(
     faults: &[FaultSpec],
     output: &std::path::Path,
 ) -> Result<SimulationReport> {
-    let Some(preset) = Scenario::preset(scenario) else {
-        bail!(
-            "unknown scenario '{scenario}' (presets: {})",
-            Scenario::NAMES.join(", ")
-        );
-    };
-    preset
-        .check(duration, faults)
-        .map_err(|e| anyhow::anyhow!("--{e}"))?;
+    let preset = preset(scenario, duration, faults)?;
     let started = Instant::now();
     let report = simulate(&preset, seed, duration, faults, output)?;
     // A preset's whole run is known only once driven: a fault after its end is said now.

@@ -80,6 +80,10 @@ pub struct LogSummary {
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
     pub attachments: Vec<AttachmentSummary>,
     pub fused_pipelines: Vec<String>,
+    /// Each input's clock against GNSS time, for a run of several inputs (as `--align gnss`
+    /// applied them, or estimated to be shown).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub clocks: Option<crate::run::Alignment>,
 }
 
 /// Log times held per channel to put them back in order before measuring gaps: a message more
@@ -224,6 +228,11 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
         .map(str::to_owned)
         .collect();
     let gaps_between_files = gaps_between(&files, run);
+    let clocks = match (run.alignment(), run.inputs().len()) {
+        (Some(a), _) => Some(a.clone()),
+        (None, 1) => None,
+        (None, _) => Some(run.estimate_clocks()?),
+    };
     Ok(LogSummary {
         file: run.display(),
         file_bytes: run.total_bytes(),
@@ -240,6 +249,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
         metadata,
         attachments,
         fused_pipelines: fused.into_iter().collect(),
+        clocks,
     })
 }
 

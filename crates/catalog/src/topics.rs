@@ -15,6 +15,9 @@ pub const TRACK_MAP: &str = "/track/map";
 pub const GROUND_TRUTH: &str = "/truth";
 pub const EVENTS: &str = "/events";
 pub const RECORDER_DIAGNOSTICS: &str = "/recorder/diagnostics";
+/// A recorder's clock against GNSS time (its PPS); `/time_reference/<recorder>` where a run
+/// has several recorders, one topic each.
+pub const TIME_REFERENCE: &str = "/time_reference";
 
 /// The message kind a standard topic carries.
 pub fn standard_kind(topic: &str) -> Option<MessageKind> {
@@ -30,8 +33,14 @@ pub fn standard_kind(topic: &str) -> Option<MessageKind> {
         GROUND_TRUTH => MessageKind::GroundTruth,
         EVENTS => MessageKind::Event,
         RECORDER_DIAGNOSTICS => MessageKind::RecorderDiagnostics,
+        TIME_REFERENCE => MessageKind::TimeReference,
         _ => return None,
     })
+}
+
+/// `/time_reference/<recorder>`: one recorder's time reference in a run of several.
+pub fn time_reference(recorder: &str) -> String {
+    format!("{TIME_REFERENCE}/{recorder}")
 }
 
 /// `/tune/<pipeline>/trace`: the convergence trace of a tuning run of one pipeline.

@@ -429,28 +429,11 @@ impl Evaluator {
     }
 
     /// The report. Smoothed states not fed directly are scored from `log` (a run holding
-    /// them and the reference) in passes of their own.
+    /// them and the reference) in passes of their own; a part the run is missing is named
+    /// among the windows.
     pub fn finish(mut self, log: &Run) -> Result<EvalReport> {
         if self.smoothed_channels && self.reference.is_some() {
-            let channels: Vec<(u16, usize)> = self
-                .roles
-                .iter()
-                .filter(|(id, _)| !self.smoothed_fed.contains_key(id))
-                .filter_map(|(&id, r)| {
-                    if let Role::Smoothed(i) = r {
-                        Some((id, *i))
-                    } else {
-                        None
-                    }
-                })
-                .collect();
-            score_smoothed(
-                log,
-                &self.reference_topic,
-                &channels,
-                &mut self.scored,
-                &self.spans,
-            )?;
+            self.score_smoothed_from(log)?;
         }
         let t0 = self.first_ns.unwrap_or(0);
         let filters = self.filters;
@@ -462,55 +445,83 @@ impl Evaluator {
             .filter(|s| {
                 s.states > 0 || s.gated > 0 || s.nis.summary().is_some() || s.safety.is_some()
             })
-            .map(|mut s| {
-                s.meter.finish();
-                let safety = s.safety.take().map(|t| t.finish(s.meter.containment, t0));
-                PipelineEval {
-                    safety,
-                    plane: s.plane.summary(),
-                    filter: filters.get(&s.pipeline).cloned(),
-                    name: s.name,
-                    pipeline: s.pipeline,
-                    states: s.states,
-                    position_error_m: s.meter.position.summary(),
-                    speed_error_mps: s.meter.speed.summary(),
-                    nees: s.meter.nees.summary(),
-                    beyond_3_sigma: s.meter.beyond_3_sigma.share(),
-                    nis: s.nis.summary(),
-                    gated: s.gated,
-                    lockout_recoveries: s.lockouts,
-                    resets_to_fix: s.resets,
-                    device_fault_rejections: s.device_fault,
-                    unmatched_states: s.meter.unmatched,
-                    states_in_reference_gaps: s.meter.in_reference_gaps,
-                    windows: s
-                        .meter
-                        .windows
-                        .iter()
-                        .map(|w| WindowEval {
-                            label: w.label.clone(),
-                            position_error_m: w.position.summary(),
-                            speed_error_mps: w.speed.summary(),
-                        })
-                        .collect(),
-                }
-            })
+            .map(|s| pipeline_eval(s, &filters, t0))
             .collect();
         let secs = |t: u64| t.saturating_sub(t0) as f64 / 1e9;
+        let missing = log.missing().iter().filter_map(|m| {
+            let start = m.start_ns?;
+            Some(SpanReport {
+                label: format!("missing part {}", m.path.display()),
+                start_s: secs(start),
+                end_s: m.duration_ns.map(|d| secs(start + d)),
+            })
+        });
+        let spans = self.spans.iter().map(|s| SpanReport {
+            label: s.label.clone(),
+            start_s: secs(s.start_ns),
+            end_s: s.end_ns.map(secs),
+        });
         Ok(EvalReport {
             input: self.path,
             reference: self.reference.map(|_| self.reference_topic),
-            windows: self
-                .spans
-                .iter()
-                .map(|s| SpanReport {
-                    label: s.label.clone(),
-                    start_s: secs(s.start_ns),
-                    end_s: s.end_ns.map(secs),
-                })
-                .collect(),
+            windows: spans.chain(missing).collect(),
             pipelines,
         })
+    }
+
+    /// Scores the smoothed channels the replay did not feed from `log`.
+    fn score_smoothed_from(&mut self, log: &Run) -> Result<()> {
+        let channels: Vec<(u16, usize)> = self
+            .roles
+            .iter()
+            .filter(|(id, _)| !self.smoothed_fed.contains_key(id))
+            .filter_map(|(&id, r)| match r {
+                Role::Smoothed(i) => Some((id, *i)),
+                _ => None,
+            })
+            .collect();
+        score_smoothed(
+            log,
+            &self.reference_topic,
+            &channels,
+            &mut self.scored,
+            &self.spans,
+        )
+    }
+}
+
+/// One pipeline's line of the report.
+fn pipeline_eval(mut s: Scored, filters: &BTreeMap<String, String>, t0: u64) -> PipelineEval {
+    s.meter.finish();
+    let safety = s.safety.take().map(|t| t.finish(s.meter.containment, t0));
+    PipelineEval {
+        safety,
+        plane: s.plane.summary(),
+        filter: filters.get(&s.pipeline).cloned(),
+        name: s.name,
+        pipeline: s.pipeline,
+        states: s.states,
+        position_error_m: s.meter.position.summary(),
+        speed_error_mps: s.meter.speed.summary(),
+        nees: s.meter.nees.summary(),
+        beyond_3_sigma: s.meter.beyond_3_sigma.share(),
+        nis: s.nis.summary(),
+        gated: s.gated,
+        lockout_recoveries: s.lockouts,
+        resets_to_fix: s.resets,
+        device_fault_rejections: s.device_fault,
+        unmatched_states: s.meter.unmatched,
+        states_in_reference_gaps: s.meter.in_reference_gaps,
+        windows: s
+            .meter
+            .windows
+            .iter()
+            .map(|w| WindowEval {
+                label: w.label.clone(),
+                position_error_m: w.position.summary(),
+                speed_error_mps: w.speed.summary(),
+            })
+            .collect(),
     }
 }
 

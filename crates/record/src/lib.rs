@@ -16,7 +16,7 @@ pub mod recorder;
 pub mod simulator;
 
 pub use error::{Error, Result};
-pub use simulator::{simulate, Scenario, SimulationReport};
+pub use simulator::{simulate, simulate_recorders, Scenario, SimRecorder, SimulationReport};
 
 /// The version written into every log's run metadata.
 pub const TOOL_VERSION: &str = concat!("railfuse ", env!("CARGO_PKG_VERSION"));

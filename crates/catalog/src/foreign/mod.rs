@@ -10,6 +10,7 @@
 pub mod foxglove;
 pub mod protobuf;
 pub mod ros2;
+pub mod rosbag2_sqlite;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

@@ -598,6 +598,30 @@ mod tests {
     use super::*;
     use crate::foreign::Translator;
 
+    #[test]
+    fn a_header_stamp_moves_with_the_clock_and_other_messages_do_not() {
+        let msg = NavSatFix {
+            header: header_at(1_780_300_800_250_000_000, "gps"),
+            status: NavSatStatus { status: 0, service: 0 },
+            latitude: 44.6,
+            longitude: 10.9,
+            altitude: 40.0,
+            position_covariance: [0.0; 9],
+            position_covariance_type: 0,
+        };
+        let data = to_cdr(&msg);
+        let mut out = Vec::new();
+        let back = |t: u64| t - 1_200_000_000;
+        assert!(restamp_header(NAV_SAT_FIX_DEFINITION.as_bytes(), &data, back, &mut out));
+        let moved: NavSatFix = from_cdr(&out, "NavSatFix").unwrap();
+        assert_eq!((moved.header.stamp.sec, moved.header.stamp.nanosec), (1_780_300_799, 50_000_000));
+        assert_eq!((moved.latitude, moved.header.frame_id.as_str()), (44.6, "gps"));
+        // A definition without a header first, and a zero stamp, are left alone.
+        assert!(!restamp_header(b"float64 x\n", &data, back, &mut out));
+        let zero = to_cdr(&NavSatFix { header: header_at(0, "gps"), ..msg });
+        assert!(!restamp_header(NAV_SAT_FIX_DEFINITION.as_bytes(), &zero, back, &mut out));
+    }
+
     /// A CDR little-endian payload of a NavSatFix, written field by field as ROS 2 writes it.
     fn nav_sat_fix_payload(status: i8, lat: f64) -> Vec<u8> {
         let mut b = vec![0x00, 0x01, 0x00, 0x00];
@@ -660,4 +684,57 @@ mod tests {
             .unwrap()
             .is_none());
     }
+}
+
+/// A CDR message whose definition begins with a `std_msgs/Header` (every stamped sensor
+/// message) with its `header.stamp` moved by `correct`, into `out`; false (nothing written)
+/// for any other message or a zero stamp (no time of its own).
+pub fn restamp_header(
+    definition: &[u8],
+    data: &[u8],
+    correct: impl Fn(u64) -> u64,
+    out: &mut Vec<u8>,
+) -> bool {
+    let first_field = std::str::from_utf8(definition)
+        .ok()
+        .and_then(|d| {
+            d.lines()
+                .map(str::trim)
+                .find(|l| !l.is_empty() && !l.starts_with('#'))
+        })
+        .unwrap_or("");
+    let header = matches!(
+        first_field.split_whitespace().collect::<Vec<_>>()[..],
+        ["std_msgs/Header" | "std_msgs/msg/Header" | "Header", _]
+    );
+    if !header || data.len() < 12 {
+        return false;
+    }
+    let little = match data[1] {
+        0x01 | 0x03 => true,
+        0x00 | 0x02 => false,
+        _ => return false,
+    };
+    let word = |b: &[u8]| {
+        let b: [u8; 4] = b.try_into().expect("4 bytes");
+        if little {
+            u32::from_le_bytes(b)
+        } else {
+            u32::from_be_bytes(b)
+        }
+    };
+    let (sec, nanosec) = (word(&data[4..8]) as i32, word(&data[8..12]));
+    if sec <= 0 && nanosec == 0 || sec < 0 || nanosec >= 1_000_000_000 {
+        return false;
+    }
+    let t = correct(sec as u64 * 1_000_000_000 + nanosec as u64);
+    let (Ok(sec), nanosec) = (i32::try_from(t / 1_000_000_000), (t % 1_000_000_000) as u32) else {
+        return false;
+    };
+    let bytes = |v: u32| if little { v.to_le_bytes() } else { v.to_be_bytes() };
+    out.clear();
+    out.extend_from_slice(data);
+    out[4..8].copy_from_slice(&bytes(sec as u32));
+    out[8..12].copy_from_slice(&bytes(nanosec));
+    true
 }

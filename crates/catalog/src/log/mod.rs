@@ -14,7 +14,7 @@ mod writer;
 
 pub use parts::{part_path, PartWriter, SplitRule};
 pub use reader::{
-    read_channels, read_summary, ChannelInfo, LogMessage, LogReader, LogRecord, LogSummary,
+    read_channels, read_metadata, read_summary, ChannelInfo, LogMessage, LogReader, LogRecord, LogSummary,
     SchemaInfo,
 };
 pub use recover::{recover, RecoverReport};

@@ -516,6 +516,43 @@ pub fn read_summary(path: &Path) -> Result<Option<LogSummary>> {
     }))
 }
 
+/// The metadata record `name` of a file, found through its summary's metadata index (two
+/// seeks, no data read); `None` when the file has no summary or no such record.
+pub fn read_metadata(path: &Path, name: &str) -> Result<Option<BTreeMap<String, String>>> {
+    use std::io::{Seek, SeekFrom};
+    let Some(raw) = read_summary_records(path)? else {
+        return Ok(None);
+    };
+    for framed in Records::new(&raw) {
+        let framed = framed.map_err(|e| Error::mcap(path, format!("summary: {e}")))?;
+        if framed.opcode != op::METADATA_INDEX {
+            continue;
+        }
+        let Ok(Record::MetadataIndex(index)) = mcap::parse_record(framed.opcode, framed.body)
+        else {
+            continue;
+        };
+        if index.name != name {
+            continue;
+        }
+        if index.length > super::RECORD_LENGTH_LIMIT as u64 {
+            return Err(Error::mcap(path, "a metadata record longer than any railfuse reads"));
+        }
+        let mut file = open_checked(path)?;
+        let mut record = vec![0u8; index.length as usize];
+        file.seek(SeekFrom::Start(index.offset))
+            .and_then(|_| file.read_exact(&mut record))
+            .map_err(|e| Error::io(path, e))?;
+        let at_index = || Error::mcap(path, format!("no metadata record where the index puts {name}"));
+        let framed = Records::new(&record).next().ok_or_else(at_index)?.map_err(|_| at_index())?;
+        return match mcap::parse_record(framed.opcode, framed.body) {
+            Ok(Record::Metadata(m)) => Ok(Some(m.metadata)),
+            _ => Err(at_index()),
+        };
+    }
+    Ok(None)
+}
+
 /// The records of the summary section, from the footer's offsets; `None` when the file has no
 /// summary. A file without a valid footer (truncated) is an error.
 fn read_summary_records(path: &Path) -> Result<Option<Vec<u8>>> {

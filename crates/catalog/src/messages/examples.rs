@@ -46,6 +46,9 @@ impl MessageKind {
             MessageKind::BalisePassage => json!({
                 "stamp_ns": T, "balise_id": "B-0012", "chainage_m": 12_004.2, "variance_m2": 0.04
             }),
+            MessageKind::TimeReference => json!({
+                "stamp_ns": T, "local_ns": T + 350_000_123, "source": "pps"
+            }),
             MessageKind::EddyCurrentBlock => json!({
                 "stamp_ns": T, "sample_rate_hz": 10_000.0, "spacing_m": 0.3,
                 "sensor_a": [0.1, 0.4, -0.2], "sensor_b": [0.0, 0.1, 0.4],

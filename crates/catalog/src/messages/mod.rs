@@ -16,6 +16,7 @@ mod radar;
 mod recorder;
 mod registry;
 mod safety;
+mod time_reference;
 mod track_map;
 mod tuning;
 
@@ -34,8 +35,9 @@ pub use induction_loop::LoopPosition;
 pub use odometer::Odometer;
 pub use radar::RadarSpeed;
 pub use recorder::{RecorderDiagnostics, SourceStats};
-pub use registry::{AnyMessage, MessageKind};
+pub use registry::{AnyMessage, MessageKind, StampClock};
 pub use safety::{SafeInterval, SafetyCheck, SafetyStatus};
+pub use time_reference::TimeReference;
 pub use track_map::{
     SleeperSection, Station, TrackBalise, TrackLine, TrackMap, TrackSwitch, TrackVertex, Tunnel,
 };
@@ -45,7 +47,12 @@ use serde::{de::DeserializeOwned, Serialize};
 
 /// A message type that travels on a railfuse channel.
 pub trait ChannelMessage:
-    Serialize + DeserializeOwned + schemars::JsonSchema + crate::protobuf::ProtobufForm + 'static
+    Serialize
+    + DeserializeOwned
+    + Clone
+    + schemars::JsonSchema
+    + crate::protobuf::ProtobufForm
+    + 'static
 {
     /// The MCAP schema name, `railfuse.<Type>`.
     const SCHEMA_NAME: &'static str;
@@ -54,6 +61,7 @@ pub trait ChannelMessage:
 
     /// The sensor's own timestamp, ns since the Unix epoch.
     fn stamp_ns(&self) -> u64;
+    fn stamp_ns_mut(&mut self) -> &mut u64;
 
     /// The JSON schema of this type (draft 2020-12), as stored in the MCAP schema record.
     fn schema_bytes() -> Vec<u8> {

@@ -16,6 +16,9 @@ macro_rules! registry {
                 fn stamp_ns(&self) -> u64 {
                     self.stamp_ns
                 }
+                fn stamp_ns_mut(&mut self) -> &mut u64 {
+                    &mut self.stamp_ns
+                }
             }
 
             impl From<$ty> for AnyMessage {
@@ -142,6 +145,7 @@ registry!(
     ImuErrorModel,
     RecorderDiagnostics,
     TuneEvaluation,
+    TimeReference,
 );
 
 impl MessageKind {
@@ -154,6 +158,31 @@ impl MessageKind {
     pub fn from_type_name(name: &str) -> Option<Self> {
         Self::ALL.iter().copied().find(|k| k.type_name() == name)
     }
+
+    /// Whose clock this kind's `stamp_ns` is on: what correcting a recorder's clock moves.
+    pub fn stamp_clock(self) -> StampClock {
+        use MessageKind::*;
+        match self {
+            // The receiver's solution time, and a reference system's (GNSS-timed) truth.
+            GnssFix | TimeReference | GroundTruth => StampClock::Gnss,
+            Imu | RadarSpeed | Odometer | LoopPosition | BalisePassage | EddyCurrentBlock
+            | Event | RecorderDiagnostics => StampClock::Recorder,
+            TrackMap | FusedState | FusedDiagnostics | SafetyStatus | ImuErrorModel
+            | TuneEvaluation => StampClock::Derived,
+        }
+    }
+}
+
+/// Whose clock a message's stamp is on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StampClock {
+    /// GNSS time, whichever recorder logged it: a recorder's clock correction leaves it.
+    Gnss,
+    /// The recorder's own clock (it stamped the sample on arrival): corrected with the
+    /// recorder's clock, as its log time is.
+    Recorder,
+    /// Made from other messages' stamps (fused states) or not a time at all (a map).
+    Derived,
 }
 
 #[cfg(test)]

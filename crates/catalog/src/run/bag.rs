@@ -122,3 +122,75 @@ pub fn read(path: &Path) -> Result<Listed> {
         .collect::<Result<_>>()?;
     Ok(Listed { storage, parts })
 }
+
+/// One file of a run's manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ManifestFile {
+    pub name: String,
+    /// Its first and last message's log time (the repeated latched state left out); `None`
+    /// for a part with no message of its own yet.
+    pub span_ns: Option<(u64, u64)>,
+    pub messages: u64,
+}
+
+/// One topic of a run's manifest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ManifestTopic {
+    pub name: String,
+    pub type_name: String,
+    /// The channel's message encoding (json, protobuf, cdr).
+    pub encoding: String,
+    pub messages: u64,
+}
+
+/// Writes the manifest of a run split into `files` as the bag directory's `metadata.yaml` in
+/// `dir` (rosbag2's version 5 layout, MCAP storage), whole or not at all: written beside and
+/// renamed over the last one, so a crash leaves the previous manifest.
+pub fn write_manifest(dir: &Path, files: &[ManifestFile], topics: &[ManifestTopic]) -> Result<()> {
+    use std::fmt::Write;
+    let start = files.iter().filter_map(|f| f.span_ns).map(|s| s.0).min();
+    let end = files.iter().filter_map(|f| f.span_ns).map(|s| s.1).max();
+    let (start, end) = (start.unwrap_or(0), end.unwrap_or(0));
+    let mut y = String::from("rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n");
+    let total: u64 = files.iter().map(|f| f.messages).sum();
+    let _ = write!(
+        y,
+        "  duration:\n    nanoseconds: {}\n  starting_time:\n    nanoseconds_since_epoch: {start}\n  message_count: {total}\n",
+        end - start
+    );
+    y.push_str("  topics_with_message_count:\n");
+    for t in topics {
+        let _ = write!(
+            y,
+            "    - topic_metadata:\n        name: {}\n        type: {}\n        serialization_format: {}\n        offered_qos_profiles: \"\"\n      message_count: {}\n",
+            yaml_string(&t.name),
+            yaml_string(&t.type_name),
+            yaml_string(&t.encoding),
+            t.messages
+        );
+    }
+    y.push_str("  compression_format: \"\"\n  compression_mode: \"\"\n  relative_file_paths:\n");
+    for f in files {
+        let _ = writeln!(y, "    - {}", yaml_string(&f.name));
+    }
+    y.push_str("  files:\n");
+    for f in files {
+        let (a, b) = f.span_ns.unwrap_or((end, end));
+        let _ = write!(
+            y,
+            "    - path: {}\n      starting_time:\n        nanoseconds_since_epoch: {a}\n      duration:\n        nanoseconds: {}\n      message_count: {}\n",
+            yaml_string(&f.name),
+            b - a,
+            f.messages
+        );
+    }
+    let path = dir.join(METADATA);
+    let temporary = dir.join(format!(".{METADATA}.partial"));
+    std::fs::write(&temporary, y).map_err(|e| Error::io(&temporary, e))?;
+    std::fs::rename(&temporary, &path).map_err(|e| Error::io(&path, e))
+}
+
+/// A YAML double-quoted string (topic names may hold anything).
+fn yaml_string(s: &str) -> String {
+    serde_json::to_string(s).expect("a string serialises")
+}

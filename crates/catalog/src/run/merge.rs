@@ -88,6 +88,23 @@ fn clocks(run: &Run) -> BTreeMap<String, String> {
         "time".to_owned(),
         format!("{:?}", run.time_basis()).to_lowercase(),
     )]);
+    if let Some(alignment) = run.alignment() {
+        m.insert("align".into(), "gnss".into());
+        for (i, e) in alignment.estimates.iter().enumerate() {
+            let said = match e {
+                Ok(e) => format!(
+                    "{} against GNSS time: clock_offset_s={:+.9} drift_ppm={:+.3} from {} pairs of {}",
+                    e.input.display(),
+                    e.clock.offset_s(),
+                    e.clock.drift_ppm,
+                    e.pairs,
+                    e.source.label()
+                ),
+                Err(n) => format!("{}: {}", n.input.display(), n.cause),
+            };
+            m.insert(format!("input.{i:03}"), said);
+        }
+    }
     for (i, p) in run.parts().iter().enumerate() {
         let name = p.path.file_name().map_or_else(
             || p.path.display().to_string(),

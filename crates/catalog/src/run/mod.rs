@@ -19,14 +19,18 @@
 //!   parts) leaves once and is counted; one topic from two parts whose spans interleave is two
 //!   sources on one topic, refused with a hint.
 
+mod align;
 mod bag;
 mod channels;
 mod clock;
 mod merge;
 mod reader;
+mod stamp_order;
 
 use std::path::{Path, PathBuf};
 
+pub use align::{Align, Alignment, ClockEstimate, ClockSource, NoEstimate};
+pub use bag::{write_manifest, ManifestFile, ManifestTopic, METADATA as MANIFEST};
 pub use clock::{ClockMap, ClockOffset};
 pub use merge::{merge, MergeReport, MERGE_METADATA};
 pub use reader::{MergeCounts, RunReader};
@@ -42,6 +46,9 @@ pub enum TimeBasis {
     Log,
     /// When the sender published it (rosbag2's `sent`).
     Publish,
+    /// The message's own stamp (when the sensor measured it), as PlotJuggler's header-stamp
+    /// option: each part held back by a window so its stamps leave in order.
+    Stamp,
 }
 
 impl std::str::FromStr for TimeBasis {
@@ -50,7 +57,8 @@ impl std::str::FromStr for TimeBasis {
         match s {
             "log" => Ok(Self::Log),
             "publish" => Ok(Self::Publish),
-            other => Err(format!("time basis '{other}': use log or publish")),
+            "stamp" => Ok(Self::Stamp),
+            other => Err(format!("time basis '{other}': use log, publish or stamp")),
         }
     }
 }
@@ -95,6 +103,8 @@ pub struct RunOptions {
     pub clock_offsets: Vec<ClockOffset>,
     /// Read a bag whose metadata.yaml lists a part that is not there (the gap is named).
     pub allow_missing_parts: bool,
+    /// Put the recorders on one clock through the GNSS time each logged.
+    pub align: Align,
 }
 
 /// The files of one run, resolved and in order.
@@ -104,6 +114,8 @@ pub struct Run {
     parts: Vec<Part>,
     missing: Vec<MissingPart>,
     time: TimeBasis,
+    /// The clocks estimated by `--align gnss`.
+    alignment: Option<Alignment>,
 }
 
 impl Run {
@@ -118,6 +130,7 @@ impl Run {
             }],
             missing: Vec::new(),
             time: TimeBasis::Log,
+            alignment: None,
         }
     }
 
@@ -134,6 +147,7 @@ impl Run {
             parts: Vec::new(),
             missing: Vec::new(),
             time: options.time,
+            alignment: None,
         };
         for (input, path) in inputs.iter().enumerate() {
             let meta = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
@@ -157,6 +171,14 @@ impl Run {
         for offset in &options.clock_offsets {
             offset.apply(first, &run.inputs, &mut run.parts)?;
         }
+        if options.align == Align::Gnss {
+            let given: Vec<PathBuf> = options.clock_offsets.iter().map(|o| o.file.clone()).collect();
+            let alignment = run.align_gnss(&given)?;
+            if alignment.reference.is_none() {
+                return Err(align::no_gnss_time(&run, &alignment));
+            }
+            run.alignment = Some(alignment);
+        }
         Ok(run)
     }
 
@@ -169,11 +191,22 @@ impl Run {
                 let path = dir.join(&part.name);
                 if !path.exists() {
                     if !options.allow_missing_parts {
+                        let partial = crate::log::partial_path(&path);
+                        let salvage = match partial.exists() {
+                            true => format!(
+                                " ({} is: a recording cut off, `railfuse recover {} -o {}` \
+                                 salvages it)",
+                                partial.display(),
+                                partial.display(),
+                                path.display()
+                            ),
+                            false => String::new(),
+                        };
                         return Err(Error::run(
                             &path,
                             format!(
-                                "listed in {} but not there; --allow-missing-parts reads the \
-                                 rest and names the gap",
+                                "listed in {} but not there{salvage}; --allow-missing-parts \
+                                 reads the rest and names the gap",
                                 metadata.display()
                             ),
                         ));
@@ -250,6 +283,11 @@ impl Run {
         &self.missing
     }
 
+    /// The recorders' clocks as `--align gnss` estimated them.
+    pub fn alignment(&self) -> Option<&Alignment> {
+        self.alignment.as_ref()
+    }
+
     pub fn time_basis(&self) -> TimeBasis {
         self.time
     }
@@ -271,6 +309,24 @@ impl Run {
             .iter()
             .map(|p| std::fs::metadata(&p.path).map_or(0, |m| m.len()))
             .sum()
+    }
+
+    /// Where each part begins and ends on the run's clock (its summary's messages, else the
+    /// bag's `starting_time` and `duration`), where known.
+    pub fn part_spans(&self) -> Result<Vec<Option<(u64, u64)>>> {
+        self.parts
+            .iter()
+            .map(|p| {
+                let listed = p
+                    .listed_start_ns
+                    .map(|t| (t, t + p.listed_duration_ns.unwrap_or(0)));
+                let span = match listed {
+                    Some(span) => Some(span),
+                    None => crate::log::read_summary(&p.path)?.and_then(|s| s.message_span_ns),
+                };
+                Ok(span.map(|(a, b)| (p.clock.correct(a), p.clock.correct(b))))
+            })
+            .collect()
     }
 
     /// Opens the merged reader.

@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::channels::Ids;
+use super::stamp_order::{Held, StampOrder, Stamps, WINDOW_NS};
 use super::{ClockMap, Run, Storage, TimeBasis};
 use crate::error::{Error, Result};
 use crate::log::{read_summary, ChannelInfo, IdMap, LogMessage, LogReader, LogRecord, LogSummary};
@@ -19,11 +20,22 @@ pub struct MergeCounts {
     pub duplicates_dropped: u64,
     /// Parts opened and read to their end.
     pub parts_read: usize,
+    /// With `--time stamp`: messages whose stamp came more than the window (2 s) behind their
+    /// part's log time, handed out as they came.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub stamps_beyond_window: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// A part as the merge walks it.
 pub(super) struct PartState {
+    /// What is read: the part itself, or its temporary MCAP.
     path: PathBuf,
+    /// The part as the run names it.
+    name: PathBuf,
     input: usize,
     clock: ClockMap,
     /// Earliest (corrected) time it can hold, where known: it is opened when the merge gets
@@ -33,6 +45,8 @@ pub(super) struct PartState {
     pub(super) reader: Option<LogReader>,
     /// Messages taken from it so far (its file order).
     taken: u64,
+    /// With `--time stamp`: its messages held until they leave in stamp order.
+    stamped: Option<StampOrder>,
 }
 
 /// Messages remembered per channel to find one repeated at a split boundary.
@@ -97,23 +111,40 @@ pub struct RunReader {
     queued: Option<Step>,
     /// The part of the record being handed out.
     step_part: usize,
+    /// A message whose stamp was moved onto the run's clock, re-encoded.
+    restamped: Vec<u8>,
+    /// The temporary MCAP files of sqlite3 parts, removed with the reader.
+    _converted: Vec<tempfile::TempPath>,
+    /// With `--time stamp`: each channel's stamp reader.
+    stamps: Stamps,
 }
 
 impl RunReader {
     /// Reads every part's summary (one seek to each file's end) and orders the parts by the
     /// earliest time each can hold.
     pub(super) fn open(run: &Run) -> Result<Self> {
-        if let Some(p) = run.parts.iter().find(|p| p.storage == Storage::Sqlite3) {
-            return Err(Error::run(
-                &p.path,
-                "a rosbag2 sqlite3 file: `railfuse import` converts the bag to MCAP, which \
-                 every command reads",
-            ));
-        }
         let mut parts = Vec::with_capacity(run.parts.len());
         let mut summaries = Vec::with_capacity(run.parts.len());
+        let mut converted = Vec::new();
         for p in &run.parts {
-            let summary = match read_summary(&p.path) {
+            // A sqlite3 part is read through a temporary MCAP of it (converted row by row, as
+            // `ros2 bag convert` would), removed with the reader.
+            let path = match p.storage {
+                Storage::Mcap => p.path.clone(),
+                Storage::Sqlite3 => {
+                    let temporary = tempfile::Builder::new()
+                        .prefix("railfuse-db3-")
+                        .suffix(".mcap")
+                        .tempfile()
+                        .map_err(|e| Error::io(&p.path, e))?
+                        .into_temp_path();
+                    crate::foreign::rosbag2_sqlite::convert(&p.path, &temporary)?;
+                    let path = temporary.to_path_buf();
+                    converted.push(temporary);
+                    path
+                }
+            };
+            let summary = match read_summary(&path) {
                 Ok(s) => s,
                 // A damaged part is read up to its damage, where the reader names it.
                 Err(Error::Damaged { .. }) => None,
@@ -121,19 +152,29 @@ impl RunReader {
             };
             let span = summary.as_ref().and_then(|s| s.message_span_ns);
             parts.push(PartState {
-                path: p.path.clone(),
+                path,
+                name: p.path.clone(),
                 input: p.input,
                 clock: p.clock,
                 start_ns: match run.time {
                     // Publish times may come before log times: only the log time is bounded.
                     TimeBasis::Publish => None,
                     TimeBasis::Log => p.listed_start_ns.or(span.map(|s| s.0)),
+                    // A stamp precedes its log time by at most the window.
+                    TimeBasis::Stamp => p
+                        .listed_start_ns
+                        .or(span.map(|s| s.0))
+                        .map(|t| t.saturating_sub(WINDOW_NS)),
                 },
                 size: std::fs::metadata(&p.path).map_or(0, |m| m.len()),
                 reader: None,
                 taken: 0,
+                stamped: (run.time == TimeBasis::Stamp).then(StampOrder::default),
             });
             summaries.push(summary);
+        }
+        if run.parts.len() > 1 {
+            same_run(run)?;
         }
         set_drift_origins(&mut parts, &summaries);
         for part in &mut parts {
@@ -161,6 +202,9 @@ impl RunReader {
             finished_bytes: 0,
             queued: None,
             step_part: 0,
+            restamped: Vec::new(),
+            _converted: converted,
+            stamps: Stamps::default(),
         };
         reader.summary = reader.combine(&summaries)?;
         Ok(reader)
@@ -215,7 +259,7 @@ impl RunReader {
     /// The file of the message handed out last (for messages about it).
     pub fn current_path(&self) -> &Path {
         match self.current {
-            Some((_, head)) => &self.parts[head.part].path,
+            Some((_, head)) => &self.parts[head.part].name,
             None => &self.name,
         }
     }
@@ -276,17 +320,17 @@ impl RunReader {
             },
             Step::Message(head) => {
                 let (channel, _) = self.current.expect("set with the step");
-                let m = self.parts[head.part]
-                    .reader
-                    .as_ref()
-                    .and_then(LogReader::current_message)
-                    .expect("a head's reader holds its message");
+                let part = &self.parts[head.part];
+                let (_, sequence, data) = head_of(part);
+                let channel = &self.ids.channels[&channel];
+                let restamped = !part.clock.is_identity()
+                    && restamp(channel, data, &part.clock, &mut self.restamped);
                 LogRecord::Message(LogMessage {
-                    channel: &self.ids.channels[&channel],
-                    sequence: m.sequence,
+                    channel,
+                    sequence,
                     log_time_ns: head.time_ns,
                     publish_time_ns: head.publish_ns,
-                    data: m.data,
+                    data: if restamped { &self.restamped } else { data },
                 })
             }
         }
@@ -337,13 +381,25 @@ impl RunReader {
     /// Reads part `p` on to its next message (which joins the heads) or to a record to hand
     /// out now.
     fn advance(&mut self, p: usize) -> Result<Option<Step>> {
+        if self.release_held(p, false) {
+            return Ok(None);
+        }
         let part = &mut self.parts[p];
-        let reader = part.reader.as_mut().expect("an open part");
+        // Only a part read in stamp order outlives its file: what it holds leaves now.
+        let Some(reader) = part.reader.as_mut() else {
+            if !self.release_held(p, true) {
+                self.to_advance.pop();
+            }
+            return Ok(None);
+        };
         let Some(record) = reader.next() else {
             self.finished_bytes += part.size;
             self.counts.parts_read += 1;
+            self.counts.stamps_beyond_window += part.stamped.as_ref().map_or(0, |o| o.late);
             part.reader = None;
-            self.to_advance.pop();
+            if !self.release_held(p, true) {
+                self.to_advance.pop();
+            }
             return Ok(None);
         };
         let step = match record? {
@@ -353,10 +409,24 @@ impl RunReader {
                     part.clock.correct(m.publish_time_ns),
                 );
                 part.taken += 1;
+                if let Some(order) = part.stamped.as_mut() {
+                    let channel = self.ids.channel_of(p, m.channel.id).expect("its channel came before it");
+                    order.hold(Held {
+                        stamp_ns: self.stamps.of(channel, &m, &part.clock, log),
+                        order: part.taken,
+                        channel: m.channel.id,
+                        sequence: m.sequence,
+                        log_ns: log,
+                        publish_ns: publish,
+                        data: m.data.to_vec(),
+                    });
+                    // Read on: the part's head is what its window releases.
+                    return Ok(None);
+                }
                 let head = Head {
                     time_ns: match self.time {
-                        TimeBasis::Log => log,
                         TimeBasis::Publish => publish,
+                        TimeBasis::Log | TimeBasis::Stamp => log,
                     },
                     input: part.input,
                     part: p,
@@ -411,6 +481,25 @@ impl RunReader {
         Ok(step)
     }
 
+    /// Makes the earliest message part `p` holds for its stamp its head, where one is due
+    /// (at the file's `end`, any); false where none is.
+    fn release_held(&mut self, p: usize, end: bool) -> bool {
+        let part = &mut self.parts[p];
+        let Some(held) = part.stamped.as_mut().and_then(|o| o.release(end)) else {
+            return false;
+        };
+        let head = Head {
+            time_ns: held.stamp_ns,
+            input: part.input,
+            part: p,
+            order: held.order,
+            publish_ns: held.publish_ns,
+        };
+        self.heads.push(Reverse(head));
+        self.to_advance.pop();
+        true
+    }
+
     /// The run's channel for part `p`'s, with its topic's owner noted.
     fn run_channel(&mut self, p: usize, c: &Arc<ChannelInfo>) -> Result<Arc<ChannelInfo>> {
         let (c, _) = self.ids.channel(p, c).ok_or_else(|| self.full(p))?;
@@ -419,7 +508,7 @@ impl RunReader {
 
     fn full(&self, p: usize) -> Error {
         Error::run(
-            &self.parts[p].path,
+            &self.parts[p].name,
             "the run has more than 65535 channels or schemas: read fewer files at once",
         )
     }
@@ -427,16 +516,15 @@ impl RunReader {
     /// The run channel of a head, and whether it repeats a message handed out already; a
     /// topic taken back by a part that had handed it over is two sources on one topic.
     fn check_message(&mut self, head: &Head) -> Result<(u16, bool)> {
-        let reader = self.parts[head.part].reader.as_ref().expect("open");
-        let m = reader.current_message().expect("a head's message");
+        let (part_channel, _, data) = head_of(&self.parts[head.part]);
         let channel = self
             .ids
-            .channel_of(head.part, m.channel.id)
+            .channel_of(head.part, part_channel)
             .expect("its channel came before it");
         if self.parts.len() == 1 {
             return Ok((channel, false));
         }
-        let hash = foldhash::fast::FixedState::with_seed(0).hash_one(m.data);
+        let hash = foldhash::fast::FixedState::with_seed(0).hash_one(data);
         let recent = self.recent.entry(channel).or_default();
         let twice = recent
             .iter()
@@ -461,7 +549,7 @@ impl RunReader {
             }
             Some(owner) if owner.part != head.part => {
                 if owner.handed_over.contains(&head.part) {
-                    let (a, b) = (&self.parts[head.part].path, &self.parts[owner.part].path);
+                    let (a, b) = (&self.parts[head.part].name, &self.parts[owner.part].name);
                     return Err(Error::run(
                         a,
                         format!(
@@ -480,6 +568,90 @@ impl RunReader {
         }
         Ok((channel, false))
     }
+}
+
+/// A part's head message: (its channel id in the part, sequence, payload), held for its stamp
+/// or in its reader.
+fn head_of(part: &PartState) -> (u16, u32, &[u8]) {
+    if let Some(h) = part.stamped.as_ref().and_then(|o| o.head.as_ref()) {
+        return (h.channel, h.sequence, &h.data);
+    }
+    let m = part
+        .reader
+        .as_ref()
+        .and_then(LogReader::current_message)
+        .expect("a head's reader holds its message");
+    (m.channel.id, m.sequence, m.data)
+}
+
+/// Moves the stamp of a message that its recorder stamped (see
+/// [`StampClock`](crate::messages::StampClock), and a ROS 2 message's `header.stamp`) onto
+/// the run's clock, re-encoding it into `out`; false (the message as it is) for a stamp on
+/// GNSS time, a derived one, another foreign schema, or a payload that does not decode (its
+/// reader names it).
+fn restamp(channel: &ChannelInfo, data: &[u8], clock: &ClockMap, out: &mut Vec<u8>) -> bool {
+    use crate::messages::{AnyMessage, StampClock};
+    let Some(kind) = channel.kind() else {
+        // A ROS 2 message's header.stamp is its node's clock: the recorder's machine.
+        return match &channel.schema {
+            Some(s) if channel.message_encoding == "cdr" && s.encoding == "ros2msg" => {
+                crate::foreign::ros2::restamp_header(&s.data, data, |t| clock.correct(t), out)
+            }
+            _ => false,
+        };
+    };
+    let protobuf = channel.message_encoding == crate::protobuf::Encoding::Protobuf.message_encoding();
+    let decoded = match protobuf {
+        true => kind.decode_protobuf(data).ok(),
+        false => kind.decode(data).ok(),
+    };
+    let Some(mut message) = decoded else {
+        return false;
+    };
+    match (&mut message, kind.stamp_clock()) {
+        (AnyMessage::TimeReference(r), _) => r.local_ns = clock.correct(r.local_ns),
+        (m, StampClock::Recorder) => {
+            let stamp = m.stamp_ns_mut();
+            *stamp = clock.correct(*stamp);
+        }
+        _ => return false,
+    }
+    out.clear();
+    out.extend_from_slice(&match protobuf {
+        true => message.to_protobuf(),
+        false => message.to_json(),
+    });
+    true
+}
+
+/// Every part that names its run (`railfuse.run`'s `run_id`) names the same one: a file of
+/// another run mixed in is refused before anything is read.
+fn same_run(run: &Run) -> Result<()> {
+    let mut first: Option<(&Path, String)> = None;
+    for p in run.parts.iter().filter(|p| p.storage == Storage::Mcap) {
+        let id = match crate::log::read_metadata(&p.path, crate::topics::metadata::RUN) {
+            Ok(m) => m.and_then(|mut m| m.remove("run_id")),
+            // A damaged part is read up to its damage, where the reader names it.
+            Err(Error::Damaged { .. }) => None,
+            Err(e) => return Err(e),
+        };
+        let Some(id) = id else { continue };
+        match &first {
+            None => first = Some((&p.path, id)),
+            Some((path, other)) if *other != id => {
+                return Err(Error::run(
+                    &p.path,
+                    format!(
+                        "of run '{id}', {} of run '{other}': a file of another run mixed in; \
+                         read each run on its own",
+                        path.display()
+                    ),
+                ))
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
 }
 
 /// A drift is measured from its input's first time: the earliest any of its parts holds.

@@ -381,9 +381,9 @@ impl Bound<'_> {
         }
         match from_object(obj, stamp) {
             Ok(item) => {
-                writer.write(&item)?;
+                let item = writer.write(item)?;
                 report.messages += 1;
-                *report.per_topic.entry(item.topic).or_insert(0) += 1;
+                *report.per_topic.entry(item.topic.clone()).or_insert(0) += 1;
             }
             Err(e) => report.skip(line, "row does not make a valid message", e),
         }

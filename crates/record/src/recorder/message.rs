@@ -69,10 +69,16 @@ pub fn from_object(
     })
 }
 
-/// Writes items, adding each (topic, type) channel the first time it appears.
+/// Writes items, adding each (topic, type) channel the first time it appears, and keeps the
+/// last message of each channel: the state a new part of a split recording opens with.
 pub struct ItemWriter {
     pub writer: LogWriter,
     channels: HashMap<(String, MessageKind), ChannelId>,
+    latched: HashMap<(String, MessageKind), Item>,
+    /// First and last log time of the messages written (the repeated state left out), and
+    /// how many.
+    pub span_ns: Option<(u64, u64)>,
+    pub messages: u64,
 }
 
 impl ItemWriter {
@@ -80,7 +86,60 @@ impl ItemWriter {
         Self {
             writer,
             channels: HashMap::new(),
+            latched: HashMap::new(),
+            span_ns: None,
+            messages: 0,
         }
+    }
+
+    /// Writes `item` and keeps it as its channel's latest; the kept item is returned.
+    pub fn write(&mut self, item: Item) -> railfuse_catalog::Result<&Item> {
+        self.write_item(&item)?;
+        self.spans(item.log_time_ns);
+        let key = (item.topic.clone(), item.message.kind());
+        Ok(match self.latched.entry(key) {
+            std::collections::hash_map::Entry::Occupied(mut e) => {
+                e.insert(item);
+                e.into_mut()
+            }
+            std::collections::hash_map::Entry::Vacant(e) => e.insert(item),
+        })
+    }
+
+    /// A message of this part's own (not the repeated state) at `log_time_ns`, another
+    /// message written outside [`write`](Self::write) included: the part's span and count.
+    pub fn spans(&mut self, t: u64) {
+        self.span_ns = Some(self.span_ns.map_or((t, t), |(a, b)| (a.min(t), b.max(t))));
+        self.messages += 1;
+    }
+
+    /// The state this part ends on: the last message of each of its channels, in log-time
+    /// order.
+    pub fn latched_items(&self) -> Vec<Item> {
+        let mut state: Vec<Item> = self.latched.values().cloned().collect();
+        state.sort_by(|a, b| (a.log_time_ns, &a.topic).cmp(&(b.log_time_ns, &b.topic)));
+        state
+    }
+
+    /// Opens a new part with the state the last one ended on ([`latched_items`]), at their own
+    /// log times (as rosbag2 repeats latched topics and `mcap filter --last-per-channel`
+    /// keeps them), in a chunk of its own. A reader of the whole run sees them as the repeats
+    /// they are (the same message in two parts); a reader of this part alone starts from that
+    /// state instead of cold.
+    ///
+    /// [`latched_items`]: Self::latched_items
+    pub fn repeat_latched(&mut self, state: Vec<Item>) -> railfuse_catalog::Result<()> {
+        for item in state {
+            self.write_item(&item)?;
+            self.latched
+                .insert((item.topic.clone(), item.message.kind()), item);
+        }
+        self.writer.flush_chunk()
+    }
+
+    /// The (topic, type name, message encoding) of every channel written.
+    pub fn channels(&self) -> impl Iterator<Item = (&str, MessageKind, ChannelId)> {
+        self.channels.iter().map(|((t, k), &c)| (t.as_str(), *k, c))
     }
 
     fn channel(&mut self, topic: &str, kind: MessageKind) -> railfuse_catalog::Result<ChannelId> {
@@ -92,7 +151,7 @@ impl ItemWriter {
         Ok(c)
     }
 
-    pub fn write(&mut self, item: &Item) -> railfuse_catalog::Result<()> {
+    fn write_item(&mut self, item: &Item) -> railfuse_catalog::Result<()> {
         let c = self.channel(&item.topic, item.message.kind())?;
         self.writer.write_any(c, item.log_time_ns, &item.message)
     }

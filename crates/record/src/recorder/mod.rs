@@ -28,6 +28,7 @@ use std::time::{Duration, Instant};
 
 use railfuse_catalog::log::{part_path, partial_path, LogWriter};
 use railfuse_catalog::messages::{RecorderDiagnostics, SourceStats};
+use railfuse_catalog::run::{write_manifest, ManifestFile, ManifestTopic, MANIFEST};
 use railfuse_catalog::topics;
 use serde::Serialize;
 
@@ -255,12 +256,44 @@ struct Recording {
     per_topic: BTreeMap<String, u64>,
     write_error: Option<String>,
     failed_sources: Vec<String>,
+    /// When splitting: the parts finished, and every channel's (type, encoding), for the
+    /// manifest.
+    finished_parts: Vec<ManifestFile>,
+    topics: BTreeMap<String, (String, String)>,
+}
+
+/// A part as the manifest lists it.
+fn manifest_file(path: &Path, writer: &ItemWriter) -> ManifestFile {
+    ManifestFile {
+        name: path
+            .file_name()
+            .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+        span_ns: writer.span_ns,
+        messages: writer.messages,
+    }
+}
+
+/// The folder of a split recording's parts, where its manifest goes.
+fn manifest_dir(output: &Path) -> PathBuf {
+    match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_owned(),
+        _ => PathBuf::from("."),
+    }
 }
 
 impl Recording {
     /// Opens the first file and starts a thread per source, each with its bounded queue.
     fn start(opts: &RecordOptions) -> railfuse_catalog::Result<Self> {
         let splitting = opts.split_bytes.is_some() || opts.split_every.is_some();
+        let manifest = manifest_dir(&opts.output).join(MANIFEST);
+        if splitting && manifest.exists() {
+            return Err(railfuse_catalog::Error::Run {
+                path: manifest,
+                cause: "holds the manifest of another run: record a split run into a folder \
+                        of its own"
+                    .into(),
+            });
+        }
         let current = if splitting {
             part_path(&opts.output, 1)
         } else {
@@ -322,6 +355,8 @@ impl Recording {
             per_topic: BTreeMap::new(),
             write_error: None,
             failed_sources,
+            finished_parts: Vec::new(),
+            topics: BTreeMap::new(),
         })
     }
 
@@ -338,13 +373,18 @@ impl Recording {
                 match q.try_recv() {
                     Ok(item) => {
                         busy = true;
-                        self.writer.write(&item)?;
+                        let item = self.writer.write(item)?;
                         self.written[i] += 1;
                         self.messages += 1;
                         if let Some(tap) = opts.tap.as_mut() {
-                            tap(&item);
+                            tap(item);
                         }
-                        *self.per_topic.entry(item.topic).or_insert(0) += 1;
+                        match self.per_topic.get_mut(&item.topic) {
+                            Some(n) => *n += 1,
+                            None => {
+                                self.per_topic.insert(item.topic.clone(), 1);
+                            }
+                        }
                     }
                     Err(flume::TryRecvError::Empty) => break,
                     Err(flume::TryRecvError::Disconnected) => {
@@ -384,6 +424,7 @@ impl Recording {
             bytes_written: self.bytes_written(),
         };
         self.writer.writer.write(self.diag, d.stamp_ns, &d)?;
+        self.writer.spans(d.stamp_ns);
         self.writer.writer.flush_chunk()?;
         self.written_on_disk.clone_from(&self.written);
         self.messages_on_disk = self.messages;
@@ -399,15 +440,47 @@ impl Recording {
             let (writer, diag, notice) = open_part(&next, opts, Some(self.part))?;
             self.notices.extend(notice);
             self.diag = diag;
-            std::mem::replace(&mut self.writer, writer)
-                .writer
-                .finish()?;
+            let finished = std::mem::replace(&mut self.writer, writer);
+            self.finished_parts.push(manifest_file(&self.current, &finished));
+            self.topics.extend(finished.channels().map(|(t, k, c)| {
+                let encoding = finished.writer.encoding_of(c).message_encoding();
+                (t.to_owned(), (k.schema_name().to_owned(), encoding.to_owned()))
+            }));
+            // The finished part is complete before the next is written to: a write error in
+            // the next one names that one and leaves this one whole.
+            let state = finished.latched_items();
+            finished.writer.finish()?;
             self.finished_bytes += file_size(&self.current);
             self.current = next;
             self.files.push(self.current.clone());
             self.part_started = Instant::now();
+            self.writer.repeat_latched(state)?;
+            self.write_manifest(opts)?;
         }
         Ok(())
+    }
+
+    /// The run's manifest (a bag directory's metadata.yaml beside the parts), rewritten at
+    /// every split and at the end: a recording cut off mid-run still opens as one run (its
+    /// last part named as not there until `railfuse recover` salvages it).
+    fn write_manifest(&self, opts: &RecordOptions) -> railfuse_catalog::Result<()> {
+        let mut files = self.finished_parts.clone();
+        files.push(manifest_file(&self.current, &self.writer));
+        let mut topics = self.topics.clone();
+        topics.extend(self.writer.channels().map(|(t, k, c)| {
+            let encoding = self.writer.writer.encoding_of(c).message_encoding();
+            (t.to_owned(), (k.schema_name().to_owned(), encoding.to_owned()))
+        }));
+        let topics: Vec<ManifestTopic> = topics
+            .into_iter()
+            .map(|(name, (type_name, encoding))| ManifestTopic {
+                messages: self.per_topic.get(&name).copied().unwrap_or(0),
+                name,
+                type_name,
+                encoding,
+            })
+            .collect();
+        write_manifest(&manifest_dir(&opts.output), &files, &topics)
     }
 
     /// Joins the threads of sources that ended; the ones that failed go on the list.
@@ -488,12 +561,18 @@ impl Recording {
             bytes_written: self.bytes_written(),
         };
         if self.write_error.is_none() {
-            if let Err(e) = self.writer.writer.write(self.diag, d.stamp_ns, &d) {
-                self.write_error = Some(e.to_string());
+            match self.writer.writer.write(self.diag, d.stamp_ns, &d) {
+                Ok(()) => self.writer.spans(d.stamp_ns),
+                Err(e) => self.write_error = Some(e.to_string()),
             }
         }
+        let splitting = opts.split_bytes.is_some() || opts.split_every.is_some();
+        let manifest = splitting.then(|| self.write_manifest(&opts));
         let finished = self.writer.writer.finish();
         if let (Err(e), None) = (&finished, &self.write_error) {
+            self.write_error = Some(e.to_string());
+        }
+        if let (Some(Err(e)), None) = (manifest, &self.write_error) {
             self.write_error = Some(e.to_string());
         }
         // After a write error only what reached the disk counts as written.

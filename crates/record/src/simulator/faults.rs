@@ -147,7 +147,7 @@ fn device_of(e: &Emit) -> Option<&'static str> {
         Emit::Loop(_) => "loop",
         Emit::Balise(_) => "balise",
         Emit::EddyCurrent(_) => "eddy_current",
-        Emit::Truth(_) | Emit::Event(_) => return None,
+        Emit::Truth(_) | Emit::Event(_) | Emit::TimeReference(..) => return None,
     })
 }
 
@@ -267,6 +267,7 @@ fn stamp_of(e: &Emit) -> u64 {
         Emit::EddyCurrent(m) => m.stamp_ns,
         Emit::Truth(m) => m.stamp_ns,
         Emit::Event(m) => m.stamp_ns,
+        Emit::TimeReference(_, m) => m.stamp_ns,
     }
 }
 
@@ -281,6 +282,7 @@ fn restamped(mut e: Emit, t: u64) -> Emit {
         Emit::EddyCurrent(m) => m.stamp_ns = t,
         Emit::Truth(m) => m.stamp_ns = t,
         Emit::Event(m) => m.stamp_ns = t,
+        Emit::TimeReference(_, m) => m.stamp_ns = t,
     }
     e
 }
@@ -307,7 +309,7 @@ fn biased(mut e: Emit, b: f64) -> Emit {
                 *v += b as f32;
             }
         }
-        Emit::Truth(_) | Emit::Event(_) => {}
+        Emit::Truth(_) | Emit::Event(_) | Emit::TimeReference(..) => {}
     }
     e
 }

@@ -4,6 +4,7 @@
 pub mod atlas;
 mod driver;
 pub mod faults;
+mod recorders;
 mod scenario;
 pub mod seed000;
 pub mod sensors;
@@ -17,10 +18,12 @@ use std::path::Path;
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::{ChannelId, LogWriter};
 use railfuse_catalog::messages::*;
+use railfuse_catalog::messages::StampClock;
 use railfuse_catalog::topics;
 
 pub use driver::DriverParams;
 pub use faults::{FaultMode, FaultSpec};
+pub use recorders::{SimRecorder, MAX_RECORDERS};
 pub use scenario::{LineScenario, Scenario, SIMULATED_START_NS};
 pub use track::{Segment, TrackParams};
 
@@ -31,6 +34,7 @@ use sensors::{
     induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream,
 };
 use track::Track;
+use recorders::SimClock;
 use world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
 
 /// What a simulation wrote.
@@ -42,12 +46,23 @@ pub struct SimulationReport {
     pub messages: u64,
     pub per_topic: BTreeMap<String, u64>,
     pub track_length_m: f64,
+    /// The recorders' files, for a run written by several.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub files: Vec<String>,
 }
 
-/// The channels of a simulated log and the writer behind them.
-struct SimLog {
+/// One file of a simulated run: its writer and, for a run of several recorders, the
+/// recorder's clock and the jitter of its PPS readings.
+struct RecorderLog {
     writer: LogWriter,
-    channels: BTreeMap<&'static str, ChannelId>,
+    recorder: Option<(SimRecorder, SimClock, rand_chacha::ChaCha8Rng)>,
+}
+
+/// The channels of a simulated log and the writers behind them.
+struct SimLog {
+    logs: Vec<RecorderLog>,
+    /// Topic → (which log, its channel there).
+    channels: BTreeMap<String, (usize, ChannelId)>,
     report: SimulationReport,
     faults: FaultInjector,
     fault_specs: Vec<FaultSpec>,
@@ -55,18 +70,39 @@ struct SimLog {
 }
 
 impl SimLog {
+    /// One log at `path`, or with `recorders` one per recorder in the folder `path`.
     fn create(
         path: &Path,
+        recorders: &[SimRecorder],
         scenario: &Scenario,
         seed: u64,
         faults: &[FaultSpec],
     ) -> railfuse_catalog::Result<Self> {
-        let mut writer = LogWriter::create(path)?;
+        let mut logs = Vec::new();
+        if recorders.is_empty() {
+            logs.push(RecorderLog {
+                writer: LogWriter::create(path)?,
+                recorder: None,
+            });
+        }
+        for (i, r) in recorders.iter().enumerate() {
+            logs.push(RecorderLog {
+                writer: LogWriter::create(path.join(format!("{}.mcap", r.name)))?,
+                recorder: Some((
+                    r.clone(),
+                    r.clock(SIMULATED_START_NS),
+                    recorders::pps_jitter(seed, i),
+                )),
+            });
+        }
+        let n = recorders.len();
         let mut channels = BTreeMap::new();
         macro_rules! channel {
-            ($ty:ty, $topic:expr) => {
-                channels.insert($topic, writer.add_channel::<$ty>($topic)?);
-            };
+            ($ty:ty, $topic:expr) => {{
+                let log = recorders::recorder_of($topic, n);
+                let id = logs[log].writer.add_channel::<$ty>($topic)?;
+                channels.insert($topic.to_string(), (log, id));
+            }};
         }
         channel!(TrackMap, topics::TRACK_MAP);
         channel!(GroundTruth, topics::GROUND_TRUTH);
@@ -98,6 +134,11 @@ impl SimLog {
                 }
             }
         }
+        for (i, r) in recorders.iter().enumerate() {
+            let topic = topics::time_reference(&r.name);
+            let id = logs[i].writer.add_channel::<TimeReference>(&topic)?;
+            channels.insert(topic, (i, id));
+        }
         let report = SimulationReport {
             scenario: scenario.name().into(),
             seed,
@@ -105,7 +146,7 @@ impl SimLog {
         };
         let faults = FaultInjector::new(faults, SIMULATED_START_NS);
         Ok(Self {
-            writer,
+            logs,
             channels,
             report,
             faults,
@@ -114,13 +155,27 @@ impl SimLog {
         })
     }
 
+    /// Writes `msg` into its recorder's log: on that recorder's clock, its log time and
+    /// (where the recorder stamped it) its stamp.
     fn write<M: ChannelMessage>(
         &mut self,
-        topic: &'static str,
+        topic: &str,
         log_time_ns: u64,
         msg: &M,
     ) -> railfuse_catalog::Result<()> {
-        self.writer.write(self.channels[topic], log_time_ns, msg)?;
+        let (log, channel) = self.channels[topic];
+        let log = &mut self.logs[log];
+        match &log.recorder {
+            None => log.writer.write(channel, log_time_ns, msg)?,
+            Some((_, clock, _)) => {
+                let mut local = msg.clone();
+                if M::KIND.stamp_clock() == StampClock::Recorder {
+                    let stamp = local.stamp_ns_mut();
+                    *stamp = clock.local(*stamp);
+                }
+                log.writer.write(channel, clock.local(log_time_ns), &local)?;
+            }
+        }
         self.report.messages += 1;
         *self.report.per_topic.entry(topic.to_owned()).or_insert(0) += 1;
         Ok(())
@@ -143,6 +198,15 @@ impl SimLog {
             Emit::EddyCurrent(m) => self.write(topics::EDDY_CURRENT, log_time_ns, &m),
             Emit::Truth(m) => self.write(topics::GROUND_TRUTH, log_time_ns, &m),
             Emit::Event(m) => self.write(topics::EVENTS, log_time_ns, &m),
+            Emit::TimeReference(i, mut m) => {
+                let Some((r, clock, jitter)) = &mut self.logs[i].recorder else {
+                    return Ok(());
+                };
+                // The edge read on the recorder's clock; its log time is moved by `write`.
+                m.local_ns = recorders::read_pps(clock, m.local_ns, jitter);
+                let topic = topics::time_reference(&r.name);
+                self.write(&topic, log_time_ns, &m)
+            }
         }
     }
 
@@ -185,8 +249,21 @@ impl SimLog {
             ("tool_version".into(), crate::TOOL_VERSION.into()),
             ("source".into(), "simulated".into()),
         ]);
-        self.writer.write_metadata(topics::metadata::RUN, run)?;
-        self.writer.finish()?;
+        for log in self.logs {
+            let mut run = run.clone();
+            if let Some((r, clock, _)) = &log.recorder {
+                // The simulator's truth about the recorder's clock, to check an estimate by.
+                let truth = clock.as_clock_map();
+                run.insert("recorder".into(), r.name.clone());
+                run.insert("recorder_clock_offset_ns".into(), truth.offset_ns.to_string());
+                run.insert("recorder_clock_drift_ppm".into(), truth.drift_ppm.to_string());
+                run.insert("recorder_clock_origin_ns".into(), truth.origin_ns.to_string());
+                self.report.files.push(log.writer.path().display().to_string());
+            }
+            let mut writer = log.writer;
+            writer.write_metadata(topics::metadata::RUN, run)?;
+            writer.finish()?;
+        }
         self.report.duration_s = duration_s;
         self.report.track_length_m = track.length_m();
         Ok(self.report)
@@ -210,11 +287,44 @@ pub fn simulate(
         | Scenario::Seed001(p)
         | Scenario::Seed002(p)
         | Scenario::Seed003(p)
-        | Scenario::Seed004(p) => simulate_line(scenario, p, seed, duration_s, faults, out),
+        | Scenario::Seed004(p) => simulate_line(scenario, p, seed, duration_s, faults, &[], out),
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
             seed000::simulate(scenario, p, seed, duration_s, out)
         }
     }
+}
+
+/// Simulates a run as the recorders on a train write it: one file per recorder in the
+/// folder `dir` (`<name>.mcap`), each on its own clock with its PPS time reference (see
+/// [`SimRecorder`]). The same seed gives the same sensor readings as [`simulate`].
+pub fn simulate_recorders(
+    scenario: &Scenario,
+    seed: u64,
+    duration_s: Option<f64>,
+    faults: &[FaultSpec],
+    recorders: &[SimRecorder],
+    dir: &Path,
+) -> railfuse_catalog::Result<SimulationReport> {
+    let fail = |cause: &str| railfuse_catalog::Error::Run {
+        path: dir.to_owned(),
+        cause: cause.to_owned(),
+    };
+    let Some(p) = scenario.line() else {
+        return Err(fail("several recorders are simulated on the line scenarios only"));
+    };
+    if recorders.is_empty() || recorders.len() > MAX_RECORDERS {
+        return Err(fail("give one to three recorders"));
+    }
+    for (i, r) in recorders.iter().enumerate() {
+        if recorders[..i].iter().any(|o| o.name == r.name) {
+            return Err(fail(&format!("recorder '{}' named twice", r.name)));
+        }
+    }
+    std::fs::create_dir_all(dir).map_err(|source| railfuse_catalog::Error::Io {
+        path: dir.to_owned(),
+        source,
+    })?;
+    simulate_line(scenario, p, seed, duration_s, faults, recorders, dir)
 }
 
 fn simulate_line(
@@ -223,6 +333,7 @@ fn simulate_line(
     seed: u64,
     duration_s: Option<f64>,
     faults: &[FaultSpec],
+    recorders: &[SimRecorder],
     out: &Path,
 ) -> railfuse_catalog::Result<SimulationReport> {
     let start = SIMULATED_START_NS;
@@ -236,7 +347,7 @@ fn simulate_line(
         track.map = atlas::with_atlas(track.map, a, &mut rng_stream(seed, 30));
     }
     let map = &track.map;
-    let mut log = SimLog::create(out, scenario, seed, faults)?;
+    let mut log = SimLog::create(out, recorders, scenario, seed, faults)?;
     log.fault_specs = faults.to_vec();
     let published = published_map(p, map, faults, seed);
     log.write(topics::TRACK_MAP, start, published.as_ref().unwrap_or(map))?;
@@ -245,6 +356,10 @@ fn simulate_line(
         map.stations.iter().map(|s| s.chainage_m).collect(),
     );
     let mut sensors = line_sensors(p, map, seed, start);
+    sensors.extend(
+        (0..recorders.len())
+            .map(|i| Box::new(recorders::PpsReference::new(i, start)) as Box<dyn SimSensor>),
+    );
     let mut surroundings = Surroundings::new(p, map);
     let mut truth_schedule = Schedule::new(start, p.truth_rate_hz);
     let mut outbox = Outbox::default();

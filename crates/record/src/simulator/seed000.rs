@@ -151,7 +151,7 @@ pub(super) fn simulate(
     let period = p.sample_period_s;
     let steps = (duration / period).round() as u64;
     let map = guideway(p, duration, start);
-    let mut log = SimLog::create(out, scenario, seed, &[])?;
+    let mut log = SimLog::create(out, &[], scenario, seed, &[])?;
     log.write(topics::TRACK_MAP, start, &map)?;
     let mut process = rng_stream(seed, 0);
     let mut sensors = Sensors::new(p, seed);

@@ -5,7 +5,7 @@ use std::collections::BinaryHeap;
 
 use railfuse_catalog::messages::{
     BalisePassage, EddyCurrentBlock, Event, GnssFix, GroundTruth, Imu, LoopPosition, Odometer,
-    RadarSpeed,
+    RadarSpeed, TimeReference,
 };
 
 /// The true world at one simulation step.
@@ -60,6 +60,8 @@ pub enum Emit {
     EddyCurrent(EddyCurrentBlock),
     Truth(GroundTruth),
     Event(Event),
+    /// A PPS edge for recorder `.0` of a run of several.
+    TimeReference(usize, TimeReference),
 }
 
 struct Pending {

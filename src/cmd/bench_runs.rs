@@ -1,0 +1,93 @@
+//! `railfuse bench --runs`: what reading a run of many files costs. One default run re-fused
+//! as one file (chunks copied), as the same file through the run reader, as 20 parts of it
+//! (the k-way merge), and as three recorders' files on their own clocks with `--align gnss`
+//! (the clock estimate's extra pass included): wall time and peak memory of each, each the
+//! whole `refuse` command in a child process.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use railfuse_catalog::log::{SplitRule, WriterOptions};
+use railfuse_catalog::run::Run;
+use railfuse_record::{simulate, simulate_recorders, Scenario, SimRecorder};
+
+use super::measure::{mib_of, refuse_run_child, Measured};
+use super::DEFAULT_PIPELINES;
+
+const PARTS: u64 = 20;
+
+pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let config = dir.join("kalman.toml");
+    std::fs::write(&config, DEFAULT_PIPELINES)?;
+    let preset = Scenario::preset("default").expect("a built-in preset");
+    let whole = dir.join(format!("runs-{secs:.0}s.mcap"));
+    let sim = simulate(&preset, 1, Some(secs), &[], &whole)?;
+    let parts = dir.join(format!("runs-{secs:.0}s-parts"));
+    let _ = std::fs::remove_dir_all(&parts);
+    std::fs::create_dir_all(&parts)?;
+    let every_ns = (sim.duration_s * 1e9 / PARTS as f64).ceil() as u64;
+    railfuse_catalog::run::merge(
+        &Run::file(&whole),
+        &parts.join("run.mcap"),
+        SplitRule {
+            every_ns: Some(every_ns),
+            ..Default::default()
+        },
+        &WriterOptions::default(),
+    )?;
+    let three = dir.join(format!("runs-{secs:.0}s-three"));
+    let _ = std::fs::remove_dir_all(&three);
+    let recorders: Vec<SimRecorder> = ["box", "rack=+0.35,+20ppm", "radar=-1.2,-15ppm"]
+        .iter()
+        .map(|r| r.parse().map_err(anyhow::Error::msg))
+        .collect::<Result<_>>()?;
+    let written = simulate_recorders(&preset, 1, Some(secs), &[], &recorders, &three)?;
+    let three_files: Vec<PathBuf> = written.files.iter().map(PathBuf::from).collect();
+    let fused = dir.join("runs.fused.mcap");
+    let time = |inputs: &[&Path], options: &[&str]| -> Result<(f64, Option<u64>)> {
+        let mut all: Vec<Measured> = (0..repeat.max(1))
+            .map(|_| refuse_run_child(inputs, options, &config, &fused))
+            .collect::<Result<_>>()?;
+        all.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
+        let peak = all.iter().filter_map(|m| m.peak_rss_kib).max();
+        Ok((all[all.len() / 2].wall_s, peak))
+    };
+    let rows = [
+        ("one file (chunks copied)", time(&[&whole], &[])?),
+        // Publish time is the log time in a simulated run: the same order, read record by
+        // record through the run reader.
+        (
+            "one file, through the run reader",
+            time(&[&whole], &["--time", "publish"])?,
+        ),
+        ("20 parts (k-way merge)", time(&[&parts], &[])?),
+        (
+            "3 recorders, --align gnss",
+            time(
+                &three_files.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
+                &["--align", "gnss"],
+            )?,
+        ),
+    ];
+    println!(
+        "default {:.0} s, {} messages, kalman; refuse median of {} runs",
+        sim.duration_s,
+        sim.messages,
+        repeat.max(1)
+    );
+    println!("{:<36} {:>9} {:>13}", "input", "refuse s", "peak RSS MiB");
+    for (label, (wall, peak)) in &rows {
+        println!("{label:<36} {wall:>9.3} {:>13}", mib_of(*peak));
+    }
+    let (reader, parts_row) = (rows[1].1, rows[2].1);
+    println!(
+        "20 parts against one file through the run reader: time {:+.1} %, peak RSS {:+.1} %",
+        (parts_row.0 / reader.0 - 1.0) * 100.0,
+        match (parts_row.1, rows[0].1 .1) {
+            (Some(a), Some(b)) => (a as f64 / b as f64 - 1.0) * 100.0,
+            _ => f64::NAN,
+        }
+    );
+    Ok(())
+}
