@@ -109,6 +109,17 @@ fn three_recorders_aligned_by_gnss_refuse_as_accurately_as_one() {
     };
     let aligned = refuse_three("gnss", "aligned.fused.mcap");
     let unaligned = refuse_three("none", "unaligned.fused.mcap");
+    // The same from the configuration's [run] table (a bare file name names the run's file).
+    let config = d.path().join("kalman-run.toml");
+    let text = std::fs::read_to_string(sample("kalman.toml")).unwrap()
+        + "\n[run]\nalign = \"gnss\"\nclock_offsets = [\"radar.mcap=-1.2,-15ppm\"]\n";
+    std::fs::write(&config, text).unwrap();
+    let mut args = vec!["refuse"];
+    args.extend(files.iter().map(|f| s(f)));
+    let out = d.path().join("configured.fused.mcap");
+    args.extend(["-c", s(&config), "-o", s(&out), "--json"]);
+    let configured = rmse(&serde_json::from_slice(&ok(&args).stdout).unwrap());
+    assert!((configured - aligned).abs() <= 0.02 * single, "{configured} against {aligned}");
     eprintln!("position RMSE: one recorder {single:.4} m, three aligned {aligned:.4} m, three on their own clocks {unaligned:.4} m");
     assert!(
         (aligned - single).abs() <= 0.02 * single,

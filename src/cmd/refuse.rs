@@ -68,7 +68,14 @@ pub fn run(a: Args) -> Result<()> {
     let Some(output) = a.output.as_deref() else {
         anyhow::bail!("refuse needs an input log and -o OUTPUT");
     };
-    let run = a.run.open()?;
+    let loaded = match &a.config {
+        Some(path) => Some((Pipelines::load(path)?, path.display().to_string())),
+        None => None,
+    };
+    let run = match &loaded {
+        Some((c, _)) => a.run.open_with(&c.clock_offsets, c.align)?,
+        None => a.run.open()?,
+    };
     let input = &run;
     let rule = a.split.rule(input)?;
     // A split output is written whole first, then cut into its parts.
@@ -80,8 +87,8 @@ pub fn run(a: Args) -> Result<()> {
         super::eval::check_reference_in_log(input, topic)?;
     }
     let reference = a.reference.as_deref().unwrap_or(topics::GROUND_TRUTH);
-    let (config, source) = match &a.config {
-        Some(path) => (Pipelines::load(path)?, path.display().to_string()),
+    let (config, source) = match loaded {
+        Some(loaded) => loaded,
         None => default_pipeline(input, a.track.as_deref(), a.save_config.as_deref())?,
     };
     let live = match &a.viz {

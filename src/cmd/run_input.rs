@@ -27,23 +27,32 @@ pub struct RunArgs {
     /// Put several recorders on one clock: gnss estimates each input's offset and drift from
     /// the GNSS time it logged (time references, else GNSS fixes) and moves every input onto
     /// the first one's clock, the stamps it took included. A --clock-offset given wins.
-    #[arg(long, value_name = "none|gnss", default_value = "none")]
-    pub align: Align,
+    #[arg(long, value_name = "none|gnss")]
+    pub align: Option<Align>,
 }
 
 impl RunArgs {
     /// The run, resolved and checked (one line naming the file if it cannot be read).
     pub fn open(&self) -> Result<Run> {
+        self.open_with(&[], None)
+    }
+
+    /// [`open`](Self::open) with a configuration's `[run]` clocks and alignment, which the
+    /// command line's win over.
+    pub fn open_with(&self, clock_offsets: &[ClockOffset], align: Option<Align>) -> Result<Run> {
         if self.inputs.is_empty() {
             anyhow::bail!("name the log to read: a file, several files, a directory or a bag");
         }
+        // Applied in order: a file the command line names again takes the command line's.
+        let mut clocks = clock_offsets.to_vec();
+        clocks.extend(self.clock_offsets.iter().cloned());
         let run = Run::open(
             &self.inputs,
             &RunOptions {
                 time: self.time,
-                clock_offsets: self.clock_offsets.clone(),
+                clock_offsets: clocks,
                 allow_missing_parts: self.allow_missing_parts,
-                align: self.align,
+                align: self.align.or(align).unwrap_or_default(),
             },
         )?;
         if let Some(alignment) = run.alignment() {

@@ -40,9 +40,28 @@ pub struct PipelinesFile {
     /// configuration. A log's own `/track/map` wins.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub track: Option<PathBuf>,
+    /// How the log is read as one run; the command line's `--clock-offset` and `--align`
+    /// win over these.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run: Option<RunSettings>,
     /// The pipelines, each run over the same log in one pass.
     #[schemars(with = "Vec<PipelineConfig>")]
     pub pipeline: Vec<Spanned<PipelineConfig>>,
+}
+
+/// `[run]`: the recorders' clocks of a run of several files (see the book's Runs page).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RunSettings {
+    /// Each recorder's clock against the run's, `"FILE=SECONDS[,DRIFTppm]"` as
+    /// `--clock-offset` takes it (`"rack.mcap=+0.350,+20ppm"`; a bare file name matches the
+    /// run's file of that name): positive for a clock ahead.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub clock_offsets: Vec<String>,
+    /// `"gnss"`: each input's clock estimated from the GNSS time it logged and put on the
+    /// first input's (`--align gnss`); `"none"`: each file on its own clock.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub align: Option<String>,
 }
 
 /// The estimators along the track, built into the spec. `filter` may also name a registered
@@ -675,6 +694,7 @@ impl PipelineConfig {
     pub fn to_toml(&self) -> String {
         toml::to_string(&PipelinesFile {
             track: None,
+            run: None,
             pipeline: vec![Spanned::new(0..0, self.clone())],
         })
         .expect("a config serialises")

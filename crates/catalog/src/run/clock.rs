@@ -96,10 +96,15 @@ impl ClockOffset {
     /// Sets the clock of the parts this offset names: a part itself, or every part of an
     /// input. A drift is measured from the first time of the input (set when the run is read).
     pub(super) fn apply(&self, run: &Path, inputs: &[PathBuf], parts: &mut [Part]) -> Result<()> {
-        let input = inputs.iter().position(|i| super::same_file(i, &self.file));
+        // A bare file name (as a configuration gives it) names the run's file of that name.
+        let bare = self.file.components().count() == 1;
+        let named = |p: &Path| {
+            super::same_file(p, &self.file) || (bare && p.file_name() == Some(self.file.as_os_str()))
+        };
+        let input = inputs.iter().position(|i| named(i));
         let mut matched = false;
         for part in parts.iter_mut() {
-            if Some(part.input) == input || super::same_file(&part.path, &self.file) {
+            if Some(part.input) == input || named(&part.path) {
                 part.clock = self.clock;
                 matched = true;
             }

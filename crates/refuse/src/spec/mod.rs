@@ -54,6 +54,9 @@ pub struct Pipelines {
     pub path: PathBuf,
     /// The track map the configuration names (`track = "line.geojson"`), read and checked.
     pub track: Option<railfuse_catalog::messages::TrackMap>,
+    /// `[run]`: the recorders' clocks given, and how to align them.
+    pub clock_offsets: Vec<railfuse_catalog::run::ClockOffset>,
+    pub align: Option<railfuse_catalog::run::Align>,
     pub pipeline: Vec<PipelineSpec>,
 }
 
@@ -127,9 +130,26 @@ impl Pipelines {
             }
             None => None,
         };
+        let run = file.run.unwrap_or_default();
+        let bad_run = |message: String| Error::ConfigSyntax {
+            path: path.to_owned(),
+            message: format!("[run] {message}"),
+        };
+        let clock_offsets = run
+            .clock_offsets
+            .iter()
+            .map(|c| c.parse().map_err(|e| bad_run(format!("clock_offsets: {e}"))))
+            .collect::<Result<_>>()?;
+        let align = run
+            .align
+            .as_deref()
+            .map(|a| a.parse().map_err(|e| bad_run(format!("align: {e}"))))
+            .transpose()?;
         Ok(Self {
             path: path.to_owned(),
             track,
+            clock_offsets,
+            align,
             pipeline,
         })
     }
