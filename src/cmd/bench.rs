@@ -85,7 +85,6 @@ pub struct Args {
     pub runs: Option<f64>,
 }
 
-
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
         return super::bench_record::run(&a.dir, secs, a.record_speedup);

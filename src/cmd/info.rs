@@ -176,7 +176,9 @@ fn print_clocks(a: &Alignment, applied: bool) {
     match (applied, a.reference) {
         (true, Some(r)) => println!(
             "--align gnss: every input on the clock of {} (the file table's clock columns)",
-            a.estimates[r].as_ref().map_or(String::new(), |e| e.input.display().to_string())
+            a.estimates[r]
+                .as_ref()
+                .map_or(String::new(), |e| e.input.display().to_string())
         ),
         (false, Some(_)) => println!("--align gnss puts every input on the first one's clock"),
         _ => {}

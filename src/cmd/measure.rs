@@ -81,4 +81,3 @@ pub fn refuse_run_child(
         safety_epochs,
     })
 }
-

@@ -59,7 +59,10 @@ fn simulate_recorders_to(a: &Args) -> Result<SimulationReport> {
         &a.output,
     )?;
     if let Err(e) = Scenario::faults_within(report.duration_s, &a.faults) {
-        report.files.iter().for_each(|f| drop(std::fs::remove_file(f)));
+        report
+            .files
+            .iter()
+            .for_each(|f| drop(std::fs::remove_file(f)));
         bail!("--{e}");
     }
     crate::say!(

@@ -165,11 +165,9 @@ impl ChannelSummary {
     }
 }
 
-/// Reads the whole run once and summarises it.
-pub fn summarise(run: &Run) -> Result<LogSummary> {
-    let mut reader = run.reader()?;
-    let mut files: Vec<FileSummary> = run
-        .parts()
+/// Each file of the run, before its messages are counted.
+fn file_summaries(run: &Run) -> Vec<FileSummary> {
+    run.parts()
         .iter()
         .map(|p| FileSummary {
             path: p.path.display().to_string(),
@@ -179,7 +177,13 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
             last_log_time_ns: None,
             clock: p.clock,
         })
-        .collect();
+        .collect()
+}
+
+/// Reads the whole run once and summarises it.
+pub fn summarise(run: &Run) -> Result<LogSummary> {
+    let mut reader = run.reader()?;
+    let mut files = file_summaries(run);
     let mut channels: BTreeMap<u16, ChannelSummary> = BTreeMap::new();
     let mut metadata = Vec::new();
     let mut attachments = Vec::new();

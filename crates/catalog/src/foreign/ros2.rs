@@ -602,7 +602,10 @@ mod tests {
     fn a_header_stamp_moves_with_the_clock_and_other_messages_do_not() {
         let msg = NavSatFix {
             header: header_at(1_780_300_800_250_000_000, "gps"),
-            status: NavSatStatus { status: 0, service: 0 },
+            status: NavSatStatus {
+                status: 0,
+                service: 0,
+            },
             latitude: 44.6,
             longitude: 10.9,
             altitude: 40.0,
@@ -612,14 +615,33 @@ mod tests {
         let data = to_cdr(&msg);
         let mut out = Vec::new();
         let back = |t: u64| t - 1_200_000_000;
-        assert!(restamp_header(NAV_SAT_FIX_DEFINITION.as_bytes(), &data, back, &mut out));
+        assert!(restamp_header(
+            NAV_SAT_FIX_DEFINITION.as_bytes(),
+            &data,
+            back,
+            &mut out
+        ));
         let moved: NavSatFix = from_cdr(&out, "NavSatFix").unwrap();
-        assert_eq!((moved.header.stamp.sec, moved.header.stamp.nanosec), (1_780_300_799, 50_000_000));
-        assert_eq!((moved.latitude, moved.header.frame_id.as_str()), (44.6, "gps"));
+        assert_eq!(
+            (moved.header.stamp.sec, moved.header.stamp.nanosec),
+            (1_780_300_799, 50_000_000)
+        );
+        assert_eq!(
+            (moved.latitude, moved.header.frame_id.as_str()),
+            (44.6, "gps")
+        );
         // A definition without a header first, and a zero stamp, are left alone.
         assert!(!restamp_header(b"float64 x\n", &data, back, &mut out));
-        let zero = to_cdr(&NavSatFix { header: header_at(0, "gps"), ..msg });
-        assert!(!restamp_header(NAV_SAT_FIX_DEFINITION.as_bytes(), &zero, back, &mut out));
+        let zero = to_cdr(&NavSatFix {
+            header: header_at(0, "gps"),
+            ..msg
+        });
+        assert!(!restamp_header(
+            NAV_SAT_FIX_DEFINITION.as_bytes(),
+            &zero,
+            back,
+            &mut out
+        ));
     }
 
     /// A CDR little-endian payload of a NavSatFix, written field by field as ROS 2 writes it.
@@ -731,7 +753,13 @@ pub fn restamp_header(
     let (Ok(sec), nanosec) = (i32::try_from(t / 1_000_000_000), (t % 1_000_000_000) as u32) else {
         return false;
     };
-    let bytes = |v: u32| if little { v.to_le_bytes() } else { v.to_be_bytes() };
+    let bytes = |v: u32| {
+        if little {
+            v.to_le_bytes()
+        } else {
+            v.to_be_bytes()
+        }
+    };
     out.clear();
     out.extend_from_slice(data);
     out[4..8].copy_from_slice(&bytes(sec as u32));

@@ -536,15 +536,26 @@ pub fn read_metadata(path: &Path, name: &str) -> Result<Option<BTreeMap<String, 
             continue;
         }
         if index.length > super::RECORD_LENGTH_LIMIT as u64 {
-            return Err(Error::mcap(path, "a metadata record longer than any railfuse reads"));
+            return Err(Error::mcap(
+                path,
+                "a metadata record longer than any railfuse reads",
+            ));
         }
         let mut file = open_checked(path)?;
         let mut record = vec![0u8; index.length as usize];
         file.seek(SeekFrom::Start(index.offset))
             .and_then(|_| file.read_exact(&mut record))
             .map_err(|e| Error::io(path, e))?;
-        let at_index = || Error::mcap(path, format!("no metadata record where the index puts {name}"));
-        let framed = Records::new(&record).next().ok_or_else(at_index)?.map_err(|_| at_index())?;
+        let at_index = || {
+            Error::mcap(
+                path,
+                format!("no metadata record where the index puts {name}"),
+            )
+        };
+        let framed = Records::new(&record)
+            .next()
+            .ok_or_else(at_index)?
+            .map_err(|_| at_index())?;
         return match mcap::parse_record(framed.opcode, framed.body) {
             Ok(Record::Metadata(m)) => Ok(Some(m.metadata)),
             _ => Err(at_index()),

@@ -174,9 +174,9 @@ impl Run {
             let Ok(estimate) = estimate else { continue };
             let clock = onto(&estimate.clock, &reference);
             for part in self.parts.iter_mut().filter(|p| p.input == i) {
-                let given = keep
-                    .iter()
-                    .any(|k| super::same_file(k, &part.path) || super::same_file(k, &self.inputs[i]));
+                let given = keep.iter().any(|k| {
+                    super::same_file(k, &part.path) || super::same_file(k, &self.inputs[i])
+                });
                 if !given {
                     part.clock = clock;
                 }

@@ -151,7 +151,8 @@ pub fn write_manifest(dir: &Path, files: &[ManifestFile], topics: &[ManifestTopi
     let start = files.iter().filter_map(|f| f.span_ns).map(|s| s.0).min();
     let end = files.iter().filter_map(|f| f.span_ns).map(|s| s.1).max();
     let (start, end) = (start.unwrap_or(0), end.unwrap_or(0));
-    let mut y = String::from("rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n");
+    let mut y =
+        String::from("rosbag2_bagfile_information:\n  version: 5\n  storage_identifier: mcap\n");
     let total: u64 = files.iter().map(|f| f.messages).sum();
     let _ = write!(
         y,

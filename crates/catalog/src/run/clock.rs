@@ -99,7 +99,8 @@ impl ClockOffset {
         // A bare file name (as a configuration gives it) names the run's file of that name.
         let bare = self.file.components().count() == 1;
         let named = |p: &Path| {
-            super::same_file(p, &self.file) || (bare && p.file_name() == Some(self.file.as_os_str()))
+            super::same_file(p, &self.file)
+                || (bare && p.file_name() == Some(self.file.as_os_str()))
         };
         let input = inputs.iter().position(|i| named(i));
         let mut matched = false;

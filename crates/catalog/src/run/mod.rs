@@ -172,7 +172,11 @@ impl Run {
             offset.apply(first, &run.inputs, &mut run.parts)?;
         }
         if options.align == Align::Gnss {
-            let given: Vec<PathBuf> = options.clock_offsets.iter().map(|o| o.file.clone()).collect();
+            let given: Vec<PathBuf> = options
+                .clock_offsets
+                .iter()
+                .map(|o| o.file.clone())
+                .collect();
             let alignment = run.align_gnss(&given)?;
             if alignment.reference.is_none() {
                 return Err(align::no_gnss_time(&run, &alignment));

@@ -127,18 +127,10 @@ impl RunReader {
         let mut summaries = Vec::with_capacity(run.parts.len());
         let mut converted = Vec::new();
         for p in &run.parts {
-            // A sqlite3 part is read through a temporary MCAP of it (converted row by row, as
-            // `ros2 bag convert` would), removed with the reader.
             let path = match p.storage {
                 Storage::Mcap => p.path.clone(),
                 Storage::Sqlite3 => {
-                    let temporary = tempfile::Builder::new()
-                        .prefix("railfuse-db3-")
-                        .suffix(".mcap")
-                        .tempfile()
-                        .map_err(|e| Error::io(&p.path, e))?
-                        .into_temp_path();
-                    crate::foreign::rosbag2_sqlite::convert(&p.path, &temporary)?;
+                    let temporary = converted_part(&p.path)?;
                     let path = temporary.to_path_buf();
                     converted.push(temporary);
                     path
@@ -387,19 +379,11 @@ impl RunReader {
         let part = &mut self.parts[p];
         // Only a part read in stamp order outlives its file: what it holds leaves now.
         let Some(reader) = part.reader.as_mut() else {
-            if !self.release_held(p, true) {
-                self.to_advance.pop();
-            }
+            self.release_rest(p);
             return Ok(None);
         };
         let Some(record) = reader.next() else {
-            self.finished_bytes += part.size;
-            self.counts.parts_read += 1;
-            self.counts.stamps_beyond_window += part.stamped.as_ref().map_or(0, |o| o.late);
-            part.reader = None;
-            if !self.release_held(p, true) {
-                self.to_advance.pop();
-            }
+            self.part_ended(p);
             return Ok(None);
         };
         let step = match record? {
@@ -410,7 +394,10 @@ impl RunReader {
                 );
                 part.taken += 1;
                 if let Some(order) = part.stamped.as_mut() {
-                    let channel = self.ids.channel_of(p, m.channel.id).expect("its channel came before it");
+                    let channel = self
+                        .ids
+                        .channel_of(p, m.channel.id)
+                        .expect("its channel came before it");
                     order.hold(Held {
                         stamp_ns: self.stamps.of(channel, &m, &part.clock, log),
                         order: part.taken,
@@ -437,29 +424,8 @@ impl RunReader {
                 self.to_advance.pop();
                 None
             }
-            LogRecord::Schema(s) => {
-                let (s, _) = self.ids.schema(p, &s).ok_or_else(|| self.full(p))?;
-                self.announced_schemas
-                    .insert(s.id, ())
-                    .is_none()
-                    .then_some(Step::Schema(s))
-            }
-            LogRecord::Channel(c) => {
-                let c = self.run_channel(p, &c)?;
-                let channel = self
-                    .announced_channels
-                    .insert(c.id, ())
-                    .is_none()
-                    .then(|| Step::Channel(c.clone()));
-                match c.schema.as_ref() {
-                    // A schema this part shares with an earlier one, said before its channel.
-                    Some(s) if self.announced_schemas.insert(s.id, ()).is_none() => {
-                        self.queued = channel;
-                        Some(Step::Schema(s.clone()))
-                    }
-                    _ => channel,
-                }
-            }
+            LogRecord::Schema(s) => self.schema_read(p, &s)?,
+            LogRecord::Channel(c) => self.channel_read(p, &c)?,
             LogRecord::Metadata { name, metadata } => Some(Step::Metadata(name, metadata)),
             LogRecord::Attachment {
                 name,
@@ -479,6 +445,53 @@ impl RunReader {
             }
         };
         Ok(step)
+    }
+
+    /// Part `p`'s file is read to its end: closed, and what it holds for its stamps left to
+    /// leave.
+    fn part_ended(&mut self, p: usize) {
+        let part = &mut self.parts[p];
+        self.finished_bytes += part.size;
+        self.counts.parts_read += 1;
+        self.counts.stamps_beyond_window += part.stamped.as_ref().map_or(0, |o| o.late);
+        part.reader = None;
+        self.release_rest(p);
+    }
+
+    /// A read part's next held message becomes its head; without one, the part is done.
+    fn release_rest(&mut self, p: usize) {
+        if !self.release_held(p, true) {
+            self.to_advance.pop();
+        }
+    }
+
+    /// A schema of part `p`: the run's, handed out the first time the run meets it.
+    fn schema_read(&mut self, p: usize, s: &Arc<crate::log::SchemaInfo>) -> Result<Option<Step>> {
+        let (s, _) = self.ids.schema(p, s).ok_or_else(|| self.full(p))?;
+        Ok(self
+            .announced_schemas
+            .insert(s.id, ())
+            .is_none()
+            .then_some(Step::Schema(s)))
+    }
+
+    /// A channel of part `p`: the run's, handed out (after its schema, where that is new to
+    /// the run) the first time the run meets it.
+    fn channel_read(&mut self, p: usize, c: &Arc<ChannelInfo>) -> Result<Option<Step>> {
+        let c = self.run_channel(p, c)?;
+        let channel = self
+            .announced_channels
+            .insert(c.id, ())
+            .is_none()
+            .then(|| Step::Channel(c.clone()));
+        Ok(match c.schema.as_ref() {
+            // A schema this part shares with an earlier one, said before its channel.
+            Some(s) if self.announced_schemas.insert(s.id, ()).is_none() => {
+                self.queued = channel;
+                Some(Step::Schema(s.clone()))
+            }
+            _ => channel,
+        })
     }
 
     /// Makes the earliest message part `p` holds for its stamp its head, where one is due
@@ -570,6 +583,19 @@ impl RunReader {
     }
 }
 
+/// A sqlite3 part, read through a temporary MCAP of it (converted row by row, as `ros2 bag
+/// convert` would), removed with the reader.
+fn converted_part(path: &Path) -> Result<tempfile::TempPath> {
+    let temporary = tempfile::Builder::new()
+        .prefix("railfuse-db3-")
+        .suffix(".mcap")
+        .tempfile()
+        .map_err(|e| Error::io(path, e))?
+        .into_temp_path();
+    crate::foreign::rosbag2_sqlite::convert(path, &temporary)?;
+    Ok(temporary)
+}
+
 /// A part's head message: (its channel id in the part, sequence, payload), held for its stamp
 /// or in its reader.
 fn head_of(part: &PartState) -> (u16, u32, &[u8]) {
@@ -600,7 +626,8 @@ fn restamp(channel: &ChannelInfo, data: &[u8], clock: &ClockMap, out: &mut Vec<u
             _ => false,
         };
     };
-    let protobuf = channel.message_encoding == crate::protobuf::Encoding::Protobuf.message_encoding();
+    let protobuf =
+        channel.message_encoding == crate::protobuf::Encoding::Protobuf.message_encoding();
     let decoded = match protobuf {
         true => kind.decode_protobuf(data).ok(),
         false => kind.decode(data).ok(),

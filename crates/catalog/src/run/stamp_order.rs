@@ -94,10 +94,18 @@ pub(super) struct Stamps {
 impl Stamps {
     /// The stamp of `m` on the run's clock (a recorder's own stamps corrected with its
     /// `clock`, GNSS time as it is); its log time where it has none.
-    pub fn of(&mut self, run_channel: u16, m: &LogMessage<'_>, clock: &ClockMap, log_ns: u64) -> u64 {
+    pub fn of(
+        &mut self,
+        run_channel: u16,
+        m: &LogMessage<'_>,
+        clock: &ClockMap,
+        log_ns: u64,
+    ) -> u64 {
         let channel: &ChannelInfo = m.channel;
         if let Some(kind) = channel.kind() {
-            let decoded = match channel.message_encoding == crate::protobuf::Encoding::Protobuf.message_encoding() {
+            let decoded = match channel.message_encoding
+                == crate::protobuf::Encoding::Protobuf.message_encoding()
+            {
                 true => kind.decode_protobuf(m.data).ok(),
                 false => kind.decode(m.data).ok(),
             };
@@ -107,11 +115,16 @@ impl Stamps {
                 (None, _) => log_ns,
             };
         }
-        let translator = self
-            .translators
-            .entry(run_channel)
-            .or_insert_with(|| Translator::for_channel(channel, None).ok().flatten().map(Arc::new));
-        match translator.as_ref().map(|t| t.translate(m.data, m.log_time_ns)) {
+        let translator = self.translators.entry(run_channel).or_insert_with(|| {
+            Translator::for_channel(channel, None)
+                .ok()
+                .flatten()
+                .map(Arc::new)
+        });
+        match translator
+            .as_ref()
+            .map(|t| t.translate(m.data, m.log_time_ns))
+        {
             Some(Ok(crate::foreign::Translated::Message {
                 message,
                 took_log_time: false,

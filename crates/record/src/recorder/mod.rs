@@ -441,10 +441,14 @@ impl Recording {
             self.notices.extend(notice);
             self.diag = diag;
             let finished = std::mem::replace(&mut self.writer, writer);
-            self.finished_parts.push(manifest_file(&self.current, &finished));
+            self.finished_parts
+                .push(manifest_file(&self.current, &finished));
             self.topics.extend(finished.channels().map(|(t, k, c)| {
                 let encoding = finished.writer.encoding_of(c).message_encoding();
-                (t.to_owned(), (k.schema_name().to_owned(), encoding.to_owned()))
+                (
+                    t.to_owned(),
+                    (k.schema_name().to_owned(), encoding.to_owned()),
+                )
             }));
             // The finished part is complete before the next is written to: a write error in
             // the next one names that one and leaves this one whole.
@@ -469,7 +473,10 @@ impl Recording {
         let mut topics = self.topics.clone();
         topics.extend(self.writer.channels().map(|(t, k, c)| {
             let encoding = self.writer.writer.encoding_of(c).message_encoding();
-            (t.to_owned(), (k.schema_name().to_owned(), encoding.to_owned()))
+            (
+                t.to_owned(),
+                (k.schema_name().to_owned(), encoding.to_owned()),
+            )
         }));
         let topics: Vec<ManifestTopic> = topics
             .into_iter()

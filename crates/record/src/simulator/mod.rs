@@ -17,8 +17,8 @@ use std::path::Path;
 
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::{ChannelId, LogWriter};
-use railfuse_catalog::messages::*;
 use railfuse_catalog::messages::StampClock;
+use railfuse_catalog::messages::*;
 use railfuse_catalog::topics;
 
 pub use driver::DriverParams;
@@ -29,12 +29,12 @@ pub use track::{Segment, TrackParams};
 
 use driver::{Driver, DriverEvent, Phase};
 use faults::FaultInjector;
+use recorders::SimClock;
 use sensors::{
     balise::BaliseReader, eddy_current::EddyCurrentSensor, gnss::Gnss, imu::ImuSensor,
     induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream,
 };
 use track::Track;
-use recorders::SimClock;
 use world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
 
 /// What a simulation wrote.
@@ -95,6 +95,30 @@ impl SimLog {
                 )),
             });
         }
+        let channels = Self::channels(&mut logs, recorders, scenario)?;
+        let report = SimulationReport {
+            scenario: scenario.name().into(),
+            seed,
+            ..Default::default()
+        };
+        let faults = FaultInjector::new(faults, SIMULATED_START_NS);
+        Ok(Self {
+            logs,
+            channels,
+            report,
+            faults,
+            fault_specs: Vec::new(),
+            fault_events: Vec::new(),
+        })
+    }
+
+    /// Every channel of the scenario, each in the log of the recorder that logs it, and
+    /// each recorder's time reference.
+    fn channels(
+        logs: &mut [RecorderLog],
+        recorders: &[SimRecorder],
+        scenario: &Scenario,
+    ) -> railfuse_catalog::Result<BTreeMap<String, (usize, ChannelId)>> {
         let n = recorders.len();
         let mut channels = BTreeMap::new();
         macro_rules! channel {
@@ -139,20 +163,7 @@ impl SimLog {
             let id = logs[i].writer.add_channel::<TimeReference>(&topic)?;
             channels.insert(topic, (i, id));
         }
-        let report = SimulationReport {
-            scenario: scenario.name().into(),
-            seed,
-            ..Default::default()
-        };
-        let faults = FaultInjector::new(faults, SIMULATED_START_NS);
-        Ok(Self {
-            logs,
-            channels,
-            report,
-            faults,
-            fault_specs: Vec::new(),
-            fault_events: Vec::new(),
-        })
+        Ok(channels)
     }
 
     /// Writes `msg` into its recorder's log: on that recorder's clock, its log time and
@@ -173,7 +184,8 @@ impl SimLog {
                     let stamp = local.stamp_ns_mut();
                     *stamp = clock.local(*stamp);
                 }
-                log.writer.write(channel, clock.local(log_time_ns), &local)?;
+                log.writer
+                    .write(channel, clock.local(log_time_ns), &local)?;
             }
         }
         self.report.messages += 1;
@@ -255,10 +267,21 @@ impl SimLog {
                 // The simulator's truth about the recorder's clock, to check an estimate by.
                 let truth = clock.as_clock_map();
                 run.insert("recorder".into(), r.name.clone());
-                run.insert("recorder_clock_offset_ns".into(), truth.offset_ns.to_string());
-                run.insert("recorder_clock_drift_ppm".into(), truth.drift_ppm.to_string());
-                run.insert("recorder_clock_origin_ns".into(), truth.origin_ns.to_string());
-                self.report.files.push(log.writer.path().display().to_string());
+                run.insert(
+                    "recorder_clock_offset_ns".into(),
+                    truth.offset_ns.to_string(),
+                );
+                run.insert(
+                    "recorder_clock_drift_ppm".into(),
+                    truth.drift_ppm.to_string(),
+                );
+                run.insert(
+                    "recorder_clock_origin_ns".into(),
+                    truth.origin_ns.to_string(),
+                );
+                self.report
+                    .files
+                    .push(log.writer.path().display().to_string());
             }
             let mut writer = log.writer;
             writer.write_metadata(topics::metadata::RUN, run)?;
@@ -310,7 +333,9 @@ pub fn simulate_recorders(
         cause: cause.to_owned(),
     };
     let Some(p) = scenario.line() else {
-        return Err(fail("several recorders are simulated on the line scenarios only"));
+        return Err(fail(
+            "several recorders are simulated on the line scenarios only",
+        ));
     };
     if recorders.is_empty() || recorders.len() > MAX_RECORDERS {
         return Err(fail("give one to three recorders"));
@@ -356,10 +381,7 @@ fn simulate_line(
         map.stations.iter().map(|s| s.chainage_m).collect(),
     );
     let mut sensors = line_sensors(p, map, seed, start);
-    sensors.extend(
-        (0..recorders.len())
-            .map(|i| Box::new(recorders::PpsReference::new(i, start)) as Box<dyn SimSensor>),
-    );
+    sensors.extend((0..recorders.len()).map(|i| recorders::pps(i, start)));
     let mut surroundings = Surroundings::new(p, map);
     let mut truth_schedule = Schedule::new(start, p.truth_rate_hz);
     let mut outbox = Outbox::default();

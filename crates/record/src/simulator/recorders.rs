@@ -145,6 +145,11 @@ impl SimSensor for PpsReference {
     }
 }
 
+/// Recorder `index`'s PPS, as a sensor of the simulation.
+pub fn pps(index: usize, start_ns: u64) -> Box<dyn SimSensor> {
+    Box::new(PpsReference::new(index, start_ns))
+}
+
 /// The jitter of each recorder's PPS reading, each its own random stream.
 pub fn pps_jitter(seed: u64, index: usize) -> ChaCha8Rng {
     rng_stream(seed, 40 + index as u64)
