@@ -212,3 +212,30 @@ fn every_sample_configuration_is_valid_against_the_schema_jsonschema_reads() {
     );
     println!("{}", String::from_utf8_lossy(&py.stdout));
 }
+
+#[test]
+fn the_python_package_aligns_several_recorders_as_the_cli_does() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path().join("three");
+    ok(&[
+        "simulate", "--duration", "60", "--seed", "2", "--recorder", "box", "--recorder",
+        "rack=+0.35,+20ppm", "-o", s(&dir),
+    ]);
+    let files = [dir.join("box.mcap"), dir.join("rack.mcap")];
+    let config = sample("kalman.toml");
+    let cli = d.path().join("cli.fused.mcap");
+    ok(&[
+        "refuse", s(&files[0]), s(&files[1]), "--align", "gnss", "-c", s(&config), "-o", s(&cli),
+    ]);
+    let py = d.path().join("py.fused.mcap");
+    let v = python_ok(
+        "python_align.py",
+        &[s(&config), s(&py), s(&files[0]), s(&files[1])],
+    );
+    assert!(v["rmse"].as_f64().unwrap() < 1.0, "{v}");
+    assert_eq!(
+        std::fs::read(&cli).unwrap(),
+        std::fs::read(&py).unwrap(),
+        "railfuse.refuse(align=\"gnss\") and railfuse refuse --align gnss write the same bytes"
+    );
+}

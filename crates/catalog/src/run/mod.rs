@@ -25,6 +25,7 @@ mod channels;
 mod clock;
 mod merge;
 mod reader;
+mod sequential;
 mod stamp_order;
 
 use std::path::{Path, PathBuf};

@@ -149,11 +149,10 @@ impl RunReader {
                 input: p.input,
                 clock: p.clock,
                 start_ns: match run.time {
-                    // Publish times may come before log times: only the log time is bounded.
-                    TimeBasis::Publish => None,
                     TimeBasis::Log => p.listed_start_ns.or(span.map(|s| s.0)),
-                    // A stamp precedes its log time by at most the window.
-                    TimeBasis::Stamp => p
+                    // A message is sent (and stamped) before it is logged: by at most the
+                    // window, taken as that of `--time stamp`.
+                    TimeBasis::Publish | TimeBasis::Stamp => p
                         .listed_start_ns
                         .or(span.map(|s| s.0))
                         .map(|t| t.saturating_sub(WINDOW_NS)),

@@ -156,9 +156,10 @@ pub fn refuse(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
 fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
     let parts = opts.run.parts().iter().map(|p| p.path.clone()).collect();
     let digest = provenance::InputDigest::start(parts);
-    let mut replay = match opts.run.single_file() {
-        Some(file) => read_file(opts, file)?,
-        None => read_run(opts)?,
+    let mut replay = match (opts.run.single_file(), opts.run.sequential_files()?) {
+        (Some(file), _) => read_file(opts, file)?,
+        (None, Some(files)) => read_files(opts, &files)?,
+        (None, None) => read_run(opts)?,
     };
     replay.input_sha256 = Some(digest.finish()?);
     replay.finish()
@@ -168,18 +169,21 @@ fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
 /// copied to the output byte for byte.
 fn read_file<'a>(opts: &'a RefuseOptions<'a>, file: &Path) -> Result<Replay<'a>> {
     let mut replay = Replay::new(opts, read_summary(file)?)?;
-    let mut items = ReadAhead::new(Scanner::open(file)?, READ_AHEAD_BYTES);
-    while let Some(item) = items.next() {
-        if let Some(progress) = opts.progress {
-            progress(items.position());
-        }
-        match item? {
-            Item::Chunk(chunk) => items.recycle(replay.chunk(chunk)?),
-            Item::Record { opcode, body, .. } => replay.top_level(opcode, &body)?,
-            Item::Damage(_) => unreachable!("a strict scanner reports damage as an error"),
-        }
+    replay.report.input_bytes = replay.read_chunks(file, 0)?;
+    Ok(replay)
+}
+
+/// A split run whose parts follow one another with the same ids
+/// ([`Run::sequential_files`]): each part read chunk by chunk as one file is, in turn.
+fn read_files<'a>(opts: &'a RefuseOptions<'a>, files: &[&Path]) -> Result<Replay<'a>> {
+    let summary = opts.run.reader()?.summary().cloned();
+    let mut replay = Replay::new(opts, summary)?;
+    let mut read = 0;
+    for file in files {
+        read += replay.read_chunks(file, read)?;
     }
-    replay.report.input_bytes = items.position();
+    replay.report.input_bytes = read;
+    replay.report.merge.parts_read = files.len();
     Ok(replay)
 }
 
@@ -341,6 +345,23 @@ impl<'a> Replay<'a> {
             .strip_prefix(railfuse_catalog::foxglove::TOPIC_PREFIX)
             .unwrap_or(topic);
         topics::fused_pipeline_of(own).is_some_and(|n| self.names.contains(n))
+    }
+
+    /// Reads `file` chunk by chunk into the replay (progress counted from `before` bytes);
+    /// the bytes read.
+    fn read_chunks(&mut self, file: &Path, before: u64) -> Result<u64> {
+        let mut items = ReadAhead::new(Scanner::open(file)?, READ_AHEAD_BYTES);
+        while let Some(item) = items.next() {
+            if let Some(progress) = self.opts.progress {
+                progress(before + items.position());
+            }
+            match item? {
+                Item::Chunk(chunk) => items.recycle(self.chunk(chunk)?),
+                Item::Record { opcode, body, .. } => self.top_level(opcode, &body)?,
+                Item::Damage(_) => unreachable!("a strict scanner reports damage as an error"),
+            }
+        }
+        Ok(items.position())
     }
 
     /// An input chunk: its messages go to the pipelines and the evaluation; the chunk itself
