@@ -17,10 +17,15 @@ use super::DEFAULT_PIPELINES;
 
 const PARTS: u64 = 20;
 
-pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
-    let config = dir.join("kalman.toml");
-    std::fs::write(&config, DEFAULT_PIPELINES)?;
+/// The benchmark's logs: one run of `secs` s, the same as 20 parts, and as three recorders.
+struct Logs {
+    sim: railfuse_record::SimulationReport,
+    whole: PathBuf,
+    parts: PathBuf,
+    three: Vec<PathBuf>,
+}
+
+fn write_logs(dir: &Path, secs: f64) -> Result<Logs> {
     let preset = Scenario::preset("default").expect("a built-in preset");
     let whole = dir.join(format!("runs-{secs:.0}s.mcap"));
     let sim = simulate(&preset, 1, Some(secs), &[], &whole)?;
@@ -44,7 +49,24 @@ pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
         .map(|r| r.parse().map_err(anyhow::Error::msg))
         .collect::<Result<_>>()?;
     let written = simulate_recorders(&preset, 1, Some(secs), &[], &recorders, &three)?;
-    let three_files: Vec<PathBuf> = written.files.iter().map(PathBuf::from).collect();
+    Ok(Logs {
+        sim,
+        whole,
+        parts,
+        three: written.files.iter().map(PathBuf::from).collect(),
+    })
+}
+
+pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let config = dir.join("kalman.toml");
+    std::fs::write(&config, DEFAULT_PIPELINES)?;
+    let Logs {
+        sim,
+        whole,
+        parts,
+        three: three_files,
+    } = write_logs(dir, secs)?;
     let fused = dir.join("runs.fused.mcap");
     let time = |inputs: &[&Path], options: &[&str]| -> Result<(f64, Option<u64>)> {
         let mut all: Vec<Measured> = (0..repeat.max(1))

@@ -313,16 +313,19 @@ impl RunReader {
                 let (channel, _) = self.current.expect("set with the step");
                 let part = &self.parts[head.part];
                 let (_, sequence, data) = head_of(part);
-                let channel = &self.ids.channels[&channel];
-                let restamped = !part.clock.is_identity()
-                    && restamp(channel, data, &part.clock, &mut self.restamped);
-                LogRecord::Message(LogMessage {
-                    channel,
+                let mut message = LogMessage {
+                    channel: &self.ids.channels[&channel],
                     sequence,
                     log_time_ns: head.time_ns,
                     publish_time_ns: head.publish_ns,
-                    data: if restamped { &self.restamped } else { data },
-                })
+                    data,
+                };
+                if !part.clock.is_identity()
+                    && restamp(&message, &part.clock, &mut self.restamped)
+                {
+                    message.data = &self.restamped;
+                }
+                LogRecord::Message(message)
             }
         }
     }
@@ -614,27 +617,23 @@ fn head_of(part: &PartState) -> (u16, u32, &[u8]) {
 /// the run's clock, re-encoding it into `out`; false (the message as it is) for a stamp on
 /// GNSS time, a derived one, another foreign schema, or a payload that does not decode (its
 /// reader names it).
-fn restamp(channel: &ChannelInfo, data: &[u8], clock: &ClockMap, out: &mut Vec<u8>) -> bool {
+fn restamp(m: &LogMessage<'_>, clock: &ClockMap, out: &mut Vec<u8>) -> bool {
     use crate::messages::{AnyMessage, StampClock};
-    let Some(kind) = channel.kind() else {
+    let channel = m.channel;
+    if channel.kind().is_none() {
         // A ROS 2 message's header.stamp is its node's clock: the recorder's machine.
         return match &channel.schema {
             Some(s) if channel.message_encoding == "cdr" && s.encoding == "ros2msg" => {
-                crate::foreign::ros2::restamp_header(&s.data, data, |t| clock.correct(t), out)
+                crate::foreign::ros2::restamp_header(&s.data, m.data, |t| clock.correct(t), out)
             }
             _ => false,
         };
-    };
-    let protobuf =
-        channel.message_encoding == crate::protobuf::Encoding::Protobuf.message_encoding();
-    let decoded = match protobuf {
-        true => kind.decode_protobuf(data).ok(),
-        false => kind.decode(data).ok(),
-    };
-    let Some(mut message) = decoded else {
+    }
+    let Ok(Some(mut message)) = m.decode_any(Path::new("")) else {
         return false;
     };
-    match (&mut message, kind.stamp_clock()) {
+    let stamp_clock = message.kind().stamp_clock();
+    match (&mut message, stamp_clock) {
         (AnyMessage::TimeReference(r), _) => r.local_ns = clock.correct(r.local_ns),
         (m, StampClock::Recorder) => {
             let stamp = m.stamp_ns_mut();
@@ -642,6 +641,8 @@ fn restamp(channel: &ChannelInfo, data: &[u8], clock: &ClockMap, out: &mut Vec<u
         }
         _ => return false,
     }
+    let protobuf =
+        channel.message_encoding == crate::protobuf::Encoding::Protobuf.message_encoding();
     out.clear();
     out.extend_from_slice(&match protobuf {
         true => message.to_protobuf(),

@@ -103,16 +103,10 @@ impl Stamps {
     ) -> u64 {
         let channel: &ChannelInfo = m.channel;
         if let Some(kind) = channel.kind() {
-            let decoded = match channel.message_encoding
-                == crate::protobuf::Encoding::Protobuf.message_encoding()
-            {
-                true => kind.decode_protobuf(m.data).ok(),
-                false => kind.decode(m.data).ok(),
-            };
-            return match (decoded, kind.stamp_clock()) {
-                (Some(d), StampClock::Recorder) => clock.correct(d.stamp_ns()),
-                (Some(d), _) => d.stamp_ns(),
-                (None, _) => log_ns,
+            return match (m.decode_any(std::path::Path::new("")), kind.stamp_clock()) {
+                (Ok(Some(d)), StampClock::Recorder) => clock.correct(d.stamp_ns()),
+                (Ok(Some(d)), _) => d.stamp_ns(),
+                _ => log_ns,
             };
         }
         let translator = self.translators.entry(run_channel).or_insert_with(|| {
