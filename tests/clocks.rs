@@ -74,7 +74,11 @@ fn each_recorder_s_offset_and_drift_are_recovered_within_1_ms_and_1_ppm() {
             );
         }
         let drift_error = est.drift_ppm - truth.drift_ppm;
-        assert!(drift_error.abs() < 1.0, "{}: drift {drift_error} ppm off", file.display());
+        assert!(
+            drift_error.abs() < 1.0,
+            "{}: drift {drift_error} ppm off",
+            file.display()
+        );
         eprintln!(
             "{}: offset {} ns (true {}), drift {:.3} ppm (true {:.3})",
             file.display(),
@@ -97,7 +101,11 @@ fn three_recorders_aligned_by_gnss_refuse_as_accurately_as_one() {
             .as_f64()
             .unwrap()
     };
-    let single = rmse(&refuse_json(&one, "kalman.toml", &d.path().join("one.fused.mcap")));
+    let single = rmse(&refuse_json(
+        &one,
+        "kalman.toml",
+        &d.path().join("one.fused.mcap"),
+    ));
     let refuse_three = |align: &str, out: &str| {
         let mut args = vec!["refuse"];
         args.extend(files.iter().map(|f| s(f)));
@@ -119,7 +127,10 @@ fn three_recorders_aligned_by_gnss_refuse_as_accurately_as_one() {
     let out = d.path().join("configured.fused.mcap");
     args.extend(["-c", s(&config), "-o", s(&out), "--json"]);
     let configured = rmse(&serde_json::from_slice(&ok(&args).stdout).unwrap());
-    assert!((configured - aligned).abs() <= 0.02 * single, "{configured} against {aligned}");
+    assert!(
+        (configured - aligned).abs() <= 0.02 * single,
+        "{configured} against {aligned}"
+    );
     eprintln!("position RMSE: one recorder {single:.4} m, three aligned {aligned:.4} m, three on their own clocks {unaligned:.4} m");
     assert!(
         (aligned - single).abs() <= 0.02 * single,

@@ -427,7 +427,15 @@ fn every_part_of_a_split_recording_opens_with_the_run_s_state_and_a_manifest() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("run.mcap");
     let o = ok(&[
-        "record", "-o", s(&out), "--speed", "40", "--duration", "4", "--split-every", "1",
+        "record",
+        "-o",
+        s(&out),
+        "--speed",
+        "40",
+        "--duration",
+        "4",
+        "--split-every",
+        "1",
         "--json",
     ]);
     let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
@@ -450,14 +458,23 @@ fn every_part_of_a_split_recording_opens_with_the_run_s_state_and_a_manifest() {
     // The manifest lists every part with the times of its own messages.
     let manifest = std::fs::read_to_string(d.path().join("metadata.yaml")).unwrap();
     for f in &files {
-        let name = std::path::Path::new(f).file_name().unwrap().to_str().unwrap();
+        let name = std::path::Path::new(f)
+            .file_name()
+            .unwrap()
+            .to_str()
+            .unwrap();
         assert!(manifest.contains(&format!("\"{name}\"")), "{manifest}");
     }
     let run = ok_json(&["info", s(d.path()), "--json"]);
     assert_eq!(received(&run), r["messages"].as_u64().unwrap());
     // A part re-fused alone starts from the state it repeats: its default pipeline finds
     // the track map and so takes chainage from the GNSS fixes from its first one.
-    let alone = ok(&["refuse", &files[1], "-o", s(&d.path().join("alone.fused.mcap"))]);
+    let alone = ok(&[
+        "refuse",
+        &files[1],
+        "-o",
+        s(&d.path().join("alone.fused.mcap")),
+    ]);
     let said = stderr(&alone);
     assert!(
         said.contains("uses /gnss/fix: railfuse.GnssFix: GNSS fixes, their chainage on the track"),
@@ -470,7 +487,15 @@ fn a_split_recording_cut_off_opens_as_its_parts_and_names_the_one_to_recover() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("run.mcap");
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_railfuse"))
-        .args(["record", "-o", s(&out), "--speed", "20", "--split-every", "1"])
+        .args([
+            "record",
+            "-o",
+            s(&out),
+            "--speed",
+            "20",
+            "--split-every",
+            "1",
+        ])
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
         .spawn()

@@ -335,7 +335,10 @@ fn a_full_disk_in_a_split_recording_names_the_part_and_counts_only_what_reached_
     assert_eq!(r["messages"].as_u64(), Some(in_part1), "{r}");
     // Part 2 fails as it opens (the run's state repeated into it), before a message of its
     // own is taken: the report names it, and nothing taken is lost.
-    assert!(r["failed_file"].as_str().unwrap().ends_with("run-002.mcap"), "{r}");
+    assert!(
+        r["failed_file"].as_str().unwrap().ends_with("run-002.mcap"),
+        "{r}"
+    );
     assert_eq!(r["lost_to_write_error"].as_u64(), Some(0), "{r}");
 }
 

@@ -285,13 +285,27 @@ fn a_run_that_cannot_be_read_as_one_says_why_naming_the_file() {
     // A file of another run (its run metadata says so).
     fails_saying(
         &["refuse", s(&a), s(&b), "-c", s(&config), "-o", s(&out)],
-        &["b.mcap", "of run 'sim-default-seed2'", "a file of another run"],
+        &[
+            "b.mcap",
+            "of run 'sim-default-seed2'",
+            "a file of another run",
+        ],
     );
     assert!(!out.exists());
     // Two recorders of one run both claiming /imu over the same time: the same samples
     // until 5 s are the same messages, read once; from there they differ.
     let c = d.path().join("c.mcap");
-    simulate(&["--duration", "20", "--seed", "1", "--fault", "imu:bias=1:5:10"], &c);
+    simulate(
+        &[
+            "--duration",
+            "20",
+            "--seed",
+            "1",
+            "--fault",
+            "imu:bias=1:5:10",
+        ],
+        &c,
+    );
     fails_saying(
         &["refuse", s(&a), s(&c), "-c", s(&config), "-o", s(&out)],
         &["c.mcap", "is also in", "two sources on one topic"],
@@ -336,7 +350,9 @@ fn a_run_that_cannot_be_read_as_one_says_why_naming_the_file() {
     ]);
     let windows = report["eval"]["windows"].to_string();
     assert!(
-        windows.contains("missing part") && windows.contains("bag_1.mcap") && windows.contains("35"),
+        windows.contains("missing part")
+            && windows.contains("bag_1.mcap")
+            && windows.contains("35"),
         "{windows}"
     );
     std::fs::write(
@@ -351,7 +367,14 @@ fn a_run_that_cannot_be_read_as_one_says_why_naming_the_file() {
     // A damaged part: the run is read up to the damage, which is named with the remedy.
     let split = d.path().join("split");
     std::fs::create_dir(&split).unwrap();
-    ok(&["merge", s(&a), "--split-every", "10", "-o", s(&split.join("run.mcap"))]);
+    ok(&[
+        "merge",
+        s(&a),
+        "--split-every",
+        "10",
+        "-o",
+        s(&split.join("run.mcap")),
+    ]);
     let second = split.join("run-002.mcap");
     let mut bytes = std::fs::read(&second).unwrap();
     let mid = bytes.len() / 2;
@@ -375,14 +398,23 @@ fn time_stamp_orders_a_run_by_each_message_s_own_stamp() {
     simulate(&["--duration", "60"], &whole);
     let parts = d.path().join("parts");
     std::fs::create_dir(&parts).unwrap();
-    ok(&["merge", s(&whole), "--split-every", "20", "-o", s(&parts.join("run.mcap"))]);
+    ok(&[
+        "merge",
+        s(&whole),
+        "--split-every",
+        "20",
+        "-o",
+        s(&parts.join("run.mcap")),
+    ]);
     let stamped = d.path().join("stamped.mcap");
     ok(&["merge", s(&parts), "--time", "stamp", "-o", s(&stamped)]);
     // Every message once, each at its own stamp, in stamp order.
     let (mut n, mut last, mut out_of_order) = (0, 0u64, 0);
     let mut r = LogReader::open(&stamped).unwrap();
     while let Some(rec) = r.next() {
-        let LogRecord::Message(m) = rec.unwrap() else { continue };
+        let LogRecord::Message(m) = rec.unwrap() else {
+            continue;
+        };
         if m.channel.topic.starts_with("/foxglove/") {
             continue;
         }
@@ -409,7 +441,9 @@ fn time_stamp_orders_a_run_by_each_message_s_own_stamp() {
     let mut last = 0u64;
     let mut r = LogReader::open(&whole).unwrap();
     while let Some(rec) = r.next() {
-        let LogRecord::Message(m) = rec.unwrap() else { continue };
+        let LogRecord::Message(m) = rec.unwrap() else {
+            continue;
+        };
         if let Ok(Some(any)) = m.decode_any(&whole) {
             if any.kind() != railfuse_catalog::messages::MessageKind::TrackMap {
                 stamps_back += usize::from(any.stamp_ns() < last);

@@ -218,14 +218,31 @@ fn the_python_package_aligns_several_recorders_as_the_cli_does() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path().join("three");
     ok(&[
-        "simulate", "--duration", "60", "--seed", "2", "--recorder", "box", "--recorder",
-        "rack=+0.35,+20ppm", "-o", s(&dir),
+        "simulate",
+        "--duration",
+        "60",
+        "--seed",
+        "2",
+        "--recorder",
+        "box",
+        "--recorder",
+        "rack=+0.35,+20ppm",
+        "-o",
+        s(&dir),
     ]);
     let files = [dir.join("box.mcap"), dir.join("rack.mcap")];
     let config = sample("kalman.toml");
     let cli = d.path().join("cli.fused.mcap");
     ok(&[
-        "refuse", s(&files[0]), s(&files[1]), "--align", "gnss", "-c", s(&config), "-o", s(&cli),
+        "refuse",
+        s(&files[0]),
+        s(&files[1]),
+        "--align",
+        "gnss",
+        "-c",
+        s(&config),
+        "-o",
+        s(&cli),
     ]);
     let py = d.path().join("py.fused.mcap");
     let v = python_ok(

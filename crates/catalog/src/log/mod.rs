@@ -14,8 +14,8 @@ mod writer;
 
 pub use parts::{part_path, PartWriter, SplitRule};
 pub use reader::{
-    read_channels, read_metadata, read_summary, ChannelInfo, LogMessage, LogReader, LogRecord, LogSummary,
-    SchemaInfo,
+    read_channels, read_metadata, read_summary, ChannelInfo, LogMessage, LogReader, LogRecord,
+    LogSummary, SchemaInfo,
 };
 pub use recover::{recover, RecoverReport};
 pub use writer::{partial_path, ChannelId, ChunkTally, LogWriter, WriterOptions};

@@ -400,12 +400,23 @@ fn parses_exactly(opcode: u8, body: &[u8]) -> bool {
 /// decompressed), not by a count of items, so that many small chunks keep the reader far
 /// enough ahead to absorb the caller's bursts while a few big ones cannot exhaust memory.
 pub struct ReadAhead {
-    items: std::sync::mpsc::Receiver<(Result<Item>, u64, usize)>,
+    items: std::sync::mpsc::Receiver<Sent>,
     budget: std::sync::Arc<Budget>,
     /// Buffers going back to the reader for reuse.
     spares: std::sync::mpsc::Sender<Vec<u8>>,
     position: u64,
     size: u64,
+    /// The file of the item last returned, as an index into those read.
+    file: usize,
+}
+
+/// An item as the reader thread sends it: with the position reached (over all files read so
+/// far), its weight in the budget and the index of its file.
+struct Sent {
+    item: Result<Item>,
+    position: u64,
+    weight: usize,
+    file: usize,
 }
 
 /// Bytes read ahead and not yet handed to the caller.
@@ -462,10 +473,36 @@ pub const READ_AHEAD_BYTES: usize = 2 << 20;
 
 impl ReadAhead {
     /// Reads `scanner` ahead by up to `budget` bytes.
-    pub fn new(mut scanner: Scanner, budget: usize) -> Self {
+    pub fn new(scanner: Scanner, budget: usize) -> Self {
+        let size = scanner.size();
+        Self::spawn(scanner, Vec::new(), size, budget)
+    }
+
+    /// Reads `files` strictly, one after the other as if they were one, ahead by up to
+    /// `budget` bytes: the next file is read while the caller finishes the last, on the
+    /// same thread and in the same budget, so that a run split in many parts costs what one
+    /// file does. A file that cannot be opened is an error item where it would begin.
+    pub fn files(files: &[&Path], budget: usize) -> Result<Self> {
+        let Some((first, rest)) = files.split_first() else {
+            return Err(Error::Run {
+                path: PathBuf::new(),
+                cause: "no file to read".into(),
+            });
+        };
+        let scanner = Scanner::open(first)?;
+        let mut size = scanner.size();
+        for path in rest {
+            size += std::fs::metadata(path)
+                .map_err(|e| Error::io(path, e))?
+                .len();
+        }
+        let rest = rest.iter().map(|p| p.to_path_buf()).collect();
+        Ok(Self::spawn(scanner, rest, size, budget))
+    }
+
+    fn spawn(mut scanner: Scanner, rest: Vec<PathBuf>, size: u64, budget: usize) -> Self {
         // The count bound only backs up the byte budget (many tiny records).
         let (tx, items) = std::sync::mpsc::sync_channel(4096);
-        let size = scanner.size();
         let budget = std::sync::Arc::new(Budget {
             state: std::sync::Mutex::new((0, false)),
             freed: std::sync::Condvar::new(),
@@ -476,18 +513,42 @@ impl ReadAhead {
         std::thread::Builder::new()
             .name("log-reader".into())
             .spawn(move || {
+                let mut rest = rest.into_iter();
+                let (mut file, mut before) = (0, 0);
                 loop {
                     for buffer in returned.try_iter() {
                         scanner.recycle(buffer);
                     }
-                    let Some(item) = scanner.next() else {
-                        break;
+                    let item = match scanner.next() {
+                        Some(item) => item,
+                        None => {
+                            let Some(path) = rest.next() else { break };
+                            before += scanner.size();
+                            file += 1;
+                            match Scanner::open(&path) {
+                                Ok(mut next) => {
+                                    next.spares = std::mem::take(&mut scanner.spares);
+                                    scanner = next;
+                                    continue;
+                                }
+                                Err(e) => Err(e),
+                            }
+                        }
                     };
+                    let failed = item.is_err();
                     let weight = item.as_ref().map_or(0, Item::weight);
+                    let position = before + scanner.position();
                     let sent = reader_budget.take(weight)
-                        && tx.send((item, scanner.position(), weight)).is_ok();
-                    if !sent {
-                        break; // the reader was dropped
+                        && tx
+                            .send(Sent {
+                                item,
+                                position,
+                                weight,
+                                file,
+                            })
+                            .is_ok();
+                    if !sent || (failed && !scanner.salvage) {
+                        break; // the reader was dropped, or the read cannot go on
                     }
                 }
             })
@@ -498,6 +559,7 @@ impl ReadAhead {
             spares,
             position: 0,
             size,
+            file: 0,
         }
     }
 
@@ -507,13 +569,19 @@ impl ReadAhead {
         let _ = self.spares.send(buffer); // the reader may have finished
     }
 
-    /// Bytes of the file read up to the item last returned.
+    /// Bytes read up to the item last returned, over all files.
     pub fn position(&self) -> u64 {
         self.position
     }
 
+    /// Bytes of all files.
     pub fn size(&self) -> u64 {
         self.size
+    }
+
+    /// The file of the item last returned (0 for the first).
+    pub fn file(&self) -> usize {
+        self.file
     }
 }
 
@@ -521,10 +589,11 @@ impl Iterator for ReadAhead {
     type Item = Result<Item>;
 
     fn next(&mut self) -> Option<Result<Item>> {
-        let (item, position, weight) = self.items.recv().ok()?;
-        self.position = position;
+        let sent = self.items.recv().ok()?;
+        self.position = sent.position;
+        self.file = sent.file;
         // Handed over: the caller's to keep or drop from here on.
-        self.budget.give_back(weight);
-        Some(item)
+        self.budget.give_back(sent.weight);
+        Some(sent.item)
     }
 }

@@ -35,6 +35,7 @@ pub use bag::{write_manifest, ManifestFile, ManifestTopic, METADATA as MANIFEST}
 pub use clock::{ClockMap, ClockOffset};
 pub use merge::{merge, MergeReport, MERGE_METADATA};
 pub use reader::{MergeCounts, RunReader};
+pub use sequential::Sequential;
 
 use crate::error::{Error, Result};
 

@@ -320,8 +320,7 @@ impl RunReader {
                     publish_time_ns: head.publish_ns,
                     data,
                 };
-                if !part.clock.is_identity()
-                    && restamp(&message, &part.clock, &mut self.restamped)
+                if !part.clock.is_identity() && restamp(&message, &part.clock, &mut self.restamped)
                 {
                     message.data = &self.restamped;
                 }
@@ -653,7 +652,7 @@ fn restamp(m: &LogMessage<'_>, clock: &ClockMap, out: &mut Vec<u8>) -> bool {
 
 /// Every part that names its run (`railfuse.run`'s `run_id`) names the same one: a file of
 /// another run mixed in is refused before anything is read.
-fn same_run(run: &Run) -> Result<()> {
+pub(super) fn same_run(run: &Run) -> Result<()> {
     let mut first: Option<(&Path, String)> = None;
     for p in run.parts.iter().filter(|p| p.storage == Storage::Mcap) {
         let id = match crate::log::read_metadata(&p.path, crate::topics::metadata::RUN) {

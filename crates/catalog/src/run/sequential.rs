@@ -5,16 +5,27 @@
 //! where each part begins after the one before ends (nothing at a boundary twice, nothing to
 //! interleave). Anything else is read through [`RunReader`](super::RunReader).
 
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 use std::path::Path;
+use std::sync::Arc;
 
 use super::{Run, Storage, TimeBasis};
 use crate::error::Result;
-use crate::log::read_summary;
+use crate::log::{read_summary, ChannelInfo, LogSummary, SchemaInfo};
+
+/// A run to read part after part: its files in order, and its summary as one file's.
+#[derive(Debug)]
+pub struct Sequential<'a> {
+    pub files: Vec<&'a Path>,
+    pub summary: LogSummary,
+}
 
 impl Run {
-    /// The parts, in order, where the run can be read part after part as they are.
-    pub fn sequential_files(&self) -> Result<Option<Vec<&Path>>> {
+    /// The parts, in order, and the run's summary, where the run can be read part after part
+    /// as they are. Each part's summary is read once and only what the run's needs is kept
+    /// (a channel, its schema, the span), so that this costs no more memory for 1000 parts
+    /// than for two. A file of another run is refused here too.
+    pub fn sequential_files(&self) -> Result<Option<Sequential<'_>>> {
         let plain = self.time == TimeBasis::Log
             && self
                 .parts
@@ -23,9 +34,9 @@ impl Run {
         if !plain || self.parts.len() < 2 {
             return Ok(None);
         }
-        // (topic, encoding, metadata, schema name, encoding, data) by channel id.
-        let mut channels = HashMap::new();
-        let mut last_end: Option<u64> = None;
+        let mut channels: BTreeMap<u16, Arc<ChannelInfo>> = BTreeMap::new();
+        let mut schemas: BTreeMap<u16, Arc<SchemaInfo>> = BTreeMap::new();
+        let (mut first_start, mut last_end, mut longest_chunk_ns) = (None, None::<u64>, None);
         for p in &self.parts {
             let Some(summary) = read_summary(&p.path).ok().flatten() else {
                 return Ok(None);
@@ -37,24 +48,28 @@ impl Run {
             if last_end.is_some_and(|e| start <= e) {
                 return Ok(None);
             }
+            first_start.get_or_insert(start);
             last_end = Some(end);
+            longest_chunk_ns = longest_chunk_ns.max(summary.longest_chunk_ns);
             for c in list {
-                let schema = c.schema.as_ref().map(|s| (s.id, s.name.clone(), s.encoding.clone(), s.data.clone()));
-                let key = (c.topic.clone(), c.message_encoding.clone(), c.metadata.clone(), schema);
-                if *channels.entry(c.id).or_insert_with(|| key.clone()) != key {
-                    return Ok(None);
+                if let Some(s) = &c.schema {
+                    if **schemas.entry(s.id).or_insert_with(|| s.clone()) != **s {
+                        return Ok(None); // one schema id, one schema
+                    }
+                }
+                if **channels.entry(c.id).or_insert_with(|| c.clone()) != *c {
+                    return Ok(None); // one channel id, one channel
                 }
             }
         }
-        // One schema id, one schema.
-        let mut schemas = HashMap::new();
-        for (id, name, encoding, data) in channels.values().filter_map(|k| k.3.clone()) {
-            if *schemas.entry(id).or_insert_with(|| (name.clone(), encoding.clone(), data.clone()))
-                != (name, encoding, data)
-            {
-                return Ok(None);
-            }
-        }
-        Ok(Some(self.parts.iter().map(|p| p.path.as_path()).collect()))
+        super::reader::same_run(self)?;
+        Ok(Some(Sequential {
+            files: self.parts.iter().map(|p| p.path.as_path()).collect(),
+            summary: LogSummary {
+                channels: Some(channels.into_values().collect()),
+                longest_chunk_ns,
+                message_span_ns: first_start.zip(last_end),
+            },
+        }))
     }
 }

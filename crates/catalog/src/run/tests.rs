@@ -270,3 +270,75 @@ fn names_sort_in_their_numbered_order() {
         ]
     );
 }
+
+/// Messages (channel id, log time) of `items`, with the file each came from.
+fn chunked_messages(items: crate::log::scan::ReadAhead) -> Vec<(usize, u16, u64)> {
+    use crate::log::format::{parse_message, Records};
+    use crate::log::scan::Item;
+    let mut items = items;
+    let mut out = Vec::new();
+    while let Some(item) = items.next() {
+        if let Item::Chunk(chunk) = item.unwrap() {
+            for r in Records::new(&chunk.records) {
+                let r = r.unwrap();
+                if r.opcode == mcap::records::op::MESSAGE {
+                    let m = parse_message(r.body).unwrap();
+                    out.push((items.file(), m.header.channel_id, m.header.log_time));
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn parts_that_follow_one_another_read_as_one_file_through_one_read_ahead() {
+    use crate::log::scan::{ReadAhead, Scanner, READ_AHEAD_BYTES};
+    let d = tempfile::tempdir().unwrap();
+    let p = paths(d.path(), &["run-001.mcap", "run-002.mcap", "run-003.mcap"]);
+    write(&p[0], &[10, 20], &[15]);
+    write(&p[1], &[30, 40], &[35]);
+    write(&p[2], &[50], &[55]);
+    let run = Run::open(&p, &RunOptions::default()).unwrap();
+    let seq = run
+        .sequential_files()
+        .unwrap()
+        .expect("parts in order, the same ids");
+    assert_eq!(
+        seq.files,
+        p.iter().map(PathBuf::as_path).collect::<Vec<_>>()
+    );
+    assert_eq!(seq.summary.message_span_ns, Some((10, 55)));
+    let topics: Vec<&str> = seq
+        .summary
+        .channels
+        .as_ref()
+        .unwrap()
+        .iter()
+        .map(|c| c.topic.as_str())
+        .collect();
+    assert_eq!(topics, ["/radar/speed", "/imu"]);
+    // The chained read hands out every file's messages in turn, each named by its file,
+    // and counts bytes over all files.
+    let chained = ReadAhead::files(&seq.files, READ_AHEAD_BYTES).unwrap();
+    let size: u64 = p.iter().map(|f| std::fs::metadata(f).unwrap().len()).sum();
+    assert_eq!(chained.size(), size);
+    let got = chunked_messages(chained);
+    let mut want = Vec::new();
+    for (i, f) in p.iter().enumerate() {
+        let one = chunked_messages(ReadAhead::new(Scanner::open(f).unwrap(), READ_AHEAD_BYTES));
+        want.extend(one.into_iter().map(|(_, c, t)| (i, c, t)));
+    }
+    assert_eq!(got.len(), 8, "every message, in chunks: {got:?}");
+    assert_eq!(got, want);
+    // Overlapping parts are not read in turn; a file missing at its turn is an error item.
+    write(&p[2], &[38], &[]);
+    let overlapping = Run::open(&p, &RunOptions::default()).unwrap();
+    assert!(overlapping.sequential_files().unwrap().is_none());
+    let files: Vec<&Path> = vec![&p[0], &p[1]];
+    std::fs::remove_file(&p[1]).unwrap_or(());
+    assert!(
+        ReadAhead::files(&files, READ_AHEAD_BYTES).is_err(),
+        "a missing file is named before reading"
+    );
+}

@@ -21,7 +21,7 @@ use railfuse_catalog::log::{
 };
 use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, TrackMap};
 use railfuse_catalog::rejections::Rejections;
-use railfuse_catalog::run::{MergeCounts, Run};
+use railfuse_catalog::run::{MergeCounts, Run, Sequential};
 use railfuse_catalog::topics;
 use serde::Serialize;
 
@@ -158,7 +158,7 @@ fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
     let digest = provenance::InputDigest::start(parts);
     let mut replay = match (opts.run.single_file(), opts.run.sequential_files()?) {
         (Some(file), _) => read_file(opts, file)?,
-        (None, Some(files)) => read_files(opts, &files)?,
+        (None, Some(run)) => read_files(opts, run)?,
         (None, None) => read_run(opts)?,
     };
     replay.input_sha256 = Some(digest.finish()?);
@@ -169,21 +169,19 @@ fn refuse_into(opts: &RefuseOptions<'_>) -> Result<(RefuseReport, EvalReport)> {
 /// copied to the output byte for byte.
 fn read_file<'a>(opts: &'a RefuseOptions<'a>, file: &Path) -> Result<Replay<'a>> {
     let mut replay = Replay::new(opts, read_summary(file)?)?;
-    replay.report.input_bytes = replay.read_chunks(file, 0)?;
+    let items = ReadAhead::new(Scanner::open(file)?, READ_AHEAD_BYTES);
+    replay.report.input_bytes = replay.read_chunks(items, &[file])?;
     Ok(replay)
 }
 
 /// A split run whose parts follow one another with the same ids
-/// ([`Run::sequential_files`]): each part read chunk by chunk as one file is, in turn.
-fn read_files<'a>(opts: &'a RefuseOptions<'a>, files: &[&Path]) -> Result<Replay<'a>> {
-    let summary = opts.run.reader()?.summary().cloned();
-    let mut replay = Replay::new(opts, summary)?;
-    let mut read = 0;
-    for file in files {
-        read += replay.read_chunks(file, read)?;
-    }
-    replay.report.input_bytes = read;
-    replay.report.merge.parts_read = files.len();
+/// ([`Run::sequential_files`]): the parts read chunk by chunk, one after the other, as one
+/// file is.
+fn read_files<'a>(opts: &'a RefuseOptions<'a>, run: Sequential<'_>) -> Result<Replay<'a>> {
+    let mut replay = Replay::new(opts, Some(run.summary))?;
+    let items = ReadAhead::files(&run.files, READ_AHEAD_BYTES)?;
+    replay.report.input_bytes = replay.read_chunks(items, &run.files)?;
+    replay.report.merge.parts_read = run.files.len();
     Ok(replay)
 }
 
@@ -262,6 +260,8 @@ struct Replay<'a> {
     fused: Vec<Fused>,
     report: RefuseReport,
     last_log_time: u64,
+    /// The file being read chunk by chunk (a part of a split run), for messages about it.
+    reading: Option<PathBuf>,
 }
 
 impl<'a> Replay<'a> {
@@ -321,6 +321,7 @@ impl<'a> Replay<'a> {
                 pipelines: Vec::new(),
             },
             last_log_time: 0,
+            reading: None,
         };
         // With a summary, every sensor is bound to its channel before anything is read.
         if let Some(channels) = known {
@@ -347,13 +348,15 @@ impl<'a> Replay<'a> {
         topics::fused_pipeline_of(own).is_some_and(|n| self.names.contains(n))
     }
 
-    /// Reads `file` chunk by chunk into the replay (progress counted from `before` bytes);
-    /// the bytes read.
-    fn read_chunks(&mut self, file: &Path, before: u64) -> Result<u64> {
-        let mut items = ReadAhead::new(Scanner::open(file)?, READ_AHEAD_BYTES);
+    /// Reads `files` chunk by chunk into the replay, as `items` hands them over; the bytes
+    /// read.
+    fn read_chunks(&mut self, mut items: ReadAhead, files: &[&Path]) -> Result<u64> {
         while let Some(item) = items.next() {
+            if self.reading.as_deref() != files.get(items.file()).copied() {
+                self.reading = files.get(items.file()).map(|p| p.to_path_buf());
+            }
             if let Some(progress) = self.opts.progress {
-                progress(before + items.position());
+                progress(items.position());
             }
             match item? {
                 Item::Chunk(chunk) => items.recycle(self.chunk(chunk)?),
@@ -458,7 +461,7 @@ impl<'a> Replay<'a> {
 
     fn damaged(&self, offset: u64, cause: String) -> Error {
         Error::Log(railfuse_catalog::Error::Damaged {
-            path: self.input().to_owned(),
+            path: self.reading.as_deref().unwrap_or(self.input()).to_owned(),
             offset,
             cause,
         })

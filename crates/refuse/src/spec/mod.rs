@@ -138,7 +138,10 @@ impl Pipelines {
         let clock_offsets = run
             .clock_offsets
             .iter()
-            .map(|c| c.parse().map_err(|e| bad_run(format!("clock_offsets: {e}"))))
+            .map(|c| {
+                c.parse()
+                    .map_err(|e| bad_run(format!("clock_offsets: {e}")))
+            })
             .collect::<Result<_>>()?;
         let align = run
             .align
