@@ -450,6 +450,24 @@ fn a_bag_without_a_config_refuses_with_a_default_pipeline_that_says_what_it_used
         worst.0, worst.1
     );
     assert!(worst.0 < 10.0 && worst.1 < 1.0, "{worst:?}");
+    // A bag has no truth: its own receiver's NavSatFix (no speed) is the reference, each fix
+    // met by the states interpolated to its time, the speed columns empty with the reason.
+    let r: serde_json::Value =
+        serde_json::from_slice(&ok(&["eval", s(&out), "--reference", "/fix", "--json"]).stdout)
+            .unwrap();
+    let p = &r["pipelines"][0];
+    let f = &p["reference_fixes"];
+    assert!(f["matched"].as_u64().unwrap() > 500, "{p}");
+    assert!(p["speed_error_mps"].is_null(), "{p}");
+    assert!(
+        p["position_error_m"]["rmse"].as_f64().unwrap() < 10.0,
+        "{p}"
+    );
+    let text = String::from_utf8(ok(&["eval", s(&out), "--reference", "/fix"]).stdout).unwrap();
+    assert!(
+        text.contains("speed not scored: the reference carries no speed"),
+        "{text}"
+    );
 }
 
 #[test]

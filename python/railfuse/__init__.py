@@ -63,27 +63,43 @@ def refuse(
     output: PathLike,
     reference: str = "/truth",
     align: str = "none",
+    reference_quality: str = "auto",
 ) -> dict:
     """Re-fuse the run ``input`` (a file, a directory of parts, a bag, or a list of files)
     with the pipelines of ``config`` into ``output``, as ``railfuse refuse`` does. Returns
     ``{"refuse": …, "eval": …}``: what each pipeline did, and the accuracy table against
     ``reference``. ``align="gnss"`` puts several recorders' files on one clock through the
-    GNSS time each logged (``--align gnss``)."""
+    GNSS time each logged (``--align gnss``). ``reference_quality`` says which fixes of a
+    GNSS reference count (``--reference-quality``: ``auto``, ``all``, ``rtk_fixed``, …)."""
     return json.loads(
         _railfuse.refuse(
-            _run(input), os.fspath(config), os.fspath(output), reference, align
+            _run(input),
+            os.fspath(config),
+            os.fspath(output),
+            reference,
+            align,
+            reference_quality,
         )
     )
 
 
 def evaluate(
-    input: RunLike, reference: str | None = None, align: str = "none"
+    input: RunLike,
+    reference: str | None = None,
+    align: str = "none",
+    reference_quality: str = "auto",
 ) -> dict:
     """The accuracy table of a fused log's pipelines against ``reference`` (ground truth, a
     GNSS channel, another pipeline's state). Without one, the ground truth (``/truth``) where
     the log has it, else NIS and counts only; a reference named that the log does not have,
-    or that gives no samples, raises :class:`RailfuseError`, as ``railfuse eval`` fails."""
-    report = json.loads(_railfuse.evaluate(_run(input), reference or "/truth", align))
+    or that gives no samples, raises :class:`RailfuseError`, as ``railfuse eval`` fails.
+    ``reference_quality`` says which fixes of a GNSS reference count, as
+    ``--reference-quality`` does."""
+    report = json.loads(
+        _railfuse.evaluate(
+            _run(input), reference or "/truth", align, reference_quality
+        )
+    )
     if reference is not None and report.get("reference") is None:
         raise RailfuseError(
             f"{_run(input)[0]}: reference {reference} is not in the log or gives no samples"

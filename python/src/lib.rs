@@ -78,10 +78,18 @@ fn open_run(inputs: &[PathBuf], align: &str) -> PyResult<Run> {
     Run::open(inputs, &options).map_err(fail)
 }
 
+/// The reference `topic`, its GNSS fixes of `quality` counting (`auto`, `all`, `rtk_fixed`, …).
+fn reference_of(topic: &str, quality: &str) -> PyResult<railfuse_eval::Reference> {
+    Ok(railfuse_eval::Reference {
+        topic: topic.to_owned(),
+        quality: quality.parse().map_err(fail)?,
+    })
+}
+
 /// Re-fuses the run `inputs` with the pipelines of `config` into `output`, as `railfuse
 /// refuse` does (the same bytes); the refuse report and the accuracy table as JSON.
 #[pyfunction]
-#[pyo3(signature = (inputs, config, output, reference = "/truth", align = "none"))]
+#[pyo3(signature = (inputs, config, output, reference = "/truth", align = "none", reference_quality = "auto"))]
 fn refuse(
     py: Python<'_>,
     inputs: Vec<PathBuf>,
@@ -89,7 +97,9 @@ fn refuse(
     output: PathBuf,
     reference: &str,
     align: &str,
+    reference_quality: &str,
 ) -> PyResult<String> {
+    let reference = reference_of(reference, reference_quality)?;
     let pipelines = Pipelines::load(&config).map_err(fail)?;
     let run = open_run(&inputs, align)?;
     let (report, eval) = py
@@ -99,7 +109,7 @@ fn refuse(
                 output: &output,
                 config: &pipelines,
                 config_source: config.display().to_string(),
-                reference,
+                reference: &reference,
                 progress: None,
                 observer: None,
             })
@@ -110,16 +120,18 @@ fn refuse(
 
 /// The accuracy table of a fused run against `reference`, as JSON.
 #[pyfunction]
-#[pyo3(signature = (inputs, reference = "/truth", align = "none"))]
+#[pyo3(signature = (inputs, reference = "/truth", align = "none", reference_quality = "auto"))]
 fn evaluate(
     py: Python<'_>,
     inputs: Vec<PathBuf>,
     reference: &str,
     align: &str,
+    reference_quality: &str,
 ) -> PyResult<String> {
+    let reference = reference_of(reference, reference_quality)?;
     let run = open_run(&inputs, align)?;
     let report = py
-        .detach(|| railfuse_eval::evaluate(&run, reference))
+        .detach(|| railfuse_eval::evaluate(&run, &reference))
         .map_err(fail)?;
     json(&report)
 }

@@ -24,7 +24,7 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
         output: &fused,
         config: &pipelines,
         config_source: config.display().to_string(),
-        reference: railfuse_catalog::topics::GROUND_TRUTH,
+        reference: &railfuse_eval::Reference::topic(railfuse_catalog::topics::GROUND_TRUTH),
         progress: None,
         observer: None,
     })?;

@@ -35,7 +35,7 @@ pub fn run(a: Args) -> Result<()> {
         &fused,
         &config,
         source,
-        railfuse_catalog::topics::GROUND_TRUTH,
+        &railfuse_eval::Reference::topic(railfuse_catalog::topics::GROUND_TRUTH),
     )?;
     let viz = visualize(
         &railfuse_catalog::run::Run::file(&fused),

@@ -3,8 +3,9 @@ use railfuse_catalog::reference_track::MAX_GAP_PERIODS;
 use railfuse_catalog::run::Run;
 use railfuse_catalog::topics;
 use railfuse_eval::accuracy::{ConsistencySummary, ErrorSummary};
+use railfuse_eval::fix_match::{FixMatchReport, MAX_STATE_GAP_NS};
 use railfuse_eval::safety::SafetyEval;
-use railfuse_eval::{evaluate, EvalReport};
+use railfuse_eval::{evaluate, EvalReport, FixQuality, Reference};
 
 use super::run_input::RunArgs;
 use crate::table::Table;
@@ -19,6 +20,10 @@ pub struct Args {
     /// ground truth (`/truth`) where the log has one, else NIS and counts only.
     #[arg(long)]
     pub reference: Option<String>,
+    /// Which fixes of a GNSS reference count: auto (RTK fixed where it has any, else all),
+    /// all, or fix types (rtk_fixed, rtk_float, dgps, single; commas between several).
+    #[arg(long, value_name = "QUALITY", default_value = "auto")]
+    pub reference_quality: FixQuality,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -29,8 +34,14 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(topic) = &a.reference {
         check_reference_in_log(&run, topic)?;
     }
-    let topic = a.reference.as_deref().unwrap_or(topics::GROUND_TRUTH);
-    let report = evaluate(&run, topic)?;
+    let reference = Reference {
+        topic: a
+            .reference
+            .clone()
+            .unwrap_or(topics::GROUND_TRUTH.to_owned()),
+        quality: a.reference_quality,
+    };
+    let report = evaluate(&run, &reference)?;
     if report.pipelines.is_empty() {
         anyhow::bail!(
             "{}: no fused pipelines to evaluate: re-fuse it first (railfuse refuse {} -c CONFIG -o OUT)",
@@ -70,7 +81,7 @@ pub fn check_reference_used(input: &Run, named: Option<&str>, report: &EvalRepor
     match (named, &report.reference) {
         (Some(topic), None) => anyhow::bail!(
             "{}: reference {topic} is not in the log or gives no samples (a reference is ground \
-             truth, a fused state, or GNSS fixes with position and speed)",
+             truth, a fused state, or GNSS fixes on the log's track map)",
             input.display()
         ),
         _ => Ok(()),
@@ -80,7 +91,12 @@ pub fn check_reference_used(input: &Run, named: Option<&str>, report: &EvalRepor
 /// The accuracy table, as eval, refuse and demo print it: one row per pipeline (and per
 /// smoothed channel), then one row per marked window it crossed.
 pub fn print_eval(report: &EvalReport) {
+    let at_fixes = report.pipelines.iter().any(|p| p.reference_fixes.is_some());
     match &report.reference {
+        Some(r) if at_fixes => println!(
+            "accuracy against {r} (errors = fused − reference, at each reference fix, the \
+             states interpolated to its time):"
+        ),
         Some(r) => {
             println!("accuracy against {r} (errors = fused − reference, at each fused state):")
         }
@@ -94,6 +110,9 @@ pub fn print_eval(report: &EvalReport) {
         }
     }
     for p in &report.pipelines {
+        if let Some(f) = &p.reference_fixes {
+            println!("{}: {}", p.name, describe_fix_match(f));
+        }
         let (gaps, outside) = (p.states_in_reference_gaps, p.unmatched_states);
         if gaps + outside > 0 {
             println!(
@@ -106,6 +125,50 @@ pub fn print_eval(report: &EvalReport) {
             );
         }
     }
+}
+
+/// What matching a pipeline's states to a GNSS reference's fixes gave, in a sentence.
+fn describe_fix_match(f: &FixMatchReport) -> String {
+    if f.fixes == 0 {
+        return format!(
+            "no reference fix of quality {} on the track ({} of other quality left out)",
+            f.quality, f.other_quality
+        );
+    }
+    if f.matched == 0 && f.in_state_gaps == 0 {
+        return format!(
+            "none of the {} {} fixes lies inside the span of its states",
+            f.fixes, f.quality
+        );
+    }
+    let of = match f.quality.as_str() {
+        "all" => "fixes".to_owned(),
+        q => format!("{q} fixes"),
+    };
+    let mut s = format!(
+        "{} of {} {of} matched (at most {:.3} s from a state)",
+        f.matched, f.fixes, f.largest_dt_s
+    );
+    if f.in_state_gaps > 0 {
+        s += &format!(
+            "; {} in gaps of the states (more than {:.0} s apart)",
+            f.in_state_gaps,
+            MAX_STATE_GAP_NS as f64 / 1e9
+        );
+    }
+    if f.outside_states > 0 {
+        s += &format!(
+            "; {} before its first state or after its last",
+            f.outside_states
+        );
+    }
+    if f.other_quality > 0 {
+        s += &format!("; {} fixes of other quality left out", f.other_quality);
+    }
+    if let Some(why) = &f.no_speed {
+        s += &format!("; speed not scored: {why}");
+    }
+    s
 }
 
 /// The whole-run row of each pipeline, its marked windows' rows below it.

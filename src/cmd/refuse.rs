@@ -3,7 +3,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use railfuse_catalog::topics;
-use railfuse_eval::EvalReport;
+use railfuse_eval::{EvalReport, FixQuality, Reference};
 use railfuse_refuse::registry::Registry;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
@@ -45,6 +45,10 @@ pub struct Args {
     /// a GNSS fix channel). Without it, the ground truth (`/truth`) where the log has one.
     #[arg(long)]
     pub reference: Option<String>,
+    /// Which fixes of a GNSS reference count: auto (RTK fixed where it has any, else all),
+    /// all, or fix types (rtk_fixed, rtk_float, dgps, single; commas between several).
+    #[arg(long, value_name = "QUALITY", default_value = "auto")]
+    pub reference_quality: FixQuality,
     /// Print the report as JSON (with wall time, throughput and peak memory).
     #[arg(long)]
     pub json: bool,
@@ -86,7 +90,13 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(topic) = &a.reference {
         super::eval::check_reference_in_log(input, topic)?;
     }
-    let reference = a.reference.as_deref().unwrap_or(topics::GROUND_TRUTH);
+    let reference = Reference {
+        topic: a
+            .reference
+            .clone()
+            .unwrap_or(topics::GROUND_TRUTH.to_owned()),
+        quality: a.reference_quality.clone(),
+    };
     let (config, source) = match loaded {
         Some(loaded) => loaded,
         None => default_pipeline(input, a.track.as_deref(), a.save_config.as_deref())?,
@@ -101,7 +111,7 @@ pub fn run(a: Args) -> Result<()> {
         &whole,
         &config,
         source,
-        reference,
+        &reference,
         observer.as_ref().map(|o| o as Observer<'_>),
     )?;
     drop(observer);
@@ -240,7 +250,7 @@ pub fn refuse_with(
     output: &Path,
     config: &Pipelines,
     source: String,
-    reference: &str,
+    reference: &Reference,
     observer: Option<Observer<'_>>,
 ) -> Result<(RefuseReport, EvalReport, RunStats)> {
     let started = Instant::now();
@@ -325,7 +335,7 @@ pub fn refuse_and_evaluate(
     output: &Path,
     config: &Pipelines,
     source: String,
-    reference: &str,
+    reference: &Reference,
 ) -> Result<(RefuseReport, EvalReport)> {
     let run = Run::file(input);
     let (report, eval, _) = refuse_with(&run, output, config, source, reference, None)?;

@@ -49,6 +49,92 @@ fn eval_scores_against_truth_another_pipeline_or_a_gnss_receiver() {
 }
 
 #[test]
+fn a_gnss_reference_is_scored_at_its_fixes_of_the_stated_quality() {
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("run.mcap"), d.path().join("run.fused.mcap"));
+    simulate(&["--seed", "3", "--duration", "200"], &raw);
+    refuse(&raw, "kalman.toml", &fused);
+    let eval = |args: &[&str]| -> serde_json::Value {
+        ok_json(&[&["eval", s(&fused), "--json"][..], args].concat())
+    };
+    let truth = eval(&[]);
+    let auto = eval(&["--reference", "/gnss/fix"]);
+    let p = &auto["pipelines"][0];
+    let f = &p["reference_fixes"];
+    // RTK fixed by default, since the receiver has RTK fixed fixes; the rest (its
+    // correction outage) left out and counted.
+    assert_eq!(f["quality"], "rtk_fixed", "{f}");
+    let n = |k: &str| f[k].as_u64().unwrap();
+    assert!(n("matched") > 1000 && n("other_quality") > 100, "{f}");
+    assert_eq!(
+        n("matched") + n("in_state_gaps") + n("outside_states"),
+        n("fixes"),
+        "{f}"
+    );
+    // Each fix met by the states interpolated to its time: never further than half the
+    // states' spacing from one.
+    assert!(f["largest_dt_s"].as_f64().unwrap() <= 0.05, "{f}");
+    // The receiver's own errors (multipath near structures, RTK fixed or not) are in the
+    // figure, so it is above the truth's, but of its order: not the metres of a wrong match.
+    let (against_truth, against_rtk) = (
+        truth["pipelines"][0]["position_error_m"]["rmse"]
+            .as_f64()
+            .unwrap(),
+        p["position_error_m"]["rmse"].as_f64().unwrap(),
+    );
+    assert!(
+        against_rtk < against_truth + 1.0,
+        "against RTK fixed {against_rtk} m, against the truth {against_truth} m"
+    );
+    // Every fix counts with `all`: the single and float fixes of the outage make it worse.
+    let all = eval(&["--reference", "/gnss/fix", "--reference-quality", "all"]);
+    let fa = &all["pipelines"][0]["reference_fixes"];
+    assert_eq!(
+        fa["fixes"].as_u64().unwrap(),
+        n("fixes") + n("other_quality"),
+        "{fa}"
+    );
+    assert!(
+        all["pipelines"][0]["position_error_m"]["rmse"]
+            .as_f64()
+            .unwrap()
+            > against_rtk,
+        "{all}"
+    );
+    // A quality the receiver never had: said, not a table of nothing.
+    let o = ok(&[
+        "eval",
+        s(&fused),
+        "--reference",
+        "/gnss/fix",
+        "--reference-quality",
+        "dgps",
+    ]);
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        text.contains("kalman: no reference fix of quality dgps on the track"),
+        "{text}"
+    );
+    let text =
+        String::from_utf8(ok(&["eval", s(&fused), "--reference", "/gnss/fix"]).stdout).unwrap();
+    assert!(
+        text.contains("at each reference fix, the states interpolated to its time")
+            && text.contains("rtk_fixed fixes matched"),
+        "{text}"
+    );
+    // A Foxglove LocationFix (the fused log's twin of the fixes) serves as well: no fix type
+    // and no speed, so every fix counts and the speed columns say why they are empty.
+    let fox = eval(&["--reference", "/foxglove/gnss/fix"]);
+    let p = &fox["pipelines"][0];
+    assert_eq!(p["reference_fixes"]["quality"], "all", "{p}");
+    assert!(p["speed_error_mps"].is_null(), "{p}");
+    assert_eq!(
+        p["reference_fixes"]["no_speed"],
+        "the reference carries no speed"
+    );
+}
+
+#[test]
 fn the_accuracy_refuse_prints_in_its_pass_equals_eval_of_the_written_file() {
     let d = tempfile::tempdir().unwrap();
     let (raw, fused) = (d.path().join("s0.mcap"), d.path().join("s0.fused.mcap"));

@@ -17,6 +17,9 @@ py_fused = os.path.join(out_dir, "py.fused.mcap")
 refused = railfuse.refuse(raw, config, py_fused)
 summary["refuse_rmse"] = refused["eval"]["pipelines"][0]["position_error_m"]["rmse"]
 summary["evaluate_rmse"] = railfuse.evaluate(py_fused)["pipelines"][0]["position_error_m"]["rmse"]
+summary["gnss_all"] = railfuse.evaluate(
+    py_fused, reference="/gnss/fix", reference_quality="all"
+)["pipelines"][0]["reference_fixes"]
 
 states = railfuse.read(py_fused, "/fused/kalman/state")
 assert isinstance(states, pa.Table)
@@ -36,6 +39,9 @@ for name, call in {
     ),
     "unknown_scenario": lambda: railfuse.simulate(os.path.join(out_dir, "x.mcap"), "nope"),
     "unknown_reference": lambda: railfuse.evaluate(py_fused, reference="/nothere"),
+    "unknown_quality": lambda: railfuse.evaluate(
+        py_fused, reference="/gnss/fix", reference_quality="rtk"
+    ),
 }.items():
     try:
         call()

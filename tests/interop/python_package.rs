@@ -32,6 +32,25 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
     assert_eq!(v["radar_rows"].as_u64().unwrap() as usize, radar.len());
     // (refuse scores in the same pass, evaluate from the file: sums in another order)
     close(&v["refuse_rmse"], &v["evaluate_rmse"]);
+    // A GNSS reference with the fixes it counts, as --reference-quality all does.
+    let cli_all: serde_json::Value = serde_json::from_slice(
+        &railfuse(&[
+            "eval",
+            s(&py),
+            "--reference",
+            "/gnss/fix",
+            "--reference-quality",
+            "all",
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(
+        v["gnss_all"], cli_all["pipelines"][0]["reference_fixes"],
+        "{v}"
+    );
+    assert_eq!(v["gnss_all"]["quality"], "all");
     // Errors: the CLI's one line, as RailfuseError.
     let e = &v["errors"];
     let missing = d.path().join("nope.toml");
@@ -51,6 +70,7 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
     for (case, says) in [
         ("missing_topic", "no channel /nope"),
         ("unknown_reference", "reference /nothere is not in the log"),
+        ("unknown_quality", "'rtk' is not a fix quality"),
         ("unknown_param", "motion.jerk_pds: not found"),
         ("unknown_scenario", "unknown scenario 'nope'"),
     ] {

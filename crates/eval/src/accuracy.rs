@@ -292,6 +292,42 @@ pub struct WindowStats {
     pub speed: ErrorStats,
 }
 
+/// Adds an error at `t_ns` to the window of each label whose span holds it (a time inside two
+/// spans of one label counts once).
+pub fn record_in_windows(
+    windows: &mut Vec<WindowStats>,
+    spans: &[Span],
+    t_ns: u64,
+    position_error: f64,
+    speed_error: Option<f64>,
+) {
+    for span in spans.iter().filter(|w| w.contains(t_ns)) {
+        let first_of_label = spans
+            .iter()
+            .find(|w| w.label == span.label && w.contains(t_ns))
+            .map(|w| w.start_ns)
+            == Some(span.start_ns);
+        if !first_of_label {
+            continue;
+        }
+        let i = match windows.iter().position(|w| w.label == span.label) {
+            Some(i) => i,
+            None => {
+                windows.push(WindowStats {
+                    label: span.label.clone(),
+                    position: ErrorStats::default(),
+                    speed: ErrorStats::default(),
+                });
+                windows.len() - 1
+            }
+        };
+        windows[i].position.add(position_error);
+        if let Some(ve) = speed_error {
+            windows[i].speed.add(ve);
+        }
+    }
+}
+
 /// Matches estimates to the reference interpolated at their stamps.
 #[derive(Debug, Clone)]
 pub struct AccuracyMeter {
@@ -417,29 +453,7 @@ impl AccuracyMeter {
                 let (de, ve) = (e.chainage_m - s, e.speed_mps - v);
                 self.position.add(de);
                 self.speed.add(ve);
-                for span in spans.iter().filter(|w| w.contains(e.stamp_ns)) {
-                    let i = match self.windows.iter().position(|w| w.label == span.label) {
-                        Some(i) => i,
-                        None => {
-                            self.windows.push(WindowStats {
-                                label: span.label.clone(),
-                                position: ErrorStats::default(),
-                                speed: ErrorStats::default(),
-                            });
-                            self.windows.len() - 1
-                        }
-                    };
-                    // A stamp inside two spans of one label counts once.
-                    if spans
-                        .iter()
-                        .find(|w| w.label == span.label && w.contains(e.stamp_ns))
-                        .map(|w| w.start_ns)
-                        == Some(span.start_ns)
-                    {
-                        self.windows[i].position.add(de);
-                        self.windows[i].speed.add(ve);
-                    }
-                }
+                record_in_windows(&mut self.windows, spans, e.stamp_ns, de, Some(ve));
                 let (pss, psv, pvv) = e.covariance;
                 let mut cov = [0.0; 9];
                 (cov[0], cov[1], cov[3], cov[4]) = (pss, psv, psv, pvv);

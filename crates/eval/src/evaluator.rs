@@ -16,6 +16,7 @@ use crate::accuracy::{
     AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, PlaneMeter, PlaneSample,
     PlaneSummary, Span, CHI2_95_1DOF,
 };
+use crate::fix_match::{FixMatchReport, FixMeter, FixQuality, FixSample, Reference};
 use crate::safety::{SafetyEval, SafetyTally};
 use railfuse_catalog::Result;
 
@@ -54,6 +55,10 @@ pub struct PipelineEval {
     /// States inside a gap of the reference (its samples further apart than
     /// `MAX_GAP_PERIODS` of its periods): not scored.
     pub states_in_reference_gaps: u64,
+    /// Against GNSS fixes: which fixes counted, how many were matched (the states interpolated
+    /// to each fix's time) and the largest time to a state.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reference_fixes: Option<FixMatchReport>,
     pub windows: Vec<WindowEval>,
     /// Pipelines with safety checks: S7, availability, containment and caught faults.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -115,10 +120,12 @@ struct Scored {
     device_fault: u64,
     safety: Option<SafetyTally>,
     plane: PlaneMeter,
+    /// Against GNSS fixes: the states interpolated to each fix.
+    fixes: FixMeter,
 }
 
 impl Scored {
-    fn new(name: String, pipeline: String, lag_s: f64) -> Self {
+    fn new(name: String, pipeline: String, lag_s: f64, quality: FixQuality) -> Self {
         Self {
             smoothed: name.ends_with("/smoothed"),
             name,
@@ -132,7 +139,26 @@ impl Scored {
             device_fault: 0,
             safety: None,
             plane: PlaneMeter::new(lag_s),
+            fixes: FixMeter::new(quality, lag_s),
         }
+    }
+
+    /// A state (fused or smoothed): to the meter of the reference's kind.
+    fn add_state(&mut self, state: &FusedState, reference: Option<ReferenceKind>, spans: &[Span]) {
+        match reference {
+            Some(ReferenceKind::Gnss) => {}
+            _ => self.meter.add_estimate(state, spans),
+        }
+        // Kept a few seconds only: the reference kind may be known only once its channel
+        // turns up, after the first states.
+        self.fixes.add_state(
+            state.stamp_ns,
+            state.chainage_m,
+            state.speed_mps,
+            state.covariance[0],
+            spans,
+        );
+        self.states += 1;
     }
 }
 
@@ -160,6 +186,25 @@ pub fn reference_sample(
             }
         }
     })
+}
+
+/// A GNSS reference fix on the track map, with its speed where it has one; `None` for a fix
+/// without a position, off the line's ends, or before there is a map.
+pub fn fix_sample(
+    m: &railfuse_catalog::log::LogMessage<'_>,
+    path: &Path,
+    map: Option<&TrackMap>,
+) -> Result<Option<FixSample>> {
+    let g: GnssFix = m.decode(path)?;
+    Ok(map
+        .and_then(|t| t.chainage_of_fix(&g))
+        .map(|(s, variance_m2, _)| FixSample {
+            stamp_ns: g.stamp_ns,
+            fix_type: g.fix_type,
+            chainage_m: s,
+            speed_mps: g.speed_mps,
+            variance_m2,
+        }))
 }
 
 /// A marked window from an event: (label, opens).
@@ -196,15 +241,17 @@ pub struct Evaluator {
     /// walked beside them.
     smoothed_fed: BTreeMap<u16, ReferenceWalk>,
     first_ns: Option<u64>,
+    /// Which fixes of a GNSS reference count.
+    quality: FixQuality,
 }
 
 impl Evaluator {
     /// `lag_s`: how far a fused state may trail its reference (the reorder window, plus a
     /// chunk's time span where fused chunks follow the input chunk they came from).
-    pub fn new(path: &Path, reference_topic: &str, lag_s: f64) -> Self {
+    pub fn new(path: &Path, reference: &Reference, lag_s: f64) -> Self {
         Self {
             path: path.to_owned(),
-            reference_topic: reference_topic.to_owned(),
+            reference_topic: reference.topic.clone(),
             lag_s,
             scored: Vec::new(),
             roles: BTreeMap::new(),
@@ -215,6 +262,7 @@ impl Evaluator {
             smoothed_channels: false,
             smoothed_fed: BTreeMap::new(),
             first_ns: None,
+            quality: reference.quality.clone(),
         }
     }
 
@@ -222,8 +270,9 @@ impl Evaluator {
         match self.scored.iter().position(|s| s.name == name) {
             Some(i) => i,
             None => {
+                let quality = self.quality.clone();
                 self.scored
-                    .push(Scored::new(name, pipeline.to_owned(), self.lag_s));
+                    .push(Scored::new(name, pipeline.to_owned(), self.lag_s, quality));
                 self.scored.len() - 1
             }
         }
@@ -291,6 +340,13 @@ impl Evaluator {
                     x.plane.add_truth(sample);
                 }
             }
+            Some(Role::Reference(ReferenceKind::Gnss)) => {
+                if let Some(fix) = fix_sample(m, path, self.map.as_ref())? {
+                    for x in self.scored.iter_mut().filter(|x| !x.smoothed) {
+                        x.fixes.add_fix(fix, &self.spans);
+                    }
+                }
+            }
             Some(Role::Reference(kind)) => {
                 if let Some((t, s, v)) = reference_sample(kind, m, path, self.map.as_ref())? {
                     self.reference_sample(t, s, v);
@@ -344,9 +400,8 @@ impl Evaluator {
     /// A fused state on channel `id` (a `/fused/<name>/state` channel).
     pub fn fused_state(&mut self, id: u16, state: &FusedState) {
         if let Some(Role::State(i)) = self.roles.get(&id).copied() {
-            self.scored[i].meter.add_estimate(state, &self.spans);
+            self.scored[i].add_state(state, self.reference, &self.spans);
             self.scored[i].plane.add_state(state);
-            self.scored[i].states += 1;
         }
     }
 
@@ -371,9 +426,8 @@ impl Evaluator {
             }
         };
         let s = &mut self.scored[i];
-        walk.feed_until(&mut s.meter, state.stamp_ns, &self.spans)?;
-        s.meter.add_estimate(state, &self.spans);
-        s.states += 1;
+        walk.feed_until(s, state.stamp_ns, &self.spans)?;
+        s.add_state(state, self.reference, &self.spans);
         Ok(())
     }
 
@@ -437,6 +491,10 @@ impl Evaluator {
         }
         let t0 = self.first_ns.unwrap_or(0);
         let filters = self.filters;
+        let against = self.reference;
+        for s in &mut self.scored {
+            s.fixes.finish(&self.spans);
+        }
         let pipelines = self
             .scored
             .into_iter()
@@ -445,7 +503,7 @@ impl Evaluator {
             .filter(|s| {
                 s.states > 0 || s.gated > 0 || s.nis.summary().is_some() || s.safety.is_some()
             })
-            .map(|s| pipeline_eval(s, &filters, t0))
+            .map(|s| pipeline_eval(s, &filters, t0, against))
             .collect();
         let secs = |t: u64| t.saturating_sub(t0) as f64 / 1e9;
         let missing = log.missing().iter().filter_map(|m| {
@@ -482,7 +540,7 @@ impl Evaluator {
             .collect();
         score_smoothed(
             log,
-            &self.reference_topic,
+            (&self.reference_topic, self.reference),
             &channels,
             &mut self.scored,
             &self.spans,
@@ -491,10 +549,24 @@ impl Evaluator {
 }
 
 /// One pipeline's line of the report.
-fn pipeline_eval(mut s: Scored, filters: &BTreeMap<String, String>, t0: u64) -> PipelineEval {
+fn pipeline_eval(
+    mut s: Scored,
+    filters: &BTreeMap<String, String>,
+    t0: u64,
+    against: Option<ReferenceKind>,
+) -> PipelineEval {
     s.meter.finish();
     let safety = s.safety.take().map(|t| t.finish(s.meter.containment, t0));
-    PipelineEval {
+    let windows = |w: &[crate::accuracy::WindowStats]| {
+        w.iter()
+            .map(|w| WindowEval {
+                label: w.label.clone(),
+                position_error_m: w.position.summary(),
+                speed_error_mps: w.speed.summary(),
+            })
+            .collect()
+    };
+    let mut eval = PipelineEval {
         safety,
         plane: s.plane.summary(),
         filter: filters.get(&s.pipeline).cloned(),
@@ -512,17 +584,23 @@ fn pipeline_eval(mut s: Scored, filters: &BTreeMap<String, String>, t0: u64) -> 
         device_fault_rejections: s.device_fault,
         unmatched_states: s.meter.unmatched,
         states_in_reference_gaps: s.meter.in_reference_gaps,
-        windows: s
-            .meter
-            .windows
-            .iter()
-            .map(|w| WindowEval {
-                label: w.label.clone(),
-                position_error_m: w.position.summary(),
-                speed_error_mps: w.speed.summary(),
-            })
-            .collect(),
+        reference_fixes: None,
+        windows: windows(&s.meter.windows),
+    };
+    if against == Some(ReferenceKind::Gnss) {
+        // Scored at the fixes: the states' own counts against a reference do not apply, and
+        // NEES needs a reference speed (and an error free of the sensor's own noise).
+        let f = &s.fixes;
+        eval.position_error_m = f.position();
+        eval.speed_error_mps = f.speed();
+        eval.beyond_3_sigma = f.beyond_3_sigma();
+        eval.nees = None;
+        eval.unmatched_states = 0;
+        eval.states_in_reference_gaps = 0;
+        eval.windows = windows(f.windows());
+        eval.reference_fixes = Some(f.report());
     }
+    eval
 }
 
 /// How far, in s, fused states may trail the reference in file order: the reorder window
@@ -532,11 +610,12 @@ pub fn lag_allowance_s(longest_chunk_ns: Option<u64>) -> f64 {
     5.0 + longest_chunk_ns.unwrap_or(0) as f64 / 1e9
 }
 
-/// The accuracy table of a run's fused channels against `reference_topic`.
-pub fn evaluate(run: &Run, reference_topic: &str) -> Result<EvalReport> {
+/// The accuracy table of a run's fused channels against `reference`.
+pub fn evaluate(run: &Run, reference: &Reference) -> Result<EvalReport> {
+    let reference_topic = reference.topic.as_str();
     let mut reader = run.reader()?;
     let longest = reader.summary().and_then(|s| s.longest_chunk_ns);
-    let mut eval = Evaluator::new(run.name(), reference_topic, lag_allowance_s(longest));
+    let mut eval = Evaluator::new(run.name(), reference, lag_allowance_s(longest));
     let mut reads = std::collections::HashSet::new();
     let (mut foreign, mut translated) = (ForeignChannels::default(), Vec::new());
     while let Some(record) = reader.next() {
@@ -588,6 +667,8 @@ struct ReferenceWalk {
     foreign: ForeignChannels,
     translated: Vec<u8>,
     done: bool,
+    /// The newest reference stamp fed.
+    newest_ns: Option<u64>,
 }
 
 impl ReferenceWalk {
@@ -601,17 +682,13 @@ impl ReferenceWalk {
             foreign: ForeignChannels::default(),
             translated: Vec::new(),
             done: false,
+            newest_ns: None,
         })
     }
 
-    /// Feeds `meter` the reference until it has passed `stamp_ns`.
-    fn feed_until(
-        &mut self,
-        meter: &mut AccuracyMeter,
-        stamp_ns: u64,
-        spans: &[Span],
-    ) -> Result<()> {
-        while !self.done && meter.reference_newest_ns().is_none_or(|n| n < stamp_ns) {
+    /// Feeds `scored` the reference until it has passed `stamp_ns`.
+    fn feed_until(&mut self, scored: &mut Scored, stamp_ns: u64, spans: &[Span]) -> Result<()> {
+        while !self.done && self.newest_ns.is_none_or(|n| n < stamp_ns) {
             let Some(record) = self.reader.next() else {
                 self.done = true;
                 break;
@@ -635,9 +712,25 @@ impl ReferenceWalk {
                         let Ok(Some(m)) = self.foreign.message(m, &mut self.translated) else {
                             continue; // a foreign sample that does not read: a gap
                         };
-                        let sample = reference_sample(kind, &m, &self.path, self.map.as_ref())?;
-                        if let Some((t, s, v)) = sample {
-                            meter.add_reference(t, s, v, spans);
+                        let t = match kind {
+                            ReferenceKind::Gnss => {
+                                let fix = fix_sample(&m, &self.path, self.map.as_ref())?;
+                                fix.map(|f| {
+                                    scored.fixes.add_fix(f, spans);
+                                    f.stamp_ns
+                                })
+                            }
+                            _ => {
+                                let sample =
+                                    reference_sample(kind, &m, &self.path, self.map.as_ref())?;
+                                sample.map(|(t, s, v)| {
+                                    scored.meter.add_reference(t, s, v, spans);
+                                    t
+                                })
+                            }
+                        };
+                        if let Some(t) = t {
+                            self.newest_ns = Some(self.newest_ns.map_or(t, |n| n.max(t)));
                         }
                     }
                     _ => {}
@@ -663,7 +756,7 @@ pub fn reference_kind(schema: &str) -> Option<ReferenceKind> {
 /// per channel: one reader walks its states, another the reference, in step.
 fn score_smoothed(
     log: &Run,
-    reference_topic: &str,
+    (reference_topic, reference): (&str, Option<ReferenceKind>),
     channels: &[(u16, usize)],
     scored: &mut [Scored],
     spans: &[Span],
@@ -679,9 +772,8 @@ fn score_smoothed(
                 continue;
             }
             let st: FusedState = m.decode(log.name())?;
-            walk.feed_until(&mut scored[i].meter, st.stamp_ns, spans)?;
-            scored[i].meter.add_estimate(&st, spans);
-            scored[i].states += 1;
+            walk.feed_until(&mut scored[i], st.stamp_ns, spans)?;
+            scored[i].add_state(&st, reference, spans);
         }
     }
     Ok(())

@@ -27,9 +27,11 @@
 
 pub mod accuracy;
 mod evaluator;
+pub mod fix_match;
 pub mod safety;
 
 pub use evaluator::{
     evaluate, lag_allowance_s, reference_kind, reference_sample, EvalReport, Evaluator,
     PipelineEval, ReferenceKind, SpanReport, WindowEval, AFTER_FIRST_BALISE,
 };
+pub use fix_match::{FixQuality, Reference};

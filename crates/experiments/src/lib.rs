@@ -148,7 +148,7 @@ fn fused_run<T>(
         output: &fused,
         config: pipelines,
         config_source: pipelines.path.display().to_string(),
-        reference: topics::GROUND_TRUTH,
+        reference: &railfuse_eval::Reference::topic(topics::GROUND_TRUTH),
         progress: None,
         observer: None,
     });

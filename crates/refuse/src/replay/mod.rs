@@ -23,6 +23,7 @@ use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, TrackMap};
 use railfuse_catalog::rejections::Rejections;
 use railfuse_catalog::run::{MergeCounts, Run, Sequential};
 use railfuse_catalog::topics;
+use railfuse_eval::Reference;
 use serde::Serialize;
 
 use crate::error::{Error, Result};
@@ -43,8 +44,8 @@ pub struct RefuseOptions<'a> {
     pub config: &'a Pipelines,
     /// Where the configuration came from (a path, or "embedded default"), for the metadata.
     pub config_source: String,
-    /// The reference topic of the accuracy evaluation made in the same pass.
-    pub reference: &'a str,
+    /// The reference of the accuracy evaluation made in the same pass.
+    pub reference: &'a Reference,
     /// Told the bytes of the input read so far, as the replay goes.
     pub progress: Option<&'a (dyn Fn(u64) + Sync)>,
     /// Told every message the replay reads (the pipelines' sensors, the reference, the map,
@@ -336,7 +337,7 @@ impl<'a> Replay<'a> {
 
     /// The reference is a channel this run writes (another pipeline's state).
     fn reference_is_ours(&self) -> bool {
-        self.is_replaced(self.opts.reference)
+        self.is_replaced(&self.opts.reference.topic)
     }
 
     /// An earlier run's output of a pipeline this run re-runs: its fused channels and their
@@ -594,7 +595,7 @@ impl<'a> Replay<'a> {
         // Only what a pipeline reads, or the accuracy table's reference, is translated
         // (railfuse's own Foxglove twins pass as they are).
         let Some(&(first, first_si)) = sensors.first() else {
-            let reference = info.topic == self.opts.reference && info.kind().is_none();
+            let reference = info.topic == self.opts.reference.topic && info.kind().is_none();
             return Ok(reference
                 .then(|| Translator::for_channel(info, None).ok().flatten())
                 .flatten());
