@@ -207,7 +207,7 @@ fn a_kind_registered_with_one_line_is_configured_replayed_written_and_evaluated(
         output: &fused,
         config: &pipelines,
         config_source: "dr.toml".into(),
-        reference: "/truth",
+        reference: &railfuse_eval::Reference::topic("/truth"),
         progress: None,
         observer: None,
     })
