@@ -208,6 +208,7 @@ fn a_kind_registered_with_one_line_is_configured_replayed_written_and_evaluated(
         config: &pipelines,
         config_source: "dr.toml".into(),
         reference: &railfuse_eval::Reference::topic("/truth"),
+        withhold: None,
         progress: None,
         observer: None,
     })

@@ -110,6 +110,7 @@ fn refuse(
                 config: &pipelines,
                 config_source: config.display().to_string(),
                 reference: &reference,
+                withhold: None,
                 progress: None,
                 observer: None,
             })

@@ -25,6 +25,7 @@ pub fn run(dir: &Path, duration_s: f64, repeat: u32) -> Result<()> {
         config: &pipelines,
         config_source: config.display().to_string(),
         reference: &railfuse_eval::Reference::topic(railfuse_catalog::topics::GROUND_TRUTH),
+        withhold: None,
         progress: None,
         observer: None,
     })?;

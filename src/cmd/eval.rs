@@ -1,11 +1,15 @@
 use anyhow::Result;
+use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::reference_track::MAX_GAP_PERIODS;
 use railfuse_catalog::run::Run;
 use railfuse_catalog::topics;
 use railfuse_eval::accuracy::{ConsistencySummary, ErrorSummary};
 use railfuse_eval::fix_match::{FixMatchReport, MAX_STATE_GAP_NS};
 use railfuse_eval::safety::SafetyEval;
-use railfuse_eval::{evaluate, EvalReport, FixQuality, Reference};
+use std::sync::Arc;
+
+use railfuse_catalog::log::{read_metadata, ChannelInfo};
+use railfuse_eval::{evaluate, reference_kind, EvalReport, FixQuality, Reference};
 
 use super::run_input::RunArgs;
 use crate::table::Table;
@@ -34,10 +38,12 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(topic) = &a.reference {
         check_reference_in_log(&run, topic)?;
     }
+    // A run fused with a sensor withheld is scored against it unless told otherwise.
     let reference = Reference {
         topic: a
             .reference
             .clone()
+            .or_else(|| withheld_topic(&run))
             .unwrap_or(topics::GROUND_TRUTH.to_owned()),
         quality: a.reference_quality,
     };
@@ -58,19 +64,54 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
-/// A reference named on the command line is in the log: said before any work, where the
-/// run's summaries list its channels.
+/// The sensor a fused run's pipelines were not shown (its `railfuse.withheld` record).
+fn withheld_topic(run: &Run) -> Option<String> {
+    run.parts().iter().find_map(|p| {
+        read_metadata(&p.path, topics::metadata::WITHHELD)
+            .ok()
+            .flatten()?
+            .remove("topic")
+    })
+}
+
+/// A reference named on the command line is in the log and can be a reference (ground truth,
+/// a fused state, GNSS fixes of any make): said before any work, where the run's summaries
+/// list its channels.
 pub fn check_reference_in_log(input: &Run, topic: &str) -> Result<()> {
-    let reader = input.reader()?;
-    let Some(channels) = reader.summary().and_then(|s| s.channels.as_ref()) else {
+    let Some(c) = check_channel_in_log(input, topic, "to take as the reference")? else {
         return Ok(());
     };
-    if channels.iter().any(|c| c.topic == topic) {
-        return Ok(());
+    let read_as = ForeignChannels::default()
+        .channel(c.clone(), None)
+        .unwrap_or_else(|_| c.clone());
+    if reference_kind(read_as.schema_name()).is_none() {
+        anyhow::bail!(
+            "{}: {topic} ({}) cannot be a reference: a reference is ground truth, a fused \
+             state or a GNSS fix channel (GnssFix, NavSatFix, LocationFix)",
+            input.display(),
+            c.schema_name()
+        );
+    }
+    Ok(())
+}
+
+/// The channel `topic` of the run, where its summaries list its channels; an error saying
+/// what it was wanted for where the run lacks it.
+pub fn check_channel_in_log(
+    input: &Run,
+    topic: &str,
+    wanted: &str,
+) -> Result<Option<Arc<ChannelInfo>>> {
+    let reader = input.reader()?;
+    let Some(channels) = reader.summary().and_then(|s| s.channels.as_ref()) else {
+        return Ok(None);
+    };
+    if let Some(c) = channels.iter().find(|c| c.topic == topic) {
+        return Ok(Some(c.clone()));
     }
     let have: Vec<&str> = channels.iter().map(|c| c.topic.as_str()).collect();
     anyhow::bail!(
-        "{}: no channel {topic} to take as the reference (it has {})",
+        "{}: no channel {topic} {wanted} (it has {})",
         input.display(),
         have.join(", ")
     )
@@ -103,6 +144,7 @@ pub fn print_eval(report: &EvalReport) {
         None => println!("no usable reference channel: errors not computed (NIS and counts only)"),
     }
     print!("{}", accuracy_table(report));
+    print_outages(report);
     print_plane(report);
     for p in &report.pipelines {
         if let Some(safety) = &p.safety {
@@ -240,6 +282,58 @@ fn accuracy_table(report: &EvalReport) -> Table {
         }
     }
     t
+}
+
+/// The withholding protocol's table: per pipeline and outage length, the error along the
+/// track at the outages' ends, the largest inside them and the drift per distance run.
+fn print_outages(report: &EvalReport) {
+    let with: Vec<_> = report
+        .pipelines
+        .iter()
+        .filter_map(|p| Some((p, p.outages.as_ref()?)))
+        .collect();
+    if with.is_empty() {
+        return;
+    }
+    let topics: std::collections::BTreeSet<&str> = with
+        .iter()
+        .filter_map(|(p, _)| p.withheld.as_deref())
+        .collect();
+    println!(
+        "outages of {} (withheld from the pipeline; errors along the track over the outages: \
+         RMS, 95th percentile, maximum):",
+        topics.into_iter().collect::<Vec<_>>().join(", ")
+    );
+    let mut t = Table::new(&[
+        "pipeline",
+        "outage s",
+        "outages",
+        "end RMS m",
+        "end p95 m",
+        "end max m",
+        "inside max m",
+        "drift RMS %",
+        "drift max %",
+    ]);
+    let f = |e: Option<&ErrorSummary>, pick: fn(&ErrorSummary) -> f64| {
+        e.map_or("-".to_owned(), |e| format!("{:.3}", pick(e)))
+    };
+    for (p, o) in with {
+        for l in &o.by_length {
+            t.row(vec![
+                p.name.clone(),
+                format!("{:.0}", l.length_s),
+                l.outages.to_string(),
+                f(l.end_error_m.as_ref(), |e| e.rmse),
+                f(l.end_error_m.as_ref(), |e| e.p95_abs),
+                f(l.end_error_m.as_ref(), |e| e.max_abs),
+                f(l.max_abs_error_m.as_ref(), |e| e.max_abs),
+                f(l.drift_percent.as_ref(), |e| e.rmse),
+                f(l.drift_percent.as_ref(), |e| e.max_abs),
+            ]);
+        }
+    }
+    print!("{t}");
 }
 
 /// The 2-D pipelines' errors in the plane against the truth, east and north.

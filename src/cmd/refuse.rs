@@ -3,6 +3,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use railfuse_catalog::topics;
+use railfuse_eval::outages::{OutageSpec, Withhold};
 use railfuse_eval::{EvalReport, FixQuality, Reference};
 use railfuse_refuse::registry::Registry;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -49,6 +50,16 @@ pub struct Args {
     /// all, or fix types (rtk_fixed, rtk_float, dgps, single; commas between several).
     #[arg(long, value_name = "QUALITY", default_value = "auto")]
     pub reference_quality: FixQuality,
+    /// Withhold a sensor (an RTK receiver) from every pipeline that fuses it, inside the
+    /// --outages windows (for the whole run without them), and score against it: the
+    /// accuracy table's reference unless --reference names another.
+    #[arg(long, value_name = "TOPIC")]
+    pub withhold: Option<String>,
+    /// The outages of --withhold: LEN[:every=PERIOD][:from=T] in s (the first starts 60 s
+    /// into the run unless from= says otherwise), or standard (30, 60 and 120 s in turn,
+    /// one every 180 s).
+    #[arg(long, value_name = "SPEC", requires = "withhold")]
+    pub outages: Option<OutageSpec>,
     /// Print the report as JSON (with wall time, throughput and peak memory).
     #[arg(long)]
     pub json: bool,
@@ -87,20 +98,35 @@ pub fn run(a: Args) -> Result<()> {
         true => output.with_extension("whole.mcap.partial"),
         false => output.to_owned(),
     };
-    if let Some(topic) = &a.reference {
-        super::eval::check_reference_in_log(input, topic)?;
-    }
-    let reference = Reference {
-        topic: a
-            .reference
-            .clone()
-            .unwrap_or(topics::GROUND_TRUTH.to_owned()),
-        quality: a.reference_quality.clone(),
-    };
     let (config, source) = match loaded {
         Some(loaded) => loaded,
         None => default_pipeline(input, a.track.as_deref(), a.save_config.as_deref())?,
     };
+    let withhold = a.withhold.as_ref().map(|topic| Withhold {
+        topic: topic.clone(),
+        outages: a.outages.clone(),
+    });
+    // Scored against what was withheld, unless told otherwise.
+    let withheld_topic = withhold.as_ref().map(|w| w.topic.clone()).or_else(|| {
+        config
+            .pipeline
+            .iter()
+            .find_map(|p| Some(p.withhold.as_ref()?.topic.clone()))
+    });
+    let reference = Reference {
+        topic: a
+            .reference
+            .clone()
+            .or(withheld_topic)
+            .unwrap_or(topics::GROUND_TRUTH.to_owned()),
+        quality: a.reference_quality.clone(),
+    };
+    if let Some(w) = &withhold {
+        super::eval::check_channel_in_log(input, &w.topic, "to withhold")?;
+    }
+    if a.reference.is_some() || reference.topic != topics::GROUND_TRUTH {
+        super::eval::check_reference_in_log(input, &reference.topic)?;
+    }
     let live = match &a.viz {
         Some(target) => Some(LiveView::open(target)?),
         None => None,
@@ -111,7 +137,7 @@ pub fn run(a: Args) -> Result<()> {
         &whole,
         &config,
         source,
-        &reference,
+        (&reference, withhold.as_ref()),
         observer.as_ref().map(|o| o as Observer<'_>),
     )?;
     drop(observer);
@@ -250,7 +276,7 @@ pub fn refuse_with(
     output: &Path,
     config: &Pipelines,
     source: String,
-    reference: &Reference,
+    (reference, withhold): (&Reference, Option<&Withhold>),
     observer: Option<Observer<'_>>,
 ) -> Result<(RefuseReport, EvalReport, RunStats)> {
     let started = Instant::now();
@@ -262,6 +288,7 @@ pub fn refuse_with(
         config,
         config_source: source,
         reference,
+        withhold,
         progress: Some(&progress),
         observer,
     })?;
@@ -338,7 +365,7 @@ pub fn refuse_and_evaluate(
     reference: &Reference,
 ) -> Result<(RefuseReport, EvalReport)> {
     let run = Run::file(input);
-    let (report, eval, _) = refuse_with(&run, output, config, source, reference, None)?;
+    let (report, eval, _) = refuse_with(&run, output, config, source, (reference, None), None)?;
     print_eval(&eval);
     Ok((report, eval))
 }

@@ -133,6 +133,9 @@ pub mod metadata {
     pub const RUN: &str = "railfuse.run";
     /// One record per pipeline: the exact configuration that made its fused channels.
     pub const PIPELINE: &str = "railfuse.pipeline";
+    /// One record per pipeline a sensor was withheld from: the topic and the outages (log
+    /// time), written before the fused channels so that a reader scores as it goes.
+    pub const WITHHELD: &str = "railfuse.withheld";
 }
 
 #[cfg(test)]

@@ -17,6 +17,7 @@ use crate::accuracy::{
     PlaneSummary, Span, CHI2_95_1DOF,
 };
 use crate::fix_match::{FixMatchReport, FixMeter, FixQuality, FixSample, Reference};
+use crate::outages::{OutageEval, OutageWindow, Withheld};
 use crate::safety::{SafetyEval, SafetyTally};
 use railfuse_catalog::Result;
 
@@ -59,6 +60,11 @@ pub struct PipelineEval {
     /// to each fix's time) and the largest time to a state.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_fixes: Option<FixMatchReport>,
+    /// The sensor withheld from it (the withholding protocol), and its errors in each outage.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub withheld: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outages: Option<OutageEval>,
     pub windows: Vec<WindowEval>,
     /// Pipelines with safety checks: S7, availability, containment and caught faults.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -143,6 +149,11 @@ impl Scored {
         }
     }
 
+    fn set_outages(&mut self, windows: &[OutageWindow]) {
+        self.meter.outages = crate::outages::OutageMeter::new(windows);
+        self.fixes.set_outages(windows);
+    }
+
     /// A state (fused or smoothed): to the meter of the reference's kind.
     fn add_state(&mut self, state: &FusedState, reference: Option<ReferenceKind>, spans: &[Span]) {
         match reference {
@@ -200,6 +211,7 @@ pub fn fix_sample(
         .and_then(|t| t.chainage_of_fix(&g))
         .map(|(s, variance_m2, _)| FixSample {
             stamp_ns: g.stamp_ns,
+            log_time_ns: m.log_time_ns,
             fix_type: g.fix_type,
             chainage_m: s,
             speed_mps: g.speed_mps,
@@ -243,6 +255,8 @@ pub struct Evaluator {
     first_ns: Option<u64>,
     /// Which fixes of a GNSS reference count.
     quality: FixQuality,
+    /// Each pipeline's withheld sensor and outages.
+    withheld: BTreeMap<String, Withheld>,
 }
 
 impl Evaluator {
@@ -263,7 +277,28 @@ impl Evaluator {
             smoothed_fed: BTreeMap::new(),
             first_ns: None,
             quality: reference.quality.clone(),
+            withheld: BTreeMap::new(),
         }
+    }
+
+    /// `pipeline` did not see `w.topic` inside `w.windows` (or at all): its errors there are
+    /// reported outage by outage, and the outages are marked windows.
+    pub fn withheld(&mut self, pipeline: &str, w: &Withheld) {
+        for s in self.scored.iter_mut().filter(|s| s.pipeline == pipeline) {
+            s.set_outages(&w.windows);
+        }
+        let label = format!("withheld {}", w.topic);
+        for window in &w.windows {
+            let span = Span {
+                label: label.clone(),
+                start_ns: window.start_ns,
+                end_ns: Some(window.end_ns),
+            };
+            if !self.spans.contains(&span) {
+                self.spans.push(span);
+            }
+        }
+        self.withheld.insert(pipeline.to_owned(), w.clone());
     }
 
     fn index_of(&mut self, name: String, pipeline: &str) -> usize {
@@ -271,8 +306,11 @@ impl Evaluator {
             Some(i) => i,
             None => {
                 let quality = self.quality.clone();
-                self.scored
-                    .push(Scored::new(name, pipeline.to_owned(), self.lag_s, quality));
+                let mut s = Scored::new(name, pipeline.to_owned(), self.lag_s, quality);
+                if let Some(w) = self.withheld.get(pipeline) {
+                    s.set_outages(&w.windows);
+                }
+                self.scored.push(s);
                 self.scored.len() - 1
             }
         }
@@ -473,8 +511,16 @@ impl Evaluator {
         }
     }
 
-    /// A metadata record (pipeline records name each pipeline's filter).
+    /// A metadata record (pipeline records name each pipeline's filter; withheld records
+    /// its outages).
     pub fn metadata(&mut self, name: &str, metadata: &BTreeMap<String, String>) {
+        if name == topics::metadata::WITHHELD {
+            if let (Some(p), Some(w)) =
+                (metadata.get("pipeline"), Withheld::from_metadata(metadata))
+            {
+                self.withheld(&p.clone(), &w);
+            }
+        }
         if name == topics::metadata::PIPELINE {
             if let (Some(p), Some(f)) = (metadata.get("pipeline"), metadata.get("filter")) {
                 self.filters.insert(p.clone(), f.clone());
@@ -503,7 +549,12 @@ impl Evaluator {
             .filter(|s| {
                 s.states > 0 || s.gated > 0 || s.nis.summary().is_some() || s.safety.is_some()
             })
-            .map(|s| pipeline_eval(s, &filters, t0, against))
+            .map(|s| {
+                let withheld = self.withheld.get(&s.pipeline).map(|w| w.topic.clone());
+                let mut e = pipeline_eval(s, &filters, t0, against);
+                e.withheld = withheld;
+                e
+            })
             .collect();
         let secs = |t: u64| t.saturating_sub(t0) as f64 / 1e9;
         let missing = log.missing().iter().filter_map(|m| {
@@ -585,6 +636,8 @@ fn pipeline_eval(
         unmatched_states: s.meter.unmatched,
         states_in_reference_gaps: s.meter.in_reference_gaps,
         reference_fixes: None,
+        withheld: None,
+        outages: s.meter.outages.report(t0),
         windows: windows(&s.meter.windows),
     };
     if against == Some(ReferenceKind::Gnss) {
@@ -599,6 +652,7 @@ fn pipeline_eval(
         eval.states_in_reference_gaps = 0;
         eval.windows = windows(f.windows());
         eval.reference_fixes = Some(f.report());
+        eval.outages = f.outages(t0);
     }
     eval
 }

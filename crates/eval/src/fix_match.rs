@@ -24,6 +24,7 @@ use railfuse_catalog::messages::FixType;
 use serde::Serialize;
 
 use crate::accuracy::{record_in_windows, ErrorStats, ErrorSummary, Exceedance, Span, WindowStats};
+use crate::outages::{OutageEval, OutageMeter, OutageWindow};
 
 /// States further apart than this do not bracket a fix (the pipeline was not producing
 /// states, e.g. a GNSS-only pipeline in a tunnel).
@@ -106,6 +107,8 @@ impl Reference {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FixSample {
     pub stamp_ns: u64,
+    /// When it was logged: what places it in or out of a withholding outage.
+    pub log_time_ns: u64,
     pub fix_type: FixType,
     pub chainage_m: f64,
     /// Over ground, where the fix carries one.
@@ -150,6 +153,7 @@ struct Tally {
     outside_states: u64,
     largest_dt_ns: u64,
     with_speed: u64,
+    outages: OutageMeter,
 }
 
 /// The report of one pipeline's states against a fix reference.
@@ -219,6 +223,17 @@ impl FixMeter {
             FixQuality::All => (true, false),
             FixQuality::Only(types) => (types.contains(&fix_type), false),
         }
+    }
+
+    /// Scores the errors inside each of `windows` (a withheld reference's) on their own.
+    pub fn set_outages(&mut self, windows: &[OutageWindow]) {
+        self.tally.outages = OutageMeter::new(windows);
+        self.fallback.outages = OutageMeter::new(windows);
+    }
+
+    /// The outages' errors, against the fixes reported.
+    pub fn outages(&self, t0_ns: u64) -> Option<OutageEval> {
+        self.reported().0.outages.report(t0_ns)
     }
 
     pub fn add_fix(&mut self, fix: FixSample, spans: &[Span]) {
@@ -334,6 +349,7 @@ impl FixMeter {
                         .beyond_3_sigma
                         .add(de, variance_m2 + fix.variance_m2.unwrap_or(0.0));
                     record_in_windows(&mut tally.windows, spans, fix.stamp_ns, de, ve);
+                    tally.outages.add(fix.log_time_ns, fix.chainage_m, de);
                     tally.matched += 1;
                     tally.largest_dt_ns = tally.largest_dt_ns.max(dt_ns);
                 }
@@ -416,6 +432,7 @@ mod tests {
     fn fix(t_s: f64, s: f64, v: Option<f64>, fix_type: FixType) -> FixSample {
         FixSample {
             stamp_ns: (t_s * 1e9) as u64,
+            log_time_ns: (t_s * 1e9) as u64,
             fix_type,
             chainage_m: s,
             speed_mps: v,

@@ -14,8 +14,10 @@
 //! reference with a second reader in step with them.
 //!
 //! Layout:
-//! - [`accuracy`]: error and consistency statistics (RMSE, maximum, 95th percentile, NEES,
-//!   NIS) against a reference, in bounded memory;
+//! - [`error_stats`]: one error's RMSE, maximum and 95th percentile in bounded memory;
+//! - [`accuracy`]: errors and consistency (NEES, NIS) against a reference trajectory;
+//! - [`fix_match`]: fused states against a GNSS reference, interpolated to each fix;
+//! - [`outages`]: the withholding protocol's windows and each outage's errors;
 //! - [`safety`]: source 002's safety summary (S7): per check how often and how long it fired,
 //!   availability, containment of the reference by U_safe, injected faults caught;
 //! - the evaluator (this crate's root): the accuracy table of a fused log, whole run and marked
@@ -26,8 +28,10 @@
 //! finished logs with it.
 
 pub mod accuracy;
+pub mod error_stats;
 mod evaluator;
 pub mod fix_match;
+pub mod outages;
 pub mod safety;
 
 pub use evaluator::{

@@ -149,6 +149,7 @@ fn fused_run<T>(
         config: pipelines,
         config_source: pipelines.path.display().to_string(),
         reference: &railfuse_eval::Reference::topic(topics::GROUND_TRUTH),
+        withhold: None,
         progress: None,
         observer: None,
     });

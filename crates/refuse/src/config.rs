@@ -151,6 +151,8 @@ pub struct PipelineConfig {
     /// What `railfuse tune` may change in this pipeline and what it minimises; refuse
     /// ignores it.
     pub tune: Option<TuneConfig>,
+    /// How it is scored on a log without truth: a sensor withheld from it in outages.
+    pub eval: Option<EvalConfig>,
 }
 
 impl PipelineConfig {
@@ -168,6 +170,7 @@ impl PipelineConfig {
         "federated",
         "sensor",
         "tune",
+        "eval",
     ];
 
     /// The estimator along the track `filter` names, if it names one.
@@ -208,6 +211,7 @@ impl<'de> Deserialize<'de> for PipelineConfig {
                     sections: BTreeMap::new(),
                     sensor: Vec::new(),
                     tune: None,
+                    eval: None,
                 };
                 while let Some(key) = map.next_key::<String>()? {
                     match key.as_str() {
@@ -223,6 +227,7 @@ impl<'de> Deserialize<'de> for PipelineConfig {
                         "federated" => c.federated = Some(map.next_value()?),
                         "sensor" => sensor = Some(map.next_value()?),
                         "tune" => c.tune = Some(map.next_value()?),
+                        "eval" => c.eval = Some(map.next_value()?),
                         _ => {
                             let table = map.next_value()?;
                             c.sections.insert(key, table);
@@ -265,6 +270,8 @@ impl Serialize for PipelineConfig {
             sensor: &'a [Spanned<SensorConfig>],
             #[serde(skip_serializing_if = "Option::is_none")]
             tune: Option<&'a TuneConfig>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            eval: Option<&'a EvalConfig>,
         }
         View {
             name: &self.name,
@@ -280,6 +287,7 @@ impl Serialize for PipelineConfig {
             sections: &self.sections,
             sensor: &self.sensor,
             tune: self.tune.as_ref(),
+            eval: self.eval.as_ref(),
         }
         .serialize(s)
     }
@@ -583,6 +591,29 @@ pub struct TuneConfig {
     /// `sensor[/odometer/1].gate_nis`, `sensor[/gnss].chainage_bias.std_m`, ….
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub params: BTreeMap<String, ParamBounds>,
+}
+
+/// `[pipeline.eval]`: scoring the pipeline on a log without truth by the withholding
+/// protocol (`refuse --withhold TOPIC --outages SPEC` does the same for every pipeline that
+/// fuses TOPIC, and wins):
+///
+/// ```toml
+/// [pipeline.eval]
+/// withhold = "/gnss/fix"
+/// outages = "60:every=180"     # or "standard": 30, 60 and 120 s in turn, every 180 s
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EvalConfig {
+    /// A sensor topic of the pipeline hidden from it inside the outages (for the whole run
+    /// without `outages`); the accuracy table is then scored against it.
+    #[schemars(with = "String")]
+    pub withhold: Spanned<String>,
+    /// `LEN[:every=PERIOD][:from=T]` (s; the first outage starts 60 s into the run unless
+    /// `from` says otherwise), or `standard`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<String>")]
+    pub outages: Option<Spanned<String>>,
 }
 
 /// What tuning minimises.

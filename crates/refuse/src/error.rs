@@ -11,6 +11,14 @@ pub enum Error {
     /// A track map that cannot be used (the message names the file and the cause).
     #[error("{0}")]
     Map(String),
+    /// A withholding request that cannot be met in this run (the message names the run,
+    /// the topic and the cause).
+    #[error("{input}: withhold {topic}: {problem}")]
+    Withhold {
+        input: PathBuf,
+        topic: String,
+        problem: String,
+    },
     /// A log given no configuration in which no topic feeds a sensor model.
     #[error("{0}")]
     NoDefaultPipeline(String),

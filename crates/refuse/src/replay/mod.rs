@@ -23,8 +23,10 @@ use railfuse_catalog::messages::{ChannelMessage, Event, EventKind, TrackMap};
 use railfuse_catalog::rejections::Rejections;
 use railfuse_catalog::run::{MergeCounts, Run, Sequential};
 use railfuse_catalog::topics;
+use railfuse_eval::outages::Withhold;
 use railfuse_eval::Reference;
 use serde::Serialize;
+use withholding::Withholding;
 
 use crate::error::{Error, Result};
 use crate::measurement::{Measurement, Quantity, SensorContext, SensorModel};
@@ -34,6 +36,7 @@ use railfuse_eval::{self as eval, EvalReport, Evaluator};
 
 mod outputs;
 mod provenance;
+mod withholding;
 
 use outputs::{copy_channel, register_outputs, Output, TrackOutput};
 
@@ -46,6 +49,9 @@ pub struct RefuseOptions<'a> {
     pub config_source: String,
     /// The reference of the accuracy evaluation made in the same pass.
     pub reference: &'a Reference,
+    /// A sensor hidden from every pipeline that fuses it, in outages (the withholding
+    /// protocol); over the pipelines' own `[pipeline.eval]`.
+    pub withhold: Option<&'a Withhold>,
     /// Told the bytes of the input read so far, as the replay goes.
     pub progress: Option<&'a (dyn Fn(u64) + Sync)>,
     /// Told every message the replay reads (the pipelines' sensors, the reference, the map,
@@ -112,6 +118,9 @@ pub struct RefuseReport {
     /// Foreign topics whose messages carried no time of their own (a zero `header.stamp`):
     /// they took the log time.
     pub stamped_by_log_time: BTreeSet<String>,
+    /// Messages of a withheld sensor each pipeline was not shown, by pipeline.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub withheld: BTreeMap<String, u64>,
     pub pipelines: Vec<PipelineReport>,
 }
 
@@ -263,6 +272,7 @@ struct Replay<'a> {
     last_log_time: u64,
     /// The file being read chunk by chunk (a part of a split run), for messages about it.
     reading: Option<PathBuf>,
+    withholding: Withholding,
 }
 
 impl<'a> Replay<'a> {
@@ -278,6 +288,21 @@ impl<'a> Replay<'a> {
         let mut eval = Evaluator::new(opts.output, opts.reference, lag);
         let (outputs, track_output) =
             register_outputs(opts, known.map(Vec::as_slice), &mut writer, &mut eval)?;
+        let withholding = Withholding::resolve(
+            input,
+            &opts.config.pipeline,
+            opts.withhold,
+            summary.as_ref().and_then(|s| s.message_span_ns),
+            known.map(Vec::as_slice),
+        )?;
+        for (pi, p) in opts.config.pipeline.iter().enumerate() {
+            if let Some(w) = withholding.of(pi) {
+                let mut record = w.to_metadata();
+                record.insert("pipeline".into(), p.name.clone());
+                writer.write_metadata(topics::metadata::WITHHELD, record)?;
+                eval.withheld(&p.name, w);
+            }
+        }
         let pipelines = opts
             .config
             .pipeline
@@ -319,10 +344,12 @@ impl<'a> Replay<'a> {
                 missing_sensors: BTreeSet::new(),
                 skipped: BTreeMap::new(),
                 stamped_by_log_time: BTreeSet::new(),
+                withheld: BTreeMap::new(),
                 pipelines: Vec::new(),
             },
             last_log_time: 0,
             reading: None,
+            withholding,
         };
         // With a summary, every sensor is bound to its channel before anything is read.
         if let Some(channels) = known {
@@ -821,6 +848,12 @@ impl<'a> Replay<'a> {
         let sensors = std::mem::take(&mut self.routes.get_mut(&id).expect("routed").sensors);
         let result = (|| {
             for &(pi, si) in &sensors {
+                if self
+                    .withholding
+                    .hides(pi, &msg.channel.topic, msg.log_time_ns)
+                {
+                    continue;
+                }
                 match self.pipelines[pi].as_message_pipeline() {
                     // A pipeline in the plane reads the whole message.
                     Some(p) => {
@@ -890,7 +923,11 @@ impl<'a> Replay<'a> {
             false => self.opts.run,
         };
         self.writer.finish()?;
-        for (p, out) in self.pipelines.iter().zip(&self.outputs) {
+        for (pi, (p, out)) in self.pipelines.iter().zip(&self.outputs).enumerate() {
+            if self.withholding.of(pi).is_some() {
+                let hidden = self.withholding.hidden[pi];
+                self.report.withheld.insert(p.name().to_owned(), hidden);
+            }
             self.report.pipelines.push(PipelineReport {
                 name: p.name().to_owned(),
                 counts: p.counts().clone(),

@@ -26,6 +26,7 @@ use crate::kinds::{KindSpec, Outputs, PipelineKind};
 use crate::measurement::{Quantity, SensorModel};
 use crate::model::{MotionModel, SensorState};
 use crate::registry::Registry;
+use railfuse_eval::outages::Withhold;
 
 mod estimator;
 mod sensor;
@@ -301,8 +302,40 @@ pub struct PipelineSpec {
     /// Federated pipelines: the devices (sub-filters) in order of first mention, without the
     /// master. Empty for centralised pipelines.
     pub devices: Vec<String>,
+    /// `[pipeline.eval]`: a sensor withheld from it in outages, to score it against.
+    pub withhold: Option<Withhold>,
     /// The table as written, stored beside the fused channels.
     source: PipelineConfig,
+}
+
+/// `[pipeline.eval]` checked: the topic withheld is one of the pipeline's sensors, the
+/// outages parse.
+fn withhold(e: &crate::config::EvalConfig, sensors: &[SensorSpec]) -> Result<Withhold, Invalid> {
+    let topic = e.withhold.get_ref();
+    if !sensors.iter().any(|s| &s.topic == topic) {
+        let have: Vec<&str> = sensors.iter().map(|s| s.topic.as_str()).collect();
+        return Err(Invalid {
+            span: e.withhold.span(),
+            message: format!(
+                "eval.withhold: {topic} is not a sensor of this pipeline ({})",
+                have.join(", ")
+            ),
+        });
+    }
+    let outages = e
+        .outages
+        .as_ref()
+        .map(|o| {
+            o.get_ref().parse().map_err(|message: String| Invalid {
+                span: o.span(),
+                message: format!("eval.{message}"),
+            })
+        })
+        .transpose()?;
+    Ok(Withhold {
+        topic: topic.clone(),
+        outages,
+    })
 }
 
 /// A pipeline's name is part of its channels' topics (`/fused/<name>/state`): letters, digits,
@@ -381,6 +414,7 @@ impl PipelineSpec {
             )));
         }
         let estimator = estimator(c, filter, kind, &devices).map_err(here)?;
+        let withhold = c.eval.as_ref().map(|e| withhold(e, &sensors)).transpose()?;
         // Stored beside the fused channels with every setting written out.
         let mut source = c.clone();
         if let (EstimatorSpec::Messages(k), Some(kind)) = (&estimator, kind) {
@@ -397,6 +431,7 @@ impl PipelineSpec {
             output_period_ns,
             sensors,
             devices,
+            withhold,
             source,
         })
     }
