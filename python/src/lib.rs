@@ -219,6 +219,7 @@ impl Tuner {
             optimiser: parse_enum::<OptimiserKind>("optimiser", optimiser)?,
             max_evaluations,
             seed,
+            withhold: None,
         };
         let inner = py.detach(|| RustTuner::open(&request)).map_err(fail)?;
         Ok(Self { inner })

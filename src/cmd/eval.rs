@@ -155,6 +155,13 @@ pub fn print_eval(report: &EvalReport) {
         if let Some(f) = &p.reference_fixes {
             println!("{}: {}", p.name, describe_fix_match(f));
         }
+        if let Some(e) = &p.across_track_error_m {
+            println!(
+                "{}: across the track against the fixes (in the plane): RMSE {:.3} m, p95 \
+                 {:.3} m, max {:.3} m",
+                p.name, e.rmse, e.p95_abs, e.max_abs
+            );
+        }
         let (gaps, outside) = (p.states_in_reference_gaps, p.unmatched_states);
         if gaps + outside > 0 {
             println!(
@@ -318,7 +325,7 @@ fn print_outages(report: &EvalReport) {
     let f = |e: Option<&ErrorSummary>, pick: fn(&ErrorSummary) -> f64| {
         e.map_or("-".to_owned(), |e| format!("{:.3}", pick(e)))
     };
-    for (p, o) in with {
+    for (p, o) in &with {
         for l in &o.by_length {
             t.row(vec![
                 p.name.clone(),
@@ -334,6 +341,15 @@ fn print_outages(report: &EvalReport) {
         }
     }
     print!("{t}");
+    for (p, o) in with {
+        for l in o.by_length.iter().filter(|l| l.end_across_m.is_some()) {
+            let e = l.end_across_m.expect("filtered");
+            println!(
+                "{}: across the track at the ends of the {:.0} s outages: RMS {:.3} m, max {:.3} m",
+                p.name, l.length_s, e.rmse, e.max_abs
+            );
+        }
+    }
 }
 
 /// The 2-D pipelines' errors in the plane against the truth, east and north.

@@ -126,8 +126,9 @@ pub fn simulate_to(
 fn fault_help() -> String {
     format!(
         "Make a device fail for a window: DEVICE:MODE:START:END with DEVICE one of {}; MODE \
-         dropout, stuck or bias=VALUE (SI units: a GNSS position jump along the track in m, a \
-         speed in m/s, a specific force in m/s², a loop position in m), or for the map \
+         dropout, stuck, bias=VALUE (SI units: a GNSS position jump along the track in m, a \
+         speed in m/s, a specific force in m/s², a loop position in m), late=SECONDS (its \
+         stamps that much late: a driver stamping on arrival), or for the map \
          offset=D (a stretch published D m to the left); START and END in seconds from the \
          start; `:reported` adds the device's own fault and recovery events. Repeatable.",
         railfuse_record::simulator::faults::DEVICES.join(", ")

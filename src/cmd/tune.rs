@@ -5,6 +5,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
+use railfuse_eval::outages::{OutageSpec, Withhold};
 use railfuse_refuse::config::{value_names, ObjectiveKind, OptimiserKind};
 use railfuse_tune::recording::Metrics;
 use railfuse_tune::search::SearchProgress;
@@ -53,6 +54,14 @@ pub struct Args {
     /// Worker threads (default: every core).
     #[arg(long, value_parser = at_least_one)]
     pub threads: Option<usize>,
+    /// Withhold a sensor (an RTK receiver) from the pipeline inside the --outages windows (the
+    /// whole run without them) and tune against what was withheld: cross-validation on a
+    /// log without truth (the reference unless --reference names another).
+    #[arg(long, value_name = "TOPIC")]
+    pub withhold: Option<String>,
+    /// The outages of --withhold: LEN[:every=PERIOD][:from=T] in s, or standard.
+    #[arg(long, value_name = "SPEC", requires = "withhold")]
+    pub outages: Option<OutageSpec>,
     /// The tuned configuration: the input file with only the tuned values changed.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -114,7 +123,10 @@ fn tune(a: &Args) -> Result<()> {
         optimiser: a.optimiser,
         max_evaluations: a.max_evals,
         seed: a.seed,
-        ..Default::default()
+        withhold: a.withhold.as_ref().map(|topic| Withhold {
+            topic: topic.clone(),
+            outages: a.outages.clone(),
+        }),
     };
     let loading = crate::progress::Progress::steps("decoding logs", a.logs.len() as u64);
     let tuner = Tuner::open(&request)?;
@@ -176,12 +188,10 @@ fn print_report(a: &Args, o: &TuneOutcome) {
     let r = &o.report;
     let objective = match r.objective.kind {
         ObjectiveKind::Rmse => format!(
-            "{} x position RMSE + {} x speed RMSE against {}",
-            r.objective.position_weight,
-            r.objective.speed_weight,
-            r.reference.as_deref().unwrap_or("-")
+            "{} x position RMSE + {} x speed RMSE: {}",
+            r.objective.position_weight, r.objective.speed_weight, r.objective_basis
         ),
-        ObjectiveKind::Nll => "negative log-likelihood of the innovations".to_owned(),
+        ObjectiveKind::Nll => r.objective_basis.clone(),
     };
     println!(
         "tuned pipeline '{}' of {} over {} log(s): {objective}",

@@ -342,7 +342,7 @@ impl AccuracyMeter {
                 self.position.add(de);
                 self.speed.add(ve);
                 record_in_windows(&mut self.windows, spans, e.stamp_ns, de, Some(ve));
-                self.outages.add(e.stamp_ns, s, de);
+                self.outages.add(e.stamp_ns, s, de, None);
                 let (pss, psv, pvv) = e.covariance;
                 let mut cov = [0.0; 9];
                 (cov[0], cov[1], cov[3], cov[4]) = (pss, psv, psv, pvv);

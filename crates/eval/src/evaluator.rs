@@ -16,7 +16,7 @@ use crate::accuracy::{
     AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, PlaneMeter, PlaneSample,
     PlaneSummary, Span, CHI2_95_1DOF,
 };
-use crate::fix_match::{FixMatchReport, FixMeter, FixQuality, FixSample, Reference};
+use crate::fix_match::{FixMatchReport, FixMeter, FixQuality, FixSample, Reference, StateAt};
 use crate::outages::{OutageEval, OutageWindow, Withheld};
 use crate::safety::{SafetyEval, SafetyTally};
 use railfuse_catalog::Result;
@@ -60,6 +60,10 @@ pub struct PipelineEval {
     /// to each fix's time) and the largest time to a state.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reference_fixes: Option<FixMatchReport>,
+    /// Pipelines in the plane against GNSS fixes: the error across the track (state's offset
+    /// from the centre line less the fix's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub across_track_error_m: Option<ErrorSummary>,
     /// The sensor withheld from it (the withholding protocol), and its errors in each outage.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub withheld: Option<String>,
@@ -154,21 +158,33 @@ impl Scored {
         self.fixes.set_outages(windows);
     }
 
-    /// A state (fused or smoothed): to the meter of the reference's kind.
-    fn add_state(&mut self, state: &FusedState, reference: Option<ReferenceKind>, spans: &[Span]) {
+    /// A state (fused or smoothed): to the meter of the reference's kind; `map` places a
+    /// pipeline in the plane across the track.
+    fn add_state(
+        &mut self,
+        state: &FusedState,
+        (reference, map): (Option<ReferenceKind>, Option<&TrackMap>),
+        spans: &[Span],
+    ) {
         match reference {
             Some(ReferenceKind::Gnss) => {}
             _ => self.meter.add_estimate(state, spans),
         }
         // Kept a few seconds only: the reference kind may be known only once its channel
         // turns up, after the first states.
-        self.fixes.add_state(
-            state.stamp_ns,
-            state.chainage_m,
-            state.speed_mps,
-            state.covariance[0],
-            spans,
-        );
+        let lateral_m = state
+            .plane
+            .as_ref()
+            .zip(map)
+            .and_then(|(p, m)| m.lateral_offset(p.east_m, p.north_m));
+        let at = StateAt {
+            stamp_ns: state.stamp_ns,
+            chainage_m: state.chainage_m,
+            speed_mps: state.speed_mps,
+            variance_m2: state.covariance[0],
+            lateral_m,
+        };
+        self.fixes.add_state(&at, spans);
         self.states += 1;
     }
 }
@@ -207,16 +223,18 @@ pub fn fix_sample(
     map: Option<&TrackMap>,
 ) -> Result<Option<FixSample>> {
     let g: GnssFix = m.decode(path)?;
-    Ok(map
-        .and_then(|t| t.chainage_of_fix(&g))
-        .map(|(s, variance_m2, _)| FixSample {
+    Ok(map.and_then(|t| {
+        let (s, variance_m2, _) = t.chainage_of_fix(&g)?;
+        Some(FixSample {
             stamp_ns: g.stamp_ns,
             log_time_ns: m.log_time_ns,
             fix_type: g.fix_type,
             chainage_m: s,
             speed_mps: g.speed_mps,
             variance_m2,
-        }))
+            lateral_m: t.lateral_of_fix(&g),
+        })
+    }))
 }
 
 /// A marked window from an event: (label, opens).
@@ -438,7 +456,8 @@ impl Evaluator {
     /// A fused state on channel `id` (a `/fused/<name>/state` channel).
     pub fn fused_state(&mut self, id: u16, state: &FusedState) {
         if let Some(Role::State(i)) = self.roles.get(&id).copied() {
-            self.scored[i].add_state(state, self.reference, &self.spans);
+            let against = (self.reference, self.map.as_ref());
+            self.scored[i].add_state(state, against, &self.spans);
             self.scored[i].plane.add_state(state);
         }
     }
@@ -465,7 +484,7 @@ impl Evaluator {
         };
         let s = &mut self.scored[i];
         walk.feed_until(s, state.stamp_ns, &self.spans)?;
-        s.add_state(state, self.reference, &self.spans);
+        s.add_state(state, (self.reference, self.map.as_ref()), &self.spans);
         Ok(())
     }
 
@@ -636,6 +655,7 @@ fn pipeline_eval(
         unmatched_states: s.meter.unmatched,
         states_in_reference_gaps: s.meter.in_reference_gaps,
         reference_fixes: None,
+        across_track_error_m: None,
         withheld: None,
         outages: s.meter.outages.report(t0),
         windows: windows(&s.meter.windows),
@@ -652,6 +672,7 @@ fn pipeline_eval(
         eval.states_in_reference_gaps = 0;
         eval.windows = windows(f.windows());
         eval.reference_fixes = Some(f.report());
+        eval.across_track_error_m = f.across();
         eval.outages = f.outages(t0);
     }
     eval
@@ -827,7 +848,7 @@ fn score_smoothed(
             }
             let st: FusedState = m.decode(log.name())?;
             walk.feed_until(&mut scored[i], st.stamp_ns, spans)?;
-            scored[i].add_state(&st, reference, spans);
+            scored[i].add_state(&st, (reference, walk.map.as_ref()), spans);
         }
     }
     Ok(())

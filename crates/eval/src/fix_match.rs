@@ -103,6 +103,18 @@ impl Reference {
     }
 }
 
+/// A fused state as the fix meter takes it.
+#[derive(Debug, Clone, Copy)]
+pub struct StateAt {
+    pub stamp_ns: u64,
+    pub chainage_m: f64,
+    pub speed_mps: f64,
+    /// Its chainage variance, m².
+    pub variance_m2: f64,
+    /// A pipeline in the plane: its offset from the track's centre line, m (right positive).
+    pub lateral_m: Option<f64>,
+}
+
 /// A reference fix on the track.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FixSample {
@@ -116,6 +128,9 @@ pub struct FixSample {
     /// Its own variance along the track, where it carries a covariance: the error against
     /// it is the state's and the fix's, so its 3σ bound is on both variances.
     pub variance_m2: Option<f64>,
+    /// Its offset from the track's centre line (right positive), m: what a pipeline in the
+    /// plane is scored against across the track.
+    pub lateral_m: Option<f64>,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -124,6 +139,8 @@ struct StatePoint {
     chainage_m: f64,
     speed_mps: f64,
     variance_m2: f64,
+    /// A pipeline in the plane: its offset from the track's centre line.
+    lateral_m: Option<f64>,
 }
 
 /// What matching a fix gave.
@@ -132,6 +149,7 @@ enum Matched {
         chainage_m: f64,
         speed_mps: f64,
         variance_m2: f64,
+        lateral_m: Option<f64>,
         /// To the nearer bracketing state.
         dt_ns: u64,
     },
@@ -146,6 +164,8 @@ enum Matched {
 struct Tally {
     position: ErrorStats,
     speed: ErrorStats,
+    /// Pipelines in the plane: across the track.
+    across: ErrorStats,
     beyond_3_sigma: Exceedance,
     windows: Vec<WindowStats>,
     matched: u64,
@@ -154,6 +174,9 @@ struct Tally {
     largest_dt_ns: u64,
     with_speed: u64,
     outages: OutageMeter,
+    /// `½ Σ (ln 2πv + e²/v)`, v the state's variance at the fix plus the fix's own: the
+    /// negative log-likelihood of the fixes as the states predicted them.
+    nll: f64,
 }
 
 /// The report of one pipeline's states against a fix reference.
@@ -250,20 +273,16 @@ impl FixMeter {
         self.resolve(spans, false);
     }
 
-    pub fn add_state(
-        &mut self,
-        stamp_ns: u64,
-        chainage_m: f64,
-        speed_mps: f64,
-        variance_m2: f64,
-        spans: &[Span],
-    ) {
+    /// A state: along the track, and (a pipeline in the plane) its offset from the centre line.
+    pub fn add_state(&mut self, state: &StateAt, spans: &[Span]) {
         let point = StatePoint {
-            stamp_ns,
-            chainage_m,
-            speed_mps,
-            variance_m2,
+            stamp_ns: state.stamp_ns,
+            chainage_m: state.chainage_m,
+            speed_mps: state.speed_mps,
+            variance_m2: state.variance_m2,
+            lateral_m: state.lateral_m,
         };
+        let stamp_ns = state.stamp_ns;
         // In stamp order (a reorder window keeps them so; a stray one is put in place).
         let at = self.states.partition_point(|s| s.stamp_ns <= stamp_ns);
         self.states.insert(at, point);
@@ -301,6 +320,7 @@ impl FixMeter {
                 chainage_m: b.chainage_m,
                 speed_mps: b.speed_mps,
                 variance_m2: b.variance_m2,
+                lateral_m: b.lateral_m,
                 dt_ns: 0,
             };
         }
@@ -321,6 +341,7 @@ impl FixMeter {
             chainage_m,
             speed_mps,
             variance_m2: a.variance_m2 + u * (b.variance_m2 - a.variance_m2),
+            lateral_m: a.lateral_m.zip(b.lateral_m).map(|(x, y)| x + u * (y - x)),
             dt_ns: (t - a.stamp_ns).min(b.stamp_ns - t),
         }
     }
@@ -336,20 +357,29 @@ impl FixMeter {
                     chainage_m,
                     speed_mps,
                     variance_m2,
+                    lateral_m,
                     dt_ns,
                 } => {
                     let de = chainage_m - fix.chainage_m;
+                    let across = lateral_m.zip(fix.lateral_m).map(|(s, f)| s - f);
+                    if let Some(x) = across {
+                        tally.across.add(x);
+                    }
                     let ve = fix.speed_mps.map(|v| speed_mps - v);
                     tally.position.add(de);
                     if let Some(ve) = ve {
                         tally.speed.add(ve);
                         tally.with_speed += 1;
                     }
-                    tally
-                        .beyond_3_sigma
-                        .add(de, variance_m2 + fix.variance_m2.unwrap_or(0.0));
+                    let v = variance_m2 + fix.variance_m2.unwrap_or(0.0);
+                    tally.beyond_3_sigma.add(de, v);
+                    if v > 0.0 && v.is_finite() {
+                        tally.nll += 0.5 * ((std::f64::consts::TAU * v).ln() + de * de / v);
+                    }
                     record_in_windows(&mut tally.windows, spans, fix.stamp_ns, de, ve);
-                    tally.outages.add(fix.log_time_ns, fix.chainage_m, de);
+                    tally
+                        .outages
+                        .add(fix.log_time_ns, fix.chainage_m, de, across);
                     tally.matched += 1;
                     tally.largest_dt_ns = tally.largest_dt_ns.max(dt_ns);
                 }
@@ -375,12 +405,34 @@ impl FixMeter {
         }
     }
 
+    /// The position errors of the fixes reported, to pool with another log's.
+    pub fn position_stats(&self) -> &ErrorStats {
+        &self.reported().0.position
+    }
+
+    pub fn speed_stats(&self) -> &ErrorStats {
+        &self.reported().0.speed
+    }
+
+    /// Pipelines in the plane: their error across the track at the fixes.
+    pub fn across(&self) -> Option<ErrorSummary> {
+        self.reported().0.across.summary()
+    }
+
     pub fn position(&self) -> Option<ErrorSummary> {
         self.reported().0.position.summary()
     }
 
     pub fn speed(&self) -> Option<ErrorSummary> {
         self.reported().0.speed.summary()
+    }
+
+    /// The negative log-likelihood of the matched fixes under the states interpolated to
+    /// them (state and fix variances), and how many: of fixes withheld from the pipeline, its
+    /// predictive likelihood.
+    pub fn nll(&self) -> (f64, u64) {
+        let t = self.reported().0;
+        (t.nll, t.matched)
     }
 
     pub fn beyond_3_sigma(&self) -> Option<f64> {
@@ -437,6 +489,7 @@ mod tests {
             chainage_m: s,
             speed_mps: v,
             variance_m2: None,
+            lateral_m: None,
         }
     }
 
@@ -444,7 +497,14 @@ mod tests {
     fn states(m: &mut FixMeter, from_s: f64, to_s: f64) {
         let mut t = from_s;
         while t <= to_s + 1e-9 {
-            m.add_state((t * 1e9).round() as u64, t * t, 2.0 * t, 0.01, &[]);
+            let state = StateAt {
+                stamp_ns: (t * 1e9).round() as u64,
+                chainage_m: t * t,
+                speed_mps: 2.0 * t,
+                variance_m2: 0.01,
+                lateral_m: None,
+            };
+            m.add_state(&state, &[]);
             t += 0.25;
         }
     }

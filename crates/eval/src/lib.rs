@@ -35,7 +35,7 @@ pub mod outages;
 pub mod safety;
 
 pub use evaluator::{
-    evaluate, lag_allowance_s, reference_kind, reference_sample, EvalReport, Evaluator,
+    evaluate, fix_sample, lag_allowance_s, reference_kind, reference_sample, EvalReport, Evaluator,
     PipelineEval, ReferenceKind, SpanReport, WindowEval, AFTER_FIRST_BALISE,
 };
 pub use fix_match::{FixQuality, Reference};

@@ -224,6 +224,8 @@ struct OutageTally {
     /// (reference chainage, error) at the first and the last sample inside.
     first: Option<(f64, f64)>,
     last: Option<(f64, f64)>,
+    /// Across the track at the last sample (pipelines in the plane against fixes).
+    last_across: Option<f64>,
 }
 
 /// The errors inside each outage of one pipeline.
@@ -242,6 +244,9 @@ pub struct OutageReport {
     pub samples: u64,
     /// Along the track at its last reference sample, signed (fused − reference), m.
     pub end_error_m: Option<f64>,
+    /// Across the track there (pipelines in the plane against GNSS fixes), m.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub end_across_m: Option<f64>,
     pub max_abs_error_m: Option<f64>,
     /// The distance run inside it (by the reference), m.
     pub distance_m: Option<f64>,
@@ -256,6 +261,8 @@ pub struct OutageTable {
     pub outages: usize,
     /// |error at the end| over the outages: RMS, 95th percentile, maximum.
     pub end_error_m: Option<ErrorSummary>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub end_across_m: Option<ErrorSummary>,
     pub max_abs_error_m: Option<ErrorSummary>,
     pub drift_percent: Option<ErrorSummary>,
 }
@@ -278,6 +285,7 @@ impl OutageMeter {
                     max_abs_m: 0.0,
                     first: None,
                     last: None,
+                    last_across: None,
                 })
                 .collect(),
         }
@@ -286,7 +294,7 @@ impl OutageMeter {
     /// A scored sample: at `t_ns` (log time of the withheld message, or a state's stamp
     /// against a truth reference), the reference at `reference_m` along the track, the error
     /// `error_m`.
-    pub fn add(&mut self, t_ns: u64, reference_m: f64, error_m: f64) {
+    pub fn add(&mut self, t_ns: u64, reference_m: f64, error_m: f64, across_m: Option<f64>) {
         let Some(o) = self.tallies.iter_mut().find(|o| o.window.contains(t_ns)) else {
             return;
         };
@@ -294,6 +302,7 @@ impl OutageMeter {
         o.max_abs_m = o.max_abs_m.max(error_m.abs());
         o.first.get_or_insert((reference_m, error_m));
         o.last = Some((reference_m, error_m));
+        o.last_across = across_m;
     }
 
     /// The report; times from `t0_ns`.
@@ -312,6 +321,7 @@ impl OutageMeter {
                     length_s: o.window.length_s(),
                     samples: o.samples,
                     end_error_m: end,
+                    end_across_m: o.last_across,
                     max_abs_error_m: (o.samples > 0).then_some(o.max_abs_m),
                     distance_m: distance,
                     drift_percent: end
@@ -338,6 +348,7 @@ impl OutageMeter {
                     length_s,
                     outages: of.len(),
                     end_error_m: stats(|o| o.end_error_m),
+                    end_across_m: stats(|o| o.end_across_m),
                     max_abs_error_m: stats(|o| o.max_abs_error_m),
                     drift_percent: stats(|o| o.drift_percent),
                 }
@@ -408,11 +419,11 @@ mod tests {
         // 20 m/s; the error grows to 3 m at the end of the first, 1 m in the second.
         for k in 0..=300u64 {
             let t = 10_000_000_000 + k * 100_000_000;
-            m.add(t, 20.0 * (t as f64 / 1e9), 3.0 * k as f64 / 300.0);
+            m.add(t, 20.0 * (t as f64 / 1e9), 3.0 * k as f64 / 300.0, None);
         }
-        m.add(5_000_000_000, 100.0, 9.0); // outside both: not counted
-        m.add(100_000_000_000, 2000.0, -0.5);
-        m.add(129_900_000_000, 2598.0, -1.0);
+        m.add(5_000_000_000, 100.0, 9.0, None); // outside both: not counted
+        m.add(100_000_000_000, 2000.0, -0.5, None);
+        m.add(129_900_000_000, 2598.0, -1.0, Some(0.2));
         let r = m.report(0).unwrap();
         assert_eq!(r.each[0].samples, 300); // the window ends before t = 40 s
         let e0 = &r.each[0];

@@ -64,6 +64,38 @@ pub struct HeldOut {
     pub test_after: Metrics,
     pub evaluations: usize,
     pub seconds: f64,
+    /// The same pipeline tuned on the same runs without the truth: against the RTK
+    /// receiver's fixes, which the pipeline never fuses (withheld for the whole run).
+    pub without_truth: WithoutTruth,
+}
+
+/// Tuning against the withheld RTK receiver instead of the truth, scored on the held-out runs
+/// against the truth.
+#[derive(Debug, Clone, Serialize)]
+pub struct WithoutTruth {
+    pub reference: String,
+    pub objective_basis: String,
+    pub params: Vec<ParamReport>,
+    pub test_after: Metrics,
+    pub evaluations: usize,
+    pub seconds: f64,
+    /// Per held-out seed: position RMSE against the truth, untuned, tuned against the truth,
+    /// tuned against the RTK fixes.
+    pub per_seed: Vec<(u64, f64, f64, f64)>,
+}
+
+impl WithoutTruth {
+    /// Tuned against the RTK fixes, the held-out position RMSE over that of tuning against
+    /// the truth, minus one.
+    pub fn against_truth_tuned(&self, truth_tuned: &Metrics) -> Option<f64> {
+        Some(self.test_after.position_rmse_m? / truth_tuned.position_rmse_m? - 1.0)
+    }
+
+    /// Seeds on which it beats the untuned pipeline, of all.
+    pub fn beats_untuned(&self) -> (usize, usize) {
+        let n = self.per_seed.iter().filter(|s| s.3 < s.1).count();
+        (n, self.per_seed.len())
+    }
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -212,8 +244,29 @@ fn held_out(dir: &Path, seeds: u64, default_pipelines: &str) -> Result<HeldOut> 
     let outcome = tuner.run(None, None)?;
     let seconds = started.elapsed().as_secs_f64();
     let tuned: Vec<f64> = outcome.report.params.iter().map(|p| p.after).collect();
+    // Without the truth: the same search against the RTK receiver's fixes (RTK fixed ones),
+    // which samples/kalman.toml does not fuse.
+    let started = Instant::now();
+    let rtk = Tuner::open(&TuneRequest {
+        reference: Some(railfuse_catalog::topics::GNSS_FIX.into()),
+        ..request(train.clone())
+    })?
+    .run(None, None)?;
+    let rtk_seconds = started.elapsed().as_secs_f64();
+    let rtk_tuned: Vec<f64> = rtk.report.params.iter().map(|p| p.after).collect();
     let tester = Tuner::open(&request(test.clone()))?;
     let (before, after) = (tester.evaluate(&tester.start())?, tester.evaluate(&tuned)?);
+    let rtk_after = tester.evaluate(&rtk_tuned)?;
+    let rmse =
+        |s: &railfuse_tune::recording::Score| s.metrics().position_rmse_m.unwrap_or(f64::NAN);
+    let per_seed = test_seeds
+        .iter()
+        .enumerate()
+        .map(|(i, &seed)| {
+            let at = |e: &railfuse_tune::Evaluation| rmse(&e.logs[i]);
+            (seed, at(&before), at(&after), at(&rtk_after))
+        })
+        .collect();
     for log in train.iter().chain(&test) {
         std::fs::remove_file(log).ok();
     }
@@ -228,5 +281,14 @@ fn held_out(dir: &Path, seeds: u64, default_pipelines: &str) -> Result<HeldOut> 
         test_after: after.pooled.metrics(),
         evaluations: outcome.report.evaluations,
         seconds,
+        without_truth: WithoutTruth {
+            reference: railfuse_catalog::topics::GNSS_FIX.into(),
+            objective_basis: rtk.report.objective_basis.clone(),
+            params: rtk.report.params.clone(),
+            test_after: rtk_after.pooled.metrics(),
+            evaluations: rtk.report.evaluations,
+            seconds: rtk_seconds,
+            per_seed,
+        },
     })
 }

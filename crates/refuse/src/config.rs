@@ -504,6 +504,13 @@ pub struct SensorConfig {
     /// every brake and start.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub speed_window_s: Option<f64>,
+    /// Its stamps are this late, s: the measurement time is the stamp less this (a driver
+    /// that stamps a message when it arrives; PX4's default GNSS delay is 0.11 s). The
+    /// measurement is fused at its own time, the reorder window holding the others back,
+    /// as PX4's delayed fusion horizon does; so it must stay below `reorder_window_s`.
+    /// Negative: stamped early. `tune` can estimate it (`sensor[TOPIC].time_offset_s`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_offset_s: Option<f64>,
     /// The log must have this channel: without it refuse and tune stop. By default a sensor
     /// whose channel is missing (a balise on a run that passed none) is left out with a
     /// warning, and the pipeline runs on the others.

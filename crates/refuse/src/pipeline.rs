@@ -231,6 +231,9 @@ impl<const N: usize> Pipeline<N> {
         log_time_ns: u64,
         out: &mut Vec<Fused>,
     ) {
+        // A sensor that stamps late is measured earlier than its stamp says: fused at the
+        // time it measured, the reorder window holding the others back for it.
+        let late_ns = self.spec.sensors[sensor].time_offset_ns;
         for m in measurements {
             let Some(field) = self.sensors[sensor]
                 .fields
@@ -239,12 +242,14 @@ impl<const N: usize> Pipeline<N> {
             else {
                 continue;
             };
+            let mut measurement = *m;
+            measurement.stamp_ns = m.stamp_ns.saturating_add_signed(-late_ns);
             self.order.push(
-                m.stamp_ns,
+                measurement.stamp_ns,
                 Pending {
                     sensor,
                     field,
-                    measurement: *m,
+                    measurement,
                 },
             );
         }

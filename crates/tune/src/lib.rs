@@ -28,6 +28,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 pub use crate::error::{Error, Result};
+use railfuse_eval::outages::Withhold;
 use railfuse_refuse::config::{
     ObjectiveKind, OptimiserKind, ParamBounds, PipelinesFile, Scale, TuneConfig,
 };
@@ -58,6 +59,9 @@ pub struct TuneRequest {
     pub optimiser: Option<OptimiserKind>,
     pub max_evaluations: Option<usize>,
     pub seed: Option<u64>,
+    /// A sensor withheld from the pipeline in outages (over the pipeline's `[pipeline.eval]`):
+    /// tuned by cross-validation against what was withheld.
+    pub withhold: Option<Withhold>,
 }
 
 /// The objective: what is minimised.
@@ -81,9 +85,13 @@ impl Objective {
                 let v = s.speed.summary().map(|x| x.rmse);
                 match (p, v) {
                     (Some(p), Some(v)) => self.position_weight * p + self.speed_weight * v,
+                    // A reference without speed (a NavSatFix): position alone.
+                    (Some(p), None) => self.position_weight * p,
                     _ => f64::INFINITY,
                 }
             }
+            // Fixes withheld from the pipeline: their likelihood as it predicted them.
+            ObjectiveKind::Nll if s.heldout_fixes > 0 => s.heldout_nll,
             ObjectiveKind::Nll => match s.innovations {
                 0 => f64::INFINITY,
                 _ => s.nll,
@@ -114,6 +122,8 @@ pub struct Tuner {
     pub recordings: Vec<Recording>,
     pub objective: Objective,
     pub reference: Option<String>,
+    /// The sensor withheld from the pipeline, if any.
+    pub withhold: Option<Withhold>,
     pub optimiser: OptimiserKind,
     pub budget: usize,
     pub seed: u64,
@@ -151,6 +161,8 @@ pub struct TuneReport {
     pub config: PathBuf,
     pub pipeline: String,
     pub objective: Objective,
+    /// What the objective measures, in words (against what, over which samples).
+    pub objective_basis: String,
     pub reference: Option<String>,
     pub optimiser: OptimiserKind,
     pub objective_before: f64,
@@ -309,7 +321,13 @@ impl Tuner {
             let path: ParamPath = name.parse().map_err(fail)?;
             params.push(config.param(&path, b)?);
         }
-        let reference = req.reference.clone().or(table.reference.clone());
+        let withhold = req.withhold.clone().or(spec.withhold.clone());
+        // Cross-validation: scored against what was withheld, unless told otherwise.
+        let reference = req
+            .reference
+            .clone()
+            .or(table.reference.clone())
+            .or(withhold.as_ref().map(|w| w.topic.clone()));
         let objective = objective(req, &table, reference.is_some()).map_err(fail)?;
         if req.logs.is_empty() {
             return Err(fail("no logs to tune on".into()));
@@ -319,7 +337,10 @@ impl Tuner {
         let recordings = req
             .logs
             .par_iter()
-            .map(|log| Recording::load(log, &spec, reference.as_deref(), pipelines.track.as_ref()))
+            .map(|log| {
+                let track = pipelines.track.as_ref();
+                Recording::load(log, &spec, reference.as_deref(), track, withhold.as_ref())
+            })
             .collect::<Result<Vec<_>>>()?;
         let em = match optimiser {
             OptimiserKind::Em => {
@@ -335,12 +356,41 @@ impl Tuner {
             recordings,
             objective,
             reference,
+            withhold,
             optimiser,
             budget,
             seed: req.seed.or(table.seed).unwrap_or(1),
             invalid: AtomicU64::new(0),
             first_invalid: Mutex::new(None),
         })
+    }
+
+    /// What the objective measures, in words.
+    pub fn objective_basis(&self) -> String {
+        let withheld = self
+            .withhold
+            .as_ref()
+            .filter(|w| Some(&w.topic) == self.reference.as_ref());
+        let outages = |w: &Withhold| match &w.outages {
+            Some(o) => format!("in the outages {}", o.text),
+            None => "over the whole run".to_owned(),
+        };
+        match (self.objective.kind, withheld, &self.reference) {
+            (ObjectiveKind::Rmse, Some(w), _) => format!(
+                "position and speed RMSE against the fixes of {} withheld from the pipeline {} \
+                 (cross-validation)",
+                w.topic,
+                outages(w)
+            ),
+            (ObjectiveKind::Nll, Some(w), _) => format!(
+                "negative log-likelihood of the fixes of {} withheld from the pipeline {}, as \
+                 its states predicted them (held out)",
+                w.topic,
+                outages(w)
+            ),
+            (ObjectiveKind::Rmse, None, Some(r)) => format!("position and speed RMSE against {r}"),
+            _ => "negative log-likelihood of the innovations of every fused measurement".into(),
+        }
     }
 
     /// The file's own values.
@@ -437,6 +487,7 @@ impl Tuner {
             config: self.config.path.clone(),
             pipeline: self.config.pipeline.clone(),
             objective: self.objective,
+            objective_basis: self.objective_basis(),
             reference: self.reference.clone(),
             optimiser: self.optimiser,
             objective_before: before.objective,

@@ -341,6 +341,9 @@ fn number(v: &Value) -> std::result::Result<(f64, bool), String> {
     }
 }
 
+/// Numbers a table may leave out, and the value their absence means.
+const OPTIONAL_NUMBERS: &[(&str, f64)] = &[("time_offset_s", 0.0)];
+
 /// The value at `segments` below `table`.
 fn leaf<'a>(
     table: &'a mut dyn TableLike,
@@ -350,6 +353,13 @@ fn leaf<'a>(
         return Err("is not a path of keys".into());
     };
     let keys: Vec<String> = table.iter().map(|(k, _)| k.to_owned()).collect();
+    // A number whose absence means a known value is written in at that value first (a
+    // sensor's latency: none given, none assumed).
+    if rest.is_empty() && table.get(key).is_none() {
+        if let Some(&(_, value)) = OPTIONAL_NUMBERS.iter().find(|(k, _)| k == key) {
+            table.insert(key, toml_edit::value(value));
+        }
+    }
     let Some(item) = table.get_mut(key) else {
         return Err(format!(
             "not found: there is no '{key}' here (there is {})",

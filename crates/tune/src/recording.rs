@@ -19,7 +19,9 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use railfuse_eval::accuracy::{AccuracyMeter, Consistency, ErrorStats, CHI2_95_1DOF};
-use railfuse_eval::{self as eval, reference_kind, reference_sample};
+use railfuse_eval::fix_match::{FixMeter, FixQuality, FixSample, StateAt};
+use railfuse_eval::outages::{Withheld, Withhold};
+use railfuse_eval::{self as eval, fix_sample, reference_kind, reference_sample};
 use railfuse_refuse::measurement::{Measurement, SensorContext, SensorModel};
 use railfuse_refuse::pipeline::{AnyPipeline, Fused, PipelineCounts};
 use railfuse_refuse::spec::PipelineSpec;
@@ -50,8 +52,13 @@ pub struct Recording {
     pub(super) steps: Vec<Step>,
     pub(super) measurements: Vec<Measurement>,
     devices: Vec<String>,
-    /// The reference, in file order; empty without one.
+    /// The reference, in file order; empty without one or with a GNSS one.
     reference: Vec<ReferenceSample>,
+    /// A GNSS reference's fixes, in file order: scored at each fix, the states interpolated
+    /// to it (with a withheld sensor, only the fixes the pipeline was not shown).
+    fixes: Vec<FixSample>,
+    /// The sensor withheld from the pipeline, and when.
+    pub withheld: Option<Withheld>,
     pub reference_topic: Option<String>,
     /// The last log time of the file (the pipelines are flushed there).
     end_ns: u64,
@@ -74,8 +81,14 @@ pub struct Score {
     pub nll: f64,
     pub innovations: u64,
     pub states: u64,
-    /// States the reference did not cover (outside it, or in one of its gaps).
+    /// States the reference did not cover (outside it, or in one of its gaps); against GNSS
+    /// fixes, fixes the states did not cover.
     pub unscored: u64,
+    /// Against fixes withheld from the pipeline: `½ Σ (ln 2πv + e²/v)` of each fix as the
+    /// states predicted it without it (v the state's variance there plus the fix's), and
+    /// how many.
+    pub heldout_nll: f64,
+    pub heldout_fixes: u64,
     /// A state or innovation that was not a finite number.
     pub non_finite: u64,
     pub counts: PipelineCounts,
@@ -92,6 +105,8 @@ impl Score {
         self.innovations += other.innovations;
         self.states += other.states;
         self.unscored += other.unscored;
+        self.heldout_nll += other.heldout_nll;
+        self.heldout_fixes += other.heldout_fixes;
         self.non_finite += other.non_finite;
         let (a, b) = (&mut self.counts, &other.counts);
         a.accepted += b.accepted;
@@ -151,8 +166,14 @@ impl Recording {
         spec: &PipelineSpec,
         reference: Option<&str>,
         track: Option<&TrackMap>,
+        withhold: Option<&Withhold>,
     ) -> Result<Self> {
-        if let Some(si) = reference.and_then(|r| spec.sensor_for(r)) {
+        // A sensor withheld from the pipeline may score it where it was withheld.
+        let withheld_reference = withhold.is_some_and(|w| Some(w.topic.as_str()) == reference);
+        if let Some(si) = reference
+            .and_then(|r| spec.sensor_for(r))
+            .filter(|_| !withheld_reference)
+        {
             return Err(spec
                 .channel_error(
                     path,
@@ -163,10 +184,32 @@ impl Recording {
                 )
                 .into());
         }
-        let mut loader = Loader::new(path, spec, reference, track);
         // A log is one run: a file, a directory of its parts, or a bag.
         let run = Run::open(&[path.to_owned()], &Default::default())?;
         let mut reader = run.reader()?;
+        let withheld = withhold
+            .map(|w| {
+                let span = reader.summary().and_then(|s| s.message_span_ns);
+                match (&w.outages, span) {
+                    (Some(_), None) => Err(format!(
+                        "withhold {}: the run's span is unknown (a file without a summary), so \
+                         its outages cannot be placed: rewrite it first with railfuse merge",
+                        w.topic
+                    )),
+                    (_, span) => {
+                        let (a, b) = span.unwrap_or((0, 0));
+                        w.in_run(a, b)
+                            .map_err(|e| format!("withhold {}: {e}", w.topic))
+                    }
+                }
+            })
+            .transpose()
+            .map_err(|message| Error::Recording {
+                input: path.to_owned(),
+                message,
+            })?;
+        let mut loader = Loader::new(path, spec, reference, track);
+        loader.rec.withheld = withheld;
         while let Some(record) = reader.next() {
             match record? {
                 LogRecord::Channel(c) => loader.channel(c)?,
@@ -234,6 +277,8 @@ impl Recording {
 struct Scorer<'a> {
     rec: &'a Recording,
     meter: AccuracyMeter,
+    /// Against GNSS fixes.
+    fixes: FixMeter,
     next_reference: usize,
     score: Score,
 }
@@ -243,6 +288,7 @@ impl<'a> Scorer<'a> {
         Self {
             rec,
             meter: AccuracyMeter::new(rec.lag_s),
+            fixes: FixMeter::new(FixQuality::Auto, rec.lag_s),
             next_reference: 0,
             score: Score::default(),
         }
@@ -276,6 +322,24 @@ impl<'a> Scorer<'a> {
             self.score.non_finite += 1;
             return;
         }
+        let fixes = &self.rec.fixes;
+        if !fixes.is_empty() {
+            while self.next_reference < fixes.len()
+                && fixes[self.next_reference].stamp_ns <= state.stamp_ns
+            {
+                self.fixes.add_fix(fixes[self.next_reference], &[]);
+                self.next_reference += 1;
+            }
+            let at = StateAt {
+                stamp_ns: state.stamp_ns,
+                chainage_m: state.chainage_m,
+                speed_mps: state.speed_mps,
+                variance_m2: state.covariance[0],
+                lateral_m: None,
+            };
+            self.fixes.add_state(&at, &[]);
+            return;
+        }
         let reference = &self.rec.reference;
         if reference.is_empty() {
             return;
@@ -295,19 +359,55 @@ impl<'a> Scorer<'a> {
     }
 
     fn finish(mut self, counts: PipelineCounts) -> Score {
+        self.score.counts = counts;
+        if !self.rec.fixes.is_empty() {
+            for &fix in &self.rec.fixes[self.next_reference..] {
+                self.fixes.add_fix(fix, &[]);
+            }
+            self.fixes.finish(&[]);
+            self.score.position = self.fixes.position_stats().clone();
+            self.score.speed = self.fixes.speed_stats().clone();
+            let r = self.fixes.report();
+            self.score.unscored = r.in_state_gaps + r.outside_states;
+            if self.rec.withheld.is_some() {
+                (self.score.heldout_nll, self.score.heldout_fixes) = self.fixes.nll();
+            }
+            return self.score;
+        }
         self.meter.finish();
         self.score.position = self.meter.position;
         self.score.speed = self.meter.speed;
         self.score.nees = self.meter.nees;
         self.score.unscored = self.meter.unmatched + self.meter.in_reference_gaps;
-        self.score.counts = counts;
         self.score
     }
 }
 
+/// A reference message into the recording: a GNSS fix as a fix (scored where it is), any
+/// other reference as a sample of the trajectory.
+fn reference_message(
+    rec: &mut Recording,
+    kind: eval::ReferenceKind,
+    m: &LogMessage<'_>,
+    path: &Path,
+    track: Option<&TrackMap>,
+) -> Result<()> {
+    if kind == eval::ReferenceKind::Gnss {
+        rec.fixes.extend(fix_sample(m, path, track)?);
+    } else if let Some((t, s, v)) = reference_sample(kind, m, path, track)? {
+        rec.reference.push(ReferenceSample {
+            stamp_ns: t,
+            chainage_m: s,
+            speed_mps: v,
+        });
+    }
+    Ok(())
+}
+
 /// What a channel is to a recording.
 enum Role {
-    Sensor(usize, SensorModel),
+    /// A sensor; the reference too where it is withheld (its withheld messages score).
+    Sensor(usize, SensorModel, Option<eval::ReferenceKind>),
     Map,
     Events,
     Reference(eval::ReferenceKind),
@@ -345,6 +445,8 @@ impl<'a> Loader<'a> {
             measurements: Vec::new(),
             devices: Vec::new(),
             reference: Vec::new(),
+            fixes: Vec::new(),
+            withheld: None,
             reference_topic: reference.map(str::to_owned),
             end_ns: 0,
             lag_s: eval::lag_allowance_s(None) + spec.reorder_window_ns as f64 / 1e9,
@@ -387,21 +489,26 @@ impl<'a> Loader<'a> {
             })?,
         };
         let schema = c.schema_name();
-        let role = if Some(c.topic.as_str()) == reference {
-            self.reference_channel = true;
-            let kind = reference_kind(schema).ok_or_else(|| Error::Recording {
-                input: path.to_owned(),
-                message: format!(
-                    "reference {} has schema '{schema}', not ground truth, a GNSS fix or a \
-                     fused state",
-                    c.topic
-                ),
-            })?;
-            Some(Role::Reference(kind))
-        } else if let Some(si) = sensor {
+        let kind = match Some(c.topic.as_str()) == reference {
+            true => {
+                self.reference_channel = true;
+                Some(reference_kind(schema).ok_or_else(|| Error::Recording {
+                    input: path.to_owned(),
+                    message: format!(
+                        "reference {} has schema '{schema}', not ground truth, a GNSS fix or a \
+                         fused state",
+                        c.topic
+                    ),
+                })?)
+            }
+            false => None,
+        };
+        let role = if let Some(si) = sensor {
             let binding = spec.bind(path, si, schema)?;
             self.rec.schemas[si] = Some(schema.to_owned());
-            Some(Role::Sensor(si, binding.model))
+            Some(Role::Sensor(si, binding.model, kind))
+        } else if let Some(kind) = kind {
+            Some(Role::Reference(kind))
         } else if schema == TrackMap::SCHEMA_NAME {
             Some(Role::Map)
         } else if schema == Event::SCHEMA_NAME {
@@ -429,7 +536,18 @@ impl<'a> Loader<'a> {
             }
         };
         match self.roles.get(&m.channel.id) {
-            Some(Role::Sensor(si, model)) => {
+            Some(Role::Sensor(_, _, kind))
+                if rec
+                    .withheld
+                    .as_ref()
+                    .is_some_and(|w| w.topic == m.channel.topic && w.hides(m.log_time_ns)) =>
+            {
+                // Not shown to the pipeline; where it is the reference, it scores it.
+                if let Some(kind) = *kind {
+                    reference_message(rec, kind, &m, path, self.context.track.as_ref())?;
+                }
+            }
+            Some(Role::Sensor(si, model, _)) => {
                 if model
                     .decode(&m, path, &self.context, &mut self.out)
                     .is_err()
@@ -464,14 +582,7 @@ impl<'a> Loader<'a> {
                 rec.steps.push(Step::Device { device, failed });
             }
             Some(Role::Reference(kind)) => {
-                let track = self.context.track.as_ref();
-                if let Some((t, s, v)) = reference_sample(*kind, &m, path, track)? {
-                    rec.reference.push(ReferenceSample {
-                        stamp_ns: t,
-                        chainage_m: s,
-                        speed_mps: v,
-                    });
-                }
+                reference_message(rec, *kind, &m, path, self.context.track.as_ref())?
             }
             None => {}
         }
@@ -500,7 +611,7 @@ impl<'a> Loader<'a> {
         if let Some(topic) = self.reference {
             let message = match self.reference_channel {
                 false => format!("has no reference channel {topic}"),
-                true if self.rec.reference.is_empty() => {
+                true if self.rec.reference.is_empty() && self.rec.fixes.is_empty() => {
                     format!("reference channel {topic} has no usable samples")
                 }
                 true => String::new(),

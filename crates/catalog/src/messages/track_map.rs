@@ -120,19 +120,37 @@ impl TrackMap {
     /// covariance turned onto the track heading), and the track heading. None for a fix
     /// without a position or off the line's ends.
     pub fn chainage_of_fix(&self, fix: &super::GnssFix) -> Option<(f64, Option<f64>, Option<f64>)> {
-        if !fix.fix_type.has_position() {
-            return None;
-        }
-        let (lat, lon) = (fix.latitude_deg?, fix.longitude_deg?);
-        let (e, n, _) =
-            self.origin
-                .to_enu(lat, lon, fix.altitude_m.unwrap_or(self.origin.altitude_m));
+        let (e, n) = self.fix_east_north(fix)?;
         let (chainage, heading) = self.project(e, n)?;
         let variance = fix.position_covariance_enu_m2.map(|c| {
             let (ue, un) = (heading.sin(), heading.cos());
             ue * ue * c[0] + ue * un * (c[1] + c[3]) + un * un * c[4]
         });
         Some((chainage, variance, Some(heading)))
+    }
+
+    /// The signed distance of (east, north) from the main line, positive to the right of the
+    /// direction of increasing chainage, m.
+    pub fn lateral_offset(&self, east_m: f64, north_m: f64) -> Option<f64> {
+        crate::map_matching::nearest_on(&self.vertices, 0..self.vertices.len(), east_m, north_m)
+            .map(|m| m.lateral_m)
+    }
+
+    /// A fix's [`lateral_offset`](Self::lateral_offset); None for one without a position.
+    pub fn lateral_of_fix(&self, fix: &super::GnssFix) -> Option<f64> {
+        let (e, n) = self.fix_east_north(fix)?;
+        self.lateral_offset(e, n)
+    }
+
+    /// Where a fix is in the map's east/north plane; None for one without a position.
+    fn fix_east_north(&self, fix: &super::GnssFix) -> Option<(f64, f64)> {
+        if !fix.fix_type.has_position() {
+            return None;
+        }
+        let (lat, lon) = (fix.latitude_deg?, fix.longitude_deg?);
+        let altitude = fix.altitude_m.unwrap_or(self.origin.altitude_m);
+        let (e, n, _) = self.origin.to_enu(lat, lon, altitude);
+        Some((e, n))
     }
 
     /// Chainage and track heading of the point of the main line nearest to (east, north): map

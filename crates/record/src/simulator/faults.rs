@@ -27,6 +27,9 @@ pub enum FaultMode {
     Bias(f64),
     /// The map only: a stretch published this far to the left, m.
     Offset(f64),
+    /// Its stamps this many seconds late (a driver that stamps a message when it arrives,
+    /// not when it was measured): the measurement is older than its stamp says.
+    Late(f64),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -95,6 +98,9 @@ impl std::str::FromStr for FaultSpec {
             ("map", _) => value("offset=").map(FaultMode::Offset),
             (_, "dropout") => Some(FaultMode::Dropout),
             (_, "stuck") => Some(FaultMode::Stuck),
+            (_, m) if m.starts_with("late=") => {
+                value("late=").filter(|d| *d >= 0.0).map(FaultMode::Late)
+            }
             _ => value("bias=").map(FaultMode::Bias),
         };
         let Some(mode) = mode else {
@@ -239,6 +245,10 @@ impl FaultInjector {
                     None => e,
                 }),
                 (true, FaultMode::Bias(b)) => Some(biased(e, b)),
+                (true, FaultMode::Late(d)) => {
+                    let late = stamp_of(&e) + seconds(d);
+                    Some(restamped(e, late))
+                }
                 // The map is published once, offset where the fault says (simulate_line).
                 (true, FaultMode::Offset(_)) => Some(e),
             };
@@ -253,6 +263,7 @@ fn describe(m: FaultMode) -> String {
         FaultMode::Stuck => "stuck".into(),
         FaultMode::Bias(b) => format!("bias {b}"),
         FaultMode::Offset(d) => format!("offset {d} m"),
+        FaultMode::Late(d) => format!("stamps {d} s late"),
     }
 }
 

@@ -272,6 +272,8 @@ pub struct SensorSpec {
     pub states: Vec<SensorState>,
     /// The window its speed is the mean over, s (config `speed_window_s`).
     pub speed_window_s: Option<f64>,
+    /// How late its stamps are (config `time_offset_s`): measurement time = stamp − this.
+    pub time_offset_ns: i64,
     /// A log without its channel is an error (config `required`), not a warning.
     pub required: bool,
     /// Where its table is.
@@ -415,6 +417,30 @@ impl PipelineSpec {
         }
         let estimator = estimator(c, filter, kind, &devices).map_err(here)?;
         let withhold = c.eval.as_ref().map(|e| withhold(e, &sensors)).transpose()?;
+        for (s, table) in sensors.iter().zip(&c.sensor) {
+            let late_s = s.time_offset_ns as f64 / 1e9;
+            let problem = if s.time_offset_ns == 0 {
+                continue;
+            } else if estimator.reads_whole_messages() {
+                format!(
+                    "time_offset_s: an {} pipeline reads its messages' own times; give the \
+                     latency to an along-track pipeline",
+                    estimator.name()
+                )
+            } else if late_s > reorder_window_s {
+                format!(
+                    "time_offset_s = {late_s} is longer than reorder_window_s = \
+                     {reorder_window_s}: its measurements would come after their time was \
+                     fused; raise reorder_window_s"
+                )
+            } else {
+                continue;
+            };
+            return Err(Invalid {
+                span: table.span(),
+                message: format!("sensor {}: {problem}", s.topic),
+            });
+        }
         // Stored beside the fused channels with every setting written out.
         let mut source = c.clone();
         if let (EstimatorSpec::Messages(k), Some(kind)) = (&estimator, kind) {

@@ -70,6 +70,16 @@ pub(super) fn sensor(
         }
         Some(w) => Some(positive("speed_window_s", w)?),
     };
+    let time_offset_ns = match s.time_offset_s {
+        None => 0,
+        Some(t) if t.is_finite() && t.abs() <= MAX_TIME_OFFSET_S => (t * 1e9).round() as i64,
+        Some(t) => {
+            return Err(format!(
+                "time_offset_s = {t}: at most {MAX_TIME_OFFSET_S} s either way (a sensor's \
+                 latency, not a clock offset: give those with --clock-offset)"
+            ))
+        }
+    };
     let (device, device_name) = match filter.is_some_and(FilterKind::is_federated) {
         false => (0, None),
         true => match s.device_name() {
@@ -101,10 +111,14 @@ pub(super) fn sensor(
         adaptive_window,
         states,
         speed_window_s,
+        time_offset_ns,
         required: s.required,
         declared,
     })
 }
+
+/// The largest sensor latency a configuration may give, s.
+const MAX_TIME_OFFSET_S: f64 = 10.0;
 
 /// The calibration states a sensor table asks for, each checked against what it measures.
 fn sensor_states(
