@@ -136,10 +136,15 @@ fn rtk_claims(h: &HeldOut) -> String {
     let gap = w
         .against_truth_tuned(&h.test_after)
         .map_or("–".into(), |g| format!("{:+.1} %", 100.0 * g));
+    let speed = |m: &Metrics| m.speed_rmse_mps.map_or("–".into(), |v| format!("{v:.4}"));
     format!(
         "Held out, the pipeline tuned against the RTK fixes has a position RMSE {gap} of the one \
          tuned against the truth (the goal: within 10 %), and beats the untuned pipeline on \
-         {beats} of {of} held-out seeds.\n"
+         {beats} of {of} held-out seeds. Its speed RMSE is {} m/s against {} m/s tuned \
+         against the truth: it was scored against the receiver's own speed, noisier than the \
+         truth's, and the parameters that set the speed went where that noise let them.\n",
+        speed(&w.test_after),
+        speed(&h.test_after)
     )
 }
 
