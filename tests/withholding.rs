@@ -163,7 +163,7 @@ fn the_receiver_is_hidden_inside_each_outage_and_the_pipeline_is_scored_against_
     assert_eq!(pipeline_eval(&again, "kf")["outages"], kf["outages"]);
     let table = String::from_utf8(ok(&["eval", s(&fused)]).stdout).unwrap();
     assert!(
-        table.contains("outages of /gnss/fix (withheld from the pipeline")
+        table.contains("outages of /gnss/fix (errors along the track over the outages")
             && table.contains("in withheld /gnss/fix"),
         "{table}"
     );
@@ -195,6 +195,38 @@ fn the_receiver_is_hidden_inside_each_outage_and_the_pipeline_is_scored_against_
         messages(p, "/fused/kf/state")
     };
     assert_eq!(states(&by_config), states(&fused));
+
+    // The same outages scored on a log fused with the receiver everywhere (eval --withhold
+    // on a log fused elsewhere): the pipeline saw those fixes, so its errors there are
+    // smaller than when they were hidden from it; hiding is what makes the figure.
+    let plain = d.path().join("plain.mcap");
+    ok(&["refuse", s(&raw), "-c", s(&cfg), "-o", s(&plain)]);
+    let seen = ok_json(&[
+        "eval",
+        s(&plain),
+        "--withhold",
+        "/gnss/fix",
+        "--outages",
+        "standard",
+        "--json",
+    ]);
+    let seen_kf = pipeline_eval(&seen, "kf");
+    let end_rms = |p: &serde_json::Value| -> f64 {
+        let ends: Vec<f64> = p["outages"]["each"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|o| o["end_error_m"].as_f64().unwrap())
+            .collect();
+        (ends.iter().map(|e| e * e).sum::<f64>() / ends.len() as f64).sqrt()
+    };
+    assert_eq!(seen_kf["outages"]["each"].as_array().unwrap().len(), 3);
+    assert!(
+        end_rms(&seen_kf) < end_rms(&kf),
+        "seen {} m, withheld {} m",
+        end_rms(&seen_kf),
+        end_rms(&kf)
+    );
 
     // Withheld for the whole run: no fix reaches the filter at all.
     let all = d.path().join("all.mcap");

@@ -132,7 +132,7 @@ fn evaluate(
     let reference = reference_of(reference, reference_quality)?;
     let run = open_run(&inputs, align)?;
     let report = py
-        .detach(|| railfuse_eval::evaluate(&run, &reference))
+        .detach(|| railfuse_eval::evaluate(&run, &reference, None))
         .map_err(fail)?;
     json(&report)
 }

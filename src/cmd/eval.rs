@@ -9,6 +9,7 @@ use railfuse_eval::safety::SafetyEval;
 use std::sync::Arc;
 
 use railfuse_catalog::log::{read_metadata, ChannelInfo};
+use railfuse_eval::outages::{OutageSpec, Withheld, Withhold};
 use railfuse_eval::{evaluate, reference_kind, EvalReport, FixQuality, Reference};
 
 use super::run_input::RunArgs;
@@ -28,6 +29,14 @@ pub struct Args {
     /// all, or fix types (rtk_fixed, rtk_float, dgps, single; commas between several).
     #[arg(long, value_name = "QUALITY", default_value = "auto")]
     pub reference_quality: FixQuality,
+    /// Score against this sensor's fixes as withheld from every pipeline in --outages (a
+    /// log fused elsewhere, with outages of its own): the reference unless --reference names
+    /// another. Without it, the outages the fused log records (refuse --withhold).
+    #[arg(long, value_name = "TOPIC")]
+    pub withhold: Option<String>,
+    /// The outages of --withhold: LEN[:every=PERIOD][:from=T] in s, or standard.
+    #[arg(long, value_name = "SPEC", requires = "withhold")]
+    pub outages: Option<OutageSpec>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -35,19 +44,21 @@ pub struct Args {
 
 pub fn run(a: Args) -> Result<()> {
     let run = a.run.open()?;
-    if let Some(topic) = &a.reference {
-        check_reference_in_log(&run, topic)?;
-    }
+    let outages = given_outages(&run, &a)?;
     // A run fused with a sensor withheld is scored against it unless told otherwise.
     let reference = Reference {
         topic: a
             .reference
             .clone()
+            .or(a.withhold.clone())
             .or_else(|| withheld_topic(&run))
             .unwrap_or(topics::GROUND_TRUTH.to_owned()),
         quality: a.reference_quality,
     };
-    let report = evaluate(&run, &reference)?;
+    if a.reference.is_some() || a.withhold.is_some() {
+        check_reference_in_log(&run, &reference.topic)?;
+    }
+    let report = evaluate(&run, &reference, outages.as_ref())?;
     if report.pipelines.is_empty() {
         anyhow::bail!(
             "{}: no fused pipelines to evaluate: re-fuse it first (railfuse refuse {} -c CONFIG -o OUT)",
@@ -62,6 +73,33 @@ pub fn run(a: Args) -> Result<()> {
         print_eval(&report);
     }
     Ok(())
+}
+
+/// `--withhold TOPIC --outages SPEC` placed in the run's span (log time), checked first.
+fn given_outages(run: &Run, a: &Args) -> Result<Option<Withheld>> {
+    let Some(topic) = &a.withhold else {
+        return Ok(None);
+    };
+    check_channel_in_log(run, topic, "to score as withheld")?;
+    let w = Withhold {
+        topic: topic.clone(),
+        outages: a.outages.clone(),
+    };
+    let span = run.reader()?.summary().and_then(|s| s.message_span_ns);
+    let placed = match (&w.outages, span) {
+        (Some(_), None) => anyhow::bail!(
+            "{}: withhold {topic}: the run's span is unknown (a file without a summary), so \
+             its outages cannot be placed: rewrite it first with railfuse merge",
+            run.display()
+        ),
+        (_, span) => {
+            let (start, end) = span.unwrap_or((0, 0));
+            w.in_run(start, end)
+        }
+    };
+    placed
+        .map(Some)
+        .map_err(|e| anyhow::anyhow!("{}: withhold {topic}: {e}", run.display()))
 }
 
 /// The sensor a fused run's pipelines were not shown (its `railfuse.withheld` record).
@@ -307,8 +345,8 @@ fn print_outages(report: &EvalReport) {
         .filter_map(|(p, _)| p.withheld.as_deref())
         .collect();
     println!(
-        "outages of {} (withheld from the pipeline; errors along the track over the outages: \
-         RMS, 95th percentile, maximum):",
+        "outages of {} (errors along the track over the outages: RMS, 95th percentile, \
+         maximum):",
         topics.into_iter().collect::<Vec<_>>().join(", ")
     );
     let mut t = Table::new(&[

@@ -275,6 +275,8 @@ pub struct Evaluator {
     quality: FixQuality,
     /// Each pipeline's withheld sensor and outages.
     withheld: BTreeMap<String, Withheld>,
+    /// Outages given for every pipeline (`eval --withhold --outages`), over the log's record.
+    withheld_everywhere: Option<Withheld>,
 }
 
 impl Evaluator {
@@ -296,15 +298,22 @@ impl Evaluator {
             first_ns: None,
             quality: reference.quality.clone(),
             withheld: BTreeMap::new(),
+            withheld_everywhere: None,
         }
     }
 
-    /// `pipeline` did not see `w.topic` inside `w.windows` (or at all): its errors there are
-    /// reported outage by outage, and the outages are marked windows.
-    pub fn withheld(&mut self, pipeline: &str, w: &Withheld) {
-        for s in self.scored.iter_mut().filter(|s| s.pipeline == pipeline) {
+    /// Scores every pipeline as if `w.topic` had been withheld from it in `w.windows` (a
+    /// log fused elsewhere); the log's own `railfuse.withheld` records are then ignored.
+    pub fn withheld_everywhere(&mut self, w: &Withheld) {
+        for s in &mut self.scored {
             s.set_outages(&w.windows);
         }
+        self.mark_outages(w);
+        self.withheld_everywhere = Some(w.clone());
+    }
+
+    /// The outages as marked windows.
+    fn mark_outages(&mut self, w: &Withheld) {
         let label = format!("withheld {}", w.topic);
         for window in &w.windows {
             let span = Span {
@@ -316,6 +325,25 @@ impl Evaluator {
                 self.spans.push(span);
             }
         }
+    }
+
+    /// What was withheld from `pipeline`.
+    fn withheld_from(&self, pipeline: &str) -> Option<&Withheld> {
+        self.withheld_everywhere
+            .as_ref()
+            .or_else(|| self.withheld.get(pipeline))
+    }
+
+    /// `pipeline` did not see `w.topic` inside `w.windows` (or at all): its errors there are
+    /// reported outage by outage, and the outages are marked windows.
+    pub fn withheld(&mut self, pipeline: &str, w: &Withheld) {
+        if self.withheld_everywhere.is_some() {
+            return;
+        }
+        for s in self.scored.iter_mut().filter(|s| s.pipeline == pipeline) {
+            s.set_outages(&w.windows);
+        }
+        self.mark_outages(w);
         self.withheld.insert(pipeline.to_owned(), w.clone());
     }
 
@@ -325,7 +353,7 @@ impl Evaluator {
             None => {
                 let quality = self.quality.clone();
                 let mut s = Scored::new(name, pipeline.to_owned(), self.lag_s, quality);
-                if let Some(w) = self.withheld.get(pipeline) {
+                if let Some(w) = self.withheld_from(pipeline) {
                     s.set_outages(&w.windows);
                 }
                 self.scored.push(s);
@@ -555,21 +583,26 @@ impl Evaluator {
             self.score_smoothed_from(log)?;
         }
         let t0 = self.first_ns.unwrap_or(0);
-        let filters = self.filters;
-        let against = self.reference;
         for s in &mut self.scored {
             s.fixes.finish(&self.spans);
         }
+        let withheld: Vec<Option<String>> = self
+            .scored
+            .iter()
+            .map(|s| self.withheld_from(&s.pipeline).map(|w| w.topic.clone()))
+            .collect();
+        let filters = self.filters;
+        let against = self.reference;
         let pipelines = self
             .scored
             .into_iter()
+            .zip(withheld)
             // A pipeline that judged epochs without fusing any (S1 on a log of GNSS alone)
             // still has its S7 to report.
-            .filter(|s| {
+            .filter(|(s, _)| {
                 s.states > 0 || s.gated > 0 || s.nis.summary().is_some() || s.safety.is_some()
             })
-            .map(|s| {
-                let withheld = self.withheld.get(&s.pipeline).map(|w| w.topic.clone());
+            .map(|(s, withheld)| {
                 let mut e = pipeline_eval(s, &filters, t0, against);
                 e.withheld = withheld;
                 e
@@ -685,12 +718,20 @@ pub fn lag_allowance_s(longest_chunk_ns: Option<u64>) -> f64 {
     5.0 + longest_chunk_ns.unwrap_or(0) as f64 / 1e9
 }
 
-/// The accuracy table of a run's fused channels against `reference`.
-pub fn evaluate(run: &Run, reference: &Reference) -> Result<EvalReport> {
+/// The accuracy table of a run's fused channels against `reference`; `outages`, when given,
+/// are scored as withheld from every pipeline (over what the log records).
+pub fn evaluate(
+    run: &Run,
+    reference: &Reference,
+    outages: Option<&Withheld>,
+) -> Result<EvalReport> {
     let reference_topic = reference.topic.as_str();
     let mut reader = run.reader()?;
     let longest = reader.summary().and_then(|s| s.longest_chunk_ns);
     let mut eval = Evaluator::new(run.name(), reference, lag_allowance_s(longest));
+    if let Some(w) = outages {
+        eval.withheld_everywhere(w);
+    }
     let mut reads = std::collections::HashSet::new();
     let (mut foreign, mut translated) = (ForeignChannels::default(), Vec::new());
     while let Some(record) = reader.next() {
