@@ -64,13 +64,21 @@ def refuse(
     reference: str = "/truth",
     align: str = "none",
     reference_quality: str = "auto",
+    withhold: str | None = None,
+    outages: str | None = None,
 ) -> dict:
     """Re-fuse the run ``input`` (a file, a directory of parts, a bag, or a list of files)
     with the pipelines of ``config`` into ``output``, as ``railfuse refuse`` does. Returns
     ``{"refuse": …, "eval": …}``: what each pipeline did, and the accuracy table against
     ``reference``. ``align="gnss"`` puts several recorders' files on one clock through the
     GNSS time each logged (``--align gnss``). ``reference_quality`` says which fixes of a
-    GNSS reference count (``--reference-quality``: ``auto``, ``all``, ``rtk_fixed``, …)."""
+    GNSS reference count (``--reference-quality``: ``auto``, ``all``, ``rtk_fixed``, …).
+    ``withhold`` hides that sensor from the pipelines in ``outages`` (``"60:every=180"``,
+    ``"standard"``; the whole run without) and scores against it, as ``--withhold`` and
+    ``--outages`` do; the reference is then that sensor unless ``reference`` names another
+    than ``"/truth"``."""
+    if withhold is not None and reference == "/truth":
+        reference = withhold
     return json.loads(
         _railfuse.refuse(
             _run(input),
@@ -79,6 +87,8 @@ def refuse(
             reference,
             align,
             reference_quality,
+            withhold,
+            outages,
         )
     )
 
@@ -88,6 +98,8 @@ def evaluate(
     reference: str | None = None,
     align: str = "none",
     reference_quality: str = "auto",
+    withhold: str | None = None,
+    outages: str | None = None,
 ) -> dict:
     """The accuracy table of a fused log's pipelines against ``reference`` (ground truth, a
     GNSS channel, another pipeline's state). Without one, the ground truth (``/truth``) where
@@ -97,7 +109,12 @@ def evaluate(
     ``--reference-quality`` does."""
     report = json.loads(
         _railfuse.evaluate(
-            _run(input), reference or "/truth", align, reference_quality
+            _run(input),
+            reference or withhold or "/truth",
+            align,
+            reference_quality,
+            withhold,
+            outages,
         )
     )
     if reference is not None and report.get("reference") is None:
@@ -153,6 +170,8 @@ class Tuner:
         optimiser: str | None = None,
         max_evaluations: int | None = None,
         seed: int | None = None,
+        withhold: str | None = None,
+        outages: str | None = None,
     ):
         self.logs = [os.fspath(p) for p in logs]
         self.config = os.fspath(config)
@@ -167,6 +186,8 @@ class Tuner:
             optimiser,
             max_evaluations,
             seed,
+            withhold,
+            outages,
         )
 
     @property
@@ -207,11 +228,25 @@ def tune(
     optimiser: str | None = None,
     max_evaluations: int | None = None,
     seed: int | None = None,
+    withhold: str | None = None,
+    outages: str | None = None,
 ) -> dict:
     """``railfuse tune`` from Python: search, write the tuned configuration to ``output`` (if
-    given) and return ``{"report", "trace", "tuned_toml"}``."""
+    given) and return ``{"report", "trace", "tuned_toml"}``. ``withhold`` and ``outages``
+    tune by cross-validation against a receiver hidden from the pipeline, as ``--withhold``
+    and ``--outages`` do."""
     result = Tuner(
-        logs, config, pipeline, reference, params, objective, optimiser, max_evaluations, seed
+        logs,
+        config,
+        pipeline,
+        reference,
+        params,
+        objective,
+        optimiser,
+        max_evaluations,
+        seed,
+        withhold,
+        outages,
     ).run()
     if output is not None:
         with open(output, "w") as f:

@@ -78,6 +78,24 @@ fn open_run(inputs: &[PathBuf], align: &str) -> PyResult<Run> {
     Run::open(inputs, &options).map_err(fail)
 }
 
+/// `withhold` hidden in the `outages` (`LEN[:every=PERIOD][:from=T]`, `standard`; the whole
+/// run without them), as `--withhold`/`--outages` take them.
+fn withhold_of(
+    withhold: Option<String>,
+    outages: Option<&str>,
+) -> PyResult<Option<railfuse_eval::outages::Withhold>> {
+    let Some(topic) = withhold else {
+        return match outages {
+            Some(_) => Err(fail("outages without withhold: name the topic to withhold")),
+            None => Ok(None),
+        };
+    };
+    Ok(Some(railfuse_eval::outages::Withhold {
+        topic,
+        outages: outages.map(str::parse).transpose().map_err(fail)?,
+    }))
+}
+
 /// The reference `topic`, its GNSS fixes of `quality` counting (`auto`, `all`, `rtk_fixed`, …).
 fn reference_of(topic: &str, quality: &str) -> PyResult<railfuse_eval::Reference> {
     Ok(railfuse_eval::Reference {
@@ -89,7 +107,8 @@ fn reference_of(topic: &str, quality: &str) -> PyResult<railfuse_eval::Reference
 /// Re-fuses the run `inputs` with the pipelines of `config` into `output`, as `railfuse
 /// refuse` does (the same bytes); the refuse report and the accuracy table as JSON.
 #[pyfunction]
-#[pyo3(signature = (inputs, config, output, reference = "/truth", align = "none", reference_quality = "auto"))]
+#[pyo3(signature = (inputs, config, output, reference = "/truth", align = "none", reference_quality = "auto", withhold = None, outages = None))]
+#[allow(clippy::too_many_arguments)]
 fn refuse(
     py: Python<'_>,
     inputs: Vec<PathBuf>,
@@ -98,8 +117,11 @@ fn refuse(
     reference: &str,
     align: &str,
     reference_quality: &str,
+    withhold: Option<String>,
+    outages: Option<&str>,
 ) -> PyResult<String> {
     let reference = reference_of(reference, reference_quality)?;
+    let withhold = withhold_of(withhold, outages)?;
     let pipelines = Pipelines::load(&config).map_err(fail)?;
     let run = open_run(&inputs, align)?;
     let (report, eval) = py
@@ -110,7 +132,7 @@ fn refuse(
                 config: &pipelines,
                 config_source: config.display().to_string(),
                 reference: &reference,
-                withhold: None,
+                withhold: withhold.as_ref(),
                 progress: None,
                 observer: None,
             })
@@ -121,18 +143,31 @@ fn refuse(
 
 /// The accuracy table of a fused run against `reference`, as JSON.
 #[pyfunction]
-#[pyo3(signature = (inputs, reference = "/truth", align = "none", reference_quality = "auto"))]
+#[pyo3(signature = (inputs, reference = "/truth", align = "none", reference_quality = "auto", withhold = None, outages = None))]
 fn evaluate(
     py: Python<'_>,
     inputs: Vec<PathBuf>,
     reference: &str,
     align: &str,
     reference_quality: &str,
+    withhold: Option<String>,
+    outages: Option<&str>,
 ) -> PyResult<String> {
     let reference = reference_of(reference, reference_quality)?;
     let run = open_run(&inputs, align)?;
+    let placed = match withhold_of(withhold, outages)? {
+        Some(w) => {
+            let reader = run.reader().map_err(fail)?;
+            let span = reader.summary().and_then(|s| s.message_span_ns);
+            Some(
+                w.place(span)
+                    .map_err(|e| fail(format!("{}: {e}", run.display())))?,
+            )
+        }
+        None => None,
+    };
     let report = py
-        .detach(|| railfuse_eval::evaluate(&run, &reference, None))
+        .detach(|| railfuse_eval::evaluate(&run, &reference, placed.as_ref()))
         .map_err(fail)?;
     json(&report)
 }
@@ -195,7 +230,7 @@ struct Tuner {
 #[pymethods]
 impl Tuner {
     #[new]
-    #[pyo3(signature = (logs, config, pipeline, reference = None, params = Vec::new(), objective = None, optimiser = None, max_evaluations = None, seed = None))]
+    #[pyo3(signature = (logs, config, pipeline, reference = None, params = Vec::new(), objective = None, optimiser = None, max_evaluations = None, seed = None, withhold = None, outages = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -208,6 +243,8 @@ impl Tuner {
         optimiser: Option<&str>,
         max_evaluations: Option<usize>,
         seed: Option<u64>,
+        withhold: Option<String>,
+        outages: Option<&str>,
     ) -> PyResult<Self> {
         let request = TuneRequest {
             config,
@@ -219,7 +256,7 @@ impl Tuner {
             optimiser: parse_enum::<OptimiserKind>("optimiser", optimiser)?,
             max_evaluations,
             seed,
-            withhold: None,
+            withhold: withhold_of(withhold, outages)?,
         };
         let inner = py.detach(|| RustTuner::open(&request)).map_err(fail)?;
         Ok(Self { inner })

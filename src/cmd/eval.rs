@@ -86,20 +86,9 @@ fn given_outages(run: &Run, a: &Args) -> Result<Option<Withheld>> {
         outages: a.outages.clone(),
     };
     let span = run.reader()?.summary().and_then(|s| s.message_span_ns);
-    let placed = match (&w.outages, span) {
-        (Some(_), None) => anyhow::bail!(
-            "{}: withhold {topic}: the run's span is unknown (a file without a summary), so \
-             its outages cannot be placed: rewrite it first with railfuse merge",
-            run.display()
-        ),
-        (_, span) => {
-            let (start, end) = span.unwrap_or((0, 0));
-            w.in_run(start, end)
-        }
-    };
-    placed
+    w.place(span)
         .map(Some)
-        .map_err(|e| anyhow::anyhow!("{}: withhold {topic}: {e}", run.display()))
+        .map_err(|e| anyhow::anyhow!("{}: {e}", run.display()))
 }
 
 /// The sensor a fused run's pipelines were not shown (its `railfuse.withheld` record).

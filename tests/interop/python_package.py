@@ -17,6 +17,9 @@ py_fused = os.path.join(out_dir, "py.fused.mcap")
 refused = railfuse.refuse(raw, config, py_fused)
 summary["refuse_rmse"] = refused["eval"]["pipelines"][0]["position_error_m"]["rmse"]
 summary["evaluate_rmse"] = railfuse.evaluate(py_fused)["pipelines"][0]["position_error_m"]["rmse"]
+summary["outages"] = railfuse.evaluate(
+    py_fused, withhold="/gnss/fix", outages="5:every=10:from=5"
+)["pipelines"][0]["outages"]
 summary["gnss_all"] = railfuse.evaluate(
     py_fused, reference="/gnss/fix", reference_quality="all"
 )["pipelines"][0]["reference_fixes"]
@@ -39,6 +42,9 @@ for name, call in {
     ),
     "unknown_scenario": lambda: railfuse.simulate(os.path.join(out_dir, "x.mcap"), "nope"),
     "unknown_reference": lambda: railfuse.evaluate(py_fused, reference="/nothere"),
+    "withhold_unfused": lambda: railfuse.refuse(
+        raw, config, py_fused + ".w", withhold="/gnss/fix", outages="10"
+    ),
     "unknown_quality": lambda: railfuse.evaluate(
         py_fused, reference="/gnss/fix", reference_quality="rtk"
     ),

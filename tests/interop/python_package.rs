@@ -51,6 +51,27 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
         "{v}"
     );
     assert_eq!(v["gnss_all"]["quality"], "all");
+    // Outages scored from Python as `eval --withhold --outages` scores them.
+    let cli_outages: serde_json::Value = serde_json::from_slice(
+        &railfuse(&[
+            "eval",
+            s(&py),
+            "--withhold",
+            "/gnss/fix",
+            "--outages",
+            "5:every=10:from=5",
+            "--json",
+        ])
+        .stdout,
+    )
+    .unwrap();
+    assert_eq!(v["outages"], cli_outages["pipelines"][0]["outages"], "{v}");
+    assert!(
+        v["outages"]["each"]
+            .as_array()
+            .is_some_and(|e| !e.is_empty()),
+        "{v}"
+    );
     // Errors: the CLI's one line, as RailfuseError.
     let e = &v["errors"];
     let missing = d.path().join("nope.toml");
@@ -71,6 +92,10 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
         ("missing_topic", "no channel /nope"),
         ("unknown_reference", "reference /nothere is not in the log"),
         ("unknown_quality", "'rtk' is not a fix quality"),
+        (
+            "withhold_unfused",
+            "withhold /gnss/fix: no pipeline fuses it",
+        ),
         ("unknown_param", "motion.jerk_pds: not found"),
         ("unknown_scenario", "unknown scenario 'nope'"),
     ] {

@@ -147,6 +147,23 @@ pub struct Withhold {
 }
 
 impl Withhold {
+    /// The windows in a run whose messages span `span` (log time, from its summaries); an
+    /// error in words (naming the topic) when the outages cannot be placed.
+    pub fn place(&self, span: Option<(u64, u64)>) -> Result<Withheld, String> {
+        let placed = match (&self.outages, span) {
+            (Some(_), None) => Err(
+                "the run's span is unknown (a file without a summary), so its \
+                 outages cannot be placed: rewrite it first with railfuse merge"
+                    .to_owned(),
+            ),
+            (_, span) => {
+                let (start, end) = span.unwrap_or((0, 0));
+                self.in_run(start, end)
+            }
+        };
+        placed.map_err(|e| format!("withhold {}: {e}", self.topic))
+    }
+
     /// The windows in a run spanning `start_ns..end_ns` (log time).
     pub fn in_run(&self, start_ns: u64, end_ns: u64) -> Result<Withheld, String> {
         Ok(Withheld {

@@ -13,12 +13,8 @@ pub enum Error {
     Map(String),
     /// A withholding request that cannot be met in this run (the message names the run,
     /// the topic and the cause).
-    #[error("{input}: withhold {topic}: {problem}")]
-    Withhold {
-        input: PathBuf,
-        topic: String,
-        problem: String,
-    },
+    #[error("{input}: {problem}")]
+    Withhold { input: PathBuf, problem: String },
     /// A log given no configuration in which no topic feeds a sensor model.
     #[error("{0}")]
     NoDefaultPipeline(String),

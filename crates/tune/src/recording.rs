@@ -187,22 +187,9 @@ impl Recording {
         // A log is one run: a file, a directory of its parts, or a bag.
         let run = Run::open(&[path.to_owned()], &Default::default())?;
         let mut reader = run.reader()?;
+        let span = reader.summary().and_then(|s| s.message_span_ns);
         let withheld = withhold
-            .map(|w| {
-                let span = reader.summary().and_then(|s| s.message_span_ns);
-                match (&w.outages, span) {
-                    (Some(_), None) => Err(format!(
-                        "withhold {}: the run's span is unknown (a file without a summary), so \
-                         its outages cannot be placed: rewrite it first with railfuse merge",
-                        w.topic
-                    )),
-                    (_, span) => {
-                        let (a, b) = span.unwrap_or((0, 0));
-                        w.in_run(a, b)
-                            .map_err(|e| format!("withhold {}: {e}", w.topic))
-                    }
-                }
-            })
+            .map(|w| w.place(span))
             .transpose()
             .map_err(|message| Error::Recording {
                 input: path.to_owned(),

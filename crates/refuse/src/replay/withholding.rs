@@ -32,8 +32,7 @@ impl Withholding {
     ) -> Result<Self> {
         let fail = |topic: &str, problem: String| Error::Withhold {
             input: input.to_owned(),
-            topic: topic.to_owned(),
-            problem,
+            problem: format!("withhold {topic}: {problem}"),
         };
         if let Some(w) = requested {
             if !pipelines.iter().any(|p| p.sensor_for(&w.topic).is_some()) {
@@ -62,19 +61,11 @@ impl Withholding {
                     return Err(fail(&w.topic, "the log has no such channel".into()));
                 }
             }
-            let placed = match (&w.outages, span) {
-                (None, _) => w.in_run(0, 0),
-                (Some(_), Some((start, end))) => w.in_run(start, end),
-                (Some(_), None) => {
-                    return Err(fail(
-                        &w.topic,
-                        "the run's span is unknown (a file without a summary), so its outages \
-                         cannot be placed: rewrite it first with railfuse merge"
-                            .into(),
-                    ))
-                }
-            };
-            per_pipeline.push(Some(placed.map_err(|e| fail(&w.topic, e))?));
+            let placed = w.place(span).map_err(|problem| Error::Withhold {
+                input: input.to_owned(),
+                problem,
+            })?;
+            per_pipeline.push(Some(placed));
         }
         Ok(Self {
             hidden: vec![0; per_pipeline.len()],
