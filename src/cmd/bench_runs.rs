@@ -57,6 +57,36 @@ fn write_logs(dir: &Path, secs: f64) -> Result<Logs> {
     })
 }
 
+/// Each case's median wall time and median peak RSS (KiB) over `repeat` rounds, round after
+/// round over all cases, so that the machine's drift (other load, heat) falls on every case
+/// alike rather than on whichever ran last.
+fn measure<'a>(
+    cases: &[(&'a str, &[&Path], &[&str])],
+    repeat: u32,
+    config: &Path,
+    fused: &Path,
+) -> Result<Vec<(&'a str, (f64, Option<u64>))>> {
+    let mut all: Vec<Vec<Measured>> = cases.iter().map(|_| Vec::new()).collect();
+    for _ in 0..repeat.max(1) {
+        for ((_, inputs, options), runs) in cases.iter().zip(&mut all) {
+            runs.push(refuse_run_child(inputs, options, config, fused)?);
+        }
+    }
+    Ok(cases
+        .iter()
+        .zip(all)
+        .map(|((label, ..), mut runs)| {
+            // Medians of both: one run's peak RSS moves by a chunk buffer or two with where
+            // the allocator and the read-ahead happen to stand when it peaks.
+            let mut peaks: Vec<u64> = runs.iter().filter_map(|m| m.peak_rss_kib).collect();
+            peaks.sort_unstable();
+            runs.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
+            let median_peak = peaks.get(peaks.len() / 2).copied();
+            (*label, (runs[runs.len() / 2].wall_s, median_peak))
+        })
+        .collect())
+}
+
 pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     let config = dir.join("kalman.toml");
@@ -86,32 +116,7 @@ pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
         ),
         ("3 recorders, --align gnss", &three, &["--align", "gnss"]),
     ];
-    // Round after round over all cases, so that the machine's drift (other load, heat)
-    // falls on every case alike rather than on whichever ran last.
-    let mut all: Vec<Vec<Measured>> = cases.iter().map(|_| Vec::new()).collect();
-    for _ in 0..repeat.max(1) {
-        for ((_, inputs, options), runs) in cases.iter().zip(&mut all) {
-            runs.push(refuse_run_child(inputs, options, &config, &fused)?);
-        }
-    }
-    let rows: Vec<(&str, (f64, Option<u64>))> = cases
-        .iter()
-        .zip(all)
-        .map(|((label, ..), mut runs)| {
-            // Medians of both: one run's peak RSS moves by a chunk buffer or two with where
-            // the allocator and the read-ahead happen to stand when it peaks.
-            let mut peaks: Vec<u64> = runs.iter().filter_map(|m| m.peak_rss_kib).collect();
-            peaks.sort_unstable();
-            runs.sort_by(|x, y| x.wall_s.total_cmp(&y.wall_s));
-            (
-                *label,
-                (
-                    runs[runs.len() / 2].wall_s,
-                    peaks.get(peaks.len() / 2).copied(),
-                ),
-            )
-        })
-        .collect();
+    let rows = measure(&cases, repeat, &config, &fused)?;
     println!(
         "default {:.0} s, {} messages, kalman; refuse: medians of {} rounds over all inputs",
         sim.duration_s,

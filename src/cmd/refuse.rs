@@ -102,31 +102,7 @@ pub fn run(a: Args) -> Result<()> {
         Some(loaded) => loaded,
         None => default_pipeline(input, a.track.as_deref(), a.save_config.as_deref())?,
     };
-    let withhold = a.withhold.as_ref().map(|topic| Withhold {
-        topic: topic.clone(),
-        outages: a.outages.clone(),
-    });
-    // Scored against what was withheld, unless told otherwise.
-    let withheld_topic = withhold.as_ref().map(|w| w.topic.clone()).or_else(|| {
-        config
-            .pipeline
-            .iter()
-            .find_map(|p| Some(p.withhold.as_ref()?.topic.clone()))
-    });
-    let reference = Reference {
-        topic: a
-            .reference
-            .clone()
-            .or(withheld_topic)
-            .unwrap_or(topics::GROUND_TRUTH.to_owned()),
-        quality: a.reference_quality.clone(),
-    };
-    if let Some(w) = &withhold {
-        super::eval::check_channel_in_log(input, &w.topic, "to withhold")?;
-    }
-    if a.reference.is_some() || reference.topic != topics::GROUND_TRUTH {
-        super::eval::check_reference_in_log(input, &reference.topic)?;
-    }
+    let (reference, withhold) = scoring(&a, &config, input)?;
     let live = match &a.viz {
         Some(target) => Some(LiveView::open(target)?),
         None => None,
@@ -354,6 +330,38 @@ pub fn print_counts(report: &RefuseReport) {
             println!("{}: {line}", p.name);
         }
     }
+}
+
+/// What the run is scored against, and the sensor withheld from the pipelines if any: the
+/// command line's, checked against the log before any work. With a sensor withheld (here
+/// or in a pipeline's `[pipeline.eval]`) it is the reference unless `--reference` says
+/// otherwise.
+fn scoring(a: &Args, config: &Pipelines, input: &Run) -> Result<(Reference, Option<Withhold>)> {
+    let withhold = a.withhold.as_ref().map(|topic| Withhold {
+        topic: topic.clone(),
+        outages: a.outages.clone(),
+    });
+    let withheld_topic = withhold.as_ref().map(|w| w.topic.clone()).or_else(|| {
+        config
+            .pipeline
+            .iter()
+            .find_map(|p| Some(p.withhold.as_ref()?.topic.clone()))
+    });
+    let reference = Reference {
+        topic: a
+            .reference
+            .clone()
+            .or(withheld_topic)
+            .unwrap_or(topics::GROUND_TRUTH.to_owned()),
+        quality: a.reference_quality.clone(),
+    };
+    if let Some(w) = &withhold {
+        super::eval::check_channel_in_log(input, &w.topic, "to withhold")?;
+    }
+    if a.reference.is_some() || reference.topic != topics::GROUND_TRUTH {
+        super::eval::check_reference_in_log(input, &reference.topic)?;
+    }
+    Ok((reference, withhold))
 }
 
 /// Re-fuses and prints the accuracy table of the result (demo).

@@ -365,6 +365,20 @@ impl Tuner {
         })
     }
 
+    /// Each log's figures before and after.
+    fn log_reports(&self, before: &Evaluation, after: &Evaluation) -> Vec<LogReport> {
+        self.recordings
+            .iter()
+            .zip(before.logs.iter().zip(&after.logs))
+            .map(|(r, (b, a))| LogReport {
+                path: r.path.clone(),
+                sensor_messages: r.messages(),
+                before: b.metrics(),
+                after: a.metrics(),
+            })
+            .collect()
+    }
+
     /// What the objective measures, in words.
     pub fn objective_basis(&self) -> String {
         let withheld = self
@@ -495,17 +509,7 @@ impl Tuner {
             params: self.param_reports(&best),
             before: before.pooled.metrics(),
             after: after.pooled.metrics(),
-            logs: self
-                .recordings
-                .iter()
-                .zip(before.logs.iter().zip(&after.logs))
-                .map(|(r, (b, a))| LogReport {
-                    path: r.path.clone(),
-                    sensor_messages: r.messages(),
-                    before: b.metrics(),
-                    after: a.metrics(),
-                })
-                .collect(),
+            logs: self.log_reports(&before, &after),
             evaluations,
             started_unix_ns,
             ending,

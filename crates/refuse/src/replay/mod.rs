@@ -295,14 +295,7 @@ impl<'a> Replay<'a> {
             summary.as_ref().and_then(|s| s.message_span_ns),
             known.map(Vec::as_slice),
         )?;
-        for (pi, p) in opts.config.pipeline.iter().enumerate() {
-            if let Some(w) = withholding.of(pi) {
-                let mut record = w.to_metadata();
-                record.insert("pipeline".into(), p.name.clone());
-                writer.write_metadata(topics::metadata::WITHHELD, record)?;
-                eval.withheld(&p.name, w);
-            }
-        }
+        withholding.record(&opts.config.pipeline, &mut writer, &mut eval)?;
         let pipelines = opts
             .config
             .pipeline

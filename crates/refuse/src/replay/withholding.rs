@@ -7,8 +7,10 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use railfuse_catalog::log::ChannelInfo;
+use railfuse_catalog::log::{ChannelInfo, LogWriter};
+use railfuse_catalog::topics;
 use railfuse_eval::outages::{Withheld, Withhold};
+use railfuse_eval::Evaluator;
 
 use crate::error::{Error, Result};
 use crate::spec::PipelineSpec;
@@ -71,6 +73,25 @@ impl Withholding {
             hidden: vec![0; per_pipeline.len()],
             per_pipeline,
         })
+    }
+
+    /// Writes what each pipeline is not shown into the output (before its fused channels, so
+    /// that a reader scores as it goes) and tells the evaluation.
+    pub fn record(
+        &self,
+        pipelines: &[PipelineSpec],
+        writer: &mut LogWriter,
+        eval: &mut Evaluator,
+    ) -> Result<()> {
+        for (pi, p) in pipelines.iter().enumerate() {
+            if let Some(w) = self.of(pi) {
+                let mut record = w.to_metadata();
+                record.insert("pipeline".into(), p.name.clone());
+                writer.write_metadata(topics::metadata::WITHHELD, record)?;
+                eval.withheld(&p.name, w);
+            }
+        }
+        Ok(())
     }
 
     /// Pipeline `pi`'s withheld sensor, if it has one.

@@ -310,6 +310,41 @@ pub struct PipelineSpec {
     source: PipelineConfig,
 }
 
+/// Each sensor's `time_offset_s` can be honoured: its pipeline fuses measurements along the
+/// track (a message pipeline reads its messages' own times) and holds them back long enough.
+fn check_latencies(
+    sensors: &[SensorSpec],
+    tables: &[Spanned<crate::config::SensorConfig>],
+    estimator: &EstimatorSpec,
+    reorder_window_s: f64,
+) -> Result<(), Invalid> {
+    for (s, table) in sensors.iter().zip(tables) {
+        let late_s = s.time_offset_ns as f64 / 1e9;
+        let problem = if s.time_offset_ns == 0 {
+            continue;
+        } else if estimator.reads_whole_messages() {
+            format!(
+                "time_offset_s: an {} pipeline reads its messages' own times; give the \
+                 latency to an along-track pipeline",
+                estimator.name()
+            )
+        } else if late_s > reorder_window_s {
+            format!(
+                "time_offset_s = {late_s} is longer than reorder_window_s = \
+                 {reorder_window_s}: its measurements would come after their time was \
+                 fused; raise reorder_window_s"
+            )
+        } else {
+            continue;
+        };
+        return Err(Invalid {
+            span: table.span(),
+            message: format!("sensor {}: {problem}", s.topic),
+        });
+    }
+    Ok(())
+}
+
 /// `[pipeline.eval]` checked: the topic withheld is one of the pipeline's sensors, the
 /// outages parse.
 fn withhold(e: &crate::config::EvalConfig, sensors: &[SensorSpec]) -> Result<Withhold, Invalid> {
@@ -417,30 +452,7 @@ impl PipelineSpec {
         }
         let estimator = estimator(c, filter, kind, &devices).map_err(here)?;
         let withhold = c.eval.as_ref().map(|e| withhold(e, &sensors)).transpose()?;
-        for (s, table) in sensors.iter().zip(&c.sensor) {
-            let late_s = s.time_offset_ns as f64 / 1e9;
-            let problem = if s.time_offset_ns == 0 {
-                continue;
-            } else if estimator.reads_whole_messages() {
-                format!(
-                    "time_offset_s: an {} pipeline reads its messages' own times; give the \
-                     latency to an along-track pipeline",
-                    estimator.name()
-                )
-            } else if late_s > reorder_window_s {
-                format!(
-                    "time_offset_s = {late_s} is longer than reorder_window_s = \
-                     {reorder_window_s}: its measurements would come after their time was \
-                     fused; raise reorder_window_s"
-                )
-            } else {
-                continue;
-            };
-            return Err(Invalid {
-                span: table.span(),
-                message: format!("sensor {}: {problem}", s.topic),
-            });
-        }
+        check_latencies(&sensors, &c.sensor, &estimator, reorder_window_s)?;
         // Stored beside the fused channels with every setting written out.
         let mut source = c.clone();
         if let (EstimatorSpec::Messages(k), Some(kind)) = (&estimator, kind) {

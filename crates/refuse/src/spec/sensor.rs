@@ -70,16 +70,7 @@ pub(super) fn sensor(
         }
         Some(w) => Some(positive("speed_window_s", w)?),
     };
-    let time_offset_ns = match s.time_offset_s {
-        None => 0,
-        Some(t) if t.is_finite() && t.abs() <= MAX_TIME_OFFSET_S => (t * 1e9).round() as i64,
-        Some(t) => {
-            return Err(format!(
-                "time_offset_s = {t}: at most {MAX_TIME_OFFSET_S} s either way (a sensor's \
-                 latency, not a clock offset: give those with --clock-offset)"
-            ))
-        }
-    };
+    let time_offset_ns = time_offset_ns(s.time_offset_s)?;
     let (device, device_name) = match filter.is_some_and(FilterKind::is_federated) {
         false => (0, None),
         true => match s.device_name() {
@@ -90,15 +81,7 @@ pub(super) fn sensor(
             ),
         },
     };
-    let adaptive_window = match s.adaptive_variance {
-        Some(a) if a.window < 2 => {
-            return Err(format!(
-                "adaptive_variance.window = {}: at least 2 innovations",
-                a.window
-            ))
-        }
-        a => a.map(|a| a.window as usize),
-    };
+    let adaptive_window = adaptive_window(s)?;
     Ok(SensorSpec {
         topic: s.topic.clone(),
         role: s.role,
@@ -115,6 +98,29 @@ pub(super) fn sensor(
         required: s.required,
         declared,
     })
+}
+
+/// The innovations its variance is matched over (config `adaptive_variance.window`), checked.
+fn adaptive_window(s: &SensorConfig) -> Result<Option<usize>, String> {
+    match s.adaptive_variance {
+        Some(a) if a.window < 2 => Err(format!(
+            "adaptive_variance.window = {}: at least 2 innovations",
+            a.window
+        )),
+        a => Ok(a.map(|a| a.window as usize)),
+    }
+}
+
+/// A sensor's latency (config `time_offset_s`) in ns, checked.
+fn time_offset_ns(time_offset_s: Option<f64>) -> Result<i64, String> {
+    match time_offset_s {
+        None => Ok(0),
+        Some(t) if t.is_finite() && t.abs() <= MAX_TIME_OFFSET_S => Ok((t * 1e9).round() as i64),
+        Some(t) => Err(format!(
+            "time_offset_s = {t}: at most {MAX_TIME_OFFSET_S} s either way (a sensor's \
+             latency, not a clock offset: give those with --clock-offset)"
+        )),
+    }
 }
 
 /// The largest sensor latency a configuration may give, s.
