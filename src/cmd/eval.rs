@@ -9,10 +9,10 @@ use railfuse_eval::safety::SafetyEval;
 use std::sync::Arc;
 
 use railfuse_catalog::log::{read_metadata, ChannelInfo};
-use railfuse_eval::outages::{OutageSpec, Withheld, Withhold};
+use railfuse_eval::outages::Withheld;
 use railfuse_eval::{evaluate, reference_kind, EvalReport, FixQuality, Reference};
 
-use super::run_input::RunArgs;
+use super::run_input::{RunArgs, WithholdArgs};
 use crate::table::Table;
 
 #[derive(clap::Args)]
@@ -29,14 +29,8 @@ pub struct Args {
     /// all, or fix types (rtk_fixed, rtk_float, dgps, single; commas between several).
     #[arg(long, value_name = "QUALITY", default_value = "auto")]
     pub reference_quality: FixQuality,
-    /// Score against this sensor's fixes as withheld from every pipeline in --outages (a
-    /// log fused elsewhere, with outages of its own): the reference unless --reference names
-    /// another. Without it, the outages the fused log records (refuse --withhold).
-    #[arg(long, value_name = "TOPIC")]
-    pub withhold: Option<String>,
-    /// The outages of --withhold: LEN[:every=PERIOD][:from=T] in s, or standard.
-    #[arg(long, value_name = "SPEC", requires = "withhold")]
-    pub outages: Option<OutageSpec>,
+    #[command(flatten)]
+    pub withhold: WithholdArgs,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -50,12 +44,12 @@ pub fn run(a: Args) -> Result<()> {
         topic: a
             .reference
             .clone()
-            .or(a.withhold.clone())
+            .or(a.withhold.withhold.clone())
             .or_else(|| withheld_topic(&run))
             .unwrap_or(topics::GROUND_TRUTH.to_owned()),
         quality: a.reference_quality,
     };
-    if a.reference.is_some() || a.withhold.is_some() {
+    if a.reference.is_some() || a.withhold.withhold.is_some() {
         check_reference_in_log(&run, &reference.topic)?;
     }
     let report = evaluate(&run, &reference, outages.as_ref())?;
@@ -77,14 +71,10 @@ pub fn run(a: Args) -> Result<()> {
 
 /// `--withhold TOPIC --outages SPEC` placed in the run's span (log time), checked first.
 fn given_outages(run: &Run, a: &Args) -> Result<Option<Withheld>> {
-    let Some(topic) = &a.withhold else {
+    let Some(w) = a.withhold.request() else {
         return Ok(None);
     };
-    check_channel_in_log(run, topic, "to score as withheld")?;
-    let w = Withhold {
-        topic: topic.clone(),
-        outages: a.outages.clone(),
-    };
+    check_channel_in_log(run, &w.topic, "to score as withheld")?;
     let span = run.reader()?.summary().and_then(|s| s.message_span_ns);
     w.place(span)
         .map(Some)

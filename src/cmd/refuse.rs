@@ -3,7 +3,7 @@ use std::time::Instant;
 
 use anyhow::Result;
 use railfuse_catalog::topics;
-use railfuse_eval::outages::{OutageSpec, Withhold};
+use railfuse_eval::outages::Withhold;
 use railfuse_eval::{EvalReport, FixQuality, Reference};
 use railfuse_refuse::registry::Registry;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -15,7 +15,7 @@ use railfuse_refuse::spec::Pipelines;
 
 use super::eval::print_eval;
 use super::measure::{peak_rss_kib, RunStats};
-use super::run_input::{RunArgs, SplitArgs};
+use super::run_input::{RunArgs, SplitArgs, WithholdArgs};
 use railfuse_catalog::run::Run;
 
 #[derive(clap::Args)]
@@ -50,16 +50,8 @@ pub struct Args {
     /// all, or fix types (rtk_fixed, rtk_float, dgps, single; commas between several).
     #[arg(long, value_name = "QUALITY", default_value = "auto")]
     pub reference_quality: FixQuality,
-    /// Withhold a sensor (an RTK receiver) from every pipeline that fuses it, inside the
-    /// --outages windows (for the whole run without them), and score against it: the
-    /// accuracy table's reference unless --reference names another.
-    #[arg(long, value_name = "TOPIC")]
-    pub withhold: Option<String>,
-    /// The outages of --withhold: LEN[:every=PERIOD][:from=T] in s (the first starts 60 s
-    /// into the run unless from= says otherwise), or standard (30, 60 and 120 s in turn,
-    /// one every 180 s).
-    #[arg(long, value_name = "SPEC", requires = "withhold")]
-    pub outages: Option<OutageSpec>,
+    #[command(flatten)]
+    pub withhold: WithholdArgs,
     /// Print the report as JSON (with wall time, throughput and peak memory).
     #[arg(long)]
     pub json: bool,
@@ -337,10 +329,7 @@ pub fn print_counts(report: &RefuseReport) {
 /// or in a pipeline's `[pipeline.eval]`) it is the reference unless `--reference` says
 /// otherwise.
 fn scoring(a: &Args, config: &Pipelines, input: &Run) -> Result<(Reference, Option<Withhold>)> {
-    let withhold = a.withhold.as_ref().map(|topic| Withhold {
-        topic: topic.clone(),
-        outages: a.outages.clone(),
-    });
+    let withhold = a.withhold.request();
     let withheld_topic = withhold.as_ref().map(|w| w.topic.clone()).or_else(|| {
         config
             .pipeline

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use railfuse_catalog::log::SplitRule;
 use railfuse_catalog::run::{Align, ClockOffset, Run, RunOptions, TimeBasis};
+use railfuse_eval::outages::{OutageSpec, Withhold};
 
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct RunArgs {
@@ -179,6 +180,33 @@ impl SplitArgs {
                 .map(|s| seconds_ns("--split-every", s))
                 .transpose()?,
             at_ns,
+        })
+    }
+}
+
+/// A sensor withheld from the pipelines in outages (the withholding protocol), as `refuse`,
+/// `eval` and `tune` take it.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct WithholdArgs {
+    /// Withhold a sensor (an RTK receiver) inside the --outages windows (the whole run
+    /// without them) and score against it, the reference unless --reference names another:
+    /// refuse hides it from every pipeline that fuses it, tune tunes by cross-validation
+    /// against it, eval scores a log fused elsewhere as if it had been hidden.
+    #[arg(long, value_name = "TOPIC")]
+    pub withhold: Option<String>,
+    /// The outages of --withhold: LEN[:every=PERIOD][:from=T] in s (the first starts 60 s
+    /// into the run unless from= says otherwise), or standard (30, 60 and 120 s in turn, one
+    /// every 180 s).
+    #[arg(long, value_name = "SPEC", requires = "withhold")]
+    pub outages: Option<OutageSpec>,
+}
+
+impl WithholdArgs {
+    /// What was asked for, if anything.
+    pub fn request(&self) -> Option<Withhold> {
+        self.withhold.as_ref().map(|topic| Withhold {
+            topic: topic.clone(),
+            outages: self.outages.clone(),
         })
     }
 }

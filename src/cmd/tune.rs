@@ -5,7 +5,6 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use anyhow::{Context, Result};
-use railfuse_eval::outages::{OutageSpec, Withhold};
 use railfuse_refuse::config::{value_names, ObjectiveKind, OptimiserKind};
 use railfuse_tune::recording::Metrics;
 use railfuse_tune::search::SearchProgress;
@@ -13,6 +12,7 @@ use railfuse_tune::{
     write_trace_csv, write_trace_mcap, TuneOutcome, TuneReport, TuneRequest, Tuner,
 };
 
+use super::run_input::WithholdArgs;
 use crate::table::Table;
 
 #[derive(clap::Args)]
@@ -54,14 +54,8 @@ pub struct Args {
     /// Worker threads (default: every core).
     #[arg(long, value_parser = at_least_one)]
     pub threads: Option<usize>,
-    /// Withhold a sensor (an RTK receiver) from the pipeline inside the --outages windows (the
-    /// whole run without them) and tune against what was withheld: cross-validation on a
-    /// log without truth (the reference unless --reference names another).
-    #[arg(long, value_name = "TOPIC")]
-    pub withhold: Option<String>,
-    /// The outages of --withhold: LEN[:every=PERIOD][:from=T] in s, or standard.
-    #[arg(long, value_name = "SPEC", requires = "withhold")]
-    pub outages: Option<OutageSpec>,
+    #[command(flatten)]
+    pub withhold: WithholdArgs,
     /// The tuned configuration: the input file with only the tuned values changed.
     #[arg(short, long)]
     pub output: PathBuf,
@@ -123,10 +117,7 @@ fn tune(a: &Args) -> Result<()> {
         optimiser: a.optimiser,
         max_evaluations: a.max_evals,
         seed: a.seed,
-        withhold: a.withhold.as_ref().map(|topic| Withhold {
-            topic: topic.clone(),
-            outages: a.outages.clone(),
-        }),
+        withhold: a.withhold.request(),
     };
     let loading = crate::progress::Progress::steps("decoding logs", a.logs.len() as u64);
     let tuner = Tuner::open(&request)?;
