@@ -11,7 +11,7 @@ use common::*;
 use railfuse_catalog::messages::FusedState;
 
 /// samples/rtk.toml (every sensor, the receiver weighted by its own covariance) with `extra`
-/// lines in its GNSS table.
+/// lines in its GNSS tables.
 fn gnss_pipeline(dir: &Path, extra: &str) -> std::path::PathBuf {
     let text = std::fs::read_to_string(sample("rtk.toml"))
         .unwrap()
@@ -59,35 +59,51 @@ fn a_late_receiver_is_fused_at_its_own_time_and_tune_finds_its_latency_without_t
     let states = |p: &Path| -> Vec<FusedState> { messages(p, "/fused/rtk/state") };
     assert_eq!(states(&fixed_out), states(&base_out));
     assert_eq!(rmse(&fixed), rmse(&base));
-    // Estimated from the innovations' likelihood alone (no truth): within 5 ms.
+    // Estimated from the innovations' likelihood alone (no truth).
     let tuned = d.path().join("tuned.toml");
-    let t = ok_json(&[
-        "tune",
-        s(&late),
-        "-c",
-        s(&plain),
-        "--pipeline",
-        "rtk",
-        "--params=sensor[/gnss/fix].time_offset_s=0..0.3,linear",
-        "--objective",
-        "nll",
-        "--max-evals",
-        "60",
-        "-o",
-        s(&tuned),
-        "--json",
-    ]);
-    let found = t["params"][0]["after"].as_f64().unwrap();
-    assert!((found - 0.11).abs() < 0.005, "estimated {found} s");
-    // The tuned file carries it, and re-fuses the late log as well as the on-time one.
+    let estimate = |pipeline: &str, out: &Path| {
+        let t = ok_json(&[
+            "tune",
+            s(&late),
+            "-c",
+            s(&plain),
+            "--pipeline",
+            pipeline,
+            "--params=sensor[/gnss/fix].time_offset_s=0..0.3,linear",
+            "--objective",
+            "nll",
+            "--max-evals",
+            "60",
+            "-o",
+            s(out),
+            "--json",
+        ]);
+        t["params"][0]["after"].as_f64().unwrap()
+    };
+    let found = estimate("rtk", &tuned);
+    // The same sensors taken as white noise: the loop's survey scale and the odometers' lag
+    // are explained in part by moving the fixes in time, 4 ms off (still within the 5 ms goal).
+    let plain_found = estimate("rtk_plain", &d.path().join("plain-tuned.toml"));
+    assert!(
+        (plain_found - 0.11).abs() > 0.003 && (plain_found - 0.11).abs() < 0.005,
+        "rtk_plain estimated {plain_found} s"
+    );
+    // samples/rtk.toml models its other sensors' errors, so the likelihood has nothing else
+    // to explain with the fixes' time: within 1 ms (0.4 ms on this run, where the
+    // likelihood's curvature gives a standard deviation of 0.3 ms).
+    assert!((found - 0.11).abs() < 0.001, "estimated {found} s");
+    // The tuned file carries it, and re-fuses the late log with nearly all of the latency's
+    // error gone. Not to the on-time log's RMSE: at 33 m/s each 0.1 ms left costs 3 mm,
+    // against an RMSE of 2.5 cm (docs/no-truth.md).
     let text = std::fs::read_to_string(&tuned).unwrap();
     assert!(text.contains("time_offset_s = "), "{text}");
     let (again, _) = run(&late, &tuned, "again.mcap");
     assert!(
-        rmse(&again) < 1.05 * rmse(&base),
-        "{} against {}",
+        rmse(&again) - rmse(&base) < 0.01 * (rmse(&stale) - rmse(&base)),
+        "{} against {} on time and {} uncorrected",
         rmse(&again),
-        rmse(&base)
+        rmse(&base),
+        rmse(&stale)
     );
 
     // A latency longer than the reorder window cannot be honoured: said, with the fix.

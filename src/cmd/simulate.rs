@@ -129,8 +129,9 @@ fn fault_help() -> String {
          dropout, stuck, bias=VALUE (SI units: a GNSS position jump along the track in m, a \
          speed in m/s, a specific force in m/s², a loop position in m), late=SECONDS (its \
          stamps that much late: a driver stamping on arrival), or for the map \
-         offset=D (a stretch published D m to the left); START and END in seconds from the \
-         start; `:reported` adds the device's own fault and recovery events. Repeatable.",
+         offset=D (a stretch published D m to the left), for corrections only dropout (the \
+         RTK correction link lost: single point, then float and fixed once it is back); START \
+         and END in seconds from the start; `:reported` adds the device's own fault and recovery events. Repeatable.",
         railfuse_record::simulator::faults::DEVICES.join(", ")
     )
 }

@@ -59,7 +59,7 @@ impl Driver {
         }
     }
 
-    /// Advances the true state by `dt` at time `t` (s since start).
+    /// Advances the true state from time `t` (s since start) to `t + dt`.
     pub fn step(&mut self, t: f64, dt: f64) -> Option<DriverEvent> {
         match self.phase {
             Phase::Finished => None,
@@ -90,16 +90,21 @@ impl Driver {
                 };
                 let a_cmd = (feed_forward + 1.2 * (v_ref - self.v))
                     .clamp(-1.3 * self.p.braking_mps2, a_max);
+                // The acceleration ramps (constant jerk) over the step, and speed and
+                // position are its exact integrals: the state at the step's end is the
+                // state at that instant, to well under the step, which latency estimates
+                // of a millisecond need.
                 let max_da = self.p.jerk_mps3 * dt;
-                self.a += (a_cmd - self.a).clamp(-max_da, max_da);
-                let v_next = self.v + self.a * dt;
+                let a_next = self.a + (a_cmd - self.a).clamp(-max_da, max_da);
+                let v_next = self.v + (self.a + a_next) * dt / 2.0;
                 if v_next <= 0.0 {
                     self.s += self.v * dt / 2.0;
                     self.v = 0.0;
                     self.a = 0.0;
                 } else {
-                    self.s += (self.v + v_next) * dt / 2.0;
+                    self.s += self.v * dt + (2.0 * self.a + a_next) * dt * dt / 6.0;
                     self.v = v_next;
+                    self.a = a_next;
                 }
                 if d < 0.5 && self.v < 0.05 {
                     self.v = 0.0;

@@ -34,7 +34,8 @@ pub enum FaultMode {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FaultSpec {
-    /// gnss, imu, radar, odometer1, odometer2, loop or balise.
+    /// gnss, imu, radar, odometer1, odometer2, loop, balise, eddy_current, map or
+    /// corrections (the RTK correction link).
     pub device: String,
     pub mode: FaultMode,
     pub start_s: f64,
@@ -54,6 +55,7 @@ pub const DEVICES: &[&str] = &[
     "balise",
     "eddy_current",
     "map",
+    "corrections",
 ];
 
 /// A `--fault DEVICE:MODE:START:END[:reported]` that does not parse.
@@ -64,7 +66,7 @@ pub enum FaultSpecError {
     #[error("'{spec}': unknown device '{device}' (devices: {})", DEVICES.join(", "))]
     UnknownDevice { spec: String, device: String },
     #[error(
-        "'{spec}': unknown mode '{mode}' (dropout, stuck, bias=VALUE; the map: offset=METRES)"
+        "'{spec}': unknown mode '{mode}' (dropout, stuck, bias=VALUE, late=SECONDS; the map: offset=METRES; corrections: dropout)"
     )]
     UnknownMode { spec: String, mode: String },
     #[error("'{0}': START and END are seconds from the start of the run")]
@@ -96,6 +98,9 @@ impl std::str::FromStr for FaultSpec {
         };
         let mode = match (device, mode) {
             ("map", _) => value("offset=").map(FaultMode::Offset),
+            // The RTK correction link can only be lost: the receiver falls back to single
+            // point (then float, then fixed once it returns).
+            ("corrections", m) => (m == "dropout").then_some(FaultMode::Dropout),
             (_, "dropout") => Some(FaultMode::Dropout),
             (_, "stuck") => Some(FaultMode::Stuck),
             (_, m) if m.starts_with("late=") => {
@@ -138,6 +143,8 @@ fn topic_of(device: &str) -> &'static str {
         "loop" => topics::LOOP_POSITION,
         "map" => topics::TRACK_MAP,
         "eddy_current" => topics::EDDY_CURRENT,
+        // The receiver's correction link: its fixes show the loss.
+        "corrections" => topics::GNSS_FIX,
         _ => topics::BALISE,
     }
 }
@@ -365,6 +372,16 @@ mod tests {
                 .unwrap()
                 .reported
         );
+        // The correction link can only be lost.
+        let f: FaultSpec = "corrections:dropout:20:320".parse().unwrap();
+        assert_eq!(f.mode, FaultMode::Dropout);
+        for bad in ["corrections:stuck:1:2", "corrections:bias=1:1:2"] {
+            let e = bad.parse::<FaultSpec>().unwrap_err().to_string();
+            assert!(
+                e.contains("unknown mode") && e.contains("corrections: dropout"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -367,6 +367,8 @@ fn simulate_line(
         Some(d) => p.stations.max((d / 200.0).ceil() as usize + 2),
         None => p.stations,
     };
+    let with_link_faults = correction_link_faults(p, faults);
+    let p = &with_link_faults;
     let mut track = Track::build(&p.track, stations, start, &mut rng_stream(seed, 0));
     if let Some(a) = &p.atlas {
         track.map = atlas::with_atlas(track.map, a, &mut rng_stream(seed, 30));
@@ -389,27 +391,10 @@ fn simulate_line(
     let dt = step_ns as f64 / 1e9;
     let limit_ns = duration_s.map(|d| start + seconds(d));
     let mut t_ns = start;
+    // Each pass measures the world as it is at `t_ns`, then moves the train on to the next
+    // step: every stamp is the time of the state it was taken from.
     loop {
         let t = (t_ns - start) as f64 / 1e9;
-        match driver.step(t, dt) {
-            Some(DriverEvent::Arrived(i)) => outbox.push(
-                t_ns,
-                event(
-                    t_ns,
-                    EventKind::StationArrival,
-                    map.stations[i].name.clone(),
-                ),
-            ),
-            Some(DriverEvent::Departed(i)) => outbox.push(
-                t_ns,
-                event(
-                    t_ns,
-                    EventKind::StationDeparture,
-                    map.stations[i].name.clone(),
-                ),
-            ),
-            None => {}
-        }
         let world = surroundings.world(&track, &driver, t_ns, t, dt, &mut outbox);
         for s in &mut sensors {
             s.step(&world, &mut outbox);
@@ -424,12 +409,35 @@ fn simulate_line(
         if finished || limit_ns.is_some_and(|l| t_ns >= l) {
             break;
         }
-        t_ns += step_ns;
+        let next_ns = t_ns + step_ns;
+        let stop = match driver.step(t, dt) {
+            Some(DriverEvent::Arrived(i)) => Some((EventKind::StationArrival, i)),
+            Some(DriverEvent::Departed(i)) => Some((EventKind::StationDeparture, i)),
+            None => None,
+        };
+        if let Some((kind, i)) = stop {
+            let text = map.stations[i].name.clone();
+            outbox.push(next_ns, event(next_ns, kind, text));
+        }
+        t_ns = next_ns;
     }
     while let Some((log_time, emit)) = outbox.pop_due(u64::MAX) {
         log.write_emit(log_time, emit)?;
     }
     log.finish(scenario, map, (t_ns - start) as f64 / 1e9)
+}
+
+/// The scenario with each `corrections:dropout` fault's window among its correction-link
+/// outages.
+fn correction_link_faults(p: &LineScenario, faults: &[FaultSpec]) -> LineScenario {
+    let mut p = p.clone();
+    p.correction_outages_s.extend(
+        faults
+            .iter()
+            .filter(|f| f.device == "corrections")
+            .map(|f| (f.start_s, f.end_s - f.start_s)),
+    );
+    p
 }
 
 fn event(stamp_ns: u64, kind: EventKind, text: String) -> Emit {

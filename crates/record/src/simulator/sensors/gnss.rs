@@ -1,5 +1,11 @@
 //! GNSS receiver with RTK: fix type follows sky visibility (tunnels) and the correction link;
 //! position noise and a slowly wandering bias depend on the fix type.
+//!
+//! The bias is one unit-variance Gauss-Markov process scaled by the current fix type's σ,
+//! so it changes size the moment the solution does: an RTK fixed fix has none, as a real
+//! receiver's fixed solution drops the single-point error at once rather than letting it
+//! decay over the bias's correlation time (which gave fixes reported at 2 cm a hidden error
+//! of up to a metre for a minute after every reacquisition).
 
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::messages::{FixType, GnssFix};
@@ -44,7 +50,8 @@ pub struct Gnss {
     /// Time the sky became visible (None while in a tunnel).
     sky_since_ns: Option<u64>,
     corrections_since_ns: Option<u64>,
-    bias: (f64, f64),
+    /// The bias's unit-variance Gauss-Markov state (east, north).
+    bias_unit: (f64, f64),
     satellites: f64,
     epochs: u64,
 }
@@ -60,7 +67,7 @@ impl Gnss {
             rng,
             sky_since_ns: Some(long_ago),
             corrections_since_ns: Some(long_ago),
-            bias: (0.0, 0.0),
+            bias_unit: (0.0, 0.0),
             satellites: 17.0,
             epochs: 0,
         }
@@ -145,11 +152,13 @@ impl SimSensor for Gnss {
         let (sigma, bias_sigma) = self.sigma(fix);
         // First-order Gauss-Markov bias with stationary σ `bias_sigma`.
         let phi = (-dt / self.p.bias_tau_s).exp();
-        let q = bias_sigma * self.p.bias_scale * (1.0 - phi * phi).sqrt();
-        self.bias = (
-            phi * self.bias.0 + gauss(&mut self.rng, q),
-            phi * self.bias.1 + gauss(&mut self.rng, q),
+        let q = (1.0 - phi * phi).sqrt();
+        self.bias_unit = (
+            phi * self.bias_unit.0 + gauss(&mut self.rng, q),
+            phi * self.bias_unit.1 + gauss(&mut self.rng, q),
         );
+        let scale = bias_sigma * self.p.bias_scale;
+        let bias = (scale * self.bias_unit.0, scale * self.bias_unit.1);
         let satellites = self.satellites(w, fix);
         let mut msg = GnssFix {
             stamp_ns: w.t_ns,
@@ -166,8 +175,8 @@ impl SimSensor for Gnss {
         };
         if fix.has_position() {
             let (me, mn) = w.gnss_multipath;
-            let e = w.east_m + self.bias.0 + me + gauss(&mut self.rng, sigma);
-            let n = w.north_m + self.bias.1 + mn + gauss(&mut self.rng, sigma);
+            let e = w.east_m + bias.0 + me + gauss(&mut self.rng, sigma);
+            let n = w.north_m + bias.1 + mn + gauss(&mut self.rng, sigma);
             let u = gauss(&mut self.rng, 1.8 * sigma);
             let (lat, lon, alt) = self.origin.to_geodetic(e, n, u);
             let var = sigma * sigma + bias_sigma * bias_sigma;
@@ -188,7 +197,7 @@ impl SimSensor for Gnss {
         if let (true, Some(rtk_rate)) = (rtk, self.p.rtk_rate_hz) {
             // Every n-th epoch of the solution rate carries the RTK solution.
             let every = (self.p.rate_hz / rtk_rate).round().max(1.0) as u64;
-            if self.epochs % every != 0 {
+            if !self.epochs.is_multiple_of(every) {
                 return;
             }
         }
@@ -203,4 +212,73 @@ fn one() -> f64 {
 
 fn is_one(x: &f64) -> bool {
     *x == 1.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulator::scenario::LineScenario;
+    use crate::simulator::sensors::rng_stream;
+
+    /// Fixes (east error, north error, fix type) over `seconds` at 10 Hz, standing at the
+    /// origin, with RTK corrections from `corrections_from_s` on.
+    fn fixes(seconds: f64, corrections_from_s: f64) -> Vec<(f64, f64, FixType)> {
+        let origin = GeodeticOrigin {
+            latitude_deg: 44.65,
+            longitude_deg: 10.93,
+            altitude_m: 40.0,
+        };
+        let mut gnss = Gnss::new(LineScenario::default_gnss(), origin, 0, rng_stream(7, 3));
+        let mut out = Outbox::default();
+        let mut got = Vec::new();
+        let step = 10_000_000;
+        for t_ns in (0..super::seconds(seconds)).step_by(step as usize) {
+            let w = World {
+                t_ns,
+                dt: step as f64 / 1e9,
+                chainage_m: 0.0,
+                speed_mps: 0.0,
+                acceleration_mps2: 0.0,
+                east_m: 0.0,
+                north_m: 0.0,
+                heading_rad: 0.0,
+                curvature: 0.0,
+                in_tunnel: false,
+                corrections: t_ns >= super::seconds(corrections_from_s),
+                gnss_outage: false,
+                sky_view: 1.0,
+                gnss_multipath: (0.0, 0.0),
+            };
+            gnss.step(&w, &mut out);
+            while let Some((_, Emit::Gnss(fix))) = out.pop_due(u64::MAX) {
+                if let (Some(lat), Some(lon)) = (fix.latitude_deg, fix.longitude_deg) {
+                    let (e, n, _) = origin.to_enu(lat, lon, fix.altitude_m.unwrap_or(0.0));
+                    got.push((e, n, fix.fix_type));
+                }
+            }
+        }
+        got
+    }
+
+    #[test]
+    fn an_rtk_fixed_fix_carries_no_single_point_bias_from_before_it_fixed() {
+        // Two minutes of single-point fixes (a bias of metres), then corrections: float for
+        // 12 s, then fixed. The fixed fixes must be as good as their 2 cm, from the first.
+        let got = fixes(200.0, 120.0);
+        let single: Vec<_> = got.iter().filter(|f| f.2 == FixType::Single).collect();
+        let fixed: Vec<_> = got.iter().filter(|f| f.2 == FixType::RtkFixed).collect();
+        assert!(
+            single.len() > 1000 && fixed.len() > 400,
+            "{} {}",
+            single.len(),
+            fixed.len()
+        );
+        let worst_single = single.iter().map(|f| f.0.hypot(f.1)).fold(0.0, f64::max);
+        assert!(
+            worst_single > 0.5,
+            "single-point fixes err by metres: {worst_single}"
+        );
+        let worst_fixed = fixed.iter().map(|f| f.0.hypot(f.1)).fold(0.0, f64::max);
+        assert!(worst_fixed < 0.1, "an RTK fixed fix is {worst_fixed} m off");
+    }
 }
