@@ -58,6 +58,9 @@ enum Command {
     Tune(cmd::tune::Args),
     /// Accuracy of a fused log's pipelines against a reference, whole run and marked windows.
     Eval(cmd::eval::Args),
+    /// Fit the track's centre line and chainage to the GNSS fixes of runs over it, and write
+    /// it as the GeoJSON (or CSV) that `--track` reads.
+    Track(cmd::track::Args),
     /// Log a (raw or fused) log to the Rerun viewer or an .rrd file.
     Viz(cmd::viz::Args),
     /// The whole path in one go: simulate, re-fuse, print accuracy, write a Rerun recording.
@@ -100,6 +103,7 @@ fn main() -> ExitCode {
         Command::Info(a) => cmd::info::run(a),
         Command::Refuse(a) => cmd::refuse::run(a),
         Command::Eval(a) => cmd::eval::run(a),
+        Command::Track(a) => cmd::track::run(a),
         Command::Tune(a) => cmd::tune::run(a),
         Command::Recover(a) => cmd::recover::run(a),
         Command::Merge(a) => cmd::merge::run(a),

@@ -16,6 +16,7 @@ pub mod refuse;
 pub mod results;
 pub mod run_input;
 pub mod simulate;
+pub mod track;
 pub mod tune;
 pub mod viz;
 

@@ -1,0 +1,204 @@
+//! A run's GNSS fixes as the fit takes them: read through the run reader (a file, a split
+//! recording, a ROS 2 bag; railfuse's `GnssFix`, a ROS 2 `NavSatFix` or a Foxglove
+//! `LocationFix`), only those of the stated quality, in a local plane shared by every run.
+
+use std::collections::HashMap;
+
+use railfuse_catalog::foreign::ForeignChannels;
+use railfuse_catalog::geodesy::GeodeticOrigin;
+use railfuse_catalog::log::LogRecord;
+use railfuse_catalog::messages::{FixType, GnssFix, MessageKind};
+use railfuse_catalog::run::Run;
+use railfuse_eval::FixQuality;
+
+/// A position fix in the local plane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fix {
+    pub stamp_ns: u64,
+    pub east_m: f64,
+    pub north_m: f64,
+    /// Its horizontal 1σ, m (from the receiver's covariance, else its fix type).
+    pub sigma_m: f64,
+}
+
+/// One run's fixes of the stated quality, in time order.
+#[derive(Debug, Clone)]
+pub struct RunFixes {
+    pub name: String,
+    pub fixes: Vec<Fix>,
+}
+
+/// Why a run's fixes could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum FixesError {
+    #[error(transparent)]
+    Log(#[from] railfuse_catalog::Error),
+    #[error("{run}: no GNSS fix channel (railfuse GnssFix, ROS 2 NavSatFix or Foxglove LocationFix) to fit a line to")]
+    NoGnss { run: String },
+    #[error("{run}: several GNSS channels ({topics}): name one with --topic")]
+    SeveralGnss { run: String, topics: String },
+    #[error("{run}: no GNSS channel {topic}")]
+    NoTopic { run: String, topic: String },
+    #[error("{run}: none of its {fixes} fixes on {topic} is of the stated quality ({quality})")]
+    NoneOfQuality {
+        run: String,
+        topic: String,
+        fixes: usize,
+        quality: String,
+    },
+}
+
+/// A fix as read, before the quality is decided.
+struct Read {
+    fix: Fix,
+    fix_type: FixType,
+}
+
+/// The σ a fix type stands for where the receiver reports no covariance, m.
+fn sigma_of(fix_type: FixType) -> f64 {
+    match fix_type {
+        FixType::RtkFixed => 0.02,
+        FixType::RtkFloat => 0.3,
+        FixType::Dgps => 0.7,
+        _ => 2.0,
+    }
+}
+
+/// The fixes of `run` on `topic` (else its one GNSS channel; Foxglove twins of another
+/// channel only where there is no other) of `quality`, in the plane of `origin` (set from
+/// the first fix read where it is still `None`).
+pub fn read_fixes(
+    run: &Run,
+    topic: Option<&str>,
+    quality: &FixQuality,
+    origin: &mut Option<GeodeticOrigin>,
+) -> Result<RunFixes, FixesError> {
+    let (name, path) = (run.display(), run.name().to_owned());
+    let mut reader = run.reader()?;
+    let mut foreign = ForeignChannels::default();
+    // Per GNSS channel: its topic and the fixes read from it.
+    let mut gnss: HashMap<u16, (String, Vec<Read>)> = HashMap::new();
+    let mut buf = Vec::new();
+    while let Some(record) = reader.next() {
+        match record? {
+            LogRecord::Channel(c) => {
+                let c = match c.kind() {
+                    None => foreign.channel(c.clone(), None).unwrap_or(c),
+                    Some(_) => c,
+                };
+                let wanted = topic.is_none_or(|t| t == c.topic);
+                if wanted && c.kind() == Some(MessageKind::GnssFix) {
+                    gnss.entry(c.id).or_insert((c.topic.clone(), Vec::new()));
+                }
+            }
+            LogRecord::Message(m) => {
+                if !gnss.contains_key(&m.channel.id) {
+                    continue;
+                }
+                let id = m.channel.id;
+                // A foreign sample that does not read is a gap, as in eval.
+                let Ok(Some(m)) = foreign.message(m, &mut buf) else {
+                    continue;
+                };
+                let fix: GnssFix = m.decode(&path)?;
+                if let Some(r) = to_plane(&fix, origin) {
+                    gnss.get_mut(&id).expect("a GNSS channel").1.push(r);
+                }
+            }
+            _ => {}
+        }
+    }
+    let (topic, read) = choose(&name, topic, gnss)?;
+    keep_quality(name, topic, read, quality)
+}
+
+/// The channel to fit: the one named, else the one GNSS channel that is not a Foxglove twin.
+fn choose(
+    run: &str,
+    named: Option<&str>,
+    gnss: HashMap<u16, (String, Vec<Read>)>,
+) -> Result<(String, Vec<Read>), FixesError> {
+    let mut channels: Vec<(String, Vec<Read>)> = gnss.into_values().collect();
+    let twin = |t: &str| t.starts_with(railfuse_catalog::foxglove::TOPIC_PREFIX);
+    if channels.iter().any(|(t, _)| !twin(t)) {
+        channels.retain(|(t, _)| !twin(t));
+    }
+    match (channels.len(), named) {
+        (1, _) => Ok(channels.pop().expect("one")),
+        (0, Some(t)) => Err(FixesError::NoTopic {
+            run: run.to_owned(),
+            topic: t.to_owned(),
+        }),
+        (0, None) => Err(FixesError::NoGnss {
+            run: run.to_owned(),
+        }),
+        _ => {
+            let mut topics: Vec<String> = channels.into_iter().map(|(t, _)| t).collect();
+            topics.sort();
+            Err(FixesError::SeveralGnss {
+                run: run.to_owned(),
+                topics: topics.join(", "),
+            })
+        }
+    }
+}
+
+/// A fix with a position, in the plane of `origin`.
+fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> {
+    let (Some(lat), Some(lon)) = (fix.latitude_deg, fix.longitude_deg) else {
+        return None;
+    };
+    if !(fix.fix_type.has_position() && lat.is_finite() && lon.is_finite()) {
+        return None;
+    }
+    let alt = fix.altitude_m.filter(|a| a.is_finite()).unwrap_or(0.0);
+    let o = *origin.get_or_insert(GeodeticOrigin {
+        latitude_deg: lat,
+        longitude_deg: lon,
+        altitude_m: alt,
+    });
+    let (east_m, north_m, _) = o.to_enu(lat, lon, alt);
+    let sigma_m = fix
+        .position_covariance_enu_m2
+        .map(|c| ((c[0] + c[4]) / 2.0).sqrt())
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .unwrap_or_else(|| sigma_of(fix.fix_type));
+    Some(Read {
+        fix: Fix {
+            stamp_ns: fix.stamp_ns,
+            east_m,
+            north_m,
+            sigma_m,
+        },
+        fix_type: fix.fix_type,
+    })
+}
+
+fn keep_quality(
+    run: String,
+    topic: String,
+    read: Vec<Read>,
+    quality: &FixQuality,
+) -> Result<RunFixes, FixesError> {
+    let any_fixed = read.iter().any(|r| r.fix_type == FixType::RtkFixed);
+    let keep = |t: FixType| match quality {
+        FixQuality::Auto if any_fixed => t == FixType::RtkFixed,
+        FixQuality::Auto | FixQuality::All => true,
+        FixQuality::Only(types) => types.contains(&t),
+    };
+    let total = read.len();
+    let fixes: Vec<Fix> = read
+        .into_iter()
+        .filter(|r| keep(r.fix_type))
+        .map(|r| r.fix)
+        .collect();
+    if fixes.is_empty() {
+        return Err(FixesError::NoneOfQuality {
+            run,
+            topic,
+            fixes: total,
+            quality: quality.label(),
+        });
+    }
+    Ok(RunFixes { name: run, fixes })
+}

@@ -1,0 +1,187 @@
+//! The fitted line as the files `track =` and `--track` read: a GeoJSON `LineString` with
+//! each vertex's chainage, or a CSV of latitude, longitude and chainage; with what the fit
+//! says about itself in the GeoJSON feature's `railfuse_track` property.
+
+use railfuse_catalog::geodesy::GeodeticOrigin;
+use railfuse_catalog::messages::TrackVertex;
+use serde::Serialize;
+use serde_json::json;
+
+use crate::chainage::Placement;
+use crate::fit::FitOptions;
+use crate::report::{Centreline, Disagreement, Excursion, Stretch, StretchResidual};
+
+/// What a fit says about itself, chainage placed.
+#[derive(Debug, Clone, Serialize)]
+pub struct Summary {
+    pub runs: Vec<RunSummary>,
+    pub fix_quality: String,
+    pub fixes_used: usize,
+    pub length_m: f64,
+    pub vertices: usize,
+    pub lateral_residual_rms_m: f64,
+    pub lateral_residual_p95_m: f64,
+    /// Stretches with no fix, bridged by the spline.
+    pub gaps: Vec<Stretch>,
+    /// The residual across the track over each stretch with fixes.
+    pub stretches: Vec<StretchResidual>,
+    /// Stretches where runs' mean offsets differ by more than `disagreement_m`.
+    pub runs_disagree: Vec<Disagreement>,
+    pub placement: Placement,
+    pub knot_spacing_m: f64,
+    pub smoothing_m: f64,
+    pub tolerance_m: f64,
+    pub disagreement_m: f64,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct RunSummary {
+    pub name: String,
+    pub fixes: usize,
+    pub used: usize,
+    pub off_line: usize,
+    /// Which way it travels along the placed chainage.
+    pub direction: &'static str,
+    pub lateral_rms_m: f64,
+    pub leaves_line: Vec<Excursion>,
+}
+
+impl Summary {
+    pub fn new(
+        c: &Centreline,
+        p: &Placement,
+        vertices: &[TrackVertex],
+        quality: String,
+        opts: &FitOptions,
+        tolerance_m: f64,
+    ) -> Self {
+        let stretch = |s: &Stretch| {
+            let (a, b) = (p.chainage(s.from_m), p.chainage(s.to_m));
+            Stretch {
+                from_m: a.min(b),
+                to_m: a.max(b),
+            }
+        };
+        let at = |x: Option<f64>| x.map(|s| p.chainage(s));
+        Self {
+            runs: c
+                .runs
+                .iter()
+                .map(|r| RunSummary {
+                    name: r.name.clone(),
+                    fixes: r.fixes,
+                    used: r.used,
+                    off_line: r.off_line,
+                    direction: match r.increasing == (p.direction > 0.0) {
+                        true => "increasing",
+                        false => "decreasing",
+                    },
+                    lateral_rms_m: r.lateral_rms_m,
+                    leaves_line: r
+                        .leaves_line
+                        .iter()
+                        .map(|e| Excursion {
+                            from_m: at(e.from_m),
+                            to_m: at(e.to_m),
+                            ..e.clone()
+                        })
+                        .collect(),
+                })
+                .collect(),
+            fix_quality: quality,
+            fixes_used: c.fixes_used,
+            length_m: c.line.end_m() - c.line.start_m(),
+            vertices: vertices.len(),
+            lateral_residual_rms_m: c.lateral_rms_m,
+            lateral_residual_p95_m: c.lateral_p95_m,
+            gaps: c.gaps.iter().map(stretch).collect(),
+            stretches: c
+                .stretches
+                .iter()
+                .map(|r| {
+                    let s = stretch(&Stretch {
+                        from_m: r.from_m,
+                        to_m: r.to_m,
+                    });
+                    StretchResidual {
+                        from_m: s.from_m,
+                        to_m: s.to_m,
+                        ..*r
+                    }
+                })
+                .collect(),
+            runs_disagree: c
+                .disagreements
+                .iter()
+                .map(|d| {
+                    let s = stretch(&Stretch {
+                        from_m: d.from_m,
+                        to_m: d.to_m,
+                    });
+                    Disagreement {
+                        from_m: s.from_m,
+                        to_m: s.to_m,
+                        spread_m: d.spread_m,
+                    }
+                })
+                .collect(),
+            placement: *p,
+            knot_spacing_m: opts.knot_spacing_m,
+            smoothing_m: opts.smoothing_m,
+            tolerance_m,
+            disagreement_m: opts.disagreement_m,
+        }
+    }
+}
+
+/// Longitude and latitude of each vertex (degrees).
+fn lon_lat(vertices: &[TrackVertex], origin: &GeodeticOrigin) -> Vec<(f64, f64)> {
+    vertices
+        .iter()
+        .map(|v| {
+            let (lat, lon, _) = origin.to_geodetic(v.east_m, v.north_m, 0.0);
+            (lon, lat)
+        })
+        .collect()
+}
+
+/// The line as a GeoJSON feature collection of one main line.
+pub fn geojson(
+    name: &str,
+    vertices: &[TrackVertex],
+    origin: &GeodeticOrigin,
+    summary: &Summary,
+) -> String {
+    let coordinates: Vec<[f64; 2]> = lon_lat(vertices, origin)
+        .into_iter()
+        .map(|(lon, lat)| [lon, lat])
+        .collect();
+    let chainage: Vec<f64> = vertices.iter().map(|v| round_mm(v.chainage_m)).collect();
+    let collection = json!({
+        "type": "FeatureCollection",
+        "features": [{
+            "type": "Feature",
+            "properties": {
+                "name": name,
+                "role": "main",
+                "chainage_m": chainage,
+                "railfuse_track": summary,
+            },
+            "geometry": { "type": "LineString", "coordinates": coordinates },
+        }],
+    });
+    serde_json::to_string_pretty(&collection).expect("a summary serialises")
+}
+
+/// The line as a CSV of latitude, longitude and chainage, one vertex a row.
+pub fn csv(vertices: &[TrackVertex], origin: &GeodeticOrigin) -> String {
+    let mut out = String::from("latitude,longitude,chainage_m\n");
+    for (v, (lon, lat)) in vertices.iter().zip(lon_lat(vertices, origin)) {
+        out.push_str(&format!("{lat:.10},{lon:.10},{:.3}\n", v.chainage_m));
+    }
+    out
+}
+
+fn round_mm(x: f64) -> f64 {
+    (x * 1000.0).round() / 1000.0
+}

@@ -1,0 +1,143 @@
+//! `railfuse track`: the centre line and chainage fitted from the RTK fixes of simulated runs
+//! over the default line, scored against the simulator's own line; and bad input.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::*;
+use railfuse_catalog::map_matching::nearest_on;
+use railfuse_catalog::messages::TrackMap;
+use railfuse_catalog::track_geojson::read_track_file;
+
+/// Default runs (507 s each) of `seeds`, in `dir`.
+fn runs(dir: &Path, seeds: &[&str]) -> Vec<PathBuf> {
+    seeds
+        .iter()
+        .map(|seed| {
+            let p = dir.join(format!("run{seed}.mcap"));
+            simulate(&["--seed", seed], &p);
+            p
+        })
+        .collect()
+}
+
+#[test]
+fn three_runs_give_the_true_line_to_centimetres_and_its_chainage() {
+    let d = tempfile::tempdir().unwrap();
+    let logs = runs(d.path(), &["1", "2", "3"]);
+    let truth: TrackMap = messages(&logs[0], "/track/map").remove(0);
+    // A kilometre post: where the true line is at 1 km.
+    let (e, n, _) = truth.locate(1000.0).unwrap();
+    let (lat, lon, _) = truth.origin.to_geodetic(e, n, 0.0);
+    let (line, csv) = (d.path().join("line.geojson"), d.path().join("line.csv"));
+    let post = format!("{lat},{lon}=1");
+    let mut args = vec!["track"];
+    args.extend(logs.iter().map(|p| s(p)));
+    args.extend([
+        "-o",
+        s(&line),
+        "--csv",
+        s(&csv),
+        "--chainage-at",
+        &post,
+        "--json",
+    ]);
+    let report = ok_json(&args);
+    assert_eq!(report["runs"].as_array().unwrap().len(), 3);
+    assert!(
+        report["lateral_residual_rms_m"].as_f64().unwrap() < 0.03,
+        "{report}"
+    );
+    let gaps: Vec<(f64, f64)> = report["gaps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|g| (g["from_m"].as_f64().unwrap(), g["to_m"].as_f64().unwrap()))
+        .collect();
+    // The tunnel (7.0–7.8 km) has no fix: bridged, and said so.
+    assert!(
+        gaps.iter().any(|&(a, b)| a < 7000.0 && b > 7800.0),
+        "{gaps:?}"
+    );
+
+    // What --track reads, GeoJSON and CSV alike, lies on the true line.
+    let fitted = read_track_file(&line).unwrap();
+    assert_eq!(
+        read_track_file(&csv).unwrap().vertices.len(),
+        fitted.vertices.len()
+    );
+    let (mut sq, mut count, mut worst_chainage) = (0.0, 0usize, 0.0f64);
+    let first = fitted.vertices.first().unwrap().chainage_m;
+    let last = fitted.vertices.last().unwrap().chainage_m;
+    let mut c = first.ceil();
+    while c < last {
+        let bridged = gaps.iter().any(|&(a, b)| (a..=b).contains(&c));
+        let (fe, fn_, _) = fitted.locate(c).unwrap();
+        let (lat, lon, _) = fitted.origin.to_geodetic(fe, fn_, 0.0);
+        let (te, tn, _) = truth.origin.to_enu(lat, lon, 0.0);
+        let m = nearest_on(&truth.vertices, 0..truth.vertices.len(), te, tn).unwrap();
+        if !bridged {
+            sq += m.lateral_m * m.lateral_m;
+            count += 1;
+        }
+        // Chainage: the fitted line's against the true one at the same place.
+        if m.chainage_m > 1000.0 {
+            worst_chainage = worst_chainage.max((c - m.chainage_m).abs() / m.chainage_m);
+        }
+        c += 1.0;
+    }
+    let rms = (sq / count as f64).sqrt();
+    assert!(count > 7000 && rms < 0.03, "{rms} m RMS across {count} m");
+    assert!(
+        worst_chainage < 0.0005,
+        "chainage off by {} %",
+        worst_chainage * 100.0
+    );
+
+    // A log re-fuses on it.
+    let out = d.path().join("on-line.mcap");
+    ok(&["refuse", s(&logs[0]), "--track", s(&line), "-o", s(&out)]);
+}
+
+#[test]
+fn bad_runs_and_posts_are_one_line_each_before_any_output() {
+    let d = tempfile::tempdir().unwrap();
+    let run = &runs(d.path(), &["1"])[0];
+    let other = d.path().join("maglev.mcap");
+    simulate(&["--scenario", "seed001", "--duration", "60"], &other);
+    let no_gnss = d.path().join("seed000.mcap");
+    simulate(&["--scenario", "seed000", "--duration", "20"], &no_gnss);
+    let out = d.path().join("line.geojson");
+    let fails = |args: &[&str], says: &str| {
+        let mut all = vec!["track"];
+        all.extend(args);
+        all.extend(["-o", s(&out)]);
+        let r = railfuse(&all);
+        let err = stderr(&r);
+        assert!(!r.status.success() && err.contains(says), "{args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    };
+    fails(
+        &[s(run), "--quality", "dgps"],
+        "none of its 4808 fixes on /gnss/fix is of the stated quality (dgps)",
+    );
+    fails(
+        &[s(run), s(&other), "--quality", "all", "--tolerance", "10"],
+        "maglev.mcap: 0 of its",
+    );
+    fails(&[s(&no_gnss)], "seed000.mcap: no GNSS fix channel");
+    fails(
+        &[s(run), "--quality", "all"],
+        "m RMS across the track between chainage",
+    );
+    fails(
+        &[s(run), "--chainage-at", "45.0,11.0=3"],
+        "--chainage-at 45.0,11.0=3 lies",
+    );
+    fails(
+        &[s(run), "--origin", "95,3"],
+        "--origin '95,3': a place is LAT,LON",
+    );
+    assert!(!out.exists());
+}
