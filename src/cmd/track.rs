@@ -49,6 +49,10 @@ pub struct Args {
     /// Length the spline smooths over, m.
     #[arg(long, default_value_t = 10.0)]
     pub smoothing: f64,
+    /// Bridge the stretches without fixes with the spline alone, not with each run's own
+    /// motion (its IMU's turn and its odometer's distance, tied to its fixes either side).
+    #[arg(long)]
+    pub no_motion: bool,
     /// Print what the fit says about itself as JSON.
     #[arg(long)]
     pub json: bool,
@@ -125,6 +129,7 @@ pub fn run(a: Args) -> Result<()> {
     let opts = FitOptions {
         smoothing_m: a.smoothing,
         disagreement_m: a.tolerance,
+        cross_gaps: !a.no_motion,
         ..FitOptions::default()
     };
     let centreline = fit::fit(&runs, &opts)?;
@@ -225,11 +230,11 @@ fn print_summary(s: &Summary, out: &std::path::Path) {
         }
     }
     for g in &s.gaps {
-        println!(
-            "no fix from km {} to {}: bridged by the spline",
-            km(g.from_m),
-            km(g.to_m)
-        );
+        let how = match g.crossed_by_runs {
+            0 => "bridged by the spline alone".to_owned(),
+            n => format!("crossed by the motion (IMU turn, odometer distance) of {n} runs"),
+        };
+        println!("no fix from km {} to {}: {how}", km(g.from_m), km(g.to_m));
     }
     for d in &s.runs_disagree {
         println!(

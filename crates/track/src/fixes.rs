@@ -7,9 +7,11 @@ use std::collections::HashMap;
 use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::LogRecord;
-use railfuse_catalog::messages::{FixType, GnssFix, MessageKind};
+use railfuse_catalog::messages::{FixType, GnssFix, Imu, MessageKind, Odometer, RadarSpeed};
 use railfuse_catalog::run::Run;
 use railfuse_eval::FixQuality;
+
+use crate::motion::{MotionRecorder, MotionStep};
 
 /// A position fix in the local plane.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -21,11 +23,13 @@ pub struct Fix {
     pub sigma_m: f64,
 }
 
-/// One run's fixes of the stated quality, in time order.
+/// One run's fixes of the stated quality, in time order, and its own motion.
 #[derive(Debug, Clone)]
 pub struct RunFixes {
     pub name: String,
     pub fixes: Vec<Fix>,
+    /// Its IMU's turn and its odometer's distance, step by step (empty without both).
+    pub motion: Vec<MotionStep>,
 }
 
 /// Why a run's fixes could not be read.
@@ -78,6 +82,9 @@ pub fn read_fixes(
     let mut foreign = ForeignChannels::default();
     // Per GNSS channel: its topic and the fixes read from it.
     let mut gnss: HashMap<u16, (String, Vec<Read>)> = HashMap::new();
+    // The motion sensors' channels, by kind.
+    let mut motion_channels: HashMap<u16, MessageKind> = HashMap::new();
+    let mut motion = MotionRecorder::default();
     let mut buf = Vec::new();
     while let Some(record) = reader.next() {
         match record? {
@@ -87,11 +94,31 @@ pub fn read_fixes(
                     Some(_) => c,
                 };
                 let wanted = topic.is_none_or(|t| t == c.topic);
-                if wanted && c.kind() == Some(MessageKind::GnssFix) {
-                    gnss.entry(c.id).or_insert((c.topic.clone(), Vec::new()));
+                match c.kind() {
+                    Some(MessageKind::GnssFix) if wanted => {
+                        gnss.entry(c.id).or_insert((c.topic.clone(), Vec::new()));
+                    }
+                    Some(
+                        k @ (MessageKind::Imu | MessageKind::Odometer | MessageKind::RadarSpeed),
+                    ) => {
+                        motion_channels.insert(c.id, k);
+                    }
+                    _ => {}
                 }
             }
             LogRecord::Message(m) => {
+                if let Some(kind) = motion_channels.get(&m.channel.id) {
+                    // A motion sample that does not decode is a gap in it.
+                    match kind {
+                        MessageKind::Imu => m.decode::<Imu>(&path).map(|x| motion.imu(&x)),
+                        MessageKind::Odometer => {
+                            m.decode::<Odometer>(&path).map(|x| motion.odometer(&x))
+                        }
+                        _ => m.decode::<RadarSpeed>(&path).map(|x| motion.radar(&x)),
+                    }
+                    .ok();
+                    continue;
+                }
                 if !gnss.contains_key(&m.channel.id) {
                     continue;
                 }
@@ -109,7 +136,9 @@ pub fn read_fixes(
         }
     }
     let (topic, read) = choose(&name, topic, gnss)?;
-    keep_quality(name, topic, read, quality)
+    let mut run = keep_quality(name, topic, read, quality)?;
+    run.motion = motion.finish();
+    Ok(run)
 }
 
 /// The channel to fit: the one named, else the one GNSS channel that is not a Foxglove twin.
@@ -200,5 +229,9 @@ fn keep_quality(
             quality: quality.label(),
         });
     }
-    Ok(RunFixes { name: run, fixes })
+    Ok(RunFixes {
+        name: run,
+        fixes,
+        motion: Vec::new(),
+    })
 }

@@ -17,11 +17,13 @@
 //! millimetre, far below RTK's noise.
 
 pub mod banded;
+pub mod bridge;
 pub mod chainage;
 pub mod error;
 pub mod fit;
 pub mod fixes;
 pub mod line;
+pub mod motion;
 pub mod output;
 pub mod report;
 pub mod spline;

@@ -87,7 +87,13 @@ impl Line {
             None => all,
         };
         let m = nearest_on(v, segments, east_m, north_m)?;
+        // Clamped to the end of the window searched, not of the line: the point lies further
+        // along, where the window does not reach.
+        let distance = (east_m - m.east_m).hypot(north_m - m.north_m);
         let at_end = m.chainage_m <= self.start_m() || m.chainage_m >= self.end_m();
+        if near_m.is_some() && !at_end && distance > m.lateral_m.abs() + 0.01 {
+            return None;
+        }
         if !(m.beyond_end || at_end) {
             return Some(OnLine {
                 chainage_m: m.chainage_m,

@@ -9,7 +9,7 @@ use serde_json::json;
 
 use crate::chainage::Placement;
 use crate::fit::FitOptions;
-use crate::report::{Centreline, Disagreement, Excursion, Stretch, StretchResidual};
+use crate::report::{Centreline, Disagreement, Excursion, Gap, Stretch, StretchResidual};
 
 /// What a fit says about itself, chainage placed.
 #[derive(Debug, Clone, Serialize)]
@@ -21,8 +21,8 @@ pub struct Summary {
     pub vertices: usize,
     pub lateral_residual_rms_m: f64,
     pub lateral_residual_p95_m: f64,
-    /// Stretches with no fix, bridged by the spline.
-    pub gaps: Vec<Stretch>,
+    /// Stretches with no fix, crossed by runs' motion or bridged by the spline alone.
+    pub gaps: Vec<Gap>,
     /// The residual across the track over each stretch with fixes.
     pub stretches: Vec<StretchResidual>,
     /// Stretches where runs' mean offsets differ by more than `disagreement_m`.
@@ -94,7 +94,21 @@ impl Summary {
             vertices: vertices.len(),
             lateral_residual_rms_m: c.lateral_rms_m,
             lateral_residual_p95_m: c.lateral_p95_m,
-            gaps: c.gaps.iter().map(stretch).collect(),
+            gaps: c
+                .gaps
+                .iter()
+                .map(|g| {
+                    let s = stretch(&Stretch {
+                        from_m: g.from_m,
+                        to_m: g.to_m,
+                    });
+                    Gap {
+                        from_m: s.from_m,
+                        to_m: s.to_m,
+                        ..*g
+                    }
+                })
+                .collect(),
             stretches: c
                 .stretches
                 .iter()

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::bridge::Crossings;
 use crate::error::FitError;
 use crate::fixes::RunFixes;
 use crate::line::{Line, OnLine};
@@ -15,6 +16,15 @@ use crate::line::{Line, OnLine};
 pub struct Stretch {
     pub from_m: f64,
     pub to_m: f64,
+}
+
+/// A stretch of line with no fix: crossed by the motion of some runs (their IMU and
+/// odometer), else bridged by the spline alone.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Gap {
+    pub from_m: f64,
+    pub to_m: f64,
+    pub crossed_by_runs: usize,
 }
 
 /// A stretch where runs put the line in different places.
@@ -58,8 +68,8 @@ pub struct Centreline {
     pub fixes_used: usize,
     pub lateral_rms_m: f64,
     pub lateral_p95_m: f64,
-    /// Stretches longer than [`GAP_M`] without a fix: bridged by the spline.
-    pub gaps: Vec<Stretch>,
+    /// Stretches longer than [`GAP_M`] without a fix.
+    pub gaps: Vec<Gap>,
     pub disagreements: Vec<Disagreement>,
     /// Where the first run's first fix on the line lies, and whether it travels towards
     /// increasing chainage: the default origin and direction.
@@ -112,10 +122,17 @@ pub(crate) fn finish(
     line: Line,
     runs: &[RunFixes],
     placed: &[Vec<Option<OnLine>>],
+    crossed: &[Crossings],
     stretch_m: f64,
     disagreement_m: f64,
 ) -> Centreline {
     let on: Vec<&OnLine> = placed.iter().flatten().flatten().collect();
+    let with_sigma: Vec<(&OnLine, f64)> = runs
+        .iter()
+        .zip(placed)
+        .flat_map(|(r, p)| r.fixes.iter().zip(p))
+        .filter_map(|(f, m)| Some((m.as_ref()?, f.sigma_m)))
+        .collect();
     let mut abs: Vec<f64> = on.iter().map(|m| m.lateral_m.abs()).collect();
     abs.sort_by(f64::total_cmp);
     let p95 = abs
@@ -138,10 +155,10 @@ pub(crate) fn finish(
         fixes_used: on.len(),
         lateral_rms_m: rms(on.iter().map(|m| m.lateral_m)),
         lateral_p95_m: p95,
-        gaps: gaps(&on, &line),
+        gaps: gaps(&on, &line, crossed),
         disagreements: disagreements(placed, disagreement_m),
         first_run_start,
-        stretches: stretches(&on, stretch_m),
+        stretches: stretches(&with_sigma, stretch_m),
         line,
     }
 }
@@ -155,22 +172,26 @@ fn rms(x: impl Iterator<Item = f64>) -> f64 {
     }
 }
 
-/// The residual RMS across the track over each `length_m` stretch with fixes.
-fn stretches(on: &[&OnLine], length_m: f64) -> Vec<StretchResidual> {
-    let mut bins: BTreeMap<i64, (usize, f64)> = BTreeMap::new();
-    for m in on {
+/// The residual RMS across the track over each `length_m` stretch with fixes, each fix
+/// weighted by 1/σ² (a float fix among fixed ones counts as little as the fit let it).
+fn stretches(on: &[(&OnLine, f64)], length_m: f64) -> Vec<StretchResidual> {
+    // bin → (fixes, Σw, Σw·r²)
+    let mut bins: BTreeMap<i64, (usize, f64, f64)> = BTreeMap::new();
+    for (m, sigma) in on {
+        let w = 1.0 / (sigma * sigma).max(1e-6);
         let b = bins
             .entry((m.chainage_m / length_m).floor() as i64)
             .or_default();
         b.0 += 1;
-        b.1 += m.lateral_m * m.lateral_m;
+        b.1 += w;
+        b.2 += w * m.lateral_m * m.lateral_m;
     }
     bins.into_iter()
-        .map(|(bin, (n, sq))| StretchResidual {
+        .map(|(bin, (n, sw, swr))| StretchResidual {
             from_m: bin as f64 * length_m,
             to_m: (bin + 1) as f64 * length_m,
             fixes: n,
-            rms_m: (sq / n as f64).sqrt(),
+            rms_m: (swr / sw).sqrt(),
         })
         .collect()
 }
@@ -233,17 +254,23 @@ fn excursions(run: &RunFixes, placed: &[Option<OnLine>]) -> Vec<Excursion> {
     out
 }
 
-/// Stretches longer than [`GAP_M`] with no fix on the line.
-fn gaps(on: &[&OnLine], line: &Line) -> Vec<Stretch> {
+/// Stretches longer than [`GAP_M`] with no fix on the line, each with the number of runs
+/// whose motion crossed it.
+fn gaps(on: &[&OnLine], line: &Line, crossed: &[Crossings]) -> Vec<Gap> {
     let mut s: Vec<f64> = on.iter().map(|m| m.chainage_m).collect();
     s.push(line.start_m());
     s.push(line.end_m());
     s.sort_by(f64::total_cmp);
     s.windows(2)
         .filter(|w| w[1] - w[0] > GAP_M)
-        .map(|w| Stretch {
-            from_m: w[0],
-            to_m: w[1],
+        .map(|w| {
+            let mid = (w[0] + w[1]) / 2.0;
+            let covers = |c: &Crossings| c.spans.iter().any(|x| (x.from_m..=x.to_m).contains(&mid));
+            Gap {
+                from_m: w[0],
+                to_m: w[1],
+                crossed_by_runs: crossed.iter().filter(|c| covers(c)).count(),
+            }
         })
         .collect()
 }

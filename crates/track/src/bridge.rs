@@ -1,0 +1,367 @@
+//! Across a stretch where a run has no fix (a tunnel, a stretch without RTK), its own motion
+//! carries the line's shape: the turn its gyro measured and the distance its odometer ran,
+//! dead-reckoned through the gap.
+//!
+//! Dead reckoning alone drifts (a gyro bias turns the path by a growing angle, a worn wheel
+//! stretches it), so each crossing is tied to the run's fixes on both sides, over
+//! [`TIE_S`] before the gap and after it. Six unknowns, by Gauss–Newton least squares over
+//! those fixes:
+//!
+//! ```text
+//! ψ(t) = ψ₀ + Σ (turn − (b + ḃ τ) dτ),   p(t) = p₀ + k Σ d·(sin ψ, cos ψ)
+//! ```
+//!
+//! (p₀, ψ₀ where the tie starts, b the gyro bias and ḃ its drift, k the distance scale: a
+//! MEMS gyro's bias wanders over the minutes a crossing and its ties take). The heading and
+//! bias come from hundreds of metres of fixes either side, not from the line's tangent at
+//! the gap's ends, whose milliradian error would bend a 2 km crossing by decimetres. A
+//! crossing that needs a scale or a bias no sensor has, or leaves its tie fixes more than
+//! [`MAX_TIE_RMS_M`] off, is refused. The path through the gap becomes samples of the line
+//! every 5 m, weighted as a fix of [`BRIDGE_SIGMA_M`]; several runs' crossings average.
+
+use crate::fixes::{Fix, RunFixes};
+use crate::line::{Line, OnLine};
+use crate::motion::MotionStep;
+use crate::report::Stretch;
+use crate::spline::Sample;
+
+/// A gap in a run's fixes at least this long in time (s) and along the line (m) is crossed.
+const MIN_GAP_S: f64 = 2.0;
+const MIN_GAP_M: f64 = 30.0;
+
+/// The motion must reach this close to both fixes, ns.
+const MAX_EDGE_NS: u64 = 500_000_000;
+
+/// A crossing's samples count as fixes of this σ, m.
+pub const BRIDGE_SIGMA_M: f64 = 0.10;
+
+/// A crossing's samples are this far apart, m of distance run.
+const BRIDGE_STEP_M: f64 = 5.0;
+
+/// Ties beyond these are refused: the distance scale off 1 by more than this, the gyro bias
+/// beyond this (rad/s).
+const MAX_SCALE_ERROR: f64 = 0.1;
+const MAX_GYRO_BIAS_RADPS: f64 = 0.01;
+
+/// The crossings of one run's gaps: the samples they give and the stretches they span.
+#[derive(Debug, Default)]
+pub struct Crossings {
+    pub samples: Vec<Sample>,
+    pub spans: Vec<Stretch>,
+    /// Gaps it could not cross (no motion, or a closure no sensor explains).
+    pub refused: usize,
+}
+
+/// The crossings of `run`'s gaps on `line`, its fixes placed as `placed`.
+pub fn cross_gaps(line: &Line, run: &RunFixes, placed: &[Option<OnLine>]) -> Crossings {
+    let mut out = Crossings::default();
+    if run.motion.is_empty() {
+        return out;
+    }
+    let on: Vec<(usize, &OnLine)> = placed
+        .iter()
+        .enumerate()
+        .filter_map(|(i, m)| Some((i, m.as_ref()?)))
+        .collect();
+    for w in on.windows(2) {
+        let ((i, a), (j, b)) = (w[0], w[1]);
+        // Only where the run has no fix at all: fixes off the line in between are an
+        // excursion, not a gap to fill.
+        if j != i + 1 {
+            continue;
+        }
+        let (fa, fb) = (run.fixes[i], run.fixes[j]);
+        let gap_s = (fb.stamp_ns - fa.stamp_ns) as f64 / 1e9;
+        if gap_s < MIN_GAP_S || (b.chainage_m - a.chainage_m).abs() < MIN_GAP_M {
+            continue;
+        }
+        let psi0 = heading(line, a.chainage_m, b.chainage_m > a.chainage_m);
+        match cross(run, i, psi0) {
+            Some(path) => {
+                out.samples
+                    .extend(samples(&path, a.chainage_m, b.chainage_m));
+                out.spans.push(Stretch {
+                    from_m: a.chainage_m.min(b.chainage_m),
+                    to_m: a.chainage_m.max(b.chainage_m),
+                });
+            }
+            None => out.refused += 1,
+        }
+    }
+    out
+}
+
+/// The line's heading (clockwise from north) at `s`, the way a train travelling towards
+/// increasing chainage (or not) faces.
+fn heading(line: &Line, s: f64, increasing: bool) -> f64 {
+    use railfuse_catalog::map_matching::locate_on;
+    let h = locate_on(&line.vertices, s).map_or(0.0, |(_, _, h)| h);
+    if increasing {
+        h
+    } else {
+        h + std::f64::consts::PI
+    }
+}
+
+/// The tie's unknowns: start east, north, heading, gyro bias, its drift, distance scale.
+const N: usize = 6;
+
+/// Fixes this long before a gap and after it tie its crossing, s.
+pub const TIE_S: f64 = 20.0;
+
+/// A crossing whose tie fixes are further off than this across the track (RMS) is refused,
+/// m.
+const MAX_TIE_RMS_M: f64 = 0.15;
+
+/// A point of a crossing: distance run from the gap's first fix, and position.
+type PathPoint = (f64, f64, f64);
+
+/// The dead-reckoned positions at each step's end from `x = [e₀, n₀, ψ₀, b, ḃ, k]`.
+fn reckon(steps: &[MotionStep], start_ns: u64, x: &[f64; N]) -> Vec<(u64, f64, f64)> {
+    let [e0, n0, psi0, bias, drift, scale] = *x;
+    let (mut p, mut turn, mut last_ns) = ((e0, n0), 0.0, start_ns);
+    let mut out = Vec::with_capacity(steps.len() + 1);
+    out.push((start_ns, e0, n0));
+    for s in steps {
+        let dt = (s.stamp_ns - last_ns) as f64 / 1e9;
+        let mid = ((last_ns + s.stamp_ns) / 2 - start_ns) as f64 / 1e9;
+        last_ns = s.stamp_ns;
+        let step_turn = s.turn_rad - (bias + drift * mid) * dt;
+        let psi = psi0 + turn + step_turn / 2.0;
+        turn += step_turn;
+        let len = scale * s.distance_m;
+        p = (p.0 + len * psi.sin(), p.1 + len * psi.cos());
+        out.push((s.stamp_ns, p.0, p.1));
+    }
+    out
+}
+
+/// The reckoned position at `t_ns`, between the steps around it, and the unit direction of
+/// travel there.
+fn at(path: &[(u64, f64, f64)], t_ns: u64) -> (f64, f64, f64, f64) {
+    let i = path
+        .partition_point(|p| p.0 < t_ns)
+        .clamp(1, path.len() - 1);
+    let (a, b) = (path[i - 1], path[i]);
+    let f = if b.0 > a.0 {
+        ((t_ns.saturating_sub(a.0)) as f64 / (b.0 - a.0) as f64).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let (de, dn) = (b.1 - a.1, b.2 - a.2);
+    let len = de.hypot(dn).max(1e-9);
+    (a.1 + f * de, a.2 + f * dn, de / len, dn / len)
+}
+
+/// Along the track a tie fix counts this much of its miss: an odometer slides when the train
+/// brakes and its distance is then off by metres, which says nothing of the line's shape.
+const ALONG_WEIGHT: f64 = 0.05;
+
+/// The tie fixes' misses (along the track, weighted by [`ALONG_WEIGHT`], and across) for `x`.
+fn misses(steps: &[MotionStep], start_ns: u64, tie: &[Fix], x: &[f64; N]) -> Vec<f64> {
+    let path = reckon(steps, start_ns, x);
+    tie.iter()
+        .flat_map(|f| {
+            let (e, n, ue, un) = at(&path, f.stamp_ns);
+            let (me, mn) = (e - f.east_m, n - f.north_m);
+            [ALONG_WEIGHT * (me * ue + mn * un), me * un - mn * ue]
+        })
+        .collect()
+}
+
+/// Gauss–Newton on the tie fixes from a start facing `psi0`; the parameters and the misses'
+/// RMS.
+fn tie(steps: &[MotionStep], start_ns: u64, tie: &[Fix], psi0: f64) -> Option<([f64; N], f64)> {
+    let first = tie.first()?;
+    let mut x = [first.east_m, first.north_m, psi0, 0.0, 0.0, 1.0];
+    for _ in 0..8 {
+        let r = misses(steps, start_ns, tie, &x);
+        let mut jt: Vec<Vec<f64>> = Vec::with_capacity(N);
+        for (k, h) in [1e-3, 1e-3, 1e-6, 1e-8, 1e-10, 1e-6]
+            .into_iter()
+            .enumerate()
+        {
+            let mut xh = x;
+            xh[k] += h;
+            let rh = misses(steps, start_ns, tie, &xh);
+            jt.push(rh.iter().zip(&r).map(|(a, b)| (a - b) / h).collect());
+        }
+        // Normal equations JᵀJ dx = −Jᵀr.
+        let mut a = [[0.0; N]; N];
+        let mut g = [0.0; N];
+        for i in 0..N {
+            for j in 0..N {
+                a[i][j] = jt[i].iter().zip(&jt[j]).map(|(p, q)| p * q).sum();
+            }
+            g[i] = -jt[i].iter().zip(&r).map(|(p, q)| p * q).sum::<f64>();
+        }
+        let dx = solve(a, g)?;
+        for k in 0..N {
+            x[k] += dx[k];
+        }
+    }
+    let r = misses(steps, start_ns, tie, &x);
+    let cross = r.iter().skip(1).step_by(2);
+    let rms = (cross.map(|e| e * e).sum::<f64>() / (r.len() / 2) as f64).sqrt();
+    Some((x, rms))
+}
+
+/// `A x = b` for a small symmetric positive definite `A` (Gaussian elimination with partial
+/// pivoting); `None` if it is singular.
+#[allow(clippy::needless_range_loop)] // Elimination reads clearest with indices.
+fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    for c in 0..N {
+        let p = (c..N).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if !a[p][c].is_normal() {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..N {
+            let f = a[r][c] / a[c][c];
+            for k in c..N {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = [0.0; N];
+    for r in (0..N).rev() {
+        let s: f64 = (r + 1..N).map(|k| a[r][k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r][r];
+    }
+    Some(x)
+}
+
+/// The crossing of the gap between fixes `i` and `i + 1` of `run`, tied to its fixes either
+/// side, as points from the gap's first fix to its last; `None` where the motion does not
+/// cover it or the tie fails.
+fn cross(run: &RunFixes, i: usize, psi0: f64) -> Option<Vec<PathPoint>> {
+    let (fa, fb) = (run.fixes[i], run.fixes[i + 1]);
+    let tie_ns = (TIE_S * 1e9) as u64;
+    let from_ns = fa.stamp_ns.saturating_sub(tie_ns);
+    let to_ns = fb.stamp_ns + tie_ns;
+    let lo = run.fixes.partition_point(|f| f.stamp_ns < from_ns);
+    let hi = run.fixes.partition_point(|f| f.stamp_ns <= to_ns);
+    let tie_fixes = &run.fixes[lo..hi];
+    // The motion from the first tie fix on, covering the gap.
+    let (first_ns, end_ns) = (tie_fixes.first()?.stamp_ns, tie_fixes.last()?.stamp_ns);
+    // From the end of the step before the first tie fix (a step's motion is all before its
+    // stamp), to the step after the last.
+    let s0 = run
+        .motion
+        .partition_point(|s| s.stamp_ns <= first_ns)
+        .checked_sub(1)?;
+    let start_ns = run.motion[s0].stamp_ns;
+    let s1 = (run.motion.partition_point(|s| s.stamp_ns <= end_ns) + 1).min(run.motion.len());
+    let steps = &run.motion[s0 + 1..s1];
+    let covers = |t: u64| {
+        let k = steps.partition_point(|s| s.stamp_ns < t);
+        k < steps.len() && steps[k].stamp_ns - t <= MAX_EDGE_NS && k > 0
+    };
+    if steps.is_empty() || !covers(fa.stamp_ns) || !covers(fb.stamp_ns) {
+        return None;
+    }
+    let (x, rms) = tie(steps, start_ns, tie_fixes, psi0)?;
+    let plausible = (x[5] - 1.0).abs() <= MAX_SCALE_ERROR && x[3].abs() <= MAX_GYRO_BIAS_RADPS;
+    if !(plausible && rms <= MAX_TIE_RMS_M) {
+        return None;
+    }
+    let path = reckon(steps, start_ns, &x);
+    let (a, b) = (at(&path, fa.stamp_ns), at(&path, fb.stamp_ns));
+    let (a, b) = ((a.0, a.1), (b.0, b.1));
+    let mut d = 0.0;
+    let mut last = a;
+    let mut out = vec![(0.0, a.0, a.1)];
+    for &(t, e, n) in &path {
+        if t <= fa.stamp_ns || t >= fb.stamp_ns {
+            continue;
+        }
+        d += (e - last.0).hypot(n - last.1);
+        last = (e, n);
+        out.push((d, e, n));
+    }
+    d += (b.0 - last.0).hypot(b.1 - last.1);
+    out.push((d, b.0, b.1));
+    Some(out)
+}
+
+/// Samples of a closed path every [`BRIDGE_STEP_M`], at chainage in proportion to the
+/// distance run between the gap's ends.
+fn samples(path: &[PathPoint], from_m: f64, to_m: f64) -> Vec<Sample> {
+    let total = path.last().map_or(0.0, |p| p.0);
+    let weight = 1.0 / (BRIDGE_SIGMA_M * BRIDGE_SIGMA_M);
+    let mut next = BRIDGE_STEP_M;
+    let mut out = Vec::new();
+    for &(d, e, n) in path {
+        if d >= next && d < total - BRIDGE_STEP_M / 2.0 {
+            out.push(Sample {
+                chainage_m: from_m + (to_m - from_m) * d / total,
+                east_m: e,
+                north_m: n,
+                weight,
+            });
+            next = d + BRIDGE_STEP_M;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_biased_gyro_and_a_worn_wheel_cross_a_gap_tied_to_the_fixes_either_side() {
+        // 20 m/s along a 1200 m radius curve to the right, heading east at first; no fix
+        // from 30 s to 90 s (1.2 km). The gyro reads 0.001 rad/s high, drifting by 1e-5
+        // rad/s each second; the wheel reads 2 % long.
+        let (r, v) = (1200.0, 20.0);
+        let point = |t: f64| {
+            let a = v * t / r;
+            (r * a.sin(), -r * (1.0 - a.cos()))
+        };
+        let fixes: Vec<Fix> = (0..=1200)
+            .map(|i| i as f64 * 0.1)
+            .filter(|t| !(30.0..90.0).contains(t))
+            .map(|t| {
+                let (e, n) = point(t);
+                Fix {
+                    stamp_ns: (t * 1e9) as u64,
+                    east_m: e,
+                    north_m: n,
+                    sigma_m: 0.02,
+                }
+            })
+            .collect();
+        let motion: Vec<MotionStep> = (1..=1200)
+            .map(|i| {
+                let t = i as f64 * 0.1;
+                MotionStep {
+                    stamp_ns: (t * 1e9) as u64,
+                    distance_m: 1.02 * v * 0.1,
+                    turn_rad: (v / r + 0.001 + 1e-5 * t) * 0.1,
+                }
+            })
+            .collect();
+        let run = RunFixes {
+            name: "curve".into(),
+            fixes,
+            motion,
+        };
+        let gap = run
+            .fixes
+            .iter()
+            .position(|f| f.stamp_ns >= 29_900_000_000)
+            .unwrap();
+        let path = cross(&run, gap, std::f64::consts::FRAC_PI_2).expect("crosses");
+        let worst = path
+            .iter()
+            .map(|&(_, e, n)| (e.hypot(n + r) - r).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 0.02, "the crossing leaves the curve by {worst} m");
+        let length = path.last().unwrap().0;
+        // From the fix at 29.9 s to the one at 90 s.
+        assert!((length - 1202.0).abs() < 0.5, "{length} m");
+    }
+}
