@@ -93,9 +93,67 @@ fn three_runs_give_the_true_line_to_centimetres_and_its_chainage() {
         "{without:?} against {score:?}"
     );
 
+    // Checked against an OpenStreetMap extract of the true line drawn 1.5 m to its left,
+    // as .osm XML and as GeoJSON, beside a road that is no railway.
+    let (osm, geo) = (d.path().join("line.osm"), d.path().join("osm.geojson"));
+    let drawn = osm_extract(&truth, 1.5, &osm, &geo);
+    for extract in [&osm, &geo] {
+        let mut with_osm = args.clone();
+        with_osm[at] = s(&alone);
+        with_osm.extend(["--osm", s(extract)]);
+        let r = ok_json(&with_osm);
+        let o = &r["osm"];
+        assert_eq!(o["ways"], 1, "{r}");
+        assert!(o["share_near"].as_f64().unwrap() > 0.99, "{o}");
+        assert!(
+            (o["rms_m"].as_f64().unwrap() - drawn).abs() < 0.1,
+            "{o} against {drawn}"
+        );
+    }
+
     // A log re-fuses on it.
     let out = d.path().join("on-line.mcap");
     ok(&["refuse", s(&logs[0]), "--track", s(&line), "-o", s(&out)]);
+}
+
+/// `truth`'s line drawn `left_m` to its left as an OpenStreetMap way (`railway=rail`) beside a
+/// road, written as .osm XML and as GeoJSON; the offset as drawn (its RMS over the line).
+fn osm_extract(truth: &TrackMap, left_m: f64, osm: &Path, geo: &Path) -> f64 {
+    let v = &truth.vertices;
+    let points: Vec<(f64, f64)> = (0..v.len())
+        .map(|i| {
+            let (a, b) = (v[i.saturating_sub(1)], v[(i + 1).min(v.len() - 1)]);
+            let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
+            let len = de.hypot(dn);
+            // Left of the direction (de, dn) is (−dn, de).
+            let (e, n) = (
+                v[i].east_m - left_m * dn / len,
+                v[i].north_m + left_m * de / len,
+            );
+            let (lat, lon, _) = truth.origin.to_geodetic(e, n, 0.0);
+            (lat, lon)
+        })
+        .collect();
+    let mut xml = String::from("<?xml version=\"1.0\"?>\n<osm version=\"0.6\">\n");
+    for (i, (lat, lon)) in points.iter().enumerate() {
+        xml += &format!("<node id=\"{}\" lat=\"{lat}\" lon=\"{lon}\"/>\n", i + 1);
+    }
+    xml += "<way id=\"1\">";
+    for i in 0..points.len() {
+        xml += &format!("<nd ref=\"{}\"/>", i + 1);
+    }
+    xml += "<tag k=\"railway\" v=\"rail\"/></way>\n";
+    xml += "<way id=\"2\"><nd ref=\"1\"/><nd ref=\"2\"/><tag k=\"highway\" v=\"primary\"/></way>\n</osm>\n";
+    std::fs::write(osm, xml).unwrap();
+    let coordinates: Vec<[f64; 2]> = points.iter().map(|&(lat, lon)| [lon, lat]).collect();
+    let road = [coordinates[0], coordinates[1]];
+    let collection = serde_json::json!({ "type": "FeatureCollection", "features": [
+        { "type": "Feature", "properties": { "railway": "rail" },
+          "geometry": { "type": "LineString", "coordinates": coordinates } },
+        { "type": "Feature", "properties": { "highway": "primary" },
+          "geometry": { "type": "LineString", "coordinates": road } } ] });
+    std::fs::write(geo, collection.to_string()).unwrap();
+    left_m
 }
 
 /// A fitted line against the true one, every metre of its chainage.

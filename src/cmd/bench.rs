@@ -83,6 +83,10 @@ pub struct Args {
     /// as 20 parts, and as three recorders' files with --align gnss (time and peak memory).
     #[arg(long, value_name = "SECONDS")]
     pub runs: Option<f64>,
+    /// Measure `railfuse track` instead: default runs of this many seconds (seeds 1–3),
+    /// fitted one, two and three at a time (time, peak memory, fixes a second).
+    #[arg(long, value_name = "SECONDS")]
+    pub track: Option<f64>,
 }
 
 pub fn run(a: Args) -> Result<()> {
@@ -110,6 +114,9 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let Some(secs) = a.runs {
         return super::bench_runs::run(&a.dir, secs, a.repeat);
+    }
+    if let Some(secs) = a.track {
+        return super::bench_track::run(&a.dir, secs, a.repeat);
     }
     refuse_table(&a)
 }

@@ -2,6 +2,7 @@ pub mod bench;
 pub mod bench_em;
 pub mod bench_record;
 pub mod bench_runs;
+pub mod bench_track;
 pub mod bench_tune;
 pub mod bench_viz;
 pub mod demo;

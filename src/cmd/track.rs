@@ -7,6 +7,7 @@ use railfuse_eval::FixQuality;
 use railfuse_track::chainage::{self, Post};
 use railfuse_track::fit::{self, FitOptions};
 use railfuse_track::fixes::{read_fixes, RunFixes};
+use railfuse_track::osm;
 use railfuse_track::output::{self, Summary};
 
 use crate::table::Table;
@@ -49,6 +50,10 @@ pub struct Args {
     /// Length the spline smooths over, m.
     #[arg(long, default_value_t = 10.0)]
     pub smoothing: f64,
+    /// An OpenStreetMap extract (.osm XML, or GeoJSON as overpass-turbo exports it): the
+    /// fitted line is checked against its railway=rail ways and their offset reported.
+    #[arg(long, value_name = "FILE")]
+    pub osm: Option<PathBuf>,
     /// Bridge the stretches without fixes with the spline alone, not with each run's own
     /// motion (its IMU's turn and its odometer's distance, tied to its fixes either side).
     #[arg(long)]
@@ -109,6 +114,7 @@ pub fn run(a: Args) -> Result<()> {
         }
     }
     let given = posts(&a)?;
+    let rails = a.osm.as_deref().map(osm::read_rail).transpose()?;
     // The plane: around the first post where one is given, else the first fix read.
     let mut origin = given.first().map(|&(lat, lon, _, _)| GeodeticOrigin {
         latitude_deg: lat,
@@ -148,7 +154,7 @@ pub fn run(a: Args) -> Result<()> {
     let placement = chainage::place(&centreline, &posts)?;
     centreline.check(a.tolerance, |s| placement.chainage(s))?;
     let vertices = chainage::placed(&centreline.line.thinned(0.002), &placement);
-    let summary = Summary::new(
+    let mut summary = Summary::new(
         &centreline,
         &placement,
         &vertices,
@@ -156,6 +162,20 @@ pub fn run(a: Args) -> Result<()> {
         &opts,
         a.tolerance,
     );
+    summary.osm = rails.map(|ways| {
+        let plane: Vec<Vec<(f64, f64)>> = ways
+            .iter()
+            .map(|w| {
+                w.iter()
+                    .map(|&(lat, lon)| {
+                        let (e, n, _) = origin.to_enu(lat, lon, 0.0);
+                        (e, n)
+                    })
+                    .collect()
+            })
+            .collect();
+        osm::offset(&centreline.line, &plane)
+    });
     let name = a
         .name
         .clone()
@@ -175,7 +195,9 @@ pub fn run(a: Args) -> Result<()> {
             .with_context(|| format!("{}: cannot write", csv.display()))?;
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        let mut v = serde_json::to_value(&summary)?;
+        v["peak_rss_kib"] = super::measure::peak_rss_kib().into();
+        println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print_summary(&summary, &a.output);
     }
@@ -235,6 +257,17 @@ fn print_summary(s: &Summary, out: &std::path::Path) {
             n => format!("crossed by the motion (IMU turn, odometer distance) of {n} runs"),
         };
         println!("no fix from km {} to {}: {how}", km(g.from_m), km(g.to_m));
+    }
+    if let Some(o) = &s.osm {
+        println!(
+            "against OpenStreetMap ({} railway=rail ways): {:.0} % of the line has one within {} m, {:.2} m RMS, {:.2} m p95, {:.2} m at most from the nearest",
+            o.ways,
+            100.0 * o.share_near,
+            osm::NEAR_M,
+            o.rms_m,
+            o.p95_m,
+            o.max_m
+        );
     }
     for d in &s.runs_disagree {
         println!(

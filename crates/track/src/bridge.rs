@@ -22,7 +22,6 @@
 use crate::fixes::{Fix, RunFixes};
 use crate::line::{Line, OnLine};
 use crate::motion::MotionStep;
-use crate::report::Stretch;
 use crate::spline::Sample;
 
 /// A gap in a run's fixes at least this long in time (s) and along the line (m) is crossed.
@@ -47,7 +46,8 @@ const MAX_GYRO_BIAS_RADPS: f64 = 0.01;
 #[derive(Debug, Default)]
 pub struct Crossings {
     pub samples: Vec<Sample>,
-    pub spans: Vec<Stretch>,
+    /// The chainage each crossing spans, from–to, m.
+    pub spans: Vec<(f64, f64)>,
     /// Gaps it could not cross (no motion, or a closure no sensor explains).
     pub refused: usize,
 }
@@ -80,10 +80,10 @@ pub fn cross_gaps(line: &Line, run: &RunFixes, placed: &[Option<OnLine>]) -> Cro
             Some(path) => {
                 out.samples
                     .extend(samples(&path, a.chainage_m, b.chainage_m));
-                out.spans.push(Stretch {
-                    from_m: a.chainage_m.min(b.chainage_m),
-                    to_m: a.chainage_m.max(b.chainage_m),
-                });
+                out.spans.push((
+                    a.chainage_m.min(b.chainage_m),
+                    a.chainage_m.max(b.chainage_m),
+                ));
             }
             None => out.refused += 1,
         }

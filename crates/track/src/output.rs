@@ -9,6 +9,7 @@ use serde_json::json;
 
 use crate::chainage::Placement;
 use crate::fit::FitOptions;
+use crate::osm::OsmOffset;
 use crate::report::{Centreline, Disagreement, Excursion, Gap, Stretch, StretchResidual};
 
 /// What a fit says about itself, chainage placed.
@@ -28,6 +29,9 @@ pub struct Summary {
     /// Stretches where runs' mean offsets differ by more than `disagreement_m`.
     pub runs_disagree: Vec<Disagreement>,
     pub placement: Placement,
+    /// The line against OpenStreetMap's rail ways, where an extract was given.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub osm: Option<OsmOffset>,
     pub knot_spacing_m: f64,
     pub smoothing_m: f64,
     pub tolerance_m: f64,
@@ -140,6 +144,7 @@ impl Summary {
                 })
                 .collect(),
             placement: *p,
+            osm: None,
             knot_spacing_m: opts.knot_spacing_m,
             smoothing_m: opts.smoothing_m,
             tolerance_m,

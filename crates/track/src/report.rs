@@ -265,7 +265,7 @@ fn gaps(on: &[&OnLine], line: &Line, crossed: &[Crossings]) -> Vec<Gap> {
         .filter(|w| w[1] - w[0] > GAP_M)
         .map(|w| {
             let mid = (w[0] + w[1]) / 2.0;
-            let covers = |c: &Crossings| c.spans.iter().any(|x| (x.from_m..=x.to_m).contains(&mid));
+            let covers = |c: &Crossings| c.spans.iter().any(|&(a, b)| (a..=b).contains(&mid));
             Gap {
                 from_m: w[0],
                 to_m: w[1],
