@@ -197,6 +197,9 @@ pub struct OsmOffset {
     pub max_m: f64,
 }
 
+/// A segment of a way in the plane, its two ends (east, north).
+type Segment = ((f64, f64), (f64, f64));
+
 /// Cell size of the grid the ways' segments are looked up in, m.
 const CELL_M: f64 = NEAR_M;
 
@@ -204,7 +207,7 @@ const CELL_M: f64 = NEAR_M;
 pub fn offset(line: &Line, ways: &[Vec<(f64, f64)>]) -> OsmOffset {
     // Every segment in each grid cell its bounding box touches.
     let cell = |e: f64, n: f64| ((e / CELL_M).floor() as i64, (n / CELL_M).floor() as i64);
-    let mut grid: HashMap<(i64, i64), Vec<((f64, f64), (f64, f64))>> = HashMap::new();
+    let mut grid: HashMap<(i64, i64), Vec<Segment>> = HashMap::new();
     for w in ways {
         for s in w.windows(2) {
             let (a, b) = (
