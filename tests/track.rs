@@ -1,5 +1,7 @@
 //! `railfuse track`: the centre line and chainage fitted from the RTK fixes of simulated runs
-//! over the default line, scored against the simulator's own line; and bad input.
+//! over the default line, scored against the simulator's own line (across the track, in the
+//! gaps crossed by the runs' motion and without it, chainage, against an OpenStreetMap way); a
+//! ROS 2 bag re-fused on a line fitted from itself; and bad input.
 
 mod common;
 
@@ -7,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use common::*;
 use railfuse_catalog::map_matching::nearest_on;
-use railfuse_catalog::messages::TrackMap;
+use railfuse_catalog::messages::{FusedState, GroundTruth, TrackMap};
 use railfuse_catalog::track_geojson::read_track_file;
 
 /// Default runs (507 s each) of `seeds`, in `dir`.
@@ -204,6 +206,65 @@ fn score(fitted: &TrackMap, truth: &TrackMap, gaps: &[(f64, f64)]) -> Score {
         whole_rms: rms(&whole),
         worst_chainage,
     }
+}
+
+#[test]
+fn a_ros2_bag_refuses_on_a_line_fitted_from_itself_as_on_the_simulators() {
+    // The default run of seed 1 rewritten by rosbags as a bag with no track map
+    // (tests/interop/ros2_bag.py writes the simulator's line beside it); the line fitted
+    // from the bag and two other runs. A NavSatFix says GBAS for RTK float and fixed alike,
+    // so the float fixes count: their σ weights them, the promise needs 0.5 m.
+    let d = tempfile::tempdir().unwrap();
+    let logs = runs(d.path(), &["1", "4", "5"]);
+    let py = python("ros2_bag.py", &[s(&logs[0]), s(d.path())]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let (bag, simulators) = (d.path().join("bag"), d.path().join("line.geojson"));
+    let truth_map: TrackMap = messages(&logs[0], "/track/map").remove(0);
+    let (e, n, _) = truth_map.locate(1000.0).unwrap();
+    let (lat, lon, _) = truth_map.origin.to_geodetic(e, n, 0.0);
+    let post = format!("{lat},{lon}=1");
+    let fitted = d.path().join("fitted.geojson");
+    ok(&[
+        "track",
+        s(&bag),
+        s(&logs[1]),
+        s(&logs[2]),
+        "-o",
+        s(&fitted),
+        "--chainage-at",
+        &post,
+        "--tolerance",
+        "0.5",
+    ]);
+    let truth: Vec<GroundTruth> = messages(&logs[0], "/truth");
+    let rmse = |line: &Path| {
+        let out = d.path().join("on.mcap");
+        ok(&["refuse", s(&bag), "--track", s(line), "-o", s(&out)]);
+        let states: Vec<FusedState> = messages(&out, "/fused/default/state");
+        let sq: Vec<f64> = states
+            .iter()
+            .filter(|st| {
+                st.stamp_ns > truth[0].stamp_ns && st.stamp_ns < truth.last().unwrap().stamp_ns
+            })
+            .map(|st| {
+                let i = truth.partition_point(|g| g.stamp_ns < st.stamp_ns);
+                let (a, b) = (&truth[i - 1], &truth[i]);
+                let f = (st.stamp_ns - a.stamp_ns) as f64 / (b.stamp_ns - a.stamp_ns) as f64;
+                let c = a.chainage_m + f * (b.chainage_m - a.chainage_m);
+                (st.chainage_m - c).powi(2)
+            })
+            .collect();
+        (sq.iter().sum::<f64>() / sq.len() as f64).sqrt()
+    };
+    let (on_fitted, on_simulators) = (rmse(&fitted), rmse(&simulators));
+    assert!(
+        on_fitted < 1.05 * on_simulators,
+        "{on_fitted} m on the fitted line, {on_simulators} m on the simulator's"
+    );
 }
 
 #[test]
