@@ -2,11 +2,13 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use railfuse_catalog::geodesy::GeodeticOrigin;
+use railfuse_catalog::messages::TrackVertex;
 use railfuse_catalog::run::{Run, RunOptions};
 use railfuse_eval::FixQuality;
 use railfuse_track::chainage::{self, Post};
 use railfuse_track::fit::{self, FitOptions};
 use railfuse_track::fixes::{read_fixes, RunFixes};
+use railfuse_track::line::Line;
 use railfuse_track::osm;
 use railfuse_track::output::{self, Summary};
 
@@ -104,34 +106,10 @@ fn posts(a: &Args) -> Result<Vec<(f64, f64, f64, String)>> {
 }
 
 pub fn run(a: Args) -> Result<()> {
-    super::check_writable(&a.output)?;
-    if let Some(csv) = &a.csv {
-        super::check_writable(csv)?;
-    }
-    for (what, v) in [("--tolerance", a.tolerance), ("--smoothing", a.smoothing)] {
-        if !(v.is_finite() && v > 0.0) {
-            anyhow::bail!("{what} {v}: a length in metres above 0");
-        }
-    }
+    check_args(&a)?;
     let given = posts(&a)?;
     let rails = a.osm.as_deref().map(osm::read_rail).transpose()?;
-    // The plane: around the first post where one is given, else the first fix read.
-    let mut origin = given.first().map(|&(lat, lon, _, _)| GeodeticOrigin {
-        latitude_deg: lat,
-        longitude_deg: lon,
-        altitude_m: 0.0,
-    });
-    let mut runs: Vec<RunFixes> = Vec::with_capacity(a.runs.len());
-    for path in &a.runs {
-        let run = Run::open(std::slice::from_ref(path), &RunOptions::default())?;
-        runs.push(read_fixes(
-            &run,
-            a.topic.as_deref(),
-            &a.quality,
-            &mut origin,
-        )?);
-    }
-    let origin = origin.expect("a run with fixes set the plane");
+    let (runs, origin) = read_runs(&a, &given)?;
     let opts = FitOptions {
         smoothing_m: a.smoothing,
         disagreement_m: a.tolerance,
@@ -162,44 +140,97 @@ pub fn run(a: Args) -> Result<()> {
         &opts,
         a.tolerance,
     );
-    summary.osm = rails.map(|ways| {
-        let plane: Vec<Vec<(f64, f64)>> = ways
-            .iter()
-            .map(|w| {
-                w.iter()
-                    .map(|&(lat, lon)| {
-                        let (e, n, _) = origin.to_enu(lat, lon, 0.0);
-                        (e, n)
-                    })
-                    .collect()
-            })
-            .collect();
-        osm::offset(&centreline.line, &plane)
-    });
-    let name = a
-        .name
-        .clone()
-        .unwrap_or_else(|| format!("fitted by railfuse track from {} runs", runs.len()));
-    let csv_out = a
-        .output
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
-    let text = match csv_out {
-        true => output::csv(&vertices, &origin),
-        false => output::geojson(&name, &vertices, &origin, &summary),
-    };
-    std::fs::write(&a.output, text)
-        .with_context(|| format!("{}: cannot write", a.output.display()))?;
-    if let Some(csv) = &a.csv {
-        std::fs::write(csv, output::csv(&vertices, &origin))
-            .with_context(|| format!("{}: cannot write", csv.display()))?;
-    }
+    summary.osm = rails.map(|ways| osm_offset(&centreline.line, &ways, &origin));
+    write_outputs(&a, runs.len(), &vertices, &origin, &summary)?;
     if a.json {
         let mut v = serde_json::to_value(&summary)?;
         v["peak_rss_kib"] = super::measure::peak_rss_kib().into();
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print_summary(&summary, &a.output);
+    }
+    Ok(())
+}
+
+/// The outputs can be written and the lengths are lengths: said before any work.
+fn check_args(a: &Args) -> Result<()> {
+    super::check_writable(&a.output)?;
+    if let Some(csv) = &a.csv {
+        super::check_writable(csv)?;
+    }
+    for (what, v) in [("--tolerance", a.tolerance), ("--smoothing", a.smoothing)] {
+        if !(v.is_finite() && v > 0.0) {
+            anyhow::bail!("{what} {v}: a length in metres above 0");
+        }
+    }
+    Ok(())
+}
+
+/// Each run's fixes, in one plane: around the first post where one is given, else the first
+/// fix read.
+fn read_runs(
+    a: &Args,
+    given: &[(f64, f64, f64, String)],
+) -> Result<(Vec<RunFixes>, GeodeticOrigin)> {
+    let mut origin = given.first().map(|&(lat, lon, _, _)| GeodeticOrigin {
+        latitude_deg: lat,
+        longitude_deg: lon,
+        altitude_m: 0.0,
+    });
+    let mut runs: Vec<RunFixes> = Vec::with_capacity(a.runs.len());
+    for path in &a.runs {
+        let run = Run::open(std::slice::from_ref(path), &RunOptions::default())?;
+        runs.push(read_fixes(
+            &run,
+            a.topic.as_deref(),
+            &a.quality,
+            &mut origin,
+        )?);
+    }
+    Ok((runs, origin.expect("a run with fixes set the plane")))
+}
+
+/// The fitted line against OpenStreetMap's rail `ways` (latitude, longitude).
+fn osm_offset(line: &Line, ways: &[osm::Way], origin: &GeodeticOrigin) -> osm::OsmOffset {
+    let plane: Vec<Vec<(f64, f64)>> = ways
+        .iter()
+        .map(|w| {
+            w.iter()
+                .map(|&(lat, lon)| {
+                    let (e, n, _) = origin.to_enu(lat, lon, 0.0);
+                    (e, n)
+                })
+                .collect()
+        })
+        .collect();
+    osm::offset(line, &plane)
+}
+
+/// The line as GeoJSON (or CSV, by the name) at `-o`, and as CSV at `--csv`.
+fn write_outputs(
+    a: &Args,
+    runs: usize,
+    vertices: &[TrackVertex],
+    origin: &GeodeticOrigin,
+    summary: &Summary,
+) -> Result<()> {
+    let name = a
+        .name
+        .clone()
+        .unwrap_or_else(|| format!("fitted by railfuse track from {runs} runs"));
+    let csv_out = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    let text = match csv_out {
+        true => output::csv(vertices, origin),
+        false => output::geojson(&name, vertices, origin, summary),
+    };
+    std::fs::write(&a.output, text)
+        .with_context(|| format!("{}: cannot write", a.output.display()))?;
+    if let Some(csv) = &a.csv {
+        std::fs::write(csv, output::csv(vertices, origin))
+            .with_context(|| format!("{}: cannot write", csv.display()))?;
     }
     Ok(())
 }

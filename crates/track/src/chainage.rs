@@ -49,6 +49,12 @@ impl Placement {
     pub fn chainage(&self, s: f64) -> f64 {
         self.at_m + self.direction * (s - self.from_m)
     }
+
+    /// A provisional stretch `from`–`to` placed, its ends in increasing order.
+    pub fn span(&self, from_m: f64, to_m: f64) -> (f64, f64) {
+        let (a, b) = (self.chainage(from_m), self.chainage(to_m));
+        (a.min(b), a.max(b))
+    }
 }
 
 /// Where the line's chainage starts and which way it runs.

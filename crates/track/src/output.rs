@@ -10,7 +10,7 @@ use serde_json::json;
 use crate::chainage::Placement;
 use crate::fit::FitOptions;
 use crate::osm::OsmOffset;
-use crate::report::{Centreline, Disagreement, Excursion, Gap, Stretch, StretchResidual};
+use crate::report::{Centreline, Disagreement, Excursion, Gap, RunReport, StretchResidual};
 
 /// What a fit says about itself, chainage placed.
 #[derive(Debug, Clone, Serialize)]
@@ -59,39 +59,8 @@ impl Summary {
         opts: &FitOptions,
         tolerance_m: f64,
     ) -> Self {
-        let stretch = |s: &Stretch| {
-            let (a, b) = (p.chainage(s.from_m), p.chainage(s.to_m));
-            Stretch {
-                from_m: a.min(b),
-                to_m: a.max(b),
-            }
-        };
-        let at = |x: Option<f64>| x.map(|s| p.chainage(s));
         Self {
-            runs: c
-                .runs
-                .iter()
-                .map(|r| RunSummary {
-                    name: r.name.clone(),
-                    fixes: r.fixes,
-                    used: r.used,
-                    off_line: r.off_line,
-                    direction: match r.increasing == (p.direction > 0.0) {
-                        true => "increasing",
-                        false => "decreasing",
-                    },
-                    lateral_rms_m: r.lateral_rms_m,
-                    leaves_line: r
-                        .leaves_line
-                        .iter()
-                        .map(|e| Excursion {
-                            from_m: at(e.from_m),
-                            to_m: at(e.to_m),
-                            ..e.clone()
-                        })
-                        .collect(),
-                })
-                .collect(),
+            runs: c.runs.iter().map(|r| RunSummary::new(r, p)).collect(),
             fix_quality: quality,
             fixes_used: c.fixes_used,
             length_m: c.line.end_m() - c.line.start_m(),
@@ -102,43 +71,26 @@ impl Summary {
                 .gaps
                 .iter()
                 .map(|g| {
-                    let s = stretch(&Stretch {
-                        from_m: g.from_m,
-                        to_m: g.to_m,
-                    });
-                    Gap {
-                        from_m: s.from_m,
-                        to_m: s.to_m,
-                        ..*g
-                    }
+                    let (from_m, to_m) = p.span(g.from_m, g.to_m);
+                    Gap { from_m, to_m, ..*g }
                 })
                 .collect(),
             stretches: c
                 .stretches
                 .iter()
                 .map(|r| {
-                    let s = stretch(&Stretch {
-                        from_m: r.from_m,
-                        to_m: r.to_m,
-                    });
-                    StretchResidual {
-                        from_m: s.from_m,
-                        to_m: s.to_m,
-                        ..*r
-                    }
+                    let (from_m, to_m) = p.span(r.from_m, r.to_m);
+                    StretchResidual { from_m, to_m, ..*r }
                 })
                 .collect(),
             runs_disagree: c
                 .disagreements
                 .iter()
                 .map(|d| {
-                    let s = stretch(&Stretch {
-                        from_m: d.from_m,
-                        to_m: d.to_m,
-                    });
+                    let (from_m, to_m) = p.span(d.from_m, d.to_m);
                     Disagreement {
-                        from_m: s.from_m,
-                        to_m: s.to_m,
+                        from_m,
+                        to_m,
                         spread_m: d.spread_m,
                     }
                 })
@@ -149,6 +101,33 @@ impl Summary {
             smoothing_m: opts.smoothing_m,
             tolerance_m,
             disagreement_m: opts.disagreement_m,
+        }
+    }
+}
+
+impl RunSummary {
+    /// A run's report with its chainages placed.
+    fn new(r: &RunReport, p: &Placement) -> Self {
+        let at = |x: Option<f64>| x.map(|s| p.chainage(s));
+        Self {
+            name: r.name.clone(),
+            fixes: r.fixes,
+            used: r.used,
+            off_line: r.off_line,
+            direction: match r.increasing == (p.direction > 0.0) {
+                true => "increasing",
+                false => "decreasing",
+            },
+            lateral_rms_m: r.lateral_rms_m,
+            leaves_line: r
+                .leaves_line
+                .iter()
+                .map(|e| Excursion {
+                    from_m: at(e.from_m),
+                    to_m: at(e.to_m),
+                    ..e.clone()
+                })
+                .collect(),
         }
     }
 }
