@@ -282,6 +282,14 @@ fn print_summary(s: &Summary, out: &std::path::Path) {
             );
         }
     }
+    for a in &s.set_aside {
+        println!(
+            "fixes set aside from km {} to {}: the runs' motion says they bend up to {:.2} m off (a steady multipath pull)",
+            km(a.from_m),
+            km(a.to_m),
+            a.peak_m
+        );
+    }
     for g in &s.gaps {
         let how = match g.crossed_by_runs {
             0 => "bridged by the spline alone".to_owned(),

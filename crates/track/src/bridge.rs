@@ -1,6 +1,8 @@
-//! Across a stretch where a run has no fix (a tunnel, a stretch without RTK), its own motion
-//! carries the line's shape: the turn its gyro measured and the distance its odometer ran,
-//! dead-reckoned through the gap.
+//! Across a stretch where a run has no fix (a tunnel, a stretch without RTK) or whose fixes
+//! were set aside ([`crate::multipath`]), its own motion carries the line's shape: the turn
+//! its gyro measured and the distance its odometer ran, dead-reckoned through the gap. A run
+//! that starts or ends in a stretch set aside is crossed from its fixes on the one side
+//! ([`Tied`]).
 //!
 //! Dead reckoning alone drifts (a gyro bias turns the path by a growing angle, a worn wheel
 //! stretches it), so each crossing is tied to the run's fixes on both sides, over
@@ -56,21 +58,22 @@ pub struct Crossings {
 }
 
 /// The crossings of `run`'s gaps on `line`, its fixes placed as `placed`.
-pub fn cross_gaps(line: &Line, run: &RunFixes, placed: &[Option<OnLine>]) -> Crossings {
+/// `aside` marks the fixes set aside (their stretch is crossed as a gap).
+pub fn cross_gaps(
+    line: &Line,
+    run: &RunFixes,
+    placed: &[Option<OnLine>],
+    aside: &[bool],
+) -> Crossings {
     let mut out = Crossings::default();
     if run.motion.is_empty() {
         return out;
     }
-    let on: Vec<(usize, &OnLine)> = placed
-        .iter()
-        .enumerate()
-        .filter_map(|(i, m)| Some((i, m.as_ref()?)))
-        .collect();
-    for w in on.windows(2) {
-        let ((i, a), (j, b)) = (w[0], w[1]);
-        // Only where the run has no fix at all: fixes off the line in between are an
+    for g in gaps(run, placed, aside) {
+        let ((i, a), (j, b)) = (g.from, g.to);
+        // Only where the run has no fix used: fixes off the line in between are an
         // excursion, not a gap to fill.
-        if j != i + 1 {
+        if !(i + 1..j).all(|k| aside[k]) {
             continue;
         }
         let (fa, fb) = (run.fixes[i], run.fixes[j]);
@@ -79,7 +82,7 @@ pub fn cross_gaps(line: &Line, run: &RunFixes, placed: &[Option<OnLine>]) -> Cro
             continue;
         }
         let psi0 = heading(line, a.chainage_m, b.chainage_m > a.chainage_m);
-        match cross(run, i, psi0) {
+        match cross(run, (i, j), aside, g.tied, psi0) {
             Some(path) => {
                 out.samples
                     .extend(samples(&path, a.chainage_m, b.chainage_m));
@@ -92,6 +95,72 @@ pub fn cross_gaps(line: &Line, run: &RunFixes, placed: &[Option<OnLine>]) -> Cro
         }
     }
     out
+}
+
+/// A run's stretches between the fixes it uses on the line, and from the first (to the
+/// last) where it starts (ends) in a stretch set aside: a station at the line's end, from
+/// its first (last) fix there that its motion reaches.
+fn gaps(run: &RunFixes, placed: &[Option<OnLine>], aside: &[bool]) -> Vec<Gap> {
+    let on: Vec<(usize, &OnLine)> = placed
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !aside[*i])
+        .filter_map(|(i, m)| Some((i, m.as_ref()?)))
+        .collect();
+    let mut gaps: Vec<Gap> = on
+        .windows(2)
+        .map(|w| Gap {
+            from: (w[0].0, *w[0].1),
+            to: (w[1].0, *w[1].1),
+            tied: Tied::BothSides,
+        })
+        .collect();
+    let (m0, m1) = (
+        run.motion[0].stamp_ns,
+        run.motion[run.motion.len() - 1].stamp_ns,
+    );
+    let outer = |k: usize| {
+        let reached = (m0 + MAX_EDGE_NS..m1).contains(&run.fixes[k].stamp_ns);
+        placed[k].filter(|_| aside[k] && reached).map(|m| (k, m))
+    };
+    let (first_on, last_on) = match (on.first(), on.last()) {
+        (Some(f), Some(l)) => (f.0, l.0),
+        _ => return gaps,
+    };
+    let first_outer = (0..first_on).find_map(outer);
+    let last_outer = (last_on + 1..placed.len()).rev().find_map(outer);
+    if let (Some(&(i, a)), Some(first)) = (on.first(), first_outer) {
+        gaps.push(Gap {
+            from: first,
+            to: (i, *a),
+            tied: Tied::After,
+        });
+    }
+    if let (Some(&(j, b)), Some(last)) = (on.last(), last_outer) {
+        gaps.push(Gap {
+            from: (j, *b),
+            to: last,
+            tied: Tied::Before,
+        });
+    }
+    gaps
+}
+
+/// Which fixes tie a crossing: those either side of a gap, or only those after (before) a
+/// stretch set aside where the run starts (ends).
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Tied {
+    BothSides,
+    After,
+    Before,
+}
+
+/// A stretch of a run to cross: from fix `from` to fix `to` (in time order), with their
+/// places on the line.
+struct Gap {
+    from: (usize, OnLine),
+    to: (usize, OnLine),
+    tied: Tied,
 }
 
 /// The line's heading (clockwise from north) at `s`, the way a train travelling towards
@@ -160,53 +229,74 @@ fn at(path: &[(u64, f64, f64)], t_ns: u64) -> (f64, f64, f64, f64) {
 /// brakes and its distance is then off by metres, which says nothing of the line's shape.
 const ALONG_WEIGHT: f64 = 0.05;
 
-/// The tie fixes' misses (along the track, weighted by [`ALONG_WEIGHT`], and across) for `x`.
-fn misses(steps: &[MotionStep], start_ns: u64, tie: &[Fix], x: &[f64; N]) -> Vec<f64> {
-    let path = reckon(steps, start_ns, x);
-    tie.iter()
-        .flat_map(|f| {
+/// What a crossing is tied to: its fixes, and where the train stood, the gyro's bias then.
+struct Tie<'a> {
+    steps: &'a [MotionStep],
+    start_ns: u64,
+    fixes: &'a [Fix],
+    /// The bias the gyro read standing (rad/s) and when (s from `start_ns`).
+    standstill: Option<(f64, f64)>,
+}
+
+/// A standstill's bias counts as a miss of this many metres per rad/s: 1 cm for 1e-5
+/// rad/s, a tenth of what a MEMS gyro's bias wanders in a minute.
+const STANDSTILL_WEIGHT: f64 = 1e3;
+
+impl Tie<'_> {
+    /// The tie fixes' misses (along the track, weighted by [`ALONG_WEIGHT`], and across) for
+    /// `x`, then the standstill's.
+    fn misses(&self, x: &[f64; N]) -> Vec<f64> {
+        let path = reckon(self.steps, self.start_ns, x);
+        let fixes = self.fixes.iter().flat_map(|f| {
             let (e, n, ue, un) = at(&path, f.stamp_ns);
             let (me, mn) = (e - f.east_m, n - f.north_m);
             [ALONG_WEIGHT * (me * ue + mn * un), me * un - mn * ue]
-        })
-        .collect()
-}
-
-/// Gauss–Newton on the tie fixes from a start facing `psi0`; the parameters and the misses'
-/// RMS.
-fn tie(steps: &[MotionStep], start_ns: u64, tie: &[Fix], psi0: f64) -> Option<([f64; N], f64)> {
-    let first = tie.first()?;
-    let mut x = [first.east_m, first.north_m, psi0, 0.0, 0.0, 1.0];
-    for _ in 0..8 {
-        let r = misses(steps, start_ns, tie, &x);
-        let mut jt: Vec<Vec<f64>> = Vec::with_capacity(N);
-        for (k, h) in [1e-3, 1e-3, 1e-6, 1e-8, 1e-10, 1e-6]
-            .into_iter()
-            .enumerate()
-        {
-            let mut xh = x;
-            xh[k] += h;
-            let rh = misses(steps, start_ns, tie, &xh);
-            jt.push(rh.iter().zip(&r).map(|(a, b)| (a - b) / h).collect());
-        }
-        // Normal equations JᵀJ dx = −Jᵀr.
-        let mut a = [[0.0; N]; N];
-        let mut g = [0.0; N];
-        for i in 0..N {
-            for j in 0..N {
-                a[i][j] = jt[i].iter().zip(&jt[j]).map(|(p, q)| p * q).sum();
-            }
-            g[i] = -jt[i].iter().zip(&r).map(|(p, q)| p * q).sum::<f64>();
-        }
-        let dx = solve(a, g)?;
-        for k in 0..N {
-            x[k] += dx[k];
-        }
+        });
+        let standstill = self
+            .standstill
+            .map(|(bias, t)| STANDSTILL_WEIGHT * (x[3] + x[4] * t - bias));
+        fixes.chain(standstill).collect()
     }
-    let r = misses(steps, start_ns, tie, &x);
-    let cross = r.iter().skip(1).step_by(2);
-    let rms = (cross.map(|e| e * e).sum::<f64>() / (r.len() / 2) as f64).sqrt();
-    Some((x, rms))
+
+    /// Gauss–Newton from `x` (the parameters not `free` kept as they are); the parameters and
+    /// the fixes' misses across the track (RMS).
+    fn solve(&self, mut x: [f64; N], free: [bool; N]) -> Option<([f64; N], f64)> {
+        for _ in 0..8 {
+            let r = self.misses(&x);
+            let mut jt: Vec<Vec<f64>> = Vec::with_capacity(N);
+            for (k, h) in [1e-3, 1e-3, 1e-6, 1e-8, 1e-10, 1e-6]
+                .into_iter()
+                .enumerate()
+            {
+                let mut xh = x;
+                xh[k] += h;
+                let rh = self.misses(&xh);
+                jt.push(rh.iter().zip(&r).map(|(a, b)| (a - b) / h).collect());
+            }
+            // Normal equations JᵀJ dx = −Jᵀr.
+            let mut a = [[0.0; N]; N];
+            let mut g = [0.0; N];
+            for i in 0..N {
+                for j in 0..N {
+                    a[i][j] = match free[i] && free[j] {
+                        true => jt[i].iter().zip(&jt[j]).map(|(p, q)| p * q).sum(),
+                        false => f64::from(u8::from(i == j)),
+                    };
+                }
+                if free[i] {
+                    g[i] = -jt[i].iter().zip(&r).map(|(p, q)| p * q).sum::<f64>();
+                }
+            }
+            let dx = solve(a, g)?;
+            for k in 0..N {
+                x[k] += dx[k];
+            }
+        }
+        let r = self.misses(&x);
+        let cross = r[..2 * self.fixes.len()].iter().skip(1).step_by(2);
+        let rms = (cross.map(|e| e * e).sum::<f64>() / self.fixes.len() as f64).sqrt();
+        Some((x, rms))
+    }
 }
 
 /// `A x = b` for a small symmetric positive definite `A` (Gaussian elimination with partial
@@ -236,19 +326,38 @@ fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; 
     Some(x)
 }
 
-/// The crossing of the gap between fixes `i` and `i + 1` of `run`, tied to its fixes either
-/// side, as points from the gap's first fix to its last; `None` where the motion does not
-/// cover it or the tie fails.
-fn cross(run: &RunFixes, i: usize, psi0: f64) -> Option<Vec<PathPoint>> {
-    let (fa, fb) = (run.fixes[i], run.fixes[i + 1]);
+/// The crossing of the gap between fixes `i` and `j` of `run`, tied to its fixes as `tied`
+/// says (not those set `aside`), as points from the gap's first fix to its last; `None`
+/// where the motion does not cover it or the tie fails.
+///
+/// A crossing tied on one side only (a run that starts or stops in a stretch set aside) has
+/// no fixes on the far side to bound the gyro's bias there: where the train stood long
+/// enough ([`MIN_STANDSTILL_S`]), the gyro's mean rate then ties the bias's drift (a train
+/// that stands does not turn); else the bias is taken constant. The odometer's scale is kept:
+/// ten seconds of fixes cannot tell it.
+fn cross(
+    run: &RunFixes,
+    (i, j): (usize, usize),
+    aside: &[bool],
+    tied: Tied,
+    psi0: f64,
+) -> Option<Vec<PathPoint>> {
+    let (fa, fb) = (run.fixes[i], run.fixes[j]);
     let tie_ns = (TIE_S * 1e9) as u64;
-    let from_ns = fa.stamp_ns.saturating_sub(tie_ns);
-    let to_ns = fb.stamp_ns + tie_ns;
+    let (from_ns, to_ns) = match tied {
+        Tied::BothSides => (fa.stamp_ns.saturating_sub(tie_ns), fb.stamp_ns + tie_ns),
+        Tied::After => (fb.stamp_ns, fb.stamp_ns + 2 * tie_ns),
+        Tied::Before => (fa.stamp_ns.saturating_sub(2 * tie_ns), fa.stamp_ns),
+    };
     let lo = run.fixes.partition_point(|f| f.stamp_ns < from_ns);
     let hi = run.fixes.partition_point(|f| f.stamp_ns <= to_ns);
-    let tie_fixes = &run.fixes[lo..hi];
-    // The motion from the first tie fix on, covering the gap.
-    let (first_ns, end_ns) = (tie_fixes.first()?.stamp_ns, tie_fixes.last()?.stamp_ns);
+    let tie_fixes: Vec<Fix> = (lo..hi)
+        .filter(|&k| !aside[k])
+        .map(|k| run.fixes[k])
+        .collect();
+    // The motion from the earlier of the first tie fix and the gap's start, covering both.
+    let first_ns = tie_fixes.first()?.stamp_ns.min(fa.stamp_ns);
+    let end_ns = tie_fixes.last()?.stamp_ns.max(fb.stamp_ns);
     // From the end of the step before the first tie fix (a step's motion is all before its
     // stamp), to the step after the last.
     let s0 = run
@@ -258,14 +367,30 @@ fn cross(run: &RunFixes, i: usize, psi0: f64) -> Option<Vec<PathPoint>> {
     let start_ns = run.motion[s0].stamp_ns;
     let s1 = (run.motion.partition_point(|s| s.stamp_ns <= end_ns) + 1).min(run.motion.len());
     let steps = &run.motion[s0 + 1..s1];
+    // Motion from before `t` (the steps' start) to a step within reach after it.
     let covers = |t: u64| {
         let k = steps.partition_point(|s| s.stamp_ns < t);
-        k < steps.len() && steps[k].stamp_ns - t <= MAX_EDGE_NS && k > 0
+        t >= start_ns && k < steps.len() && steps[k].stamp_ns - t <= MAX_EDGE_NS
     };
     if steps.is_empty() || !covers(fa.stamp_ns) || !covers(fb.stamp_ns) {
         return None;
     }
-    let (x, rms) = tie(steps, start_ns, tie_fixes, psi0)?;
+    let first = tie_fixes.first()?;
+    let x = [first.east_m, first.north_m, psi0, 0.0, 0.0, 1.0];
+    let mut free = [true; N];
+    let mut tie = Tie {
+        steps,
+        start_ns,
+        fixes: &tie_fixes,
+        standstill: None,
+    };
+    if tied != Tied::BothSides {
+        // The odometer's scale kept; the bias where the train stood ties its far end.
+        free[5] = false;
+        tie.standstill = standstill_bias(steps, start_ns);
+        free[4] = tie.standstill.is_some();
+    }
+    let (x, rms) = tie.solve(x, free)?;
     let plausible = (x[5] - 1.0).abs() <= MAX_SCALE_ERROR && x[3].abs() <= MAX_GYRO_BIAS_RADPS;
     if !(plausible && rms <= MAX_TIE_RMS_M) {
         return None;
@@ -287,6 +412,25 @@ fn cross(run: &RunFixes, i: usize, psi0: f64) -> Option<Vec<PathPoint>> {
     d += (b.0 - last.0).hypot(b.1 - last.1);
     out.push((d, b.0, b.1));
     Some(out)
+}
+
+/// A standstill this long gives the gyro's bias, s.
+const MIN_STANDSTILL_S: f64 = 5.0;
+
+/// The gyro's mean rate over the steps where the train stood, and their mean time (s from
+/// `start_ns`), if it stood long enough.
+fn standstill_bias(steps: &[MotionStep], start_ns: u64) -> Option<(f64, f64)> {
+    let (mut turn, mut time, mut when, mut last) = (0.0, 0.0, 0.0, start_ns);
+    for s in steps {
+        let dt = (s.stamp_ns - last) as f64 / 1e9;
+        if s.distance_m == 0.0 {
+            turn += s.turn_rad;
+            time += dt;
+            when += dt * ((s.stamp_ns - start_ns) as f64 / 1e9 - dt / 2.0);
+        }
+        last = s.stamp_ns;
+    }
+    (time >= MIN_STANDSTILL_S).then(|| (turn / time, when / time))
 }
 
 /// Samples of a closed path every [`BRIDGE_STEP_M`], at chainage in proportion to the
@@ -357,7 +501,15 @@ mod tests {
             .iter()
             .position(|f| f.stamp_ns >= 29_900_000_000)
             .unwrap();
-        let path = cross(&run, gap, std::f64::consts::FRAC_PI_2).expect("crosses");
+        let aside = vec![false; run.fixes.len()];
+        let path = cross(
+            &run,
+            (gap, gap + 1),
+            &aside,
+            Tied::BothSides,
+            std::f64::consts::FRAC_PI_2,
+        )
+        .expect("crosses");
         let worst = path
             .iter()
             .map(|&(_, e, n)| (e.hypot(n + r) - r).abs())

@@ -8,8 +8,12 @@
 //!    is off the line; a run's stretch of such fixes is reported as leaving the line (a
 //!    branch, a siding), not averaged in.
 //! 3. The spline is refitted on every fix on the line by its chainage, weighted by its σ and
-//!    down-weighted (Huber) where its offset stands out; then 2 and 3 again, three passes
-//!    in all, so chainage becomes the fitted line's own arc length.
+//!    down-weighted (Huber) where its offset stands out, with each run's motion across the
+//!    gaps in its fixes ([`crate::bridge`]).
+//! 4. Where the runs' gyros say the line bends and they did not (a steady multipath pull,
+//!    [`crate::multipath`]), the fixes are set aside and the runs' motion crosses the stretch
+//!    as a gap; then 2 and 3 again, four passes in all, so chainage becomes the fitted line's
+//!    own arc length.
 //!
 //! Runs in either direction merge: a fix's place on the line does not depend on where the
 //! train was heading.
@@ -18,7 +22,8 @@ use crate::bridge::{cross_gaps, Crossings};
 use crate::error::{FitError, MIN_TRAVEL_M};
 use crate::fixes::{Fix, RunFixes};
 use crate::line::{Line, OnLine};
-use crate::report::Centreline;
+use crate::multipath::{self, SetAside};
+use crate::report::{Centreline, Fitted};
 use crate::spline::{Knots, PlaneSpline, Sample};
 
 /// How the line is fitted.
@@ -58,42 +63,81 @@ const SEED_SPACING_M: f64 = 2.0;
 /// A run needs this share of its fixes on the line to be on the same line.
 const MIN_ON_LINE_SHARE: f64 = 0.2;
 
+/// Passes over the runs: the fixes alone; with the gaps crossed by the runs' motion; with
+/// the stretches that motion contradicts set aside (found on the line of the pass before,
+/// [`crate::multipath`]); once more, so chainage is the final line's arc length.
+const PASSES: usize = 4;
+
+/// The pass that looks for stretches to set aside.
+const SET_ASIDE_PASS: usize = 2;
+
 /// Fits one centre line to `runs` (the first run sets chainage's origin and direction).
 pub fn fit(runs: &[RunFixes], opts: &FitOptions) -> Result<Centreline, FitError> {
     let seed = seed_run(runs)?;
     let mut line = seed_line(&runs[seed], opts)?;
-    for pass in 0..3 {
-        let placed = place_all(&line, runs, opts);
+    let mut suspect: Vec<SetAside> = Vec::new();
+    for pass in 0..PASSES {
+        let placed = place_all(&line, runs, opts, &suspect);
         check_overlap(runs, &placed, &runs[seed].name)?;
-        let mut samples = samples(runs, &placed, pass > 0);
+        if pass == SET_ASIDE_PASS && opts.cross_gaps {
+            suspect = multipath::suspect(&line, runs, &placed);
+        }
+        let aside = set_aside(&placed, &suspect);
+        let mut samples = samples(runs, &placed, &aside, pass > 0);
         // Once the line holds where there are fixes, the runs' own motion crosses the gaps.
         if pass > 0 && opts.cross_gaps {
-            for c in crossings(&line, runs, &placed) {
+            for c in crossings(&line, runs, &placed, &aside) {
                 samples.extend(c.samples);
             }
         }
         line = refit(&samples, opts)?;
     }
-    let placed = place_all(&line, runs, opts);
+    let placed = place_all(&line, runs, opts, &suspect);
     check_overlap(runs, &placed, &runs[seed].name)?;
+    let aside = set_aside(&placed, &suspect);
     let crossed = match opts.cross_gaps {
-        true => crossings(&line, runs, &placed),
+        true => crossings(&line, runs, &placed, &aside),
         false => Vec::new(),
     };
     Ok(crate::report::finish(
         line,
         runs,
-        &placed,
+        Fitted {
+            placed: &placed,
+            aside: &aside,
+            set_aside: suspect,
+        },
         &crossed,
         opts.stretch_m,
         opts.disagreement_m,
     ))
 }
 
-fn crossings(line: &Line, runs: &[RunFixes], placed: &[Vec<Option<OnLine>>]) -> Vec<Crossings> {
+/// Which fixes of each run lie in a stretch set aside.
+fn set_aside(placed: &[Vec<Option<OnLine>>], stretches: &[SetAside]) -> Vec<Vec<bool>> {
+    let inside = |m: &Option<OnLine>| {
+        m.is_some_and(|m| {
+            stretches
+                .iter()
+                .any(|s| (s.from_m..=s.to_m).contains(&m.chainage_m))
+        })
+    };
+    placed
+        .iter()
+        .map(|p| p.iter().map(inside).collect())
+        .collect()
+}
+
+fn crossings(
+    line: &Line,
+    runs: &[RunFixes],
+    placed: &[Vec<Option<OnLine>>],
+    aside: &[Vec<bool>],
+) -> Vec<Crossings> {
     runs.iter()
         .zip(placed)
-        .map(|(r, p)| cross_gaps(line, r, p))
+        .zip(aside)
+        .map(|((r, p), a)| cross_gaps(line, r, p, a))
         .collect()
 }
 
@@ -159,8 +203,20 @@ fn seed_line(run: &RunFixes, opts: &FitOptions) -> Result<Line, FitError> {
     Ok(Line::from_spline(&spline, from, to))
 }
 
-/// Where each fix of each run lies on `line`: `None` where it is off the line.
-fn place_all(line: &Line, runs: &[RunFixes], opts: &FitOptions) -> Vec<Vec<Option<OnLine>>> {
+/// Where each fix of each run lies on `line`: `None` where it is off the line. In a stretch
+/// set aside a fix may lie further off, by twice the pull the runs' motion saw there.
+fn place_all(
+    line: &Line,
+    runs: &[RunFixes],
+    opts: &FitOptions,
+    aside: &[SetAside],
+) -> Vec<Vec<Option<OnLine>>> {
+    let pull = |s: f64| {
+        aside
+            .iter()
+            .find(|a| (a.from_m..=a.to_m).contains(&s))
+            .map_or(0.0, |a| 2.0 * a.peak_m)
+    };
     runs.iter()
         .map(|run| {
             let mut last: Option<f64> = None;
@@ -168,7 +224,9 @@ fn place_all(line: &Line, runs: &[RunFixes], opts: &FitOptions) -> Vec<Vec<Optio
                 .iter()
                 .map(|f| {
                     let limit = opts.off_line_m + 3.0 * f.sigma_m;
-                    let on = |m: &OnLine| !m.beyond_end && m.lateral_m.abs() <= limit;
+                    let on = |m: &OnLine| {
+                        !m.beyond_end && m.lateral_m.abs() <= limit + pull(m.chainage_m)
+                    };
                     // Near the last match first; after a gap (a tunnel, an excursion) the
                     // train may be anywhere along the line.
                     let m = line
@@ -206,12 +264,19 @@ fn check_overlap(
 /// `robust`) down-weighted where their offset stands out of their own σ (Huber, beyond 2.5
 /// times the robust spread of the offsets in σ: a receiver whose σ is honest keeps its
 /// weight, fixes pulled by multipath lose theirs).
-fn samples(runs: &[RunFixes], placed: &[Vec<Option<OnLine>>], robust: bool) -> Vec<Sample> {
+fn samples(
+    runs: &[RunFixes],
+    placed: &[Vec<Option<OnLine>>],
+    aside: &[Vec<bool>],
+    robust: bool,
+) -> Vec<Sample> {
     let fixes = || {
         runs.iter()
             .zip(placed)
-            .flat_map(|(run, p)| run.fixes.iter().zip(p))
-            .filter_map(|(f, m)| Some((f, m.as_ref()?)))
+            .zip(aside)
+            .flat_map(|((run, p), a)| run.fixes.iter().zip(p).zip(a))
+            .filter(|(_, aside)| !**aside)
+            .filter_map(|((f, m), _)| Some((f, m.as_ref()?)))
     };
     let normalised: Vec<f64> = fixes()
         .map(|(f, m)| (m.lateral_m / f.sigma_m).abs())
@@ -234,7 +299,8 @@ fn samples(runs: &[RunFixes], placed: &[Vec<Option<OnLine>>], robust: bool) -> V
         .collect()
 }
 
-fn median(mut x: Vec<f64>) -> f64 {
+/// The median of `x` (0 when empty).
+pub(crate) fn median(mut x: Vec<f64>) -> f64 {
     if x.is_empty() {
         return 0.0;
     }
@@ -258,6 +324,7 @@ fn refit(samples: &[Sample], opts: &FitOptions) -> Result<Line, FitError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::motion::MotionStep;
 
     /// A line: 300 m straight east, a 400 m arc of radius 400 m to the left, 300 m straight.
     fn true_point(s: f64) -> (f64, f64) {
@@ -394,5 +461,88 @@ mod tests {
             panic!("{e}")
         };
         assert!((500.0..=1000.0).contains(&from_m) && rms_m > 0.1, "{e}");
+    }
+
+    /// A run due east at 20 m/s for 150 s (3 km): fixes at 10 Hz with 2 cm of noise, pulled
+    /// `pull_m` to the left over 1200–1800 m (a raised cosine, as a station building's
+    /// multipath), and its motion: a gyro with a bias and white noise, an odometer.
+    fn straight_run(seed: u64, pull_m: f64) -> RunFixes {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let fix_noise = Normal::new(0.0, 0.02).unwrap();
+        let turn_noise = Normal::new(0.0, 1e-4 * 0.1f64.sqrt()).unwrap();
+        let bias = 3e-4 * (seed as f64 - 2.0);
+        let pull = |s: f64| match (1200.0..1800.0).contains(&s) {
+            true => pull_m * 0.5 * (1.0 - ((s - 1200.0) / 600.0 * std::f64::consts::TAU).cos()),
+            false => 0.0,
+        };
+        let fixes = (0..=1500)
+            .map(|i| {
+                let s = i as f64 * 2.0;
+                Fix {
+                    stamp_ns: i as u64 * 100_000_000,
+                    east_m: s + fix_noise.sample(&mut rng),
+                    north_m: pull(s) + fix_noise.sample(&mut rng),
+                    sigma_m: 0.02,
+                }
+            })
+            .collect();
+        let motion = (1..=1500)
+            .map(|i| MotionStep {
+                stamp_ns: i as u64 * 100_000_000,
+                distance_m: 2.0,
+                turn_rad: bias * 0.1 + turn_noise.sample(&mut rng),
+            })
+            .collect();
+        RunFixes {
+            name: format!("run{seed}"),
+            fixes,
+            motion,
+        }
+    }
+
+    /// The fitted line's offset to the north (left of east) at `east_m`.
+    fn north_at(c: &Centreline, east_m: f64) -> f64 {
+        let v = &c.line.vertices;
+        let i = v.partition_point(|p| p.east_m < east_m).min(v.len() - 1);
+        v[i].north_m
+    }
+
+    #[test]
+    fn fixes_the_runs_motion_contradicts_are_set_aside_and_crossed() {
+        let runs: Vec<RunFixes> = (1..=3).map(|seed| straight_run(seed, 3.0)).collect();
+        let c = fit(&runs, &FitOptions::default()).unwrap();
+        // One stretch set aside, around the pull; the line straight through it.
+        assert_eq!(c.set_aside.len(), 1, "{:?}", c.set_aside);
+        let a = c.set_aside[0];
+        let start = c.line.start_m();
+        let (from, to) = (a.from_m - start, a.to_m - start);
+        assert!(
+            (1050.0..=1260.0).contains(&from) && (1740.0..=1950.0).contains(&to),
+            "{a:?}"
+        );
+        assert!(a.peak_m > 1.0, "{a:?}");
+        for e in [1300.0, 1500.0, 1700.0] {
+            assert!(north_at(&c, e).abs() < 0.10, "{} m at {e}", north_at(&c, e));
+        }
+        assert!(c.runs.iter().all(|r| r.set_aside > 200 && r.off_line == 0));
+        assert!(c.lateral_rms_m < 0.03, "{}", c.lateral_rms_m);
+        // Without the runs' motion the line follows the pull.
+        let no_motion = FitOptions {
+            cross_gaps: false,
+            ..FitOptions::default()
+        };
+        let pulled = fit(&runs, &no_motion).unwrap();
+        assert!(pulled.set_aside.is_empty());
+        assert!(
+            north_at(&pulled, 1500.0) > 2.5,
+            "{}",
+            north_at(&pulled, 1500.0)
+        );
+        // Without a pull nothing is set aside.
+        let clean: Vec<RunFixes> = (1..=3).map(|seed| straight_run(seed, 0.0)).collect();
+        let c = fit(&clean, &FitOptions::default()).unwrap();
+        assert!(c.set_aside.is_empty(), "{:?}", c.set_aside);
     }
 }

@@ -24,6 +24,7 @@ pub mod fit;
 pub mod fixes;
 pub mod line;
 pub mod motion;
+pub mod multipath;
 pub mod osm;
 pub mod output;
 pub mod report;

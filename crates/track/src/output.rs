@@ -9,6 +9,7 @@ use serde_json::json;
 
 use crate::chainage::Placement;
 use crate::fit::FitOptions;
+use crate::multipath::SetAside;
 use crate::osm::OsmOffset;
 use crate::report::{Centreline, Disagreement, Excursion, Gap, RunReport, StretchResidual};
 
@@ -24,6 +25,9 @@ pub struct Summary {
     pub lateral_residual_p95_m: f64,
     /// Stretches with no fix, crossed by runs' motion or bridged by the spline alone.
     pub gaps: Vec<Gap>,
+    /// Stretches whose fixes the runs' motion contradicted (a steady multipath pull), set
+    /// aside and crossed by that motion.
+    pub set_aside: Vec<SetAside>,
     /// The residual across the track over each stretch with fixes.
     pub stretches: Vec<StretchResidual>,
     /// Stretches where runs' mean offsets differ by more than `disagreement_m`.
@@ -43,6 +47,7 @@ pub struct RunSummary {
     pub name: String,
     pub fixes: usize,
     pub used: usize,
+    pub set_aside: usize,
     pub off_line: usize,
     /// Which way it travels along the placed chainage.
     pub direction: &'static str,
@@ -73,6 +78,14 @@ impl Summary {
                 .map(|g| {
                     let (from_m, to_m) = p.span(g.from_m, g.to_m);
                     Gap { from_m, to_m, ..*g }
+                })
+                .collect(),
+            set_aside: c
+                .set_aside
+                .iter()
+                .map(|a| {
+                    let (from_m, to_m) = p.span(a.from_m, a.to_m);
+                    SetAside { from_m, to_m, ..*a }
                 })
                 .collect(),
             stretches: c
@@ -113,6 +126,7 @@ impl RunSummary {
             name: r.name.clone(),
             fixes: r.fixes,
             used: r.used,
+            set_aside: r.set_aside,
             off_line: r.off_line,
             direction: match r.increasing == (p.direction > 0.0) {
                 true => "increasing",

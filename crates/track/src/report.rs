@@ -9,6 +9,7 @@ use crate::bridge::Crossings;
 use crate::error::FitError;
 use crate::fixes::RunFixes;
 use crate::line::{Line, OnLine};
+use crate::multipath::SetAside;
 
 /// A chainage stretch, m (in the line's provisional chainage until [`crate::chainage`]
 /// places it).
@@ -43,6 +44,8 @@ pub struct RunReport {
     pub fixes: usize,
     /// On the line and fitted.
     pub used: usize,
+    /// On the line, in a stretch set aside.
+    pub set_aside: usize,
     pub off_line: usize,
     /// Travelling towards increasing chainage (the line's as fitted), or not.
     pub increasing: bool,
@@ -68,8 +71,10 @@ pub struct Centreline {
     pub fixes_used: usize,
     pub lateral_rms_m: f64,
     pub lateral_p95_m: f64,
-    /// Stretches longer than [`GAP_M`] without a fix.
+    /// Stretches longer than [`GAP_M`] without a fix used.
     pub gaps: Vec<Gap>,
+    /// Stretches whose fixes the runs' motion contradicted, set aside.
+    pub set_aside: Vec<SetAside>,
     pub disagreements: Vec<Disagreement>,
     /// Where the first run's first fix on the line lies, and whether it travels towards
     /// increasing chainage: the default origin and direction.
@@ -118,14 +123,35 @@ const MIN_EXCURSION_FIXES: usize = 5;
 /// A run's mean offset in a bin counts from this many fixes.
 const MIN_BIN_FIXES: usize = 3;
 
+/// Where a fit left each run's fixes.
+pub(crate) struct Fitted<'a> {
+    /// Each fix's place on the line (`None`: off it).
+    pub placed: &'a [Vec<Option<OnLine>>],
+    /// Each fix set aside (on the line, in a stretch its runs' motion contradicts).
+    pub aside: &'a [Vec<bool>],
+    pub set_aside: Vec<SetAside>,
+}
+
 pub(crate) fn finish(
     line: Line,
     runs: &[RunFixes],
-    placed: &[Vec<Option<OnLine>>],
+    fitted: Fitted,
     crossed: &[Crossings],
     stretch_m: f64,
     disagreement_m: f64,
 ) -> Centreline {
+    let Fitted {
+        placed,
+        aside,
+        set_aside,
+    } = fitted;
+    // The fixes the line was fitted to.
+    let used: Vec<Vec<Option<OnLine>>> = placed
+        .iter()
+        .zip(aside)
+        .map(|(p, a)| p.iter().zip(a).map(|(m, &a)| m.filter(|_| !a)).collect())
+        .collect();
+    let (fitted_placed, placed) = (placed, &used[..]);
     let on: Vec<&OnLine> = placed.iter().flatten().flatten().collect();
     let with_sigma: Vec<(&OnLine, f64)> = runs
         .iter()
@@ -139,19 +165,22 @@ pub(crate) fn finish(
         .get(((abs.len() as f64 * 0.95).ceil() as usize).saturating_sub(1))
         .copied()
         .unwrap_or(0.0);
-    let first_run_start = placed[0]
+    // Where the first run starts on the line, its fixes set aside included.
+    let first_run_start = fitted_placed[0]
         .iter()
         .flatten()
         .next()
         .map_or((line.start_m(), true), |m| {
-            (m.chainage_m, increasing(&placed[0]))
+            (m.chainage_m, increasing(&fitted_placed[0]))
         });
     Centreline {
         runs: runs
             .iter()
             .zip(placed)
-            .map(|(r, p)| run_report(r, p))
+            .zip(fitted_placed)
+            .map(|((r, used), all)| run_report(r, used, all))
             .collect(),
+        set_aside,
         fixes_used: on.len(),
         lateral_rms_m: rms(on.iter().map(|m| m.lateral_m)),
         lateral_p95_m: p95,
@@ -204,16 +233,21 @@ fn increasing(placed: &[Option<OnLine>]) -> bool {
     up >= down
 }
 
-fn run_report(run: &RunFixes, placed: &[Option<OnLine>]) -> RunReport {
-    let used = placed.iter().flatten().count();
+/// A run's report from its fixes `used` and all it has on the line.
+fn run_report(run: &RunFixes, used: &[Option<OnLine>], on_line: &[Option<OnLine>]) -> RunReport {
+    let (n_used, n_on) = (
+        used.iter().flatten().count(),
+        on_line.iter().flatten().count(),
+    );
     RunReport {
         name: run.name.clone(),
         fixes: run.fixes.len(),
-        used,
-        off_line: run.fixes.len() - used,
-        increasing: increasing(placed),
-        leaves_line: excursions(run, placed),
-        lateral_rms_m: rms(placed.iter().flatten().map(|m| m.lateral_m)),
+        used: n_used,
+        set_aside: n_on - n_used,
+        off_line: run.fixes.len() - n_on,
+        increasing: increasing(on_line),
+        leaves_line: excursions(run, on_line),
+        lateral_rms_m: rms(used.iter().flatten().map(|m| m.lateral_m)),
     }
 }
 
