@@ -6,28 +6,19 @@
 //!
 //! Dead reckoning alone drifts (a gyro bias turns the path by a growing angle, a worn wheel
 //! stretches it), so each crossing is tied to the run's fixes on both sides, over
-//! [`TIE_S`] before the gap and after it. Six unknowns, by Gauss–Newton least squares over
-//! those fixes:
-//!
-//! ```text
-//! ψ(t) = ψ₀ + Σ (turn − (b + ḃ τ) dτ),   p(t) = p₀ + k Σ d·(sin ψ, cos ψ)
-//! ```
-//!
-//! (p₀, ψ₀ where the tie starts, b the gyro bias and ḃ its drift, k the distance scale: a
-//! MEMS gyro's bias wanders over the minutes a crossing takes). The heading and bias come
-//! from the fixes either side and the gap's far end together, not from the line's tangent at
-//! the gap's ends, whose milliradian error would bend a 2 km crossing by decimetres. The tie
-//! is short (5 s a side) because that bias wanders: on the default line's seeds 1–9, ties of
-//! 5, 10, 20, 40 and 60 s left 0.04–0.13, 0.06–0.14, 0.10–0.19, 0.13–0.30 and 0.14–0.41 m RMS
-//! in the gaps. A
-//! crossing that needs a scale or a bias no sensor has, or leaves its tie fixes more than
+//! [`TIE_S`] before the gap and after it, and to the receiver's Doppler course and the
+//! train's standstills in between ([`crate::tie`]: start, heading, distance scale and the
+//! gyro's wandering bias, by least squares). The heading and bias come from the fixes
+//! either side and the gap's far end together, not from the line's tangent at the gap's
+//! ends, whose milliradian error would bend a 2 km crossing by decimetres. A crossing that
+//! needs a scale or a bias no sensor has, or leaves its tie fixes more than
 //! [`MAX_TIE_RMS_M`] off, is refused. The path through the gap becomes samples of the line
 //! every 5 m, weighted as a fix of [`BRIDGE_SIGMA_M`]; several runs' crossings average.
 
 use crate::fixes::{Fix, RunFixes};
 use crate::line::{Line, OnLine};
-use crate::motion::MotionStep;
 use crate::spline::Sample;
+use crate::tie::{at, standstill_bias, Tie, BIAS, SCALE};
 
 /// A gap in a run's fixes at least this long in time (s) and along the line (m) is crossed.
 const MIN_GAP_S: f64 = 2.0;
@@ -175,9 +166,6 @@ fn heading(line: &Line, s: f64, increasing: bool) -> f64 {
     }
 }
 
-/// The tie's unknowns: start east, north, heading, gyro bias, its drift, distance scale.
-const N: usize = 6;
-
 /// Fixes this long before a gap and after it tie its crossing, s.
 pub const TIE_S: f64 = 5.0;
 
@@ -187,144 +175,6 @@ const MAX_TIE_RMS_M: f64 = 0.15;
 
 /// A point of a crossing: distance run from the gap's first fix, and position.
 type PathPoint = (f64, f64, f64);
-
-/// The dead-reckoned positions at each step's end from `x = [e₀, n₀, ψ₀, b, ḃ, k]`.
-fn reckon(steps: &[MotionStep], start_ns: u64, x: &[f64; N]) -> Vec<(u64, f64, f64)> {
-    let [e0, n0, psi0, bias, drift, scale] = *x;
-    let (mut p, mut turn, mut last_ns) = ((e0, n0), 0.0, start_ns);
-    let mut out = Vec::with_capacity(steps.len() + 1);
-    out.push((start_ns, e0, n0));
-    for s in steps {
-        let dt = (s.stamp_ns - last_ns) as f64 / 1e9;
-        let mid = ((last_ns + s.stamp_ns) / 2 - start_ns) as f64 / 1e9;
-        last_ns = s.stamp_ns;
-        let step_turn = s.turn_rad - (bias + drift * mid) * dt;
-        let psi = psi0 + turn + step_turn / 2.0;
-        turn += step_turn;
-        let len = scale * s.distance_m;
-        p = (p.0 + len * psi.sin(), p.1 + len * psi.cos());
-        out.push((s.stamp_ns, p.0, p.1));
-    }
-    out
-}
-
-/// The reckoned position at `t_ns`, between the steps around it, and the unit direction of
-/// travel there.
-fn at(path: &[(u64, f64, f64)], t_ns: u64) -> (f64, f64, f64, f64) {
-    let i = path
-        .partition_point(|p| p.0 < t_ns)
-        .clamp(1, path.len() - 1);
-    let (a, b) = (path[i - 1], path[i]);
-    let f = if b.0 > a.0 {
-        ((t_ns.saturating_sub(a.0)) as f64 / (b.0 - a.0) as f64).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let (de, dn) = (b.1 - a.1, b.2 - a.2);
-    let len = de.hypot(dn).max(1e-9);
-    (a.1 + f * de, a.2 + f * dn, de / len, dn / len)
-}
-
-/// Along the track a tie fix counts this much of its miss: an odometer slides when the train
-/// brakes and its distance is then off by metres, which says nothing of the line's shape.
-const ALONG_WEIGHT: f64 = 0.05;
-
-/// What a crossing is tied to: its fixes, and where the train stood, the gyro's bias then.
-struct Tie<'a> {
-    steps: &'a [MotionStep],
-    start_ns: u64,
-    fixes: &'a [Fix],
-    /// The bias the gyro read standing (rad/s) and when (s from `start_ns`).
-    standstill: Option<(f64, f64)>,
-}
-
-/// A standstill's bias counts as a miss of this many metres per rad/s: 1 cm for 1e-5
-/// rad/s, a tenth of what a MEMS gyro's bias wanders in a minute.
-const STANDSTILL_WEIGHT: f64 = 1e3;
-
-impl Tie<'_> {
-    /// The tie fixes' misses (along the track, weighted by [`ALONG_WEIGHT`], and across) for
-    /// `x`, then the standstill's.
-    fn misses(&self, x: &[f64; N]) -> Vec<f64> {
-        let path = reckon(self.steps, self.start_ns, x);
-        let fixes = self.fixes.iter().flat_map(|f| {
-            let (e, n, ue, un) = at(&path, f.stamp_ns);
-            let (me, mn) = (e - f.east_m, n - f.north_m);
-            [ALONG_WEIGHT * (me * ue + mn * un), me * un - mn * ue]
-        });
-        let standstill = self
-            .standstill
-            .map(|(bias, t)| STANDSTILL_WEIGHT * (x[3] + x[4] * t - bias));
-        fixes.chain(standstill).collect()
-    }
-
-    /// Gauss–Newton from `x` (the parameters not `free` kept as they are); the parameters and
-    /// the fixes' misses across the track (RMS).
-    fn solve(&self, mut x: [f64; N], free: [bool; N]) -> Option<([f64; N], f64)> {
-        for _ in 0..8 {
-            let r = self.misses(&x);
-            let mut jt: Vec<Vec<f64>> = Vec::with_capacity(N);
-            for (k, h) in [1e-3, 1e-3, 1e-6, 1e-8, 1e-10, 1e-6]
-                .into_iter()
-                .enumerate()
-            {
-                let mut xh = x;
-                xh[k] += h;
-                let rh = self.misses(&xh);
-                jt.push(rh.iter().zip(&r).map(|(a, b)| (a - b) / h).collect());
-            }
-            // Normal equations JᵀJ dx = −Jᵀr.
-            let mut a = [[0.0; N]; N];
-            let mut g = [0.0; N];
-            for i in 0..N {
-                for j in 0..N {
-                    a[i][j] = match free[i] && free[j] {
-                        true => jt[i].iter().zip(&jt[j]).map(|(p, q)| p * q).sum(),
-                        false => f64::from(u8::from(i == j)),
-                    };
-                }
-                if free[i] {
-                    g[i] = -jt[i].iter().zip(&r).map(|(p, q)| p * q).sum::<f64>();
-                }
-            }
-            let dx = solve(a, g)?;
-            for k in 0..N {
-                x[k] += dx[k];
-            }
-        }
-        let r = self.misses(&x);
-        let cross = r[..2 * self.fixes.len()].iter().skip(1).step_by(2);
-        let rms = (cross.map(|e| e * e).sum::<f64>() / self.fixes.len() as f64).sqrt();
-        Some((x, rms))
-    }
-}
-
-/// `A x = b` for a small symmetric positive definite `A` (Gaussian elimination with partial
-/// pivoting); `None` if it is singular.
-#[allow(clippy::needless_range_loop)] // Elimination reads clearest with indices.
-fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
-    for c in 0..N {
-        let p = (c..N).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if !a[p][c].is_normal() {
-            return None;
-        }
-        a.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..N {
-            let f = a[r][c] / a[c][c];
-            for k in c..N {
-                a[r][k] -= f * a[c][k];
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = [0.0; N];
-    for r in (0..N).rev() {
-        let s: f64 = (r + 1..N).map(|k| a[r][k] * x[k]).sum();
-        x[r] = (b[r] - s) / a[r][r];
-    }
-    Some(x)
-}
 
 /// The crossing of the gap between fixes `i` and `j` of `run`, tied to its fixes as `tied`
 /// says (not those set `aside`), as points from the gap's first fix to its last; `None`
@@ -375,27 +225,29 @@ fn cross(
     if steps.is_empty() || !covers(fa.stamp_ns) || !covers(fb.stamp_ns) {
         return None;
     }
-    let first = tie_fixes.first()?;
-    let x = [first.east_m, first.north_m, psi0, 0.0, 0.0, 1.0];
-    let mut free = [true; N];
-    let mut tie = Tie {
+    let (c0, c1) = (
+        run.courses.partition_point(|c| c.stamp_ns < start_ns),
+        run.courses.partition_point(|c| c.stamp_ns <= end_ns),
+    );
+    let tie = Tie {
         steps,
         start_ns,
         fixes: &tie_fixes,
-        standstill: None,
+        courses: &run.courses[c0..c1],
+        standstill: standstill_bias(steps, start_ns, MIN_STANDSTILL_S),
     };
-    if tied != Tied::BothSides {
-        // The odometer's scale kept; the bias where the train stood ties its far end.
-        free[5] = false;
-        tie.standstill = standstill_bias(steps, start_ns);
-        free[4] = tie.standstill.is_some();
-    }
-    let (x, rms) = tie.solve(x, free)?;
-    let plausible = (x[5] - 1.0).abs() <= MAX_SCALE_ERROR && x[3].abs() <= MAX_GYRO_BIAS_RADPS;
+    let first = tie_fixes.first()?;
+    let x = tie.start(first.east_m, first.north_m, psi0);
+    let mut free = vec![true; x.len()];
+    // Fixes on one side only cannot tell the odometer's scale.
+    free[SCALE] = tied == Tied::BothSides;
+    let (x, rms) = tie.solve(x, &free)?;
+    let plausible = (x[SCALE] - 1.0).abs() <= MAX_SCALE_ERROR
+        && x[BIAS..].iter().all(|b| b.abs() <= MAX_GYRO_BIAS_RADPS);
     if !(plausible && rms <= MAX_TIE_RMS_M) {
         return None;
     }
-    let path = reckon(steps, start_ns, &x);
+    let path = tie.reckon(&x);
     let (a, b) = (at(&path, fa.stamp_ns), at(&path, fb.stamp_ns));
     let (a, b) = ((a.0, a.1), (b.0, b.1));
     let mut d = 0.0;
@@ -416,22 +268,6 @@ fn cross(
 
 /// A standstill this long gives the gyro's bias, s.
 const MIN_STANDSTILL_S: f64 = 5.0;
-
-/// The gyro's mean rate over the steps where the train stood, and their mean time (s from
-/// `start_ns`), if it stood long enough.
-fn standstill_bias(steps: &[MotionStep], start_ns: u64) -> Option<(f64, f64)> {
-    let (mut turn, mut time, mut when, mut last) = (0.0, 0.0, 0.0, start_ns);
-    for s in steps {
-        let dt = (s.stamp_ns - last) as f64 / 1e9;
-        if s.distance_m == 0.0 {
-            turn += s.turn_rad;
-            time += dt;
-            when += dt * ((s.stamp_ns - start_ns) as f64 / 1e9 - dt / 2.0);
-        }
-        last = s.stamp_ns;
-    }
-    (time >= MIN_STANDSTILL_S).then(|| (turn / time, when / time))
-}
 
 /// Samples of a closed path every [`BRIDGE_STEP_M`], at chainage in proportion to the
 /// distance run between the gap's ends.
@@ -457,6 +293,8 @@ fn samples(path: &[PathPoint], from_m: f64, to_m: f64) -> Vec<Sample> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fixes::Course;
+    use crate::motion::MotionStep;
 
     #[test]
     fn a_biased_gyro_and_a_worn_wheel_cross_a_gap_tied_to_the_fixes_either_side() {
@@ -495,6 +333,7 @@ mod tests {
             name: "curve".into(),
             fixes,
             motion,
+            ..RunFixes::default()
         };
         let gap = run
             .fixes
@@ -518,5 +357,80 @@ mod tests {
         let length = path.last().unwrap().0;
         // From the fix at 29.9 s to the one at 90 s.
         assert!((length - 1202.0).abs() < 0.5, "{length} m");
+    }
+
+    /// A run due east at 20 m/s with no fix from 30 s to 120 s (1.8 km); its gyro's bias
+    /// wanders (5e-4 rad/s, a period of 80 s); with `courses`, the receiver's course (2 mrad
+    /// of noise) through the gap. How far the crossing leaves the straight, m.
+    fn wandering_crossing(courses: bool) -> f64 {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let noise = Normal::new(0.0, 0.002).unwrap();
+        let ns = |t: f64| (t * 1e9).round() as u64;
+        let fixes: Vec<Fix> = (0..=1500)
+            .map(|i| i as f64 * 0.1)
+            .filter(|t| !(30.0..120.0).contains(t))
+            .map(|t| Fix {
+                stamp_ns: ns(t),
+                east_m: 20.0 * t,
+                north_m: 0.0,
+                sigma_m: 0.02,
+            })
+            .collect();
+        let bias = |t: f64| 5e-4 * (std::f64::consts::TAU * t / 80.0).sin();
+        let motion = (1..=1500)
+            .map(|i| {
+                let t = i as f64 * 0.1;
+                MotionStep {
+                    stamp_ns: ns(t),
+                    distance_m: 2.0,
+                    turn_rad: bias(t - 0.05) * 0.1,
+                }
+            })
+            .collect();
+        let courses = (300..1200)
+            .filter(|_| courses)
+            .map(|i| Course {
+                stamp_ns: ns(i as f64 * 0.1),
+                course_rad: std::f64::consts::FRAC_PI_2 + noise.sample(&mut rng),
+                speed_mps: 20.0,
+            })
+            .collect();
+        let run = RunFixes {
+            name: "straight".into(),
+            fixes,
+            motion,
+            courses,
+        };
+        let gap = run
+            .fixes
+            .iter()
+            .position(|f| f.stamp_ns >= ns(29.9))
+            .unwrap();
+        let aside = vec![false; run.fixes.len()];
+        let path = cross(
+            &run,
+            (gap, gap + 1),
+            &aside,
+            Tied::BothSides,
+            std::f64::consts::FRAC_PI_2,
+        )
+        .expect("crosses");
+        path.iter().map(|p| p.2.abs()).fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn the_receivers_course_steers_a_wandering_gyro_bias_through_a_gap() {
+        let (with, without) = (wandering_crossing(true), wandering_crossing(false));
+        // 0.14 m and 1.3 m when written.
+        assert!(
+            with < 0.2,
+            "with the course the crossing leaves the line by {with} m"
+        );
+        assert!(
+            without > 5.0 * with,
+            "without the course {without} m, with it {with} m"
+        );
     }
 }

@@ -203,8 +203,13 @@ fn seed_line(run: &RunFixes, opts: &FitOptions) -> Result<Line, FitError> {
     Ok(Line::from_spline(&spline, from, to))
 }
 
+/// How far beyond the pull the runs' motion saw in a stretch set aside its fixes may lie: the
+/// offset seen against a chord 300 m long is a third of a 600 m pull's.
+const PULL_REACH: f64 = 3.0;
+
 /// Where each fix of each run lies on `line`: `None` where it is off the line. In a stretch
-/// set aside a fix may lie further off, by twice the pull the runs' motion saw there.
+/// set aside a fix may lie further off, by [`PULL_REACH`] times the pull the runs' motion saw
+/// there.
 fn place_all(
     line: &Line,
     runs: &[RunFixes],
@@ -215,7 +220,7 @@ fn place_all(
         aside
             .iter()
             .find(|a| (a.from_m..=a.to_m).contains(&s))
-            .map_or(0.0, |a| 2.0 * a.peak_m)
+            .map_or(0.0, |a| PULL_REACH * a.peak_m)
     };
     runs.iter()
         .map(|run| {
@@ -367,7 +372,7 @@ mod tests {
         RunFixes {
             name: name.into(),
             fixes,
-            motion: Vec::new(),
+            ..RunFixes::default()
         }
     }
 
@@ -499,6 +504,7 @@ mod tests {
             name: format!("run{seed}"),
             fixes,
             motion,
+            ..RunFixes::default()
         }
     }
 

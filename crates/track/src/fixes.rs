@@ -23,13 +23,28 @@ pub struct Fix {
     pub sigma_m: f64,
 }
 
+/// The receiver's course over ground, from its Doppler velocity: it holds where RTK is lost
+/// (the velocity does not need the corrections) and a steady multipath pull does not bend it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Course {
+    pub stamp_ns: u64,
+    /// Clockwise from north, rad.
+    pub course_rad: f64,
+    pub speed_mps: f64,
+}
+
+/// Below this speed a course says little, m/s.
+pub const MIN_COURSE_SPEED_MPS: f64 = 5.0;
+
 /// One run's fixes of the stated quality, in time order, and its own motion.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct RunFixes {
     pub name: String,
     pub fixes: Vec<Fix>,
     /// Its IMU's turn and its odometer's distance, step by step (empty without both).
     pub motion: Vec<MotionStep>,
+    /// The receiver's course, from fixes of every quality, where it moved fast enough.
+    pub courses: Vec<Course>,
 }
 
 /// Why a run's fixes could not be read.
@@ -56,6 +71,7 @@ pub enum FixesError {
 struct Read {
     fix: Fix,
     fix_type: FixType,
+    course: Option<Course>,
 }
 
 /// The σ a fix type stands for where the receiver reports no covariance, m.
@@ -192,6 +208,16 @@ fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> 
         .map(|c| ((c[0] + c[4]) / 2.0).sqrt())
         .filter(|s| s.is_finite() && *s > 0.0)
         .unwrap_or_else(|| sigma_of(fix.fix_type));
+    let course = match (fix.course_rad, fix.speed_mps) {
+        (Some(c), Some(v)) if c.is_finite() && v.is_finite() && v >= MIN_COURSE_SPEED_MPS => {
+            Some(Course {
+                stamp_ns: fix.stamp_ns,
+                course_rad: c,
+                speed_mps: v,
+            })
+        }
+        _ => None,
+    };
     Some(Read {
         fix: Fix {
             stamp_ns: fix.stamp_ns,
@@ -200,6 +226,7 @@ fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> 
             sigma_m,
         },
         fix_type: fix.fix_type,
+        course,
     })
 }
 
@@ -216,6 +243,7 @@ fn keep_quality(
         FixQuality::Only(types) => types.contains(&t),
     };
     let total = read.len();
+    let courses = read.iter().filter_map(|r| r.course).collect();
     let fixes: Vec<Fix> = read
         .into_iter()
         .filter(|r| keep(r.fix_type))
@@ -233,5 +261,6 @@ fn keep_quality(
         name: run,
         fixes,
         motion: Vec::new(),
+        courses,
     })
 }

@@ -29,3 +29,4 @@ pub mod osm;
 pub mod output;
 pub mod report;
 pub mod spline;
+pub mod tie;

@@ -28,6 +28,7 @@ use serde::Serialize;
 use crate::fit::median;
 use crate::fixes::RunFixes;
 use crate::line::{Line, OnLine};
+use crate::tie::wrap;
 use railfuse_catalog::map_matching::locate_on;
 
 /// Length of the bins the runs' turn is compared over, m.
@@ -46,8 +47,9 @@ pub const THRESHOLD: f64 = 8.0;
 /// … and this many metres.
 pub const MIN_SAG_M: f64 = 0.2;
 
-/// Suspect bins closer than this are one stretch, m.
-pub const MERGE_M: f64 = 150.0;
+/// Suspect bins closer than this are one stretch, m: the two sides of one pull, whose
+/// middle a train slowing into a station sees through few metres of motion.
+pub const MERGE_M: f64 = 2.0 * SAG_HALF_M + BIN_M;
 
 /// The nominal gyro: angle noise, rad/√s, and the error of the windowed bias, rad/s. They
 /// weigh runs and bins against each other; the threshold is set on the bins' own spread.
@@ -123,13 +125,15 @@ pub fn suspect(line: &Line, runs: &[RunFixes], placed: &[Vec<Option<OnLine>>]) -
             }),
         }
     }
-    // One that reaches an end of the line takes in what lies just past it (where a train
+    // One that comes within a chord of an end of the line runs to it (an end is seen only
+    // from one side, its pull faintly) and takes in what lies just past it (where a train
     // stands at the end, its fixes a little beyond the line's last sample).
+    let reach = 2.0 * SAG_HALF_M;
     for s in &mut out {
-        if s.from_m <= start {
+        if s.from_m <= start + reach {
             s.from_m = start - BIN_M;
         }
-        if s.to_m >= line.end_m() {
+        if s.to_m >= line.end_m() - reach {
             s.to_m = line.end_m() + BIN_M;
         }
     }
@@ -235,17 +239,6 @@ fn run_bins(line: &Line, run: &RunFixes, placed: &[Option<OnLine>]) -> Vec<(usiz
         }
     }
     out
-}
-
-/// An angle difference in (−π, π].
-fn wrap(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    let a = a.rem_euclid(TAU);
-    if a > PI {
-        a - TAU
-    } else {
-        a
-    }
 }
 
 /// Each motion step's chainage: between the run's placed fixes around it, in proportion to
