@@ -296,6 +296,24 @@ mod tests {
     use crate::fixes::Course;
     use crate::motion::MotionStep;
 
+    /// The crossing of `run`'s gap that opens after its fix at 29.9 s, setting out east.
+    fn cross_from_29_9_s_facing_east(run: &RunFixes) -> Vec<PathPoint> {
+        let gap = run
+            .fixes
+            .iter()
+            .position(|f| f.stamp_ns >= 29_900_000_000)
+            .unwrap();
+        let aside = vec![false; run.fixes.len()];
+        cross(
+            run,
+            (gap, gap + 1),
+            &aside,
+            Tied::BothSides,
+            std::f64::consts::FRAC_PI_2,
+        )
+        .expect("crosses")
+    }
+
     #[test]
     fn a_biased_gyro_and_a_worn_wheel_cross_a_gap_tied_to_the_fixes_either_side() {
         // 20 m/s along a 1200 m radius curve to the right, heading east at first; no fix
@@ -335,20 +353,7 @@ mod tests {
             motion,
             ..RunFixes::default()
         };
-        let gap = run
-            .fixes
-            .iter()
-            .position(|f| f.stamp_ns >= 29_900_000_000)
-            .unwrap();
-        let aside = vec![false; run.fixes.len()];
-        let path = cross(
-            &run,
-            (gap, gap + 1),
-            &aside,
-            Tied::BothSides,
-            std::f64::consts::FRAC_PI_2,
-        )
-        .expect("crosses");
+        let path = cross_from_29_9_s_facing_east(&run);
         let worst = path
             .iter()
             .map(|&(_, e, n)| (e.hypot(n + r) - r).abs())
@@ -403,20 +408,7 @@ mod tests {
             motion,
             courses,
         };
-        let gap = run
-            .fixes
-            .iter()
-            .position(|f| f.stamp_ns >= ns(29.9))
-            .unwrap();
-        let aside = vec![false; run.fixes.len()];
-        let path = cross(
-            &run,
-            (gap, gap + 1),
-            &aside,
-            Tied::BothSides,
-            std::f64::consts::FRAC_PI_2,
-        )
-        .expect("crosses");
+        let path = cross_from_29_9_s_facing_east(&run);
         path.iter().map(|p| p.2.abs()).fold(0.0, f64::max)
     }
 
