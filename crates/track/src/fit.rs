@@ -22,7 +22,7 @@ use crate::bridge::{cross_gaps, Crossings};
 use crate::error::{FitError, MIN_TRAVEL_M};
 use crate::fixes::{Fix, RunFixes};
 use crate::line::{Line, OnLine};
-use crate::multipath::{self, SetAside};
+use crate::multipath::{self, median, SetAside};
 use crate::report::{Centreline, Fitted};
 use crate::spline::{Knots, PlaneSpline, Sample};
 
@@ -302,15 +302,6 @@ fn samples(
             }
         })
         .collect()
-}
-
-/// The median of `x` (0 when empty).
-pub(crate) fn median(mut x: Vec<f64>) -> f64 {
-    if x.is_empty() {
-        return 0.0;
-    }
-    let mid = x.len() / 2;
-    *x.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// The spline through `samples`, over their chainage span.

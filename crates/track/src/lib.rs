@@ -7,7 +7,10 @@
 //! system, [`banded`]), gives it a chainage ([`chainage`]) and writes it as the GeoJSON or CSV
 //! the other commands read as `--track` ([`output`]), with what the fit says about itself:
 //! the runs, the fixes used, the residual across the track, the stretches bridged without
-//! fixes, where runs disagree and where a run leaves the line.
+//! fixes, where runs disagree and where a run leaves the line. Where a run has no fix, or
+//! its fixes bend where its gyro says the train did not (a steady multipath pull,
+//! [`multipath`]), its own motion crosses ([`bridge`], tied to its fixes, course and
+//! standstills by [`tie`]).
 //!
 //! Why a spline and not clothoids: a railway's alignment is straights, transition curves and
 //! arcs, and fitting those segments needs the segmentation right first (where each begins is

@@ -25,7 +25,6 @@
 
 use serde::Serialize;
 
-use crate::fit::median;
 use crate::fixes::RunFixes;
 use crate::line::{Line, OnLine};
 use crate::tie::wrap;
@@ -283,4 +282,13 @@ fn step_chainage(run: &RunFixes, placed: &[Option<OnLine>]) -> Vec<Option<f64>> 
             })
         })
         .collect()
+}
+
+/// The median of `x` (0 when empty).
+pub(crate) fn median(mut x: Vec<f64>) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let mid = x.len() / 2;
+    *x.select_nth_unstable_by(mid, f64::total_cmp).1
 }
