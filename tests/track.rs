@@ -153,6 +153,66 @@ fn osm_extract(truth: &TrackMap, left_m: f64, osm: &Path, geo: &Path) -> f64 {
     left_m
 }
 
+#[test]
+fn a_2d_pipelines_fused_states_make_a_line_and_an_along_track_ones_are_refused() {
+    // seed003's first two minutes re-fused by its GNSS/INS pipelines (positions in the
+    // plane), and the default run's by the default pipeline (chainage on its map).
+    let d = tempfile::tempdir().unwrap();
+    let (raw, fused) = (d.path().join("s3.mcap"), d.path().join("s3.fused.mcap"));
+    simulate(&["--scenario", "seed003", "--duration", "120"], &raw);
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/seed003.toml");
+    ok(&["refuse", s(&raw), "-c", s(&config), "-o", s(&fused)]);
+    let line = d.path().join("line.geojson");
+    let report = ok_json(&[
+        "track",
+        s(&fused),
+        "--topic",
+        "/fused/kf/state",
+        "-o",
+        s(&line),
+        "--tolerance",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(report["fix_quality"], "fused states", "{report}");
+    let states: Vec<FusedState> = messages(&fused, "/fused/kf/state");
+    let with_position = states.iter().filter(|st| st.plane.is_some()).count();
+    assert!(with_position > 1000, "{with_position}");
+    assert_eq!(report["runs"][0]["fixes"], with_position, "{report}");
+    // Past the first station's multipath (which the plain KF follows, as the fixes do) the
+    // line lies on the true one to a fused state's decimetres.
+    let truth = true_line(&raw);
+    let fitted = read_track_file(&line).unwrap();
+    let mut worst = 0.0f64;
+    for v in &fitted.vertices {
+        let (lat, lon, _) = fitted.origin.to_geodetic(v.east_m, v.north_m, 0.0);
+        let (te, tn, _) = truth.origin.to_enu(lat, lon, 0.0);
+        let m = nearest_on(&truth.vertices, 0..truth.vertices.len(), te, tn).unwrap();
+        if !m.beyond_end && m.chainage_m > 400.0 && m.chainage_m < truth.length_m() - 10.0 {
+            worst = worst.max(m.lateral_m.abs());
+        }
+    }
+    assert!(worst < 0.5, "{worst} m off the true line");
+    // An along-track pipeline's states have no position to fit.
+    let run = &runs(d.path(), &["1"])[0];
+    let along = d.path().join("along.mcap");
+    ok(&["refuse", s(run), "-o", s(&along)]);
+    let r = railfuse(&[
+        "track",
+        s(&along),
+        "--topic",
+        "/fused/default/state",
+        "-o",
+        s(&line),
+    ]);
+    let err = stderr(&r);
+    assert!(
+        !r.status.success() && err.contains("holds no fused state with a position"),
+        "{err}"
+    );
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
+
 /// A report's stretches (gaps, set aside), from–to m.
 fn stretches(list: &serde_json::Value) -> Vec<(f64, f64)> {
     list.as_array()

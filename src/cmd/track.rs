@@ -28,7 +28,9 @@ pub struct Args {
     /// Also write the line as a CSV of latitude, longitude and chainage_m.
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
-    /// The GNSS channel (default: the run's one GNSS channel).
+    /// The channel the line comes from: a GNSS channel, or a 2-D pipeline's fused states
+    /// (`/fused/<pipeline>/state`, e.g. gnss_ins: positions that hold through the fixes'
+    /// gaps). Default: the run's one GNSS channel, else its one fused channel with positions.
     #[arg(long)]
     pub topic: Option<String>,
     /// Which fixes count: auto (RTK fixed where a run has any, else all), all, or fix types
@@ -136,7 +138,10 @@ pub fn run(a: Args) -> Result<()> {
         &centreline,
         &placement,
         &vertices,
-        a.quality.label(),
+        match runs.iter().all(|r| r.fused) {
+            true => "fused states".to_owned(),
+            false => a.quality.label(),
+        },
         &opts,
         a.tolerance,
     );

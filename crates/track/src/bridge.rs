@@ -18,7 +18,7 @@
 use crate::fixes::{Fix, RunFixes};
 use crate::line::{Line, OnLine};
 use crate::spline::Sample;
-use crate::tie::{at, standstill_bias, Tie, BIAS, SCALE};
+use crate::tie::{at, standstill_bias, Point, Tie, BIAS, SCALE};
 
 /// A gap in a run's fixes at least this long in time (s) and along the line (m) is crossed.
 const MIN_GAP_S: f64 = 2.0;
@@ -247,14 +247,19 @@ fn cross(
     if !(plausible && rms <= MAX_TIE_RMS_M) {
         return None;
     }
-    let path = tie.reckon(&x);
-    let (a, b) = (at(&path, fa.stamp_ns), at(&path, fb.stamp_ns));
+    Some(between(&tie.reckon(&x), fa.stamp_ns, fb.stamp_ns))
+}
+
+/// The reckoned `path` from `from_ns` to `to_ns`, as points with the distance run from the
+/// first.
+fn between(path: &[Point], from_ns: u64, to_ns: u64) -> Vec<PathPoint> {
+    let (a, b) = (at(path, from_ns), at(path, to_ns));
     let (a, b) = ((a.0, a.1), (b.0, b.1));
     let mut d = 0.0;
     let mut last = a;
     let mut out = vec![(0.0, a.0, a.1)];
-    for &(t, e, n) in &path {
-        if t <= fa.stamp_ns || t >= fb.stamp_ns {
+    for &(t, e, n) in path {
+        if t <= from_ns || t >= to_ns {
             continue;
         }
         d += (e - last.0).hypot(n - last.1);
@@ -263,7 +268,7 @@ fn cross(
     }
     d += (b.0 - last.0).hypot(b.1 - last.1);
     out.push((d, b.0, b.1));
-    Some(out)
+    out
 }
 
 /// A standstill this long gives the gyro's bias, s.
@@ -407,6 +412,7 @@ mod tests {
             fixes,
             motion,
             courses,
+            ..RunFixes::default()
         };
         let path = cross_from_29_9_s_facing_east(&run);
         path.iter().map(|p| p.2.abs()).fold(0.0, f64::max)

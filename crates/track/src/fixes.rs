@@ -7,7 +7,9 @@ use std::collections::HashMap;
 use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::LogRecord;
-use railfuse_catalog::messages::{FixType, GnssFix, Imu, MessageKind, Odometer, RadarSpeed};
+use railfuse_catalog::messages::{
+    FixType, FusedState, GnssFix, Imu, MessageKind, Odometer, RadarSpeed,
+};
 use railfuse_catalog::run::Run;
 use railfuse_eval::FixQuality;
 
@@ -45,6 +47,8 @@ pub struct RunFixes {
     pub motion: Vec<MotionStep>,
     /// The receiver's course, from fixes of every quality, where it moved fast enough.
     pub courses: Vec<Course>,
+    /// Its points are a 2-D pipeline's fused states, not GNSS fixes.
+    pub fused: bool,
 }
 
 /// Why a run's fixes could not be read.
@@ -58,6 +62,8 @@ pub enum FixesError {
     SeveralGnss { run: String, topics: String },
     #[error("{run}: no GNSS channel {topic}")]
     NoTopic { run: String, topic: String },
+    #[error("{run}: {topic} holds no fused state with a position (an along-track pipeline's states are chainage on a map; a 2-D pipeline's, such as gnss_ins, have one)")]
+    NoFusedPosition { run: String, topic: String },
     #[error("{run}: none of its {fixes} fixes on {topic} is of the stated quality ({quality})")]
     NoneOfQuality {
         run: String,
@@ -70,8 +76,18 @@ pub enum FixesError {
 /// A fix as read, before the quality is decided.
 struct Read {
     fix: Fix,
-    fix_type: FixType,
+    /// `None`: a fused state, which has no fix type.
+    fix_type: Option<FixType>,
     course: Option<Course>,
+}
+
+/// The channels a run's line may come from, each with its topic and what was read from it:
+/// GNSS fixes, and fused states of 2-D pipelines (GNSS/INS), whose positions hold through the
+/// fixes' gaps.
+#[derive(Default)]
+struct Sources {
+    gnss: HashMap<u16, (String, Vec<Read>)>,
+    fused: HashMap<u16, (String, Vec<Read>)>,
 }
 
 /// The σ a fix type stands for where the receiver reports no covariance, m.
@@ -96,8 +112,7 @@ pub fn read_fixes(
     let (name, path) = (run.display(), run.name().to_owned());
     let mut reader = run.reader()?;
     let mut foreign = ForeignChannels::default();
-    // Per GNSS channel: its topic and the fixes read from it.
-    let mut gnss: HashMap<u16, (String, Vec<Read>)> = HashMap::new();
+    let mut sources = Sources::default();
     // The motion sensors' channels, by kind.
     let mut motion_channels: HashMap<u16, MessageKind> = HashMap::new();
     let mut motion = MotionRecorder::default();
@@ -110,9 +125,13 @@ pub fn read_fixes(
                     Some(_) => c,
                 };
                 let wanted = topic.is_none_or(|t| t == c.topic);
+                let entry = (c.topic.clone(), Vec::new());
                 match c.kind() {
                     Some(MessageKind::GnssFix) if wanted => {
-                        gnss.entry(c.id).or_insert((c.topic.clone(), Vec::new()));
+                        sources.gnss.entry(c.id).or_insert(entry);
+                    }
+                    Some(MessageKind::FusedState) if wanted => {
+                        sources.fused.entry(c.id).or_insert(entry);
                     }
                     Some(
                         k @ (MessageKind::Imu | MessageKind::Odometer | MessageKind::RadarSpeed),
@@ -135,38 +154,56 @@ pub fn read_fixes(
                     .ok();
                     continue;
                 }
-                if !gnss.contains_key(&m.channel.id) {
+                let id = m.channel.id;
+                if let Some((_, read)) = sources.fused.get_mut(&id) {
+                    let state: FusedState = m.decode(&path)?;
+                    read.extend(fused_to_plane(&state, origin));
                     continue;
                 }
-                let id = m.channel.id;
+                if !sources.gnss.contains_key(&id) {
+                    continue;
+                }
                 // A foreign sample that does not read is a gap, as in eval.
                 let Ok(Some(m)) = foreign.message(m, &mut buf) else {
                     continue;
                 };
                 let fix: GnssFix = m.decode(&path)?;
                 if let Some(r) = to_plane(&fix, origin) {
-                    gnss.get_mut(&id).expect("a GNSS channel").1.push(r);
+                    sources.gnss.get_mut(&id).expect("a GNSS channel").1.push(r);
                 }
             }
             _ => {}
         }
     }
-    let (topic, read) = choose(&name, topic, gnss)?;
+    let (topic, read) = choose(&name, topic, sources)?;
     let mut run = keep_quality(name, topic, read, quality)?;
     run.motion = motion.finish();
     Ok(run)
 }
 
-/// The channel to fit: the one named, else the one GNSS channel that is not a Foxglove twin.
+/// The channel to fit: the one named (GNSS or fused), else the one GNSS channel that is not
+/// a Foxglove twin, else (a log without GNSS) the one fused channel with positions.
 fn choose(
     run: &str,
     named: Option<&str>,
-    gnss: HashMap<u16, (String, Vec<Read>)>,
+    sources: Sources,
 ) -> Result<(String, Vec<Read>), FixesError> {
-    let mut channels: Vec<(String, Vec<Read>)> = gnss.into_values().collect();
     let twin = |t: &str| t.starts_with(railfuse_catalog::foxglove::TOPIC_PREFIX);
+    let mut channels: Vec<(String, Vec<Read>)> = sources.gnss.into_values().collect();
     if channels.iter().any(|(t, _)| !twin(t)) {
         channels.retain(|(t, _)| !twin(t));
+    }
+    let fused: Vec<(String, Vec<Read>)> = sources.fused.into_values().collect();
+    if let (Some(t), Some((_, read))) = (named, fused.first()) {
+        if read.is_empty() {
+            return Err(FixesError::NoFusedPosition {
+                run: run.to_owned(),
+                topic: t.to_owned(),
+            });
+        }
+    }
+    if channels.is_empty() {
+        channels = fused.into_iter().filter(|(_, r)| !r.is_empty()).collect();
     }
     match (channels.len(), named) {
         (1, _) => Ok(channels.pop().expect("one")),
@@ -188,6 +225,45 @@ fn choose(
     }
 }
 
+/// A fused state's position in the plane of `origin`, its σ from its covariance; `None`
+/// for an along-track pipeline's state (chainage on a map) or a position that is not finite.
+fn fused_to_plane(state: &FusedState, origin: &mut Option<GeodeticOrigin>) -> Option<Read> {
+    let p = state.plane.as_ref()?;
+    let (lat, lon) = (p.latitude_deg, p.longitude_deg);
+    if !(lat.is_finite() && lon.is_finite()) {
+        return None;
+    }
+    let c = p.covariance_en_m2;
+    let sigma = ((c[0] + c[3]) / 2.0).sqrt();
+    let sigma_m = if sigma.is_finite() && sigma > 0.0 {
+        sigma
+    } else {
+        sigma_of(FixType::RtkFloat)
+    };
+    let (east_m, north_m) = plane_of(origin, lat, lon, 0.0);
+    Some(Read {
+        fix: Fix {
+            stamp_ns: state.stamp_ns,
+            east_m,
+            north_m,
+            sigma_m,
+        },
+        fix_type: None,
+        course: None,
+    })
+}
+
+/// (east, north) of a place in the plane of `origin`, which the first place read sets.
+fn plane_of(origin: &mut Option<GeodeticOrigin>, lat: f64, lon: f64, alt: f64) -> (f64, f64) {
+    let o = *origin.get_or_insert(GeodeticOrigin {
+        latitude_deg: lat,
+        longitude_deg: lon,
+        altitude_m: alt,
+    });
+    let (east_m, north_m, _) = o.to_enu(lat, lon, alt);
+    (east_m, north_m)
+}
+
 /// A fix with a position, in the plane of `origin`.
 fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> {
     let (Some(lat), Some(lon)) = (fix.latitude_deg, fix.longitude_deg) else {
@@ -197,12 +273,7 @@ fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> 
         return None;
     }
     let alt = fix.altitude_m.filter(|a| a.is_finite()).unwrap_or(0.0);
-    let o = *origin.get_or_insert(GeodeticOrigin {
-        latitude_deg: lat,
-        longitude_deg: lon,
-        altitude_m: alt,
-    });
-    let (east_m, north_m, _) = o.to_enu(lat, lon, alt);
+    let (east_m, north_m) = plane_of(origin, lat, lon, alt);
     let sigma_m = fix
         .position_covariance_enu_m2
         .map(|c| ((c[0] + c[4]) / 2.0).sqrt())
@@ -225,7 +296,7 @@ fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> 
             north_m,
             sigma_m,
         },
-        fix_type: fix.fix_type,
+        fix_type: Some(fix.fix_type),
         course,
     })
 }
@@ -236,11 +307,14 @@ fn keep_quality(
     read: Vec<Read>,
     quality: &FixQuality,
 ) -> Result<RunFixes, FixesError> {
-    let any_fixed = read.iter().any(|r| r.fix_type == FixType::RtkFixed);
-    let keep = |t: FixType| match quality {
-        FixQuality::Auto if any_fixed => t == FixType::RtkFixed,
-        FixQuality::Auto | FixQuality::All => true,
-        FixQuality::Only(types) => types.contains(&t),
+    let any_fixed = read.iter().any(|r| r.fix_type == Some(FixType::RtkFixed));
+    // A fused state has no fix type: a fused channel's states are all kept.
+    let fused = read.iter().all(|r| r.fix_type.is_none());
+    let keep = |t: Option<FixType>| match (t, quality) {
+        (None, _) => true,
+        (Some(t), FixQuality::Auto) if any_fixed => t == FixType::RtkFixed,
+        (Some(_), FixQuality::Auto | FixQuality::All) => true,
+        (Some(t), FixQuality::Only(types)) => types.contains(&t),
     };
     let total = read.len();
     let courses = read.iter().filter_map(|r| r.course).collect();
@@ -262,5 +336,6 @@ fn keep_quality(
         fixes,
         motion: Vec::new(),
         courses,
+        fused,
     })
 }
