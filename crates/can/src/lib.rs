@@ -1,0 +1,17 @@
+//! railfuse-can: the vehicle's CAN bus, the odometry a train puts on it and how railfuse
+//! reads it.
+//!
+//! - [`frame`]: one frame as railfuse keeps it (id, flags, data, bus time), classic and FD.
+//! - [`candump`]: the log format of can-utils' `candump -l`, line by line, each line that does
+//!   not parse counted with its number.
+//! - [`dbc`]: the vehicle's DBC file as a [`dbc::Database`] of messages and signals (the
+//!   grammar is the `can-dbc` crate's), checked for what would decode wrongly, each fault
+//!   with its line.
+//! - [`decode`]: a frame's signals in their units (scale, offset, signed, Intel and Motorola
+//!   byte order, IEEE floats, multiplexed signals, value tables), each out of its declared
+//!   range flagged; checked against cantools signal for signal.
+
+pub mod candump;
+pub mod dbc;
+pub mod decode;
+pub mod frame;

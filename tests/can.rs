@@ -1,0 +1,147 @@
+//! railfuse's CAN reading checked against the CAN ecosystem's own tools: a candump log read
+//! frame for frame as python-can reads it, and every frame decoded signal for signal as
+//! cantools decodes it, on samples/vehicle.dbc (Intel and Motorola, signed, scaled, IEEE
+//! float and double, multiplexed signals, value tables).
+
+mod common;
+
+use std::path::Path;
+
+use common::*;
+use railfuse_can::candump::Reader;
+use railfuse_can::dbc::Database;
+use railfuse_can::decode::Decoded;
+
+/// A seeded stream of bytes (SplitMix64): the frames' data.
+struct Bytes(u64);
+
+impl Bytes {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    fn hex(&mut self, n: usize) -> String {
+        (0..n)
+            .map(|_| format!("{:02X}", self.next() as u8))
+            .collect()
+    }
+}
+
+/// 600 frames of every message in the DBC, ids it does not have, a remote request, an error
+/// frame and FD frames, as `candump -l` writes them.
+fn candump_log() -> String {
+    let mut b = Bytes(48);
+    let ids = ["100", "101", "120", "19000000", "200", "321", "01ABCDEF"];
+    let mut log = String::new();
+    for i in 0..600u64 {
+        let stamp = format!(
+            "({}.{:06})",
+            1_700_000_000 + i / 100,
+            (i % 100) * 10_000 + 7
+        );
+        let id = ids[(b.next() % ids.len() as u64) as usize];
+        let mut data = b.hex(8);
+        if id == "19000000" {
+            // The multiplexor: one of the three pages the DBC has.
+            data.replace_range(0..2, &format!("{:02X}", b.next() % 3));
+        }
+        log.push_str(&format!("{stamp} can0 {id}#{data}\n"));
+    }
+    log.push_str("(1700000006.000001) can0 100#R\n");
+    // A bus error: python-can takes only that class of error frame as one.
+    log.push_str("(1700000006.000002) can0 20000080#0000000000000000\n");
+    log.push_str(&format!(
+        "(1700000006.000003) can1 321##1{}\n",
+        Bytes(7).hex(12)
+    ));
+    log.push_str(&format!(
+        "(1700000006.000004) can1 19000001##0{}\n",
+        Bytes(8).hex(64)
+    ));
+    log
+}
+
+#[test]
+fn candump_frames_and_dbc_signals_agree_with_python_can_and_cantools() {
+    let d = tempfile::tempdir().unwrap();
+    let log = d.path().join("frames.log");
+    std::fs::write(&log, candump_log()).unwrap();
+    let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/vehicle.dbc");
+    let out = d.path().join("theirs.json");
+    let py = python("can_check.py", &[s(&dbc), s(&log), s(&out)]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let theirs: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let db = Database::open(&dbc).unwrap();
+    let ours: Vec<_> = Reader::new(std::io::BufReader::new(std::fs::File::open(&log).unwrap()))
+        .map(|f| f.unwrap())
+        .collect();
+    assert_eq!(ours.len(), theirs.len());
+    assert_eq!(ours.len(), 604);
+    let (mut decoded, mut signals, mut labels) = (0, 0, 0);
+    for (f, t) in ours.iter().zip(&theirs) {
+        let at = format!("frame at {} id {:#x}", f.stamp_ns, f.id);
+        assert!(
+            (f.stamp_ns as f64 / 1e9 - t["stamp"].as_f64().unwrap()).abs() < 1e-6,
+            "{at}"
+        );
+        // python-can keeps an error frame's time and nothing else of it.
+        assert_eq!(t["error"], f.error, "{at}: error");
+        if f.error {
+            continue;
+        }
+        assert_eq!(t["bus"], f.bus.as_str(), "{at}");
+        assert_eq!(t["id"], f.id, "{at}");
+        for (flag, ours) in [
+            ("extended", f.extended),
+            ("rtr", f.rtr),
+            ("fd", f.fd),
+            ("brs", f.brs),
+            ("esi", f.esi),
+        ] {
+            assert_eq!(t[flag], ours, "{at}: {flag}");
+        }
+        let hex: String = f.data.iter().map(|b| format!("{b:02x}")).collect();
+        assert_eq!(t["data"], hex.as_str(), "{at}");
+        match (db.decode(f), t["signals"].as_object()) {
+            (Decoded::Signals { values, .. }, Some(theirs)) => {
+                decoded += 1;
+                assert_eq!(values.len(), theirs.len(), "{at}: {values:?} {theirs:?}");
+                for v in &values {
+                    let Some(their) = theirs[&v.name].as_f64() else {
+                        // NaN or an infinity, by name.
+                        let name = theirs[&v.name].as_str().unwrap();
+                        assert_eq!(format!("{}", v.value).to_lowercase(), name, "{at}");
+                        signals += 1;
+                        continue;
+                    };
+                    assert!(
+                        (v.value - their).abs() <= 1e-9 * their.abs().max(1.0),
+                        "{at}: {} = {} here, {their} by cantools",
+                        v.name,
+                        v.value
+                    );
+                    signals += 1;
+                    let their_label = t["labels"].get(&v.name).and_then(|l| l.as_str());
+                    assert_eq!(v.label.as_deref(), their_label, "{at}: {}", v.name);
+                    labels += usize::from(their_label.is_some());
+                }
+            }
+            (Decoded::Unknown, None) => {}
+            (ours, theirs) => panic!("{at}: {ours:?} here, {theirs:?} by cantools"),
+        }
+    }
+    // Every message of the DBC came up, with its value tables.
+    assert!(
+        decoded > 400 && signals > 1200 && labels > 100,
+        "{decoded} {signals} {labels}"
+    );
+}
