@@ -164,7 +164,11 @@ impl Database {
             };
             if db.messages.insert((id, extended), message).is_some() {
                 // The second of the two is the one to name.
-                let second = text.rfind(&format!("{at} ")).map_or("", |o| &text[o..]);
+                let start = format!("\n{at} ");
+                let second = text
+                    .match_indices(&start)
+                    .nth(1)
+                    .map_or("", |(o, _)| &text[o + 1..]);
                 return Err(invalid(second, format!("a second message with id {id:#x}")));
             }
         }

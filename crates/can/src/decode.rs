@@ -194,6 +194,9 @@ SIG_VALTYPE_ 2147484672 Speed : 1;
             e.starts_with("v.dbc:13: WheelSpeed Direction: its 2 bits from bit 63"),
             "{e}"
         );
+        let twice = DBC.replace("BO_ 2147484672 Radar", "BO_ 256 Radar");
+        let e = Database::parse("v.dbc", &twice).unwrap_err().to_string();
+        assert_eq!(e, "v.dbc:15: a second message with id 0x100");
         let broken = DBC.replace("SG_ Accel : 39|12@0-", "SG_ Accel : 39|12@0x");
         let e = Database::parse("v.dbc", &broken).unwrap_err().to_string();
         assert!(e.starts_with("v.dbc:"), "{e}");
