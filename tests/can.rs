@@ -1,6 +1,6 @@
-//! railfuse's CAN reading checked against the CAN ecosystem's own tools: a candump log read
-//! frame for frame as python-can reads it, and every frame decoded signal for signal as
-//! cantools decodes it, on samples/vehicle.dbc (Intel and Motorola, signed, scaled, IEEE
+//! railfuse's CAN reading checked against the CAN ecosystem's own tools: a candump log and a
+//! Vector ASC log read frame for frame as python-can reads them, and every frame decoded
+//! signal for signal as cantools decodes it, on samples/vehicle.dbc (Intel and Motorola, signed, scaled, IEEE
 //! float and double, multiplexed signals, value tables).
 
 mod common;
@@ -8,9 +8,14 @@ mod common;
 use std::path::Path;
 
 use common::*;
+use std::fs::File;
+use std::io::BufReader;
+
+use railfuse_can::asc;
 use railfuse_can::candump::Reader;
 use railfuse_can::dbc::Database;
 use railfuse_can::decode::Decoded;
+use railfuse_can::frame::{Frame, FD_LENGTHS};
 
 /// A seeded stream of bytes (SplitMix64): the frames' data.
 struct Bytes(u64);
@@ -70,9 +75,102 @@ fn candump_frames_and_dbc_signals_agree_with_python_can_and_cantools() {
     let d = tempfile::tempdir().unwrap();
     let log = d.path().join("frames.log");
     std::fs::write(&log, candump_log()).unwrap();
+    let ours: Vec<Frame> = Reader::new(BufReader::new(File::open(&log).unwrap()))
+        .map(|f| f.unwrap())
+        .collect();
+    assert_eq!(ours.len(), 604);
+    agrees_with_python_can_and_cantools(d.path(), &log, &ours, |f| f.bus.clone());
+}
+
+#[test]
+fn vector_asc_frames_agree_with_python_can_and_with_their_candump() {
+    let d = tempfile::tempdir().unwrap();
+    let frames: Vec<Frame> = Reader::new(candump_log().as_bytes())
+        .map(|f| f.unwrap())
+        .collect();
+    let asc = d.path().join("frames.asc");
+    std::fs::write(&asc, asc_log(&frames)).unwrap();
+    let ours: Vec<Frame> = asc::Reader::new(BufReader::new(File::open(&asc).unwrap()))
+        .map(|f| f.unwrap())
+        .collect();
+    assert_eq!(ours.len(), frames.len());
+    for (a, c) in ours.iter().zip(&frames) {
+        let bus = if c.bus == "can0" { "CAN1" } else { "CAN2" };
+        assert_eq!(a.bus, bus);
+        if c.error {
+            // An ASC error frame says nothing of its class.
+            assert!(a.error && a.stamp_ns == c.stamp_ns, "{a:?}");
+            continue;
+        }
+        assert_eq!(
+            Frame {
+                bus: c.bus.clone(),
+                ..a.clone()
+            },
+            *c,
+            "{a:?}"
+        );
+    }
+    // python-can numbers an ASC channel from 0.
+    agrees_with_python_can_and_cantools(d.path(), &asc, &ours, |f| {
+        (f.bus[3..].parse::<u32>().unwrap() - 1).to_string()
+    });
+}
+
+/// The frames as Vector's ASC logging writes them, the trigger block starting at the first
+/// one's whole second.
+fn asc_log(frames: &[Frame]) -> String {
+    let start = frames[0].stamp_ns / 1_000_000_000 * 1_000_000_000;
+    // 1700000000 s: Tue Nov 14 22:13:20 2023 UTC.
+    assert_eq!(start, 1_700_000_000_000_000_000);
+    let date = "Tue Nov 14 10:13:20.000 pm 2023";
+    let mut out = format!("date {date}\nbase hex  timestamps absolute\ninternal events logged\n");
+    out.push_str(&format!(
+        "Begin Triggerblock {date}\n   0.000000 Start of measurement\n"
+    ));
+    for f in frames {
+        let t = format!("{:.6}", (f.stamp_ns - start) as f64 / 1e9);
+        let ch = if f.bus == "can0" { 1 } else { 2 };
+        let id = format!("{:X}{}", f.id, if f.extended { "x" } else { "" });
+        let data: Vec<String> = f.data.iter().map(|b| format!("{b:02X}")).collect();
+        let line = match (f.error, f.fd, f.rtr) {
+            (true, _, _) => format!("{t} {ch}  ErrorFrame"),
+            (_, true, _) => {
+                let dlc = FD_LENGTHS.iter().position(|&n| n == f.data.len()).unwrap();
+                format!(
+                    "{t} CANFD {ch:>3} Rx {id:>8}  {:>32} {} {} {dlc:x} {} {}",
+                    "",
+                    u8::from(f.brs),
+                    u8::from(f.esi),
+                    f.data.len(),
+                    data.join(" ")
+                )
+            }
+            (_, _, true) => format!("{t} {ch}  {id:<15} Rx   r"),
+            _ => format!(
+                "{t} {ch}  {id:<15} Rx   d {} {}",
+                f.data.len(),
+                data.join(" ")
+            ),
+        };
+        out.push_str(&line);
+        out.push('\n');
+    }
+    out.push_str("End TriggerBlock\n");
+    out
+}
+
+/// `ours` (read from `log`) against python-can's reading of the same file and cantools'
+/// decoding of each frame; `bus` gives a frame's bus as python-can names it.
+fn agrees_with_python_can_and_cantools(
+    dir: &Path,
+    log: &Path,
+    ours: &[Frame],
+    bus: impl Fn(&Frame) -> String,
+) {
     let dbc = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples/vehicle.dbc");
-    let out = d.path().join("theirs.json");
-    let py = python("can_check.py", &[s(&dbc), s(&log), s(&out)]);
+    let out = dir.join("theirs.json");
+    let py = python("can_check.py", &[s(&dbc), s(log), s(&out)]);
     assert!(
         py.status.success(),
         "{}",
@@ -81,11 +179,7 @@ fn candump_frames_and_dbc_signals_agree_with_python_can_and_cantools() {
     let theirs: Vec<serde_json::Value> =
         serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let db = Database::open(&dbc).unwrap();
-    let ours: Vec<_> = Reader::new(std::io::BufReader::new(std::fs::File::open(&log).unwrap()))
-        .map(|f| f.unwrap())
-        .collect();
     assert_eq!(ours.len(), theirs.len());
-    assert_eq!(ours.len(), 604);
     let (mut decoded, mut signals, mut labels) = (0, 0, 0);
     for (f, t) in ours.iter().zip(&theirs) {
         let at = format!("frame at {} id {:#x}", f.stamp_ns, f.id);
@@ -98,7 +192,7 @@ fn candump_frames_and_dbc_signals_agree_with_python_can_and_cantools() {
         if f.error {
             continue;
         }
-        assert_eq!(t["bus"], f.bus.as_str(), "{at}");
+        assert_eq!(t["bus"].to_string().trim_matches('"'), bus(f), "{at}");
         assert_eq!(t["id"], f.id, "{at}");
         for (flag, ours) in [
             ("extended", f.extended),

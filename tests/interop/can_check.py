@@ -1,6 +1,9 @@
-"""Read a candump log with python-can and decode its frames with cantools.
+"""Read a candump log (or a Vector ASC log, .asc) with python-can and decode its frames with
+cantools.
 
-    python tests/interop/can_check.py vehicle.dbc frames.log out.json
+    python tests/interop/can_check.py vehicle.dbc frames.log|frames.asc out.json
+
+An ASC log's date is read as UTC (python-can reads it in the local zone).
 
 Writes, frame by frame as python-can's CanutilsLogReader reads them: the time, id, flags
 and data, and for frames whose id the DBC has, cantools' signals (scaled, multiplexing
@@ -9,7 +12,9 @@ resolved) and the value tables' names. tests/can.rs compares railfuse's reading 
 
 import json
 import math
+import os
 import sys
+import time
 
 import can
 import cantools
@@ -19,7 +24,13 @@ def main():
     dbc, log, out = sys.argv[1:4]
     db = cantools.database.load_file(dbc)
     frames = []
-    for m in can.io.CanutilsLogReader(log):
+    if log.endswith(".asc"):
+        os.environ["TZ"] = "UTC"
+        time.tzset()
+        reader = can.io.ASCReader(log, relative_timestamp=False)
+    else:
+        reader = can.io.CanutilsLogReader(log)
+    for m in reader:
         frame = {
             "stamp": m.timestamp,
             "bus": m.channel,

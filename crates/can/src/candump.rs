@@ -8,23 +8,14 @@
 //! (1700000000.123460) can0 20000080#0000000000000000   error frame (CAN_ERR_FLAG in the id)
 //! ```
 //!
-//! A line that does not parse is skipped and reported with its number; a log's lines are
-//! untrusted, so a line longer than [`MAX_LINE`] is refused unread.
+//! A line that does not parse is skipped and reported with its number; a line longer than
+//! [`MAX_LINE`] is refused unread ([`crate::lines`]).
 
-use std::io::{BufRead, Read};
+use std::io::BufRead;
 
 use crate::frame::{Frame, ERROR_FLAG, MAX_CLASSIC_LEN, MAX_FD_LEN};
-
-/// The longest line taken: a 64-byte FD frame with the longest stamp and interface name.
-pub const MAX_LINE: usize = 512;
-
-/// A line that did not parse: its number (from 1) and why.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("line {line}: {reason}")]
-pub struct BadLine {
-    pub line: usize,
-    pub reason: String,
-}
+use crate::lines::Lines;
+pub use crate::lines::{BadLine, MAX_LINE};
 
 /// One `candump -l` line as a frame.
 pub fn parse_line(line: &str) -> Result<Frame, String> {
@@ -155,17 +146,13 @@ fn parse_data(s: &str, max: usize) -> Result<Vec<u8>, String> {
 
 /// A `candump -l` log read line by line: each item a frame, or a line that did not parse.
 pub struct Reader<R> {
-    input: R,
-    line: usize,
-    buf: Vec<u8>,
+    lines: Lines<R>,
 }
 
 impl<R: BufRead> Reader<R> {
     pub fn new(input: R) -> Self {
         Self {
-            input,
-            line: 0,
-            buf: Vec::new(),
+            lines: Lines::new(input),
         }
     }
 }
@@ -174,47 +161,11 @@ impl<R: BufRead> Iterator for Reader<R> {
     type Item = Result<Frame, BadLine>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        loop {
-            self.buf.clear();
-            // Bounded: a line past MAX_LINE is read no further than that and refused.
-            let n = self
-                .input
-                .by_ref()
-                .take(MAX_LINE as u64 + 1)
-                .read_until(b'\n', &mut self.buf);
-            let n = match n {
-                Ok(0) => return None,
-                Ok(n) => n,
-                Err(e) => {
-                    self.line += 1;
-                    return Some(Err(self.bad(format!("unreadable: {e}"))));
-                }
-            };
-            self.line += 1;
-            if n > MAX_LINE && !self.buf.ends_with(b"\n") {
-                // Skip the rest of the overlong line.
-                let mut rest = Vec::new();
-                let _ = self.input.read_until(b'\n', &mut rest);
-                return Some(Err(self.bad(format!("longer than {MAX_LINE} bytes"))));
-            }
-            let text = match std::str::from_utf8(&self.buf) {
-                Ok(t) => t.trim(),
-                Err(_) => return Some(Err(self.bad("not text".into()))),
-            };
-            if text.is_empty() {
-                continue;
-            }
-            return Some(parse_line(text).map_err(|reason| self.bad(reason)));
-        }
-    }
-}
-
-impl<R> Reader<R> {
-    fn bad(&self, reason: String) -> BadLine {
-        BadLine {
-            line: self.line,
-            reason,
-        }
+        let (line, text) = match self.lines.next_line()? {
+            Ok(l) => l,
+            Err(e) => return Some(Err(e)),
+        };
+        Some(parse_line(text).map_err(|reason| BadLine { line, reason }))
     }
 }
 

@@ -2,8 +2,9 @@
 //! reads it.
 //!
 //! - [`frame`]: one frame as railfuse keeps it (id, flags, data, bus time), classic and FD.
-//! - [`candump`]: the log format of can-utils' `candump -l`, line by line, each line that does
-//!   not parse counted with its number.
+//! - [`candump`]: the log format of can-utils' `candump -l`, and [`asc`]: Vector's ASC log,
+//!   both line by line ([`lines`]: bounded), each line that does not parse reported with its
+//!   number.
 //! - [`dbc`]: the vehicle's DBC file as a [`dbc::Database`] of messages and signals (the
 //!   grammar is the `can-dbc` crate's), checked for what would decode wrongly, each fault
 //!   with its line.
@@ -11,7 +12,9 @@
 //!   byte order, IEEE floats, multiplexed signals, value tables), each out of its declared
 //!   range flagged; checked against cantools signal for signal.
 
+pub mod asc;
 pub mod candump;
 pub mod dbc;
 pub mod decode;
 pub mod frame;
+pub mod lines;
