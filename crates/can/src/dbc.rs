@@ -99,27 +99,7 @@ impl Database {
             line: line_of(text, at),
             reason,
         };
-        let dbc = match can_dbc::Dbc::try_from(text) {
-            Ok(d) => d,
-            Err(can_dbc::Error::Incomplete(_, rest)) => {
-                let what = rest.lines().next().unwrap_or("").trim();
-                return Err(invalid(rest, format!("does not parse from here: '{what}'")));
-            }
-            Err(can_dbc::Error::Nom(e)) => {
-                let at = match &e {
-                    nom::Err::Error(e) | nom::Err::Failure(e) => e.input,
-                    nom::Err::Incomplete(_) => "",
-                };
-                return Err(invalid(at, "does not parse".into()));
-            }
-            Err(e) => {
-                return Err(DbcError::Invalid {
-                    file: file.to_owned(),
-                    line: 0,
-                    reason: format!("{e:?}"),
-                })
-            }
-        };
+        let dbc = grammar(file, text)?;
         let mut db = Database::default();
         for m in dbc.messages() {
             let (id, extended) = match *m.id() {
@@ -176,8 +156,35 @@ impl Database {
     }
 }
 
+/// The DBC's grammar (the `can-dbc` crate's), a failure placed at its line.
+fn grammar(file: &str, text: &str) -> Result<can_dbc::Dbc, DbcError> {
+    let invalid = |at: &str, reason: String| DbcError::Invalid {
+        file: file.to_owned(),
+        line: line_of(text, at),
+        reason,
+    };
+    match can_dbc::Dbc::try_from(text) {
+        Ok(d) => Ok(d),
+        Err(can_dbc::Error::Incomplete(_, rest)) => {
+            let what = rest.lines().next().unwrap_or("").trim();
+            Err(invalid(rest, format!("does not parse from here: '{what}'")))
+        }
+        Err(can_dbc::Error::Nom(e)) => {
+            let at = match &e {
+                nom::Err::Error(e) | nom::Err::Failure(e) => e.input,
+                nom::Err::Incomplete(_) => "",
+            };
+            Err(invalid(at, "does not parse".into()))
+        }
+        Err(e) => Err(invalid("", format!("{e:?}"))),
+    }
+}
+
 /// The 1-based line of `at`, a slice of `text` (or a string found in it); 0 where neither.
 fn line_of(text: &str, at: &str) -> usize {
+    if at.is_empty() {
+        return 0;
+    }
     let offset = match (at.as_ptr() as usize).checked_sub(text.as_ptr() as usize) {
         Some(o) if o <= text.len() && !at.is_empty() => Some(o),
         _ => text.find(at),
