@@ -151,7 +151,8 @@ pub(crate) fn finish(
         .zip(aside)
         .map(|(p, a)| p.iter().zip(a).map(|(m, &a)| m.filter(|_| !a)).collect())
         .collect();
-    let (fitted_placed, placed) = (placed, &used[..]);
+    // `on_line`: every fix on the line, those set aside included; `placed`: those fitted.
+    let (on_line, placed) = (placed, &used[..]);
     let on: Vec<&OnLine> = placed.iter().flatten().flatten().collect();
     let with_sigma: Vec<(&OnLine, f64)> = runs
         .iter()
@@ -166,18 +167,18 @@ pub(crate) fn finish(
         .copied()
         .unwrap_or(0.0);
     // Where the first run starts on the line, its fixes set aside included.
-    let first_run_start = fitted_placed[0]
+    let first_run_start = on_line[0]
         .iter()
         .flatten()
         .next()
         .map_or((line.start_m(), true), |m| {
-            (m.chainage_m, increasing(&fitted_placed[0]))
+            (m.chainage_m, increasing(&on_line[0]))
         });
     Centreline {
         runs: runs
             .iter()
             .zip(placed)
-            .zip(fitted_placed)
+            .zip(on_line)
             .map(|((r, used), all)| run_report(r, used, all))
             .collect(),
         set_aside,
