@@ -16,5 +16,6 @@ pub mod asc;
 pub mod candump;
 pub mod dbc;
 pub mod decode;
+pub mod encode;
 pub mod frame;
 pub mod lines;

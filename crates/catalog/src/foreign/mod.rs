@@ -7,6 +7,7 @@
 //! [`ros2`] (CDR), [`foxglove`] (Foxglove's well-known schemas in JSON) and [`protobuf`]
 //! (the same schemas in protobuf, read through the file's own descriptors).
 
+pub mod can;
 pub mod foxglove;
 pub mod protobuf;
 pub mod ros2;

@@ -49,6 +49,19 @@ impl MessageKind {
             MessageKind::TimeReference => json!({
                 "stamp_ns": T, "local_ns": T + 350_000_123, "source": "pps"
             }),
+            MessageKind::CanFrame => json!({
+                "stamp_ns": T, "receive_ns": T + 120_000, "bus": "can0", "id": 256,
+                "extended": false, "remote": false, "error": false, "fd": false, "brs": false,
+                "esi": false, "data": "D2049604010000F0"
+            }),
+            MessageKind::CanSignals => json!({
+                "stamp_ns": T, "bus": "can0", "id": 256, "message": "WheelSpeed",
+                "signals": [
+                    {"name": "AxleSpeed1", "value": 12.02, "unit": "m/s"},
+                    {"name": "Direction", "value": 1.0, "label": "forward"},
+                    {"name": "Counter", "value": 15.0, "out_of_range": true}
+                ]
+            }),
             MessageKind::EddyCurrentBlock => json!({
                 "stamp_ns": T, "sample_rate_hz": 10_000.0, "spacing_m": 0.3,
                 "sensor_a": [0.1, 0.4, -0.2], "sensor_b": [0.0, 0.1, 0.4],

@@ -2,6 +2,7 @@
 //! channels and tuning traces. Each type implements [`ChannelMessage`], which ties it to its schema name.
 
 mod balise;
+mod can;
 mod eddy_current;
 mod events;
 mod examples;
@@ -21,6 +22,7 @@ mod track_map;
 mod tuning;
 
 pub use balise::BalisePassage;
+pub use can::{CanData, CanFrame, CanSignal, CanSignals};
 pub use eddy_current::EddyCurrentBlock;
 pub use events::{Event, EventKind, Severity};
 pub use fused::{

@@ -146,6 +146,8 @@ registry!(
     RecorderDiagnostics,
     TuneEvaluation,
     TimeReference,
+    CanFrame,
+    CanSignals,
 );
 
 impl MessageKind {
@@ -166,7 +168,7 @@ impl MessageKind {
             // The receiver's solution time, and a reference system's (GNSS-timed) truth.
             GnssFix | TimeReference | GroundTruth => StampClock::Gnss,
             Imu | RadarSpeed | Odometer | LoopPosition | BalisePassage | EddyCurrentBlock
-            | Event | RecorderDiagnostics => StampClock::Recorder,
+            | Event | RecorderDiagnostics | CanFrame | CanSignals => StampClock::Recorder,
             TrackMap | FusedState | FusedDiagnostics | SafetyStatus | ImuErrorModel
             | TuneEvaluation => StampClock::Derived,
         }

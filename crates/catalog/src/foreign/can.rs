@@ -1,0 +1,406 @@
+//! The vehicle's CAN bus read as railfuse's own sensors.
+//!
+//! A frame travels as a [`CanFrame`] (`/can/<bus>/frames`), whole, whatever the DBC knows;
+//! the DBC's messages decode to [`CanSignals`] (`/can/<bus>/<Message>`); and a
+//! configuration maps a decoded signal onto a railfuse sensor, so a recording of the bus
+//! alone re-fuses with no bridge:
+//!
+//! ```toml
+//! [can]
+//! dbc = "vehicle.dbc"
+//!
+//! [sensor."/odometer/1"]
+//! from = "can:WheelSpeed.AxleSpeed1"
+//!
+//! [sensor."/radar/speed"]
+//! from = "can:RadarSpeed.GroundSpeed"
+//! valid = "can:RadarSpeed.Valid"        # optional: 0 is "no measurement"
+//! quality = "can:RadarSpeed.Quality"    # optional: a fraction, or % by its unit
+//! ```
+//!
+//! [`SensorBridge`] does the mapping: a speed signal in m/s, km/h or mph becomes an
+//! [`Odometer`]'s or a [`RadarSpeed`]'s speed (its magnitude: direction is a signal of its
+//! own on a train's bus), stamped with the frame's bus time.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use railfuse_can::dbc::{Database, DbcError};
+use railfuse_can::decode::{Decoded, Value};
+use railfuse_can::frame::Frame;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use crate::messages::{
+    AnyMessage, CanData, CanFrame, CanSignal, CanSignals, MessageKind, Odometer, RadarSpeed,
+};
+
+/// `/can/<bus>/frames`: every frame of one bus.
+pub fn frames_topic(bus: &str) -> String {
+    format!("/can/{bus}/frames")
+}
+
+/// `/can/<bus>/<Message>`: one DBC message's decoded signals.
+pub fn signals_topic(bus: &str, message: &str) -> String {
+    format!("/can/{bus}/{message}")
+}
+
+impl CanFrame {
+    /// The catalogue's form of `frame`, received at `receive_ns`.
+    pub fn from_frame(frame: &Frame, receive_ns: u64) -> Self {
+        CanFrame {
+            stamp_ns: frame.stamp_ns,
+            receive_ns,
+            bus: frame.bus.clone(),
+            id: frame.id,
+            extended: frame.extended,
+            remote: frame.rtr,
+            error: frame.error,
+            fd: frame.fd,
+            brs: frame.brs,
+            esi: frame.esi,
+            data: CanData(frame.data.clone()),
+        }
+    }
+
+    /// The frame it carries.
+    pub fn to_frame(&self) -> Frame {
+        Frame {
+            stamp_ns: self.stamp_ns,
+            bus: self.bus.clone(),
+            id: self.id,
+            extended: self.extended,
+            rtr: self.remote,
+            error: self.error,
+            fd: self.fd,
+            brs: self.brs,
+            esi: self.esi,
+            data: self.data.0.clone(),
+        }
+    }
+}
+
+impl CanSignals {
+    /// The message `name`'s signals decoded from `frame`.
+    pub fn new(frame: &Frame, name: &str, values: Vec<Value>) -> Self {
+        CanSignals {
+            stamp_ns: frame.stamp_ns,
+            bus: frame.bus.clone(),
+            id: frame.id,
+            message: name.to_owned(),
+            signals: values
+                .into_iter()
+                .map(|v| CanSignal {
+                    name: v.name,
+                    value: v.value,
+                    unit: v.unit,
+                    label: v.label,
+                    out_of_range: v.out_of_range,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// `[can]` of a configuration: the vehicle's DBC, and which bus to read.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CanSettings {
+    /// The vehicle's DBC file, relative to the configuration.
+    pub dbc: PathBuf,
+    /// Read frames of this bus only (`can0`); every bus when absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bus: Option<String>,
+}
+
+/// `[sensor."<topic>"]`: a railfuse sensor made from decoded CAN signals.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SensorSource {
+    /// The speed signal, `"can:Message.Signal"`: in m/s, km/h or mph by its DBC unit.
+    pub from: String,
+    /// A signal of the same message that is 0 when the sensor has no measurement.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub valid: Option<String>,
+    /// A signal of the same message giving the measurement's quality: 0–1, or 0–100 in `%`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quality: Option<String>,
+}
+
+/// What is wrong with a CAN mapping (the caller names the configuration file).
+#[derive(Debug, thiserror::Error)]
+pub enum MappingError {
+    #[error(transparent)]
+    Dbc(#[from] DbcError),
+    #[error("[sensor.\"{topic}\"] {key} = \"{given}\": {cause}")]
+    Signal {
+        topic: String,
+        key: &'static str,
+        given: String,
+        cause: String,
+    },
+    #[error("[sensor.\"{topic}\"]: {cause}")]
+    Sensor { topic: String, cause: String },
+}
+
+/// A signal of the mapped message, by name.
+#[derive(Debug, Clone)]
+struct SignalRef {
+    name: String,
+    /// To SI units.
+    scale: f64,
+}
+
+#[derive(Debug, Clone)]
+struct Mapped {
+    topic: String,
+    kind: MessageKind,
+    /// (id, extended) of the message.
+    message: (u32, bool),
+    speed: SignalRef,
+    valid: Option<SignalRef>,
+    quality: Option<SignalRef>,
+}
+
+/// What the bridge has seen, for the report.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct BridgeCounts {
+    /// Sensor messages made, by topic.
+    pub made: BTreeMap<String, u64>,
+    /// Frames no DBC message has (kept raw), by bus and id (`can0 0x7FF`).
+    pub unknown_ids: BTreeMap<String, u64>,
+    /// Frames shorter than their message, by message.
+    pub too_short: BTreeMap<String, u64>,
+    /// Mapped signals out of their declared range (used all the same), by message.signal.
+    pub out_of_range: BTreeMap<String, u64>,
+    /// Mapped values that are not finite numbers (left out), by message.signal.
+    pub not_finite: BTreeMap<String, u64>,
+}
+
+/// The vehicle's DBC and the sensors mapped from its signals.
+pub struct SensorBridge {
+    db: Database,
+    bus: Option<String>,
+    mapped: Vec<Mapped>,
+    pub counts: BridgeCounts,
+}
+
+/// A speed unit's factor to m/s.
+fn speed_scale(unit: &str) -> Option<f64> {
+    match unit.trim().to_ascii_lowercase().as_str() {
+        "m/s" | "mps" | "m/sec" => Some(1.0),
+        "km/h" | "kph" | "kmh" | "km/hr" => Some(1.0 / 3.6),
+        "mph" => Some(0.447_04),
+        _ => None,
+    }
+}
+
+impl SensorBridge {
+    /// The bridge of `settings` (its DBC relative to `base`) for the sensors of `sensors`.
+    pub fn new(
+        settings: &CanSettings,
+        base: &Path,
+        sensors: &BTreeMap<String, SensorSource>,
+    ) -> Result<Self, MappingError> {
+        let db = Database::open(&base.join(&settings.dbc))?;
+        Self::with_database(db, settings.bus.clone(), sensors)
+    }
+
+    /// The bridge of a DBC already read.
+    pub fn with_database(
+        db: Database,
+        bus: Option<String>,
+        sensors: &BTreeMap<String, SensorSource>,
+    ) -> Result<Self, MappingError> {
+        let mapped = sensors
+            .iter()
+            .map(|(topic, source)| map_sensor(&db, topic, source))
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            db,
+            bus,
+            mapped,
+            counts: BridgeCounts::default(),
+        })
+    }
+
+    /// The topics the bridge makes, with their kinds.
+    pub fn topics(&self) -> impl Iterator<Item = (&str, MessageKind)> {
+        self.mapped.iter().map(|m| (m.topic.as_str(), m.kind))
+    }
+
+    pub fn database(&self) -> &Database {
+        &self.db
+    }
+
+    /// The sensor messages `frame` makes, with their topics (none for most frames).
+    pub fn frame(&mut self, frame: &CanFrame) -> Vec<(&str, AnyMessage)> {
+        if self.bus.as_ref().is_some_and(|b| *b != frame.bus) {
+            return Vec::new();
+        }
+        let f = frame.to_frame();
+        let (message, values) = match self.db.decode(&f) {
+            Decoded::Signals { message, values } => (message, values),
+            Decoded::Unknown => {
+                if !f.error && !f.rtr {
+                    let key = format!("{} 0x{:X}", f.bus, f.id);
+                    *self.counts.unknown_ids.entry(key).or_insert(0) += 1;
+                }
+                return Vec::new();
+            }
+            Decoded::TooShort { message } => {
+                *self
+                    .counts
+                    .too_short
+                    .entry(message.name.clone())
+                    .or_insert(0) += 1;
+                return Vec::new();
+            }
+        };
+        let mut out = Vec::new();
+        for m in self
+            .mapped
+            .iter()
+            .filter(|m| m.message == (f.id, f.extended))
+        {
+            let find = |r: &SignalRef| values.iter().find(|v| v.name == r.name);
+            let Some(v) = find(&m.speed) else {
+                continue; // a multiplexed signal this frame does not carry
+            };
+            let name = format!("{}.{}", message.name, v.name);
+            if !v.value.is_finite() {
+                *self.counts.not_finite.entry(name).or_insert(0) += 1;
+                continue;
+            }
+            if v.out_of_range {
+                *self.counts.out_of_range.entry(name).or_insert(0) += 1;
+            }
+            let speed = (v.value * m.speed.scale).abs();
+            let read = |r: &Option<SignalRef>| {
+                let r = r.as_ref()?;
+                Some(find(r)?.value * r.scale).filter(|x| x.is_finite())
+            };
+            let message = match m.kind {
+                MessageKind::RadarSpeed => AnyMessage::RadarSpeed(RadarSpeed {
+                    stamp_ns: f.stamp_ns,
+                    speed_mps: speed,
+                    quality: read(&m.quality).map_or(1.0, |q| q.clamp(0.0, 1.0)),
+                    valid: read(&m.valid).is_none_or(|x| x != 0.0),
+                    speed_variance_m2ps2: None,
+                }),
+                _ => AnyMessage::Odometer(Odometer {
+                    stamp_ns: f.stamp_ns,
+                    sensor_id: m.topic.clone(),
+                    pulse_count: None,
+                    pulses_per_revolution: None,
+                    wheel_diameter_m: None,
+                    distance_increment_m: None,
+                    speed_mps: speed,
+                }),
+            };
+            *self.counts.made.entry(m.topic.clone()).or_insert(0) += 1;
+            out.push((m.topic.as_str(), message));
+        }
+        out
+    }
+}
+
+/// `topic`'s sensor from `source`, checked against the DBC.
+fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mapped, MappingError> {
+    let kind = match crate::topics::standard_kind(topic) {
+        Some(k @ (MessageKind::Odometer | MessageKind::RadarSpeed)) => k,
+        Some(k) => {
+            return Err(MappingError::Sensor {
+                topic: topic.into(),
+                cause: format!(
+                    "is a {} channel: CAN signals make odometers and radars (a speed)",
+                    k.type_name()
+                ),
+            })
+        }
+        None => {
+            return Err(MappingError::Sensor {
+                topic: topic.into(),
+                cause: "is not an odometer or radar topic (/odometer/1, /odometer/2, \
+                        /radar/speed)"
+                    .into(),
+            })
+        }
+    };
+    let (message, name, unit) = find_signal(db, topic, "from", &source.from)?;
+    let speed = SignalRef {
+        name,
+        scale: speed_scale(&unit).ok_or_else(|| MappingError::Signal {
+            topic: topic.into(),
+            key: "from",
+            given: source.from.clone(),
+            cause: format!("is in '{unit}': a speed is in m/s, km/h or mph"),
+        })?,
+    };
+    let same_message = |key: &'static str, given: &Option<String>, percent: bool| {
+        let Some(given) = given else {
+            return Ok(None);
+        };
+        let (m, name, unit) = find_signal(db, topic, key, given)?;
+        if m != message {
+            return Err(MappingError::Signal {
+                topic: topic.into(),
+                key,
+                given: given.clone(),
+                cause: format!("is not in the message of `from` ({})", source.from),
+            });
+        }
+        let scale = if percent && unit.trim() == "%" {
+            0.01
+        } else {
+            1.0
+        };
+        Ok(Some(SignalRef { name, scale }))
+    };
+    let valid = same_message("valid", &source.valid, false)?;
+    let quality = same_message("quality", &source.quality, true)?;
+    if kind == MessageKind::Odometer && (valid.is_some() || quality.is_some()) {
+        return Err(MappingError::Sensor {
+            topic: topic.into(),
+            cause: "an odometer has no `valid` or `quality`: those are a radar's".into(),
+        });
+    }
+    Ok(Mapped {
+        topic: topic.to_owned(),
+        kind,
+        message,
+        speed,
+        valid,
+        quality,
+    })
+}
+
+/// The message key, the signal's name and its unit.
+fn find_signal(
+    db: &Database,
+    topic: &str,
+    key: &'static str,
+    given: &str,
+) -> Result<((u32, bool), String, String), MappingError> {
+    let err = |cause: String| MappingError::Signal {
+        topic: topic.into(),
+        key,
+        given: given.into(),
+        cause,
+    };
+    let (message, signal) = given
+        .strip_prefix("can:")
+        .and_then(|s| s.split_once('.'))
+        .ok_or_else(|| err("write it as \"can:Message.Signal\"".into()))?;
+    let m = db
+        .messages
+        .values()
+        .find(|m| m.name == message)
+        .ok_or_else(|| err(format!("the DBC has no message {message}")))?;
+    let s = m
+        .signals
+        .iter()
+        .find(|s| s.name == signal)
+        .ok_or_else(|| err(format!("message {message} has no signal {signal}")))?;
+    Ok(((m.id, m.extended), s.name.clone(), s.unit.clone()))
+}
