@@ -1,7 +1,10 @@
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use anyhow::Result;
+use railfuse_can::dbc::Database;
 use railfuse_record::decode::nmea;
+use railfuse_record::import::can_log::{self, CanLog};
 use railfuse_record::import::{csv_map, eth, gnss_file, ImportReport};
 use railfuse_record::recorder::StreamFormat;
 
@@ -15,7 +18,8 @@ pub struct Args {
     pub output: Option<PathBuf>,
     /// Input format. Without it, it is told from the input: a directory with metadata.yaml
     /// is a ROS 2 bag, bytes B5 62 UBX, a line that checks as an NMEA sentence NMEA, `HH:MM:SS.ffffff,X,hex`
-    /// lines an ETH node log, and `--map` a CSV table.
+    /// lines an ETH node log, a `(stamp) can0 123#…` line a candump log, a `date` or `base`
+    /// line an ASC log, and `--map` a CSV table.
     #[arg(long, value_enum)]
     pub format: Option<Format>,
     /// UTC date (YYYY-MM-DD) of NMEA fixes that come before any RMC or ZDA sentence. Without
@@ -34,6 +38,11 @@ pub struct Args {
     /// fields each requires, and DIR/example.csv, a table it imports; then stop.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["input", "output", "format", "map"])]
     pub example_map: Option<PathBuf>,
+    /// The vehicle's DBC: a CAN log's known messages are also written decoded, one channel
+    /// per message (`/can/<bus>/<Message>`), beside every frame raw (`/can/<bus>/frames`).
+    /// Only with a CAN log (candump, asc).
+    #[arg(long, value_name = "VEHICLE.dbc")]
+    pub dbc: Option<PathBuf>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -52,6 +61,10 @@ pub enum Format {
     Csv,
     /// A ROS 2 bag in the sqlite3 storage (a directory of .db3 files), to MCAP.
     Rosbag2,
+    /// A CAN bus log of can-utils' `candump -l`: `(1700000000.123456) can0 123#DEADBEEF`.
+    Candump,
+    /// A CAN bus log in Vector's ASC (CANalyzer, CANoe).
+    Asc,
 }
 
 fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
@@ -70,6 +83,12 @@ fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
         return Err(bad());
     }
     Ok((y, m as u32, d as u32))
+}
+
+/// The first line of a Vector ASC log: `date …` or `base hex …`.
+fn asc_header(line: &str) -> bool {
+    let l = line.trim_start().to_ascii_lowercase();
+    l.starts_with("date ") || l.starts_with("base hex") || l.starts_with("base dec")
 }
 
 /// The format of `input`, told from its first bytes (or `--map`), or why it cannot be.
@@ -109,6 +128,8 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
             input.display()
         ),
         _ if head.starts_with(&[0xb5, 0x62]) => Ok(Format::Ubx),
+        _ if railfuse_can::candump::parse_line(first_line).is_ok() => Ok(Format::Candump),
+        _ if asc_header(first_line) => Ok(Format::Asc),
         _ if first_line.starts_with('$') => Ok(Format::Nmea),
         _ if eth_line(first_line) => Ok(Format::Eth),
         // A line that checks as a sentence (from its last `$`: a capture that starts
@@ -116,7 +137,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if text.lines().any(|l| nmea::parse(l).is_ok()) => Ok(Format::Nmea),
         _ => anyhow::bail!(
             "{}: cannot tell its format from its first line; name it with --format \
-             (eth, nmea, ubx, csv with --map, rosbag2)",
+             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc)",
             input.display()
         ),
     }
@@ -143,6 +164,13 @@ pub fn run(a: Args) -> Result<()> {
             format_name(format)
         );
     }
+    let can = matches!(format, Format::Candump | Format::Asc);
+    if a.dbc.is_some() && !can {
+        anyhow::bail!(
+            "--dbc decodes a CAN log (--format candump or asc), not --format {}",
+            format_name(format)
+        );
+    }
     let report: ImportReport = match format {
         Format::Eth => {
             let size = std::fs::metadata(&input).map_or(0, |m| m.len());
@@ -161,6 +189,17 @@ pub fn run(a: Args) -> Result<()> {
                 )
             };
             csv_map::import(&input, map, &output)?
+        }
+        Format::Candump | Format::Asc => {
+            let dbc = match &a.dbc {
+                Some(p) => Some(Arc::new(Database::open(p)?)),
+                None => None,
+            };
+            let log = match format {
+                Format::Asc => CanLog::Asc,
+                _ => CanLog::Candump,
+            };
+            can_log::import(&input, &output, log, dbc)?
         }
     };
     // An import that found nothing is wrong input, not an empty log.

@@ -43,6 +43,13 @@ impl<R: BufRead> Reader<R> {
     }
 }
 
+impl<R> Reader<R> {
+    /// Lines read so far.
+    pub fn lines_read(&self) -> usize {
+        self.lines.count()
+    }
+}
+
 impl<R: BufRead> Iterator for Reader<R> {
     type Item = Result<Frame, BadLine>;
 

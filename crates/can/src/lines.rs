@@ -21,6 +21,13 @@ pub struct Lines<R> {
     buf: Vec<u8>,
 }
 
+impl<R> Lines<R> {
+    /// Lines read so far.
+    pub fn count(&self) -> usize {
+        self.line
+    }
+}
+
 impl<R: BufRead> Lines<R> {
     pub fn new(input: R) -> Self {
         Self {

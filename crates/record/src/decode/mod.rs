@@ -2,6 +2,7 @@
 //! checksum and bounds every length before trusting it; what does not decode is reported as a
 //! typed error for the caller to count, never a panic.
 
+pub mod can;
 pub mod nmea;
 pub mod time;
 pub mod ubx;

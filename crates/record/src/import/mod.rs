@@ -4,8 +4,10 @@
 //!   NMEA sentences, correction-link and station events);
 //! - [`gnss_file`]: NMEA and UBX captures of a receiver;
 //! - [`rosbag2`]: ROS 2 bags in the sqlite3 storage, to MCAP;
-//! - [`csv_map`]: CSV tables with a column mapping.
+//! - [`csv_map`]: CSV tables with a column mapping;
+//! - [`can_log`]: CAN bus logs (candump, Vector ASC), decoded with the vehicle's DBC.
 
+pub mod can_log;
 pub mod csv_map;
 pub mod eth;
 pub mod gnss_file;

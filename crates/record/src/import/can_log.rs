@@ -1,0 +1,110 @@
+//! CAN bus logs of other tools into railfuse channels: can-utils' `candump -l` log and
+//! Vector's ASC, through the readers of [`railfuse_can`] and the recorder's own
+//! [`CanDecoder`] (so an imported bus is the same channels a live one is). The log's stamp is
+//! each frame's bus time and, with no receive time in a file, its log time too.
+//!
+//! A line that does not parse is skipped and counted with its number; the import goes on.
+
+use std::io::BufReader;
+use std::path::Path;
+use std::sync::Arc;
+
+use railfuse_can::dbc::Database;
+use railfuse_can::frame::Frame;
+use railfuse_can::lines::BadLine;
+use railfuse_catalog::log::LogWriter;
+use railfuse_catalog::messages::SourceStats;
+use railfuse_catalog::{Error, Result};
+
+use super::ImportReport;
+use crate::decode::can::CanDecoder;
+use crate::recorder::message::ItemWriter;
+
+/// The CAN log formats read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CanLog {
+    /// can-utils' `candump -l`: `(1700000000.123456) can0 123#DEADBEEF`.
+    Candump,
+    /// Vector's ASC (CANalyzer, CANoe).
+    Asc,
+}
+
+/// Imports the CAN log `input` to `output`, decoding with `dbc` where given.
+pub fn import(
+    input: &Path,
+    output: &Path,
+    format: CanLog,
+    dbc: Option<Arc<Database>>,
+) -> Result<ImportReport> {
+    let mut report = ImportReport {
+        input: input.to_owned(),
+        output: output.to_owned(),
+        format: format!("{format:?}").to_lowercase(),
+        time_base: match format {
+            CanLog::Candump => "each frame's stamp in the log (seconds since the Unix epoch)",
+            CanLog::Asc => "the trigger block's date (taken as UTC) plus each line's offset",
+        }
+        .into(),
+        ..Default::default()
+    };
+    let file = std::fs::File::open(input).map_err(|source| Error::Io {
+        path: input.to_owned(),
+        source,
+    })?;
+    let file = BufReader::with_capacity(64 << 10, file);
+    let mut frames = match format {
+        CanLog::Candump => Frames::Candump(railfuse_can::candump::Reader::new(file)),
+        CanLog::Asc => Frames::Asc(railfuse_can::asc::Reader::new(file)),
+    };
+    let mut writer = ItemWriter::new(LogWriter::create(output)?);
+    let mut decoder = CanDecoder::new(dbc);
+    let (mut stats, mut items) = (SourceStats::default(), Vec::new());
+    for frame in frames.by_ref() {
+        match frame {
+            Ok(f) => decoder.frame(&f, f.stamp_ns, &mut stats, &mut items),
+            Err(bad) => report.skip(bad.line as u64, "line that does not parse", bad.reason),
+        }
+        for item in items.drain(..) {
+            let item = writer.write(item)?;
+            report.messages += 1;
+            match report.per_topic.get_mut(&item.topic) {
+                Some(n) => *n += 1,
+                None => {
+                    report.per_topic.insert(item.topic.clone(), 1);
+                }
+            }
+        }
+    }
+    for (reason, n) in stats.skipped {
+        *report.skipped.entry(reason).or_insert(0) += n;
+    }
+    report.warnings = stats.warnings;
+    report.lines = frames.lines_read() as u64;
+    writer.writer.finish()?;
+    Ok(report)
+}
+
+/// The frames of a log, in either format.
+enum Frames<R> {
+    Candump(railfuse_can::candump::Reader<R>),
+    Asc(railfuse_can::asc::Reader<R>),
+}
+
+impl<R> Frames<R> {
+    fn lines_read(&self) -> usize {
+        match self {
+            Frames::Candump(r) => r.lines_read(),
+            Frames::Asc(r) => r.lines_read(),
+        }
+    }
+}
+
+impl<R: std::io::BufRead> Iterator for Frames<R> {
+    type Item = std::result::Result<Frame, BadLine>;
+    fn next(&mut self) -> Option<Self::Item> {
+        match self {
+            Frames::Candump(r) => r.next(),
+            Frames::Asc(r) => r.next(),
+        }
+    }
+}
