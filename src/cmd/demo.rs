@@ -24,7 +24,7 @@ pub fn run(a: Args) -> Result<()> {
         dir.join("run.rrd"),
         dir.join("pipelines.toml"),
     );
-    super::simulate::simulate_to("default", a.seed, None, &[], &raw)?;
+    super::simulate::simulate_to("default", a.seed, None, &[], false, &raw)?;
     // The default pipeline and the same with sensor states, side by side, as one config.
     let (text, config) = railfuse_experiments::long_runs::side_by_side()?;
     std::fs::write(&config_path, &text)

@@ -287,6 +287,9 @@ pub fn refuse_with(
     for (reason, n) in &report.skipped {
         eprintln!("note: {n} messages skipped: {reason}");
     }
+    if let Some(can) = &report.can {
+        print_can(can);
+    }
     if report.merge.duplicates_dropped > 0 {
         eprintln!(
             "note: {} messages were in two files of the run (a split boundary): read once",
@@ -300,6 +303,39 @@ pub fn refuse_with(
         );
     }
     Ok((report, eval, stats))
+}
+
+/// What the sensors made from the CAN bus made, and what of the bus they could not read.
+fn print_can(can: &railfuse_catalog::foreign::can::BridgeCounts) {
+    let made: Vec<String> = can.made.iter().map(|(t, n)| format!("{t} {n}")).collect();
+    eprintln!(
+        "made from the CAN bus: {}",
+        match made.is_empty() {
+            true => "nothing (no frame of a mapped message)".to_owned(),
+            false => made.join(", "),
+        }
+    );
+    let counted = [
+        ("frames of ids not in the DBC", &can.unknown_ids),
+        ("frames shorter than their message", &can.too_short),
+        (
+            "mapped signals outside their DBC range (left out)",
+            &can.out_of_range,
+        ),
+        (
+            "mapped signals not a finite number (left out)",
+            &can.not_finite,
+        ),
+    ];
+    for (what, by) in counted.iter().filter(|(_, by)| !by.is_empty()) {
+        let total: u64 = by.values().sum();
+        let first: Vec<String> = by
+            .iter()
+            .take(5)
+            .map(|(k, n)| format!("{k} ×{n}"))
+            .collect();
+        eprintln!("note: {total} {what}: {}", first.join(", "));
+    }
 }
 
 /// What each pipeline did with its measurements (the gate counts are in the accuracy table).

@@ -25,6 +25,12 @@ pub struct Args {
     /// without a third); the third the radar. OUTPUT is then a folder of NAME.mcap files.
     #[arg(long = "recorder", value_name = "NAME[=SECONDS[,DRIFTppm]]")]
     pub recorders: Vec<SimRecorder>,
+    /// Put the odometers and the radar on the vehicle's CAN bus, as samples/vehicle.dbc
+    /// describes it: their readings are logged as raw frames on /can/can0/frames (WheelSpeed,
+    /// AxlePulses, RadarSpeed) instead of on /odometer/N and /radar/speed. Re-fuse with a
+    /// configuration that maps them back (samples/can.toml). Line scenarios only.
+    #[arg(long)]
+    pub can_bus: bool,
     /// Output MCAP file (a folder with --recorder).
     #[arg(short, long)]
     pub output: PathBuf,
@@ -35,7 +41,14 @@ pub struct Args {
 
 pub fn run(a: Args) -> Result<()> {
     let report = match a.recorders.is_empty() {
-        true => simulate_to(&a.scenario, a.seed, a.duration, &a.faults, &a.output)?,
+        true => simulate_to(
+            &a.scenario,
+            a.seed,
+            a.duration,
+            &a.faults,
+            a.can_bus,
+            &a.output,
+        )?,
         false => simulate_recorders_to(&a)?,
     };
     if a.json {
@@ -46,7 +59,7 @@ pub fn run(a: Args) -> Result<()> {
 
 /// A run written by several recorders, one file each in the output folder.
 fn simulate_recorders_to(a: &Args) -> Result<SimulationReport> {
-    let preset = preset(&a.scenario, a.duration, &a.faults)?;
+    let preset = preset(&a.scenario, a.duration, &a.faults, a.can_bus)?;
     if a.recorders.len() > MAX_RECORDERS {
         bail!("--recorder: at most {MAX_RECORDERS} recorders (GNSS/INS box, odometry rack, radar)");
     }
@@ -78,8 +91,13 @@ fn simulate_recorders_to(a: &Args) -> Result<SimulationReport> {
 }
 
 /// The scenario preset, checked against the duration and faults asked for.
-fn preset(scenario: &str, duration: Option<f64>, faults: &[FaultSpec]) -> Result<Scenario> {
-    let Some(preset) = Scenario::preset(scenario) else {
+fn preset(
+    scenario: &str,
+    duration: Option<f64>,
+    faults: &[FaultSpec],
+    can_bus: bool,
+) -> Result<Scenario> {
+    let Some(mut preset) = Scenario::preset(scenario) else {
         bail!(
             "unknown scenario '{scenario}' (presets: {})",
             Scenario::NAMES.join(", ")
@@ -88,6 +106,15 @@ fn preset(scenario: &str, duration: Option<f64>, faults: &[FaultSpec]) -> Result
     preset
         .check(duration, faults)
         .map_err(|e| anyhow::anyhow!("--{e}"))?;
+    if can_bus {
+        match preset.line_mut() {
+            Some(p) => p.can_bus = true,
+            None => bail!(
+                "--can-bus: scenario '{scenario}' has no odometers or radar to put on a bus \
+                 (line scenarios have)"
+            ),
+        }
+    }
     Ok(preset)
 }
 
@@ -97,9 +124,10 @@ pub fn simulate_to(
     seed: u64,
     duration: Option<f64>,
     faults: &[FaultSpec],
+    can_bus: bool,
     output: &std::path::Path,
 ) -> Result<SimulationReport> {
-    let preset = preset(scenario, duration, faults)?;
+    let preset = preset(scenario, duration, faults, can_bus)?;
     let started = Instant::now();
     let report = simulate(&preset, seed, duration, faults, output)?;
     // A preset's whole run is known only once driven: a fault after its end is said now.

@@ -31,6 +31,7 @@ use crate::filter::working_state::DetectorSettings;
 use crate::measurement::Quantity;
 use crate::model::{ConstantAcceleration, ConstantVelocity, MotionModel, ProcessNoise, Singer};
 pub use crate::noise::{FromMessage, Variance, VarianceValue};
+pub use railfuse_catalog::foreign::can::{CanSettings, SensorSource};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -44,6 +45,13 @@ pub struct PipelinesFile {
     /// win over these.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub run: Option<RunSettings>,
+    /// `[can]`: the vehicle's DBC, which the `[sensor."<topic>"]` tables read the bus with.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub can: Option<CanSettings>,
+    /// `[sensor."/odometer/1"] from = "can:WheelSpeed.AxleSpeed1"`: a sensor made from the
+    /// CAN bus's signals (with `[can]`), fed to the pipelines as if the log had its channel.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub sensor: BTreeMap<String, SensorSource>,
     /// The pipelines, each run over the same log in one pass.
     #[schemars(with = "Vec<PipelineConfig>")]
     pub pipeline: Vec<Spanned<PipelineConfig>>,
@@ -733,6 +741,8 @@ impl PipelineConfig {
         toml::to_string(&PipelinesFile {
             track: None,
             run: None,
+            can: None,
+            sensor: BTreeMap::new(),
             pipeline: vec![Spanned::new(0..0, self.clone())],
         })
         .expect("a config serialises")

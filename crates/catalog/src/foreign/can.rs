@@ -171,7 +171,7 @@ pub struct BridgeCounts {
     pub unknown_ids: BTreeMap<String, u64>,
     /// Frames shorter than their message, by message.
     pub too_short: BTreeMap<String, u64>,
-    /// Mapped signals out of their declared range (used all the same), by message.signal.
+    /// Mapped signals out of their declared range (left out: no reading), by message.signal.
     pub out_of_range: BTreeMap<String, u64>,
     /// Mapped values that are not finite numbers (left out), by message.signal.
     pub not_finite: BTreeMap<String, u64>,
@@ -273,7 +273,9 @@ impl SensorBridge {
                 continue;
             }
             if v.out_of_range {
+                // All ones is CAN's "not available"; past the range is no reading either.
                 *self.counts.out_of_range.entry(name).or_insert(0) += 1;
+                continue;
             }
             let speed = (v.value * m.speed.scale).abs();
             let read = |r: &Option<SignalRef>| {

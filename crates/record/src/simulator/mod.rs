@@ -2,6 +2,7 @@
 //! log. Deterministic for a seed: the same scenario, seed and duration give the same file.
 
 pub mod atlas;
+pub mod can_bus;
 mod driver;
 pub mod faults;
 mod recorders;
@@ -15,6 +16,7 @@ mod world;
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use railfuse_catalog::foreign::can::frames_topic;
 use railfuse_catalog::geodesy::GeodeticOrigin;
 use railfuse_catalog::log::{ChannelId, LogWriter};
 use railfuse_catalog::messages::StampClock;
@@ -67,6 +69,9 @@ struct SimLog {
     faults: FaultInjector,
     fault_specs: Vec<FaultSpec>,
     fault_events: Vec<Event>,
+    /// The odometers and radar on the vehicle's CAN bus, where the scenario puts them there.
+    can: Option<can_bus::CanBus>,
+    frames: Vec<railfuse_can::frame::Frame>,
 }
 
 impl SimLog {
@@ -102,6 +107,10 @@ impl SimLog {
             ..Default::default()
         };
         let faults = FaultInjector::new(faults, SIMULATED_START_NS);
+        let can = scenario
+            .line()
+            .filter(|p| p.can_bus)
+            .map(|p| can_bus::CanBus::new(p.odometers.len()));
         Ok(Self {
             logs,
             channels,
@@ -109,6 +118,8 @@ impl SimLog {
             faults,
             fault_specs: Vec::new(),
             fault_events: Vec::new(),
+            can,
+            frames: Vec::new(),
         })
     }
 
@@ -141,7 +152,15 @@ impl SimLog {
                 if p.induction_loop.is_some() {
                     channel!(LoopPosition, topics::LOOP_POSITION);
                 }
-                channel!(RadarSpeed, topics::RADAR_SPEED);
+                if p.can_bus {
+                    // On the odometry rack, which has the bus's interface.
+                    let topic = frames_topic(can_bus::BUS);
+                    let log = recorders::recorder_of(topics::ODOMETER_1, n);
+                    let id = logs[log].writer.add_channel::<CanFrame>(&topic)?;
+                    channels.insert(topic, (log, id));
+                } else {
+                    channel!(RadarSpeed, topics::RADAR_SPEED);
+                }
                 if p.balise.is_some() {
                     channel!(BalisePassage, topics::BALISE);
                 }
@@ -153,6 +172,7 @@ impl SimLog {
                 for topic in [topics::ODOMETER_1, topics::ODOMETER_2]
                     .into_iter()
                     .take(p.odometers.len())
+                    .filter(|_| !p.can_bus)
                 {
                     channel!(Odometer, topic);
                 }
@@ -199,6 +219,16 @@ impl SimLog {
             self.write(topics::EVENTS, log_time_ns, &e)?;
         }
         let Some(emit) = emit else { return Ok(()) };
+        if let Some(bus) = &mut self.can {
+            match &emit {
+                Emit::Radar(m) => self.frames.push(bus.radar(m, log_time_ns)),
+                Emit::Odometer(i, m) => bus.odometer(*i, m, log_time_ns, &mut self.frames),
+                _ => {}
+            }
+            if matches!(emit, Emit::Radar(_) | Emit::Odometer(..)) {
+                return self.write_frames();
+            }
+        }
         match emit {
             Emit::Gnss(m) => self.write(topics::GNSS_FIX, log_time_ns, &m),
             Emit::Imu(m) => self.write(topics::IMU, log_time_ns, &m),
@@ -220,6 +250,23 @@ impl SimLog {
                 self.write(&topic, log_time_ns, &m)
             }
         }
+    }
+
+    /// The CAN frames gathered, each at its bus time on the bus's recorder's clock.
+    fn write_frames(&mut self) -> railfuse_catalog::Result<()> {
+        let topic = frames_topic(can_bus::BUS);
+        let (log, channel) = self.channels[&topic];
+        let log = &mut self.logs[log];
+        for mut frame in self.frames.drain(..) {
+            if let Some((_, clock, _)) = &log.recorder {
+                frame.stamp_ns = clock.local(frame.stamp_ns);
+            }
+            let m = CanFrame::from_frame(&frame, frame.stamp_ns);
+            log.writer.write(channel, frame.stamp_ns, &m)?;
+            self.report.messages += 1;
+            *self.report.per_topic.entry(topic.clone()).or_insert(0) += 1;
+        }
+        Ok(())
     }
 
     fn finish(
@@ -423,6 +470,10 @@ fn simulate_line(
     }
     while let Some((log_time, emit)) = outbox.pop_due(u64::MAX) {
         log.write_emit(log_time, emit)?;
+    }
+    if let Some(bus) = &mut log.can {
+        bus.flush(t_ns, &mut log.frames);
+        log.write_frames()?;
     }
     log.finish(scenario, map, (t_ns - start) as f64 / 1e9)
 }

@@ -52,6 +52,10 @@ pub struct LineScenario {
     /// None: no eddy-current sensor pair on the bogie.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub eddy_current: Option<EddyCurrentParams>,
+    /// The odometers and the radar send on the vehicle's CAN bus (samples/vehicle.dbc), logged
+    /// as frames on `/can/can0/frames`, instead of on channels of their own.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub can_bus: bool,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -133,6 +137,17 @@ impl Scenario {
     }
 
     /// The line-run parameters, for the presets that are line runs.
+    pub fn line_mut(&mut self) -> Option<&mut LineScenario> {
+        match self {
+            Scenario::Default(p)
+            | Scenario::Seed001(p)
+            | Scenario::Seed002(p)
+            | Scenario::Seed003(p)
+            | Scenario::Seed004(p) => Some(p),
+            Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
+        }
+    }
+
     pub fn line(&self) -> Option<&LineScenario> {
         match self {
             Scenario::Default(p)
@@ -260,6 +275,7 @@ impl LineScenario {
                 extra_switches_m: vec![],
             }),
             eddy_current: Some(Self::default_eddy_current()),
+            can_bus: false,
         }
     }
 
@@ -498,6 +514,7 @@ impl LineScenario {
             site: None,
             atlas: None,
             eddy_current: None,
+            can_bus: false,
         }
     }
 

@@ -34,10 +34,12 @@ use crate::pipeline::{AnyPipeline, Fused, PipelineCounts};
 use crate::spec::Pipelines;
 use railfuse_eval::{self as eval, EvalReport, Evaluator};
 
+mod can_sensors;
 mod outputs;
 mod provenance;
 mod withholding;
 
+use can_sensors::{CanRoute, CanSensors};
 use outputs::{copy_channel, register_outputs, Output, TrackOutput};
 
 pub struct RefuseOptions<'a> {
@@ -121,6 +123,9 @@ pub struct RefuseReport {
     /// Messages of a withheld sensor each pipeline was not shown, by pipeline.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub withheld: BTreeMap<String, u64>,
+    /// What the sensors made from the CAN bus made, and what of the bus they could not read.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub can: Option<railfuse_catalog::foreign::can::BridgeCounts>,
     pub pipelines: Vec<PipelineReport>,
 }
 
@@ -138,6 +143,8 @@ struct Route {
     translator: Option<Translator>,
     /// The evaluation reads it (reference, track map, events, kept fused channels).
     evaluated: bool,
+    /// CAN frames, which the configuration's CAN sensors are made from.
+    can_frames: bool,
 }
 
 #[derive(Clone, Copy)]
@@ -273,6 +280,8 @@ struct Replay<'a> {
     /// The file being read chunk by chunk (a part of a split run), for messages about it.
     reading: Option<PathBuf>,
     withholding: Withholding,
+    /// The sensors the configuration makes from the CAN bus.
+    can: Option<CanSensors>,
 }
 
 impl<'a> Replay<'a> {
@@ -286,7 +295,7 @@ impl<'a> Replay<'a> {
         // Fused states of kept pipelines may trail the reference by a chunk in file order.
         let lag = eval::lag_allowance_s(summary.as_ref().and_then(|s| s.longest_chunk_ns));
         let mut eval = Evaluator::new(opts.output, opts.reference, lag);
-        let (outputs, track_output) =
+        let (outputs, track_output, can) =
             register_outputs(opts, known.map(Vec::as_slice), &mut writer, &mut eval)?;
         let withholding = Withholding::resolve(
             input,
@@ -338,11 +347,13 @@ impl<'a> Replay<'a> {
                 skipped: BTreeMap::new(),
                 stamped_by_log_time: BTreeSet::new(),
                 withheld: BTreeMap::new(),
+                can: None,
                 pipelines: Vec::new(),
             },
             last_log_time: 0,
             reading: None,
             withholding,
+            can,
         };
         // With a summary, every sensor is bound to its channel before anything is read.
         if let Some(channels) = known {
@@ -568,9 +579,15 @@ impl<'a> Replay<'a> {
             self.register_ros_outputs()?;
         }
         let mut route = Route::default();
-        if self.is_replaced(&info.topic) {
-            route.replaced = true;
-        } else {
+        route.replaced = self.is_replaced(&info.topic);
+        if !route.replaced && !self.is_made(&info) {
+            match self.route_can(&info)? {
+                CanRoute::MadeBefore => route.replaced = true,
+                CanRoute::Frames => route.can_frames = true,
+                CanRoute::Other => {}
+            }
+        }
+        if !route.replaced {
             let info = match self.translator(&info)? {
                 Some(t) => {
                     let read_as = t.channel(&info);
@@ -708,11 +725,11 @@ impl<'a> Replay<'a> {
             return Ok(false);
         }
         let (context, model, evaluated) = (route.context, route.model, route.evaluated);
+        let can_frames = route.can_frames;
         self.arrived(h.log_time)?;
-        if context.is_none() && model.is_none() && !evaluated {
+        if context.is_none() && model.is_none() && !evaluated && !can_frames {
             return Ok(true); // passes through untouched
         }
-        let input = self.input();
         let channel = self.channels[&h.channel_id].clone();
         let translated = match self.translate(&channel, h.channel_id, m) {
             Read::AsItIs => None,
@@ -740,18 +757,27 @@ impl<'a> Replay<'a> {
             self.eval.message(&msg)?;
         }
         self.context_message(context, &msg)?;
-        let Some(model) = model else {
-            return Ok(true);
+        if can_frames {
+            self.can_frame(&msg)?;
+        }
+        self.sensor_message(h.channel_id, &msg).map(|()| true)
+    }
+
+    /// A message of a channel the pipelines read: its measurements decoded and fed to each
+    /// pipeline sensor on it. One that does not decode (a null where a number belongs) is
+    /// skipped and counted: one bad message must not cost the whole replay.
+    fn sensor_message(&mut self, id: u16, msg: &LogMessage<'_>) -> Result<()> {
+        let Some(model) = self.routes.get(&id).and_then(|r| r.model) else {
+            return Ok(());
         };
-        // A sensor message that does not decode (a null where a number belongs) is skipped
-        // and counted: one bad message must not cost the whole replay.
-        if let Err(e) = model.decode(&msg, input, &self.context, &mut self.measurements) {
+        let input = self.input();
+        if let Err(e) = model.decode(msg, input, &self.context, &mut self.measurements) {
             self.report
                 .undecodable
-                .add(&channel.topic, "decode", || e.to_string());
-            return Ok(true);
+                .add(&msg.channel.topic, "decode", || e.to_string());
+            return Ok(());
         }
-        self.feed(h.channel_id, &msg).map(|()| true)
+        self.feed(id, msg)
     }
 
     /// Counts a message read, and writes the configuration's track before the first.
@@ -877,6 +903,7 @@ impl<'a> Replay<'a> {
             self.check_every_sensor_bound(&[])?;
         }
         self.check_track_for_chainage()?;
+        self.report.can = self.can.as_ref().map(|c| c.counts().clone());
         for pi in 0..self.pipelines.len() {
             self.pipelines[pi].finish(self.last_log_time, &self.context, &mut self.fused);
             self.emit(pi)?;

@@ -19,6 +19,7 @@ use crate::error::{Error, Result};
 use crate::spec::PipelineSpec;
 use railfuse_eval::Evaluator;
 
+use super::can_sensors::CanSensors;
 use super::{observe, RefuseOptions, Replay, LOCATION_TWIN_EVERY_NS};
 
 pub(super) struct Output {
@@ -212,7 +213,7 @@ pub(super) fn register_outputs(
     known: Option<&[Arc<ChannelInfo>]>,
     writer: &mut LogWriter,
     eval: &mut Evaluator,
-) -> Result<(Vec<Output>, Option<TrackOutput>)> {
+) -> Result<(Vec<Output>, Option<TrackOutput>, Option<CanSensors>)> {
     let mut ids = FreeIds::new(known, opts.output);
     let (state, diagnostics, location) = (ids.next()?, ids.next()?, ids.next()?);
     let safety = ids.next()?;
@@ -259,7 +260,11 @@ pub(super) fn register_outputs(
         }
         _ => None,
     };
-    Ok((outputs, track))
+    let can = match &opts.config.can {
+        Some(spec) => Some(CanSensors::register(spec, || ids.next(), writer)?),
+        None => None,
+    };
+    Ok((outputs, track, can))
 }
 
 /// Ids neither a channel nor a schema of the input uses, highest first.

@@ -58,7 +58,73 @@ pub struct Pipelines {
     /// `[run]`: the recorders' clocks given, and how to align them.
     pub clock_offsets: Vec<railfuse_catalog::run::ClockOffset>,
     pub align: Option<railfuse_catalog::run::Align>,
+    /// `[can]` and `[sensor."<topic>"]`: sensors made from the CAN bus, the DBC read and the
+    /// mapping checked against it.
+    pub can: Option<CanSensors>,
     pub pipeline: Vec<PipelineSpec>,
+}
+
+/// The vehicle's DBC and the sensors a configuration makes from its signals.
+#[derive(Debug, Clone)]
+pub struct CanSensors {
+    pub db: std::sync::Arc<railfuse_can::dbc::Database>,
+    pub bus: Option<String>,
+    pub sensors: std::collections::BTreeMap<String, crate::config::SensorSource>,
+}
+
+impl CanSensors {
+    /// The bridge that makes the sensors' messages from frames.
+    pub fn bridge(&self) -> railfuse_catalog::foreign::can::SensorBridge {
+        railfuse_catalog::foreign::can::SensorBridge::with_database(
+            (*self.db).clone(),
+            self.bus.clone(),
+            &self.sensors,
+        )
+        .expect("checked when the configuration was read")
+    }
+
+    /// `[can]` and `[sensor]` of a configuration at `path`: the DBC (relative to it) read and
+    /// every mapping checked.
+    fn read(
+        path: &Path,
+        can: Option<crate::config::CanSettings>,
+        sensors: std::collections::BTreeMap<String, crate::config::SensorSource>,
+    ) -> Result<Option<Self>> {
+        let bad = |message: String| Error::ConfigSyntax {
+            path: path.to_owned(),
+            message,
+        };
+        let Some(can) = can else {
+            return match sensors.keys().next() {
+                None => Ok(None),
+                Some(topic) => Err(bad(format!(
+                    "[sensor.\"{topic}\"] reads the CAN bus: name the vehicle's DBC in \
+                     [can] dbc = \"vehicle.dbc\""
+                ))),
+            };
+        };
+        if sensors.is_empty() {
+            return Err(bad(
+                "[can] names a DBC and no [sensor.\"<topic>\"] reads it: map a signal, \
+                 e.g. [sensor.\"/odometer/1\"] from = \"can:WheelSpeed.AxleSpeed1\""
+                    .into(),
+            ));
+        }
+        let dbc = path.parent().unwrap_or(Path::new("")).join(&can.dbc);
+        let db =
+            railfuse_can::dbc::Database::open(&dbc).map_err(|e| bad(format!("[can] dbc: {e}")))?;
+        railfuse_catalog::foreign::can::SensorBridge::with_database(
+            db.clone(),
+            can.bus.clone(),
+            &sensors,
+        )
+        .map_err(|e| bad(e.to_string()))?;
+        Ok(Some(Self {
+            db: std::sync::Arc::new(db),
+            bus: can.bus,
+            sensors,
+        }))
+    }
 }
 
 impl Pipelines {
@@ -131,6 +197,7 @@ impl Pipelines {
             }
             None => None,
         };
+        let can = CanSensors::read(path, file.can, file.sensor)?;
         let run = file.run.unwrap_or_default();
         let bad_run = |message: String| Error::ConfigSyntax {
             path: path.to_owned(),
@@ -154,6 +221,7 @@ impl Pipelines {
             track,
             clock_offsets,
             align,
+            can,
             pipeline,
         })
     }

@@ -329,20 +329,31 @@ impl LogWriter {
         channel_id: u16,
         topic: &str,
     ) -> Result<ChannelId> {
+        self.add_channel_of_with_ids(M::KIND, schema_id, channel_id, topic, &BTreeMap::new())
+    }
+
+    /// [`add_channel_with_ids`](Self::add_channel_with_ids) for a kind known at run time,
+    /// with the channel's metadata.
+    pub fn add_channel_of_with_ids(
+        &mut self,
+        kind: MessageKind,
+        schema_id: u16,
+        channel_id: u16,
+        topic: &str,
+        metadata: &BTreeMap<String, String>,
+    ) -> Result<ChannelId> {
         let encoding = self.encoding;
         if !self.schemas.contains_key(&schema_id) {
-            let data = schema_of(M::KIND, encoding);
-            let name = M::SCHEMA_NAME;
-            self.copy_schema(schema_id, name, encoding.schema_encoding(), &data)?;
+            let data = schema_of(kind, encoding);
+            self.copy_schema(
+                schema_id,
+                kind.schema_name(),
+                encoding.schema_encoding(),
+                &data,
+            )?;
         }
         let message_encoding = encoding.message_encoding();
-        self.copy_channel(
-            channel_id,
-            schema_id,
-            topic,
-            message_encoding,
-            &BTreeMap::new(),
-        )?;
+        self.copy_channel(channel_id, schema_id, topic, message_encoding, metadata)?;
         Ok(ChannelId(channel_id))
     }
 
