@@ -41,7 +41,7 @@ pub fn parse_line(line: &str) -> Result<Frame, String> {
 }
 
 /// `seconds.fraction` since the Unix epoch, as ns.
-fn parse_stamp(s: &str) -> Result<u64, String> {
+pub(crate) fn parse_stamp(s: &str) -> Result<u64, String> {
     let bad = || format!("time stamp '{s}' is not seconds.microseconds");
     let (secs, frac) = s.split_once('.').unwrap_or((s, ""));
     if secs.is_empty()
@@ -126,7 +126,7 @@ fn parse_body(body: &str) -> Result<Frame, String> {
 }
 
 /// Hex pairs (dots between bytes allowed, as cansend takes), at most `max` bytes.
-fn parse_data(s: &str, max: usize) -> Result<Vec<u8>, String> {
+pub(crate) fn parse_data(s: &str, max: usize) -> Result<Vec<u8>, String> {
     let hex: Vec<u8> = s.bytes().filter(|&b| b != b'.').collect();
     if !hex.len().is_multiple_of(2) {
         return Err(format!("data '{s}' has an odd number of hex digits"));
