@@ -32,6 +32,16 @@ pub struct Args {
     /// A file of NMEA, UBX or JSON lines: PATH[:FORMAT] (default by extension). Repeatable.
     #[arg(long, value_name = "PATH[:FORMAT]")]
     pub file: Vec<String>,
+    /// The vehicle's CAN bus: a SocketCAN interface (`can0`), an SLCAN serial adapter
+    /// (`slcan:/dev/ttyACM0[:BITRATE[:TTYBAUD]]`, 500 kbit/s unless told), a socketcand server
+    /// (`socketcand:HOST:PORT[:BUS]`) or a cannelloni gateway (`cannelloni:PORT[:BUS]`). Every
+    /// frame is logged on /can/<bus>/frames. Repeatable.
+    #[arg(long, value_name = "ADAPTER")]
+    pub can: Vec<String>,
+    /// The vehicle's DBC: the CAN sources' known messages are also logged decoded, one channel
+    /// each (/can/<bus>/<Message>). Read and checked before recording starts.
+    #[arg(long, value_name = "VEHICLE.dbc")]
+    pub dbc: Option<PathBuf>,
     /// Read standard input: FORMAT[=/TOPIC], FORMAT one of json, nmea, ubx (default json);
     /// `=/TOPIC` sends a receiver's fixes to their own channel.
     #[arg(long, value_name = "FORMAT")]
@@ -60,7 +70,8 @@ pub struct Args {
     pub split_every: Option<f64>,
     /// Sources from a TOML file of `[[source]]` tables (added to those given by flags), e.g.
     /// `udp = 5600`, or `serial = "/dev/ttyACM0"` with `baud = 115200`, `format = "ubx"`,
-    /// `topic = "/gnss/rx2"`.
+    /// `topic = "/gnss/rx2"`, or `can = "slcan:/dev/ttyACM0:500000"`; and `[can] dbc =
+    /// "vehicle.dbc"` to decode the CAN sources (`--dbc` wins).
     #[arg(long, value_name = "FILE")]
     pub sources: Option<PathBuf>,
     /// Run metadata from a TOML file of KEY = "value" lines (flags override it).
@@ -95,6 +106,7 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
         .chain(a.tcp_client.iter().map(|t| ("tcp-client", t.clone())))
         .chain(a.serial.iter().map(|t| ("serial", t.clone())))
         .chain(a.file.iter().map(|t| ("file", t.clone())))
+        .chain(a.can.iter().map(|t| ("can", t.clone())))
         .chain(a.stdin.iter().map(|t| ("stdin", t.clone())));
     let mut out = Vec::new();
     for (kind, args) in flags {
@@ -109,6 +121,16 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
         let file: SourcesFile = toml::from_str(&text)
             .map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e.to_string().trim()))?;
         out.extend(file.source);
+        if let Some(can) = file.can.filter(|_| a.dbc.is_none()) {
+            let dbc = path
+                .parent()
+                .unwrap_or(std::path::Path::new(""))
+                .join(can.dbc);
+            out = with_dbc(out, &dbc)?;
+        }
+    }
+    if let Some(dbc) = &a.dbc {
+        out = with_dbc(out, dbc)?;
     }
     if let Some(scenario) = &a.simulate {
         out.push(SourceSpec::from_flag("simulate", scenario)?);
@@ -137,6 +159,19 @@ fn sources(a: &Args) -> Result<Vec<SourceSpec>> {
         }
     }
     Ok(out.into_iter().map(|s| s.bind(a.bind)).collect())
+}
+
+/// The CAN sources decoding with the DBC at `path`, read and checked now: a broken DBC is
+/// said before anything is recorded.
+fn with_dbc(specs: Vec<SourceSpec>, path: &std::path::Path) -> Result<Vec<SourceSpec>> {
+    if !specs.iter().any(|s| matches!(s, SourceSpec::Can { .. })) {
+        bail!(
+            "--dbc {}: no CAN source to decode (give one with --can)",
+            path.display()
+        );
+    }
+    let db = Arc::new(railfuse_can::dbc::Database::open(path)?);
+    Ok(specs.into_iter().map(|s| s.with_dbc(&db)).collect())
 }
 
 fn status_line(s: &Status) -> String {

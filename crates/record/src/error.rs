@@ -42,6 +42,9 @@ pub enum SourceError {
         #[source]
         source: io::Error,
     },
+    /// A CAN adapter that could not be opened, or went away (the source's name says which).
+    #[error("{cause}")]
+    Can { adapter: String, cause: String },
     #[error("standard input: {0}")]
     Stdin(#[source] io::Error),
     #[error("unknown scenario '{0}'")]

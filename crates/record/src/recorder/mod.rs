@@ -13,8 +13,10 @@
 //! stop the sources drain what their peers already sent while the writer keeps writing; and
 //! the file of a run that ends abnormally stays as `.partial` for `railfuse recover`.
 
+mod can;
 pub mod message;
 mod serial;
+mod socketcan;
 pub mod source_spec;
 pub mod sources;
 pub mod stream;
@@ -33,7 +35,7 @@ use railfuse_catalog::topics;
 use serde::Serialize;
 
 use message::{Item, ItemWriter};
-pub use source_spec::{SourceSpec, SourcesFile, SpecError};
+pub use source_spec::{CanAdapter, SourceSpec, SourcesFile, SpecError};
 pub use stream::StreamFormat;
 
 /// Called with the live figures (the CLI's status display).

@@ -5,7 +5,7 @@
 //!   `serial:/dev/ttyACM0:115200:ubx`):
 //!   `udp:PORT`, `tcp:PORT[:FORMAT]`, `tcp-client:HOST:PORT[:FORMAT]`,
 //!   `serial:DEVICE:BAUD[:FORMAT]`, `file:PATH[:FORMAT]`, `stdin[:FORMAT]`,
-//!   `simulate[:SCENARIO]`;
+//!   `simulate[:SCENARIO]`, and the vehicle's CAN bus, `can:ADAPTER` (see [`CanAdapter`]);
 //! - a `[[source]]` table of a sources file (`udp = 5600`, or `serial = "/dev/ttyACM0"` with
 //!   `baud = 115200`, `format = "ubx"`, `topic = "/gnss/rx2"`), deserialised directly.
 //!
@@ -26,7 +26,7 @@ use super::stream::StreamFormat;
 pub enum SpecError {
     #[error("{spec}: {what}")]
     Bad { spec: String, what: String },
-    #[error("give exactly one of udp, tcp, tcp_client, serial, file, stdin, simulate")]
+    #[error("give exactly one of udp, tcp, tcp_client, serial, file, stdin, simulate, can")]
     Kinds,
     #[error("serial needs baud")]
     NoBaud,
@@ -73,6 +73,12 @@ pub enum SourceSpec {
         baud: u32,
         format: StreamFormat,
         topic: Option<String>,
+    },
+    /// The vehicle's CAN bus through an adapter, each frame logged whole and, with the
+    /// vehicle's DBC, decoded.
+    Can {
+        adapter: CanAdapter,
+        dbc: Option<std::sync::Arc<railfuse_can::dbc::Database>>,
     },
     /// The embedded simulator, played out in real time (or `speed` times faster).
     Simulated {
@@ -124,6 +130,11 @@ impl std::fmt::Display for SourceSpec {
                 speed,
                 ..
             } => write!(f, "simulator {scenario} seed {seed} ×{speed}"),
+            SourceSpec::Can { adapter, dbc } => write!(
+                f,
+                "can {adapter}{}",
+                if dbc.is_some() { " (decoded)" } else { "" }
+            ),
         }
     }
 }
@@ -133,7 +144,13 @@ const LOCALHOST: IpAddr = IpAddr::V4(Ipv4Addr::LOCALHOST);
 impl SourceSpec {
     /// Network listeners bind `ip` (127.0.0.1 until told otherwise).
     pub fn bind(mut self, ip: IpAddr) -> Self {
-        if let SourceSpec::Udp { addr } | SourceSpec::TcpListen { addr, .. } = &mut self {
+        if let SourceSpec::Udp { addr }
+        | SourceSpec::TcpListen { addr, .. }
+        | SourceSpec::Can {
+            adapter: CanAdapter::Cannelloni { addr, .. },
+            ..
+        } = &mut self
+        {
             addr.set_ip(ip);
         }
         self
@@ -211,7 +228,135 @@ impl FromStr for SourceSpec {
                 speed: 1.0,
                 duration_s: None,
             },
+            "can" => SourceSpec::Can {
+                adapter: args.parse().map_err(|what: String| bad(spec, what))?,
+                dbc: None,
+            },
             other => return Err(bad(spec, format!("unknown source kind '{other}'"))),
+        })
+    }
+}
+
+/// A CAN adapter, as `record --can` names it:
+///
+/// - `IFACE` (`can0`, `vcan0`): a Linux SocketCAN interface, classic and FD frames, with the
+///   kernel's receive time and its count of frames dropped on a full socket buffer;
+/// - `slcan:DEVICE[:BITRATE[:TTYBAUD]]` (`slcan:/dev/ttyACM0:500000`): an SLCAN serial adapter,
+///   opened at the CAN bit rate (500 kbit/s unless told; SLCAN's 10 k–1 M) and the serial
+///   line at TTYBAUD (115200; a USB adapter ignores it); the bus is named after the device;
+/// - `socketcand:HOST:PORT[:BUS]`: a socketcand server's bus BUS (`can0`), over TCP;
+/// - `cannelloni:PORT[:BUS]`: a cannelloni gateway's datagrams on UDP PORT, named BUS
+///   (`cannelloni`), with the kernel's drop count and the gateway's sequence gaps counted.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CanAdapter {
+    SocketCan {
+        iface: String,
+    },
+    Slcan {
+        path: PathBuf,
+        bitrate: u32,
+        baud: u32,
+    },
+    Socketcand {
+        addr: String,
+        bus: String,
+    },
+    Cannelloni {
+        addr: SocketAddr,
+        bus: String,
+    },
+}
+
+impl CanAdapter {
+    /// The bus's name in the log (`/can/<bus>/frames`).
+    pub fn bus(&self) -> String {
+        match self {
+            CanAdapter::SocketCan { iface } => iface.clone(),
+            CanAdapter::Slcan { path, .. } => path
+                .file_name()
+                .map_or_else(|| "slcan".into(), |n| n.to_string_lossy().into_owned()),
+            CanAdapter::Socketcand { bus, .. } | CanAdapter::Cannelloni { bus, .. } => bus.clone(),
+        }
+    }
+}
+
+impl std::fmt::Display for CanAdapter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CanAdapter::SocketCan { iface } => write!(f, "socketcan {iface}"),
+            CanAdapter::Slcan { path, bitrate, .. } => {
+                write!(f, "slcan {} {} kbit/s", path.display(), bitrate / 1000)
+            }
+            CanAdapter::Socketcand { addr, bus } => write!(f, "socketcand {addr} {bus}"),
+            CanAdapter::Cannelloni { addr, bus } => write!(f, "cannelloni {addr} as {bus}"),
+        }
+    }
+}
+
+/// A bus name: what an interface may be called (it names a channel).
+fn bus_name(name: &str) -> Result<String, String> {
+    let fine = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '-' || c == '.';
+    match !name.is_empty() && name.len() <= 32 && name.chars().all(fine) {
+        true => Ok(name.to_owned()),
+        false => Err(format!(
+            "bus '{name}': up to 32 letters, digits, '_', '-' or '.' (it names a channel)"
+        )),
+    }
+}
+
+impl FromStr for CanAdapter {
+    type Err = String;
+
+    fn from_str(args: &str) -> Result<Self, String> {
+        let parts: Vec<&str> = args.split(':').collect();
+        let number = |what: &str, text: &str| {
+            text.parse::<u32>()
+                .map_err(|_| format!("'{text}' is not a {what}"))
+        };
+        let port = |text: &str| {
+            text.parse::<u16>()
+                .map_err(|_| format!("'{text}' is not a port"))
+        };
+        Ok(match parts[..] {
+            [iface] => CanAdapter::SocketCan {
+                iface: bus_name(iface)?,
+            },
+            ["slcan", path, ref rest @ ..] if rest.len() <= 2 => {
+                let bitrate = match rest.first() {
+                    Some(b) => number("bit rate", b)?,
+                    None => 500_000,
+                };
+                if railfuse_can::slcan::bitrate_command(bitrate).is_none() {
+                    return Err(format!(
+                        "SLCAN has no code for {bitrate} bit/s: one of {}",
+                        railfuse_can::slcan::BITRATES
+                            .map(|b| b.to_string())
+                            .join(", ")
+                    ));
+                }
+                let baud = match rest.get(1) {
+                    Some(b) => number("baud rate", b)?,
+                    None => 115_200,
+                };
+                CanAdapter::Slcan {
+                    path: path.into(),
+                    bitrate,
+                    baud,
+                }
+            }
+            ["socketcand", host, p, ref rest @ ..] if rest.len() <= 1 => CanAdapter::Socketcand {
+                addr: format!("{host}:{}", port(p)?),
+                bus: bus_name(rest.first().unwrap_or(&"can0"))?,
+            },
+            ["cannelloni", p, ref rest @ ..] if rest.len() <= 1 => CanAdapter::Cannelloni {
+                addr: SocketAddr::new(LOCALHOST, port(p)?),
+                bus: bus_name(rest.first().unwrap_or(&"cannelloni"))?,
+            },
+            _ => {
+                return Err("IFACE, slcan:DEVICE[:BITRATE[:TTYBAUD]], \
+                            socketcand:HOST:PORT[:BUS] or cannelloni:PORT[:BUS]"
+                    .into())
+            }
         })
     }
 }
@@ -302,6 +447,7 @@ struct SourceTable {
     file: Option<PathBuf>,
     stdin: Option<bool>,
     simulate: Option<String>,
+    can: Option<String>,
     format: Option<StreamFormat>,
     topic: Option<String>,
 }
@@ -318,6 +464,7 @@ impl TryFrom<SourceTable> for SourceSpec {
             t.file.is_some(),
             t.stdin == Some(true),
             t.simulate.is_some(),
+            t.can.is_some(),
         ];
         if kinds.iter().filter(|k| **k).count() != 1 {
             return Err(SpecError::Kinds);
@@ -361,6 +508,11 @@ impl TryFrom<SourceTable> for SourceSpec {
                 format,
                 topic,
             }
+        } else if let Some(can) = t.can {
+            SourceSpec::Can {
+                adapter: can.parse().map_err(|what: String| bad(&can, what))?,
+                dbc: None,
+            }
         } else if let Some(scenario) = t.simulate {
             SourceSpec::Simulated {
                 scenario,
@@ -377,11 +529,34 @@ impl TryFrom<SourceTable> for SourceSpec {
     }
 }
 
-/// A sources file: `[[source]]` tables.
+/// A sources file: `[[source]]` tables, and `[can] dbc = "vehicle.dbc"` (relative to the
+/// file) to decode its CAN sources' frames.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SourcesFile {
     pub source: Vec<SourceSpec>,
+    #[serde(default)]
+    pub can: Option<SourcesCan>,
+}
+
+/// `[can]` of a sources file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SourcesCan {
+    pub dbc: PathBuf,
+}
+
+impl SourceSpec {
+    /// A CAN source that decodes with `db`; any other as it is.
+    pub fn with_dbc(self, db: &std::sync::Arc<railfuse_can::dbc::Database>) -> Self {
+        match self {
+            SourceSpec::Can { adapter, .. } => SourceSpec::Can {
+                adapter,
+                dbc: Some(db.clone()),
+            },
+            other => other,
+        }
+    }
 }
 
 #[cfg(test)]
@@ -426,10 +601,21 @@ mod tests {
             ("tcp:5601:nmea=gnss", "must start with '/'"),
             ("tcp:5601:csv", "unknown stream format"),
             ("carrier-pigeon:1", "unknown source kind"),
+            ("can:slcan:/dev/ttyACM0:300000", "no code for 300000"),
+            ("can:socketcand:host:x", "'x' is not a port"),
+            ("can:can0/../x", "up to 32 letters"),
+            ("can:a:b:c:d:e", "IFACE, slcan"),
         ] {
             let e = spec.parse::<SourceSpec>().unwrap_err().to_string();
             assert!(e.starts_with(spec) && e.contains(says), "{spec}: {e}");
         }
+        let slcan: SourceSpec = "can:slcan:/dev/ttyACM0:1000000".parse().unwrap();
+        assert_eq!(slcan.to_string(), "can slcan /dev/ttyACM0 1000 kbit/s");
+        let table: SourcesFile =
+            toml::from_str("[[source]]\ncan = \"slcan:/dev/ttyACM0:1000000\"\n").unwrap();
+        assert_eq!(table.source, vec![slcan]);
+        let remote: SourceSpec = "can:socketcand:gw.local:29536".parse().unwrap();
+        assert_eq!(remote.to_string(), "can socketcand gw.local:29536 can0");
         let two = toml::from_str::<SourcesFile>("[[source]]\nudp = 1\ntcp = 2\n");
         assert!(two.unwrap_err().to_string().contains("exactly one of"));
         let no_baud = toml::from_str::<SourcesFile>("[[source]]\nserial = \"/dev/ttyS0\"\n");

@@ -72,7 +72,7 @@ impl Link {
 
     /// Queues decoded items, GNSS fixes on `gnss_topic` when the source is mapped to one;
     /// false when the recorder has gone.
-    fn send(&self, items: &mut Vec<Item>, gnss_topic: Option<&str>) -> bool {
+    pub(super) fn send(&self, items: &mut Vec<Item>, gnss_topic: Option<&str>) -> bool {
         let mut dropped = 0;
         for mut item in items.drain(..) {
             if let (Some(t), AnyMessage::GnssFix(_)) = (gnss_topic, &item.message) {
@@ -280,6 +280,7 @@ fn run_until_end(spec: SourceSpec, link: &Link) -> Result<(), SourceError> {
             speed,
             duration_s,
         } => simulated(&scenario, seed, speed, duration_s, link),
+        SourceSpec::Can { adapter, dbc } => super::can::run(&adapter, dbc, link),
     }
 }
 
@@ -455,7 +456,7 @@ fn next_backoff(backoff: Duration) -> Duration {
 
 /// A read that found nothing waiting (a time-out, a non-blocking socket with no data, a
 /// signal): not an error of the source.
-fn nothing_waiting(e: &std::io::Error) -> bool {
+pub(super) fn nothing_waiting(e: &std::io::Error) -> bool {
     use std::io::ErrorKind::{Interrupted, TimedOut, WouldBlock};
     matches!(e.kind(), WouldBlock | TimedOut | Interrupted)
 }
