@@ -18,7 +18,7 @@ const PEER: &str = include_str!("../../bench/peer_refuse.py");
 
 #[derive(clap::Args)]
 // One measurement a run: a second mode flag is refused, not silently dropped.
-#[command(group(clap::ArgGroup::new("mode").args(["record", "viz", "tune", "em", "safety", "gnss_ins", "eddy_current", "runs"])))]
+#[command(group(clap::ArgGroup::new("mode").args(["record", "can", "viz", "tune", "em", "safety", "gnss_ins", "eddy_current", "runs"])))]
 pub struct Args {
     /// Durations (s) of the simulated default-scenario logs to measure with samples/kalman.toml;
     /// memory should not grow with them.
@@ -41,6 +41,15 @@ pub struct Args {
     /// this many seconds.
     #[arg(long, value_name = "SECONDS")]
     pub record: Option<f64>,
+    /// Measure the recorder on the vehicle's CAN bus instead: `--can-rate` frames a second
+    /// through an SLCAN adapter (a pty pair), then through a socketcand server (loopback),
+    /// each held this many seconds, decoded with the vehicle's DBC: frames lost, drops
+    /// counted, CPU and resident memory over the run.
+    #[arg(long, value_name = "SECONDS")]
+    pub can: Option<f64>,
+    /// With --can: frames a second (1 Mbit/s classic CAN at full load is about 8 000).
+    #[arg(long, default_value_t = 50_000.0)]
+    pub can_rate: f64,
     /// Measure `railfuse viz` instead: time, peak memory and recording size for the
     /// default scenario re-fused with the demo's two pipelines (samples/kalman.toml and
     /// samples/sensor-states.toml), at the default decimation and at full rate.
@@ -92,6 +101,9 @@ pub struct Args {
 pub fn run(a: Args) -> Result<()> {
     if let Some(secs) = a.record {
         return super::bench_record::run(&a.dir, secs, a.record_speedup);
+    }
+    if let Some(secs) = a.can {
+        return super::bench_can::run(&a.dir, secs, a.can_rate);
     }
     if let Some(secs) = a.tune {
         return super::bench_tune::run(&a.dir, secs, a.repeat);

@@ -1,4 +1,5 @@
 pub mod bench;
+pub mod bench_can;
 pub mod bench_em;
 pub mod bench_record;
 pub mod bench_runs;
