@@ -46,16 +46,17 @@ impl<R: BufRead> Lines<R> {
                 .by_ref()
                 .take(MAX_LINE as u64 + 1)
                 .read_until(b'\n', &mut self.buf);
-            self.line += 1;
             let n = match n {
                 Ok(0) => return None,
                 Ok(n) => n,
-                Err(e) => return Some(Err(self.bad(format!("unreadable: {e}")))),
+                Err(e) => {
+                    self.line += 1;
+                    return Some(Err(self.bad(format!("unreadable: {e}"))));
+                }
             };
+            self.line += 1;
             if n > MAX_LINE && !self.buf.ends_with(b"\n") {
-                // Skip the rest of the overlong line.
-                let mut rest = Vec::new();
-                let _ = self.input.read_until(b'\n', &mut rest);
+                self.skip_rest();
                 return Some(Err(self.bad(format!("longer than {MAX_LINE} bytes"))));
             }
             match std::str::from_utf8(&self.buf) {
@@ -65,6 +66,23 @@ impl<R: BufRead> Lines<R> {
             }
             let text = std::str::from_utf8(&self.buf).expect("checked").trim();
             return Some(Ok((self.line, text)));
+        }
+    }
+
+    /// Skips to the end of an overlong line, a buffer at a time (never holding it whole).
+    fn skip_rest(&mut self) {
+        loop {
+            let (used, done) = match self.input.fill_buf() {
+                Ok([]) | Err(_) => return,
+                Ok(buf) => match buf.iter().position(|&b| b == b'\n') {
+                    Some(i) => (i + 1, true),
+                    None => (buf.len(), false),
+                },
+            };
+            self.input.consume(used);
+            if done {
+                return;
+            }
         }
     }
 

@@ -70,7 +70,7 @@ impl<'de> Deserialize<'de> for CanData {
 
 /// The bytes of an even number of hex digits, at most 64 bytes.
 fn parse_hex(hex: &str) -> Result<Vec<u8>, String> {
-    if hex.len() % 2 != 0 || hex.len() > 128 {
+    if !hex.len().is_multiple_of(2) || hex.len() > 128 {
         return Err(format!(
             "'{hex}' is not 0 to 64 bytes in hex (an even number of digits)"
         ));

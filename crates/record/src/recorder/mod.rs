@@ -14,9 +14,9 @@
 //! the file of a run that ends abnormally stays as `.partial` for `railfuse recover`.
 
 mod can;
+mod link;
 pub mod message;
 mod serial;
-mod socketcan;
 pub mod source_spec;
 pub mod sources;
 pub mod stream;

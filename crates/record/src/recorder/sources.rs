@@ -13,83 +13,25 @@
 use std::io::Read;
 use std::net::{TcpListener, TcpStream, UdpSocket};
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use railfuse_catalog::log::{LogReader, LogRecord};
 use railfuse_catalog::messages::*;
 
+use super::link::nothing_waiting;
+pub use super::link::{lock, now_ns, Link, Stats, DRAIN};
 use super::message::Item;
 use super::source_spec::SourceSpec;
 use super::stream::{StreamDecoder, StreamFormat};
+pub use super::udp::UDP_RECEIVE_BUFFER;
 use crate::error::SourceError;
-
-pub type Stats = Arc<Mutex<SourceStats>>;
-
-/// A source's figures. A thread that panicked while holding them leaves them usable: they are
-/// counters, and the recorder must go on reporting the other sources.
-pub fn lock(stats: &Stats) -> MutexGuard<'_, SourceStats> {
-    stats.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-pub fn now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos() as u64)
-}
 
 /// Connections one TCP listener serves at once; more are refused and counted.
 pub const MAX_CONNECTIONS: usize = 64;
-/// How long stream sources keep reading what their peers already sent once the recording
-/// stops.
-pub const DRAIN: Duration = Duration::from_secs(2);
 /// A connection silent this long drops the half line it holds (and its buffer).
 pub const IDLE_HALF_LINE: Duration = Duration::from_secs(30);
-/// The UDP receive buffer asked for: bursts of datagrams wait here while the thread is busy.
-pub const UDP_RECEIVE_BUFFER: usize = 8 << 20;
-
-/// What a source's thread shares with the recorder.
-#[derive(Clone)]
-pub struct Link {
-    pub queue: flume::Sender<Item>,
-    pub stats: Stats,
-    pub stop: Arc<AtomicBool>,
-    /// Said at once on the recorder's status line (a listener that cannot accept, a UDP
-    /// buffer the kernel keeps small).
-    pub alerts: flume::Sender<String>,
-}
-
-impl Link {
-    fn stopping(&self) -> bool {
-        self.stop.load(Ordering::Relaxed)
-    }
-
-    fn alert(&self, text: String) {
-        lock(&self.stats).last_error = Some(text.clone());
-        let _ = self.alerts.send(text);
-    }
-
-    /// Queues decoded items, GNSS fixes on `gnss_topic` when the source is mapped to one;
-    /// false when the recorder has gone.
-    pub(super) fn send(&self, items: &mut Vec<Item>, gnss_topic: Option<&str>) -> bool {
-        let mut dropped = 0;
-        for mut item in items.drain(..) {
-            if let (Some(t), AnyMessage::GnssFix(_)) = (gnss_topic, &item.message) {
-                item.topic = t.to_owned();
-            }
-            match self.queue.try_send(item) {
-                Ok(()) => {}
-                Err(flume::TrySendError::Full(_)) => dropped += 1,
-                Err(flume::TrySendError::Disconnected(_)) => return false,
-            }
-        }
-        if dropped > 0 {
-            lock(&self.stats).dropped += dropped;
-        }
-        true
-    }
-}
 
 /// The text of a panic's payload.
 pub fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
@@ -452,13 +394,6 @@ fn serve_connection(
 /// 50 ms up to a second, instead of spinning.
 fn next_backoff(backoff: Duration) -> Duration {
     (backoff * 2).clamp(Duration::from_millis(50), Duration::from_secs(1))
-}
-
-/// A read that found nothing waiting (a time-out, a non-blocking socket with no data, a
-/// signal): not an error of the source.
-pub(super) fn nothing_waiting(e: &std::io::Error) -> bool {
-    use std::io::ErrorKind::{Interrupted, TimedOut, WouldBlock};
-    matches!(e.kind(), WouldBlock | TimedOut | Interrupted)
 }
 
 fn sleep_unless_stopping(link: &Link, d: Duration) {

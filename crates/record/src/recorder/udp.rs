@@ -8,6 +8,9 @@ use std::os::fd::AsRawFd;
 
 use nix::sys::socket::{self, sockopt, ControlMessageOwned, MsgFlags};
 
+/// The UDP receive buffer asked for: bursts of datagrams wait here while the thread is busy.
+pub const UDP_RECEIVE_BUFFER: usize = 8 << 20;
+
 /// Asks for a receive buffer of `bytes` (beyond `net.core.rmem_max` where the process may,
 /// as root may); returns what the kernel granted (it reports twice the usable size).
 pub fn size_receive_buffer(sock: &UdpSocket, bytes: usize) -> usize {

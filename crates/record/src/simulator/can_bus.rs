@@ -17,14 +17,17 @@ pub const VEHICLE_DBC: &str = include_str!("../../../../samples/vehicle.dbc");
 /// The bus's name in the log (`/can/can0/frames`).
 pub const BUS: &str = "can0";
 
+/// One axle's reading: its speed, m/s, and its pulse count.
+type Axle = (f64, u64);
+
 /// The bus: its messages, and the axle readings of the sample being gathered.
 pub struct CanBus {
     wheel_speed: Message,
     axle_pulses: Message,
     radar: Message,
     axles: usize,
-    /// The sample's stamp, and each axle's (speed, pulse count) so far.
-    pending: Option<(u64, Vec<Option<(f64, u64)>>)>,
+    /// The sample's stamp, and each axle's reading so far.
+    pending: Option<(u64, Vec<Option<Axle>>)>,
     counter: u64,
 }
 

@@ -578,8 +578,10 @@ impl<'a> Replay<'a> {
         if info.message_encoding == ros2::ENCODING && self.ros_outputs.is_empty() {
             self.register_ros_outputs()?;
         }
-        let mut route = Route::default();
-        route.replaced = self.is_replaced(&info.topic);
+        let mut route = Route {
+            replaced: self.is_replaced(&info.topic),
+            ..Route::default()
+        };
         if !route.replaced && !self.is_made(&info) {
             match self.route_can(&info)? {
                 CanRoute::MadeBefore => route.replaced = true,

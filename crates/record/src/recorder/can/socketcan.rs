@@ -10,7 +10,7 @@ use nix::sys::socket::{self, sockopt, ControlMessageOwned, MsgFlags};
 use nix::sys::time::TimeVal;
 use railfuse_can::frame::{Frame, ERROR_FLAG};
 
-use super::can::Frames;
+use super::frames::Frames;
 
 const EFF_FLAG: u32 = 0x8000_0000;
 const RTR_FLAG: u32 = 0x4000_0000;
