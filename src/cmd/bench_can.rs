@@ -129,16 +129,8 @@ pub fn run(dir: &Path, secs: f64, rate: f64) -> Result<()> {
         "CAN frames through the recorder with samples/vehicle.dbc ({secs:.0} s each; lost = sent − in the file)"
     );
     println!(
-        "{:<11} {:>8} {:>10} {:>10} {:>7} {:>8} {:>11} {:>8}   {}",
-        "adapter",
-        "frames/s",
-        "sent",
-        "in file",
-        "lost",
-        "dropped",
-        "messages",
-        "CPU",
-        "memory start / mid / end"
+        "{:<11} {:>8} {:>10} {:>10} {:>7} {:>8} {:>11} {:>8}   memory start / mid / end",
+        "adapter", "frames/s", "sent", "in file", "lost", "dropped", "messages", "CPU",
     );
     // SLCAN: the adapter's side of a pty pair.
     let (mut master, tty) = pty()?;
