@@ -239,3 +239,185 @@ fn agrees_with_python_can_and_cantools(
         "{decoded} {signals} {labels}"
     );
 }
+
+/// The messages of each topic in a log, by `info --json`.
+fn topic_counts(path: &Path) -> std::collections::BTreeMap<String, u64> {
+    ok_json(&["info", s(path), "--json"])["channels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| {
+            (
+                c["topic"].as_str().unwrap().to_owned(),
+                c["messages"].as_u64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_can_only_run_re_fuses_as_its_own_channels_do_and_agrees_with_cantools() {
+    let d = tempfile::tempdir().unwrap();
+    let (bus, plain) = (d.path().join("bus.mcap"), d.path().join("plain.mcap"));
+    simulate(&["--can-bus", "--seed", "3", "--duration", "200"], &bus);
+    simulate(&["--seed", "3", "--duration", "200"], &plain);
+    let counts = topic_counts(&bus);
+    assert!(
+        !counts.contains_key("/odometer/1") && !counts.contains_key("/radar/speed"),
+        "the sensors are on the bus only: {counts:?}"
+    );
+    let (bus_fused, plain_fused) = (
+        d.path().join("bus.fused.mcap"),
+        d.path().join("plain.fused.mcap"),
+    );
+    let on_bus = refuse_json(&bus, "can.toml", &bus_fused);
+    let own = refuse_json(&plain, "kalman.toml", &plain_fused);
+    // Every reading of the sensors came back from the bus.
+    let plain_counts = topic_counts(&plain);
+    let made = &on_bus["refuse"]["can"]["made"];
+    for topic in ["/odometer/1", "/odometer/2", "/radar/speed"] {
+        assert_eq!(
+            made[topic].as_u64(),
+            plain_counts.get(topic).copied(),
+            "{topic}: {on_bus}"
+        );
+    }
+    assert_eq!(
+        topic_counts(&bus_fused)["/odometer/1"],
+        plain_counts["/odometer/1"]
+    );
+    // The same accuracy as from the sensors' own channels: the bus adds 0.01 m/s steps and
+    // each sensor's 2 ms latency (a frame's time is when it was on the bus).
+    let rmse = |r: &serde_json::Value| {
+        pipeline_eval(r, "kalman")["position_error_m"]["rmse"]
+            .as_f64()
+            .unwrap()
+    };
+    let (a, b) = (rmse(&on_bus), rmse(&own));
+    assert!(
+        (a - b).abs() <= 0.1 * b,
+        "position RMSE {a} m from the bus, {b} m from the channels"
+    );
+    // cantools reads the frames (through mcap-protobuf-support, from the file's own schema)
+    // to the very values railfuse made its sensors of.
+    let out = d.path().join("theirs.json");
+    let dbc = sample("vehicle.dbc");
+    let py = python("can_mcap.py", &[s(&dbc), s(&bus), s(&bus_fused), s(&out)]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let theirs: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(
+        theirs["frames"].as_u64(),
+        counts.get("/can/can0/frames").copied()
+    );
+    for (topic, t) in theirs["topics"].as_object().unwrap() {
+        assert!(t["both"].as_u64().unwrap() > 1000, "{topic}: {t}");
+        assert_eq!(t["both"], t["cantools"], "{topic}: {t}");
+        assert_eq!(t["both"], t["railfuse"], "{topic}: {t}");
+        assert!(t["max_difference"].as_f64().unwrap() < 1e-9, "{topic}: {t}");
+    }
+}
+
+#[test]
+fn a_candump_log_imports_decoded_and_bad_can_input_is_one_line_naming_its_place() {
+    let d = tempfile::tempdir().unwrap();
+    let out = d.path().join("bus.mcap");
+    let dbc = sample("vehicle.dbc");
+    let log = d.path().join("bus.log");
+    let mut text = std::fs::read_to_string(sample("vehicle-bus.log")).unwrap();
+    text.push_str("(1780300830.5) can0 100#not hex\n");
+    std::fs::write(&log, text).unwrap();
+    let r = ok_json(&["import", s(&log), "--dbc", s(&dbc), "-o", s(&out), "--json"]);
+    assert_eq!(r["format"], "candump");
+    assert_eq!(r["per_topic"]["/can/can0/frames"], 702, "{r}");
+    assert_eq!(r["per_topic"]["/can/can0/WheelSpeed"], 250, "{r}");
+    assert_eq!(r["skipped"]["line that does not parse"], 1, "{r}");
+    assert!(
+        r["first_problems"][0]
+            .as_str()
+            .unwrap()
+            .starts_with("line 703:"),
+        "{r}"
+    );
+    assert_eq!(r["warnings"]["CAN id not in the DBC (kept raw)"], 1, "{r}");
+    assert_eq!(r["warnings"]["CAN error frame"], 1, "{r}");
+    // A DBC that does not parse: its file and line, before anything is written.
+    let broken = d.path().join("broken.dbc");
+    let dbc_text = std::fs::read_to_string(&dbc).unwrap();
+    std::fs::write(
+        &broken,
+        dbc_text.replace("SG_ Quality : 23|8@0+", "SG_ Quality : 23|8@0x"),
+    )
+    .unwrap();
+    let fail = |args: &[&str]| {
+        let o = railfuse(args);
+        assert!(!o.status.success(), "{args:?}");
+        let e = stderr(&o);
+        assert_eq!(e.trim().lines().count(), 1, "{e}");
+        e
+    };
+    let e = fail(&[
+        "import",
+        "--format",
+        "candump",
+        s(&log),
+        "--dbc",
+        s(&broken),
+        "-o",
+        s(&d.path().join("x.mcap")),
+    ]);
+    assert!(e.contains("broken.dbc:25:"), "{e}");
+    assert!(!d.path().join("x.mcap").exists());
+    let e = fail(&[
+        "record",
+        "--can",
+        "slcan:/dev/null",
+        "--dbc",
+        s(&broken),
+        "-o",
+        s(&d.path().join("r.mcap")),
+    ]);
+    assert!(e.contains("broken.dbc:25:"), "{e}");
+    assert!(!d.path().join("r.mcap").exists() && !d.path().join("r.mcap.partial").exists());
+    // Configurations: each fault names the file and the table.
+    let config = |name: &str, body: &str| {
+        let p = d.path().join(name);
+        let base = std::fs::read_to_string(sample("can.toml")).unwrap();
+        let pipelines = &base[base.find("[[pipeline]]").unwrap()..];
+        std::fs::write(&p, format!("{body}\n{pipelines}")).unwrap();
+        std::fs::copy(&dbc, d.path().join("vehicle.dbc")).unwrap();
+        p
+    };
+    for (name, body, says) in [
+        ("no-can.toml", "[sensor.\"/odometer/1\"]\nfrom = \"can:WheelSpeed.AxleSpeed1\"", "name the vehicle's DBC in [can]"),
+        ("no-signal.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/odometer/1\"]\nfrom = \"can:WheelSpeed.Axle9\"", "message WheelSpeed has no signal Axle9"),
+        ("not-speed.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/radar/speed\"]\nfrom = \"can:RadarSpeed.Quality\"", "is in '%': a speed is in m/s, km/h or mph"),
+        ("imu.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/imu\"]\nfrom = \"can:RadarSpeed.Acceleration\"", "is a Imu channel"),
+        ("bad-dbc.toml", "[can]\ndbc = \"broken.dbc\"\n[sensor.\"/odometer/1\"]\nfrom = \"can:WheelSpeed.AxleSpeed1\"", "broken.dbc:25:"),
+    ] {
+        let c = config(name, body);
+        let e = fail(&["refuse", s(&out), "-c", s(&c), "-o", s(&d.path().join("f.mcap"))]);
+        assert!(e.contains(name) && e.contains(says), "{name}: {e}");
+    }
+    // A log that has the sensor's own channel and its frames: the sensor would come twice.
+    let plain = d.path().join("plain.mcap");
+    simulate(&["--duration", "20"], &plain);
+    let mixed = d.path().join("mixed.mcap");
+    ok(&["merge", s(&plain), s(&out), "-o", s(&mixed)]);
+    let e = fail(&[
+        "refuse",
+        s(&mixed),
+        "-c",
+        s(&sample("can.toml")),
+        "-o",
+        s(&d.path().join("f.mcap")),
+    ]);
+    assert!(
+        e.contains("from the CAN bus") && e.contains("has that channel too"),
+        "{e}"
+    );
+}

@@ -329,6 +329,12 @@ fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mappe
             })
         }
     };
+    if kind == MessageKind::Odometer && (source.valid.is_some() || source.quality.is_some()) {
+        return Err(MappingError::Sensor {
+            topic: topic.into(),
+            cause: "an odometer has no `valid` or `quality`: those are a radar's".into(),
+        });
+    }
     let (message, name, unit) = find_signal(db, topic, "from", &source.from)?;
     let speed = SignalRef {
         name,
@@ -361,12 +367,6 @@ fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mappe
     };
     let valid = same_message("valid", &source.valid, false)?;
     let quality = same_message("quality", &source.quality, true)?;
-    if kind == MessageKind::Odometer && (valid.is_some() || quality.is_some()) {
-        return Err(MappingError::Sensor {
-            topic: topic.into(),
-            cause: "an odometer has no `valid` or `quality`: those are a radar's".into(),
-        });
-    }
     Ok(Mapped {
         topic: topic.to_owned(),
         kind,
@@ -405,4 +405,156 @@ fn find_signal(
         .find(|s| s.name == signal)
         .ok_or_else(|| err(format!("message {message} has no signal {signal}")))?;
     Ok(((m.id, m.extended), s.name.clone(), s.unit.clone()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const DBC: &str = r#"VERSION ""
+
+NS_ :
+
+BS_:
+
+BU_: TCU Radar
+
+BO_ 256 WheelSpeed: 4 TCU
+ SG_ AxleKmh : 0|16@1+ (0.01,0) [0|400] "km/h" Radar
+ SG_ Raw : 16|16@1+ (1,0) [0|100] "rpm" Radar
+
+BO_ 288 RadarSpeed: 4 Radar
+ SG_ Speed : 0|16@1- (0.01,0) [-300|300] "m/s" TCU
+ SG_ Quality : 16|8@1+ (1,0) [0|100] "%" TCU
+ SG_ Valid : 24|1@1+ (1,0) [0|1] "" TCU
+"#;
+
+    fn db() -> Database {
+        Database::parse("t.dbc", DBC).unwrap()
+    }
+
+    fn source(from: &str, valid: Option<&str>, quality: Option<&str>) -> SensorSource {
+        SensorSource {
+            from: from.into(),
+            valid: valid.map(Into::into),
+            quality: quality.map(Into::into),
+        }
+    }
+
+    fn frame(id: u32, data: &[u8]) -> CanFrame {
+        CanFrame {
+            stamp_ns: 77,
+            receive_ns: 78,
+            bus: "can0".into(),
+            id,
+            extended: false,
+            remote: false,
+            error: false,
+            fd: false,
+            brs: false,
+            esi: false,
+            data: CanData(data.to_vec()),
+        }
+    }
+
+    #[test]
+    fn signals_become_sensors_in_si_units_and_the_radar_s_flags_change_them() {
+        let sensors = BTreeMap::from([
+            (
+                "/odometer/1".to_owned(),
+                source("can:WheelSpeed.AxleKmh", None, None),
+            ),
+            (
+                "/radar/speed".to_owned(),
+                source(
+                    "can:RadarSpeed.Speed",
+                    Some("can:RadarSpeed.Valid"),
+                    Some("can:RadarSpeed.Quality"),
+                ),
+            ),
+        ]);
+        let mut b = SensorBridge::with_database(db(), None, &sensors).unwrap();
+        // 72 km/h is 20 m/s.
+        let made = b.frame(&frame(256, &7200u16.to_le_bytes().repeat(2)));
+        let [(topic, AnyMessage::Odometer(o))] = &made[..] else {
+            panic!("{made:?}")
+        };
+        assert_eq!((*topic, o.stamp_ns), ("/odometer/1", 77));
+        assert!((o.speed_mps - 20.0).abs() < 1e-12);
+        // Backwards at 12.5 m/s, 80 % quality, valid; then the same with Valid 0.
+        let mut data = (-1250i16).to_le_bytes().to_vec();
+        data.extend([80, 1]);
+        let made = b.frame(&frame(288, &data));
+        let AnyMessage::RadarSpeed(r) = &made[0].1 else {
+            panic!()
+        };
+        assert!((r.speed_mps - 12.5).abs() < 1e-12 && (r.quality - 0.8).abs() < 1e-12 && r.valid);
+        data[3] = 0;
+        let AnyMessage::RadarSpeed(r) = &b.frame(&frame(288, &data))[0].1 else {
+            panic!()
+        };
+        assert!(!r.valid, "Valid 0 is a radar with no measurement");
+        // Past its range (all ones: "not available"): no reading, counted.
+        assert!(b.frame(&frame(256, &[0xFF, 0xFF, 0, 0])).is_empty());
+        assert_eq!(b.counts.out_of_range["WheelSpeed.AxleKmh"], 1);
+        assert!(b.frame(&frame(0x7FF, &[1])).is_empty());
+        assert_eq!(b.counts.unknown_ids["can0 0x7FF"], 1);
+        assert!(b.frame(&frame(256, &[1])).is_empty());
+        assert_eq!(b.counts.too_short["WheelSpeed"], 1);
+        assert_eq!(b.counts.made["/odometer/1"], 1);
+        // Another bus is not read when one is named.
+        let mut only = SensorBridge::with_database(db(), Some("can1".into()), &sensors).unwrap();
+        assert!(only.frame(&frame(256, &[0, 1, 0, 0])).is_empty());
+    }
+
+    #[test]
+    fn a_mapping_the_dbc_cannot_give_says_what_and_where() {
+        let bad = |topic: &str, s: SensorSource| {
+            let sensors = BTreeMap::from([(topic.to_owned(), s)]);
+            SensorBridge::with_database(db(), None, &sensors)
+                .err()
+                .expect("refused")
+                .to_string()
+        };
+        for (topic, s, says) in [
+            (
+                "/odometer/1",
+                source("WheelSpeed.AxleKmh", None, None),
+                "\"can:Message.Signal\"",
+            ),
+            (
+                "/odometer/1",
+                source("can:Wheel.AxleKmh", None, None),
+                "no message Wheel",
+            ),
+            (
+                "/odometer/1",
+                source("can:WheelSpeed.Raw", None, None),
+                "is in 'rpm'",
+            ),
+            (
+                "/odometer/1",
+                source("can:WheelSpeed.AxleKmh", Some("can:RadarSpeed.Valid"), None),
+                "an odometer has no",
+            ),
+            (
+                "/radar/speed",
+                source("can:RadarSpeed.Speed", Some("can:WheelSpeed.Raw"), None),
+                "not in the message of `from`",
+            ),
+            (
+                "/gnss/fix",
+                source("can:RadarSpeed.Speed", None, None),
+                "is a GnssFix channel",
+            ),
+            (
+                "/wheel",
+                source("can:RadarSpeed.Speed", None, None),
+                "not an odometer or radar topic",
+            ),
+        ] {
+            let e = bad(topic, s);
+            assert!(e.contains(says), "{topic}: {e}");
+        }
+    }
 }
