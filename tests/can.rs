@@ -421,3 +421,107 @@ fn a_candump_log_imports_decoded_and_bad_can_input_is_one_line_naming_its_place(
         "{e}"
     );
 }
+
+#[test]
+fn blf_frames_agree_with_python_can_and_a_broken_blf_keeps_what_came_before() {
+    let d = tempfile::tempdir().unwrap();
+    let log = d.path().join("frames.log");
+    std::fs::write(&log, candump_log()).unwrap();
+    let frames: Vec<Frame> = Reader::new(candump_log().as_bytes())
+        .map(|f| f.unwrap())
+        .collect();
+    let (blf, out) = (d.path().join("frames.blf"), d.path().join("theirs.json"));
+    let py = python("can_blf.py", &[s(&log), s(&blf), s(&out)]);
+    assert!(
+        py.status.success(),
+        "{}",
+        String::from_utf8_lossy(&py.stderr)
+    );
+    let theirs: Vec<serde_json::Value> =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let ours: Vec<Frame> = railfuse_can::blf::Reader::new(File::open(&blf).unwrap())
+        .unwrap()
+        .map(|f| f.unwrap())
+        .collect();
+    assert_eq!(ours.len(), frames.len());
+    assert_eq!(theirs.len(), frames.len());
+    for ((a, c), t) in ours.iter().zip(&frames).zip(&theirs) {
+        let at = format!("{a:?}");
+        // python-can numbers a BLF channel from 0; the file from 1.
+        assert_eq!(
+            a.bus,
+            format!("CAN{}", t["channel"].as_u64().unwrap() + 1),
+            "{at}"
+        );
+        assert_eq!(a.bus, if c.bus == "can0" { "CAN1" } else { "CAN2" }, "{at}");
+        assert!(
+            (a.stamp_ns as f64 / 1e9 - t["stamp"].as_f64().unwrap()).abs() < 2e-6,
+            "{at}: {t}"
+        );
+        assert!(a.stamp_ns.abs_diff(c.stamp_ns) < 2_000, "{at}: {c:?}");
+        if c.error {
+            // python-can's BLFWriter keeps an error frame's time and nothing of its class.
+            assert!(a.error && t["error"] == true, "{at}: {t}");
+            continue;
+        }
+        for (flag, ours) in [
+            ("extended", a.extended),
+            ("rtr", a.rtr),
+            ("error", a.error),
+            ("fd", a.fd),
+            ("brs", a.brs),
+            ("esi", a.esi),
+        ] {
+            assert_eq!(t[flag], ours, "{at}: {flag}");
+        }
+        let data: String = a.data.iter().map(|b| format!("{b:02X}")).collect();
+        assert_eq!(t["data"], data, "{at}");
+        assert_eq!(t["id"], a.id, "{at}");
+        assert_eq!(
+            (a.id, a.extended, a.rtr, a.error, &a.data),
+            (c.id, c.extended, c.rtr, c.error, &c.data),
+            "{at}"
+        );
+    }
+    // Cut off mid-file: the frames before the cut, then where it broke.
+    let bytes = std::fs::read(&blf).unwrap();
+    let cut = d.path().join("cut.blf");
+    std::fs::write(&cut, &bytes[..bytes.len() - 100]).unwrap();
+    let read: Vec<_> = railfuse_can::blf::Reader::new(File::open(&cut).unwrap())
+        .unwrap()
+        .collect();
+    let last = read.last().unwrap().as_ref().unwrap_err();
+    assert!(last.reason.contains("runs past the end"), "{last}");
+    assert!(
+        read.len() > frames.len() / 2,
+        "the frames of the cut container that are whole: {}",
+        read.len()
+    );
+    // An object claiming 4 GiB is refused without being read.
+    let mut huge = bytes[..144].to_vec();
+    huge.extend(b"LOBJ\x10\x00\x01\x00\xff\xff\xff\xff\x0a\x00\x00\x00");
+    let e = railfuse_can::blf::Reader::new(&huge[..])
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap_err();
+    assert!(e.reason.contains("an object of 4294967295 bytes"), "{e}");
+    // Imported: the same frames, decoded.
+    let mcap = d.path().join("blf.mcap");
+    let dbc = sample("vehicle.dbc");
+    let r = ok_json(&[
+        "import",
+        s(&blf),
+        "--dbc",
+        s(&dbc),
+        "-o",
+        s(&mcap),
+        "--json",
+    ]);
+    assert_eq!(r["format"], "blf");
+    let n: u64 = ["/can/CAN1/frames", "/can/CAN2/frames"]
+        .iter()
+        .map(|t| r["per_topic"][t].as_u64().unwrap_or(0))
+        .sum();
+    assert_eq!(n, frames.len() as u64, "{r}");
+}

@@ -19,7 +19,7 @@ pub struct Args {
     /// Input format. Without it, it is told from the input: a directory with metadata.yaml
     /// is a ROS 2 bag, bytes B5 62 UBX, a line that checks as an NMEA sentence NMEA, `HH:MM:SS.ffffff,X,hex`
     /// lines an ETH node log, a `(stamp) can0 123#…` line a candump log, a `date` or `base`
-    /// line an ASC log, and `--map` a CSV table.
+    /// line an ASC log, bytes `LOGG` a BLF log, and `--map` a CSV table.
     #[arg(long, value_enum)]
     pub format: Option<Format>,
     /// UTC date (YYYY-MM-DD) of NMEA fixes that come before any RMC or ZDA sentence. Without
@@ -40,7 +40,7 @@ pub struct Args {
     pub example_map: Option<PathBuf>,
     /// The vehicle's DBC: a CAN log's known messages are also written decoded, one channel
     /// per message (`/can/<bus>/<Message>`), beside every frame raw (`/can/<bus>/frames`).
-    /// Only with a CAN log (candump, asc).
+    /// Only with a CAN log (candump, asc, blf).
     #[arg(long, value_name = "VEHICLE.dbc")]
     pub dbc: Option<PathBuf>,
     /// Print the report as JSON.
@@ -65,6 +65,8 @@ pub enum Format {
     Candump,
     /// A CAN bus log in Vector's ASC (CANalyzer, CANoe).
     Asc,
+    /// A CAN bus log in Vector's BLF (binary; CANalyzer, CANoe, python-can).
+    Blf,
 }
 
 fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
@@ -128,6 +130,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
             input.display()
         ),
         _ if head.starts_with(&[0xb5, 0x62]) => Ok(Format::Ubx),
+        _ if head.starts_with(b"LOGG") => Ok(Format::Blf),
         _ if railfuse_can::candump::parse_line(first_line).is_ok() => Ok(Format::Candump),
         _ if asc_header(first_line) => Ok(Format::Asc),
         _ if first_line.starts_with('$') => Ok(Format::Nmea),
@@ -137,7 +140,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if text.lines().any(|l| nmea::parse(l).is_ok()) => Ok(Format::Nmea),
         _ => anyhow::bail!(
             "{}: cannot tell its format from its first line; name it with --format \
-             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc)",
+             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc, blf)",
             input.display()
         ),
     }
@@ -164,7 +167,7 @@ pub fn run(a: Args) -> Result<()> {
             format_name(format)
         );
     }
-    let can = matches!(format, Format::Candump | Format::Asc);
+    let can = matches!(format, Format::Candump | Format::Asc | Format::Blf);
     if a.dbc.is_some() && !can {
         anyhow::bail!(
             "--dbc decodes a CAN log (--format candump or asc), not --format {}",
@@ -190,13 +193,14 @@ pub fn run(a: Args) -> Result<()> {
             };
             csv_map::import(&input, map, &output)?
         }
-        Format::Candump | Format::Asc => {
+        Format::Candump | Format::Asc | Format::Blf => {
             let dbc = match &a.dbc {
                 Some(p) => Some(Arc::new(Database::open(p)?)),
                 None => None,
             };
             let log = match format {
                 Format::Asc => CanLog::Asc,
+                Format::Blf => CanLog::Blf,
                 _ => CanLog::Candump,
             };
             can_log::import(&input, &output, log, dbc)?

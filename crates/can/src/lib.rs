@@ -4,7 +4,7 @@
 //! - [`frame`]: one frame as railfuse keeps it (id, flags, data, bus time), classic and FD.
 //! - [`candump`]: the log format of can-utils' `candump -l`, and [`asc`]: Vector's ASC log,
 //!   both line by line ([`lines`]: bounded), each line that does not parse reported with its
-//!   number.
+//!   number; [`blf`]: Vector's binary log, object by object, every size bounded.
 //! - [`dbc`]: the vehicle's DBC file as a [`dbc::Database`] of messages and signals (the
 //!   grammar is the `can-dbc` crate's), checked for what would decode wrongly, each fault
 //!   with its line.
@@ -17,6 +17,7 @@
 //!   what sends on the bus.
 
 pub mod asc;
+pub mod blf;
 pub mod candump;
 pub mod cannelloni;
 pub mod dbc;

@@ -1,5 +1,5 @@
-//! CAN bus logs of other tools into railfuse channels: can-utils' `candump -l` log and
-//! Vector's ASC, through the readers of [`railfuse_can`] and the recorder's own
+//! CAN bus logs of other tools into railfuse channels: can-utils' `candump -l` log,
+//! Vector's ASC and BLF, through the readers of [`railfuse_can`] and the recorder's own
 //! [`CanDecoder`] (so an imported bus is the same channels a live one is). The log's stamp is
 //! each frame's bus time and, with no receive time in a file, its log time too.
 //!
@@ -27,6 +27,8 @@ pub enum CanLog {
     Candump,
     /// Vector's ASC (CANalyzer, CANoe).
     Asc,
+    /// Vector's BLF (binary).
+    Blf,
 }
 
 /// Imports the CAN log `input` to `output`, decoding with `dbc` where given.
@@ -43,6 +45,7 @@ pub fn import(
         time_base: match format {
             CanLog::Candump => "each frame's stamp in the log (seconds since the Unix epoch)",
             CanLog::Asc => "the trigger block's date (taken as UTC) plus each line's offset",
+            CanLog::Blf => "the file header's start (taken as UTC) plus each object's offset",
         }
         .into(),
         ..Default::default()
@@ -55,6 +58,14 @@ pub fn import(
     let mut frames = match format {
         CanLog::Candump => Frames::Candump(railfuse_can::candump::Reader::new(file)),
         CanLog::Asc => Frames::Asc(railfuse_can::asc::Reader::new(file)),
+        CanLog::Blf => {
+            Frames::Blf(
+                railfuse_can::blf::Reader::new(file).map_err(|e| Error::Run {
+                    path: input.to_owned(),
+                    cause: e.to_string(),
+                })?,
+            )
+        }
     };
     let mut writer = ItemWriter::new(LogWriter::create(output)?);
     let mut decoder = CanDecoder::new(dbc);
@@ -62,7 +73,17 @@ pub fn import(
     for frame in frames.by_ref() {
         match frame {
             Ok(f) => decoder.frame(&f, f.stamp_ns, &mut stats, &mut items),
-            Err(bad) => report.skip(bad.line as u64, "line that does not parse", bad.reason),
+            Err(Bad::Line(bad)) => {
+                report.skip(bad.line as u64, "line that does not parse", bad.reason)
+            }
+            // A BLF that breaks its format cannot be read on: what came before is kept.
+            Err(Bad::Object(bad)) => {
+                *report
+                    .skipped
+                    .entry("the rest of a broken BLF".into())
+                    .or_insert(0) += 1;
+                report.first_problems.push(bad.to_string());
+            }
         }
         for item in items.drain(..) {
             let item = writer.write(item)?;
@@ -79,15 +100,25 @@ pub fn import(
         *report.skipped.entry(reason).or_insert(0) += n;
     }
     report.warnings = stats.warnings;
-    report.lines = frames.lines_read() as u64;
+    match &frames {
+        Frames::Blf(r) => report.bytes = r.bytes_read(),
+        _ => report.lines = frames.lines_read() as u64,
+    }
     writer.writer.finish()?;
     Ok(report)
 }
 
-/// The frames of a log, in either format.
+/// The frames of a log, in any of the formats.
 enum Frames<R> {
     Candump(railfuse_can::candump::Reader<R>),
     Asc(railfuse_can::asc::Reader<R>),
+    Blf(railfuse_can::blf::Reader<R>),
+}
+
+/// What a log's reader could not read.
+enum Bad {
+    Line(BadLine),
+    Object(railfuse_can::blf::BadObject),
 }
 
 impl<R> Frames<R> {
@@ -95,16 +126,18 @@ impl<R> Frames<R> {
         match self {
             Frames::Candump(r) => r.lines_read(),
             Frames::Asc(r) => r.lines_read(),
+            Frames::Blf(_) => 0,
         }
     }
 }
 
 impl<R: std::io::BufRead> Iterator for Frames<R> {
-    type Item = std::result::Result<Frame, BadLine>;
+    type Item = std::result::Result<Frame, Bad>;
     fn next(&mut self) -> Option<Self::Item> {
         match self {
-            Frames::Candump(r) => r.next(),
-            Frames::Asc(r) => r.next(),
+            Frames::Candump(r) => r.next().map(|f| f.map_err(Bad::Line)),
+            Frames::Asc(r) => r.next().map(|f| f.map_err(Bad::Line)),
+            Frames::Blf(r) => r.next().map(|f| f.map_err(Bad::Object)),
         }
     }
 }
