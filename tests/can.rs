@@ -525,3 +525,75 @@ fn blf_frames_agree_with_python_can_and_a_broken_blf_keeps_what_came_before() {
         .sum();
     assert_eq!(n, frames.len() as u64, "{r}");
 }
+
+#[test]
+fn odometers_read_as_pulse_generators_off_the_bus_feed_source_002_s_safety_checks_as_their_channels_do(
+) {
+    let d = tempfile::tempdir().unwrap();
+    let (bus, plain) = (d.path().join("bus.mcap"), d.path().join("plain.mcap"));
+    simulate(
+        &[
+            "--scenario",
+            "seed002",
+            "--seed",
+            "2",
+            "--duration",
+            "300",
+            "--can-bus",
+        ],
+        &bus,
+    );
+    simulate(
+        &["--scenario", "seed002", "--seed", "2", "--duration", "300"],
+        &plain,
+    );
+    // seed002.toml's pipelines under can-pulses.toml's [can] and [sensor] tables.
+    let pulses = std::fs::read_to_string(sample("can-pulses.toml")).unwrap();
+    let tables = &pulses[pulses.find("\n[can]").unwrap()..pulses.find("\n[[pipeline]]").unwrap()];
+    let seed002 = std::fs::read_to_string(sample("seed002.toml")).unwrap();
+    let config = d.path().join("seed002-can.toml");
+    std::fs::write(&config, format!("{tables}\n{seed002}")).unwrap();
+    std::fs::copy(sample("vehicle.dbc"), d.path().join("vehicle.dbc")).unwrap();
+    let run = |raw: &Path, config: &Path, out: &str| -> serde_json::Value {
+        let o = ok(&[
+            "refuse",
+            s(raw),
+            "-c",
+            s(config),
+            "-o",
+            s(&d.path().join(out)),
+            "--json",
+        ]);
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let on_bus = run(&bus, &config, "bus.fused.mcap");
+    let own = run(&plain, &sample("seed002.toml"), "plain.fused.mcap");
+    let made = &on_bus["refuse"]["can"]["made"];
+    assert!(made["/odometer/1"].as_u64().unwrap() > 5000, "{made}");
+    for name in ["ekf_safety", "ekf_safety_cal"] {
+        let (a, b) = (pipeline_eval(&on_bus, name), pipeline_eval(&own, name));
+        let availability = |p: &serde_json::Value| p["safety"]["availability"].as_f64().unwrap();
+        assert!(
+            (availability(&a) - availability(&b)).abs() < 0.01,
+            "{name}: {} usable from the bus, {} from the channels",
+            availability(&a),
+            availability(&b)
+        );
+        // The pulse-count checks see the same slips and slides.
+        let failed = |p: &serde_json::Value, check: &str| {
+            p["safety"]["checks"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|c| c["check"] == check)
+                .map_or(0, |c| c["failed_epochs"].as_u64().unwrap())
+        };
+        for check in ["s1_axle_1", "s1_axle_2", "s5_odometry"] {
+            let (x, y) = (failed(&a, check), failed(&b, check));
+            assert!(
+                x.abs_diff(y) <= y / 10 + 5,
+                "{name} {check}: {x} epochs from the bus, {y} from the channels"
+            );
+        }
+    }
+}

@@ -1,106 +1,16 @@
-//! The vehicle's CAN bus read as railfuse's own sensors.
-//!
-//! A frame travels as a [`CanFrame`] (`/can/<bus>/frames`), whole, whatever the DBC knows;
-//! the DBC's messages decode to [`CanSignals`] (`/can/<bus>/<Message>`); and a
-//! configuration maps a decoded signal onto a railfuse sensor, so a recording of the bus
-//! alone re-fuses with no bridge:
-//!
-//! ```toml
-//! [can]
-//! dbc = "vehicle.dbc"
-//!
-//! [sensor."/odometer/1"]
-//! from = "can:WheelSpeed.AxleSpeed1"
-//!
-//! [sensor."/radar/speed"]
-//! from = "can:RadarSpeed.GroundSpeed"
-//! valid = "can:RadarSpeed.Valid"        # optional: 0 is "no measurement"
-//! quality = "can:RadarSpeed.Quality"    # optional: a fraction, or % by its unit
-//! ```
-//!
-//! [`SensorBridge`] does the mapping: a speed signal in m/s, km/h or mph becomes an
-//! [`Odometer`]'s or a [`RadarSpeed`]'s speed (its magnitude: direction is a signal of its
-//! own on a train's bus), stamped with the frame's bus time.
+//! The `[can]` and `[sensor."<topic>"]` tables of a configuration, checked against the DBC,
+//! and the bridge that makes the sensors' messages from frames.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use railfuse_can::dbc::{Database, DbcError};
-use railfuse_can::decode::{Decoded, Value};
-use railfuse_can::frame::Frame;
+use railfuse_can::dbc::{Database, DbcError, Encoding, Signal};
+use railfuse_can::decode::Decoded;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::messages::{
-    AnyMessage, CanData, CanFrame, CanSignal, CanSignals, MessageKind, Odometer, RadarSpeed,
-};
-
-/// `/can/<bus>/frames`: every frame of one bus.
-pub fn frames_topic(bus: &str) -> String {
-    format!("/can/{bus}/frames")
-}
-
-/// `/can/<bus>/<Message>`: one DBC message's decoded signals.
-pub fn signals_topic(bus: &str, message: &str) -> String {
-    format!("/can/{bus}/{message}")
-}
-
-impl CanFrame {
-    /// The catalogue's form of `frame`, received at `receive_ns`.
-    pub fn from_frame(frame: &Frame, receive_ns: u64) -> Self {
-        CanFrame {
-            stamp_ns: frame.stamp_ns,
-            receive_ns,
-            bus: frame.bus.clone(),
-            id: frame.id,
-            extended: frame.extended,
-            remote: frame.rtr,
-            error: frame.error,
-            fd: frame.fd,
-            brs: frame.brs,
-            esi: frame.esi,
-            data: CanData(frame.data.clone()),
-        }
-    }
-
-    /// The frame it carries.
-    pub fn to_frame(&self) -> Frame {
-        Frame {
-            stamp_ns: self.stamp_ns,
-            bus: self.bus.clone(),
-            id: self.id,
-            extended: self.extended,
-            rtr: self.remote,
-            error: self.error,
-            fd: self.fd,
-            brs: self.brs,
-            esi: self.esi,
-            data: self.data.0.clone(),
-        }
-    }
-}
-
-impl CanSignals {
-    /// The message `name`'s signals decoded from `frame`.
-    pub fn new(frame: &Frame, name: &str, values: Vec<Value>) -> Self {
-        CanSignals {
-            stamp_ns: frame.stamp_ns,
-            bus: frame.bus.clone(),
-            id: frame.id,
-            message: name.to_owned(),
-            signals: values
-                .into_iter()
-                .map(|v| CanSignal {
-                    name: v.name,
-                    value: v.value,
-                    unit: v.unit,
-                    label: v.label,
-                    out_of_range: v.out_of_range,
-                })
-                .collect(),
-        }
-    }
-}
+use super::pulse_counter::{NoReading, PulseCounter};
+use crate::messages::{AnyMessage, CanFrame, MessageKind, Odometer, RadarSpeed};
 
 /// `[can]` of a configuration: the vehicle's DBC, and which bus to read.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -118,7 +28,21 @@ pub struct CanSettings {
 #[serde(deny_unknown_fields)]
 pub struct SensorSource {
     /// The speed signal, `"can:Message.Signal"`: in m/s, km/h or mph by its DBC unit.
-    pub from: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub from: Option<String>,
+    /// Or, for an odometer, its axle pulse generator's count (an unsigned integer signal,
+    /// wrapping at its bits): distance from the wheel below, speed over `speed_window_s`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pulses: Option<String>,
+    /// With `pulses`: pulses a wheel revolution.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pulses_per_revolution: Option<u32>,
+    /// With `pulses`: the wheel's diameter, m.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wheel_diameter_m: Option<f64>,
+    /// With `pulses`: the speed is the distance over the last this long, s (0.2 unless told).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed_window_s: Option<f64>,
     /// A signal of the same message that is 0 when the sensor has no measurement.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub valid: Option<String>,
@@ -151,15 +75,33 @@ struct SignalRef {
     scale: f64,
 }
 
-#[derive(Debug, Clone)]
 struct Mapped {
     topic: String,
     kind: MessageKind,
     /// (id, extended) of the message.
     message: (u32, bool),
-    speed: SignalRef,
+    reading: Reading,
     valid: Option<SignalRef>,
     quality: Option<SignalRef>,
+}
+
+/// What the sensor's main signal is.
+enum Reading {
+    Speed(SignalRef),
+    Pulses {
+        signal: SignalRef,
+        counter: PulseCounter,
+        per_revolution: u32,
+        diameter_m: f64,
+    },
+}
+
+impl Reading {
+    fn signal(&self) -> &SignalRef {
+        match self {
+            Reading::Speed(s) | Reading::Pulses { signal: s, .. } => s,
+        }
+    }
 }
 
 /// What the bridge has seen, for the report.
@@ -175,6 +117,10 @@ pub struct BridgeCounts {
     pub out_of_range: BTreeMap<String, u64>,
     /// Mapped values that are not finite numbers (left out), by message.signal.
     pub not_finite: BTreeMap<String, u64>,
+    /// Pulse counts that jumped as no wheel turns (a counter restarted; counting starts
+    /// anew), by message.signal.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub counter_restarts: BTreeMap<String, u64>,
 }
 
 /// The vehicle's DBC and the sensors mapped from its signals.
@@ -260,11 +206,11 @@ impl SensorBridge {
         let mut out = Vec::new();
         for m in self
             .mapped
-            .iter()
+            .iter_mut()
             .filter(|m| m.message == (f.id, f.extended))
         {
             let find = |r: &SignalRef| values.iter().find(|v| v.name == r.name);
-            let Some(v) = find(&m.speed) else {
+            let Some(v) = find(m.reading.signal()) else {
                 continue; // a multiplexed signal this frame does not carry
             };
             let name = format!("{}.{}", message.name, v.name);
@@ -277,28 +223,56 @@ impl SensorBridge {
                 *self.counts.out_of_range.entry(name).or_insert(0) += 1;
                 continue;
             }
-            let speed = (v.value * m.speed.scale).abs();
             let read = |r: &Option<SignalRef>| {
                 let r = r.as_ref()?;
                 Some(find(r)?.value * r.scale).filter(|x| x.is_finite())
             };
-            let message = match m.kind {
-                MessageKind::RadarSpeed => AnyMessage::RadarSpeed(RadarSpeed {
-                    stamp_ns: f.stamp_ns,
-                    speed_mps: speed,
-                    quality: read(&m.quality).map_or(1.0, |q| q.clamp(0.0, 1.0)),
-                    valid: read(&m.valid).is_none_or(|x| x != 0.0),
-                    speed_variance_m2ps2: None,
-                }),
-                _ => AnyMessage::Odometer(Odometer {
+            let message = match (&mut m.reading, m.kind) {
+                (Reading::Speed(s), MessageKind::RadarSpeed) => {
+                    AnyMessage::RadarSpeed(RadarSpeed {
+                        stamp_ns: f.stamp_ns,
+                        speed_mps: (v.value * s.scale).abs(),
+                        quality: read(&m.quality).map_or(1.0, |q| q.clamp(0.0, 1.0)),
+                        valid: read(&m.valid).is_none_or(|x| x != 0.0),
+                        speed_variance_m2ps2: None,
+                    })
+                }
+                (Reading::Speed(s), _) => AnyMessage::Odometer(Odometer {
                     stamp_ns: f.stamp_ns,
                     sensor_id: m.topic.clone(),
                     pulse_count: None,
                     pulses_per_revolution: None,
                     wheel_diameter_m: None,
                     distance_increment_m: None,
-                    speed_mps: speed,
+                    speed_mps: (v.value * s.scale).abs(),
                 }),
+                (
+                    Reading::Pulses {
+                        counter,
+                        per_revolution,
+                        diameter_m,
+                        ..
+                    },
+                    _,
+                ) => {
+                    let r = match counter.count(f.stamp_ns, v.value as u64) {
+                        Ok(r) => r,
+                        Err(NoReading::Restarted) => {
+                            *self.counts.counter_restarts.entry(name).or_insert(0) += 1;
+                            continue;
+                        }
+                        Err(_) => continue,
+                    };
+                    AnyMessage::Odometer(Odometer {
+                        stamp_ns: f.stamp_ns,
+                        sensor_id: m.topic.clone(),
+                        pulse_count: Some(r.total),
+                        pulses_per_revolution: Some(*per_revolution),
+                        wheel_diameter_m: Some(*diameter_m),
+                        distance_increment_m: Some(r.increment_m),
+                        speed_mps: r.speed_mps,
+                    })
+                }
             };
             *self.counts.made.entry(m.topic.clone()).or_insert(0) += 1;
             out.push((m.topic.as_str(), message));
@@ -335,35 +309,65 @@ fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mappe
             cause: "an odometer has no `valid` or `quality`: those are a radar's".into(),
         });
     }
-    let (message, name, unit) = find_signal(db, topic, "from", &source.from)?;
-    let speed = SignalRef {
-        name,
-        scale: speed_scale(&unit).ok_or_else(|| MappingError::Signal {
-            topic: topic.into(),
-            key: "from",
-            given: source.from.clone(),
-            cause: format!("is in '{unit}': a speed is in m/s, km/h or mph"),
-        })?,
+    let (message, reading, main) = match (&source.from, &source.pulses) {
+        (Some(from), None) => {
+            let (message, signal) = find_signal(db, topic, "from", from)?;
+            let scale = speed_scale(&signal.unit).ok_or_else(|| MappingError::Signal {
+                topic: topic.into(),
+                key: "from",
+                given: from.clone(),
+                cause: format!("is in '{}': a speed is in m/s, km/h or mph", signal.unit),
+            })?;
+            let speed = SignalRef {
+                name: signal.name.clone(),
+                scale,
+            };
+            (message, Reading::Speed(speed), from)
+        }
+        (None, Some(pulses)) if kind == MessageKind::Odometer => {
+            let (message, signal) = find_signal(db, topic, "pulses", pulses)?;
+            (
+                message,
+                pulse_reading(topic, pulses, signal, source)?,
+                pulses,
+            )
+        }
+        (None, Some(_)) => {
+            return Err(MappingError::Sensor {
+                topic: topic.into(),
+                cause: "`pulses` makes an odometer; a radar gives its speed in `from`".into(),
+            })
+        }
+        _ => {
+            return Err(MappingError::Sensor {
+                topic: topic.into(),
+                cause: "give one of `from` (a speed signal) or `pulses` (an axle's pulse count)"
+                    .into(),
+            })
+        }
     };
     let same_message = |key: &'static str, given: &Option<String>, percent: bool| {
         let Some(given) = given else {
             return Ok(None);
         };
-        let (m, name, unit) = find_signal(db, topic, key, given)?;
+        let (m, signal) = find_signal(db, topic, key, given)?;
         if m != message {
             return Err(MappingError::Signal {
                 topic: topic.into(),
                 key,
                 given: given.clone(),
-                cause: format!("is not in the message of `from` ({})", source.from),
+                cause: format!("is not in the message of `from` ({main})"),
             });
         }
-        let scale = if percent && unit.trim() == "%" {
+        let scale = if percent && signal.unit.trim() == "%" {
             0.01
         } else {
             1.0
         };
-        Ok(Some(SignalRef { name, scale }))
+        Ok(Some(SignalRef {
+            name: signal.name.clone(),
+            scale,
+        }))
     };
     let valid = same_message("valid", &source.valid, false)?;
     let quality = same_message("quality", &source.quality, true)?;
@@ -371,19 +375,67 @@ fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mappe
         topic: topic.to_owned(),
         kind,
         message,
-        speed,
+        reading,
         valid,
         quality,
     })
 }
 
-/// The message key, the signal's name and its unit.
-fn find_signal(
-    db: &Database,
+/// An odometer read from its axle's pulse count: the signal must be a plain count, and the
+/// wheel known.
+fn pulse_reading(
+    topic: &str,
+    given: &str,
+    signal: &Signal,
+    source: &SensorSource,
+) -> Result<Reading, MappingError> {
+    let bad = |cause: String| MappingError::Signal {
+        topic: topic.into(),
+        key: "pulses",
+        given: given.into(),
+        cause,
+    };
+    if signal.encoding != Encoding::Unsigned || signal.factor != 1.0 || signal.offset != 0.0 {
+        return Err(bad(
+            "is not a count: a pulse count is an unsigned signal with factor 1 and offset 0".into(),
+        ));
+    }
+    let sensor = |cause: &str| MappingError::Sensor {
+        topic: topic.into(),
+        cause: cause.into(),
+    };
+    let per_revolution = source
+        .pulses_per_revolution
+        .filter(|&n| n > 0)
+        .ok_or_else(|| sensor("`pulses` needs pulses_per_revolution, a positive whole number"))?;
+    let diameter_m = source
+        .wheel_diameter_m
+        .filter(|d| d.is_finite() && (0.1..=3.0).contains(d))
+        .ok_or_else(|| sensor("`pulses` needs wheel_diameter_m, 0.1 to 3 m"))?;
+    let window_s = source.speed_window_s.unwrap_or(0.2);
+    if !(window_s.is_finite() && window_s > 0.0 && window_s <= 10.0) {
+        return Err(sensor(
+            "speed_window_s is a window of more than 0 and at most 10 s",
+        ));
+    }
+    Ok(Reading::Pulses {
+        signal: SignalRef {
+            name: signal.name.clone(),
+            scale: 1.0,
+        },
+        counter: PulseCounter::new(signal.size, per_revolution, diameter_m, window_s),
+        per_revolution,
+        diameter_m,
+    })
+}
+
+/// The message key and the signal.
+fn find_signal<'a>(
+    db: &'a Database,
     topic: &str,
     key: &'static str,
     given: &str,
-) -> Result<((u32, bool), String, String), MappingError> {
+) -> Result<((u32, bool), &'a Signal), MappingError> {
     let err = |cause: String| MappingError::Signal {
         topic: topic.into(),
         key,
@@ -404,12 +456,13 @@ fn find_signal(
         .iter()
         .find(|s| s.name == signal)
         .ok_or_else(|| err(format!("message {message} has no signal {signal}")))?;
-    Ok(((m.id, m.extended), s.name.clone(), s.unit.clone()))
+    Ok(((m.id, m.extended), s))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::messages::CanData;
 
     const DBC: &str = r#"VERSION ""
 
@@ -435,10 +488,53 @@ BO_ 288 RadarSpeed: 4 Radar
 
     fn source(from: &str, valid: Option<&str>, quality: Option<&str>) -> SensorSource {
         SensorSource {
-            from: from.into(),
+            from: Some(from.into()),
+            pulses: None,
+            pulses_per_revolution: None,
+            wheel_diameter_m: None,
+            speed_window_s: None,
             valid: valid.map(Into::into),
             quality: quality.map(Into::into),
         }
+    }
+
+    fn pulses(signal: &str, per_revolution: Option<u32>) -> SensorSource {
+        SensorSource {
+            from: None,
+            pulses: Some(signal.into()),
+            pulses_per_revolution: per_revolution,
+            wheel_diameter_m: Some(0.85),
+            ..source("", None, None)
+        }
+    }
+
+    #[test]
+    fn an_axle_s_pulse_count_becomes_an_odometer_with_its_distance_and_speed() {
+        let sensors = BTreeMap::from([(
+            "/odometer/1".to_owned(),
+            pulses("can:WheelSpeed.Raw", Some(200)),
+        )]);
+        let mut b = SensorBridge::with_database(db(), None, &sensors).unwrap();
+        let at = |t: u64, count: u16| CanFrame {
+            stamp_ns: t,
+            ..frame(256, &[0, 0, count.to_le_bytes()[0], count.to_le_bytes()[1]])
+        };
+        assert!(
+            b.frame(&at(0, 10)).is_empty(),
+            "the first count has nothing to measure against"
+        );
+        let made = b.frame(&at(100_000_000, 60));
+        let AnyMessage::Odometer(o) = &made[0].1 else {
+            panic!("{made:?}")
+        };
+        let metres = 50.0 * std::f64::consts::PI * 0.85 / 200.0;
+        assert_eq!(o.pulse_count, Some(50));
+        assert!((o.distance_increment_m.unwrap() - metres).abs() < 1e-12);
+        assert!((o.speed_mps - metres / 0.1).abs() < 1e-9);
+        assert_eq!(
+            (o.pulses_per_revolution, o.wheel_diameter_m),
+            (Some(200), Some(0.85))
+        );
     }
 
     fn frame(id: u32, data: &[u8]) -> CanFrame {
