@@ -86,6 +86,19 @@ fn read_until(master: &mut std::fs::File, want: &[u8]) -> Vec<u8> {
     got
 }
 
+/// Waits until a socket is bound to UDP `port` on this machine (20 s at most).
+fn wait_bound_udp(port: u16) {
+    let hex = format!(":{port:04X} ");
+    let start = Instant::now();
+    while !std::fs::read_to_string("/proc/net/udp").is_ok_and(|t| t.contains(&hex)) {
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "nothing bound UDP port {port}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 fn topic_counts(path: &Path) -> std::collections::BTreeMap<String, u64> {
     let info = ok_json(&["info", s(path), "--json"]);
     info["channels"]
@@ -229,7 +242,7 @@ fn cannelloni_datagrams_are_recorded_and_a_lost_one_and_a_broken_one_counted() {
         &format!("cannelloni:{port}:gateway"),
         "--json",
     ]);
-    std::thread::sleep(Duration::from_millis(800));
+    wait_bound_udp(port);
     let tx = UdpSocket::bind("127.0.0.1:0").unwrap();
     let frames: Vec<Frame> = (0..4).map(|i| frame(0x200 + i, &[i as u8; 8], 0)).collect();
     for seq in 0..100u16 {
