@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use railfuse_can::dbc::{Database, DbcError, Encoding, Signal};
-use railfuse_can::decode::Decoded;
+use railfuse_can::decode::{Decoded, Value};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -209,107 +209,119 @@ impl SensorBridge {
             .iter_mut()
             .filter(|m| m.message == (f.id, f.extended))
         {
-            let find = |r: &SignalRef| values.iter().find(|v| v.name == r.name);
-            let Some(v) = find(m.reading.signal()) else {
-                continue; // a multiplexed signal this frame does not carry
-            };
-            let name = format!("{}.{}", message.name, v.name);
-            if !v.value.is_finite() {
-                *self.counts.not_finite.entry(name).or_insert(0) += 1;
-                continue;
+            if let Some(made) = m.make(f.stamp_ns, &message.name, &values, &mut self.counts) {
+                *self.counts.made.entry(m.topic.clone()).or_insert(0) += 1;
+                out.push((m.topic.as_str(), made));
             }
-            if v.out_of_range {
-                // All ones is CAN's "not available"; past the range is no reading either.
-                *self.counts.out_of_range.entry(name).or_insert(0) += 1;
-                continue;
-            }
-            let read = |r: &Option<SignalRef>| {
-                let r = r.as_ref()?;
-                Some(find(r)?.value * r.scale).filter(|x| x.is_finite())
-            };
-            let message = match (&mut m.reading, m.kind) {
-                (Reading::Speed(s), MessageKind::RadarSpeed) => {
-                    AnyMessage::RadarSpeed(RadarSpeed {
-                        stamp_ns: f.stamp_ns,
-                        speed_mps: (v.value * s.scale).abs(),
-                        quality: read(&m.quality).map_or(1.0, |q| q.clamp(0.0, 1.0)),
-                        valid: read(&m.valid).is_none_or(|x| x != 0.0),
-                        speed_variance_m2ps2: None,
-                    })
-                }
-                (Reading::Speed(s), _) => AnyMessage::Odometer(Odometer {
-                    stamp_ns: f.stamp_ns,
-                    sensor_id: m.topic.clone(),
-                    pulse_count: None,
-                    pulses_per_revolution: None,
-                    wheel_diameter_m: None,
-                    distance_increment_m: None,
-                    speed_mps: (v.value * s.scale).abs(),
-                }),
-                (
-                    Reading::Pulses {
-                        counter,
-                        per_revolution,
-                        diameter_m,
-                        ..
-                    },
-                    _,
-                ) => {
-                    let r = match counter.count(f.stamp_ns, v.value as u64) {
-                        Ok(r) => r,
-                        Err(NoReading::Restarted) => {
-                            *self.counts.counter_restarts.entry(name).or_insert(0) += 1;
-                            continue;
-                        }
-                        Err(_) => continue,
-                    };
-                    AnyMessage::Odometer(Odometer {
-                        stamp_ns: f.stamp_ns,
-                        sensor_id: m.topic.clone(),
-                        pulse_count: Some(r.total),
-                        pulses_per_revolution: Some(*per_revolution),
-                        wheel_diameter_m: Some(*diameter_m),
-                        distance_increment_m: Some(r.increment_m),
-                        speed_mps: r.speed_mps,
-                    })
-                }
-            };
-            *self.counts.made.entry(m.topic.clone()).or_insert(0) += 1;
-            out.push((m.topic.as_str(), message));
         }
         out
     }
 }
 
-/// `topic`'s sensor from `source`, checked against the DBC.
-fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mapped, MappingError> {
-    let kind = match crate::topics::standard_kind(topic) {
-        Some(k @ (MessageKind::Odometer | MessageKind::RadarSpeed)) => k,
-        Some(k) => {
-            return Err(MappingError::Sensor {
-                topic: topic.into(),
-                cause: format!(
-                    "is a {} channel: CAN signals make odometers and radars (a speed)",
-                    k.type_name()
-                ),
-            })
+impl Mapped {
+    /// The sensor's message from one frame's decoded `values` (of DBC message `name`), or
+    /// none (its signal absent, not a number, out of range, or a count with nothing to measure
+    /// against), what was left out counted.
+    fn make(
+        &mut self,
+        stamp_ns: u64,
+        name: &str,
+        values: &[Value],
+        counts: &mut BridgeCounts,
+    ) -> Option<AnyMessage> {
+        let find = |r: &SignalRef| values.iter().find(|v| v.name == r.name);
+        // Absent: a multiplexed signal this frame does not carry.
+        let v = find(self.reading.signal())?;
+        let key = format!("{name}.{}", v.name);
+        if !v.value.is_finite() {
+            *counts.not_finite.entry(key).or_insert(0) += 1;
+            return None;
         }
-        None => {
-            return Err(MappingError::Sensor {
-                topic: topic.into(),
-                cause: "is not an odometer or radar topic (/odometer/1, /odometer/2, \
-                        /radar/speed)"
-                    .into(),
-            })
+        if v.out_of_range {
+            // All ones is CAN's "not available"; past the range is no reading either.
+            *counts.out_of_range.entry(key).or_insert(0) += 1;
+            return None;
         }
-    };
-    if kind == MessageKind::Odometer && (source.valid.is_some() || source.quality.is_some()) {
-        return Err(MappingError::Sensor {
-            topic: topic.into(),
-            cause: "an odometer has no `valid` or `quality`: those are a radar's".into(),
-        });
+        let read = |r: &Option<SignalRef>| {
+            let r = r.as_ref()?;
+            Some(find(r)?.value * r.scale).filter(|x| x.is_finite())
+        };
+        let mut odometer = Odometer {
+            stamp_ns,
+            sensor_id: self.topic.clone(),
+            pulse_count: None,
+            pulses_per_revolution: None,
+            wheel_diameter_m: None,
+            distance_increment_m: None,
+            speed_mps: 0.0,
+        };
+        match (&mut self.reading, self.kind) {
+            (Reading::Speed(s), MessageKind::RadarSpeed) => {
+                Some(AnyMessage::RadarSpeed(RadarSpeed {
+                    stamp_ns,
+                    speed_mps: (v.value * s.scale).abs(),
+                    quality: read(&self.quality).map_or(1.0, |q| q.clamp(0.0, 1.0)),
+                    valid: read(&self.valid).is_none_or(|x| x != 0.0),
+                    speed_variance_m2ps2: None,
+                }))
+            }
+            (Reading::Speed(s), _) => {
+                odometer.speed_mps = (v.value * s.scale).abs();
+                Some(AnyMessage::Odometer(odometer))
+            }
+            (
+                Reading::Pulses {
+                    counter,
+                    per_revolution,
+                    diameter_m,
+                    ..
+                },
+                _,
+            ) => {
+                let r = match counter.count(stamp_ns, v.value as u64) {
+                    Ok(r) => r,
+                    Err(NoReading::Restarted) => {
+                        *counts.counter_restarts.entry(key).or_insert(0) += 1;
+                        return None;
+                    }
+                    Err(_) => return None,
+                };
+                odometer.pulse_count = Some(r.total);
+                odometer.pulses_per_revolution = Some(*per_revolution);
+                odometer.wheel_diameter_m = Some(*diameter_m);
+                odometer.distance_increment_m = Some(r.increment_m);
+                odometer.speed_mps = r.speed_mps;
+                Some(AnyMessage::Odometer(odometer))
+            }
+        }
     }
-    let (message, reading, main) = match (&source.from, &source.pulses) {
+}
+
+/// The kind of sensor `topic` is: an odometer or a radar, the two a CAN signal makes.
+fn sensor_kind(topic: &str) -> Result<MessageKind, MappingError> {
+    let cause = match crate::topics::standard_kind(topic) {
+        Some(k @ (MessageKind::Odometer | MessageKind::RadarSpeed)) => return Ok(k),
+        Some(k) => format!(
+            "is a {} channel: CAN signals make odometers and radars (a speed)",
+            k.type_name()
+        ),
+        None => "is not an odometer or radar topic (/odometer/1, /odometer/2, /radar/speed)".into(),
+    };
+    Err(MappingError::Sensor {
+        topic: topic.into(),
+        cause,
+    })
+}
+
+/// The sensor's main signal (a speed, or an axle's pulse count), its message and how it was
+/// given.
+fn main_reading<'a>(
+    db: &Database,
+    topic: &str,
+    kind: MessageKind,
+    source: &'a SensorSource,
+) -> Result<((u32, bool), Reading, &'a str), MappingError> {
+    Ok(match (&source.from, &source.pulses) {
         (Some(from), None) => {
             let (message, signal) = find_signal(db, topic, "from", from)?;
             let scale = speed_scale(&signal.unit).ok_or_else(|| MappingError::Signal {
@@ -345,7 +357,19 @@ fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mappe
                     .into(),
             })
         }
-    };
+    })
+}
+
+/// `topic`'s sensor from `source`, checked against the DBC.
+fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mapped, MappingError> {
+    let kind = sensor_kind(topic)?;
+    if kind == MessageKind::Odometer && (source.valid.is_some() || source.quality.is_some()) {
+        return Err(MappingError::Sensor {
+            topic: topic.into(),
+            cause: "an odometer has no `valid` or `quality`: those are a radar's".into(),
+        });
+    }
+    let (message, reading, main) = main_reading(db, topic, kind, source)?;
     let same_message = |key: &'static str, given: &Option<String>, percent: bool| {
         let Some(given) = given else {
             return Ok(None);
