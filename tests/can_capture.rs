@@ -7,7 +7,6 @@ mod common;
 
 use std::io::{Read, Write};
 use std::net::{TcpListener, UdpSocket};
-use std::os::fd::{FromRawFd, OwnedFd};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -39,33 +38,6 @@ fn frame(id: u32, data: &[u8], stamp_ns: u64) -> Frame {
         esi: false,
         data: data.to_vec(),
     }
-}
-
-/// A pseudo-terminal pair: the master (the adapter's side) and the slave's path.
-fn pty() -> (std::fs::File, String) {
-    let (mut master, mut slave) = (0, 0);
-    let mut name = [0 as libc::c_char; 128];
-    let r = unsafe {
-        libc::openpty(
-            &mut master,
-            &mut slave,
-            name.as_mut_ptr(),
-            std::ptr::null(),
-            std::ptr::null(),
-        )
-    };
-    assert_eq!(r, 0, "openpty");
-    // Not inherited by the recorder: closing it here must hang the line up, as unplugging does.
-    unsafe { libc::fcntl(master, libc::F_SETFD, libc::FD_CLOEXEC) };
-    // The recorder opens the slave by its name; this process keeps no copy of it.
-    drop(unsafe { OwnedFd::from_raw_fd(slave) });
-    let path = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-        .to_string_lossy()
-        .into_owned();
-    (
-        std::fs::File::from(unsafe { OwnedFd::from_raw_fd(master) }),
-        path,
-    )
 }
 
 /// Reads what the recorder sent the adapter until `want` has come (10 s at most).
@@ -118,7 +90,9 @@ fn topic_counts(path: &Path) -> std::collections::BTreeMap<String, u64> {
 fn slcan_on_a_pty_and_socketcand_record_every_frame_and_an_unplugged_adapter_ends_alone() {
     let d = tempfile::tempdir().unwrap();
     let out = d.path().join("bus.mcap");
-    let (mut master, tty) = pty();
+    // The recorder opens the slave by its name; this process keeps no copy of it.
+    let (mut master, slave, tty) = pty();
+    drop(slave);
     // A socketcand server: the handshake, 2000 radar frames, then 1000 more once told.
     let server = TcpListener::bind("127.0.0.1:0").unwrap();
     let port = server.local_addr().unwrap().port();

@@ -174,33 +174,6 @@ fn a_recorder_killed_with_sigkill_loses_at_most_its_last_second_and_recover_gets
     assert_eq!(py["topics"]["/radar/speed"], 3000, "{py}");
 }
 
-/// A pseudo-terminal pair: (master side, slave fd, slave device path).
-fn pty() -> (std::fs::File, i32, String) {
-    let (mut master, mut slave) = (0, 0);
-    let mut name = [0 as libc::c_char; 128];
-    // SAFETY: openpty fills the two descriptors and the name buffer it is given.
-    let rc = unsafe {
-        libc::openpty(
-            &mut master,
-            &mut slave,
-            name.as_mut_ptr(),
-            std::ptr::null(),
-            std::ptr::null(),
-        )
-    };
-    assert_eq!(rc, 0, "openpty failed");
-    let tty = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
-        .to_str()
-        .unwrap()
-        .to_owned();
-    // SAFETY: `master` is the open master side of the pair; the File owns it from here.
-    (
-        unsafe { <std::fs::File as std::os::fd::FromRawFd>::from_raw_fd(master) },
-        slave,
-        tty,
-    )
-}
-
 #[test]
 fn nmea_and_ubx_over_pseudo_terminals_at_set_bauds_arrive_with_their_values() {
     let (mut m, slave, tty) = pty();
@@ -239,8 +212,7 @@ fn nmea_and_ubx_over_pseudo_terminals_at_set_bauds_arrive_with_their_values() {
     }
     std::thread::sleep(Duration::from_millis(500));
     let r = stop(child);
-    unsafe { libc::close(slave) };
-    unsafe { libc::close(slave_u) };
+    drop((slave, slave_u));
     let src = &r["sources"][0];
     assert_eq!(
         (src["written"].as_u64(), src["checksum_failures"].as_u64()),

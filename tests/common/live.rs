@@ -94,3 +94,38 @@ pub fn killed_recording(out: &std::path::Path, lines: usize) -> std::path::PathB
     assert!(partial.exists() && !out.exists());
     partial
 }
+
+/// A pseudo-terminal pair: the master (a device's side), the slave descriptor and the
+/// slave's path. The master is not inherited by a child the test starts, so closing it here
+/// hangs the line up as unplugging a device does.
+pub fn pty() -> (std::fs::File, std::os::fd::OwnedFd, String) {
+    use std::os::fd::FromRawFd;
+    let (mut master, mut slave) = (0, 0);
+    let mut name = [0 as libc::c_char; 128];
+    // SAFETY: openpty fills the two descriptors and the name buffer it is given.
+    let rc = unsafe {
+        libc::openpty(
+            &mut master,
+            &mut slave,
+            name.as_mut_ptr(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
+    assert_eq!(rc, 0, "openpty failed");
+    // SAFETY: `master` is open; the flag only keeps it from children.
+    unsafe { libc::fcntl(master, libc::F_SETFD, libc::FD_CLOEXEC) };
+    // SAFETY: openpty wrote a NUL-terminated name.
+    let tty = unsafe { std::ffi::CStr::from_ptr(name.as_ptr()) }
+        .to_str()
+        .unwrap()
+        .to_owned();
+    // SAFETY: both descriptors were just made by openpty and are owned from here.
+    unsafe {
+        (
+            std::fs::File::from_raw_fd(master),
+            std::os::fd::OwnedFd::from_raw_fd(slave),
+            tty,
+        )
+    }
+}

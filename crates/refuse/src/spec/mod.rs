@@ -183,39 +183,9 @@ impl Pipelines {
                 .map_err(|Invalid { span, message }| invalid(span, message))?;
             pipeline.push(spec);
         }
-        // The track file is relative to the configuration.
-        let track = match &file.track {
-            Some(t) => {
-                let at = path.parent().unwrap_or(Path::new("")).join(t);
-                let map = railfuse_catalog::track_geojson::read_track_file(&at).map_err(|e| {
-                    Error::ConfigSyntax {
-                        path: path.to_owned(),
-                        message: format!("track: {e}"),
-                    }
-                })?;
-                Some(map)
-            }
-            None => None,
-        };
+        let track = read_track(path, file.track.as_deref())?;
         let can = CanSensors::read(path, file.can, file.sensor)?;
-        let run = file.run.unwrap_or_default();
-        let bad_run = |message: String| Error::ConfigSyntax {
-            path: path.to_owned(),
-            message: format!("[run] {message}"),
-        };
-        let clock_offsets = run
-            .clock_offsets
-            .iter()
-            .map(|c| {
-                c.parse()
-                    .map_err(|e| bad_run(format!("clock_offsets: {e}")))
-            })
-            .collect::<Result<_>>()?;
-        let align = run
-            .align
-            .as_deref()
-            .map(|a| a.parse().map_err(|e| bad_run(format!("align: {e}"))))
-            .transpose()?;
+        let (clock_offsets, align) = read_run(path, file.run.unwrap_or_default())?;
         Ok(Self {
             path: path.to_owned(),
             track,
@@ -230,6 +200,51 @@ impl Pipelines {
     pub fn names(&self) -> impl Iterator<Item = &str> {
         self.pipeline.iter().map(|p| p.name.as_str())
     }
+}
+
+/// The configuration's track file (relative to it), read and checked.
+fn read_track(
+    path: &Path,
+    track: Option<&Path>,
+) -> Result<Option<railfuse_catalog::messages::TrackMap>> {
+    let Some(t) = track else {
+        return Ok(None);
+    };
+    let at = path.parent().unwrap_or(Path::new("")).join(t);
+    railfuse_catalog::track_geojson::read_track_file(&at)
+        .map(Some)
+        .map_err(|e| Error::ConfigSyntax {
+            path: path.to_owned(),
+            message: format!("track: {e}"),
+        })
+}
+
+/// `[run]`: the recorders' clock offsets and the alignment, parsed.
+fn read_run(
+    path: &Path,
+    run: crate::config::RunSettings,
+) -> Result<(
+    Vec<railfuse_catalog::run::ClockOffset>,
+    Option<railfuse_catalog::run::Align>,
+)> {
+    let bad_run = |message: String| Error::ConfigSyntax {
+        path: path.to_owned(),
+        message: format!("[run] {message}"),
+    };
+    let clock_offsets = run
+        .clock_offsets
+        .iter()
+        .map(|c| {
+            c.parse()
+                .map_err(|e| bad_run(format!("clock_offsets: {e}")))
+        })
+        .collect::<Result<_>>()?;
+    let align = run
+        .align
+        .as_deref()
+        .map(|a| a.parse().map_err(|e| bad_run(format!("align: {e}"))))
+        .transpose()?;
+    Ok((clock_offsets, align))
 }
 
 /// Where in a configuration file something is declared.
