@@ -46,7 +46,8 @@ enum Command {
     /// Record live sources (UDP/TCP JSON lines, NMEA/UBX serial, files, stdin, the simulator)
     /// into a crash-safe MCAP log.
     Record(Box<cmd::record::Args>),
-    /// Convert an existing log (the ETH-PBL railway dataset) into railfuse channels.
+    /// Convert an existing log (ETH-PBL node, NMEA/UBX, CSV, ROS 2 bag, CAN logs, GPX) into
+    /// railfuse channels.
     Import(cmd::import::Args),
     /// Write a run's files (split parts, several recorders' files, a bag) as one log, merged
     /// by time, or as parts of a chosen size or span.
@@ -61,6 +62,9 @@ enum Command {
     /// Fit the track's centre line and chainage to the GNSS fixes of runs over it, and write
     /// it as the GeoJSON (or CSV) that `--track` reads.
     Track(cmd::track::Args),
+    /// Write a fused run's positions, with their time and uncertainty, as GPX, KML, GeoJSON or
+    /// CSV (for GIS tools and people who do not run railfuse).
+    Export(cmd::export::Args),
     /// Log a (raw or fused) log to the Rerun viewer or an .rrd file.
     Viz(cmd::viz::Args),
     /// The whole path in one go: simulate, re-fuse, print accuracy, write a Rerun recording.
@@ -104,6 +108,7 @@ fn main() -> ExitCode {
         Command::Refuse(a) => cmd::refuse::run(a),
         Command::Eval(a) => cmd::eval::run(a),
         Command::Track(a) => cmd::track::run(a),
+        Command::Export(a) => cmd::export::run(a),
         Command::Tune(a) => cmd::tune::run(a),
         Command::Recover(a) => cmd::recover::run(a),
         Command::Merge(a) => cmd::merge::run(a),

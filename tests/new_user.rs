@@ -8,20 +8,6 @@ use std::path::Path;
 
 use common::*;
 
-/// The one error line a failed command printed, after checking it failed.
-fn fails(args: &[&str]) -> String {
-    let o = railfuse(args);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "{args:?} exited 0: {err}");
-    let lines: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
-    assert_eq!(lines.len(), 1, "{args:?}: {err}");
-    assert!(
-        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
-        "{err}"
-    );
-    lines[0].to_owned()
-}
-
 /// `railfuse tune` of samples/kalman.toml's pipeline on samples/short-run.mcap to `out`,
 /// with `extra` arguments.
 fn tune_short_run(out: &Path, extra: &[&str]) -> std::process::Output {

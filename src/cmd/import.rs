@@ -3,9 +3,10 @@ use std::sync::Arc;
 
 use anyhow::Result;
 use railfuse_can::dbc::Database;
+use railfuse_catalog::formats::Storage;
 use railfuse_record::decode::nmea;
 use railfuse_record::import::can_log::{self, CanLog};
-use railfuse_record::import::{csv_map, eth, gnss_file, ImportReport};
+use railfuse_record::import::{converted, csv_map, eth, gnss_file, ImportReport};
 use railfuse_record::recorder::StreamFormat;
 
 #[derive(clap::Args)]
@@ -17,7 +18,7 @@ pub struct Args {
     #[arg(short, long, required_unless_present = "example_map")]
     pub output: Option<PathBuf>,
     /// Input format. Without it, it is told from the input: a directory with metadata.yaml
-    /// is a ROS 2 bag, bytes B5 62 UBX, a line that checks as an NMEA sentence NMEA, `HH:MM:SS.ffffff,X,hex`
+    /// is a ROS 2 bag, a `<gpx` document GPX, bytes B5 62 UBX, a line that checks as an NMEA sentence NMEA, `HH:MM:SS.ffffff,X,hex`
     /// lines an ETH node log, a `(stamp) can0 123#…` line a candump log, a `date` or `base`
     /// line an ASC log, bytes `LOGG` a BLF log, and `--map` a CSV table.
     #[arg(long, value_enum)]
@@ -43,6 +44,8 @@ pub struct Args {
     /// Only with a CAN log (candump, asc, blf).
     #[arg(long, value_name = "VEHICLE.dbc")]
     pub dbc: Option<PathBuf>,
+    #[command(flatten)]
+    pub formats: super::run_input::FormatArgs,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -67,6 +70,8 @@ pub enum Format {
     Asc,
     /// A CAN bus log in Vector's BLF (binary; CANalyzer, CANoe, python-can).
     Blf,
+    /// A GPX 1.0 or 1.1 track (phones, Garmin units, handheld loggers) into /gnss/fix.
+    Gpx,
 }
 
 fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
@@ -131,6 +136,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         ),
         _ if head.starts_with(&[0xb5, 0x62]) => Ok(Format::Ubx),
         _ if head.starts_with(b"LOGG") => Ok(Format::Blf),
+        _ if railfuse_catalog::formats::looks_like_gpx(&head) => Ok(Format::Gpx),
         _ if railfuse_can::candump::parse_line(first_line).is_ok() => Ok(Format::Candump),
         _ if asc_header(first_line) => Ok(Format::Asc),
         _ if first_line.starts_with('$') => Ok(Format::Nmea),
@@ -140,7 +146,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if text.lines().any(|l| nmea::parse(l).is_ok()) => Ok(Format::Nmea),
         _ => anyhow::bail!(
             "{}: cannot tell its format from its first line; name it with --format \
-             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc, blf)",
+             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc, blf, gpx)",
             input.display()
         ),
     }
@@ -184,7 +190,10 @@ pub fn run(a: Args) -> Result<()> {
         }
         Format::Nmea => gnss_file::import(&input, &output, StreamFormat::Nmea, a.date)?,
         Format::Ubx => gnss_file::import(&input, &output, StreamFormat::Ubx, a.date)?,
-        Format::Rosbag2 => railfuse_record::import::rosbag2::import(&input, &output)?,
+        Format::Rosbag2 => {
+            converted::import(Storage::Sqlite3, &input, &output, &a.formats.options())?
+        }
+        Format::Gpx => converted::import(Storage::Gpx, &input, &output, &a.formats.options())?,
         Format::Csv => {
             let Some(map) = &a.map else {
                 anyhow::bail!(

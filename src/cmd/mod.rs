@@ -8,6 +8,7 @@ pub mod bench_tune;
 pub mod bench_viz;
 pub mod demo;
 pub mod eval;
+pub mod export;
 pub mod import;
 pub mod info;
 pub mod measure;

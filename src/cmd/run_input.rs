@@ -4,6 +4,8 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use railfuse_catalog::formats::gpx::{Elevation, GpxOptions, HdopMeaning};
+use railfuse_catalog::formats::FormatOptions;
 use railfuse_catalog::log::SplitRule;
 use railfuse_catalog::run::{Align, ClockOffset, Run, RunOptions, TimeBasis};
 use railfuse_eval::outages::{OutageSpec, Withhold};
@@ -11,7 +13,8 @@ use railfuse_eval::outages::{OutageSpec, Withhold};
 #[derive(clap::Args, Debug, Clone, Default)]
 pub struct RunArgs {
     /// The run: an MCAP file, several files (the parts of a split recording, the files of
-    /// several recorders), a directory of parts, or a ROS 2 bag directory (its metadata.yaml).
+    /// several recorders), a directory of parts, a ROS 2 bag directory (its metadata.yaml),
+    /// or files of other tools' formats (a GPX track).
     #[arg(value_name = "LOG")]
     pub inputs: Vec<PathBuf>,
     /// A file's (or an input's) clock against the run's: FILE=SECONDS[,DRIFTppm], positive
@@ -30,6 +33,22 @@ pub struct RunArgs {
     /// the first one's clock, the stamps it took included. A --clock-offset given wins.
     #[arg(long, value_name = "none|gnss")]
     pub align: Option<Align>,
+    #[command(flatten)]
+    pub formats: FormatArgs,
+}
+
+/// How files of other tools' formats are read, as a run or an import.
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct FormatArgs {
+    /// What a GPX file's hdop holds: dop (a dilution of precision, as GPX says: the
+    /// pipeline's GNSS variance applies) or metres[:P] (an accuracy in metres, the radius
+    /// holding P % of fixes, 68 without P, as phone apps write it: each fix's σ).
+    #[arg(long, value_name = "dop|metres[:P]", default_value = "dop")]
+    pub gpx_hdop: HdopMeaning,
+    /// What a GPX file's ele is: msl (height above sea level, as GPX units write it) or
+    /// ellipsoid (above WGS-84's ellipsoid).
+    #[arg(long, value_name = "msl|ellipsoid", default_value = "msl")]
+    pub gpx_ele: Elevation,
 }
 
 impl RunArgs {
@@ -54,8 +73,10 @@ impl RunArgs {
                 clock_offsets: clocks,
                 allow_missing_parts: self.allow_missing_parts,
                 align: self.align.or(align).unwrap_or_default(),
+                formats: self.formats.options(),
             },
         )?;
+        say_conversions(&run);
         if let Some(alignment) = run.alignment() {
             for e in alignment.estimates.iter().flatten() {
                 crate::say!(
@@ -95,6 +116,45 @@ impl RunArgs {
             );
         }
         Ok(run)
+    }
+}
+
+impl FormatArgs {
+    /// How files of other tools' formats are read.
+    pub fn options(&self) -> FormatOptions {
+        FormatOptions {
+            gpx: GpxOptions {
+                hdop: self.gpx_hdop,
+                elevation: self.gpx_ele,
+            },
+        }
+    }
+}
+
+/// What each converted part read, and where it was damaged.
+fn say_conversions(run: &Run) {
+    for (path, c) in run.conversions() {
+        let skipped = match c.skipped.is_empty() {
+            true => String::new(),
+            false => format!("; not used: {}", c.reasons()),
+        };
+        let gaps = match c.gaps {
+            0 => String::new(),
+            n => format!(", {n} segment breaks"),
+        };
+        crate::say!(
+            "{}: {} records read, {} messages{gaps}{skipped}",
+            path.display(),
+            c.rows,
+            c.messages
+        );
+        if let Some(d) = &c.damage {
+            eprintln!(
+                "warning: {}: {d}; the {} messages before it are read",
+                path.display(),
+                c.messages
+            );
+        }
     }
 }
 

@@ -82,6 +82,20 @@ pub fn pipeline_eval(report: &serde_json::Value, name: &str) -> serde_json::Valu
         .clone()
 }
 
+/// The one error line a failed command printed, after checking it failed.
+pub fn fails(args: &[&str]) -> String {
+    let o = railfuse(args);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{args:?} exited 0: {err}");
+    let lines: Vec<&str> = err.lines().filter(|l| l.contains("error")).collect();
+    assert_eq!(lines.len(), 1, "{args:?}: {err}");
+    assert!(
+        !err.contains("panicked") && !err.contains("RUST_BACKTRACE"),
+        "{err}"
+    );
+    lines[0].to_owned()
+}
+
 pub fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }

@@ -17,7 +17,9 @@
 //!   the Rust type with `schemars`, so the type is the one source of truth.
 
 pub mod error;
+pub mod export;
 pub mod foreign;
+pub mod formats;
 pub mod foxglove;
 pub mod geodesy;
 pub mod inspect;

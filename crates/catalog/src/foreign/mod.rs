@@ -11,7 +11,6 @@ pub mod can;
 pub mod foxglove;
 pub mod protobuf;
 pub mod ros2;
-pub mod rosbag2_sqlite;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

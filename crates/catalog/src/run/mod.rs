@@ -38,6 +38,16 @@ pub use reader::{MergeCounts, RunReader};
 pub use sequential::Sequential;
 
 use crate::error::{Error, Result};
+pub use crate::formats::Storage;
+use crate::formats::{Converted, FormatOptions};
+
+/// A part of another tool's format, converted to a temporary MCAP file when the run was
+/// opened (once, however often the run is read), removed with the run.
+#[derive(Debug)]
+pub struct ConvertedPart {
+    pub mcap: tempfile::TempPath,
+    pub report: Converted,
+}
 
 /// Which time orders the merge and is each message's log time downstream.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -65,14 +75,6 @@ impl std::str::FromStr for TimeBasis {
     }
 }
 
-/// How a part stores its messages.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Storage {
-    Mcap,
-    Sqlite3,
-}
-
 /// One file of a run.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Part {
@@ -86,6 +88,9 @@ pub struct Part {
     pub listed_messages: Option<u64>,
     /// Its clock against the run's time.
     pub clock: ClockMap,
+    /// Its conversion, for a part of another tool's format.
+    #[serde(skip)]
+    pub converted: Option<std::sync::Arc<ConvertedPart>>,
 }
 
 /// A part a bag's metadata.yaml lists that is not there (read with `allow_missing_parts`).
@@ -107,6 +112,8 @@ pub struct RunOptions {
     pub allow_missing_parts: bool,
     /// Put the recorders on one clock through the GNSS time each logged.
     pub align: Align,
+    /// How files of other tools' formats are read.
+    pub formats: FormatOptions,
 }
 
 /// The files of one run, resolved and in order.
@@ -158,6 +165,9 @@ impl Run {
             } else {
                 run.parts.push(Part::new(path.clone(), input));
             }
+        }
+        for part in &mut run.parts {
+            part.convert(&options.formats)?;
         }
         for (i, a) in run.parts.iter().enumerate() {
             if let Some(b) = run.parts[..i].iter().find(|b| same_file(&a.path, &b.path)) {
@@ -239,7 +249,7 @@ impl Run {
         let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
             .map_err(|e| Error::io(dir, e))?
             .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file() && storage_of(p).is_some())
+            .filter(|p| p.is_file() && Storage::of_name(p).is_some())
             .collect();
         files.sort_by(|a, b| natural_order(&a.to_string_lossy(), &b.to_string_lossy()));
         if files.is_empty() {
@@ -253,7 +263,7 @@ impl Run {
                      `railfuse recover` salvages it)",
                     p.display()
                 ),
-                None => "no .mcap or .db3 file and no metadata.yaml: not a run".to_owned(),
+                None => "no .mcap, .db3 or .gpx file and no metadata.yaml: not a run".to_owned(),
             };
             return Err(Error::run(dir, cause));
         }
@@ -282,6 +292,13 @@ impl Run {
 
     pub fn parts(&self) -> &[Part] {
         &self.parts
+    }
+
+    /// The parts converted from other tools' formats, with what each conversion read.
+    pub fn conversions(&self) -> impl Iterator<Item = (&Path, &Converted)> {
+        self.parts
+            .iter()
+            .filter_map(|p| p.converted.as_ref().map(|c| (p.path.as_path(), &c.report)))
     }
 
     /// Parts a bag lists that are not there.
@@ -328,7 +345,9 @@ impl Run {
                     .map(|t| (t, t + p.listed_duration_ns.unwrap_or(0)));
                 let span = match listed {
                     Some(span) => Some(span),
-                    None => crate::log::read_summary(&p.path)?.and_then(|s| s.message_span_ns),
+                    None => {
+                        crate::log::read_summary(p.mcap_path())?.and_then(|s| s.message_span_ns)
+                    }
                 };
                 Ok(span.map(|(a, b)| (p.clock.correct(a), p.clock.correct(b))))
             })
@@ -344,23 +363,44 @@ impl Run {
 impl Part {
     fn new(path: PathBuf, input: usize) -> Self {
         Self {
-            storage: storage_of(&path).unwrap_or(Storage::Mcap),
+            storage: Storage::of_file(&path),
             path,
             input,
             listed_start_ns: None,
             listed_duration_ns: None,
             listed_messages: None,
             clock: ClockMap::default(),
+            converted: None,
         }
     }
-}
 
-/// The storage of a log file by its name; `None` for a file that is not one.
-fn storage_of(path: &Path) -> Option<Storage> {
-    match path.extension()?.to_str()? {
-        "mcap" => Some(Storage::Mcap),
-        "db3" => Some(Storage::Sqlite3),
-        _ => None,
+    /// The MCAP file the run reader reads for this part: its own, or its conversion.
+    pub fn mcap_path(&self) -> &Path {
+        match &self.converted {
+            Some(c) => &c.mcap,
+            None => &self.path,
+        }
+    }
+
+    /// Converts a part of another tool's format into a temporary MCAP file.
+    fn convert(&mut self, options: &FormatOptions) -> Result<()> {
+        if !self.storage.is_converted() || self.converted.is_some() {
+            return Ok(());
+        }
+        let mcap = tempfile::Builder::new()
+            .prefix("railfuse-part-")
+            .suffix(".mcap")
+            .tempfile()
+            .map_err(|e| Error::io(&self.path, e))?
+            .into_temp_path();
+        // Read once by the run reader: no Foxglove twins, which only a viewer reads.
+        let writer = crate::log::WriterOptions {
+            foxglove: false,
+            ..Default::default()
+        };
+        let report = crate::formats::convert(self.storage, &self.path, &mcap, options, &writer)?;
+        self.converted = Some(std::sync::Arc::new(ConvertedPart { mcap, report }));
+        Ok(())
     }
 }
 

@@ -113,8 +113,6 @@ pub struct RunReader {
     step_part: usize,
     /// A message whose stamp was moved onto the run's clock, re-encoded.
     restamped: Vec<u8>,
-    /// The temporary MCAP files of sqlite3 parts, removed with the reader.
-    _converted: Vec<tempfile::TempPath>,
     /// With `--time stamp`: each channel's stamp reader.
     stamps: Stamps,
 }
@@ -125,17 +123,8 @@ impl RunReader {
     pub(super) fn open(run: &Run) -> Result<Self> {
         let mut parts = Vec::with_capacity(run.parts.len());
         let mut summaries = Vec::with_capacity(run.parts.len());
-        let mut converted = Vec::new();
         for p in &run.parts {
-            let path = match p.storage {
-                Storage::Mcap => p.path.clone(),
-                Storage::Sqlite3 => {
-                    let temporary = converted_part(&p.path)?;
-                    let path = temporary.to_path_buf();
-                    converted.push(temporary);
-                    path
-                }
-            };
+            let path = p.mcap_path().to_owned();
             let summary = match read_summary(&path) {
                 Ok(s) => s,
                 // A damaged part is read up to its damage, where the reader names it.
@@ -194,7 +183,6 @@ impl RunReader {
             queued: None,
             step_part: 0,
             restamped: Vec::new(),
-            _converted: converted,
             stamps: Stamps::default(),
         };
         reader.summary = reader.combine(&summaries)?;
@@ -582,19 +570,6 @@ impl RunReader {
         }
         Ok((channel, false))
     }
-}
-
-/// A sqlite3 part, read through a temporary MCAP of it (converted row by row, as `ros2 bag
-/// convert` would), removed with the reader.
-fn converted_part(path: &Path) -> Result<tempfile::TempPath> {
-    let temporary = tempfile::Builder::new()
-        .prefix("railfuse-db3-")
-        .suffix(".mcap")
-        .tempfile()
-        .map_err(|e| Error::io(path, e))?
-        .into_temp_path();
-    crate::foreign::rosbag2_sqlite::convert(path, &temporary)?;
-    Ok(temporary)
 }
 
 /// A part's head message: (its channel id in the part, sequence, payload), held for its stamp

@@ -3,15 +3,15 @@
 //! - [`eth`]: the ETH-PBL railway dataset (on-board node CSV: raw IMU, UBX frames as hex,
 //!   NMEA sentences, correction-link and station events);
 //! - [`gnss_file`]: NMEA and UBX captures of a receiver;
-//! - [`rosbag2`]: ROS 2 bags in the sqlite3 storage, to MCAP;
+//! - [`converted`]: ROS 2 sqlite3 bags and GPX tracks, to MCAP (the run reader's conversion);
 //! - [`csv_map`]: CSV tables with a column mapping;
 //! - [`can_log`]: CAN bus logs (candump, Vector ASC), decoded with the vehicle's DBC.
 
 pub mod can_log;
+pub mod converted;
 pub mod csv_map;
 pub mod eth;
 pub mod gnss_file;
-pub mod rosbag2;
 
 use std::collections::BTreeMap;
 use std::io::BufRead;

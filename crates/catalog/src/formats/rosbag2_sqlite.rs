@@ -11,20 +11,10 @@ use std::path::{Path, PathBuf};
 
 use rusqlite::{Connection, OpenFlags};
 
-use super::ros2;
+use super::Converted;
 use crate::error::{Error, Result};
+use crate::foreign::ros2;
 use crate::log::LogWriter;
-
-/// What a conversion copied.
-#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
-pub struct Converted {
-    /// Rows of the bag's `messages` tables read.
-    pub rows: u64,
-    pub messages: u64,
-    pub per_topic: BTreeMap<String, u64>,
-    /// Rows not copied, by reason.
-    pub skipped: BTreeMap<String, u64>,
-}
 
 /// The `.db3` files of a bag directory, in name order (rosbag2 numbers its splits).
 fn db3_files(bag: &Path) -> Result<Vec<PathBuf>> {

@@ -1,0 +1,67 @@
+//! Converting other tools' files into a run: one hour of a 10 Hz GPX track (36 000 points, as
+//! a Garmin or phone app writes them: time, elevation, hdop, satellites, speed and course in
+//! extensions) into MCAP `/gnss/fix`. The goal: under a second.
+
+use std::io::Write;
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use railfuse_catalog::formats::{self, FormatOptions, Storage};
+
+const POINTS: usize = 36_000;
+
+fn hour_of_gpx(path: &std::path::Path) {
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    writeln!(
+        f,
+        r#"<?xml version="1.0" encoding="UTF-8"?>
+<gpx version="1.1" creator="bench" xmlns="http://www.topografix.com/GPX/1/1" xmlns:gpxtpx="http://www.garmin.com/xmlschemas/TrackPointExtension/v2">
+<trk><name>an hour at 10 Hz</name><trkseg>"#
+    )
+    .unwrap();
+    for k in 0..POINTS {
+        let (s, tenth) = (k / 10, k % 10);
+        writeln!(
+            f,
+            "<trkpt lat=\"{:.7}\" lon=\"{:.7}\"><ele>{:.1}</ele><time>2021-07-26T{:02}:{:02}:{:02}.{tenth}00Z</time>\
+             <sat>9</sat><hdop>0.9</hdop><extensions><gpxtpx:TrackPointExtension><gpxtpx:speed>{:.2}</gpxtpx:speed>\
+             <gpxtpx:course>{:.1}</gpxtpx:course></gpxtpx:TrackPointExtension></extensions></trkpt>",
+            55.6 + k as f64 * 2e-6,
+            12.5 + k as f64 * 1e-6,
+            20.0 + (k % 100) as f64 * 0.1,
+            4 + s / 3600,
+            (s / 60) % 60,
+            s % 60,
+            20.0 + (k % 50) as f64 * 0.1,
+            (k % 360) as f64,
+        )
+        .unwrap();
+    }
+    writeln!(f, "</trkseg></trk></gpx>").unwrap();
+}
+
+fn convert(c: &mut Criterion) {
+    let dir = tempfile::tempdir().unwrap();
+    let gpx = dir.path().join("hour.gpx");
+    hour_of_gpx(&gpx);
+    let out = dir.path().join("hour.mcap");
+    let mut group = c.benchmark_group("convert");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(POINTS as u64));
+    group.bench_function("gpx_hour_10hz", |b| {
+        b.iter(|| {
+            let r = formats::convert(
+                Storage::Gpx,
+                &gpx,
+                &out,
+                &FormatOptions::default(),
+                &Default::default(),
+            )
+            .unwrap();
+            assert_eq!(r.messages, POINTS as u64);
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, convert);
+criterion_main!(benches);

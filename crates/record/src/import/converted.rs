@@ -1,0 +1,44 @@
+//! Files the run reader also reads directly (ROS 2 sqlite3 bags, GPX tracks) imported as
+//! MCAP: the conversion is the catalogue's ([`railfuse_catalog::formats`]), so an imported
+//! file holds exactly what a command reading the original sees.
+
+use std::path::Path;
+
+use railfuse_catalog::formats::{self, FormatOptions, Storage};
+use railfuse_catalog::Result;
+
+use super::ImportReport;
+
+/// Converts `input` (of a converted storage) to MCAP at `output`.
+pub fn import(
+    storage: Storage,
+    input: &Path,
+    output: &Path,
+    options: &FormatOptions,
+) -> Result<ImportReport> {
+    let c = formats::convert(storage, input, output, options, &Default::default())?;
+    let time_base = match storage {
+        Storage::Gpx => "each point's <time> (UTC; zone offsets applied)",
+        _ => "rosbag2 receive time (log and publish time)",
+    };
+    let mut warnings = std::collections::BTreeMap::new();
+    if c.gaps > 0 {
+        warnings.insert("segment breaks (gaps in the track)".to_owned(), c.gaps);
+    }
+    if let Some(d) = &c.damage {
+        warnings.insert(format!("damaged, read up to it: {d}"), 1);
+    }
+    Ok(ImportReport {
+        input: input.to_owned(),
+        output: output.to_owned(),
+        format: storage.name().into(),
+        time_base: time_base.into(),
+        lines: c.rows,
+        messages: c.messages,
+        per_topic: c.per_topic,
+        skipped: c.skipped,
+        first_problems: c.first_problems,
+        warnings,
+        ..Default::default()
+    })
+}
