@@ -45,13 +45,12 @@ fn not_run(cmd: &str) -> Option<&'static str> {
     }
 }
 
-/// The inputs the README assumes the reader has, in `dir`.
+/// The inputs the README assumes the reader has, in `dir`: the checkout's samples/, and
+/// shared/ beside the checkout (`../shared`, as CI lays it: the real recordings).
 fn inputs(dir: &Path) {
-    std::os::unix::fs::symlink(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("samples"),
-        dir.join("samples"),
-    )
-    .unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    std::os::unix::fs::symlink(root.join("samples"), dir.join("samples")).unwrap();
+    std::os::unix::fs::symlink(root.join("../shared"), dir.join("../shared")).unwrap();
     let (nmea, ubx) = captures(dir);
     std::fs::rename(&nmea, dir.join("receiver.nmea")).unwrap();
     std::fs::rename(&ubx, dir.join("receiver.ubx")).unwrap();
@@ -89,8 +88,10 @@ fn inputs(dir: &Path) {
 /// Runs `commands` in order in a clean directory with the reader's inputs: what did not run,
 /// with why, and what failed.
 fn run_in_order(commands: &[String]) -> (usize, Vec<String>, Vec<String>) {
-    let d = tempfile::tempdir().unwrap();
-    inputs(d.path());
+    let top = tempfile::tempdir().unwrap();
+    let d = top.path().join("checkout");
+    std::fs::create_dir(&d).unwrap();
+    inputs(&d);
     let (mut ran, mut skipped, mut failed) = (0, Vec::new(), Vec::new());
     for cmd in commands {
         if let Some(why) = not_run(cmd) {
@@ -100,7 +101,7 @@ fn run_in_order(commands: &[String]) -> (usize, Vec<String>, Vec<String>) {
         let o = std::process::Command::new("sh")
             .arg("-c")
             .arg(format!("'{}' {cmd}", env!("CARGO_BIN_EXE_railfuse")))
-            .current_dir(d.path())
+            .current_dir(&d)
             .output()
             .unwrap();
         ran += 1;

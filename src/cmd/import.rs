@@ -72,6 +72,8 @@ pub enum Format {
     Blf,
     /// A GPX 1.0 or 1.1 track (phones, Garmin units, handheld loggers) into /gnss/fix.
     Gpx,
+    /// ASAM MDF 4 CAN bus logging (CANedge, Vector): frames, and with --dbc their signals.
+    Mdf4,
 }
 
 fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
@@ -137,6 +139,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if head.starts_with(&[0xb5, 0x62]) => Ok(Format::Ubx),
         _ if head.starts_with(b"LOGG") => Ok(Format::Blf),
         _ if railfuse_catalog::formats::looks_like_gpx(&head) => Ok(Format::Gpx),
+        _ if railfuse_catalog::formats::looks_like_mdf4(&head) => Ok(Format::Mdf4),
         _ if railfuse_can::candump::parse_line(first_line).is_ok() => Ok(Format::Candump),
         _ if asc_header(first_line) => Ok(Format::Asc),
         _ if first_line.starts_with('$') => Ok(Format::Nmea),
@@ -146,7 +149,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if text.lines().any(|l| nmea::parse(l).is_ok()) => Ok(Format::Nmea),
         _ => anyhow::bail!(
             "{}: cannot tell its format from its first line; name it with --format \
-             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc, blf, gpx)",
+             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc, blf, gpx, mdf4)",
             input.display()
         ),
     }
@@ -173,10 +176,13 @@ pub fn run(a: Args) -> Result<()> {
             format_name(format)
         );
     }
-    let can = matches!(format, Format::Candump | Format::Asc | Format::Blf);
+    let can = matches!(
+        format,
+        Format::Candump | Format::Asc | Format::Blf | Format::Mdf4
+    );
     if a.dbc.is_some() && !can {
         anyhow::bail!(
-            "--dbc decodes a CAN log (--format candump or asc), not --format {}",
+            "--dbc decodes a CAN log (--format candump, asc, blf or mdf4), not --format {}",
             format_name(format)
         );
     }
@@ -202,7 +208,7 @@ pub fn run(a: Args) -> Result<()> {
             };
             csv_map::import(&input, map, &output)?
         }
-        Format::Candump | Format::Asc | Format::Blf => {
+        Format::Candump | Format::Asc | Format::Blf | Format::Mdf4 => {
             let dbc = match &a.dbc {
                 Some(p) => Some(Arc::new(Database::open(p)?)),
                 None => None,
@@ -210,6 +216,7 @@ pub fn run(a: Args) -> Result<()> {
             let log = match format {
                 Format::Asc => CanLog::Asc,
                 Format::Blf => CanLog::Blf,
+                Format::Mdf4 => CanLog::Mdf4,
                 _ => CanLog::Candump,
             };
             can_log::import(&input, &output, log, dbc)?

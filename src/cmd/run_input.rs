@@ -148,6 +148,9 @@ fn say_conversions(run: &Run) {
             c.rows,
             c.messages
         );
+        for w in &c.warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
         if let Some(d) = &c.damage {
             eprintln!(
                 "warning: {}: {d}; the {} messages before it are read",

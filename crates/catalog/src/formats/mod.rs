@@ -5,9 +5,11 @@
 //! same conversion to a file of its own.
 //!
 //! - [`rosbag2_sqlite`]: ROS 2 bags in the sqlite3 storage (`.db3`);
-//! - [`gpx`]: GPX 1.0 and 1.1 tracks (phones, Garmin units, handheld loggers).
+//! - [`gpx`]: GPX 1.0 and 1.1 tracks (phones, Garmin units, handheld loggers);
+//! - [`mdf4`]: ASAM MDF 4 CAN bus logging (CANedge, Vector), frames onto `/can/<bus>/frames`.
 
 pub mod gpx;
+pub mod mdf4;
 pub mod rosbag2_sqlite;
 
 use std::collections::BTreeMap;
@@ -25,6 +27,8 @@ pub enum Storage {
     /// rosbag2's sqlite3 storage.
     Sqlite3,
     Gpx,
+    /// ASAM MDF 4 (bus logging).
+    Mdf4,
 }
 
 impl Storage {
@@ -34,6 +38,7 @@ impl Storage {
             "mcap" => Some(Self::Mcap),
             "db3" => Some(Self::Sqlite3),
             "gpx" => Some(Self::Gpx),
+            "mf4" | "mdf" => Some(Self::Mdf4),
             _ => None,
         }
     }
@@ -47,6 +52,7 @@ impl Storage {
         let read = std::fs::File::open(path).and_then(|f| f.take(512).read_to_end(&mut head));
         match read {
             Ok(_) if looks_like_gpx(&head) => Self::Gpx,
+            Ok(_) if looks_like_mdf4(&head) => Self::Mdf4,
             Ok(_) if head.starts_with(b"SQLite format 3\0") => Self::Sqlite3,
             _ => Self::Mcap,
         }
@@ -62,6 +68,7 @@ impl Storage {
             Self::Mcap => "MCAP",
             Self::Sqlite3 => "rosbag2 sqlite3",
             Self::Gpx => "GPX",
+            Self::Mdf4 => "MDF4",
         }
     }
 }
@@ -72,6 +79,11 @@ pub fn looks_like_gpx(head: &[u8]) -> bool {
     let text = String::from_utf8_lossy(head);
     let text = text.trim_start_matches('\u{feff}').trim_start();
     text.starts_with('<') && text.contains("<gpx")
+}
+
+/// Whether the first bytes of a file are an MDF file's (finalised or not).
+pub fn looks_like_mdf4(head: &[u8]) -> bool {
+    head.starts_with(b"MDF     ") || head.starts_with(b"UnFinMF ")
 }
 
 /// How the converted formats read their files (the choices a file cannot state itself).
@@ -95,6 +107,9 @@ pub struct Converted {
     pub gaps: u64,
     /// Where the input is damaged or cut off: what was read before it is kept.
     pub damage: Option<String>,
+    /// What was read but may be wrong (a start time in an unknown zone).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 impl Converted {
@@ -134,6 +149,7 @@ pub fn convert(
     match storage {
         Storage::Sqlite3 => rosbag2_sqlite::convert(input, output),
         Storage::Gpx => gpx::convert(input, output, &options.gpx, writer),
+        Storage::Mdf4 => mdf4::convert(input, output, writer),
         Storage::Mcap => Err(Error::run(input, "an MCAP file is read as it is")),
     }
 }

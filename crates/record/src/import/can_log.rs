@@ -1,5 +1,5 @@
 //! CAN bus logs of other tools into railfuse channels: can-utils' `candump -l` log,
-//! Vector's ASC and BLF, through the readers of [`railfuse_can`] and the recorder's own
+//! Vector's ASC and BLF, ASAM MDF 4 bus logging, through the readers of [`railfuse_can`] and the recorder's own
 //! [`CanDecoder`] (so an imported bus is the same channels a live one is). The log's stamp is
 //! each frame's bus time and, with no receive time in a file, its log time too.
 //!
@@ -29,6 +29,8 @@ pub enum CanLog {
     Asc,
     /// Vector's BLF (binary).
     Blf,
+    /// ASAM MDF 4 bus logging (CSS CANedge, Vector): `railfuse-mdf`'s reading.
+    Mdf4,
 }
 
 /// Imports the CAN log `input` to `output`, decoding with `dbc` where given.
@@ -46,9 +48,14 @@ pub fn import(
             CanLog::Candump => "each frame's stamp in the log (seconds since the Unix epoch)",
             CanLog::Asc => "the trigger block's date (taken as UTC) plus each line's offset",
             CanLog::Blf => "the file header's start (taken as UTC) plus each object's offset",
+            CanLog::Mdf4 => "the header's start (UTC) plus each record's master time",
         }
         .into(),
         ..Default::default()
+    };
+    let fault = |cause: String| Error::Run {
+        path: input.to_owned(),
+        cause,
     };
     let file = std::fs::File::open(input).map_err(|source| Error::Io {
         path: input.to_owned(),
@@ -59,13 +66,11 @@ pub fn import(
         CanLog::Candump => Frames::Candump(railfuse_can::candump::Reader::new(file)),
         CanLog::Asc => Frames::Asc(railfuse_can::asc::Reader::new(file)),
         CanLog::Blf => {
-            Frames::Blf(
-                railfuse_can::blf::Reader::new(file).map_err(|e| Error::Run {
-                    path: input.to_owned(),
-                    cause: e.to_string(),
-                })?,
-            )
+            Frames::Blf(railfuse_can::blf::Reader::new(file).map_err(|e| fault(e.to_string()))?)
         }
+        CanLog::Mdf4 => Frames::Mdf4(Box::new(
+            railfuse_mdf::bus::BusFrames::open(input).map_err(|e| fault(e.to_string()))?,
+        )),
     };
     let mut writer = ItemWriter::new(LogWriter::create(output)?);
     let mut decoder = CanDecoder::new(dbc);
@@ -102,10 +107,30 @@ pub fn import(
     report.warnings = stats.warnings;
     match &frames {
         Frames::Blf(r) => report.bytes = r.bytes_read(),
+        Frames::Mdf4(r) => mdf4_report(&r.report, &mut report),
         _ => report.lines = frames.lines_read() as u64,
     }
     writer.writer.finish()?;
     Ok(report)
+}
+
+/// What an MDF file's reading said, into the import's report.
+fn mdf4_report(r: &railfuse_mdf::bus::BusReport, report: &mut ImportReport) {
+    report.lines = r.records;
+    for (why, n) in r.not_used() {
+        *report.skipped.entry(why).or_insert(0) += n;
+    }
+    if let Some(d) = &r.damage {
+        report
+            .warnings
+            .insert(format!("damaged, read up to it: {d}"), 1);
+    }
+    if !r.finalised {
+        report.warnings.insert(
+            "not finalised by its logger: read to the end of its data".into(),
+            1,
+        );
+    }
 }
 
 /// The frames of a log, in any of the formats.
@@ -113,6 +138,7 @@ enum Frames<R> {
     Candump(railfuse_can::candump::Reader<R>),
     Asc(railfuse_can::asc::Reader<R>),
     Blf(railfuse_can::blf::Reader<R>),
+    Mdf4(Box<railfuse_mdf::bus::BusFrames>),
 }
 
 /// What a log's reader could not read.
@@ -126,7 +152,7 @@ impl<R> Frames<R> {
         match self {
             Frames::Candump(r) => r.lines_read(),
             Frames::Asc(r) => r.lines_read(),
-            Frames::Blf(_) => 0,
+            Frames::Blf(_) | Frames::Mdf4(_) => 0,
         }
     }
 }
@@ -138,6 +164,7 @@ impl<R: std::io::BufRead> Iterator for Frames<R> {
             Frames::Candump(r) => r.next().map(|f| f.map_err(Bad::Line)),
             Frames::Asc(r) => r.next().map(|f| f.map_err(Bad::Line)),
             Frames::Blf(r) => r.next().map(|f| f.map_err(Bad::Object)),
+            Frames::Mdf4(r) => r.next().map(Ok),
         }
     }
 }
