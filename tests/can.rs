@@ -396,7 +396,9 @@ fn a_candump_log_imports_decoded_and_bad_can_input_is_one_line_naming_its_place(
         ("no-can.toml", "[sensor.\"/odometer/1\"]\nfrom = \"can:WheelSpeed.AxleSpeed1\"", "name the vehicle's DBC in [can]"),
         ("no-signal.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/odometer/1\"]\nfrom = \"can:WheelSpeed.Axle9\"", "message WheelSpeed has no signal Axle9"),
         ("not-speed.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/radar/speed\"]\nfrom = \"can:RadarSpeed.Quality\"", "is in '%': a speed is in m/s, km/h or mph"),
-        ("imu.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/imu\"]\nfrom = \"can:RadarSpeed.Acceleration\"", "is a Imu channel"),
+        ("imu.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/imu\"]\nfrom = \"can:RadarSpeed.Acceleration\"", "`from` is an odometer's or a radar's"),
+        ("balise.toml", "[can]\ndbc = \"vehicle.dbc\"\n[sensor.\"/balise\"]\nfrom = \"can:RadarSpeed.Speed\"", "is a BalisePassage channel"),
+        ("two-dbcs.toml", "[[can]]\ndbc = \"vehicle.dbc\"\n[[can]]\ndbc = \"vehicle.dbc\"\n[sensor.\"/odometer/1\"]\nfrom = \"can:WheelSpeed.AxleSpeed1\"", "two tables for every bus"),
         ("bad-dbc.toml", "[can]\ndbc = \"broken.dbc\"\n[sensor.\"/odometer/1\"]\nfrom = \"can:WheelSpeed.AxleSpeed1\"", "broken.dbc:25:"),
     ] {
         let c = config(name, body);

@@ -174,3 +174,95 @@ fn import_writes_the_drives_frames_and_decodes_them_with_the_dbc() {
         "{r}"
     );
 }
+
+/// Every message of `topic` in a log, as JSON.
+fn messages(path: &Path, topic: &str) -> Vec<serde_json::Value> {
+    let run = Run::open(&[path.to_owned()], &RunOptions::default()).unwrap();
+    let mut reader = run.reader().unwrap();
+    let mut out = Vec::new();
+    while let Some(r) = reader.next() {
+        if let LogRecord::Message(m) = r.unwrap() {
+            if m.channel.topic == topic {
+                let any = m.decode_any(path).unwrap().expect("a catalogue message");
+                out.push(serde_json::from_slice(&any.to_json()).unwrap());
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn the_drives_gnss_imu_and_wheel_speed_come_off_its_two_buses_as_asammdf_decodes_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = &drive_files()[4];
+    let fused = dir.path().join("car.fused.mcap");
+    let out = ok(&[
+        "refuse",
+        s(src),
+        "-c",
+        s(&sample("canedge-car.toml")),
+        "-o",
+        s(&fused),
+    ]);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("made from the CAN bus: /gnss/fix"), "{said}");
+    // asammdf's extract_bus_logging with the module's DBC on bus 2, signal for signal.
+    let sig = dir.path().join("signals.json");
+    let dbc = sample("canedge-car/canmod-gps.dbc");
+    python_ok(
+        "mdf4_frames.py",
+        &["signals", s(src), s(&dbc), "2", s(&sig)],
+    );
+    let theirs: serde_json::Value = serde_json::from_slice(&std::fs::read(&sig).unwrap()).unwrap();
+    let series = |name: &str| -> Vec<(u64, f64)> {
+        theirs[name]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| (p[0].as_u64().unwrap(), p[1].as_f64().unwrap()))
+            .collect()
+    };
+    let at = |s: &[(u64, f64)], t: u64| s.iter().find(|p| p.0.abs_diff(t) <= 1_000).map(|p| p.1);
+    let (lat, lon) = (series("Latitude"), series("Longitude"));
+    let fixes = messages(&fused, "/gnss/fix");
+    assert_eq!(fixes.len(), lat.len());
+    let placed: Vec<&serde_json::Value> = fixes
+        .iter()
+        .filter(|f| !f["latitude_deg"].is_null())
+        .collect();
+    assert!(placed.len() > 30, "{}", placed.len());
+    for f in &placed {
+        let t = f["stamp_ns"].as_u64().unwrap();
+        assert!((f["latitude_deg"].as_f64().unwrap() - at(&lat, t).unwrap()).abs() < 1e-9);
+        assert!((f["longitude_deg"].as_f64().unwrap() - at(&lon, t).unwrap()).abs() < 1e-9);
+        // The module's accuracy is each fix's σ.
+        let sigma = f["position_covariance_enu_m2"][0].as_f64().unwrap().sqrt();
+        assert_eq!(
+            Some(sigma),
+            at(&series("PositionAccuracy"), t)
+                .map(|a| a.max(0.0))
+                .filter(|a| *a > 0.0)
+        );
+    }
+    let imu = messages(&fused, "/imu");
+    let ax = series("AccelerationX");
+    let wz = series("AngularRateZ");
+    assert!(
+        imu.len() as f64 > 0.95 * ax.len() as f64,
+        "{} of {}",
+        imu.len(),
+        ax.len()
+    );
+    for m in imu.iter().step_by(97) {
+        let t = m["stamp_ns"].as_u64().unwrap();
+        assert!((m["specific_force_mps2"][0].as_f64().unwrap() - at(&ax, t).unwrap()).abs() < 1e-9);
+        let rate = at(&wz, t).unwrap().to_radians();
+        assert!((m["angular_rate_radps"][2].as_f64().unwrap() - rate).abs() < 1e-9);
+    }
+    // The wheel speed from the OBD-2 responses on bus 1, km/h into m/s.
+    let odo = messages(&fused, "/odometer/1");
+    assert!(odo.len() > 60, "{}", odo.len()); // about 2 Hz over the last file's 45 s
+    assert!(odo
+        .iter()
+        .all(|o| (0.0..70.0).contains(&o["speed_mps"].as_f64().unwrap())));
+}

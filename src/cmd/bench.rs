@@ -18,7 +18,7 @@ const PEER: &str = include_str!("../../bench/peer_refuse.py");
 
 #[derive(clap::Args)]
 // One measurement a run: a second mode flag is refused, not silently dropped.
-#[command(group(clap::ArgGroup::new("mode").args(["record", "can", "viz", "tune", "em", "safety", "gnss_ins", "eddy_current", "runs"])))]
+#[command(group(clap::ArgGroup::new("mode").args(["record", "can", "viz", "tune", "em", "safety", "gnss_ins", "eddy_current", "runs", "mdf4"])))]
 pub struct Args {
     /// Durations (s) of the simulated default-scenario logs to measure with samples/kalman.toml;
     /// memory should not grow with them.
@@ -63,6 +63,10 @@ pub struct Args {
     /// evaluations per second of the default pipeline on it, on one core and on every core.
     #[arg(long, value_name = "SECONDS")]
     pub tune: Option<f64>,
+    /// Measure MDF 4 reading instead: these bus logs (files or folders) read to CAN frames by
+    /// railfuse and by asammdf, and converted into a run's MCAP part.
+    #[arg(long, value_name = "FILE|DIR", num_args = 1..)]
+    pub mdf4: Vec<PathBuf>,
     /// Measure EM instead: railfuse's against pykalman's `KalmanFilter.em` on the same
     /// constant-acceleration data (10 000 steps, 20 iterations, Q and R estimated).
     #[arg(long)]
@@ -107,6 +111,10 @@ pub fn run(a: Args) -> Result<()> {
     }
     if let Some(secs) = a.tune {
         return super::bench_tune::run(&a.dir, secs, a.repeat);
+    }
+    if !a.mdf4.is_empty() {
+        let python = a.python.clone().or_else(find_python);
+        return super::bench_mdf::run(&a.mdf4, python, &a.dir, a.repeat);
     }
     if a.em {
         let python = a.python.clone().or_else(find_python);

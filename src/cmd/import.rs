@@ -2,7 +2,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::Result;
-use railfuse_can::dbc::Database;
+use railfuse_can::dbc::{BusDbcs, Database};
 use railfuse_catalog::formats::Storage;
 use railfuse_record::decode::nmea;
 use railfuse_record::import::can_log::{self, CanLog};
@@ -41,9 +41,11 @@ pub struct Args {
     pub example_map: Option<PathBuf>,
     /// The vehicle's DBC: a CAN log's known messages are also written decoded, one channel
     /// per message (`/can/<bus>/<Message>`), beside every frame raw (`/can/<bus>/frames`).
-    /// Only with a CAN log (candump, asc, blf).
-    #[arg(long, value_name = "VEHICLE.dbc")]
-    pub dbc: Option<PathBuf>,
+    /// Only with a CAN log (candump, asc, blf, mdf4).
+    /// A bus's own DBC is `BUS=FILE` (`--dbc CAN2=gnss.dbc --dbc CAN1=obd2.dbc`: each bus
+    /// decoded with its own); a plain FILE decodes every bus no other names.
+    #[arg(long, value_name = "[BUS=]VEHICLE.dbc")]
+    pub dbc: Vec<String>,
     #[command(flatten)]
     pub formats: super::run_input::FormatArgs,
     /// Print the report as JSON.
@@ -92,6 +94,23 @@ fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
         return Err(bad());
     }
     Ok((y, m as u32, d as u32))
+}
+
+/// `--dbc [BUS=]FILE`, each read and checked; one for a bus at most.
+pub fn bus_dbcs(args: &[String]) -> Result<BusDbcs> {
+    let mut out = BusDbcs::default();
+    for arg in args {
+        let (bus, path) = BusDbcs::parse_arg(arg);
+        if out.0.iter().any(|(b, _)| *b == bus) {
+            anyhow::bail!(
+                "--dbc {arg}: a second DBC for {}: one a bus",
+                bus.as_deref()
+                    .map_or("every bus".into(), |b| format!("bus {b}"))
+            );
+        }
+        out.0.push((bus, Arc::new(Database::open(&path)?)));
+    }
+    Ok(out)
 }
 
 /// The first line of a Vector ASC log: `date …` or `base hex …`.
@@ -180,7 +199,7 @@ pub fn run(a: Args) -> Result<()> {
         format,
         Format::Candump | Format::Asc | Format::Blf | Format::Mdf4
     );
-    if a.dbc.is_some() && !can {
+    if !a.dbc.is_empty() && !can {
         anyhow::bail!(
             "--dbc decodes a CAN log (--format candump, asc, blf or mdf4), not --format {}",
             format_name(format)
@@ -209,10 +228,7 @@ pub fn run(a: Args) -> Result<()> {
             csv_map::import(&input, map, &output)?
         }
         Format::Candump | Format::Asc | Format::Blf | Format::Mdf4 => {
-            let dbc = match &a.dbc {
-                Some(p) => Some(Arc::new(Database::open(p)?)),
-                None => None,
-            };
+            let dbc = bus_dbcs(&a.dbc)?;
             let log = match format {
                 Format::Asc => CanLog::Asc,
                 Format::Blf => CanLog::Blf,

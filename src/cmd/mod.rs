@@ -1,6 +1,7 @@
 pub mod bench;
 pub mod bench_can;
 pub mod bench_em;
+pub mod bench_mdf;
 pub mod bench_record;
 pub mod bench_runs;
 pub mod bench_track;

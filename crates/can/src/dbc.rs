@@ -65,6 +65,43 @@ pub struct Message {
     pub signals: Vec<Signal>,
 }
 
+/// The DBCs of a vehicle's buses, each for its bus or (`None`) for every bus no other names:
+/// a vehicle bus and an OBD-2 bus decoded side by side, each with its own.
+#[derive(Debug, Clone, Default)]
+pub struct BusDbcs(pub Vec<(Option<String>, std::sync::Arc<Database>)>);
+
+impl BusDbcs {
+    /// One DBC for every bus, or none.
+    pub fn every_bus(db: Option<std::sync::Arc<Database>>) -> Self {
+        Self(db.into_iter().map(|d| (None, d)).collect())
+    }
+
+    /// The index of the DBC that decodes `bus`: the one naming it, else one naming no bus.
+    pub fn index_of(&self, bus: &str) -> Option<usize> {
+        let named = self.0.iter().position(|(b, _)| b.as_deref() == Some(bus));
+        named.or_else(|| self.0.iter().position(|(b, _)| b.is_none()))
+    }
+
+    /// The DBC that decodes `bus`.
+    pub fn for_bus(&self, bus: &str) -> Option<&Database> {
+        self.index_of(bus).map(|i| &*self.0[i].1)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// A `--dbc` argument: `FILE` (every bus) or `BUS=FILE`.
+    pub fn parse_arg(arg: &str) -> (Option<String>, std::path::PathBuf) {
+        match arg.split_once('=') {
+            Some((bus, file)) if !bus.is_empty() && !bus.contains('/') => {
+                (Some(bus.to_owned()), file.into())
+            }
+            _ => (None, arg.into()),
+        }
+    }
+}
+
 /// A DBC's messages by (id, extended).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Database {

@@ -31,7 +31,7 @@ use crate::filter::working_state::DetectorSettings;
 use crate::measurement::Quantity;
 use crate::model::{ConstantAcceleration, ConstantVelocity, MotionModel, ProcessNoise, Singer};
 pub use crate::noise::{FromMessage, Variance, VarianceValue};
-pub use railfuse_catalog::foreign::can::{CanSettings, SensorSource};
+pub use railfuse_catalog::foreign::can::{CanBuses, CanSettings, SensorSource};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -45,9 +45,11 @@ pub struct PipelinesFile {
     /// win over these.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub run: Option<RunSettings>,
-    /// `[can]`: the vehicle's DBC, which the `[sensor."<topic>"]` tables read the bus with.
+    /// `[can]`: the vehicle's DBC, which the `[sensor."<topic>"]` tables read the bus with;
+    /// or `[[can]]`, one table a bus (`bus = "CAN2"`, `dbc = "gnss.dbc"`), each bus decoded
+    /// with its own DBC.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub can: Option<CanSettings>,
+    pub can: Option<CanBuses>,
     /// `[sensor."/odometer/1"] from = "can:WheelSpeed.AxleSpeed1"`: a sensor made from the
     /// CAN bus's signals (with `[can]`), fed to the pipelines as if the log had its channel.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]

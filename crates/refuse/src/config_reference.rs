@@ -97,7 +97,16 @@ fn table(out: &mut String, path: &str, schema: &Value, done: &mut Vec<(Value, St
             if let Some(props) = v.get("properties") {
                 let form = tag_of(props).map_or(String::new(), |t| format!(" with {t}"));
                 nested.push((format!("[{sub}]{form}"), v.clone()));
+            } else if let Some(items) = v.get("items").filter(|i| i.get("properties").is_some()) {
+                nested.push((format!("[[{sub}]]"), items.clone()));
             }
+        }
+        // A map of tables by name (`[sensor."/gnss/fix"]`).
+        if let Some(values) = p
+            .get("additionalProperties")
+            .filter(|a| a.get("properties").is_some())
+        {
+            nested.push((format!("[{sub}.\"<name>\"]"), values.clone()));
         }
     }
     for (path, s) in nested {
@@ -113,12 +122,16 @@ fn prefix(path: &str) -> &str {
     }
 }
 
+/// The forms of a union, a union's own unions flattened (an optional untagged enum).
 fn variants(p: &Value) -> Vec<Value> {
     ["oneOf", "anyOf"]
         .iter()
         .filter_map(|k| p.get(*k).and_then(Value::as_array))
         .flatten()
-        .cloned()
+        .flat_map(|v| match v.get("oneOf").or(v.get("anyOf")) {
+            Some(_) => variants(v),
+            None => vec![v.clone()],
+        })
         .collect()
 }
 

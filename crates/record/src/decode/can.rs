@@ -10,9 +10,8 @@
 //! are counted and skipped.
 
 use std::collections::HashMap;
-use std::sync::Arc;
 
-use railfuse_can::dbc::Database;
+use railfuse_can::dbc::BusDbcs;
 use railfuse_can::decode::Decoded;
 use railfuse_can::frame::Frame;
 use railfuse_catalog::foreign::can::{frames_topic, signals_topic};
@@ -33,16 +32,17 @@ pub const TOO_MANY_BUSES: &str = "CAN frame of a bus past the 16th (skipped)";
 /// Turns frames into log items.
 #[derive(Default)]
 pub struct CanDecoder {
-    db: Option<Arc<Database>>,
+    dbcs: BusDbcs,
     /// Each bus's frame topic, and each (bus, id, extended)'s signal topic.
     frame_topics: HashMap<String, String>,
     signal_topics: HashMap<(String, u32, bool), String>,
 }
 
 impl CanDecoder {
-    pub fn new(db: Option<Arc<Database>>) -> Self {
+    /// Decoding each bus with its DBC (none: frames only).
+    pub fn new(dbcs: BusDbcs) -> Self {
         Self {
-            db,
+            dbcs,
             ..Default::default()
         }
     }
@@ -76,7 +76,7 @@ impl CanDecoder {
             log_time_ns: receive_ns,
             message: AnyMessage::CanFrame(CanFrame::from_frame(frame, receive_ns)),
         });
-        let Some(db) = &self.db else {
+        let Some(db) = self.dbcs.for_bus(&frame.bus) else {
             return;
         };
         match db.decode(frame) {
@@ -107,6 +107,7 @@ impl CanDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::sync::Arc;
 
     fn frame(bus: &str, id: u32, data: &[u8]) -> Frame {
         Frame {
@@ -130,7 +131,7 @@ mod tests {
             include_str!("../../../../samples/vehicle.dbc"),
         )
         .unwrap();
-        let mut d = CanDecoder::new(Some(Arc::new(db)));
+        let mut d = CanDecoder::new(BusDbcs::every_bus(Some(Arc::new(db))));
         let (mut stats, mut out) = (SourceStats::default(), Vec::new());
         // AxleSpeed1 = 200 m/s, past its [0|120].
         d.frame(

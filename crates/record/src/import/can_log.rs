@@ -7,9 +7,8 @@
 
 use std::io::BufReader;
 use std::path::Path;
-use std::sync::Arc;
 
-use railfuse_can::dbc::Database;
+use railfuse_can::dbc::BusDbcs;
 use railfuse_can::frame::Frame;
 use railfuse_can::lines::BadLine;
 use railfuse_catalog::log::LogWriter;
@@ -33,13 +32,8 @@ pub enum CanLog {
     Mdf4,
 }
 
-/// Imports the CAN log `input` to `output`, decoding with `dbc` where given.
-pub fn import(
-    input: &Path,
-    output: &Path,
-    format: CanLog,
-    dbc: Option<Arc<Database>>,
-) -> Result<ImportReport> {
+/// Imports the CAN log `input` to `output`, decoding each bus with its DBC of `dbcs`.
+pub fn import(input: &Path, output: &Path, format: CanLog, dbcs: BusDbcs) -> Result<ImportReport> {
     let mut report = ImportReport {
         input: input.to_owned(),
         output: output.to_owned(),
@@ -73,7 +67,7 @@ pub fn import(
         )),
     };
     let mut writer = ItemWriter::new(LogWriter::create(output)?);
-    let mut decoder = CanDecoder::new(dbc);
+    let mut decoder = CanDecoder::new(dbcs);
     let (mut stats, mut items) = (SourceStats::default(), Vec::new());
     for frame in frames.by_ref() {
         match frame {
@@ -116,7 +110,7 @@ pub fn import(
 
 /// What an MDF file's reading said, into the import's report.
 fn mdf4_report(r: &railfuse_mdf::bus::BusReport, report: &mut ImportReport) {
-    report.lines = r.records;
+    report.bytes = std::fs::metadata(&report.input).map_or(0, |m| m.len());
     for (why, n) in r.not_used() {
         *report.skipped.entry(why).or_insert(0) += n;
     }

@@ -67,27 +67,26 @@ pub struct Pipelines {
 /// The vehicle's DBC and the sensors a configuration makes from its signals.
 #[derive(Debug, Clone)]
 pub struct CanSensors {
-    pub db: std::sync::Arc<railfuse_can::dbc::Database>,
-    pub bus: Option<String>,
+    /// Each bus's DBC (`None`: every bus no other names).
+    pub dbs: railfuse_can::dbc::BusDbcs,
     pub sensors: std::collections::BTreeMap<String, crate::config::SensorSource>,
 }
 
 impl CanSensors {
     /// The bridge that makes the sensors' messages from frames.
     pub fn bridge(&self) -> railfuse_catalog::foreign::can::SensorBridge {
-        railfuse_catalog::foreign::can::SensorBridge::with_database(
-            (*self.db).clone(),
-            self.bus.clone(),
+        railfuse_catalog::foreign::can::SensorBridge::with_databases(
+            self.dbs.clone(),
             &self.sensors,
         )
         .expect("checked when the configuration was read")
     }
 
-    /// `[can]` and `[sensor]` of a configuration at `path`: the DBC (relative to it) read and
+    /// `[can]` and `[sensor]` of a configuration at `path`: the DBCs (relative to it) read and
     /// every mapping checked.
     fn read(
         path: &Path,
-        can: Option<crate::config::CanSettings>,
+        can: Option<crate::config::CanBuses>,
         sensors: std::collections::BTreeMap<String, crate::config::SensorSource>,
     ) -> Result<Option<Self>> {
         let bad = |message: String| Error::ConfigSyntax {
@@ -110,20 +109,24 @@ impl CanSensors {
                     .into(),
             ));
         }
-        let dbc = path.parent().unwrap_or(Path::new("")).join(&can.dbc);
-        let db =
-            railfuse_can::dbc::Database::open(&dbc).map_err(|e| bad(format!("[can] dbc: {e}")))?;
-        railfuse_catalog::foreign::can::SensorBridge::with_database(
-            db.clone(),
-            can.bus.clone(),
-            &sensors,
-        )
-        .map_err(|e| bad(e.to_string()))?;
-        Ok(Some(Self {
-            db: std::sync::Arc::new(db),
-            bus: can.bus,
-            sensors,
-        }))
+        let mut dbs = railfuse_can::dbc::BusDbcs::default();
+        for (i, bus) in can.buses().iter().enumerate() {
+            if can.buses()[..i].iter().any(|b| b.bus == bus.bus) {
+                return Err(bad(format!(
+                    "[[can]]: two tables for {}: one DBC a bus",
+                    bus.bus
+                        .as_deref()
+                        .map_or("every bus".to_owned(), |b| format!("bus {b}"))
+                )));
+            }
+            let dbc = path.parent().unwrap_or(Path::new("")).join(&bus.dbc);
+            let db = railfuse_can::dbc::Database::open(&dbc)
+                .map_err(|e| bad(format!("[can] dbc: {e}")))?;
+            dbs.0.push((bus.bus.clone(), std::sync::Arc::new(db)));
+        }
+        railfuse_catalog::foreign::can::SensorBridge::with_databases(dbs.clone(), &sensors)
+            .map_err(|e| bad(e.to_string()))?;
+        Ok(Some(Self { dbs, sensors }))
     }
 }
 

@@ -2,107 +2,17 @@
 //! and the bridge that makes the sensors' messages from frames.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use railfuse_can::dbc::{Database, DbcError, Encoding, Signal};
+use railfuse_can::dbc::{BusDbcs, Database, Encoding, Signal};
 use railfuse_can::decode::{Decoded, Value};
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
+use super::assembled::{Latest, MessageKey, SignalAt};
 use super::pulse_counter::{NoReading, PulseCounter};
+use super::sensor::{find_signal, Mapped, Reading, SignalRef};
+pub use super::settings::{CanBuses, CanSettings, MappingError, SensorSource};
 use crate::messages::{AnyMessage, CanFrame, MessageKind, Odometer, RadarSpeed};
-
-/// `[can]` of a configuration: the vehicle's DBC, and which bus to read.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct CanSettings {
-    /// The vehicle's DBC file, relative to the configuration.
-    pub dbc: PathBuf,
-    /// Read frames of this bus only (`can0`); every bus when absent.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub bus: Option<String>,
-}
-
-/// `[sensor."<topic>"]`: a railfuse sensor made from decoded CAN signals.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct SensorSource {
-    /// The speed signal, `"can:Message.Signal"`: in m/s, km/h or mph by its DBC unit.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub from: Option<String>,
-    /// Or, for an odometer, its axle pulse generator's count (an unsigned integer signal,
-    /// wrapping at its bits): distance from the wheel below, speed over `speed_window_s`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub pulses: Option<String>,
-    /// With `pulses`: pulses a wheel revolution.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub pulses_per_revolution: Option<u32>,
-    /// With `pulses`: the wheel's diameter, m.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub wheel_diameter_m: Option<f64>,
-    /// With `pulses`: the speed is the distance over the last this long, s (0.2 unless told).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub speed_window_s: Option<f64>,
-    /// A signal of the same message that is 0 when the sensor has no measurement.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub valid: Option<String>,
-    /// A signal of the same message giving the measurement's quality: 0–1, or 0–100 in `%`.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub quality: Option<String>,
-}
-
-/// What is wrong with a CAN mapping (the caller names the configuration file).
-#[derive(Debug, thiserror::Error)]
-pub enum MappingError {
-    #[error(transparent)]
-    Dbc(#[from] DbcError),
-    #[error("[sensor.\"{topic}\"] {key} = \"{given}\": {cause}")]
-    Signal {
-        topic: String,
-        key: &'static str,
-        given: String,
-        cause: String,
-    },
-    #[error("[sensor.\"{topic}\"]: {cause}")]
-    Sensor { topic: String, cause: String },
-}
-
-/// A signal of the mapped message, by name.
-#[derive(Debug, Clone)]
-struct SignalRef {
-    name: String,
-    /// To SI units.
-    scale: f64,
-}
-
-struct Mapped {
-    topic: String,
-    kind: MessageKind,
-    /// (id, extended) of the message.
-    message: (u32, bool),
-    reading: Reading,
-    valid: Option<SignalRef>,
-    quality: Option<SignalRef>,
-}
-
-/// What the sensor's main signal is.
-enum Reading {
-    Speed(SignalRef),
-    Pulses {
-        signal: SignalRef,
-        counter: PulseCounter,
-        per_revolution: u32,
-        diameter_m: f64,
-    },
-}
-
-impl Reading {
-    fn signal(&self) -> &SignalRef {
-        match self {
-            Reading::Speed(s) | Reading::Pulses { signal: s, .. } => s,
-        }
-    }
-}
 
 /// What the bridge has seen, for the report.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
@@ -121,12 +31,15 @@ pub struct BridgeCounts {
     /// anew), by message.signal.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub counter_restarts: BTreeMap<String, u64>,
+    /// Other values that made no reading (a fix type `fix_types` does not name), by cause.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub other: BTreeMap<String, u64>,
 }
 
-/// The vehicle's DBC and the sensors mapped from its signals.
+/// The vehicle's DBCs (one a bus, or one for every bus) and the sensors mapped from their
+/// signals.
 pub struct SensorBridge {
-    db: Database,
-    bus: Option<String>,
+    dbs: BusDbcs,
     mapped: Vec<Mapped>,
     pub counts: BridgeCounts,
 }
@@ -158,13 +71,20 @@ impl SensorBridge {
         bus: Option<String>,
         sensors: &BTreeMap<String, SensorSource>,
     ) -> Result<Self, MappingError> {
+        Self::with_databases(BusDbcs(vec![(bus, std::sync::Arc::new(db))]), sensors)
+    }
+
+    /// The bridge of DBCs already read, each of its bus (`None`: every bus no other names).
+    pub fn with_databases(
+        dbs: BusDbcs,
+        sensors: &BTreeMap<String, SensorSource>,
+    ) -> Result<Self, MappingError> {
         let mapped = sensors
             .iter()
-            .map(|(topic, source)| map_sensor(&db, topic, source))
+            .map(|(topic, source)| map_sensor(&dbs, topic, source))
             .collect::<Result<_, _>>()?;
         Ok(Self {
-            db,
-            bus,
+            dbs,
             mapped,
             counts: BridgeCounts::default(),
         })
@@ -175,17 +95,13 @@ impl SensorBridge {
         self.mapped.iter().map(|m| (m.topic.as_str(), m.kind))
     }
 
-    pub fn database(&self) -> &Database {
-        &self.db
-    }
-
     /// The sensor messages `frame` makes, with their topics (none for most frames).
     pub fn frame(&mut self, frame: &CanFrame) -> Vec<(&str, AnyMessage)> {
-        if self.bus.as_ref().is_some_and(|b| *b != frame.bus) {
+        let Some(dbi) = self.dbs.index_of(&frame.bus) else {
             return Vec::new();
-        }
+        };
         let f = frame.to_frame();
-        let (message, values) = match self.db.decode(&f) {
+        let (message, values) = match self.dbs.0[dbi].1.decode(&f) {
             Decoded::Signals { message, values } => (message, values),
             Decoded::Unknown => {
                 if !f.error && !f.rtr {
@@ -203,12 +119,14 @@ impl SensorBridge {
                 return Vec::new();
             }
         };
+        let key = (dbi, f.id, f.extended);
         let mut out = Vec::new();
-        for m in self
-            .mapped
-            .iter_mut()
-            .filter(|m| m.message == (f.id, f.extended))
-        {
+        for m in &mut self.mapped {
+            let signals: Vec<SignalAt> = m.reading.assembled().cloned().collect();
+            m.latest.remember(key, f.stamp_ns, &values, signals.iter());
+            if m.message != key {
+                continue;
+            }
             if let Some(made) = m.make(f.stamp_ns, &message.name, &values, &mut self.counts) {
                 *self.counts.made.entry(m.topic.clone()).or_insert(0) += 1;
                 out.push((m.topic.as_str(), made));
@@ -229,9 +147,14 @@ impl Mapped {
         values: &[Value],
         counts: &mut BridgeCounts,
     ) -> Option<AnyMessage> {
+        match &self.reading {
+            Reading::Gnss(g) => return g.make(&self.latest, stamp_ns, &mut counts.other),
+            Reading::Imu(i) => return i.make(&self.topic, &self.latest, stamp_ns),
+            _ => {}
+        }
         let find = |r: &SignalRef| values.iter().find(|v| v.name == r.name);
         // Absent: a multiplexed signal this frame does not carry.
-        let v = find(self.reading.signal())?;
+        let v = find(self.reading.signal()?)?;
         let key = format!("{name}.{}", v.name);
         if !v.value.is_finite() {
             *counts.not_finite.entry(key).or_insert(0) += 1;
@@ -269,6 +192,7 @@ impl Mapped {
                 odometer.speed_mps = (v.value * s.scale).abs();
                 Some(AnyMessage::Odometer(odometer))
             }
+            (Reading::Gnss(_) | Reading::Imu(_), _) => None,
             (
                 Reading::Pulses {
                     counter,
@@ -297,15 +221,22 @@ impl Mapped {
     }
 }
 
-/// The kind of sensor `topic` is: an odometer or a radar, the two a CAN signal makes.
+/// The kind of sensor `topic` is: an odometer, a radar, a GNSS fix or an IMU.
 fn sensor_kind(topic: &str) -> Result<MessageKind, MappingError> {
     let cause = match crate::topics::standard_kind(topic) {
-        Some(k @ (MessageKind::Odometer | MessageKind::RadarSpeed)) => return Ok(k),
+        Some(
+            k @ (MessageKind::Odometer
+            | MessageKind::RadarSpeed
+            | MessageKind::GnssFix
+            | MessageKind::Imu),
+        ) => return Ok(k),
         Some(k) => format!(
-            "is a {} channel: CAN signals make odometers and radars (a speed)",
+            "is a {} channel: CAN signals make odometers, radars, GNSS fixes and IMUs",
             k.type_name()
         ),
-        None => "is not an odometer or radar topic (/odometer/1, /odometer/2, /radar/speed)".into(),
+        None => "is not a sensor topic CAN signals make (/odometer/1, /odometer/2, \
+                 /radar/speed, /gnss/fix, /imu)"
+            .into(),
     };
     Err(MappingError::Sensor {
         topic: topic.into(),
@@ -316,11 +247,11 @@ fn sensor_kind(topic: &str) -> Result<MessageKind, MappingError> {
 /// The sensor's main signal (a speed, or an axle's pulse count), its message and how it was
 /// given.
 fn main_reading<'a>(
-    db: &Database,
+    db: &BusDbcs,
     topic: &str,
     kind: MessageKind,
     source: &'a SensorSource,
-) -> Result<((u32, bool), Reading, &'a str), MappingError> {
+) -> Result<(MessageKey, Reading, &'a str), MappingError> {
     Ok(match (&source.from, &source.pulses) {
         (Some(from), None) => {
             let (message, signal) = find_signal(db, topic, "from", from)?;
@@ -360,9 +291,13 @@ fn main_reading<'a>(
     })
 }
 
-/// `topic`'s sensor from `source`, checked against the DBC.
-fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mapped, MappingError> {
+/// `topic`'s sensor from `source`, checked against the DBCs.
+fn map_sensor(db: &BusDbcs, topic: &str, source: &SensorSource) -> Result<Mapped, MappingError> {
     let kind = sensor_kind(topic)?;
+    if matches!(kind, MessageKind::GnssFix | MessageKind::Imu) {
+        return super::mapping::assembled_sensor(db, topic, kind, source);
+    }
+    super::mapping::only_for(topic, kind, source)?;
     if kind == MessageKind::Odometer && (source.valid.is_some() || source.quality.is_some()) {
         return Err(MappingError::Sensor {
             topic: topic.into(),
@@ -402,6 +337,7 @@ fn map_sensor(db: &Database, topic: &str, source: &SensorSource) -> Result<Mappe
         reading,
         valid,
         quality,
+        latest: Latest::default(),
     })
 }
 
@@ -453,38 +389,8 @@ fn pulse_reading(
     })
 }
 
-/// The message key and the signal.
-fn find_signal<'a>(
-    db: &'a Database,
-    topic: &str,
-    key: &'static str,
-    given: &str,
-) -> Result<((u32, bool), &'a Signal), MappingError> {
-    let err = |cause: String| MappingError::Signal {
-        topic: topic.into(),
-        key,
-        given: given.into(),
-        cause,
-    };
-    let (message, signal) = given
-        .strip_prefix("can:")
-        .and_then(|s| s.split_once('.'))
-        .ok_or_else(|| err("write it as \"can:Message.Signal\"".into()))?;
-    let m = db
-        .messages
-        .values()
-        .find(|m| m.name == message)
-        .ok_or_else(|| err(format!("the DBC has no message {message}")))?;
-    let s = m
-        .signals
-        .iter()
-        .find(|s| s.name == signal)
-        .ok_or_else(|| err(format!("message {message} has no signal {signal}")))?;
-    Ok(((m.id, m.extended), s))
-}
-
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::messages::CanData;
 
@@ -519,6 +425,7 @@ BO_ 288 RadarSpeed: 4 Radar
             speed_window_s: None,
             valid: valid.map(Into::into),
             quality: quality.map(Into::into),
+            ..Default::default()
         }
     }
 
@@ -561,7 +468,8 @@ BO_ 288 RadarSpeed: 4 Radar
         );
     }
 
-    fn frame(id: u32, data: &[u8]) -> CanFrame {
+    /// A classic frame on can0.
+    pub(in crate::foreign::can) fn frame(id: u32, data: &[u8]) -> CanFrame {
         CanFrame {
             stamp_ns: 77,
             receive_ns: 78,
@@ -645,7 +553,7 @@ BO_ 288 RadarSpeed: 4 Radar
             (
                 "/odometer/1",
                 source("can:Wheel.AxleKmh", None, None),
-                "no message Wheel",
+                "no DBC has a message Wheel",
             ),
             (
                 "/odometer/1",
@@ -665,12 +573,17 @@ BO_ 288 RadarSpeed: 4 Radar
             (
                 "/gnss/fix",
                 source("can:RadarSpeed.Speed", None, None),
-                "is a GnssFix channel",
+                "`from` is an odometer's or a radar's",
+            ),
+            (
+                "/balise",
+                source("can:RadarSpeed.Speed", None, None),
+                "is a BalisePassage channel",
             ),
             (
                 "/wheel",
                 source("can:RadarSpeed.Speed", None, None),
-                "not an odometer or radar topic",
+                "not a sensor topic CAN signals make",
             ),
         ] {
             let e = bad(topic, s);

@@ -20,17 +20,24 @@
 //!
 //! [`SensorBridge`] does the mapping: a speed signal in m/s, km/h or mph becomes an
 //! [`Odometer`]'s or a [`RadarSpeed`]'s speed (its magnitude: direction is a signal of its
-//! own on a train's bus), stamped with the frame's bus time.
+//! own on a train's bus), stamped with the frame's bus time; a GNSS fix and an IMU sample are
+//! made of several signals, possibly of several messages (`latitude`, `longitude`, `fix_type`,
+//! …; `acceleration`, `angular_rate`: see `mapping.rs` and `assembled.rs`); and `[[can]]`
+//! gives each bus its own DBC.
 
+mod assembled;
 mod bridge;
+mod mapping;
 mod pulse_counter;
+mod sensor;
+mod settings;
 
 use railfuse_can::decode::Value;
 use railfuse_can::frame::Frame;
 
 use crate::messages::{CanData, CanFrame, CanSignal, CanSignals};
 
-pub use bridge::{BridgeCounts, CanSettings, MappingError, SensorBridge, SensorSource};
+pub use bridge::{BridgeCounts, CanBuses, CanSettings, MappingError, SensorBridge, SensorSource};
 
 /// `/can/<bus>/frames`: every frame of one bus.
 pub fn frames_topic(bus: &str) -> String {

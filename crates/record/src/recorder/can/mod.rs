@@ -30,7 +30,8 @@ pub(super) fn run(
     dbc: Option<Arc<Database>>,
     link: &Link,
 ) -> Result<(), SourceError> {
-    let mut out = Frames::new(CanDecoder::new(dbc), adapter.bus(), link);
+    let dbcs = railfuse_can::dbc::BusDbcs::every_bus(dbc);
+    let mut out = Frames::new(CanDecoder::new(dbcs), adapter.bus(), link);
     let fail = |cause: String| SourceError::Can {
         adapter: adapter.to_string(),
         cause,
