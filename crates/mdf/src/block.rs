@@ -39,7 +39,8 @@ impl Block {
 
     /// Bytes of its data, by the header's length.
     pub fn data_length(&self) -> u64 {
-        self.length - HEADER - 8 * self.links.len() as u64
+        self.length
+            .saturating_sub(HEADER + 8 * self.links.len() as u64)
     }
 
     pub fn u8(&self, at: usize) -> u8 {
@@ -96,7 +97,7 @@ pub fn read<F: Read + Seek>(
     let length = u64::from_le_bytes(head[8..16].try_into().expect("8 bytes"));
     let link_count = u64::from_le_bytes(head[16..24].try_into().expect("8 bytes"));
     let id_text = String::from_utf8_lossy(&id).into_owned();
-    if link_count > (length.saturating_sub(HEADER)) / 8 {
+    if length < HEADER || link_count > (length - HEADER) / 8 {
         return Err(MdfError::at(
             offset,
             format!("{id_text} claims {link_count} links in a block of {length} bytes"),

@@ -161,6 +161,8 @@ impl SdReader {
 pub struct BusFrames {
     layout: Layout,
     readers: Vec<GroupReader>,
+    /// The last frame's time: a frame before it (a damaged time) is counted, not given.
+    last_ns: u64,
     pub report: BusReport,
 }
 
@@ -213,6 +215,7 @@ impl BusFrames {
         Ok(Self {
             layout,
             readers,
+            last_ns: 0,
             report,
         })
     }
@@ -240,15 +243,28 @@ impl Iterator for BusFrames {
     type Item = Frame;
     fn next(&mut self) -> Option<Frame> {
         let start = self.layout.start_ns;
-        for r in &mut self.readers {
-            if r.head.is_none() {
-                r.head = r.next_frame(start, &mut self.report);
+        loop {
+            for r in &mut self.readers {
+                if r.head.is_none() {
+                    r.head = r.next_frame(start, &mut self.report);
+                }
             }
+            let i = (0..self.readers.len())
+                .filter(|&i| self.readers[i].head.is_some())
+                .min_by_key(|&i| self.readers[i].head.as_ref().map(|f| f.stamp_ns))?;
+            let f = self.readers[i].head.take()?;
+            if f.stamp_ns < self.last_ns {
+                self.report.frames -= 1;
+                *self
+                    .report
+                    .skipped
+                    .entry("a frame earlier than the one before (a damaged time)".into())
+                    .or_insert(0) += 1;
+                continue;
+            }
+            self.last_ns = f.stamp_ns;
+            return Some(f);
         }
-        let i = (0..self.readers.len())
-            .filter(|&i| self.readers[i].head.is_some())
-            .min_by_key(|&i| self.readers[i].head.as_ref().map(|f| f.stamp_ns))?;
-        self.readers[i].head.take()
     }
 }
 
@@ -299,10 +315,12 @@ fn frame(
     let int = |c: &Option<Channel>| c.as_ref().and_then(|c| c.raw_int(record));
     let flag = |c: &Option<Channel>| int(c).unwrap_or(0) != 0;
     let seconds = g.time.value(record).ok_or("a time that does not read")?;
-    if !(seconds.is_finite() && seconds >= -1e9) {
+    // A record's time is within a few centuries of its file's start, or it is damage.
+    if !(seconds.is_finite() && seconds.abs() <= 1e10) {
         return Err("a time that does not read");
     }
-    let stamp_ns = (start_ns as i128 + (seconds * 1e9).round() as i128).max(0) as u64;
+    let stamp_ns =
+        (start_ns as i128 + (seconds * 1e9).round() as i128).clamp(0, u64::MAX as i128) as u64;
     let raw_id = int(&g.id).unwrap_or(0) as u32;
     // Some loggers mark a 29-bit id in the id's top bit instead of IDE.
     let extended = flag(&g.ide) || raw_id & 0x8000_0000 != 0;
