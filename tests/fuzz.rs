@@ -219,15 +219,15 @@ fn converted_reads_back(output: &Path) -> Result<(), TestCaseError> {
     Ok(())
 }
 
-#[test]
-fn gpx_reader() {
-    use railfuse_catalog::formats::{self, FormatOptions, Storage};
+/// Mutations of `target`'s corpus converted as `storage` into a run's MCAP part.
+fn conversion(target: &str, storage: railfuse_catalog::formats::Storage, name: &str) {
+    use railfuse_catalog::formats::{self, FormatOptions};
     let d = tempfile::tempdir().unwrap();
-    let (input, output) = (d.path().join("ride.gpx"), d.path().join("ride.mcap"));
-    fuzz("gpx", 600, |data| {
+    let (input, output) = (d.path().join(name), d.path().join("out.mcap"));
+    fuzz(target, 600, |data| {
         std::fs::write(&input, data).unwrap();
         let options = FormatOptions::default();
-        if formats::convert(Storage::Gpx, &input, &output, &options, &Default::default()).is_ok() {
+        if formats::convert(storage, &input, &output, &options, &Default::default()).is_ok() {
             converted_reads_back(&output)?;
         }
         Ok(())
@@ -235,26 +235,13 @@ fn gpx_reader() {
 }
 
 #[test]
+fn gpx_reader() {
+    conversion("gpx", railfuse_catalog::formats::Storage::Gpx, "ride.gpx");
+}
+
+#[test]
 fn mdf4_bus_reader() {
-    use railfuse_catalog::formats::{self, FormatOptions, Storage};
-    let d = tempfile::tempdir().unwrap();
-    let (input, output) = (d.path().join("bus.mf4"), d.path().join("bus.mcap"));
-    fuzz("mdf4", 600, |data| {
-        std::fs::write(&input, data).unwrap();
-        let options = FormatOptions::default();
-        if formats::convert(
-            Storage::Mdf4,
-            &input,
-            &output,
-            &options,
-            &Default::default(),
-        )
-        .is_ok()
-        {
-            converted_reads_back(&output)?;
-        }
-        Ok(())
-    });
+    conversion("mdf4", railfuse_catalog::formats::Storage::Mdf4, "bus.mf4");
 }
 
 #[test]
