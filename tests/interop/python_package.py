@@ -32,6 +32,13 @@ summary["state_columns"] = states.column_names
 summary["first_chainage"] = states.column("chainage_m")[0].as_py()
 summary["covariance_type"] = str(states.schema.field("covariance").type)
 summary["radar_rows"] = railfuse.read(raw, "/radar/speed").num_rows
+# Other tools' files are runs to the package too: a GPX ride, an MDF 4 bus log.
+here = os.path.dirname(os.path.abspath(__file__))
+ride = railfuse.read(os.path.join(here, "../../samples/ride.gpx"), "/gnss/fix")
+summary["gpx_rows"] = ride.num_rows
+summary["gpx_first_latitude"] = ride.column("latitude_deg")[0].as_py()
+mf4 = os.path.join(here, "../fuzz/corpus/mdf4/cut-sorted.mf4")
+summary["mdf4_frames"] = railfuse.read(mf4, "/can/CAN2/frames").num_rows
 
 errors = {}
 for name, call in {

@@ -30,6 +30,9 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
     assert_eq!(v["state_columns"][0], "log_time_ns");
     let radar: Vec<railfuse_catalog::messages::RadarSpeed> = messages(&raw, "/radar/speed");
     assert_eq!(v["radar_rows"].as_u64().unwrap() as usize, radar.len());
+    assert_eq!(v["gpx_rows"], 91);
+    assert_eq!(v["gpx_first_latitude"], 44.6551002);
+    assert!(v["mdf4_frames"].as_u64().unwrap() > 10, "{v}");
     // (refuse scores in the same pass, evaluate from the file: sums in another order)
     close(&v["refuse_rmse"], &v["evaluate_rmse"]);
     // A GNSS reference with the fixes it counts, as --reference-quality all does.

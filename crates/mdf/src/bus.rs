@@ -9,7 +9,7 @@
 //! Frames leave in time order: each data group's records are read in order (a logger's one
 //! unsorted group is already in time order), and several data groups are merged by time.
 
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, VecDeque};
 use std::fs::File;
 use std::path::Path;
 
@@ -123,11 +123,15 @@ impl BusReport {
 struct GroupReader {
     records: Records<File>,
     groups: Vec<ChannelGroup>,
-    bus: HashMap<usize, BusGroup>,
+    /// Each channel group's bus logging, where it is a bus group.
+    bus: Vec<Option<BusGroup>>,
     /// VLSD payloads by (group, offset), oldest first.
     held: VecDeque<((usize, u64), Vec<u8>)>,
-    sd: HashMap<u64, SdReader>,
+    /// Each SD block's reader, by its link.
+    sd: Vec<(u64, SdReader)>,
     head: Option<Frame>,
+    /// `CAN<n>` by n, made once.
+    bus_names: Vec<(i128, String)>,
 }
 
 /// A channel's SD stream, read forward to each offset asked for.
@@ -175,26 +179,23 @@ impl BusFrames {
         let mut sd_damage = None;
         for dg in &layout.data_groups {
             let stream = DataStream::new(open()?, layout.file_len, dg.data, open_ended)?;
-            let bus: HashMap<usize, BusGroup> = dg
+            let bus: Vec<Option<BusGroup>> = dg
                 .groups
                 .iter()
-                .enumerate()
-                .filter_map(|(i, g)| BusGroup::of(g, &dg.groups).map(|b| (i, b)))
+                .map(|g| BusGroup::of(g, &dg.groups))
                 .collect();
-            let mut sd = HashMap::new();
-            for b in bus.values() {
+            let mut sd = Vec::new();
+            for b in bus.iter().flatten() {
                 if let Some(link) = b.sd {
                     let mut s = DataStream::new(open()?, layout.file_len, link, false)?;
                     if let Some(d) = s.damage.take() {
                         sd_damage.get_or_insert(format!("the frames' data: {d}"));
                     }
-                    sd.insert(
-                        link,
-                        SdReader {
-                            stream: std::io::BufReader::new(s),
-                            at: 0,
-                        },
-                    );
+                    let reader = SdReader {
+                        stream: std::io::BufReader::new(s),
+                        at: 0,
+                    };
+                    sd.push((link, reader));
                 }
             }
             readers.push(GroupReader {
@@ -204,6 +205,7 @@ impl BusFrames {
                 held: VecDeque::new(),
                 sd,
                 head: None,
+                bus_names: Vec::new(),
             });
         }
         let report = BusReport {
@@ -227,7 +229,9 @@ impl BusFrames {
 
     /// Whether any group of the file is CAN bus logging.
     pub fn has_bus_logging(&self) -> bool {
-        self.readers.iter().any(|r| !r.bus.is_empty())
+        self.readers
+            .iter()
+            .any(|r| r.bus.iter().any(Option::is_some))
     }
 
     /// The names of the file's channel groups.
@@ -270,30 +274,39 @@ impl Iterator for BusFrames {
 
 impl GroupReader {
     fn next_frame(&mut self, start_ns: u64, report: &mut BusReport) -> Option<Frame> {
+        // The fields one by one: a record borrowed from the reader, the rest changed beside it.
+        let GroupReader {
+            records,
+            groups,
+            bus,
+            held,
+            sd,
+            bus_names,
+            ..
+        } = self;
         loop {
-            let Some((g, kind, bytes)) = self.records.next_record() else {
-                if let Some(d) = self.records.damage.take() {
+            let Some((g, kind, bytes)) = records.next_record() else {
+                if let Some(d) = records.damage.take() {
                     report.damage.get_or_insert(d);
                 }
                 return None;
             };
             report.records += 1;
             if let Kind::Vlsd { offset } = kind {
-                if self.held.len() >= HELD_VLSD {
-                    self.held.pop_front();
+                if held.len() >= HELD_VLSD {
+                    held.pop_front();
                 }
-                self.held.push_back(((g, offset), bytes.to_vec()));
+                held.push_back(((g, offset), bytes.to_vec()));
                 continue;
             }
-            let Some(bus) = self.bus.get(&g) else {
+            let Some(bus) = bus.get(g).and_then(Option::as_ref) else {
                 *report
                     .other_records
-                    .entry(self.groups[g].name.clone())
+                    .entry(groups[g].name.clone())
                     .or_insert(0) += 1;
                 continue;
             };
-            let bytes = bytes.to_vec();
-            match frame(bus, &bytes, start_ns, &mut self.held, &mut self.sd) {
+            match frame(bus, bytes, start_ns, held, sd, bus_names) {
                 Ok(f) => {
                     report.frames += 1;
                     return Some(f);
@@ -304,13 +317,24 @@ impl GroupReader {
     }
 }
 
+/// `CAN<n>`, made once for each n.
+fn bus_name(names: &mut Vec<(i128, String)>, n: i128) -> String {
+    if let Some((_, name)) = names.iter().find(|(k, _)| *k == n) {
+        return name.clone();
+    }
+    let name = format!("CAN{n}");
+    names.push((n, name.clone()));
+    name
+}
+
 /// One record of a bus group as a frame, or why it is not one.
 fn frame(
     g: &BusGroup,
     record: &[u8],
     start_ns: u64,
     held: &mut VecDeque<((usize, u64), Vec<u8>)>,
-    sd: &mut HashMap<u64, SdReader>,
+    sd: &mut [(u64, SdReader)],
+    bus_names: &mut Vec<(i128, String)>,
 ) -> std::result::Result<Frame, &'static str> {
     let int = |c: &Option<Channel>| c.as_ref().and_then(|c| c.raw_int(record));
     let flag = |c: &Option<Channel>| int(c).unwrap_or(0) != 0;
@@ -326,7 +350,7 @@ fn frame(
     let extended = flag(&g.ide) || raw_id & 0x8000_0000 != 0;
     let mut f = Frame {
         stamp_ns,
-        bus: format!("CAN{}", int(&g.bus).unwrap_or(0)),
+        bus: bus_name(bus_names, int(&g.bus).unwrap_or(0)),
         id: raw_id & 0x1FFF_FFFF,
         extended,
         rtr: g.kind == Event::Remote,
@@ -363,8 +387,9 @@ fn frame(
                     let offset = bytes
                         .vlsd_offset(record)
                         .ok_or("a VLSD offset that does not read")?;
-                    sd.get_mut(&link)
-                        .and_then(|s| s.at(offset))
+                    sd.iter_mut()
+                        .find(|s| s.0 == link)
+                        .and_then(|s| s.1.at(offset))
                         .ok_or("DataBytes whose signal data is not in the file")?
                 }
                 _ => bytes

@@ -130,13 +130,32 @@ pub struct Channel {
 impl Channel {
     /// The raw value as an integer (unsigned or signed) of a record's bytes (after the record
     /// id); None where the record is too short or the type is not an integer.
+    #[inline]
     pub fn raw_int(&self, record: &[u8]) -> Option<i128> {
+        self.raw_int_as(self.data_type, record)
+    }
+
+    /// [`raw_int`](Self::raw_int) read as if of `data_type`.
+    #[inline]
+    fn raw_int_as(&self, data_type: u8, record: &[u8]) -> Option<i128> {
         let start = self.byte_offset as usize;
         let bits = self.bit_count.min(64);
         let bytes = (self.bit_offset as usize + bits as usize).div_ceil(8);
         let src = record.get(start..start + bytes)?;
+        // The common case (an unsigned little-endian field within 8 bytes) in one word.
+        if data_type == 0 && bytes <= 8 {
+            let mut word = [0u8; 8];
+            word[..bytes].copy_from_slice(src);
+            let v = u64::from_le_bytes(word) >> self.bit_offset;
+            let v = if bits >= 64 {
+                v
+            } else {
+                v & ((1u64 << bits) - 1)
+            };
+            return Some(v as i128);
+        }
         let mut word = [0u8; 16];
-        match self.data_type {
+        match data_type {
             0 | 2 | 4 => word[..bytes].copy_from_slice(src),
             1 | 3 | 5 => {
                 for (i, b) in src.iter().rev().enumerate() {
@@ -152,7 +171,7 @@ impl Channel {
             (1u128 << bits) - 1
         };
         let v = v & mask;
-        Some(match self.data_type {
+        Some(match data_type {
             2 | 3 if bits > 0 && v >> (bits - 1) & 1 == 1 => v as i128 - (1i128 << bits),
             _ => v as i128,
         })
@@ -161,11 +180,7 @@ impl Channel {
     /// A VLSD channel's offset into its signal data (an unsigned integer in the record,
     /// whatever type its values are).
     pub fn vlsd_offset(&self, record: &[u8]) -> Option<u64> {
-        let as_uint = Channel {
-            data_type: 0,
-            ..self.clone()
-        };
-        as_uint.raw_int(record).map(|v| v as u64)
+        self.raw_int_as(0, record).map(|v| v as u64)
     }
 
     /// The value, converted: integers and floats (32 and 64 bits).

@@ -28,8 +28,8 @@ pub enum Kind {
 pub struct Records<F: Read + Seek> {
     data: BufReader<DataStream<F>>,
     id_size: u8,
-    /// Record id → (group index, record length, VLSD).
-    by_id: HashMap<u64, (usize, usize, bool)>,
+    /// Record id → (group index, record length, VLSD); a file has a handful of groups.
+    by_id: Vec<(u64, (usize, usize, bool))>,
     /// Each VLSD group's next signal-data offset.
     vlsd_offsets: HashMap<usize, u64>,
     buf: Vec<u8>,
@@ -97,7 +97,7 @@ impl<F: Read + Seek> Records<F> {
                 if self.data.fill_buf_is_empty()? {
                     return Ok(None);
                 }
-                self.by_id.keys().next().copied().unwrap_or(0)
+                self.by_id.first().map_or(0, |g| g.0)
             }
             n => {
                 let mut raw = [0u8; 8];
@@ -108,7 +108,7 @@ impl<F: Read + Seek> Records<F> {
                 }
             }
         };
-        let Some(&(group, len, vlsd)) = self.by_id.get(&id) else {
+        let Some(&(_, (group, len, vlsd))) = self.by_id.iter().find(|g| g.0 == id) else {
             return Err(MdfError::at(
                 0,
                 format!("record {record}: record id {id}, which no channel group has (the rest cannot be framed)"),
