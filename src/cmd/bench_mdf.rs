@@ -39,24 +39,20 @@ fn median(mut t: Vec<f64>) -> f64 {
     t[t.len() / 2]
 }
 
-pub fn run(inputs: &[PathBuf], python: Option<PathBuf>, dir: &Path, repeat: u32) -> Result<()> {
-    let files = files(inputs)?;
-    let bytes: u64 = files
-        .iter()
-        .map(|f| std::fs::metadata(f).map_or(0, |m| m.len()))
-        .sum();
+/// railfuse's passes: the frames, and the median seconds to read them and to convert them.
+fn railfuse_passes(files: &[PathBuf], dir: &Path, repeat: u32) -> Result<(u64, f64, f64)> {
     let (mut frames, mut read_s, mut convert_s) = (0u64, Vec::new(), Vec::new());
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     for _ in 0..repeat.max(1) {
         let t = Instant::now();
         frames = 0;
-        for f in &files {
+        for f in files {
             let mut r = BusFrames::open(f).map_err(|e| anyhow::anyhow!("{}: {e}", f.display()))?;
             frames += r.by_ref().count() as u64;
         }
         read_s.push(t.elapsed().as_secs_f64());
         let t = Instant::now();
-        for f in &files {
+        for f in files {
             let out = dir.join("bench-mdf4.mcap");
             formats::convert(
                 Storage::Mdf4,
@@ -68,7 +64,16 @@ pub fn run(inputs: &[PathBuf], python: Option<PathBuf>, dir: &Path, repeat: u32)
         }
         convert_s.push(t.elapsed().as_secs_f64());
     }
-    let (ours, convert) = (median(read_s), median(convert_s));
+    Ok((frames, median(read_s), median(convert_s)))
+}
+
+pub fn run(inputs: &[PathBuf], python: Option<PathBuf>, dir: &Path, repeat: u32) -> Result<()> {
+    let files = files(inputs)?;
+    let bytes: u64 = files
+        .iter()
+        .map(|f| std::fs::metadata(f).map_or(0, |m| m.len()))
+        .sum();
+    let (frames, ours, convert) = railfuse_passes(&files, dir, repeat)?;
     println!(
         "{} files, {:.1} MiB, {frames} CAN frames; median of {} passes",
         files.len(),

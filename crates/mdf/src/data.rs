@@ -200,64 +200,11 @@ fn collect<F: Read + Seek>(
             out.push(Fragment::Raw { offset: start, len });
         }
         b"##DZ" => {
-            let b = block::read(file, file_len, offset, false)?;
-            let start = b.data_offset();
-            if start + 24 > file_len {
-                damage.get_or_insert(format!("byte {offset}: a DZ block cut off"));
-                return Ok(());
-            }
-            file.seek(SeekFrom::Start(start))?;
-            let mut h = [0u8; 24];
-            file.read_exact(&mut h)?;
-            let zip_type = h[2];
-            let columns = u32::from_le_bytes(h[4..8].try_into().expect("4 bytes"));
-            let original = u64::from_le_bytes(h[8..16].try_into().expect("8 bytes"));
-            let compressed = u64::from_le_bytes(h[16..24].try_into().expect("8 bytes"));
-            if original > MAX_INFLATED {
-                return Err(MdfError::at(
-                    offset,
-                    format!(
-                        "a DZ block claims to inflate to {original} bytes (more than {} MiB)",
-                        MAX_INFLATED >> 20
-                    ),
-                ));
-            }
-            if zip_type > 1 {
-                return Err(MdfError::at(
-                    offset,
-                    format!("DZ compression {zip_type}: not deflate"),
-                ));
-            }
-            if compressed > b.data_length().saturating_sub(24) || start + 24 + compressed > file_len
-            {
-                damage.get_or_insert(format!(
-                    "byte {offset}: a DZ block runs past the file's end"
-                ));
-                return Ok(());
-            }
-            out.push(Fragment::Zipped {
-                offset: start + 24,
-                compressed,
-                original,
-                columns: (zip_type == 1).then_some(columns),
-                block: offset,
-            });
-        }
-        b"##DL" => {
-            let mut dl = offset;
-            let mut first = true;
-            while dl != 0 {
-                if !first && !seen.insert(dl) {
-                    return Err(MdfError::at(dl, "a data list that links back to itself"));
-                }
-                first = false;
-                let b = block::read(file, file_len, dl, false)?;
-                for &d in b.links.iter().skip(1).filter(|&&d| d != 0) {
-                    collect(file, file_len, d, out, seen, damage)?;
-                }
-                dl = b.link(0);
+            if let Some(f) = zipped(file, file_len, &head, damage)? {
+                out.push(f);
             }
         }
+        b"##DL" => list(file, file_len, offset, out, seen, damage)?,
         b"##HL" => {
             let first = head.link(0);
             if first != 0 {
@@ -270,6 +217,79 @@ fn collect<F: Read + Seek>(
                 format!("{} where data belongs", String::from_utf8_lossy(other)),
             ))
         }
+    }
+    Ok(())
+}
+
+/// A DZ block's fragment: its compressed bytes' place and what they inflate to; none where
+/// it runs past the file's end (said as damage).
+fn zipped<F: Read + Seek>(
+    file: &mut F,
+    file_len: u64,
+    b: &block::Block,
+    damage: &mut Option<String>,
+) -> Result<Option<Fragment>> {
+    let (offset, start) = (b.offset, b.data_offset());
+    if start + 24 > file_len {
+        damage.get_or_insert(format!("byte {offset}: a DZ block cut off"));
+        return Ok(None);
+    }
+    file.seek(SeekFrom::Start(start))?;
+    let mut h = [0u8; 24];
+    file.read_exact(&mut h)?;
+    let zip_type = h[2];
+    let columns = u32::from_le_bytes(h[4..8].try_into().expect("4 bytes"));
+    let original = u64::from_le_bytes(h[8..16].try_into().expect("8 bytes"));
+    let compressed = u64::from_le_bytes(h[16..24].try_into().expect("8 bytes"));
+    if original > MAX_INFLATED {
+        return Err(MdfError::at(
+            offset,
+            format!(
+                "a DZ block claims to inflate to {original} bytes (more than {} MiB)",
+                MAX_INFLATED >> 20
+            ),
+        ));
+    }
+    if zip_type > 1 {
+        return Err(MdfError::at(
+            offset,
+            format!("DZ compression {zip_type}: not deflate"),
+        ));
+    }
+    if compressed > b.data_length().saturating_sub(24) || start + 24 + compressed > file_len {
+        damage.get_or_insert(format!(
+            "byte {offset}: a DZ block runs past the file's end"
+        ));
+        return Ok(None);
+    }
+    Ok(Some(Fragment::Zipped {
+        offset: start + 24,
+        compressed,
+        original,
+        columns: (zip_type == 1).then_some(columns),
+        block: offset,
+    }))
+}
+
+/// The data blocks of a DL list and the lists it links on to.
+fn list<F: Read + Seek>(
+    file: &mut F,
+    file_len: u64,
+    first: u64,
+    out: &mut Vec<Fragment>,
+    seen: &mut HashSet<u64>,
+    damage: &mut Option<String>,
+) -> Result<()> {
+    let mut dl = first;
+    while dl != 0 {
+        if dl != first && !seen.insert(dl) {
+            return Err(MdfError::at(dl, "a data list that links back to itself"));
+        }
+        let b = block::read(file, file_len, dl, false)?;
+        for &d in b.links.iter().skip(1).filter(|&&d| d != 0) {
+            collect(file, file_len, d, out, seen, damage)?;
+        }
+        dl = b.link(0);
     }
     Ok(())
 }

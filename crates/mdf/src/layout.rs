@@ -207,6 +207,54 @@ pub fn read<F: Read + Seek>(file: &mut F) -> Result<Layout> {
     if file_len < 64 + block::HEADER {
         return Err(MdfError::at(0, "shorter than an MDF file's first blocks"));
     }
+    let mut layout = identification(file, file_len)?;
+    let hd = block::read(file, file_len, 64, true)?;
+    if &hd.id != b"##HD" {
+        return Err(MdfError::at(
+            64,
+            format!("{} where the header block belongs", hd.id()),
+        ));
+    }
+    let time_flags = hd.u8(12);
+    let (local, offsets_valid) = (time_flags & 1 != 0, time_flags & 2 != 0);
+    layout.start_ns = hd.u64(0);
+    if local && offsets_valid {
+        let minutes = hd.i16(8) as i64 + hd.i16(10) as i64;
+        layout.start_ns = (layout.start_ns as i64 - minutes * 60_000_000_000) as u64;
+    }
+    layout.start_is_local = local && !offsets_valid;
+    let (mut seen, mut nodes) = (HashSet::new(), 0usize);
+    let mut dg = hd.link(0);
+    while dg != 0 {
+        let b = visit(file, file_len, dg, b"##DG", &mut seen, &mut nodes)?;
+        let mut group = DataGroup {
+            offset: dg,
+            record_id_size: b.u8(0),
+            data: b.link(2),
+            groups: Vec::new(),
+        };
+        if ![0, 1, 2, 4, 8].contains(&group.record_id_size) {
+            return Err(MdfError::at(
+                dg,
+                format!("a record id of {} bytes", group.record_id_size),
+            ));
+        }
+        let mut cg = b.link(1);
+        while cg != 0 {
+            let c = visit(file, file_len, cg, b"##CG", &mut seen, &mut nodes)?;
+            group
+                .groups
+                .push(channel_group(file, file_len, &c, &mut seen, &mut nodes)?);
+            cg = c.link(0);
+        }
+        layout.data_groups.push(group);
+        dg = b.link(0);
+    }
+    Ok(layout)
+}
+
+/// The identification block: finalised or not, the version, the unfinalised flags.
+fn identification<F: Read + Seek>(file: &mut F, file_len: u64) -> Result<Layout> {
     file.seek(std::io::SeekFrom::Start(0))?;
     let mut id = [0u8; 64];
     file.read_exact(&mut id)?;
@@ -228,76 +276,37 @@ pub fn read<F: Read + Seek>(file: &mut F) -> Result<Layout> {
             format!("MDF version {version}: only MDF 4 (4.00–4.20) is read"),
         ));
     }
-    let hd = block::read(file, file_len, 64, true)?;
-    if &hd.id != b"##HD" {
-        return Err(MdfError::at(
-            64,
-            format!("{} where the header block belongs", hd.id()),
-        ));
-    }
-    let time_flags = hd.u8(12);
-    let local = time_flags & 1 != 0;
-    let offsets_valid = time_flags & 2 != 0;
-    let mut start_ns = hd.u64(0);
-    if local && offsets_valid {
-        let minutes = hd.i16(8) as i64 + hd.i16(10) as i64;
-        start_ns = (start_ns as i64 - minutes * 60_000_000_000) as u64;
-    }
-    let mut layout = Layout {
+    Ok(Layout {
         finalised,
         version,
         unfinalised_flags: u16::from_le_bytes([id[60], id[61]]),
-        start_ns,
-        start_is_local: local && !offsets_valid,
+        start_ns: 0,
+        start_is_local: false,
         data_groups: Vec::new(),
         file_len,
-    };
-    let mut seen = HashSet::new();
-    let mut nodes = 0usize;
-    let mut dg = hd.link(0);
-    while dg != 0 {
-        let b = visit(file, file_len, dg, b"##DG", &mut seen, &mut nodes)?;
-        let mut group = DataGroup {
-            offset: dg,
-            record_id_size: b.u8(0),
-            data: b.link(2),
-            groups: Vec::new(),
-        };
-        if ![0, 1, 2, 4, 8].contains(&group.record_id_size) {
-            return Err(MdfError::at(
-                dg,
-                format!("a record id of {} bytes", group.record_id_size),
-            ));
-        }
-        let mut cg = b.link(1);
-        while cg != 0 {
-            let c = visit(file, file_len, cg, b"##CG", &mut seen, &mut nodes)?;
-            let mut channels = Vec::new();
-            channel_list(
-                file,
-                file_len,
-                c.link(1),
-                "",
-                &mut seen,
-                &mut nodes,
-                &mut channels,
-            )?;
-            group.groups.push(ChannelGroup {
-                offset: cg,
-                record_id: c.u64(0),
-                name: block::text(file, file_len, c.link(2))?,
-                cycle_count: c.u64(8),
-                flags: c.u16(16),
-                data_bytes: c.u32(24),
-                inval_bytes: c.u32(28),
-                channels,
-            });
-            cg = c.link(0);
-        }
-        layout.data_groups.push(group);
-        dg = b.link(0);
-    }
-    Ok(layout)
+    })
+}
+
+/// A channel group's block read with its channels.
+fn channel_group<F: Read + Seek>(
+    file: &mut F,
+    file_len: u64,
+    c: &Block,
+    seen: &mut HashSet<u64>,
+    nodes: &mut usize,
+) -> Result<ChannelGroup> {
+    let mut channels = Vec::new();
+    channel_list(file, file_len, c.link(1), "", seen, nodes, &mut channels)?;
+    Ok(ChannelGroup {
+        offset: c.offset,
+        record_id: c.u64(0),
+        name: block::text(file, file_len, c.link(2))?,
+        cycle_count: c.u64(8),
+        flags: c.u16(16),
+        data_bytes: c.u32(24),
+        inval_bytes: c.u32(28),
+        channels,
+    })
 }
 
 /// A block of a list, once: a second visit is a cycle.

@@ -8,7 +8,7 @@ use railfuse_can::dbc::{BusDbcs, Signal};
 use super::assembled::{self, GnssSignals, ImuSignals, Latest, SignalAt};
 use super::sensor::{find_signal, Mapped, Reading};
 use super::settings::{MappingError, SensorSource};
-use crate::messages::MessageKind;
+use crate::messages::{FixType, MessageKind};
 
 type Dbs = BusDbcs;
 
@@ -188,93 +188,17 @@ pub(super) fn assembled_sensor(
     }
     let max_age_ns = (max_age_s * 1e9) as u64;
     let valid = flag(dbs, topic, &s.valid)?;
-    let reading = match kind {
+    let (reading, message) = match kind {
         MessageKind::Imu => {
-            if s.latitude.is_some() || s.longitude.is_some() || s.fix_type.is_some() {
-                return Err(sensor_error(
-                    topic,
-                    "an IMU takes `acceleration` and `angular_rate`",
-                ));
-            }
-            let (Some(a), Some(w)) = (&s.acceleration, &s.angular_rate) else {
-                return Err(sensor_error(
-                    topic,
-                    "an IMU needs `acceleration` and `angular_rate`, three signals each (x, y, z)",
-                ));
-            };
-            let axes =
-                |key, given: &[String; 3], units, what| -> Result<[SignalAt; 3], MappingError> {
-                    Ok([
-                        signal_at(dbs, topic, key, &given[0], units, what)?,
-                        signal_at(dbs, topic, key, &given[1], units, what)?,
-                        signal_at(dbs, topic, key, &given[2], units, what)?,
-                    ])
-                };
-            Reading::Imu(Box::new(ImuSignals {
-                acceleration: axes("acceleration", a, ACCELERATION, "an acceleration")?,
-                angular_rate: axes("angular_rate", w, RATE, "an angular rate")?,
-                valid,
-                max_age_ns,
-            }))
+            let imu = imu_signals(dbs, topic, s, valid, max_age_ns)?;
+            let message = imu.acceleration[0].message;
+            (Reading::Imu(Box::new(imu)), message)
         }
         _ => {
-            if s.acceleration.is_some() || s.angular_rate.is_some() {
-                return Err(sensor_error(
-                    topic,
-                    "a GNSS fix takes no `acceleration` or `angular_rate`",
-                ));
-            }
-            let (Some(lat), Some(lon)) = (&s.latitude, &s.longitude) else {
-                return Err(sensor_error(
-                    topic,
-                    "a GNSS fix needs `latitude` and `longitude`",
-                ));
-            };
-            let latitude = signal_at(dbs, topic, "latitude", lat, DEGREES, "a latitude")?;
-            let longitude = signal_at(dbs, topic, "longitude", lon, DEGREES, "a longitude")?;
-            if latitude.message != longitude.message {
-                return Err(sensor_error(
-                    topic,
-                    "`latitude` and `longitude` must be signals of one message",
-                ));
-            }
-            let fix_types = match &s.fix_types {
-                None => assembled::ublox_fix_types(),
-                Some(table) => table
-                    .iter()
-                    .map(|(k, v)| {
-                        k.trim().parse::<i64>().map(|k| (k, *v)).map_err(|_| {
-                            sensor_error(topic, format!("fix_types: '{k}' is not a whole number"))
-                        })
-                    })
-                    .collect::<Result<HashMap<_, _>, _>>()?,
-            };
-            Reading::Gnss(Box::new(GnssSignals {
-                latitude,
-                longitude,
-                altitude: optional(dbs, topic, "altitude", &s.altitude, METRES, "a height")?,
-                accuracy: optional(dbs, topic, "accuracy", &s.accuracy, METRES, "an accuracy")?,
-                fix_type: optional(
-                    dbs,
-                    topic,
-                    "fix_type",
-                    &s.fix_type,
-                    COUNT,
-                    "a fix type (a number)",
-                )?,
-                fix_types,
-                satellites: optional(dbs, topic, "satellites", &s.satellites, COUNT, "a count")?,
-                speed: optional(dbs, topic, "speed", &s.speed, SPEED, "a speed")?,
-                course: optional(dbs, topic, "course", &s.course, ANGLE_RAD, "a course")?,
-                valid,
-                max_age_ns,
-            }))
+            let gnss = gnss_signals(dbs, topic, s, valid, max_age_ns)?;
+            let message = gnss.latitude.message;
+            (Reading::Gnss(Box::new(gnss)), message)
         }
-    };
-    let message = match &reading {
-        Reading::Gnss(g) => g.latitude.message,
-        Reading::Imu(i) => i.acceleration[0].message,
-        _ => unreachable!("made above"),
     };
     Ok(Mapped {
         topic: topic.to_owned(),
@@ -285,6 +209,107 @@ pub(super) fn assembled_sensor(
         quality: None,
         latest: Latest::default(),
     })
+}
+
+/// An IMU's six signals (and its flag).
+fn imu_signals(
+    dbs: &Dbs,
+    topic: &str,
+    s: &SensorSource,
+    valid: Option<SignalAt>,
+    max_age_ns: u64,
+) -> Result<ImuSignals, MappingError> {
+    if s.latitude.is_some() || s.longitude.is_some() || s.fix_type.is_some() {
+        return Err(sensor_error(
+            topic,
+            "an IMU takes `acceleration` and `angular_rate`",
+        ));
+    }
+    let (Some(a), Some(w)) = (&s.acceleration, &s.angular_rate) else {
+        return Err(sensor_error(
+            topic,
+            "an IMU needs `acceleration` and `angular_rate`, three signals each (x, y, z)",
+        ));
+    };
+    let axes = |key, given: &[String; 3], units, what| -> Result<[SignalAt; 3], MappingError> {
+        Ok([
+            signal_at(dbs, topic, key, &given[0], units, what)?,
+            signal_at(dbs, topic, key, &given[1], units, what)?,
+            signal_at(dbs, topic, key, &given[2], units, what)?,
+        ])
+    };
+    Ok(ImuSignals {
+        acceleration: axes("acceleration", a, ACCELERATION, "an acceleration")?,
+        angular_rate: axes("angular_rate", w, RATE, "an angular rate")?,
+        valid,
+        max_age_ns,
+    })
+}
+
+/// A GNSS fix's signals: its position of one message, the rest of any.
+fn gnss_signals(
+    dbs: &Dbs,
+    topic: &str,
+    s: &SensorSource,
+    valid: Option<SignalAt>,
+    max_age_ns: u64,
+) -> Result<GnssSignals, MappingError> {
+    if s.acceleration.is_some() || s.angular_rate.is_some() {
+        return Err(sensor_error(
+            topic,
+            "a GNSS fix takes no `acceleration` or `angular_rate`",
+        ));
+    }
+    let (Some(lat), Some(lon)) = (&s.latitude, &s.longitude) else {
+        return Err(sensor_error(
+            topic,
+            "a GNSS fix needs `latitude` and `longitude`",
+        ));
+    };
+    let latitude = signal_at(dbs, topic, "latitude", lat, DEGREES, "a latitude")?;
+    let longitude = signal_at(dbs, topic, "longitude", lon, DEGREES, "a longitude")?;
+    if latitude.message != longitude.message {
+        return Err(sensor_error(
+            topic,
+            "`latitude` and `longitude` must be signals of one message",
+        ));
+    }
+    Ok(GnssSignals {
+        latitude,
+        longitude,
+        altitude: optional(dbs, topic, "altitude", &s.altitude, METRES, "a height")?,
+        accuracy: optional(dbs, topic, "accuracy", &s.accuracy, METRES, "an accuracy")?,
+        fix_type: optional(
+            dbs,
+            topic,
+            "fix_type",
+            &s.fix_type,
+            COUNT,
+            "a fix type (a number)",
+        )?,
+        fix_types: fix_types(topic, s)?,
+        satellites: optional(dbs, topic, "satellites", &s.satellites, COUNT, "a count")?,
+        speed: optional(dbs, topic, "speed", &s.speed, SPEED, "a speed")?,
+        course: optional(dbs, topic, "course", &s.course, ANGLE_RAD, "a course")?,
+        valid,
+        max_age_ns,
+    })
+}
+
+/// `fix_types`, its values' keys whole numbers; u-blox's without it.
+fn fix_types(topic: &str, s: &SensorSource) -> Result<HashMap<i64, FixType>, MappingError> {
+    let Some(table) = &s.fix_types else {
+        return Ok(assembled::ublox_fix_types());
+    };
+    table
+        .iter()
+        .map(|(k, v)| {
+            k.trim()
+                .parse::<i64>()
+                .map(|k| (k, *v))
+                .map_err(|_| sensor_error(topic, format!("fix_types: '{k}' is not a whole number")))
+        })
+        .collect()
 }
 
 #[cfg(test)]
