@@ -107,6 +107,7 @@ impl CanDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use railfuse_can::dbc::Database;
     use std::sync::Arc;
 
     fn frame(bus: &str, id: u32, data: &[u8]) -> Frame {
