@@ -8,7 +8,7 @@ use railfuse_can::dbc::{BusDbcs, Database, Encoding, Signal};
 use railfuse_can::decode::{Decoded, Value};
 use serde::Serialize;
 
-use super::assembled::{Latest, MessageKey, SignalAt};
+use super::assembled::{Latest, MessageKey};
 use super::pulse_counter::{NoReading, PulseCounter};
 use super::sensor::{find_signal, Mapped, Reading, SignalRef};
 pub use super::settings::{CanBuses, CanSettings, MappingError, SensorSource};
@@ -122,8 +122,8 @@ impl SensorBridge {
         let key = (dbi, f.id, f.extended);
         let mut out = Vec::new();
         for m in &mut self.mapped {
-            let signals: Vec<SignalAt> = m.reading.assembled().cloned().collect();
-            m.latest.remember(key, f.stamp_ns, &values, signals.iter());
+            m.latest
+                .remember(key, f.stamp_ns, &values, m.reading.assembled());
             if m.message != key {
                 continue;
             }
