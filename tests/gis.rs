@@ -94,6 +94,7 @@ fn a_ride_gpxpy_wrote_reads_point_for_point_as_gpxpy_reads_it() {
                 hdop: "metres".parse().unwrap(),
                 ..Default::default()
             },
+            ..Default::default()
         },
         ..Default::default()
     };

@@ -239,10 +239,11 @@ fn help_lists_every_value_the_parser_takes_and_the_csv_mapping_has_an_example_of
     }
     let import = help("import");
     for key in [
-        "time_column",
-        "time_unit",
-        "time_offset_ns",
+        "[time]",
+        "[columns]",
+        "[[channel]]",
         "--example-map",
+        "samples/",
     ] {
         assert!(import.contains(key), "{key}: {import}");
     }
@@ -260,7 +261,7 @@ fn help_lists_every_value_the_parser_takes_and_the_csv_mapping_has_an_example_of
         s(&out),
         "--json",
     ]);
-    let kinds = railfuse_record::import::csv_map::EXAMPLE_KINDS;
+    let kinds = railfuse_catalog::formats::csv_table::example::EXAMPLE_KINDS;
     assert_eq!(r["messages"].as_u64(), Some(kinds.len() as u64), "{r}");
     assert_eq!(
         r["per_topic"].as_object().unwrap().len(),

@@ -3,10 +3,11 @@ use std::sync::Arc;
 
 use anyhow::Result;
 use railfuse_can::dbc::{BusDbcs, Database};
+use railfuse_catalog::formats::csv_table;
 use railfuse_catalog::formats::Storage;
 use railfuse_record::decode::nmea;
 use railfuse_record::import::can_log::{self, CanLog};
-use railfuse_record::import::{converted, csv_map, eth, gnss_file, ImportReport};
+use railfuse_record::import::{converted, eth, gnss_file, ImportReport};
 use railfuse_record::recorder::StreamFormat;
 
 #[derive(clap::Args)]
@@ -28,13 +29,6 @@ pub struct Args {
     /// and counted (never stamped 1970).
     #[arg(long, value_parser = parse_date)]
     pub date: Option<(i64, u32, u32)>,
-    /// The column mapping of a CSV import (TOML): `time_column`, `time_unit` (s, ms, us,
-    /// ns), `time_offset_ns`, `delimiter`, and per `[[channel]]` its `topic`, `type`,
-    /// `fields = { field = "column" }` (`name[i]` for an array's elements) and `constants`.
-    /// `--example-map DIR` writes one for every message type. Only with `--format csv`
-    /// (which it implies when no format is given).
-    #[arg(long, value_name = "MAPPING.toml")]
-    pub map: Option<PathBuf>,
     /// Write DIR/mapping.toml, a CSV mapping with a channel of every message type and the
     /// fields each requires, and DIR/example.csv, a table it imports; then stop.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["input", "output", "format", "map"])]
@@ -184,12 +178,12 @@ pub fn run(a: Args) -> Result<()> {
     let format = match a.format {
         Some(f) => f,
         None => {
-            let f = detect(&input, a.map.is_some())?;
+            let f = detect(&input, a.formats.map.is_some())?;
             crate::say!("format: {} (told from the input)", format_name(f));
             f
         }
     };
-    if a.map.is_some() && format != Format::Csv {
+    if a.formats.map.is_some() && format != Format::Csv {
         anyhow::bail!(
             "--map is the column mapping of --format csv, not of --format {}",
             format_name(format)
@@ -216,17 +210,10 @@ pub fn run(a: Args) -> Result<()> {
         Format::Nmea => gnss_file::import(&input, &output, StreamFormat::Nmea, a.date)?,
         Format::Ubx => gnss_file::import(&input, &output, StreamFormat::Ubx, a.date)?,
         Format::Rosbag2 => {
-            converted::import(Storage::Sqlite3, &input, &output, &a.formats.options())?
+            converted::import(Storage::Sqlite3, &input, &output, &a.formats.options()?)?
         }
-        Format::Gpx => converted::import(Storage::Gpx, &input, &output, &a.formats.options())?,
-        Format::Csv => {
-            let Some(map) = &a.map else {
-                anyhow::bail!(
-                    "--format csv needs --map MAPPING.toml (the column of each message field)"
-                )
-            };
-            csv_map::import(&input, map, &output)?
-        }
+        Format::Gpx => converted::import(Storage::Gpx, &input, &output, &a.formats.options()?)?,
+        Format::Csv => converted::import(Storage::Csv, &input, &output, &a.formats.options()?)?,
         Format::Candump | Format::Asc | Format::Blf | Format::Mdf4 => {
             let dbc = bus_dbcs(&a.dbc)?;
             let log = match format {
@@ -253,7 +240,7 @@ pub fn run(a: Args) -> Result<()> {
 
 /// `--example-map DIR`: a mapping and a CSV it reads, to start from.
 fn write_example(dir: &Path) -> Result<()> {
-    let (mapping, table) = csv_map::example();
+    let (mapping, table) = csv_table::example::example();
     std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
     for (name, text) in [("mapping.toml", mapping), ("example.csv", table)] {
         let path = dir.join(name);

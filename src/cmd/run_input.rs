@@ -2,8 +2,10 @@
 //! directories of parts or ROS 2 bag directories, with each file's clock and the time basis.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use anyhow::Result;
+use railfuse_catalog::formats::csv_table::mapping::MappingFile;
 use railfuse_catalog::formats::gpx::{Elevation, GpxOptions, HdopMeaning};
 use railfuse_catalog::formats::FormatOptions;
 use railfuse_catalog::log::SplitRule;
@@ -14,7 +16,8 @@ use railfuse_eval::outages::{OutageSpec, Withhold};
 pub struct RunArgs {
     /// The run: an MCAP file, several files (the parts of a split recording, the files of
     /// several recorders), a directory of parts, a ROS 2 bag directory (its metadata.yaml),
-    /// or files of other tools' formats (a GPX track).
+    /// or files of other tools' formats (a GPX track, an MDF4 bus log, a logger's CSV with
+    /// --map).
     #[arg(value_name = "LOG")]
     pub inputs: Vec<PathBuf>,
     /// A file's (or an input's) clock against the run's: FILE=SECONDS[,DRIFTppm], positive
@@ -49,6 +52,13 @@ pub struct FormatArgs {
     /// ellipsoid (above WGS-84's ellipsoid).
     #[arg(long, value_name = "msl|ellipsoid", default_value = "msl")]
     pub gpx_ele: Elevation,
+    /// The column mapping of a logger's CSV (TOML): its time (`[time]` column or columns,
+    /// unit or strftime format, zone, spread of whole seconds), what its columns are in
+    /// (`[columns]` scale, offset, unit), and per `[[channel]]` its `topic`, `type`,
+    /// `fields = { field = "column" }` and `constants`. `railfuse import --example-map DIR`
+    /// writes one for every message type; samples/ has a GNSS logger's and a phone's.
+    #[arg(long, value_name = "MAPPING.toml")]
+    pub map: Option<PathBuf>,
 }
 
 impl RunArgs {
@@ -73,7 +83,7 @@ impl RunArgs {
                 clock_offsets: clocks,
                 allow_missing_parts: self.allow_missing_parts,
                 align: self.align.or(align).unwrap_or_default(),
-                formats: self.formats.options(),
+                formats: self.formats.options()?,
             },
         )?;
         say_conversions(&run);
@@ -120,14 +130,19 @@ impl RunArgs {
 }
 
 impl FormatArgs {
-    /// How files of other tools' formats are read.
-    pub fn options(&self) -> FormatOptions {
-        FormatOptions {
+    /// How files of other tools' formats are read (the mapping file read and checked).
+    pub fn options(&self) -> Result<FormatOptions> {
+        let csv = match &self.map {
+            Some(path) => Some(Arc::new(MappingFile::read(path)?)),
+            None => None,
+        };
+        Ok(FormatOptions {
             gpx: GpxOptions {
                 hdop: self.gpx_hdop,
                 elevation: self.gpx_ele,
             },
-        }
+            csv,
+        })
     }
 }
 

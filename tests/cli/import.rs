@@ -133,8 +133,8 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
     );
     let problems = r["first_problems"].to_string();
     assert!(
-        problems.contains("line 102: bad time")
-            && problems.contains("line 103: row does not make a valid message"),
+        problems.contains("bad time: line 102")
+            && problems.contains("row does not make a valid message: line 103"),
         "{problems}"
     );
     let info: serde_json::Value = ok_json(&["info", s(&out), "--json"]);
@@ -153,7 +153,7 @@ fn a_csv_log_imports_through_its_column_mapping_and_bad_rows_are_named() {
     ]);
     assert!(
         !bad.status.success()
-            && stderr(&bad).contains("channel /radar/speed: column 'v' is not a column of"),
+            && stderr(&bad).contains("channel /radar/speed: no column 'v' in the header"),
         "{}",
         stderr(&bad)
     );

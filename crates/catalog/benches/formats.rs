@@ -1,10 +1,13 @@
 //! Converting other tools' files into a run: one hour of a 10 Hz GPX track (36 000 points, as
 //! a Garmin or phone app writes them: time, elevation, hdop, satellites, speed and course in
-//! extensions) into MCAP `/gnss/fix`. The goal: under a second.
+//! extensions), and one hour of a 10 Hz GNSS logger's CSV (date and time in six columns,
+//! whole seconds spread at the receiver's rate, 1e-7°, mm, mm/s) into MCAP `/gnss/fix`. The
+//! goal: each under a second.
 
 use std::io::Write;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use railfuse_catalog::formats::csv_table::mapping::MappingFile;
 use railfuse_catalog::formats::{self, FormatOptions, Storage};
 
 const POINTS: usize = 36_000;
@@ -39,6 +42,35 @@ fn hour_of_gpx(path: &std::path::Path) {
     writeln!(f, "</trkseg></trk></gpx>").unwrap();
 }
 
+/// The GNSS logger's table of `samples/gnss-logger.csv`, at 10 Hz for an hour, and its
+/// mapping at that rate.
+fn hour_of_csv(path: &std::path::Path, mapping: &std::path::Path) {
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    writeln!(
+        f,
+        "Year,Month,Day,Hour,Minute,Second,nSAT,Lon,Lat,Alt1,Alt2,hAcc,vAcc,speed,speedAcc,PDOP"
+    )
+    .unwrap();
+    for k in 0..POINTS {
+        let s = k / 10;
+        writeln!(
+            f,
+            "2021,7,26,{},{},{},17,{},{},{},{},20,40,{},120,196",
+            4 + s / 3600,
+            (s / 60) % 60,
+            s % 60,
+            125_000_000 + k * 10,
+            556_000_000 + k * 20,
+            20_000 + k % 100,
+            -27_000 + (k % 100) as i64,
+            20_000 + k % 500,
+        )
+        .unwrap();
+    }
+    let sample = include_str!("../../../samples/gnss-logger.toml");
+    std::fs::write(mapping, sample.replace("rate_hz = 5", "rate_hz = 10")).unwrap();
+}
+
 fn convert(c: &mut Criterion) {
     let dir = tempfile::tempdir().unwrap();
     let gpx = dir.path().join("hour.gpx");
@@ -57,6 +89,19 @@ fn convert(c: &mut Criterion) {
                 &Default::default(),
             )
             .unwrap();
+            assert_eq!(r.messages, POINTS as u64);
+        })
+    });
+    let (csv, mapping) = (dir.path().join("hour.csv"), dir.path().join("logger.toml"));
+    hour_of_csv(&csv, &mapping);
+    let options = FormatOptions {
+        csv: Some(std::sync::Arc::new(MappingFile::read(&mapping).unwrap())),
+        ..Default::default()
+    };
+    group.bench_function("csv_logger_hour_10hz", |b| {
+        b.iter(|| {
+            let r =
+                formats::convert(Storage::Csv, &csv, &out, &options, &Default::default()).unwrap();
             assert_eq!(r.messages, POINTS as u64);
         })
     });

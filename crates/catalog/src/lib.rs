@@ -32,6 +32,7 @@ pub mod rejections;
 pub mod run;
 pub mod topics;
 pub mod track_geojson;
+pub mod units;
 
 pub use error::{Error, Result};
 pub use messages::ChannelMessage;

@@ -13,8 +13,6 @@ pub enum Error {
     #[error(transparent)]
     Log(#[from] railfuse_catalog::Error),
     #[error(transparent)]
-    Mapping(#[from] MappingError),
-    #[error(transparent)]
     Scenario(#[from] ScenarioError),
     #[error(transparent)]
     Source(#[from] SourceError),
@@ -105,39 +103,5 @@ pub enum ScenarioError {
         device: String,
         start_s: f64,
         duration_s: f64,
-    },
-}
-
-/// A CSV column mapping that does not fit its file.
-#[derive(Debug, thiserror::Error)]
-pub enum MappingError {
-    #[error("{}: {source}", path.display())]
-    Read {
-        path: PathBuf,
-        #[source]
-        source: io::Error,
-    },
-    #[error("{}: {}", path.display(), source.to_string().trim())]
-    Toml {
-        path: PathBuf,
-        #[source]
-        source: toml::de::Error,
-    },
-    #[error("{}: time_unit '{unit}': s, ms, us or ns", path.display())]
-    TimeUnit { path: PathBuf, unit: String },
-    #[error("{}: delimiter '{delimiter}' must be one character", path.display())]
-    Delimiter { path: PathBuf, delimiter: String },
-    #[error("{}: {source}", path.display())]
-    Csv {
-        path: PathBuf,
-        #[source]
-        source: csv::Error,
-    },
-    #[error("{}: {what} '{column}' is not a column of {}", mapping.display(), input.display())]
-    NoColumn {
-        mapping: PathBuf,
-        input: PathBuf,
-        what: String,
-        column: String,
     },
 }

@@ -6,8 +6,11 @@
 //!
 //! - [`rosbag2_sqlite`]: ROS 2 bags in the sqlite3 storage (`.db3`);
 //! - [`gpx`]: GPX 1.0 and 1.1 tracks (phones, Garmin units, handheld loggers);
-//! - [`mdf4`]: ASAM MDF 4 CAN bus logging (CANedge, Vector), frames onto `/can/<bus>/frames`.
+//! - [`mdf4`]: ASAM MDF 4 CAN bus logging (CANedge, Vector), frames onto `/can/<bus>/frames`;
+//! - [`csv_table`]: loggers' CSV tables, through a column mapping (`--map`).
 
+pub mod accuracy;
+pub mod csv_table;
 pub mod gpx;
 pub mod mdf4;
 pub mod rosbag2_sqlite;
@@ -29,6 +32,8 @@ pub enum Storage {
     Gpx,
     /// ASAM MDF 4 (bus logging).
     Mdf4,
+    /// A logger's table, read through a column mapping.
+    Csv,
 }
 
 impl Storage {
@@ -39,6 +44,7 @@ impl Storage {
             "db3" => Some(Self::Sqlite3),
             "gpx" => Some(Self::Gpx),
             "mf4" | "mdf" => Some(Self::Mdf4),
+            "csv" | "tsv" | "txt" => Some(Self::Csv),
             _ => None,
         }
     }
@@ -69,6 +75,7 @@ impl Storage {
             Self::Sqlite3 => "rosbag2 sqlite3",
             Self::Gpx => "GPX",
             Self::Mdf4 => "MDF4",
+            Self::Csv => "CSV",
         }
     }
 }
@@ -87,9 +94,12 @@ pub fn looks_like_mdf4(head: &[u8]) -> bool {
 }
 
 /// How the converted formats read their files (the choices a file cannot state itself).
-#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct FormatOptions {
     pub gpx: gpx::GpxOptions,
+    /// The column mapping of CSV tables (a table does not say what its columns are).
+    #[serde(skip)]
+    pub csv: Option<std::sync::Arc<csv_table::mapping::MappingFile>>,
 }
 
 /// What a conversion read and wrote.
@@ -150,6 +160,13 @@ pub fn convert(
         Storage::Sqlite3 => rosbag2_sqlite::convert(input, output),
         Storage::Gpx => gpx::convert(input, output, &options.gpx, writer),
         Storage::Mdf4 => mdf4::convert(input, output, writer),
+        Storage::Csv => match &options.csv {
+            Some(mapping) => csv_table::convert(input, output, mapping, writer),
+            None => Err(Error::run(
+                input,
+                "a CSV table needs its column mapping: --map MAPPING.toml (`railfuse import --example-map DIR` writes one to start from)",
+            )),
+        },
         Storage::Mcap => Err(Error::run(input, "an MCAP file is read as it is")),
     }
 }

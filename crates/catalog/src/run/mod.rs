@@ -245,11 +245,15 @@ impl Run {
             }
             return Ok(());
         }
-        // As `ros2 bag reindex` would: the storage files, in their numbered order.
+        // As `ros2 bag reindex` would: the storage files, in their numbered order. A table
+        // is a part only with a mapping to read it (a directory of logs often holds others).
+        let tables = options.formats.csv.is_some();
         let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
             .map_err(|e| Error::io(dir, e))?
             .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| p.is_file() && Storage::of_name(p).is_some())
+            .filter(|p| {
+                p.is_file() && Storage::of_name(p).is_some_and(|s| s != Storage::Csv || tables)
+            })
             .collect();
         files.sort_by(|a, b| natural_order(&a.to_string_lossy(), &b.to_string_lossy()));
         if files.is_empty() {
@@ -263,7 +267,9 @@ impl Run {
                      `railfuse recover` salvages it)",
                     p.display()
                 ),
-                None => "no .mcap, .db3 or .gpx file and no metadata.yaml: not a run".to_owned(),
+                None => {
+                    "no .mcap, .db3, .gpx or .mf4 file and no metadata.yaml: not a run".to_owned()
+                }
             };
             return Err(Error::run(dir, cause));
         }

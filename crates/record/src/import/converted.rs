@@ -1,4 +1,5 @@
-//! Files the run reader also reads directly (ROS 2 sqlite3 bags, GPX tracks) imported as
+//! Files the run reader also reads directly (ROS 2 sqlite3 bags, GPX tracks, MDF4, CSV
+//! tables through their mapping) imported as
 //! MCAP: the conversion is the catalogue's ([`railfuse_catalog::formats`]), so an imported
 //! file holds exactly what a command reading the original sees.
 
@@ -19,9 +20,13 @@ pub fn import(
     let c = formats::convert(storage, input, output, options, &Default::default())?;
     let time_base = match storage {
         Storage::Gpx => "each point's <time> (UTC; zone offsets applied)",
+        Storage::Csv => "the mapping's time columns (its unit, format and zone)",
         _ => "rosbag2 receive time (log and publish time)",
     };
     let mut warnings = std::collections::BTreeMap::new();
+    for w in &c.warnings {
+        warnings.insert(w.clone(), 1);
+    }
     if c.gaps > 0 {
         warnings.insert("segment breaks (gaps in the track)".to_owned(), c.gaps);
     }

@@ -3,13 +3,12 @@
 //! - [`eth`]: the ETH-PBL railway dataset (on-board node CSV: raw IMU, UBX frames as hex,
 //!   NMEA sentences, correction-link and station events);
 //! - [`gnss_file`]: NMEA and UBX captures of a receiver;
-//! - [`converted`]: ROS 2 sqlite3 bags and GPX tracks, to MCAP (the run reader's conversion);
-//! - [`csv_map`]: CSV tables with a column mapping;
+//! - [`converted`]: ROS 2 sqlite3 bags, GPX tracks, MDF4 bus logs and CSV tables with a
+//!   column mapping, to MCAP (the run reader's conversion);
 //! - [`can_log`]: CAN bus logs (candump, Vector ASC), decoded with the vehicle's DBC.
 
 pub mod can_log;
 pub mod converted;
-pub mod csv_map;
 pub mod eth;
 pub mod gnss_file;
 

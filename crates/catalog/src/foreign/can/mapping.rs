@@ -9,6 +9,7 @@ use super::assembled::{self, GnssSignals, ImuSignals, Latest, SignalAt};
 use super::sensor::{find_signal, Mapped, Reading};
 use super::settings::{MappingError, SensorSource};
 use crate::messages::{FixType, MessageKind};
+use crate::units::{self, Units, ACCELERATION, COUNT, DEGREES, METRES, RADIANS, RATE, SPEED};
 
 type Dbs = BusDbcs;
 
@@ -51,59 +52,10 @@ pub(super) fn only_for(
     }
 }
 
-/// A unit's factor to SI among `units` (name, factor), or why not.
-fn unit_scale(signal: &Signal, units: &[(&str, f64)], what: &str) -> Result<f64, String> {
-    let unit = signal.unit.trim().to_ascii_lowercase();
-    units
-        .iter()
-        .find(|(u, _)| *u == unit)
-        .map(|(_, f)| *f)
-        .ok_or_else(|| {
-            let names: Vec<&str> = units
-                .iter()
-                .map(|(u, _)| *u)
-                .filter(|u| !u.is_empty())
-                .collect();
-            format!("is in '{}': {what} is in {}", signal.unit, names.join(", "))
-        })
+/// A signal's unit's factor among `units`, or why not.
+fn unit_scale(signal: &Signal, units: Units, what: &str) -> Result<f64, String> {
+    units::factor(units, &signal.unit, what)
 }
-
-const DEGREES: &[(&str, f64)] = &[
-    ("deg", 1.0),
-    ("°", 1.0),
-    ("degree", 1.0),
-    ("degrees", 1.0),
-    ("rad", 180.0 / std::f64::consts::PI),
-];
-const ANGLE_RAD: &[(&str, f64)] = &[
-    ("deg", std::f64::consts::PI / 180.0),
-    ("°", std::f64::consts::PI / 180.0),
-    ("degree", std::f64::consts::PI / 180.0),
-    ("rad", 1.0),
-];
-const METRES: &[(&str, f64)] = &[("m", 1.0), ("ft", 0.3048), ("cm", 0.01), ("mm", 0.001)];
-const COUNT: &[(&str, f64)] = &[("", 1.0), ("-", 1.0)];
-const SPEED: &[(&str, f64)] = &[
-    ("m/s", 1.0),
-    ("mps", 1.0),
-    ("km/h", 1.0 / 3.6),
-    ("kph", 1.0 / 3.6),
-    ("kmh", 1.0 / 3.6),
-    ("mph", 0.447_04),
-];
-const ACCELERATION: &[(&str, f64)] = &[
-    ("m/s^2", 1.0),
-    ("m/s²", 1.0),
-    ("m/s2", 1.0),
-    ("g", 9.806_65),
-    ("mg", 0.009_806_65),
-];
-const RATE: &[(&str, f64)] = &[
-    ("deg/s", std::f64::consts::PI / 180.0),
-    ("°/s", std::f64::consts::PI / 180.0),
-    ("dps", std::f64::consts::PI / 180.0),
-    ("rad/s", 1.0),
-];
 
 /// A signal of `given`, its unit one of `units`.
 fn signal_at(
@@ -111,7 +63,7 @@ fn signal_at(
     topic: &str,
     key: &'static str,
     given: &str,
-    units: &[(&str, f64)],
+    units: Units,
     what: &str,
 ) -> Result<SignalAt, MappingError> {
     let (message, signal) = find_signal(dbs, topic, key, given)?;
@@ -134,7 +86,7 @@ fn optional(
     topic: &str,
     key: &'static str,
     given: &Option<String>,
-    units: &[(&str, f64)],
+    units: Units,
     what: &str,
 ) -> Result<Option<SignalAt>, MappingError> {
     given
@@ -290,7 +242,7 @@ fn gnss_signals(
         fix_types: fix_types(topic, s)?,
         satellites: optional(dbs, topic, "satellites", &s.satellites, COUNT, "a count")?,
         speed: optional(dbs, topic, "speed", &s.speed, SPEED, "a speed")?,
-        course: optional(dbs, topic, "course", &s.course, ANGLE_RAD, "a course")?,
+        course: optional(dbs, topic, "course", &s.course, RADIANS, "a course")?,
         valid,
         max_age_ns,
     })

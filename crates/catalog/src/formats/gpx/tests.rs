@@ -58,7 +58,7 @@ fn hdop_as_metres_is_a_68_percent_radius_made_a_sigma() {
     assert_eq!(c[0], c[4]);
     assert!((c[8].sqrt() - 2.0 * sigma).abs() < 1e-9);
     assert_eq!(f.altitude_m, Some(408.2));
-    assert!((normal_quantile(0.975) - 1.959964).abs() < 1e-6);
+    assert!((accuracy::normal_quantile(0.975) - 1.959964).abs() < 1e-6);
     assert!("metres:150".parse::<HdopMeaning>().is_err());
 }
 
