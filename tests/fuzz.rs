@@ -245,6 +245,15 @@ fn mdf4_bus_reader() {
 }
 
 #[test]
+fn ros1_bag_reader() {
+    conversion(
+        "rosbag1",
+        railfuse_catalog::formats::Storage::Rosbag1,
+        "run.bag",
+    );
+}
+
+#[test]
 fn pipeline_config() {
     let path = Path::new("fuzz.toml");
     fuzz("config", 2000, |data| {

@@ -124,16 +124,17 @@ def evaluate(
     return report
 
 
-def read(path: RunLike, topic: str):
+def read(path: RunLike, topic: str, mapping: str | os.PathLike | None = None):
     """Every message of ``topic`` in the run ``path`` (a file, a directory of parts, a bag,
-    or a list of files) as a ``pyarrow.Table``: one row per message, a column per
+    or a list of files; a logger's CSV with its column ``mapping``, as ``--map`` takes it)
+    as a ``pyarrow.Table``: one row per message, a column per
     field (nested fields as structs and lists), ``log_time_ns`` first. Fused states and
     diagnostics (``/fused/<pipeline>/state``) read like any other channel. For
     ``Table.to_pandas()``, install the ``pandas`` extra: ``pip install 'railfuse[pandas]'``."""
     import pyarrow as pa
     import pyarrow.json as pajson
 
-    lines = _railfuse.read_json_lines(_run(path), topic)
+    lines = _railfuse.read_json_lines(_run(path), topic, os.fspath(mapping) if mapping else None)
     if not lines:
         return pa.table({"log_time_ns": pa.array([], pa.int64())})
     return pajson.read_json(

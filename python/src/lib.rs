@@ -71,8 +71,24 @@ fn simulate(
 /// The run of `inputs` (files, directories of parts, bags), as the command line reads it,
 /// its recorders put on one clock with `align = "gnss"`.
 fn open_run(inputs: &[PathBuf], align: &str) -> PyResult<Run> {
+    open_run_mapped(inputs, align, None)
+}
+
+/// [`open_run`] with a logger CSV's column mapping (`--map`).
+fn open_run_mapped(inputs: &[PathBuf], align: &str, mapping: Option<PathBuf>) -> PyResult<Run> {
+    let csv = match mapping {
+        Some(path) => Some(std::sync::Arc::new(
+            railfuse_catalog::formats::csv_table::mapping::MappingFile::read(&path)
+                .map_err(fail)?,
+        )),
+        None => None,
+    };
     let options = railfuse_catalog::run::RunOptions {
         align: align.parse().map_err(fail)?,
+        formats: railfuse_catalog::formats::FormatOptions {
+            csv,
+            ..Default::default()
+        },
         ..Default::default()
     };
     Run::open(inputs, &options).map_err(fail)
@@ -175,12 +191,14 @@ fn evaluate(
 /// Every message of `topic` as newline-delimited JSON, each object with its `log_time_ns`
 /// first: what `railfuse.read` turns into a table.
 #[pyfunction]
+#[pyo3(signature = (inputs, topic, mapping = None))]
 fn read_json_lines<'py>(
     py: Python<'py>,
     inputs: Vec<PathBuf>,
     topic: &str,
+    mapping: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyBytes>> {
-    let run = open_run(&inputs, "none")?;
+    let run = open_run_mapped(&inputs, "none", mapping)?;
     let path = run.name().to_owned();
     let lines = py
         .detach(|| -> Result<Option<Vec<u8>>, railfuse_catalog::Error> {

@@ -19,7 +19,7 @@ pub struct Args {
     #[arg(short, long, required_unless_present = "example_map")]
     pub output: Option<PathBuf>,
     /// Input format. Without it, it is told from the input: a directory with metadata.yaml
-    /// is a ROS 2 bag, a `<gpx` document GPX, bytes B5 62 UBX, a line that checks as an NMEA sentence NMEA, `HH:MM:SS.ffffff,X,hex`
+    /// is a ROS 2 bag, `#ROSBAG V2.0` a ROS 1 bag, a `<gpx` document GPX, bytes B5 62 UBX, a line that checks as an NMEA sentence NMEA, `HH:MM:SS.ffffff,X,hex`
     /// lines an ETH node log, a `(stamp) can0 123#…` line a candump log, a `date` or `base`
     /// line an ASC log, bytes `LOGG` a BLF log, and `--map` a CSV table.
     #[arg(long, value_enum)]
@@ -70,6 +70,9 @@ pub enum Format {
     Gpx,
     /// ASAM MDF 4 CAN bus logging (CANedge, Vector): frames, and with --dbc their signals.
     Mdf4,
+    /// A ROS 1 bag (format 2.0; uncompressed, bz2 or lz4 chunks; with or without its index),
+    /// its channels kept as `ros1msg`.
+    Rosbag1,
 }
 
 fn parse_date(s: &str) -> Result<(i64, u32, u32), String> {
@@ -153,6 +156,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if head.starts_with(b"LOGG") => Ok(Format::Blf),
         _ if railfuse_catalog::formats::looks_like_gpx(&head) => Ok(Format::Gpx),
         _ if railfuse_catalog::formats::looks_like_mdf4(&head) => Ok(Format::Mdf4),
+        _ if head.starts_with(b"#ROSBAG V") => Ok(Format::Rosbag1),
         _ if railfuse_can::candump::parse_line(first_line).is_ok() => Ok(Format::Candump),
         _ if asc_header(first_line) => Ok(Format::Asc),
         _ if first_line.starts_with('$') => Ok(Format::Nmea),
@@ -162,7 +166,7 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if text.lines().any(|l| nmea::parse(l).is_ok()) => Ok(Format::Nmea),
         _ => anyhow::bail!(
             "{}: cannot tell its format from its first line; name it with --format \
-             (eth, nmea, ubx, csv with --map, rosbag2, candump, asc, blf, gpx, mdf4)",
+             (eth, nmea, ubx, csv with --map, rosbag2, rosbag1, candump, asc, blf, gpx, mdf4)",
             input.display()
         ),
     }
@@ -213,6 +217,9 @@ pub fn run(a: Args) -> Result<()> {
             converted::import(Storage::Sqlite3, &input, &output, &a.formats.options()?)?
         }
         Format::Gpx => converted::import(Storage::Gpx, &input, &output, &a.formats.options()?)?,
+        Format::Rosbag1 => {
+            converted::import(Storage::Rosbag1, &input, &output, &a.formats.options()?)?
+        }
         Format::Csv => converted::import(Storage::Csv, &input, &output, &a.formats.options()?)?,
         Format::Candump | Format::Asc | Format::Blf | Format::Mdf4 => {
             let dbc = bus_dbcs(&a.dbc)?;
@@ -299,6 +306,9 @@ fn print_report(report: &ImportReport) {
     }
     for (warning, n) in &report.warnings {
         println!("warning: {n} × {warning}");
+    }
+    for f in &report.frames {
+        println!("frame: {f}");
     }
 }
 

@@ -166,6 +166,9 @@ fn say_conversions(run: &Run) {
         for w in &c.warnings {
             eprintln!("warning: {}: {w}", path.display());
         }
+        for f in &c.frames {
+            crate::say!("{}: frame {f}", path.display());
+        }
         if let Some(d) = &c.damage {
             eprintln!(
                 "warning: {}: {d}; the {} messages before it are read",

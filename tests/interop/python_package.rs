@@ -31,6 +31,8 @@ fn the_python_package_refuses_byte_for_byte_like_the_cli_and_reads_tables() {
     let radar: Vec<railfuse_catalog::messages::RadarSpeed> = messages(&raw, "/radar/speed");
     assert_eq!(v["radar_rows"].as_u64().unwrap() as usize, radar.len());
     assert_eq!(v["gpx_rows"], 91);
+    // A logger's CSV with its column mapping, as --map reads it.
+    assert_eq!(v["csv_rows"], 451);
     assert_eq!(v["gpx_first_latitude"], 44.6551002);
     assert!(v["mdf4_frames"].as_u64().unwrap() > 10, "{v}");
     // (refuse scores in the same pass, evaluate from the file: sums in another order)

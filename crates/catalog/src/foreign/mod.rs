@@ -4,12 +4,13 @@
 //! the sensor its [`Role`] names. One table ([`Translator::for_channel`]) maps a channel's
 //! message encoding, schema name and role to a catalogue kind; everything after it (sensor
 //! models, pipelines, the viewer) sees catalogue messages only, never an encoding. Readers:
-//! [`ros2`] (CDR), [`foxglove`] (Foxglove's well-known schemas in JSON) and [`protobuf`]
+//! [`ros2`] (CDR), [`ros1`] (ROS 1's serialisation, the same messages), [`foxglove`] (Foxglove's well-known schemas in JSON) and [`protobuf`]
 //! (the same schemas in protobuf, read through the file's own descriptors).
 
 pub mod can;
 pub mod foxglove;
 pub mod protobuf;
+pub mod ros1;
 pub mod ros2;
 
 use schemars::JsonSchema;
@@ -40,6 +41,10 @@ impl Role {
 pub enum ForeignError {
     #[error("CDR payload does not decode as {schema}: {cause}")]
     Cdr { schema: String, cause: String },
+    /// A ROS 1 payload that does not decode (counted with the CDR ones: the bytes do not fit
+    /// the schema).
+    #[error("ROS 1 payload does not decode as {schema}: {cause}")]
+    Ros1 { schema: String, cause: String },
     #[error("{0}")]
     Invalid(String),
     /// The channel's schema cannot be used (a protobuf schema that does not parse).
@@ -53,10 +58,42 @@ impl ForeignError {
     /// schema is unusable).
     pub fn kind(&self) -> &'static str {
         match self {
-            ForeignError::Cdr { .. } => "cdr",
+            ForeignError::Cdr { .. } | ForeignError::Ros1 { .. } => "cdr",
             ForeignError::Invalid(_) => "invalid",
             ForeignError::Schema(_) => "schema",
         }
+    }
+}
+
+/// Where a sensor frame sits on the vehicle, as a bag's `/tf_static` says: `child` in
+/// `parent`'s frame, translated by `translation_m` and rotated by the quaternion
+/// `rotation_xyzw`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameTransform {
+    pub parent: String,
+    pub child: String,
+    pub translation_m: [f64; 3],
+    pub rotation_xyzw: [f64; 4],
+}
+
+impl std::fmt::Display for FrameTransform {
+    /// `gps in base_link at (-3.200, 0.000, 3.900) m, roll 0.0° pitch 0.0° yaw 90.0°`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let [x, y, z] = self.translation_m;
+        let [qx, qy, qz, qw] = self.rotation_xyzw;
+        // Roll, pitch, yaw (z-y-x, as tf's getRPY).
+        let roll = (2.0 * (qw * qx + qy * qz)).atan2(1.0 - 2.0 * (qx * qx + qy * qy));
+        let pitch = (2.0 * (qw * qy - qz * qx)).clamp(-1.0, 1.0).asin();
+        let yaw = (2.0 * (qw * qz + qx * qy)).atan2(1.0 - 2.0 * (qy * qy + qz * qz));
+        write!(
+            f,
+            "{} in {} at ({x:.3}, {y:.3}, {z:.3}) m, roll {:.1}° pitch {:.1}° yaw {:.1}°",
+            self.child,
+            self.parent,
+            roll.to_degrees(),
+            pitch.to_degrees(),
+            yaw.to_degrees()
+        )
     }
 }
 
@@ -171,7 +208,8 @@ impl Translator {
             read.map(|(kind, decode)| (kind, Decoder::Fixed(decode)))
         };
         let read = match encoding {
-            ros2::ENCODING => fixed(ros2::reader(schema, role)?),
+            ros2::ENCODING => fixed(ros2::reader::<ros2::Cdr>(schema, role)?),
+            ros1::ENCODING => fixed(ros1::reader(schema, role)?),
             foxglove::ENCODING => fixed(foxglove::reader(schema, role)?),
             protobuf::ENCODING => protobuf::reader(schema, schema_data, role)?
                 .map(|(kind, reader)| (kind, Decoder::Protobuf(Arc::new(reader)))),
@@ -219,6 +257,7 @@ impl Translator {
         };
         [
             in_encoding(ros2::ENCODING, ros2::SCHEMAS),
+            in_encoding(ros1::ENCODING, &ros1::SCHEMAS),
             in_encoding(foxglove::ENCODING, &[foxglove::LOCATION_FIX]),
             in_encoding(protobuf::ENCODING, protobuf::SCHEMAS),
         ]

@@ -27,7 +27,7 @@
 use byteorder::{BigEndian, LittleEndian};
 use serde::{Deserialize, Serialize};
 
-use super::{Decode, ForeignError, PositionFix, Role, Translated};
+use super::{Decode, ForeignError, FrameTransform, PositionFix, Role, Translated};
 use crate::messages::{
     AnyMessage, FixType, FusedState, GnssFix, Imu, MessageKind, Odometer, RadarSpeed, TrackMap,
 };
@@ -69,8 +69,8 @@ pub struct NavSatStatus {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct NavSatFix {
-    pub header: Header,
+pub struct NavSatFix<H = Header> {
+    pub header: H,
     pub status: NavSatStatus,
     pub latitude: f64,
     pub longitude: f64,
@@ -95,8 +95,8 @@ pub struct Quaternion {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct ImuMsg {
-    pub header: Header,
+pub struct ImuMsg<H = Header> {
+    pub header: H,
     pub orientation: Quaternion,
     pub orientation_covariance: [f64; 9],
     pub angular_velocity: Vector3,
@@ -121,15 +121,36 @@ pub struct TwistWithCovariance {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct TwistWithCovarianceStamped {
-    pub header: Header,
+pub struct TwistWithCovarianceStamped<H = Header> {
+    pub header: H,
     pub twist: TwistWithCovariance,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct TwistStamped {
-    pub header: Header,
+pub struct TwistStamped<H = Header> {
+    pub header: H,
     pub twist: Twist,
+}
+
+/// `geometry_msgs/Transform`.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct Transform {
+    pub translation: Vector3,
+    pub rotation: Quaternion,
+}
+
+/// `geometry_msgs/TransformStamped`: where `child_frame_id` sits in `header.frame_id`.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct TransformStamped<H = Header> {
+    pub header: H,
+    pub child_frame_id: String,
+    pub transform: Transform,
+}
+
+/// `tf2_msgs/TFMessage`: the transforms on `/tf` and `/tf_static`.
+#[derive(Debug, Serialize, Deserialize)]
+pub struct TfMessage<H = Header> {
+    pub transforms: Vec<TransformStamped<H>>,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -145,8 +166,8 @@ pub struct PoseWithCovariance {
 }
 
 #[derive(Debug, Serialize, Deserialize)]
-pub struct Odometry {
-    pub header: Header,
+pub struct Odometry<H = Header> {
+    pub header: H,
     pub child_frame_id: String,
     pub pose: PoseWithCovariance,
     pub twist: TwistWithCovariance,
@@ -395,25 +416,60 @@ pub fn from_cdr<T: for<'de> Deserialize<'de>>(
     decoded.map(|(v, _)| v).map_err(|e| fail(e.to_string()))
 }
 
-/// The message's time, or the log time where its stamp is zero.
-fn stamp(h: &Header, log_time_ns: u64) -> Result<(u64, bool), ForeignError> {
-    if h.stamp.sec == 0 && h.stamp.nanosec == 0 {
-        return Ok((log_time_ns, true));
-    }
-    if h.stamp.sec < 0 || h.stamp.nanosec >= 1_000_000_000 {
-        return Err(ForeignError::Invalid(format!(
-            "header.stamp {}.{:09} is not a time",
-            h.stamp.sec, h.stamp.nanosec
-        )));
-    }
-    Ok((
-        h.stamp.sec as u64 * 1_000_000_000 + u64::from(h.stamp.nanosec),
-        false,
-    ))
+/// A ROS wire format: how a payload decodes, and the header its stamped messages carry
+/// (ROS 2's in CDR; ROS 1's, with a sequence number and unsigned seconds, in its own
+/// serialisation: see [`super::ros1`]).
+pub(super) trait Wire {
+    type Header: RosHeader + for<'de> Deserialize<'de>;
+    fn decode<T: for<'de> Deserialize<'de>>(data: &[u8], schema: &str) -> Result<T, ForeignError>;
 }
 
-fn nav_sat_fix(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
-    let m: NavSatFix = from_cdr(data, NAV_SAT_FIX)?;
+/// A stamped message's header: its time and frame.
+pub(super) trait RosHeader {
+    /// `header.stamp` as seconds and nanoseconds.
+    fn stamp(&self) -> (i64, u32);
+    fn into_frame_id(self) -> String;
+}
+
+impl RosHeader for Header {
+    fn stamp(&self) -> (i64, u32) {
+        (i64::from(self.stamp.sec), self.stamp.nanosec)
+    }
+    fn into_frame_id(self) -> String {
+        self.frame_id
+    }
+}
+
+/// ROS 2's CDR.
+pub(super) struct Cdr;
+
+impl Wire for Cdr {
+    type Header = Header;
+    fn decode<T: for<'de> Deserialize<'de>>(data: &[u8], schema: &str) -> Result<T, ForeignError> {
+        from_cdr(data, schema)
+    }
+}
+
+/// The message's time, or the log time where its stamp is zero.
+fn stamp(h: &impl RosHeader, log_time_ns: u64) -> Result<(u64, bool), ForeignError> {
+    let (sec, nanosec) = h.stamp();
+    if sec == 0 && nanosec == 0 {
+        return Ok((log_time_ns, true));
+    }
+    if sec < 0 || nanosec >= 1_000_000_000 {
+        return Err(ForeignError::Invalid(format!(
+            "header.stamp {sec}.{nanosec:09} is not a time"
+        )));
+    }
+    Ok((sec as u64 * 1_000_000_000 + u64::from(nanosec), false))
+}
+
+fn nav_sat_fix<W: Wire>(
+    data: &[u8],
+    _: Option<Role>,
+    log_time_ns: u64,
+) -> Result<Translated, ForeignError> {
+    let m: NavSatFix<W::Header> = W::decode(data, NAV_SAT_FIX)?;
     let fix_type = match m.status.status {
         -1 => return Ok(Translated::Skipped("NavSatFix with status NO_FIX")),
         0 => FixType::Single,
@@ -442,14 +498,18 @@ fn nav_sat_fix(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Transla
     })
 }
 
-fn imu(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
-    let m: ImuMsg = from_cdr(data, IMU)?;
+fn imu<W: Wire>(
+    data: &[u8],
+    _: Option<Role>,
+    log_time_ns: u64,
+) -> Result<Translated, ForeignError> {
+    let m: ImuMsg<W::Header> = W::decode(data, IMU)?;
     let (a, w) = (&m.linear_acceleration, &m.angular_velocity);
     let (stamp_ns, took_log_time) = stamp(&m.header, log_time_ns)?;
     Ok(Translated::Message {
         message: AnyMessage::Imu(Imu {
             stamp_ns,
-            sensor_id: m.header.frame_id,
+            sensor_id: m.header.into_frame_id(),
             specific_force_mps2: [a.x, a.y, a.z],
             angular_rate_radps: [w.x, w.y, w.z],
             accel_lsb_mps2: None,
@@ -462,7 +522,7 @@ fn imu(data: &[u8], _: Option<Role>, log_time_ns: u64) -> Result<Translated, For
 /// A twist's linear velocity (body x for a radar or an odometer, east/north for a GNSS
 /// receiver), with the variance of x where given, as the sensor `role` says.
 fn speed(
-    header: Header,
+    header: impl RosHeader,
     linear: &Vector3,
     variance: Option<f64>,
     role: Option<Role>,
@@ -496,7 +556,7 @@ fn speed(
         }
         Some(Role::Odometer) => AnyMessage::Odometer(Odometer {
             stamp_ns,
-            sensor_id: header.frame_id,
+            sensor_id: header.into_frame_id(),
             pulse_count: None,
             pulses_per_revolution: None,
             wheel_diameter_m: None,
@@ -523,12 +583,12 @@ fn speed(
     })
 }
 
-fn twist_with_covariance(
+fn twist_with_covariance<W: Wire>(
     data: &[u8],
     role: Option<Role>,
     log_time_ns: u64,
 ) -> Result<Translated, ForeignError> {
-    let m: TwistWithCovarianceStamped = from_cdr(data, TWIST_WITH_COVARIANCE_STAMPED)?;
+    let m: TwistWithCovarianceStamped<W::Header> = W::decode(data, TWIST_WITH_COVARIANCE_STAMPED)?;
     let var = m.twist.covariance[0][0];
     speed(
         m.header,
@@ -539,13 +599,21 @@ fn twist_with_covariance(
     )
 }
 
-fn twist(data: &[u8], role: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
-    let m: TwistStamped = from_cdr(data, TWIST_STAMPED)?;
+fn twist<W: Wire>(
+    data: &[u8],
+    role: Option<Role>,
+    log_time_ns: u64,
+) -> Result<Translated, ForeignError> {
+    let m: TwistStamped<W::Header> = W::decode(data, TWIST_STAMPED)?;
     speed(m.header, &m.twist.linear, None, role, log_time_ns)
 }
 
-fn odometry(data: &[u8], role: Option<Role>, log_time_ns: u64) -> Result<Translated, ForeignError> {
-    let m: Odometry = from_cdr(data, ODOMETRY)?;
+fn odometry<W: Wire>(
+    data: &[u8],
+    role: Option<Role>,
+    log_time_ns: u64,
+) -> Result<Translated, ForeignError> {
+    let m: Odometry<W::Header> = W::decode(data, ODOMETRY)?;
     let var = m.twist.covariance[0][0];
     let role = role.or(Some(Role::Odometer));
     speed(
@@ -557,9 +625,32 @@ fn odometry(data: &[u8], role: Option<Role>, log_time_ns: u64) -> Result<Transla
     )
 }
 
-/// The catalogue kind and reader of `schema` for a sensor of `role`; `Ok(None)` for a schema
-/// not read here.
-pub(super) fn reader(
+/// The transforms of a `tf2_msgs/TFMessage` in the wire format `W`: each sensor frame
+/// (child) where it sits in its parent frame.
+pub(super) fn transforms<W: Wire>(data: &[u8]) -> Result<Vec<FrameTransform>, ForeignError> {
+    let m: TfMessage<W::Header> = W::decode(data, "tf2_msgs/TFMessage")?;
+    Ok(m.transforms
+        .into_iter()
+        .map(|t| {
+            let (v, q) = (&t.transform.translation, &t.transform.rotation);
+            FrameTransform {
+                parent: t.header.into_frame_id(),
+                child: t.child_frame_id,
+                translation_m: [v.x, v.y, v.z],
+                rotation_xyzw: [q.x, q.y, q.z, q.w],
+            }
+        })
+        .collect())
+}
+
+/// The transforms of a ROS 2 `tf2_msgs/msg/TFMessage` (CDR).
+pub fn transforms_cdr(data: &[u8]) -> Result<Vec<FrameTransform>, ForeignError> {
+    transforms::<Cdr>(data)
+}
+
+/// The catalogue kind and reader of `schema` (ROS 2's name: `sensor_msgs/msg/NavSatFix`) in
+/// the wire format `W` for a sensor of `role`; `Ok(None)` for a schema not read here.
+pub(super) fn reader<W: Wire>(
     schema: &str,
     role: Option<Role>,
 ) -> Result<Option<(MessageKind, Decode)>, String> {
@@ -579,16 +670,22 @@ pub(super) fn reader(
     let wrong_role = |kind: &str| Err(format!("{schema} is {kind}: its role cannot be {role:?}"));
     Ok(Some(match schema {
         NAV_SAT_FIX => match role {
-            None | Some(Role::Gnss) => (MessageKind::GnssFix, nav_sat_fix as Decode),
+            None | Some(Role::Gnss) => (MessageKind::GnssFix, nav_sat_fix::<W> as Decode),
             _ => return wrong_role("a GNSS fix"),
         },
         IMU => match role {
-            None | Some(Role::Imu) => (MessageKind::Imu, imu as Decode),
+            None | Some(Role::Imu) => (MessageKind::Imu, imu::<W> as Decode),
             _ => return wrong_role("an IMU sample"),
         },
-        TWIST_WITH_COVARIANCE_STAMPED => (speed_kind(role, None)?, twist_with_covariance as Decode),
-        TWIST_STAMPED => (speed_kind(role, None)?, twist as Decode),
-        ODOMETRY => (speed_kind(role, Some(Role::Odometer))?, odometry as Decode),
+        TWIST_WITH_COVARIANCE_STAMPED => (
+            speed_kind(role, None)?,
+            twist_with_covariance::<W> as Decode,
+        ),
+        TWIST_STAMPED => (speed_kind(role, None)?, twist::<W> as Decode),
+        ODOMETRY => (
+            speed_kind(role, Some(Role::Odometer))?,
+            odometry::<W> as Decode,
+        ),
         _ => return Ok(None),
     }))
 }

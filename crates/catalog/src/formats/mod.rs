@@ -7,12 +7,14 @@
 //! - [`rosbag2_sqlite`]: ROS 2 bags in the sqlite3 storage (`.db3`);
 //! - [`gpx`]: GPX 1.0 and 1.1 tracks (phones, Garmin units, handheld loggers);
 //! - [`mdf4`]: ASAM MDF 4 CAN bus logging (CANedge, Vector), frames onto `/can/<bus>/frames`;
-//! - [`csv_table`]: loggers' CSV tables, through a column mapping (`--map`).
+//! - [`csv_table`]: loggers' CSV tables, through a column mapping (`--map`);
+//! - [`rosbag1`]: ROS 1 bags (`.bag` 2.0), their channels as `ros1msg` channels.
 
 pub mod accuracy;
 pub mod csv_table;
 pub mod gpx;
 pub mod mdf4;
+pub mod rosbag1;
 pub mod rosbag2_sqlite;
 
 use std::collections::BTreeMap;
@@ -34,6 +36,8 @@ pub enum Storage {
     Mdf4,
     /// A logger's table, read through a column mapping.
     Csv,
+    /// A ROS 1 bag (format 2.0).
+    Rosbag1,
 }
 
 impl Storage {
@@ -45,6 +49,7 @@ impl Storage {
             "gpx" => Some(Self::Gpx),
             "mf4" | "mdf" => Some(Self::Mdf4),
             "csv" | "tsv" | "txt" => Some(Self::Csv),
+            "bag" => Some(Self::Rosbag1),
             _ => None,
         }
     }
@@ -60,6 +65,7 @@ impl Storage {
             Ok(_) if looks_like_gpx(&head) => Self::Gpx,
             Ok(_) if looks_like_mdf4(&head) => Self::Mdf4,
             Ok(_) if head.starts_with(b"SQLite format 3\0") => Self::Sqlite3,
+            Ok(_) if head.starts_with(b"#ROSBAG V") => Self::Rosbag1,
             _ => Self::Mcap,
         }
     }
@@ -76,6 +82,7 @@ impl Storage {
             Self::Gpx => "GPX",
             Self::Mdf4 => "MDF4",
             Self::Csv => "CSV",
+            Self::Rosbag1 => "ROS 1 bag",
         }
     }
 }
@@ -120,6 +127,26 @@ pub struct Converted {
     /// What was read but may be wrong (a start time in an unknown zone).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// Where the sensor frames sit, as the input's `/tf_static` says (ROS bags).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub frames: Vec<crate::foreign::FrameTransform>,
+}
+
+/// Adds `new` transforms to `frames`, a frame given again replacing what it said before
+/// (`/tf_static` is latched: a bag repeats it for every subscriber).
+pub(crate) fn add_frames(
+    frames: &mut Vec<crate::foreign::FrameTransform>,
+    new: Vec<crate::foreign::FrameTransform>,
+) {
+    for t in new {
+        match frames
+            .iter_mut()
+            .find(|f| f.parent == t.parent && f.child == t.child)
+        {
+            Some(f) => *f = t,
+            None => frames.push(t),
+        }
+    }
 }
 
 impl Converted {
@@ -160,6 +187,7 @@ pub fn convert(
         Storage::Sqlite3 => rosbag2_sqlite::convert(input, output),
         Storage::Gpx => gpx::convert(input, output, &options.gpx, writer),
         Storage::Mdf4 => mdf4::convert(input, output, writer),
+        Storage::Rosbag1 => rosbag1::convert(input, output, writer),
         Storage::Csv => match &options.csv {
             Some(mapping) => csv_table::convert(input, output, mapping, writer),
             None => Err(Error::run(

@@ -21,6 +21,7 @@ pub fn import(
     let time_base = match storage {
         Storage::Gpx => "each point's <time> (UTC; zone offsets applied)",
         Storage::Csv => "the mapping's time columns (its unit, format and zone)",
+        Storage::Rosbag1 => "each message record's time (the recorder's receive time); header.stamp is the sensor time",
         _ => "rosbag2 receive time (log and publish time)",
     };
     let mut warnings = std::collections::BTreeMap::new();
@@ -44,6 +45,7 @@ pub fn import(
         skipped: c.skipped,
         first_problems: c.first_problems,
         warnings,
+        frames: c.frames,
         ..Default::default()
     })
 }

@@ -38,6 +38,9 @@ pub struct ImportReport {
     /// What was imported but looks wrong (a receiver's date 1024 weeks early), by reason.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub warnings: BTreeMap<String, u64>,
+    /// Where the sensor frames sit, as a bag's `/tf_static` says.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub frames: Vec<railfuse_catalog::foreign::FrameTransform>,
 }
 
 impl ImportReport {
