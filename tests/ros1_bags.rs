@@ -194,6 +194,21 @@ fn an_imported_bag_is_ros1msg_mcap_that_mcap_ros1_reads_and_refuses_like_the_bag
     };
     let (a, b) = (fused(&bag, "a.fused.mcap"), fused(&out, "b.fused.mcap"));
     assert!(a.len() > 800 && a == b, "{} {}", a.len(), b.len());
+    // The fused log keeps the bag's channels as they were (ros1, their definitions): its
+    // NavSatFix scores the fused states.
+    let fused_log = dir.path().join("a.fused.mcap");
+    let eval = ok_json(&[
+        "eval",
+        s(&fused_log),
+        "--reference",
+        "/fix",
+        "--reference-quality",
+        "all",
+        "--json",
+    ]);
+    let scored = &eval["pipelines"][0]["position_error_m"];
+    assert_eq!(scored["samples"], 901, "{eval}");
+    assert!(scored["rmse"].as_f64().unwrap() < 2.0, "{eval}");
 }
 
 #[test]

@@ -260,6 +260,9 @@ struct Replay<'a> {
     context: SensorContext,
     schemas: IdMap<Arc<SchemaInfo>>,
     channels: IdMap<Arc<ChannelInfo>>,
+    /// Each channel as the input has it (a foreign channel's encoding and schema), which the
+    /// output copies: `channels` holds what it is read as.
+    originals: IdMap<Arc<ChannelInfo>>,
     routes: IdMap<Route>,
     /// For a ROS 2 input, each pipeline's state also as NavSatFix and Odometry in CDR
     /// (registered when the first CDR channel is met).
@@ -325,6 +328,7 @@ impl<'a> Replay<'a> {
             },
             schemas: IdMap::default(),
             channels: IdMap::default(),
+            originals: IdMap::default(),
             routes: IdMap::default(),
             ros_outputs: Vec::new(),
             track_output,
@@ -564,7 +568,8 @@ impl<'a> Replay<'a> {
         let info = self.channels.get(&info.id).cloned().unwrap_or(info);
         let kept = self.route(info.clone())?;
         if kept && top_level {
-            copy_channel(&mut self.writer, &info)?;
+            let original = self.originals.get(&info.id).cloned().unwrap_or(info);
+            copy_channel(&mut self.writer, &original)?;
         }
         Ok(kept)
     }
@@ -575,6 +580,7 @@ impl<'a> Replay<'a> {
         if let Some(route) = self.routes.get(&info.id) {
             return Ok(!route.replaced);
         }
+        self.originals.insert(info.id, info.clone());
         if info.message_encoding == ros2::ENCODING && self.ros_outputs.is_empty() {
             self.register_ros_outputs()?;
         }
