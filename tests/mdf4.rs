@@ -266,3 +266,42 @@ fn the_drives_gnss_imu_and_wheel_speed_come_off_its_two_buses_as_asammdf_decodes
         .iter()
         .all(|o| (0.0..70.0).contains(&o["speed_mps"].as_f64().unwrap())));
 }
+
+/// A measurement system's MDF 4 (physical values, two groups at 10 and 100 Hz) that asammdf
+/// wrote: read through samples/mdf4-measured.toml, every sample as asammdf reads it back, in
+/// railfuse's units (the MDF channels' own units: mm, km/h through a linear conversion, g,
+/// deg/s), uncompressed and in transposed deflate.
+#[test]
+fn measured_signals_read_through_a_mapping_as_asammdf_reads_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let map = sample("mdf4-measured.toml");
+    for compression in ["0", "2"] {
+        let file = dir.path().join(format!("measured-{compression}.mf4"));
+        let theirs = python_ok("mdf4_frames.py", &["measured", s(&file), compression]);
+        let e = fails(&["info", s(&file)]);
+        assert!(e.contains("--map") && e.contains("Latitude"), "{e}");
+        let out = dir.path().join(format!("measured-{compression}.mcap"));
+        ok(&["import", s(&file), "--map", s(&map), "-o", s(&out)]);
+        let col = |name: &str| theirs[name].as_array().unwrap().clone();
+        let fixes = messages(&out, "/gnss/fix");
+        assert_eq!(fixes.len(), col("Latitude").len());
+        for (k, f) in fixes.iter().enumerate() {
+            let at = |name: &str| col(name)[k][1].as_f64().unwrap();
+            assert_eq!(f["stamp_ns"], col("Latitude")[k][0]);
+            assert_eq!(f["latitude_deg"].as_f64(), Some(at("Latitude")));
+            assert_eq!(f["longitude_deg"].as_f64(), Some(at("Longitude")));
+            assert!((f["altitude_m"].as_f64().unwrap() - at("Height") / 1000.0).abs() < 1e-9);
+            assert!((f["speed_mps"].as_f64().unwrap() - at("Speed") / 3.6).abs() < 1e-9);
+        }
+        let imu = messages(&out, "/imu");
+        assert_eq!(imu.len(), col("AccX").len());
+        for (k, m) in imu.iter().enumerate() {
+            let at = |name: &str| col(name)[k][1].as_f64().unwrap();
+            assert_eq!(m["stamp_ns"], col("AccZ")[k][0]);
+            let f = m["specific_force_mps2"][2].as_f64().unwrap();
+            assert!((f - at("AccZ") * 9.806_65).abs() < 1e-9);
+            let w = m["angular_rate_radps"][0].as_f64().unwrap();
+            assert!((w - at("GyroX").to_radians()).abs() < 1e-12);
+        }
+    }
+}

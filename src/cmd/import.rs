@@ -128,9 +128,6 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
             ),
         };
     }
-    if map {
-        return Ok(Format::Csv);
-    }
     let mut head = Vec::with_capacity(512);
     std::fs::File::open(input)
         .and_then(|f| f.take(512).read_to_end(&mut head))
@@ -157,6 +154,8 @@ fn detect(input: &std::path::Path, map: bool) -> Result<Format> {
         _ if railfuse_catalog::formats::looks_like_gpx(&head) => Ok(Format::Gpx),
         _ if railfuse_catalog::formats::looks_like_mdf4(&head) => Ok(Format::Mdf4),
         _ if head.starts_with(b"#ROSBAG V") => Ok(Format::Rosbag1),
+        // A mapping names a table's columns (or an MDF file's measured channels, above).
+        _ if map => Ok(Format::Csv),
         _ if railfuse_can::candump::parse_line(first_line).is_ok() => Ok(Format::Candump),
         _ if asc_header(first_line) => Ok(Format::Asc),
         _ if first_line.starts_with('$') => Ok(Format::Nmea),
@@ -187,9 +186,9 @@ pub fn run(a: Args) -> Result<()> {
             f
         }
     };
-    if a.formats.map.is_some() && format != Format::Csv {
+    if a.formats.map.is_some() && !matches!(format, Format::Csv | Format::Mdf4) {
         anyhow::bail!(
-            "--map is the column mapping of --format csv, not of --format {}",
+            "--map is the column mapping of --format csv (or mdf4), not of --format {}",
             format_name(format)
         );
     }
@@ -221,6 +220,9 @@ pub fn run(a: Args) -> Result<()> {
             converted::import(Storage::Rosbag1, &input, &output, &a.formats.options()?)?
         }
         Format::Csv => converted::import(Storage::Csv, &input, &output, &a.formats.options()?)?,
+        Format::Mdf4 if a.formats.map.is_some() => {
+            converted::import(Storage::Mdf4, &input, &output, &a.formats.options()?)?
+        }
         Format::Candump | Format::Asc | Format::Blf | Format::Mdf4 => {
             let dbc = bus_dbcs(&a.dbc)?;
             let log = match format {

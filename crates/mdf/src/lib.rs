@@ -23,6 +23,7 @@ pub mod bus;
 pub mod data;
 pub mod layout;
 pub mod records;
+pub mod signals;
 
 /// Where and why an MDF file could not be read on.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

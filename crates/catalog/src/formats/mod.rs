@@ -186,7 +186,7 @@ pub fn convert(
     match storage {
         Storage::Sqlite3 => rosbag2_sqlite::convert(input, output),
         Storage::Gpx => gpx::convert(input, output, &options.gpx, writer),
-        Storage::Mdf4 => mdf4::convert(input, output, writer),
+        Storage::Mdf4 => mdf4::convert(input, output, options.csv.as_deref(), writer),
         Storage::Rosbag1 => rosbag1::convert(input, output, writer),
         Storage::Csv => match &options.csv {
             Some(mapping) => csv_table::convert(input, output, mapping, writer),

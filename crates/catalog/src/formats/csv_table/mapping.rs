@@ -175,12 +175,6 @@ impl CsvMapping {
             return bad("no [[channel]]: nothing to read".into());
         }
         for c in &self.channel {
-            if c.time.is_none() && self.time.is_none() {
-                return bad(format!(
-                    "channel {}: no time (give `[time]` or the channel's own `time`)",
-                    c.topic
-                ));
-            }
             if c.time.as_ref().is_some_and(|t| t.spread.is_some()) {
                 return bad(format!(
                     "channel {}: `spread` is the table's `[time]`, not a channel's",

@@ -104,7 +104,7 @@ pub fn convert(
 }
 
 /// A mapping bound to a file's header: every column found, every channel opened.
-struct Table {
+pub(crate) struct Table {
     clock: Option<Clock>,
     spreader: Option<SecondSpreader>,
     decimal_comma: bool,
@@ -134,7 +134,7 @@ struct Field {
 }
 
 impl Table {
-    fn bind(
+    pub(crate) fn bind(
         mapping: &MappingFile,
         input: &Path,
         headers: &csv::StringRecord,
@@ -170,6 +170,12 @@ impl Table {
             .map_err(fault)?;
         let mut channels: Vec<Channel> = Vec::new();
         for c in &map.channel {
+            if c.time.is_none() && clock.is_none() {
+                return Err(fault(format!(
+                    "channel {}: no time (give `[time]` or the channel's own `time`)",
+                    c.topic
+                )));
+            }
             if channels.iter().any(|b| b.topic == c.topic) {
                 return Err(fault(format!("channel {} is mapped twice", c.topic)));
             }
@@ -187,7 +193,7 @@ impl Table {
     }
 
     /// One row read: written at once, or held until its whole second is complete.
-    fn row(
+    pub(crate) fn row(
         &mut self,
         line: u64,
         record: &csv::StringRecord,
@@ -214,7 +220,7 @@ impl Table {
         Ok(())
     }
 
-    fn finish(&mut self, writer: &mut LogWriter, report: &mut Converted) -> Result<()> {
+    pub(crate) fn finish(&mut self, writer: &mut LogWriter, report: &mut Converted) -> Result<()> {
         let held = self
             .spreader
             .as_mut()
