@@ -275,6 +275,7 @@ impl Tuner {
             max_evaluations,
             seed,
             withhold: withhold_of(withhold, outages)?,
+            formats: Default::default(),
         };
         let inner = py.detach(|| RustTuner::open(&request)).map_err(fail)?;
         Ok(Self { inner })

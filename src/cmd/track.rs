@@ -44,6 +44,8 @@ pub struct Args {
     /// LAT,LON=KM. Twice: the two posts also set the direction.
     #[arg(long, value_name = "LAT,LON=KM")]
     pub chainage_at: Vec<String>,
+    #[command(flatten)]
+    pub formats: super::run_input::FormatArgs,
     /// The line's name in the file.
     #[arg(long)]
     pub name: Option<String>,
@@ -183,8 +185,12 @@ fn read_runs(
         altitude_m: 0.0,
     });
     let mut runs: Vec<RunFixes> = Vec::with_capacity(a.runs.len());
+    let options = RunOptions {
+        formats: a.formats.options()?,
+        ..RunOptions::default()
+    };
     for path in &a.runs {
-        let run = Run::open(std::slice::from_ref(path), &RunOptions::default())?;
+        let run = Run::open(std::slice::from_ref(path), &options)?;
         runs.push(read_fixes(
             &run,
             a.topic.as_deref(),

@@ -24,6 +24,8 @@ pub struct Args {
     /// The pipeline configuration (TOML) holding the pipeline.
     #[arg(short, long)]
     pub config: PathBuf,
+    #[command(flatten)]
+    pub formats: super::run_input::FormatArgs,
     /// The pipeline to tune.
     #[arg(long)]
     pub pipeline: String,
@@ -118,6 +120,7 @@ fn tune(a: &Args) -> Result<()> {
         max_evaluations: a.max_evals,
         seed: a.seed,
         withhold: a.withhold.request(),
+        formats: a.formats.options()?,
     };
     let loading = crate::progress::Progress::steps("decoding logs", a.logs.len() as u64);
     let tuner = Tuner::open(&request)?;

@@ -62,6 +62,8 @@ pub struct TuneRequest {
     /// A sensor withheld from the pipeline in outages (over the pipeline's `[pipeline.eval]`):
     /// tuned by cross-validation against what was withheld.
     pub withhold: Option<Withhold>,
+    /// How logs of other tools' formats are read (a logger CSV's mapping).
+    pub formats: railfuse_catalog::formats::FormatOptions,
 }
 
 /// The objective: what is minimised.
@@ -339,7 +341,8 @@ impl Tuner {
             .par_iter()
             .map(|log| {
                 let track = pipelines.track.as_ref();
-                Recording::load(log, &spec, reference.as_deref(), track, withhold.as_ref())
+                let (reference, withhold) = (reference.as_deref(), withhold.as_ref());
+                Recording::load(log, &req.formats, &spec, reference, track, withhold)
             })
             .collect::<Result<Vec<_>>>()?;
         let em = match optimiser {

@@ -163,6 +163,7 @@ impl Recording {
     /// a log without one.
     pub fn load(
         path: &Path,
+        formats: &railfuse_catalog::formats::FormatOptions,
         spec: &PipelineSpec,
         reference: Option<&str>,
         track: Option<&TrackMap>,
@@ -185,7 +186,11 @@ impl Recording {
                 .into());
         }
         // A log is one run: a file, a directory of its parts, or a bag.
-        let run = Run::open(&[path.to_owned()], &Default::default())?;
+        let options = railfuse_catalog::run::RunOptions {
+            formats: formats.clone(),
+            ..Default::default()
+        };
+        let run = Run::open(&[path.to_owned()], &options)?;
         let mut reader = run.reader()?;
         let span = reader.summary().and_then(|s| s.message_span_ns);
         let withheld = withhold
