@@ -69,7 +69,10 @@ fn same_fixes(ours: &[GnssFix], theirs: &serde_json::Value) {
 
 #[test]
 fn a_gnss_logger_s_table_reads_fix_for_fix_as_pandas_reads_it() {
-    let (csv, map) = (sample("gnss-logger.csv"), sample("gnss-logger.toml"));
+    let (csv, map) = (
+        sample("loggers/gnss-logger.csv"),
+        sample("loggers/gnss-logger.toml"),
+    );
     let theirs = python_ok("logger_csv.py", &["read-logger", s(&csv)]);
     same_fixes(&of_run(&csv, &map, "/gnss/fix"), &theirs);
     assert_eq!(theirs["fixes"].as_array().unwrap().len(), 451);
@@ -94,8 +97,8 @@ fn a_gnss_logger_s_table_reads_fix_for_fix_as_pandas_reads_it() {
 #[test]
 fn a_phone_export_reads_sample_for_sample_and_its_repeated_fix_once() {
     let (csv, map) = (
-        sample("phone-sensorlog.csv"),
-        sample("phone-sensorlog.toml"),
+        sample("loggers/phone-sensorlog.csv"),
+        sample("loggers/phone-sensorlog.toml"),
     );
     let theirs = python_ok("logger_csv.py", &["read-phone", s(&csv)]);
     let imu: Vec<Imu> = of_run(&csv, &map, "/imu");
@@ -146,7 +149,10 @@ fn a_phone_export_reads_sample_for_sample_and_its_repeated_fix_once() {
 
 #[test]
 fn a_table_is_a_run_for_every_command_with_its_mapping_and_refused_without() {
-    let (csv, map) = (sample("gnss-logger.csv"), sample("gnss-logger.toml"));
+    let (csv, map) = (
+        sample("loggers/gnss-logger.csv"),
+        sample("loggers/gnss-logger.toml"),
+    );
     let info = ok_json(&["info", s(&csv), "--map", s(&map), "--json"]);
     let fix = info["channels"]
         .as_array()

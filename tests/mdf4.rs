@@ -268,13 +268,13 @@ fn the_drives_gnss_imu_and_wheel_speed_come_off_its_two_buses_as_asammdf_decodes
 }
 
 /// A measurement system's MDF 4 (physical values, two groups at 10 and 100 Hz) that asammdf
-/// wrote: read through samples/mdf4-measured.toml, every sample as asammdf reads it back, in
+/// wrote: read through samples/loggers/mdf4-measured.toml, every sample as asammdf reads it back, in
 /// railfuse's units (the MDF channels' own units: mm, km/h through a linear conversion, g,
 /// deg/s), uncompressed and in transposed deflate.
 #[test]
 fn measured_signals_read_through_a_mapping_as_asammdf_reads_them() {
     let dir = tempfile::tempdir().unwrap();
-    let map = sample("mdf4-measured.toml");
+    let map = sample("loggers/mdf4-measured.toml");
     for compression in ["0", "2"] {
         let file = dir.path().join(format!("measured-{compression}.mf4"));
         let theirs = python_ok("mdf4_frames.py", &["measured", s(&file), compression]);

@@ -52,11 +52,12 @@ pub struct FormatArgs {
     /// ellipsoid (above WGS-84's ellipsoid).
     #[arg(long, value_name = "msl|ellipsoid", default_value = "msl")]
     pub gpx_ele: Elevation,
-    /// The column mapping of a logger's CSV (TOML): its time (`[time]` column or columns,
-    /// unit or strftime format, zone, spread of whole seconds), what its columns are in
-    /// (`[columns]` scale, offset, unit), and per `[[channel]]` its `topic`, `type`,
-    /// `fields = { field = "column" }` and `constants`. `railfuse import --example-map DIR`
-    /// writes one for every message type; samples/ has a GNSS logger's and a phone's.
+    /// The column mapping of a logger's CSV, or of an MDF 4 file's measured channels (TOML):
+    /// its time (`[time]` column or columns, unit or strftime format, zone, spread of whole
+    /// seconds), what its columns are in (`[columns]` scale, offset, unit), and per
+    /// `[[channel]]` its `topic`, `type`, `fields = { field = "column" }` and `constants`.
+    /// `railfuse import --example-map DIR` writes one for every message type;
+    /// samples/loggers/ has a GNSS logger's, a phone's and an MDF 4 measurement's.
     #[arg(long, value_name = "MAPPING.toml")]
     pub map: Option<PathBuf>,
 }

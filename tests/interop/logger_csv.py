@@ -5,12 +5,12 @@ is checked against).
         writes a railfuse log's GNSS fixes as a u-blox GNSS logger writes them: the date and
         time in six columns (whole seconds only), Lon/Lat in 1e-7 deg, heights and
         accuracies in mm, speed in mm/s, PDOP x 100, five rows a second
-        (samples/gnss-logger.csv).
+        (samples/loggers/gnss-logger.csv).
     python tests/interop/logger_csv.py sample-phone RUN.mcap OUT.csv
         writes a phone sensor-logger export (SensorLog's columns): one row per IMU sample at
         25 Hz, the phone's local time with its offset, acceleration in G with iOS's sign
         (at rest face up z = -1), rotation in rad/s, and the latest 1 Hz location fix
-        (its own time since 1970) repeated on every row (samples/phone-sensorlog.csv).
+        (its own time since 1970) repeated on every row (samples/loggers/phone-sensorlog.csv).
     python tests/interop/logger_csv.py european IN.csv OUT.csv
         rewrites a table as a European spreadsheet saves it: ';' between cells, a decimal
         comma, a BOM and CRLF line ends.

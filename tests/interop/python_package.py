@@ -38,9 +38,9 @@ ride = railfuse.read(os.path.join(here, "../../samples/ride.gpx"), "/gnss/fix")
 summary["gpx_rows"] = ride.num_rows
 summary["gpx_first_latitude"] = ride.column("latitude_deg")[0].as_py()
 logger = railfuse.read(
-    os.path.join(here, "../../samples/gnss-logger.csv"),
+    os.path.join(here, "../../samples/loggers/gnss-logger.csv"),
     "/gnss/fix",
-    mapping=os.path.join(here, "../../samples/gnss-logger.toml"),
+    mapping=os.path.join(here, "../../samples/loggers/gnss-logger.toml"),
 )
 summary["csv_rows"] = logger.num_rows
 mf4 = os.path.join(here, "../fuzz/corpus/mdf4/cut-sorted.mf4")

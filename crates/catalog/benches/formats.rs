@@ -42,7 +42,7 @@ fn hour_of_gpx(path: &std::path::Path) {
     writeln!(f, "</trkseg></trk></gpx>").unwrap();
 }
 
-/// The GNSS logger's table of `samples/gnss-logger.csv`, at 10 Hz for an hour, and its
+/// The GNSS logger's table of `samples/loggers/gnss-logger.csv`, at 10 Hz for an hour, and its
 /// mapping at that rate.
 fn hour_of_csv(path: &std::path::Path, mapping: &std::path::Path) {
     let mut f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
@@ -67,7 +67,7 @@ fn hour_of_csv(path: &std::path::Path, mapping: &std::path::Path) {
         )
         .unwrap();
     }
-    let sample = include_str!("../../../samples/gnss-logger.toml");
+    let sample = include_str!("../../../samples/loggers/gnss-logger.toml");
     std::fs::write(mapping, sample.replace("rate_hz = 5", "rate_hz = 10")).unwrap();
 }
 
