@@ -15,6 +15,10 @@ ROS 1 tool would, to check railfuse's bag reader message for message.
         header's index_pos 0.
     ros1_bag.py read-mcap FILE.mcap
         reads an MCAP of ROS 1 channels with mcap-ros1-support's decoder, as read does.
+    ros1_bag.py write-mcap IN.mcap OUT.mcap
+        writes the same messages as `write` into an MCAP of ROS 1 channels (`ros1` messages,
+        `ros1msg` schemas with ROS 1's definitions), as `mcap convert` makes of a bag, with the
+        official mcap writer.
 """
 
 import json
@@ -152,23 +156,50 @@ def write(source, out, compression):
             writer.write(conns[topic], t, TS.serialize_ros1(msg, msgtype))
             counts[topic] = counts.get(topic, 0) + 1
 
-        first = True
-        for topic, t, m in json_messages(source):
-            if first:
-                put("/tf_static", "tf2_msgs/msg/TFMessage", tf_static(t), t)
-                first = False
-            if topic == "/gnss/fix":
-                put("/fix", "sensor_msgs/msg/NavSatFix", nav_sat_fix(m), t)
-            elif topic == "/imu":
-                put("/imu", "sensor_msgs/msg/Imu", imu(m), t)
-            elif topic == "/radar/speed":
-                put("/radar", "geometry_msgs/msg/TwistWithCovarianceStamped", twist_cov(m, "radar"), t)
-            elif topic.startswith("/odometer/"):
-                n = topic.rsplit("/", 1)[1]
-                put(f"/odom/{n}", "nav_msgs/msg/Odometry", odometry(m, f"wheel{n}"), t)
-            elif topic == "/events":
-                put("/rosout_text", "std_msgs/msg/String", TS.types["std_msgs/msg/String"](data=json.dumps(m)), t)
+        sensors(source, put)
     print(json.dumps(counts))
+
+
+def write_mcap(source, out):
+    from mcap.writer import Writer as McapWriter
+
+    counts, channels = {}, {}
+    with open(out, "wb") as f:
+        writer = McapWriter(f)
+        writer.start(profile="ros1", library="ros1_bag.py")
+
+        def put(topic, msgtype, msg, t):
+            if topic not in channels:
+                text, _ = TS.generate_msgdef(msgtype, ros_version=1)
+                name = msgtype.replace("/msg/", "/")
+                schema = writer.register_schema(name=name, encoding="ros1msg", data=text.encode())
+                channels[topic] = writer.register_channel(topic=topic, message_encoding="ros1", schema_id=schema)
+            writer.add_message(channels[topic], log_time=t, publish_time=t, data=bytes(TS.serialize_ros1(msg, msgtype)))
+            counts[topic] = counts.get(topic, 0) + 1
+
+        sensors(source, put)
+        writer.finish()
+    print(json.dumps(counts))
+
+
+def sensors(source, put):
+    """A railfuse log's sensors as ROS 1 messages, handed to `put(topic, type, message, t)`."""
+    first = True
+    for topic, t, m in json_messages(source):
+        if first:
+            put("/tf_static", "tf2_msgs/msg/TFMessage", tf_static(t), t)
+            first = False
+        if topic == "/gnss/fix":
+            put("/fix", "sensor_msgs/msg/NavSatFix", nav_sat_fix(m), t)
+        elif topic == "/imu":
+            put("/imu", "sensor_msgs/msg/Imu", imu(m), t)
+        elif topic == "/radar/speed":
+            put("/radar", "geometry_msgs/msg/TwistWithCovarianceStamped", twist_cov(m, "radar"), t)
+        elif topic.startswith("/odometer/"):
+            n = topic.rsplit("/", 1)[1]
+            put(f"/odom/{n}", "nav_msgs/msg/Odometry", odometry(m, f"wheel{n}"), t)
+        elif topic == "/events":
+            put("/rosout_text", "std_msgs/msg/String", TS.types["std_msgs/msg/String"](data=json.dumps(m)), t)
 
 
 def fields(msgtype, msg):
@@ -245,6 +276,8 @@ if __name__ == "__main__":
         write(sys.argv[2], sys.argv[3], sys.argv[4])
     elif what == "read":
         read(sys.argv[2])
+    elif what == "write-mcap":
+        write_mcap(sys.argv[2], sys.argv[3])
     elif what == "read-mcap":
         read_mcap(sys.argv[2])
     elif what == "unindex":
