@@ -2,7 +2,8 @@
 //! a Garmin or phone app writes them: time, elevation, hdop, satellites, speed and course in
 //! extensions), and one hour of a 10 Hz GNSS logger's CSV (date and time in six columns,
 //! whole seconds spread at the receiver's rate, 1e-7°, mm, mm/s) into MCAP `/gnss/fix`. The
-//! goal: each under a second.
+//! goal: each under a second. And a ROS 1 bag, `samples/short-run.bag` (90 s, 25 207
+//! messages in bz2 chunks), into MCAP `ros1msg` channels.
 
 use std::io::Write;
 
@@ -103,6 +104,15 @@ fn convert(c: &mut Criterion) {
             let r =
                 formats::convert(Storage::Csv, &csv, &out, &options, &Default::default()).unwrap();
             assert_eq!(r.messages, POINTS as u64);
+        })
+    });
+    let bag = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../samples/short-run.bag");
+    group.throughput(Throughput::Elements(25_207));
+    group.bench_function("ros1_bag_bz2_25k_messages", |b| {
+        b.iter(|| {
+            let r = formats::convert(Storage::Rosbag1, &bag, &out, &options, &Default::default())
+                .unwrap();
+            assert_eq!(r.messages, 25_207);
         })
     });
     group.finish();
