@@ -48,7 +48,7 @@ impl Storage {
             "db3" => Some(Self::Sqlite3),
             "gpx" => Some(Self::Gpx),
             "mf4" | "mdf" => Some(Self::Mdf4),
-            "csv" | "tsv" | "txt" => Some(Self::Csv),
+            "csv" | "tsv" => Some(Self::Csv),
             "bag" => Some(Self::Rosbag1),
             _ => None,
         }

@@ -45,7 +45,21 @@ pub fn convert(input: &Path, output: &Path, writer: &WriterOptions) -> Result<Co
     }
     let mut bag = Bag::new(LogWriter::create_with(output, writer)?);
     let mut records = BagRecords::new(reader, size);
-    loop {
+    // The bag header first: where its index is, whose connection records name every
+    // connection before a chunk that does not repeat them is read.
+    match records.next_record() {
+        Ok(Some(header)) if header.fields.op() == Some(records::OP_BAG_HEADER) => {
+            bag.top_level(header)?;
+            if let Some(at) = bag.index_pos.filter(|p| (1..size).contains(p)) {
+                bag.index_connections(input, at, size)?;
+            }
+        }
+        Ok(Some(other)) => bag.top_level(other)?,
+        Ok(None) => {}
+        Err(Stop::Io(e)) => return Err(Error::run(input, e)),
+        Err(Stop::CutOff(d) | Stop::Damaged(d)) => bag.report.damage = Some(d),
+    }
+    while bag.report.damage.is_none() {
         match records.next_record() {
             Ok(Some(record)) => bag.top_level(record)?,
             Ok(None) => break,
@@ -109,6 +123,25 @@ impl Bag {
             Some(records::OP_INDEX | records::OP_CHUNK_INFO) => Ok(()),
             _ => self.record(record, None),
         }
+    }
+
+    /// The connection records of the index section (from `at` to the end): read before the
+    /// chunks, so a message meets its connection even where its chunk does not repeat it. An
+    /// index that does not read is left to the scan, which needs none.
+    fn index_connections(&mut self, input: &Path, at: u64, size: u64) -> Result<()> {
+        use std::io::{Seek, SeekFrom};
+        let mut file = std::fs::File::open(input).map_err(|e| Error::io(input, e))?;
+        file.seek(SeekFrom::Start(at))
+            .map_err(|e| Error::io(input, e))?;
+        let mut index = BagRecords::new(BufReader::new(file), size);
+        index.skip_to(at);
+        while let Ok(Some(record)) = index.next_record() {
+            if record.fields.op() == Some(records::OP_CONNECTION) {
+                // A connection the scan meets again is taken once.
+                let _ = self.connection(&record);
+            }
+        }
+        Ok(())
     }
 
     /// A chunk: its records, decompressed.
@@ -244,9 +277,10 @@ impl Bag {
             ));
         }
         if self.report.messages == 0 {
-            let why = match &self.report.damage {
-                Some(d) => d.clone(),
-                None => "no message in the bag".to_owned(),
+            let why = match (&self.report.damage, self.report.skipped.is_empty()) {
+                (Some(d), _) => d.clone(),
+                (None, true) => "no message in the bag".to_owned(),
+                (None, false) => format!("no message read: {}", self.report.reasons()),
             };
             return Err(Error::run(input, why));
         }

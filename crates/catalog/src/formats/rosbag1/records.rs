@@ -126,6 +126,11 @@ impl<R: BufRead> BagRecords<R> {
         self.offset
     }
 
+    /// The reader stands at byte `offset` of the file (it was seeked there).
+    pub fn skip_to(&mut self, offset: u64) {
+        self.offset = offset;
+    }
+
     /// The next record, `Ok(None)` at the end of the file.
     pub fn next_record(&mut self) -> Result<Option<Record>, Stop> {
         let offset = self.offset;

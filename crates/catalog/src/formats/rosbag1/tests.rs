@@ -138,3 +138,68 @@ fn a_ros1_header_decodes_with_its_sequence_and_unsigned_seconds() {
     payload[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
     assert!(from_ros1::<Header>(&payload, "std_msgs/Header").is_err());
 }
+
+#[test]
+fn connections_only_in_the_index_name_the_chunks_messages() {
+    let conn = 7u32.to_le_bytes();
+    let info = record(
+        &[
+            ("topic", b"/notes"),
+            ("type", b"std_msgs/String"),
+            ("md5sum", b"*"),
+        ],
+        b"",
+    );
+    let info = &info[4..info.len() - 4];
+    let connection = record(
+        &[
+            ("op", &[OP_CONNECTION]),
+            ("conn", &conn),
+            ("topic", b"/notes"),
+        ],
+        info,
+    );
+    let mut chunk = Vec::new();
+    for k in 0..3u32 {
+        let time = [100u32.to_le_bytes(), (k * 1000).to_le_bytes()].concat();
+        chunk.extend(record(
+            &[("op", &[OP_MESSAGE]), ("conn", &conn), ("time", &time)],
+            b"\0\0\0\0",
+        ));
+    }
+    let chunk = record(
+        &[
+            ("op", &[OP_CHUNK]),
+            ("compression", b"none"),
+            ("size", &(chunk.len() as u32).to_le_bytes()),
+        ],
+        &chunk,
+    );
+    let header_len = record(
+        &[("op", &[OP_BAG_HEADER]), ("index_pos", &0u64.to_le_bytes())],
+        &[b' '; 16],
+    )
+    .len();
+    let index_pos = (MAGIC.len() + header_len + chunk.len()) as u64;
+    let mut bytes = MAGIC.to_vec();
+    bytes.extend(record(
+        &[
+            ("op", &[OP_BAG_HEADER]),
+            ("index_pos", &index_pos.to_le_bytes()),
+        ],
+        &[b' '; 16],
+    ));
+    bytes.extend(chunk);
+    bytes.extend(connection);
+    let (c, _) = convert_bytes(&bytes).unwrap();
+    assert_eq!(c.per_topic.get("/notes"), Some(&3), "{c:?}");
+    assert!(
+        !c.warnings.iter().any(|w| w.contains("no index")),
+        "{:?}",
+        c.warnings
+    );
+    // Without its index the same messages have no connection: counted, and said.
+    let cut = &bytes[..index_pos as usize];
+    let e = convert_bytes(cut).unwrap_err().to_string();
+    assert!(e.contains("no message read: 3 a message of no known connection"), "{e}");
+}
