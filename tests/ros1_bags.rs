@@ -28,7 +28,11 @@ fn bag(dir: &Path, compression: &str) -> PathBuf {
 
 /// Every message of a run as railfuse reads it: (topic, log time, translated message).
 fn translated(path: &Path) -> Vec<(String, u64, Option<AnyMessage>)> {
-    let run = Run::open(&[path.to_owned()], &RunOptions::default()).unwrap();
+    translated_with(path, &RunOptions::default())
+}
+
+fn translated_with(path: &Path, options: &RunOptions) -> Vec<(String, u64, Option<AnyMessage>)> {
+    let run = Run::open(&[path.to_owned()], options).unwrap();
     let mut reader = run.reader().unwrap();
     let mut out = Vec::new();
     while let Some(r) = reader.next() {
@@ -225,6 +229,32 @@ fn an_mcap_of_ros1_channels_another_tool_wrote_reads_as_the_bag() {
     let (ours, theirs) = (translated(&mcap), translated(&bag));
     assert_eq!(ours.len(), 25_207);
     assert_eq!(ours, theirs);
+}
+
+/// A bag recorded on a clock 1.5 s ahead: `--clock-offset` moves its log times and the
+/// sensors' `header.stamp` alike (ROS 1's header, after its sequence number).
+#[test]
+fn a_clock_offset_moves_a_ros1_header_stamp_with_the_log_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = bag(dir.path(), "bz2");
+    let offset: railfuse_catalog::run::ClockOffset = format!("{}=-1.5", s(&bag)).parse().unwrap();
+    let options = RunOptions {
+        clock_offsets: vec![offset],
+        ..Default::default()
+    };
+    let fix = |v: Vec<(String, u64, Option<AnyMessage>)>| {
+        v.into_iter()
+            .find_map(|(t, log, m)| match (t.as_str(), m) {
+                ("/fix", Some(AnyMessage::GnssFix(f))) => Some((log, f.stamp_ns)),
+                _ => None,
+            })
+            .unwrap()
+    };
+    let ((log, stamp), (moved_log, moved_stamp)) =
+        (fix(translated(&bag)), fix(translated_with(&bag, &options)));
+    let d = |a: u64, b: u64| b as i128 - a as i128;
+    assert_eq!(d(log, moved_log).abs(), 1_500_000_000);
+    assert_eq!(d(stamp, moved_stamp), d(log, moved_log));
 }
 
 #[test]

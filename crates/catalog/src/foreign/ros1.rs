@@ -105,3 +105,48 @@ pub(super) fn reader(
 pub fn transforms(data: &[u8]) -> Result<Vec<super::FrameTransform>, ForeignError> {
     ros2::transforms::<Ros1>(data)
 }
+
+/// A ROS 1 message whose definition begins with a `std_msgs/Header` with its `header.stamp`
+/// (after the sequence number: bytes 4 to 12, little-endian) moved by `correct`, into `out`;
+/// false (nothing written) for any other message or a zero stamp (no time of its own).
+pub fn restamp_header(
+    definition: &[u8],
+    data: &[u8],
+    correct: impl Fn(u64) -> u64,
+    out: &mut Vec<u8>,
+) -> bool {
+    if !ros2::begins_with_header(definition) || data.len() < 12 {
+        return false;
+    }
+    // ROS 1's `time`: unsigned seconds, little-endian.
+    ros2::restamp_words(data, true, u32::MAX, correct, out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ros1_header_stamp_moves_with_the_clock_and_other_messages_do_not() {
+        let definition = b"# a fix\nuint8 KNOWN=3\nHeader header\nfloat64 latitude\n";
+        let mut data = 9u32.to_le_bytes().to_vec();
+        data.extend(1_780_300_800u32.to_le_bytes());
+        data.extend(250_000_000u32.to_le_bytes());
+        data.extend(0u32.to_le_bytes());
+        let mut out = Vec::new();
+        assert!(restamp_header(
+            definition,
+            &data,
+            |t| t - 1_500_000_000,
+            &mut out
+        ));
+        let h: Header = from_ros1(&out, "std_msgs/Header").unwrap();
+        assert_eq!(
+            (h.seq, h.stamp.secs, h.stamp.nsecs),
+            (9, 1_780_300_798, 750_000_000)
+        );
+        assert!(!restamp_header(b"string data\n", &data, |t| t, &mut out));
+        let zero = [9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0];
+        assert!(!restamp_header(definition, &zero, |t| t, &mut out));
+    }
+}

@@ -805,6 +805,23 @@ mod tests {
     }
 }
 
+/// Whether a message definition's first field is a `std_msgs/Header` (ROS 1's and ROS 2's;
+/// constants, `uint8 KNOWN=3`, are not fields and may come first).
+pub(super) fn begins_with_header(definition: &[u8]) -> bool {
+    let first_field = std::str::from_utf8(definition)
+        .ok()
+        .and_then(|d| {
+            d.lines()
+                .map(str::trim)
+                .find(|l| !l.is_empty() && !l.starts_with('#') && !l.contains('='))
+        })
+        .unwrap_or("");
+    matches!(
+        first_field.split_whitespace().collect::<Vec<_>>()[..],
+        ["std_msgs/Header" | "std_msgs/msg/Header" | "Header", _]
+    )
+}
+
 /// A CDR message whose definition begins with a `std_msgs/Header` (every stamped sensor
 /// message) with its `header.stamp` moved by `correct`, into `out`; false (nothing written)
 /// for any other message or a zero stamp (no time of its own).
@@ -814,19 +831,7 @@ pub fn restamp_header(
     correct: impl Fn(u64) -> u64,
     out: &mut Vec<u8>,
 ) -> bool {
-    let first_field = std::str::from_utf8(definition)
-        .ok()
-        .and_then(|d| {
-            d.lines()
-                .map(str::trim)
-                .find(|l| !l.is_empty() && !l.starts_with('#'))
-        })
-        .unwrap_or("");
-    let header = matches!(
-        first_field.split_whitespace().collect::<Vec<_>>()[..],
-        ["std_msgs/Header" | "std_msgs/msg/Header" | "Header", _]
-    );
-    if !header || data.len() < 12 {
+    if !begins_with_header(definition) || data.len() < 12 {
         return false;
     }
     let little = match data[1] {
@@ -834,22 +839,37 @@ pub fn restamp_header(
         0x00 | 0x02 => false,
         _ => return false,
     };
-    let word = |b: &[u8]| {
-        let b: [u8; 4] = b.try_into().expect("4 bytes");
+    // ROS 2's seconds are signed 32 bits.
+    restamp_words(data, little, i32::MAX as u32, correct, out)
+}
+
+/// The header stamp at bytes 4 to 12 of `data` (seconds, nanoseconds: after CDR's
+/// encapsulation header, or ROS 1's sequence number) moved by `correct` into `out`; false for
+/// a zero stamp, one that is not a time, or one moved past `max_sec`.
+pub(super) fn restamp_words(
+    data: &[u8],
+    little: bool,
+    max_sec: u32,
+    correct: impl Fn(u64) -> u64,
+    out: &mut Vec<u8>,
+) -> bool {
+    let word = |at: usize| {
+        let b = [data[at], data[at + 1], data[at + 2], data[at + 3]];
         if little {
             u32::from_le_bytes(b)
         } else {
             u32::from_be_bytes(b)
         }
     };
-    let (sec, nanosec) = (word(&data[4..8]) as i32, word(&data[8..12]));
-    if sec <= 0 && nanosec == 0 || sec < 0 || nanosec >= 1_000_000_000 {
+    let (sec, nanosec) = (word(4), word(8));
+    if sec == 0 && nanosec == 0 || sec > max_sec || nanosec >= 1_000_000_000 {
         return false;
     }
-    let t = correct(sec as u64 * 1_000_000_000 + nanosec as u64);
-    let (Ok(sec), nanosec) = (i32::try_from(t / 1_000_000_000), (t % 1_000_000_000) as u32) else {
+    let t = correct(u64::from(sec) * 1_000_000_000 + u64::from(nanosec));
+    let sec = t / 1_000_000_000;
+    if sec > u64::from(max_sec) {
         return false;
-    };
+    }
     let bytes = |v: u32| {
         if little {
             v.to_le_bytes()
@@ -860,6 +880,6 @@ pub fn restamp_header(
     out.clear();
     out.extend_from_slice(data);
     out[4..8].copy_from_slice(&bytes(sec as u32));
-    out[8..12].copy_from_slice(&bytes(nanosec));
+    out[8..12].copy_from_slice(&bytes((t % 1_000_000_000) as u32));
     true
 }

@@ -595,10 +595,13 @@ fn restamp(m: &LogMessage<'_>, clock: &ClockMap, out: &mut Vec<u8>) -> bool {
     use crate::messages::{AnyMessage, StampClock};
     let channel = m.channel;
     if channel.kind().is_none() {
-        // A ROS 2 message's header.stamp is its node's clock: the recorder's machine.
+        // A ROS message's header.stamp is its node's clock: the recorder's machine.
         return match &channel.schema {
             Some(s) if channel.message_encoding == "cdr" && s.encoding == "ros2msg" => {
                 crate::foreign::ros2::restamp_header(&s.data, m.data, |t| clock.correct(t), out)
+            }
+            Some(s) if channel.message_encoding == "ros1" && s.encoding == "ros1msg" => {
+                crate::foreign::ros1::restamp_header(&s.data, m.data, |t| clock.correct(t), out)
             }
             _ => false,
         };

@@ -201,5 +201,8 @@ fn connections_only_in_the_index_name_the_chunks_messages() {
     // Without its index the same messages have no connection: counted, and said.
     let cut = &bytes[..index_pos as usize];
     let e = convert_bytes(cut).unwrap_err().to_string();
-    assert!(e.contains("no message read: 3 a message of no known connection"), "{e}");
+    assert!(
+        e.contains("no message read: 3 a message of no known connection"),
+        "{e}"
+    );
 }
