@@ -542,32 +542,8 @@ impl<const N: usize> Pipeline<N> {
             }
             None => e.process(&scalar),
         };
-        if let Some(i) = outcome.innovation() {
-            diagnostics.innovation = Some(i.residual);
-            diagnostics.innovation_variance = Some(i.variance);
-            diagnostics.nis = Some(i.nis);
-        }
-        let extra = e.diagnostics();
-        diagnostics.effective_sample_size = extra.effective_sample_size;
-        diagnostics.resampled = extra.resampled;
-        diagnostics.sharing = extra.sharing.map(|shares| {
-            shares
-                .into_iter()
-                .map(|s| railfuse_catalog::messages::DeviceShare {
-                    device: s.device,
-                    beta: s.beta,
-                    fault: s.fault,
-                })
-                .collect()
-        });
-        let decision = match outcome {
-            Outcome::Accepted(_) => GateDecision::Accepted,
-            Outcome::AcceptedAfterLockout(_) => GateDecision::AcceptedAfterLockout,
-            Outcome::RejectedGate(_) => GateDecision::RejectedGate,
-            Outcome::RejectedNumerics(_) => GateDecision::RejectedInvalid,
-            Outcome::RejectedDeviceFault(_) => GateDecision::RejectedDeviceFault,
-            Outcome::Reset(_) => GateDecision::ResetToFix,
-        };
+        note_outcome(diagnostics, &outcome, e.diagnostics());
+        let decision = gate_decision(&outcome);
         let used = matches!(
             decision,
             GateDecision::Accepted | GateDecision::AcceptedAfterLockout | GateDecision::ResetToFix
@@ -862,5 +838,43 @@ mod tests {
                 serde_json::from_str(&serde_json::to_string(d).unwrap()).unwrap();
             assert_eq!(back.decision, d.decision);
         }
+    }
+}
+
+/// An update's innovation and the estimator's own diagnostics (particles, shares) into the
+/// state's diagnostics.
+fn note_outcome(
+    diagnostics: &mut FusedDiagnostics,
+    outcome: &Outcome,
+    extra: crate::filter::EstimatorDiagnostics,
+) {
+    if let Some(i) = outcome.innovation() {
+        diagnostics.innovation = Some(i.residual);
+        diagnostics.innovation_variance = Some(i.variance);
+        diagnostics.nis = Some(i.nis);
+    }
+    diagnostics.effective_sample_size = extra.effective_sample_size;
+    diagnostics.resampled = extra.resampled;
+    diagnostics.sharing = extra.sharing.map(|shares| {
+        shares
+            .into_iter()
+            .map(|s| railfuse_catalog::messages::DeviceShare {
+                device: s.device,
+                beta: s.beta,
+                fault: s.fault,
+            })
+            .collect()
+    });
+}
+
+/// What the filter did with a measurement, as the diagnostics count it.
+fn gate_decision(outcome: &Outcome) -> GateDecision {
+    match outcome {
+        Outcome::Accepted(_) => GateDecision::Accepted,
+        Outcome::AcceptedAfterLockout(_) => GateDecision::AcceptedAfterLockout,
+        Outcome::RejectedGate(_) => GateDecision::RejectedGate,
+        Outcome::RejectedNumerics(_) => GateDecision::RejectedInvalid,
+        Outcome::RejectedDeviceFault(_) => GateDecision::RejectedDeviceFault,
+        Outcome::Reset(_) => GateDecision::ResetToFix,
     }
 }

@@ -192,40 +192,14 @@ impl EddyCurrentPipeline {
         self.aiding.latest = Some((t, z > 0.0));
         let since = self.aiding.standing_since;
         self.aiding.standing_since = standing.then(|| since.unwrap_or(t));
-        let diag = EddyCurrentDiagnostics {
-            window: "wheel".into(),
-            sleepers_a: self.counters[0].sleepers,
-            sleepers_b: self.counters[1].sleepers,
-            ..Default::default()
-        };
+        let diag = self.wheel_diagnostics();
         if self.kf.is_none() {
             self.start_from_wheel(t, z, r0, &topic, diag, o);
             return;
         }
         let late_s = self.advance(t, false);
         if standing {
-            let i = self.zero_velocity();
-            // Held there: a standing train's chainage does not wander with the residue of
-            // its speed (the estimate projected onto the constraint, its covariance as the
-            // updates left it).
-            if let Some(kf) = self.kf.as_mut() {
-                let x = &mut kf.estimate.state;
-                (x[1], x[2]) = (0.0, 0.0);
-            }
-            self.aiding.tracks[w.aid].refused_since_ns = None;
-            self.record_as(
-                &topic,
-                t,
-                Some(0.0),
-                Some(STANDSTILL_SPEED_STD_MPS.powi(2)),
-                i,
-                GateDecision::Accepted,
-                Some("standstill: the wheel turned no pulse over its window"),
-                diag,
-                o,
-            );
-            self.filter_state(o);
-            return;
+            return self.hold_standing(w.aid, t, &topic, diag, o);
         }
         let kf = self.kf.as_mut().expect("checked above");
         let v = kf.estimate.state[1].max(0.0);
@@ -280,6 +254,49 @@ impl EddyCurrentPipeline {
             o,
         );
         self.wheel_state(t, o);
+    }
+
+    /// A wheel sample's diagnostics: the sleepers counted so far.
+    fn wheel_diagnostics(&self) -> EddyCurrentDiagnostics {
+        EddyCurrentDiagnostics {
+            window: "wheel".into(),
+            sleepers_a: self.counters[0].sleepers,
+            sleepers_b: self.counters[1].sleepers,
+            ..Default::default()
+        }
+    }
+
+    /// The wheel turned no pulse over its window: zero speed fused, and the train held where
+    /// it stands.
+    fn hold_standing(
+        &mut self,
+        aid: usize,
+        t: u64,
+        topic: &str,
+        diag: EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        let i = self.zero_velocity();
+        // Held there: a standing train's chainage does not wander with the residue of its
+        // speed (the estimate projected onto the constraint, its covariance as the updates
+        // left it).
+        if let Some(kf) = self.kf.as_mut() {
+            let x = &mut kf.estimate.state;
+            (x[1], x[2]) = (0.0, 0.0);
+        }
+        self.aiding.tracks[aid].refused_since_ns = None;
+        self.record_as(
+            topic,
+            t,
+            Some(0.0),
+            Some(STANDSTILL_SPEED_STD_MPS.powi(2)),
+            i,
+            GateDecision::Accepted,
+            Some("standstill: the wheel turned no pulse over its window"),
+            diag,
+            o,
+        );
+        self.filter_state(o);
     }
 
     /// A state at a wheel's sample where the windows leave a gap of more than one and a half

@@ -174,30 +174,7 @@ impl EddyCurrentPipeline {
         let h_v = RowVector3::new(0.0, 1.0, -late_s);
         let innovation = kf.innovation(&h_v, r_v, m.speed_mps);
         if innovation.nis > SPEED_GATE_NIS && !m.acquired {
-            self.gate_refusals += 1;
-            self.counts.rejected_gate += 1;
-            let why = format!(
-                "speed {:.3} m/s, NIS {:.1} beyond {SPEED_GATE_NIS}",
-                m.speed_mps, innovation.nis
-            );
-            self.record(
-                m.stamp_ns,
-                Some(m.speed_mps),
-                Some(r_v),
-                Some(innovation),
-                GateDecision::RejectedGate,
-                Some(&why),
-                diag.clone(),
-                o,
-            );
-            if self.gate_refusals >= GATE_RESTART {
-                // The correlator has agreed with itself and not the filter five times: the
-                // filter is what diverged.
-                self.kf = None;
-                self.gate_refusals = 0;
-            }
-            self.filter_state(o);
-            return;
+            return self.refuse_speed(m, r_v, innovation, diag, o);
         }
         self.gate_refusals = 0;
         self.last_correlation_ns = Some(m.stamp_ns);
@@ -218,6 +195,41 @@ impl EddyCurrentPipeline {
             diag.clone(),
             o,
         );
+        self.filter_state(o);
+    }
+
+    /// A window's speed beyond the gate: refused, and after [`GATE_RESTART`] refusals in a
+    /// row the filter started over.
+    fn refuse_speed(
+        &mut self,
+        m: &SpeedMeasurement,
+        r_v: f64,
+        innovation: Innovation,
+        diag: &EddyCurrentDiagnostics,
+        o: &mut Vec<Fused>,
+    ) {
+        self.gate_refusals += 1;
+        self.counts.rejected_gate += 1;
+        let why = format!(
+            "speed {:.3} m/s, NIS {:.1} beyond {SPEED_GATE_NIS}",
+            m.speed_mps, innovation.nis
+        );
+        self.record(
+            m.stamp_ns,
+            Some(m.speed_mps),
+            Some(r_v),
+            Some(innovation),
+            GateDecision::RejectedGate,
+            Some(&why),
+            diag.clone(),
+            o,
+        );
+        if self.gate_refusals >= GATE_RESTART {
+            // The correlator has agreed with itself and not the filter five times: the filter
+            // is what diverged.
+            self.kf = None;
+            self.gate_refusals = 0;
+        }
         self.filter_state(o);
     }
 

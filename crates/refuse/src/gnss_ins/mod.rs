@@ -449,19 +449,8 @@ impl GnssInsPipeline {
         self.gate.count(&verdict);
         let speed = fix.speed_mps.filter(|v| v.is_finite() && *v >= 0.0);
         self.standing = speed.is_some_and(|v| v < self.settings.standstill_speed_mps);
-        // The pre-filters follow every gated fix, so that a single-point fix after an RTK
-        // stretch meets a current trend; only the pre-filtered class fuses their output.
-        let filtered = [(0, e, re), (1, n, rn)].map(|(k, z, r)| self.prefilters[k].step(t, z, r));
         let use_filtered = verdict == GateVerdict::PreFiltered;
-        let (pe, pn, rpe, rpn) = match use_filtered {
-            true => (
-                filtered[0].value,
-                filtered[1].value,
-                filtered[0].variance,
-                filtered[1].variance,
-            ),
-            false => (e, n, re, rn),
-        };
+        let (pe, pn, rpe, rpn) = self.prefiltered(t, (e, n, re, rn), use_filtered);
         let velocity = self.gnss_velocity(fix, speed);
         if self.nav.is_none() {
             self.start(fix, (e, n, re.max(rn)), speed, &topic, o);
@@ -515,6 +504,28 @@ impl GnssInsPipeline {
             self.counts.accepted += 1;
         }
         self.after_fix(t, &topic, map, o);
+    }
+
+    /// The fix's position (east, north and their variances) through the pre-filters where
+    /// `use_filtered`, else as it is. The pre-filters follow every gated fix, so that a
+    /// single-point fix after an RTK stretch meets a current trend; only the pre-filtered
+    /// class fuses their output.
+    fn prefiltered(
+        &mut self,
+        t: u64,
+        (e, n, re, rn): (f64, f64, f64, f64),
+        use_filtered: bool,
+    ) -> (f64, f64, f64, f64) {
+        let filtered = [(0, e, re), (1, n, rn)].map(|(k, z, r)| self.prefilters[k].step(t, z, r));
+        match use_filtered {
+            true => (
+                filtered[0].value,
+                filtered[1].value,
+                filtered[0].variance,
+                filtered[1].variance,
+            ),
+            false => (e, n, re, rn),
+        }
     }
 
     /// The fix's velocity in the plane (from its speed and course), through its pre-filters,

@@ -8,6 +8,7 @@ use railfuse_catalog::messages::{
 };
 
 use super::error_state::{velocity_rows, ErrorVector, BA, BG, BY, DIM, E, K, N, V};
+use super::planar_ins::Navigation;
 use super::{GnssInsPipeline, Out};
 use crate::filter::Innovation;
 use crate::fused::{measurement_record, Fused};
@@ -43,50 +44,16 @@ impl GnssInsPipeline {
             0.0,
             accel_var,
         ];
-        let v = nav.speed_mps;
-        let rows = velocity_rows(&nav);
-        let h = SMatrix::<f64, 2, DIM>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);
-        let vc = h * p * h.transpose();
-        let origin = self.origin.expect("set by the first fix");
-        let (lat, lon, _) = origin.to_geodetic(nav.east_m, nav.north_m, 0.0);
-        let (ve, vn) = nav.velocity();
-        let imu_topic = self.topic(self.roles.imu);
-        let state = |topic: &str, kind: &str, value: f64, i: usize| SensorStateEstimate {
-            topic: topic.to_owned(),
-            kind: kind.into(),
-            value,
-            std: p[(i, i)].max(0.0).sqrt(),
-        };
-        let mut sensor_states = vec![
-            state(imu_topic, "accel_bias", nav.accel_bias_mps2, BA),
-            state(imu_topic, "lateral_accel_bias", nav.lateral_bias_mps2, BY),
-            state(imu_topic, "gyro_bias", nav.gyro_bias_radps, BG),
-        ];
-        for (j, sensor) in self.roles.speed.iter().enumerate() {
-            if sensor.scale.is_some() {
-                let topic = self.topic(sensor.sensor);
-                let k = self.calibration.speed_scales[j];
-                sensor_states.push(state(topic, "scale_factor", k, K + j));
-            }
-        }
+        let sensor_states = self.sensor_states(&nav, &p);
         let state = FusedState {
             stamp_ns: t,
             chainage_m,
-            speed_mps: v,
+            speed_mps: nav.speed_mps,
             acceleration_mps2: self.last_acceleration,
             covariance,
             source: topic.to_owned(),
             sensor_states,
-            plane: Some(PlanePosition {
-                east_m: nav.east_m,
-                north_m: nav.north_m,
-                covariance_en_m2: [p[(0, 0)], p[(0, 1)], p[(1, 0)], p[(1, 1)]],
-                latitude_deg: lat,
-                longitude_deg: lon,
-                velocity_en_mps: Some([ve, vn]),
-                velocity_covariance_en: Some([vc[(0, 0)], vc[(0, 1)], vc[(1, 0)], vc[(1, 1)]]),
-                heading_rad: Some(nav.heading_rad),
-            }),
+            plane: Some(self.plane_position(&nav, &p)),
         };
         o.items.push(Fused {
             state: Some(state),
@@ -95,6 +62,54 @@ impl GnssInsPipeline {
         let period = (self.settings.output_period_s * 1e9) as u64;
         self.next_output_ns = t + period;
         self.write_model(t, (nav.accel_bias_mps2, nav.gyro_bias_radps), o);
+    }
+
+    /// The position in the plane with its covariance, on the globe, and the velocity.
+    fn plane_position(&self, nav: &Navigation, p: &SMatrix<f64, DIM, DIM>) -> PlanePosition {
+        let rows = velocity_rows(nav);
+        let h = SMatrix::<f64, 2, DIM>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);
+        let vc = h * p * h.transpose();
+        let origin = self.origin.expect("set by the first fix");
+        let (lat, lon, _) = origin.to_geodetic(nav.east_m, nav.north_m, 0.0);
+        let (ve, vn) = nav.velocity();
+        PlanePosition {
+            east_m: nav.east_m,
+            north_m: nav.north_m,
+            covariance_en_m2: [p[(0, 0)], p[(0, 1)], p[(1, 0)], p[(1, 1)]],
+            latitude_deg: lat,
+            longitude_deg: lon,
+            velocity_en_mps: Some([ve, vn]),
+            velocity_covariance_en: Some([vc[(0, 0)], vc[(0, 1)], vc[(1, 0)], vc[(1, 1)]]),
+            heading_rad: Some(nav.heading_rad),
+        }
+    }
+
+    /// The IMU's biases and each speed sensor's scale factor, with their σ.
+    fn sensor_states(
+        &self,
+        nav: &Navigation,
+        p: &SMatrix<f64, DIM, DIM>,
+    ) -> Vec<SensorStateEstimate> {
+        let imu_topic = self.topic(self.roles.imu);
+        let state = |topic: &str, kind: &str, value: f64, i: usize| SensorStateEstimate {
+            topic: topic.to_owned(),
+            kind: kind.into(),
+            value,
+            std: p[(i, i)].max(0.0).sqrt(),
+        };
+        let mut states = vec![
+            state(imu_topic, "accel_bias", nav.accel_bias_mps2, BA),
+            state(imu_topic, "lateral_accel_bias", nav.lateral_bias_mps2, BY),
+            state(imu_topic, "gyro_bias", nav.gyro_bias_radps, BG),
+        ];
+        for (j, sensor) in self.roles.speed.iter().enumerate() {
+            if sensor.scale.is_some() {
+                let topic = self.topic(sensor.sensor);
+                let k = self.calibration.speed_scales[j];
+                states.push(state(topic, "scale_factor", k, K + j));
+            }
+        }
+        states
     }
 
     /// The learnt IMU model, once a second; none with learning off (`applied` would claim a

@@ -346,9 +346,67 @@ impl SafetyPipeline {
             return Some(self.finish_epoch(epoch, map));
         }
         self.predict_to(fix.stamp_ns, map);
-        // S4 on the predicted position, then its step test. A fix beside the track may be
-        // dropped (degraded); a step says the map may be off as well as the fix, so it only
-        // fails the check: the fix is still fused, and the map heading not trusted alone.
+        let s4_failed = self.check_against_map(fix.stamp_ns, &m, (re, rn))?;
+        self.fix_dropped = self.drop_fix(fix.stamp_ns, s4_failed);
+        if self.fix_dropped {
+            epoch.refused(&topic, "beside the track (S4): not fused (degraded mode)");
+            return Some(self.finish_epoch(epoch, map));
+        }
+        self.update_axes(
+            InnovationKind::Position,
+            &mut epoch,
+            [(Axis::East, e, re), (Axis::North, n, rn)],
+        );
+        Some(self.finish_epoch(epoch, map))
+    }
+
+    /// What degraded mode weighs for an epoch at `chainage` (with its variance): a dropped
+    /// fix, the wide interval since the last useful position, and the odometry so far where
+    /// no window completed (`window_done`); `None` with degraded mode off.
+    fn cover(
+        &self,
+        t_ns: u64,
+        (chainage_m, variance_m2): (f64, f64),
+        sigma_max: f64,
+        window_done: bool,
+    ) -> Option<degraded::Cover> {
+        let s = &self.settings;
+        let margin = s.map_margin * s.map_std_m;
+        s.degraded.then(|| degraded::Cover {
+            fix_dropped: self.fix_dropped,
+            wide_interval: self.last_useful_chainage_m.map(|at| {
+                let since_useful_m = (chainage_m - at).abs();
+                degraded::WideInterval {
+                    half_width_m: s.eta * sigma_max + margin,
+                    allowance_m: s.eta * s.max_position_std_m
+                        + margin
+                        + s.wide_interval_fraction * since_useful_m,
+                    since_useful_m,
+                }
+            }),
+            odometry_so_far: match window_done {
+                true => None,
+                false => self.odometry.judge(
+                    t_ns,
+                    chainage_m,
+                    variance_m2,
+                    s.odometry_sigmas,
+                    s.axle_2_scale_std,
+                ),
+            },
+        })
+    }
+
+    /// S4 on the predicted position, then its step test, kept as the epoch's map check;
+    /// whether S4 failed (`None` without a filter). A fix beside the track may be dropped
+    /// (degraded); a step says the map may be off as well as the fix, so it only fails the
+    /// check: the fix is still fused, and the map heading not trusted alone.
+    fn check_against_map(
+        &mut self,
+        t_ns: u64,
+        m: &railfuse_catalog::map_matching::MapMatch,
+        (re, rn): (f64, f64),
+    ) -> Option<bool> {
         let s = &self.settings;
         let p = self.filter.as_ref()?.position_covariance();
         let r = Matrix2::new(re, 0.0, 0.0, rn);
@@ -358,7 +416,7 @@ impl SafetyPipeline {
         // would make the next good fix look like a step.
         let step = match s.map_step_window_s > 0.0 && !s4_failed {
             true => self.map_step.check(
-                fix.stamp_ns,
+                t_ns,
                 m.track,
                 m.lateral_m,
                 map_check::across(m.heading_rad, &r),
@@ -373,17 +431,7 @@ impl SafetyPipeline {
             Some(step) if !step.passed => step,
             _ => s4,
         });
-        self.fix_dropped = self.drop_fix(fix.stamp_ns, s4_failed);
-        if self.fix_dropped {
-            epoch.refused(&topic, "beside the track (S4): not fused (degraded mode)");
-            return Some(self.finish_epoch(epoch, map));
-        }
-        self.update_axes(
-            InnovationKind::Position,
-            &mut epoch,
-            [(Axis::East, e, re), (Axis::North, n, rn)],
-        );
-        Some(self.finish_epoch(epoch, map))
+        Some(s4_failed)
     }
 
     /// Degraded mode: whether a fix that does not fit the map (`failed`: beside the track by
@@ -703,29 +751,12 @@ impl SafetyPipeline {
             )
             .cloned();
         let margin = s.map_margin * s.map_std_m;
-        let cover = s.degraded.then(|| degraded::Cover {
-            fix_dropped: self.fix_dropped,
-            wide_interval: self.last_useful_chainage_m.map(|at| {
-                let since_useful_m = (place.chainage_m - at).abs();
-                degraded::WideInterval {
-                    half_width_m: s.eta * sigma_max + margin,
-                    allowance_m: s.eta * s.max_position_std_m
-                        + margin
-                        + s.wide_interval_fraction * since_useful_m,
-                    since_useful_m,
-                }
-            }),
-            odometry_so_far: match odometry {
-                Some(_) => None,
-                None => self.odometry.judge(
-                    epoch.stamp_ns,
-                    place.chainage_m,
-                    p[(0, 0)],
-                    s.odometry_sigmas,
-                    s.axle_2_scale_std,
-                ),
-            },
-        });
+        let cover = self.cover(
+            epoch.stamp_ns,
+            (place.chainage_m, p[(0, 0)]),
+            sigma_max,
+            odometry.is_some(),
+        );
         checks.push(odometry.unwrap_or_else(|| {
             diagnosis::verdict(
                 "s5_odometry",
