@@ -232,11 +232,7 @@ fn true_line(log: &Path) -> TrackMap {
             .last()
             .is_none_or(|v| t.chainage_m >= v.chainage_m + 1.0)
         {
-            vertices.push(TrackVertex {
-                chainage_m: t.chainage_m,
-                east_m: t.east_m,
-                north_m: t.north_m,
-            });
+            vertices.push(TrackVertex::at(t.chainage_m, t.east_m, t.north_m));
         }
     }
     TrackMap { vertices, ..map }

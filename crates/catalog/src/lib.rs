@@ -32,7 +32,9 @@ pub mod rejections;
 pub mod run;
 pub mod topics;
 pub mod track_geojson;
+pub mod track_profile;
 pub mod units;
+pub mod vehicle;
 
 pub use error::{Error, Result};
 pub use messages::ChannelMessage;

@@ -222,6 +222,11 @@ pub enum MapProblem {
         first_m: f64,
         second_m: f64,
     },
+    #[error("track {track}: {problem}")]
+    Profile {
+        track: String,
+        problem: crate::track_profile::ProfileProblem,
+    },
 }
 
 impl TrackMap {
@@ -264,6 +269,12 @@ fn check_track(name: &str, v: &[TrackVertex]) -> Result<(), MapProblem> {
             index: i + 1,
             before: v[i].chainage_m,
             after: v[i + 1].chainage_m,
+        });
+    }
+    if let Some(problem) = crate::track_profile::profile_problem(v) {
+        return Err(MapProblem::Profile {
+            track: name.to_owned(),
+            problem,
         });
     }
     if let Some((first, second)) = self_intersection(v) {
@@ -341,11 +352,7 @@ mod tests {
     use crate::messages::TrackLine;
 
     fn vertex(chainage_m: f64, east_m: f64, north_m: f64) -> TrackVertex {
-        TrackVertex {
-            chainage_m,
-            east_m,
-            north_m,
-        }
+        TrackVertex::at(chainage_m, east_m, north_m)
     }
 
     fn map(vertices: Vec<TrackVertex>, other_tracks: Vec<TrackLine>) -> TrackMap {

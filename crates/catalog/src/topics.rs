@@ -12,6 +12,8 @@ pub const LOOP_POSITION: &str = "/loop/position";
 pub const BALISE: &str = "/balise";
 pub const EDDY_CURRENT: &str = "/eddy_current/block";
 pub const TRACK_MAP: &str = "/track/map";
+/// The train's length and where each sensor sits on it (the installation drawing).
+pub const VEHICLE: &str = "/vehicle";
 pub const GROUND_TRUTH: &str = "/truth";
 pub const EVENTS: &str = "/events";
 pub const RECORDER_DIAGNOSTICS: &str = "/recorder/diagnostics";
@@ -30,6 +32,7 @@ pub fn standard_kind(topic: &str) -> Option<MessageKind> {
         BALISE => MessageKind::BalisePassage,
         EDDY_CURRENT => MessageKind::EddyCurrentBlock,
         TRACK_MAP => MessageKind::TrackMap,
+        VEHICLE => MessageKind::Vehicle,
         GROUND_TRUTH => MessageKind::GroundTruth,
         EVENTS => MessageKind::Event,
         RECORDER_DIAGNOSTICS => MessageKind::RecorderDiagnostics,

@@ -298,11 +298,7 @@ fn vertices(
     Ok(plane
         .iter()
         .zip(chainage)
-        .map(|(&(east_m, north_m), chainage_m)| TrackVertex {
-            chainage_m,
-            east_m,
-            north_m,
-        })
+        .map(|(&(east_m, north_m), chainage_m)| TrackVertex::at(chainage_m, east_m, north_m))
         .collect())
 }
 

@@ -54,9 +54,108 @@ pub struct PipelinesFile {
     /// CAN bus's signals (with `[can]`), fed to the pipelines as if the log had its channel.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub sensor: BTreeMap<String, SensorSource>,
+    /// `[vehicle]`: the train's length and where each sensor sits on it (its lever arm and
+    /// mounting in the body frame, origin at the front end). Wins over the log's `/vehicle`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<VehicleConfig>")]
+    pub vehicle: Option<Spanned<VehicleConfig>>,
     /// The pipelines, each run over the same log in one pass.
     #[schemars(with = "Vec<PipelineConfig>")]
     pub pipeline: Vec<Spanned<PipelineConfig>>,
+}
+
+/// `[vehicle]`: the train as its installation drawing gives it (see the book's Vehicle page).
+///
+/// ```toml
+/// [vehicle]
+/// length_m = 104.0
+/// [vehicle.sensor."/gnss/fix"]
+/// lever_arm_m = [-12.5, 0.0, 4.1]    # x behind the front end is negative, y left, z up
+/// [vehicle.sensor."/imu"]
+/// lever_arm_m = [-13.0, 0.25, 1.2]
+/// mounting_deg = [0.4, -1.1, 0.8]    # roll, pitch, yaw of its axes in the body
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VehicleConfig {
+    /// What the train is called, for reports.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub name: String,
+    /// From the front end to the rear end, m.
+    pub length_m: f64,
+    /// How far the body leans out of a curve per m/s² of unbalanced lateral acceleration,
+    /// rad (about 0.015 for a coach); 0 or absent: not given.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub roll_per_lateral_mps2: f64,
+    /// Each sensor's place by its topic; a sensor not named here is at the front end.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub sensor: BTreeMap<String, MountConfig>,
+}
+
+/// `[vehicle.sensor."<topic>"]`: one sensor's place.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MountConfig {
+    /// x (along the train from the front end, negative behind it), y (left), z (up from the
+    /// top of rail), m.
+    pub lever_arm_m: [f64; 3],
+    /// Roll, pitch and yaw of its axes in the body, degrees (about the fixed x, y, z axes).
+    #[serde(default, skip_serializing_if = "is_zero_angles")]
+    pub mounting_deg: [f64; 3],
+    /// Its frame in the recording's transforms (a ROS `frame_id`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_id: Option<String>,
+}
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+fn is_zero_angles(v: &[f64; 3]) -> bool {
+    v.iter().all(|a| *a == 0.0)
+}
+
+impl VehicleConfig {
+    /// The catalogue's vehicle (unchecked: [`railfuse_catalog::messages::Vehicle::check`]).
+    pub fn vehicle(&self) -> railfuse_catalog::messages::Vehicle {
+        railfuse_catalog::messages::Vehicle {
+            stamp_ns: 0,
+            name: self.name.clone(),
+            length_m: self.length_m,
+            roll_per_lateral_mps2: self.roll_per_lateral_mps2,
+            sensors: self
+                .sensor
+                .iter()
+                .map(|(topic, m)| railfuse_catalog::messages::SensorMount {
+                    topic: topic.clone(),
+                    frame_id: m.frame_id.clone(),
+                    lever_arm_m: m.lever_arm_m,
+                    mounting_deg: m.mounting_deg,
+                })
+                .collect(),
+        }
+    }
+
+    /// The table of a vehicle (what `--save-config` writes of a log's `/vehicle`).
+    pub fn of(v: &railfuse_catalog::messages::Vehicle) -> VehicleConfig {
+        VehicleConfig {
+            name: v.name.clone(),
+            length_m: v.length_m,
+            roll_per_lateral_mps2: v.roll_per_lateral_mps2,
+            sensor: v
+                .sensors
+                .iter()
+                .map(|s| {
+                    let m = MountConfig {
+                        lever_arm_m: s.lever_arm_m,
+                        mounting_deg: s.mounting_deg,
+                        frame_id: s.frame_id.clone(),
+                    };
+                    (s.topic.clone(), m)
+                })
+                .collect(),
+        }
+    }
 }
 
 /// `[run]`: the recorders' clocks of a run of several files (see the book's Runs page).
@@ -745,6 +844,7 @@ impl PipelineConfig {
             run: None,
             can: None,
             sensor: BTreeMap::new(),
+            vehicle: None,
             pipeline: vec![Spanned::new(0..0, self.clone())],
         })
         .expect("a config serialises")

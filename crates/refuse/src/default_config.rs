@@ -200,6 +200,10 @@ fn sensor_of(
             format!("{schema}: balise passages' chainage"),
         ),
         MessageKind::TrackMap => (None, "the track map: GNSS fixes' chainage".into()),
+        MessageKind::Vehicle => (
+            None,
+            "the vehicle: each sensor's lever arm and mounting".into(),
+        ),
         MessageKind::Event => (None, "events: device faults and recoveries".into()),
         MessageKind::GroundTruth => {
             return Err("ground truth: the accuracy table's reference, not a sensor".into())

@@ -1,14 +1,22 @@
 //! Sensor models: how a message of each channel kind becomes scalar measurements of the
-//! along-track state `[s, v, a]` (or `[s, v]`).
+//! along-track state `[s, v, a]` (or `[s, v]`) of the train's front end.
 //!
 //! | schema | measures | H |
 //! |---|---|---|
-//! | `railfuse.LoopPosition` | chainage | `[1, 0, 0]` |
-//! | `railfuse.BalisePassage` | chainage (surveyed, at the passage) | `[1, 0, 0]` |
+//! | `railfuse.LoopPosition` | chainage (the loop antenna's, moved to the front end) | `[1, 0, 0]` |
+//! | `railfuse.BalisePassage` | chainage (surveyed, at the passage of the balise antenna) | `[1, 0, 0]` |
 //! | `railfuse.RadarSpeed` | speed (invalid samples rejected) | `[0, 1, 0]` |
 //! | `railfuse.Odometer` | speed over its window | `[0, 1, 0]` |
-//! | `railfuse.GnssFix` | chainage (the fix projected on the track map), speed | `[1, 0, 0]`, `[0, 1, 0]` |
-//! | `railfuse.Imu` | along-track acceleration (body x, level track) | `[0, 0, 1]` |
+//! | `railfuse.GnssFix` | chainage (the antenna's fix projected on the track map, moved to the front end), speed | `[1, 0, 0]`, `[0, 1, 0]` |
+//! | `railfuse.Imu` | along-track acceleration (body x, gravity of the gradient removed) | `[0, 0, 1]` |
+//!
+//! Each sensor is where the vehicle ([`SensorContext::vehicle`]) puts it: a chainage measured
+//! at a sensor `x` behind the front end is the front end's `x` further on (and a roof antenna
+//! on a gradient leans back by its height times the gradient); wheels and a radar measure the
+//! rail, `√(1 + G²)` longer than the chainage on a gradient `G`; an IMU's specific force is
+//! turned by its mounting into the body, and the gradient's `g sin θ` at its place taken from
+//! the track map (map-aided: the along-track filters have no attitude of their own). A point
+//! train on a flat map is left as it was.
 //!
 //! A GNSS fix without a position (fix type `none`) gives no chainage; its variance along the
 //! track is the receiver's east/north covariance projected on the track direction.
@@ -19,8 +27,10 @@ use nalgebra::RowSVector;
 use railfuse_catalog::log::LogMessage;
 use railfuse_catalog::messages::{
     BalisePassage, FusedState, GnssFix, Imu, LoopPosition, MessageKind, Odometer, RadarSpeed,
-    TrackMap,
+    SensorMount, TrackMap, Vehicle,
 };
+use railfuse_catalog::track_profile::TrackPose;
+use railfuse_catalog::vehicle::GRAVITY_MPS2;
 
 use crate::error::Result;
 
@@ -73,10 +83,67 @@ pub struct Measurement {
     pub valid: bool,
 }
 
-/// What the sensor models need besides the message: the track map, for GNSS.
-#[derive(Debug, Clone, Default)]
+/// What the sensor models need besides the message: the track map (GNSS fixes' chainage,
+/// gradients), the vehicle (where each sensor sits) and where the train was last estimated.
+#[derive(Debug, Clone)]
 pub struct SensorContext {
     pub track: Option<TrackMap>,
+    /// The train: each sensor's lever arm and mounting. A point train (every sensor at the
+    /// front end, aligned) where nothing places them.
+    pub vehicle: Vehicle,
+    /// The front end as last estimated (the first pipeline's state): what the corrections
+    /// that depend on where the train is (a gradient) are taken at. They change over tens of
+    /// metres, so the estimate carried forward at its speed is close enough.
+    pub whereabouts: Option<Whereabouts>,
+}
+
+impl Default for SensorContext {
+    fn default() -> Self {
+        SensorContext {
+            track: None,
+            vehicle: Vehicle::point(),
+            whereabouts: None,
+        }
+    }
+}
+
+/// The front end's chainage and speed at a time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Whereabouts {
+    pub stamp_ns: u64,
+    pub chainage_m: f64,
+    pub speed_mps: f64,
+}
+
+impl SensorContext {
+    /// The sensor on the message's topic, where the vehicle puts it.
+    fn mount(&self, msg: &LogMessage<'_>) -> SensorMount {
+        self.vehicle.mount_or_front(&msg.channel.topic)
+    }
+
+    /// The track's frame at `mount`'s place at `stamp_ns`, from the last estimate carried
+    /// forward; None before the first estimate or without a map.
+    fn pose_of(&self, mount: &SensorMount, stamp_ns: u64) -> Option<TrackPose> {
+        let (map, w) = (self.track.as_ref()?, self.whereabouts?);
+        let dt = railfuse_catalog::seconds_between(w.stamp_ns, stamp_ns).clamp(-5.0, 5.0);
+        map.pose_at(mount.chainage(w.chainage_m + w.speed_mps * dt))
+    }
+
+    /// A speed measured along the rail at `mount`'s place, as the chainage's rate.
+    fn chainage_rate(&self, mount: &SensorMount, stamp_ns: u64, rail_speed: f64) -> f64 {
+        self.pose_of(mount, stamp_ns)
+            .map_or(rail_speed, |p| rail_speed / p.rail_per_chainage())
+    }
+
+    /// The IMU's acceleration along the track: its specific force turned into the body by its
+    /// mounting, less the gradient's gravity at its place.
+    fn along_track_acceleration(&self, mount: &SensorMount, m: &Imu) -> f64 {
+        let body = mount.mounting() * nalgebra::Vector3::from(m.specific_force_mps2);
+        let gravity = self
+            .pose_of(mount, m.stamp_ns)
+            .map_or(0.0, |p| GRAVITY_MPS2 * p.along_track_gravity());
+        body.x - gravity
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -166,7 +233,7 @@ impl SensorModel {
                 out.push(one(
                     m.stamp_ns,
                     Quantity::Chainage,
-                    m.chainage_m,
+                    ctx.mount(msg).front_chainage(m.chainage_m),
                     m.variance_m2,
                     true,
                 ));
@@ -176,31 +243,33 @@ impl SensorModel {
                 out.push(one(
                     m.stamp_ns,
                     Quantity::Chainage,
-                    m.chainage_m,
+                    ctx.mount(msg).front_chainage(m.chainage_m),
                     m.variance_m2,
                     true,
                 ));
             }
             SensorModel::RadarSpeed => {
                 let m: RadarSpeed = msg.decode(path)?;
+                let speed = ctx.chainage_rate(&ctx.mount(msg), m.stamp_ns, m.speed_mps);
                 out.push(one(
                     m.stamp_ns,
                     Quantity::Speed,
-                    m.speed_mps,
+                    speed,
                     m.speed_variance_m2ps2,
                     m.valid,
                 ));
             }
             SensorModel::OdometerSpeed => {
                 let m: Odometer = msg.decode(path)?;
-                out.push(one(m.stamp_ns, Quantity::Speed, m.speed_mps, None, true));
+                let speed = ctx.chainage_rate(&ctx.mount(msg), m.stamp_ns, m.speed_mps);
+                out.push(one(m.stamp_ns, Quantity::Speed, speed, None, true));
             }
             SensorModel::ImuAcceleration => {
                 let m: Imu = msg.decode(path)?;
                 out.push(one(
                     m.stamp_ns,
                     Quantity::Acceleration,
-                    m.specific_force_mps2[0],
+                    ctx.along_track_acceleration(&ctx.mount(msg), &m),
                     None,
                     true,
                 ));
@@ -261,6 +330,11 @@ fn gnss(
     let m: GnssFix = msg.decode(path)?;
     let along = ctx.track.as_ref().and_then(|t| t.chainage_of_fix(&m));
     let (chainage, variance, heading) = along.unwrap_or((f64::NAN, None, None));
+    // The antenna's place on the map, moved to the front end.
+    let chainage = match &ctx.track {
+        Some(map) if along.is_some() => ctx.mount(msg).front_chainage_of_point(map, chainage),
+        _ => chainage,
+    };
     out.push(one(
         m.stamp_ns,
         Quantity::Chainage,

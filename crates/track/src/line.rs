@@ -55,11 +55,7 @@ impl Line {
             if let Some(last) = vertices.last() {
                 chainage += (e - last.east_m).hypot(n - last.north_m);
             }
-            vertices.push(TrackVertex {
-                chainage_m: chainage,
-                east_m: e,
-                north_m: n,
-            });
+            vertices.push(TrackVertex::at(chainage, e, n));
         }
         Self { vertices }
     }

@@ -22,7 +22,7 @@ use railfuse_eval::accuracy::{AccuracyMeter, Consistency, ErrorStats, CHI2_95_1D
 use railfuse_eval::fix_match::{FixMeter, FixQuality, FixSample, StateAt};
 use railfuse_eval::outages::{Withheld, Withhold};
 use railfuse_eval::{self as eval, fix_sample, reference_kind, reference_sample};
-use railfuse_refuse::measurement::{Measurement, SensorContext, SensorModel};
+use railfuse_refuse::measurement::{Measurement, Quantity, SensorContext, SensorModel};
 use railfuse_refuse::pipeline::{AnyPipeline, Fused, PipelineCounts};
 use railfuse_refuse::spec::PipelineSpec;
 
@@ -401,6 +401,8 @@ enum Role {
     /// A sensor; the reference too where it is withheld (its withheld messages score).
     Sensor(usize, SensorModel, Option<eval::ReferenceKind>),
     Map,
+    /// The log's installation drawing: where each sensor sits.
+    Vehicle,
     Events,
     Reference(eval::ReferenceKind),
 }
@@ -454,6 +456,7 @@ impl<'a> Loader<'a> {
             translated: Vec::new(),
             context: SensorContext {
                 track: track.cloned(),
+                ..SensorContext::default()
             },
             reference_channel: false,
             out: Vec::new(),
@@ -503,6 +506,8 @@ impl<'a> Loader<'a> {
             Some(Role::Reference(kind))
         } else if schema == TrackMap::SCHEMA_NAME {
             Some(Role::Map)
+        } else if schema == railfuse_catalog::messages::Vehicle::SCHEMA_NAME {
+            Some(Role::Vehicle)
         } else if schema == Event::SCHEMA_NAME {
             Some(Role::Events)
         } else {
@@ -547,6 +552,7 @@ impl<'a> Loader<'a> {
                     rec.undecodable += 1;
                     return Ok(());
                 }
+                follow(&self.out, &mut self.context.whereabouts);
                 let start = rec.measurements.len() as u32;
                 rec.measurements.extend_from_slice(&self.out);
                 rec.steps.push(Step::Sensor {
@@ -557,6 +563,7 @@ impl<'a> Loader<'a> {
                 });
             }
             Some(Role::Map) => self.context.track = Some(m.decode(path)?),
+            Some(Role::Vehicle) => self.context.vehicle = m.decode(path)?,
             Some(Role::Events) => {
                 let e: Event = m.decode(path)?;
                 let failed = match e.kind {
@@ -619,5 +626,28 @@ impl<'a> Loader<'a> {
         rec.measurements.shrink_to_fit();
         rec.steps.shrink_to_fit();
         Ok(rec)
+    }
+}
+
+/// Where the train is, from the measurements just decoded: a recording is made before any
+/// filter runs, so the place-dependent corrections (a gradient's gravity, the rail's
+/// length) are taken at the last absolute chainage measured, carried at the last speed.
+fn follow(out: &[Measurement], w: &mut Option<railfuse_refuse::measurement::Whereabouts>) {
+    let speed = out
+        .iter()
+        .find(|m| m.valid && m.quantity == Quantity::Speed && m.value.is_finite())
+        .map(|m| m.value);
+    if let (Some(w), Some(v)) = (w.as_mut(), speed) {
+        w.speed_mps = v;
+    }
+    if let Some(c) = out
+        .iter()
+        .find(|m| m.valid && m.quantity == Quantity::Chainage && m.value.is_finite())
+    {
+        *w = Some(railfuse_refuse::measurement::Whereabouts {
+            stamp_ns: c.stamp_ns,
+            chainage_m: c.value,
+            speed_mps: w.map_or(0.0, |w| w.speed_mps),
+        });
     }
 }

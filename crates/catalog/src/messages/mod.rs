@@ -20,6 +20,7 @@ mod safety;
 mod time_reference;
 mod track_map;
 mod tuning;
+mod vehicle;
 
 pub use balise::BalisePassage;
 pub use can::{CanData, CanFrame, CanSignal, CanSignals};
@@ -44,6 +45,7 @@ pub use track_map::{
     SleeperSection, Station, TrackBalise, TrackLine, TrackMap, TrackSwitch, TrackVertex, Tunnel,
 };
 pub use tuning::{TuneEvaluation, TunedValue};
+pub use vehicle::{SensorMount, Vehicle};
 
 use serde::{de::DeserializeOwned, Serialize};
 

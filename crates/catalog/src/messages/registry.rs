@@ -137,6 +137,7 @@ registry!(
     BalisePassage,
     EddyCurrentBlock,
     TrackMap,
+    Vehicle,
     GroundTruth,
     Event,
     FusedState,
@@ -169,7 +170,7 @@ impl MessageKind {
             GnssFix | TimeReference | GroundTruth => StampClock::Gnss,
             Imu | RadarSpeed | Odometer | LoopPosition | BalisePassage | EddyCurrentBlock
             | Event | RecorderDiagnostics | CanFrame | CanSignals => StampClock::Recorder,
-            TrackMap | FusedState | FusedDiagnostics | SafetyStatus | ImuErrorModel
+            TrackMap | Vehicle | FusedState | FusedDiagnostics | SafetyStatus | ImuErrorModel
             | TuneEvaluation => StampClock::Derived,
         }
     }

@@ -5,12 +5,35 @@ use crate::protobuf::protobuf_form;
 
 use crate::geodesy::GeodeticOrigin;
 
-/// A point of the track's centre line with its chainage.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+/// A point of the track's centre line with its chainage, and where the map has them its
+/// height and cant (see [`crate::track_profile`] for how they are read between vertices).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct TrackVertex {
+    /// Distance along the line in the plane (the alignment's kilometrage), m.
     pub chainage_m: f64,
     pub east_m: f64,
     pub north_m: f64,
+    /// Height of the top of rail on the centre line, m up in the local frame (absent: the map
+    /// has no heights and the line is taken as flat).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height_m: Option<f64>,
+    /// Cant, m: how much higher the left rail is than the right, looking towards increasing
+    /// chainage (a right-hand curve's cant is positive). Absent: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cant_m: Option<f64>,
+}
+
+impl TrackVertex {
+    /// A vertex of a flat line without cant.
+    pub fn at(chainage_m: f64, east_m: f64, north_m: f64) -> TrackVertex {
+        TrackVertex {
+            chainage_m,
+            east_m,
+            north_m,
+            height_m: None,
+            cant_m: None,
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -88,6 +111,10 @@ pub struct TrackMap {
     /// Switches on the main line, in increasing chainage.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub switches: Vec<TrackSwitch>,
+    /// The distance over which cant is measured (between the rails' running circles), m;
+    /// absent: 1.5, standard gauge.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cant_base_m: Option<f64>,
 }
 
 impl TrackMap {
@@ -107,6 +134,7 @@ impl TrackMap {
             other_tracks: vec![],
             sleeper_sections: Vec::new(),
             switches: Vec::new(),
+            cant_base_m: None,
         }
     }
 
@@ -218,6 +246,7 @@ protobuf_form!(TrackMap {
     other_tracks,
     sleeper_sections,
     switches,
+    cant_base_m,
 });
 protobuf_form!(GeodeticOrigin {
     latitude_deg,
@@ -227,7 +256,9 @@ protobuf_form!(GeodeticOrigin {
 protobuf_form!(TrackVertex {
     chainage_m,
     east_m,
-    north_m
+    north_m,
+    height_m,
+    cant_m
 });
 protobuf_form!(TrackBalise {
     balise_id,

@@ -88,11 +88,7 @@ mod tests {
         let AnyMessage::TrackMap(mut map) = MessageKind::TrackMap.example() else {
             panic!("a map example")
         };
-        map.vertices.push(TrackVertex {
-            chainage_m: 12_000.0,
-            east_m: 12_000.0,
-            north_m: 0.0,
-        });
+        map.vertices.push(TrackVertex::at(12_000.0, 12_000.0, 0.0));
         map.stations = vec![
             Station {
                 name: "A".into(),

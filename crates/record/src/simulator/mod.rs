@@ -5,12 +5,15 @@ pub mod atlas;
 pub mod can_bus;
 mod driver;
 pub mod faults;
+pub mod kinematics;
 mod recorders;
+pub mod ride;
 mod scenario;
 pub mod seed000;
 pub mod sensors;
 pub mod site;
 mod track;
+mod vehicle;
 mod world;
 
 use std::collections::BTreeMap;
@@ -26,12 +29,15 @@ use railfuse_catalog::topics;
 pub use driver::DriverParams;
 pub use faults::{FaultMode, FaultSpec};
 pub use recorders::{SimRecorder, MAX_RECORDERS};
+pub use ride::RideParams;
 pub use scenario::{LineScenario, Scenario, SIMULATED_START_NS};
-pub use track::{Segment, TrackParams};
+pub use track::{GradientSection, Segment, TrackParams, VerticalParams};
+pub use vehicle::VehicleParams;
 
 use driver::{Driver, DriverEvent, Phase};
 use faults::FaultInjector;
 use recorders::SimClock;
+use ride::{Ride, RideSample};
 use sensors::{
     balise::BaliseReader, eddy_current::EddyCurrentSensor, gnss::Gnss, imu::ImuSensor,
     induction_loop::InductionLoop, odometer::OdometerSensor, radar::Radar, rng_stream,
@@ -72,6 +78,9 @@ struct SimLog {
     /// The odometers and radar on the vehicle's CAN bus, where the scenario puts them there.
     can: Option<can_bus::CanBus>,
     frames: Vec<railfuse_can::frame::Frame>,
+    /// The train as installed (JSON), for the run's metadata: the truth a calibration is
+    /// checked against.
+    installed: Option<String>,
 }
 
 impl SimLog {
@@ -120,6 +129,7 @@ impl SimLog {
             fault_events: Vec::new(),
             can,
             frames: Vec::new(),
+            installed: None,
         })
     }
 
@@ -140,6 +150,9 @@ impl SimLog {
             }};
         }
         channel!(TrackMap, topics::TRACK_MAP);
+        if scenario.line().is_some_and(|p| p.vehicle.is_some()) {
+            channel!(Vehicle, topics::VEHICLE);
+        }
         channel!(GroundTruth, topics::GROUND_TRUTH);
         channel!(Event, topics::EVENTS);
         match scenario.line() {
@@ -280,7 +293,8 @@ impl SimLog {
             | Scenario::Seed001(p)
             | Scenario::Seed002(p)
             | Scenario::Seed003(p)
-            | Scenario::Seed004(p) => p.train.clone(),
+            | Scenario::Seed004(p)
+            | Scenario::Railway(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
             Scenario::Seed000LoopDrift(_) => {
                 "maglev (source 000 simulation, loop error growing with distance)".into()
@@ -308,6 +322,10 @@ impl SimLog {
             ("tool_version".into(), crate::TOOL_VERSION.into()),
             ("source".into(), "simulated".into()),
         ]);
+        let mut run = run;
+        if let Some(installed) = &self.installed {
+            run.insert("vehicle_installed".into(), installed.clone());
+        }
         for log in self.logs {
             let mut run = run.clone();
             if let Some((r, clock, _)) = &log.recorder {
@@ -357,7 +375,8 @@ pub fn simulate(
         | Scenario::Seed001(p)
         | Scenario::Seed002(p)
         | Scenario::Seed003(p)
-        | Scenario::Seed004(p) => simulate_line(scenario, p, seed, duration_s, faults, &[], out),
+        | Scenario::Seed004(p)
+        | Scenario::Railway(p) => simulate_line(scenario, p, seed, duration_s, faults, &[], out),
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
             seed000::simulate(scenario, p, seed, duration_s, out)
         }
@@ -425,11 +444,26 @@ fn simulate_line(
     log.fault_specs = faults.to_vec();
     let published = published_map(p, map, faults, seed);
     log.write(topics::TRACK_MAP, start, published.as_ref().unwrap_or(map))?;
+    let installed = match &p.vehicle {
+        Some(v) => {
+            let drawing = Vehicle {
+                stamp_ns: start,
+                ..v.drawing.clone()
+            };
+            log.write(topics::VEHICLE, start, &drawing)?;
+            v.installed(&mut rng_stream(seed, 41))
+        }
+        None => Vehicle::point(),
+    };
+    if p.vehicle.is_some() {
+        log.installed = Some(serde_json::to_string(&installed).expect("a vehicle serialises"));
+    }
+    let mut ride = p.ride.clone().map(|r| Ride::new(r, rng_stream(seed, 40)));
     let mut driver = Driver::new(
         p.driver.clone(),
         map.stations.iter().map(|s| s.chainage_m).collect(),
     );
-    let mut sensors = line_sensors(p, map, seed, start);
+    let mut sensors = line_sensors(p, map, &installed, seed, start);
     sensors.extend((0..recorders.len()).map(|i| recorders::pps(i, start)));
     let mut surroundings = Surroundings::new(p, map);
     let mut truth_schedule = Schedule::new(start, p.truth_rate_hz);
@@ -442,7 +476,16 @@ fn simulate_line(
     // step: every stamp is the time of the state it was taken from.
     loop {
         let t = (t_ns - start) as f64 / 1e9;
-        let world = surroundings.world(&track, &driver, t_ns, t, dt, &mut outbox);
+        let ride = ride
+            .as_mut()
+            .map_or_else(RideSample::default, |r| r.step(driver.v, dt));
+        let moving = Moving {
+            track: &track,
+            vehicle: &installed,
+            driver: &driver,
+            ride,
+        };
+        let world = surroundings.world(moving, t_ns, t, dt, &mut outbox);
         for s in &mut sensors {
             s.step(&world, &mut outbox);
         }
@@ -519,29 +562,48 @@ fn published_map(
     published
 }
 
-/// Every sensor the line scenario has, each with its own random stream.
+/// Every sensor the line scenario has, each with its own random stream, each where the
+/// installed train has it.
 fn line_sensors(
     p: &LineScenario,
     map: &TrackMap,
+    installed: &Vehicle,
     seed: u64,
     start: u64,
 ) -> Vec<Box<dyn SimSensor>> {
+    let along = |topic: &str| installed.mount_or_front(topic).lever_arm_m[0];
     let mut sensors: Vec<Box<dyn SimSensor>> = vec![
         Box::new(Gnss::new(
             p.gnss.clone(),
+            installed.mount_or_front(topics::GNSS_FIX),
             map.origin,
             start,
             rng_stream(seed, 1),
         )),
-        Box::new(ImuSensor::new(p.imu.clone(), start, rng_stream(seed, 2))),
-        Box::new(Radar::new(p.radar.clone(), start, rng_stream(seed, 3))),
+        Box::new(ImuSensor::new(
+            p.imu.clone(),
+            installed.mount_or_front(topics::IMU),
+            start,
+            rng_stream(seed, 2),
+        )),
+        Box::new(Radar::new(
+            p.radar.clone(),
+            along(topics::RADAR_SPEED),
+            start,
+            rng_stream(seed, 3),
+        )),
     ];
     if let Some(l) = &p.induction_loop {
-        sensors.push(Box::new(InductionLoop::new(l.clone(), rng_stream(seed, 4))));
+        sensors.push(Box::new(InductionLoop::new(
+            l.clone(),
+            along(topics::LOOP_POSITION),
+            rng_stream(seed, 4),
+        )));
     }
     if let Some(b) = &p.balise {
         sensors.push(Box::new(BaliseReader::new(
             b.clone(),
+            along(topics::BALISE),
             map.balises.clone(),
             rng_stream(seed, 5),
         )));
@@ -549,21 +611,33 @@ fn line_sensors(
     if let Some(e) = &p.eddy_current {
         sensors.push(Box::new(EddyCurrentSensor::new(
             e.clone(),
+            along(topics::EDDY_CURRENT),
             map,
             start,
             rng_stream(seed, 31),
             rng_stream(seed, 32),
         )));
     }
+    let odometers = [topics::ODOMETER_1, topics::ODOMETER_2];
     for (i, o) in p.odometers.iter().take(2).enumerate() {
         sensors.push(Box::new(OdometerSensor::new(
             o.clone(),
             i,
+            along(odometers[i]),
             start,
             rng_stream(seed, 10 + i as u64),
         )));
     }
     sensors
+}
+
+/// The train moving along its track at one step: what a [`World`] is made of besides its
+/// surroundings.
+struct Moving<'a> {
+    track: &'a Track,
+    vehicle: &'a Vehicle,
+    driver: &'a Driver,
+    ride: RideSample,
 }
 
 /// What the train passes through (tunnels, cuttings, multipath, correction outages): the
@@ -585,15 +659,15 @@ impl<'a> Surroundings<'a> {
         }
     }
 
-    fn world(
+    fn world<'t>(
         &mut self,
-        track: &Track,
-        driver: &Driver,
+        moving: Moving<'t>,
         t_ns: u64,
         t: f64,
         dt: f64,
         outbox: &mut Outbox,
-    ) -> World {
+    ) -> World<'t> {
+        let (track, driver) = (moving.track, moving.driver);
         let (p, map) = (self.p, &track.map);
         let (east_m, north_m, heading_rad) =
             map.locate(driver.s).expect("a built track has vertices");
@@ -645,6 +719,9 @@ impl<'a> Surroundings<'a> {
                 -site.multipath_left_m * heading_rad.cos(),
                 site.multipath_left_m * heading_rad.sin(),
             ),
+            track,
+            vehicle: moving.vehicle,
+            ride: moving.ride,
         }
     }
 }

@@ -126,7 +126,7 @@ impl PpsReference {
 }
 
 impl SimSensor for PpsReference {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
         if !self.schedule.due(w.t_ns) {
             return;
         }

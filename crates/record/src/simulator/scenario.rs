@@ -7,13 +7,15 @@ use serde::{Deserialize, Serialize};
 
 use super::atlas::AtlasParams;
 use super::driver::DriverParams;
+use super::ride::RideParams;
 use super::seed000::Seed000Params;
 use super::sensors::{
     balise::BaliseParams, eddy_current::EddyCurrentParams, gnss::GnssParams, imu::ImuParams,
     induction_loop::LoopParams, odometer::OdometerParams, radar::RadarParams,
 };
 use super::site::SiteParams;
-use super::track::{Segment, TrackParams};
+use super::track::{GradientSection, Segment, TrackParams, VerticalParams};
+use super::vehicle::VehicleParams;
 
 /// 2026-06-01T08:00:00Z: simulated runs start here, so logs are reproducible to the byte.
 pub const SIMULATED_START_NS: u64 = 1_780_300_800 * 1_000_000_000;
@@ -56,6 +58,13 @@ pub struct LineScenario {
     /// as frames on `/can/can0/frames`, instead of on channels of their own.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub can_bus: bool,
+    /// The train with its length and each sensor where it sits (published on `/vehicle`,
+    /// installed within tolerances); None: a point train, every sensor at the front end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<VehicleParams>,
+    /// The body's vibration; None: a body that follows the track exactly.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ride: Option<RideParams>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -75,6 +84,9 @@ pub enum Scenario {
     /// Source 004's eddy-current experiment: shunting moves, hard acceleration and braking,
     /// long stops and line speed over an atlas of sleeper sections and switches.
     Seed004(Box<LineScenario>),
+    /// The default run on a railway in three dimensions with a train of 104 m (see
+    /// [`LineScenario::railway`]).
+    Railway(Box<LineScenario>),
 }
 
 impl Scenario {
@@ -86,6 +98,7 @@ impl Scenario {
         "seed002",
         "seed003",
         "seed004",
+        "railway",
     ];
 
     /// What each preset of [`Self::NAMES`] is, in a line, for help texts.
@@ -107,6 +120,10 @@ impl Scenario {
                 "source 004's: shunting, hard acceleration and braking, long stops and line \
                  speed over sleeper sections and switches, with the eddy-current sensor pair"
             }
+            "railway" => {
+                "the default run on a real railway: gradients, cant, vibration, a 104 m train \
+                 with each sensor where it sits"
+            }
             _ => "",
         }
     }
@@ -120,6 +137,7 @@ impl Scenario {
             "seed002" => Some(Scenario::Seed002(Box::new(LineScenario::seed002()))),
             "seed003" => Some(Scenario::Seed003(Box::new(LineScenario::seed003()))),
             "seed004" => Some(Scenario::Seed004(Box::new(LineScenario::seed004()))),
+            "railway" => Some(Scenario::Railway(Box::new(LineScenario::railway()))),
             _ => None,
         }
     }
@@ -133,6 +151,7 @@ impl Scenario {
             Scenario::Seed002(_) => "seed002",
             Scenario::Seed003(_) => "seed003",
             Scenario::Seed004(_) => "seed004",
+            Scenario::Railway(_) => "railway",
         }
     }
 
@@ -143,7 +162,8 @@ impl Scenario {
             | Scenario::Seed001(p)
             | Scenario::Seed002(p)
             | Scenario::Seed003(p)
-            | Scenario::Seed004(p) => Some(p),
+            | Scenario::Seed004(p)
+            | Scenario::Railway(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -154,7 +174,8 @@ impl Scenario {
             | Scenario::Seed001(p)
             | Scenario::Seed002(p)
             | Scenario::Seed003(p)
-            | Scenario::Seed004(p) => Some(p),
+            | Scenario::Seed004(p)
+            | Scenario::Railway(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -276,7 +297,70 @@ impl LineScenario {
             }),
             eddy_current: Some(Self::default_eddy_current()),
             can_bus: false,
+            vehicle: None,
+            ride: None,
         }
+    }
+
+    /// The default run on a railway as it is: gradients to 35 ‰ (one stretch at 40 ‰) on
+    /// vertical curves of 2 500 m, canted curves with transitions (cant ramps of 1:400, up
+    /// to 150 mm, deficiency up to 129 mm on a 900 m curve), the body's lean and vibration,
+    /// and a 104 m train with its sensors where they sit, installed within tolerances.
+    pub fn railway() -> Self {
+        let mut p = Self::default_run();
+        p.train = "simulated EMU, 4 cars, 104 m".into();
+        p.track.name = "Modena test line in three dimensions (simulated)".into();
+        // Room behind the start for the train's 104 m.
+        p.track.lead_in_m = 200.0;
+        let curve = |radius_m, angle_deg, transition_m, cant_mm| Segment::Curve {
+            radius_m,
+            angle_deg,
+            transition_m,
+            cant_mm,
+        };
+        p.track.pattern = vec![
+            Segment::Straight { length_m: 1800.0 },
+            curve(1500.0, 35.0, 60.0, 110.0),
+            Segment::Straight { length_m: 2600.0 },
+            curve(2000.0, -30.0, 40.0, 60.0),
+            Segment::Straight { length_m: 2200.0 },
+            curve(1200.0, 25.0, 80.0, 150.0),
+            Segment::Straight { length_m: 1500.0 },
+            curve(900.0, -30.0, 70.0, 60.0),
+        ];
+        let g = |length_m, permille| GradientSection { length_m, permille };
+        p.track.vertical = Some(VerticalParams {
+            // Climbs 32 m and comes back down: the pattern repeats at the same height.
+            sections: vec![
+                g(1500.0, 0.0),
+                g(2000.0, 12.0),
+                g(1200.0, 35.0),
+                g(1000.0, 0.0),
+                g(600.0, 40.0),
+                g(1400.0, -20.0),
+                g(2500.0, -12.0),
+                g(1600.0, -20.0),
+            ],
+            curve_radius_m: 2500.0,
+        });
+        p.vehicle = Some(VehicleParams::emu());
+        p.ride = Some(RideParams::coach());
+        p
+    }
+
+    /// The same run in the world railfuse assumed before: the same line in the plane, flat and
+    /// without cant, a body that follows it exactly, a point train.
+    pub fn flattened(&self) -> Self {
+        let mut p = self.clone();
+        for seg in &mut p.track.pattern {
+            if let Segment::Curve { cant_mm, .. } = seg {
+                *cant_mm = 0.0;
+            }
+        }
+        p.track.vertical = None;
+        p.vehicle = None;
+        p.ride = None;
+        p
     }
 
     /// The default run's receiver: 10 Hz, RTK fixed to 2 cm, float to 25 cm, DGPS 0.7 m,
@@ -329,25 +413,13 @@ impl LineScenario {
             heading_deg: 60.0,
             pattern: vec![
                 Segment::Straight { length_m: 1800.0 },
-                Segment::Curve {
-                    radius_m: 1500.0,
-                    angle_deg: 35.0,
-                },
+                Segment::curve(1500.0, 35.0),
                 Segment::Straight { length_m: 2600.0 },
-                Segment::Curve {
-                    radius_m: 2000.0,
-                    angle_deg: -30.0,
-                },
+                Segment::curve(2000.0, -30.0),
                 Segment::Straight { length_m: 2200.0 },
-                Segment::Curve {
-                    radius_m: 1200.0,
-                    angle_deg: 25.0,
-                },
+                Segment::curve(1200.0, 25.0),
                 Segment::Straight { length_m: 1500.0 },
-                Segment::Curve {
-                    radius_m: 1800.0,
-                    angle_deg: -30.0,
-                },
+                Segment::curve(1800.0, -30.0),
             ],
             station_spacing_m: 5700.0,
             balise_spacing_m: 1000.0,
@@ -357,6 +429,8 @@ impl LineScenario {
             loop_crossing_spacing_m: Some(25.0),
             vertex_spacing_m: 10.0,
             station_chainages_m: vec![],
+            vertical: None,
+            lead_in_m: 0.0,
         }
     }
 
@@ -470,6 +544,8 @@ impl LineScenario {
                 loop_crossing_spacing_m: None,
                 vertex_spacing_m: 10.0,
                 station_chainages_m: vec![],
+                vertical: None,
+                lead_in_m: 0.0,
             },
             driver: DriverParams {
                 max_speed_mps: 120.0,
@@ -515,6 +591,8 @@ impl LineScenario {
             atlas: None,
             eddy_current: None,
             can_bus: false,
+            vehicle: None,
+            ride: None,
         }
     }
 

@@ -218,11 +218,7 @@ fn guideway(p: &Seed000Params, duration: f64, start: u64) -> TrackMap {
     let v_end = p.initial_speed_mps + p.initial_acceleration_mps2 * duration;
     let length = (p.initial_speed_mps + v_end) / 2.0 * duration * 1.2 + 1000.0;
     let n_balises = (length / p.balise_spacing_m) as usize;
-    let vertex = |s: f64| TrackVertex {
-        chainage_m: s,
-        east_m: s,
-        north_m: 0.0,
-    };
+    let vertex = |s: f64| TrackVertex::at(s, s, 0.0);
     TrackMap {
         stamp_ns: start,
         name: "maglev guideway (source 000 simulation)".into(),
@@ -245,6 +241,7 @@ fn guideway(p: &Seed000Params, duration: f64, start: u64) -> TrackMap {
         other_tracks: Vec::new(),
         sleeper_sections: Vec::new(),
         switches: Vec::new(),
+        cant_base_m: None,
     }
 }
 

@@ -72,11 +72,7 @@ fn is_one(x: &f64) -> bool {
 fn left_of(map: &TrackMap, chainage_m: f64, left_m: f64) -> TrackVertex {
     let (e, n, h) = map.locate(chainage_m).expect("a built track has vertices");
     // Left of heading h (clockwise from north) is (−cos h, sin h).
-    TrackVertex {
-        chainage_m,
-        east_m: e - left_m * h.cos(),
-        north_m: n + left_m * h.sin(),
-    }
+    TrackVertex::at(chainage_m, e - left_m * h.cos(), n + left_m * h.sin())
 }
 
 /// A smooth bump: 0 outside `[a, b]`, rising to 1 in the middle (a raised cosine).
@@ -232,11 +228,7 @@ mod tests {
 
     #[test]
     fn an_offset_stretch_moves_only_between_its_ends() {
-        let v = |c: f64| TrackVertex {
-            chainage_m: c,
-            east_m: c,
-            north_m: 0.0,
-        };
+        let v = |c: f64| TrackVertex::at(c, c, 0.0);
         let truth = line(vec![v(0.0), v(1000.0)], vec![]);
         let m = with_offsets(&truth, &[(300.0, 455.0, 5.0)], 50.0);
         let at = |c: f64| {
@@ -269,16 +261,8 @@ mod tests {
     fn the_surveyed_map_wanders_by_its_survey_error_and_has_station_tracks() {
         let truth = line(
             vec![
-                TrackVertex {
-                    chainage_m: 0.0,
-                    east_m: 0.0,
-                    north_m: 0.0,
-                },
-                TrackVertex {
-                    chainage_m: 20_000.0,
-                    east_m: 0.0,
-                    north_m: 20_000.0,
-                },
+                TrackVertex::at(0.0, 0.0, 0.0),
+                TrackVertex::at(20_000.0, 0.0, 20_000.0),
             ],
             vec![Station {
                 name: "A".into(),

@@ -5,12 +5,18 @@ use std::collections::BinaryHeap;
 
 use railfuse_catalog::messages::{
     BalisePassage, EddyCurrentBlock, Event, GnssFix, GroundTruth, Imu, LoopPosition, Odometer,
-    RadarSpeed, TimeReference,
+    RadarSpeed, TimeReference, Vehicle,
 };
 
-/// The true world at one simulation step.
-#[derive(Debug, Clone, Copy)]
-pub struct World {
+use super::ride::RideSample;
+use super::track::Track;
+
+/// The true world at one simulation step: the front end's motion along the track (its
+/// chainage, speed, place), what is around it, and what each sensor's motion is taken from
+/// ([`super::kinematics::motion`]: the track's exact geometry, the train as installed, the
+/// body's vibration).
+#[derive(Clone, Copy)]
+pub struct World<'a> {
     pub t_ns: u64,
     /// Step length, s.
     pub dt: f64,
@@ -33,9 +39,25 @@ pub struct World {
     /// The pull of multipath on a fix here (east, north, m), which the receiver does not
     /// report: 0 away from buildings and cuttings.
     pub gnss_multipath: (f64, f64),
+    pub track: &'a Track,
+    /// The train as installed (the simulated truth, not the drawing the log carries).
+    pub vehicle: &'a Vehicle,
+    pub ride: RideSample,
 }
 
-impl World {
+impl World<'_> {
+    /// The chainage of the place `along_m` from the front end (a lever arm's x).
+    pub fn chainage_at(&self, along_m: f64) -> f64 {
+        self.chainage_m + along_m
+    }
+
+    /// The speed along the rail `along_m` from the front end, m/s: the chainage's rate times
+    /// the rail's length per metre of chainage on the gradient there.
+    pub fn rail_speed_at(&self, along_m: f64) -> f64 {
+        let g = self.track.gradient(self.chainage_at(along_m));
+        self.speed_mps * (1.0 + g * g).sqrt()
+    }
+
     /// The sub-step time (ns) at which the train was at `chainage` during the last step,
     /// assuming constant speed over the step: for crossing detectors.
     pub fn time_at(&self, chainage: f64) -> u64 {
@@ -117,7 +139,7 @@ impl Outbox {
 
 /// A simulated sensor: looks at the world every step and emits what it measures.
 pub trait SimSensor {
-    fn step(&mut self, world: &World, out: &mut Outbox);
+    fn step(&mut self, world: &World<'_>, out: &mut Outbox);
 }
 
 /// A fixed-rate schedule in integer nanoseconds (no drift from float accumulation).

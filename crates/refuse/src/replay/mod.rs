@@ -150,6 +150,8 @@ struct Route {
 #[derive(Clone, Copy)]
 enum ContextKind {
     TrackMap,
+    /// The log's installation drawing, unless the configuration has a `[vehicle]`.
+    Vehicle,
     Events,
 }
 
@@ -325,6 +327,12 @@ impl<'a> Replay<'a> {
             // The configuration's track until the log brings its own.
             context: SensorContext {
                 track: opts.config.track.clone(),
+                vehicle: opts
+                    .config
+                    .vehicle
+                    .clone()
+                    .unwrap_or_else(railfuse_catalog::messages::Vehicle::point),
+                whereabouts: None,
             },
             schemas: IdMap::default(),
             channels: IdMap::default(),
@@ -608,6 +616,9 @@ impl<'a> Replay<'a> {
             let schema = info.schema_name();
             route.context = match schema {
                 n if n == TrackMap::SCHEMA_NAME => Some(ContextKind::TrackMap),
+                n if n == railfuse_catalog::messages::Vehicle::SCHEMA_NAME => {
+                    Some(ContextKind::Vehicle)
+                }
                 n if n == Event::SCHEMA_NAME => Some(ContextKind::Events),
                 _ => None,
             };
@@ -851,6 +862,13 @@ impl<'a> Replay<'a> {
         let input = self.input();
         match kind {
             Some(ContextKind::TrackMap) => self.context.track = Some(msg.decode(input)?),
+            Some(ContextKind::Vehicle) if self.opts.config.vehicle.is_none() => {
+                let v: railfuse_catalog::messages::Vehicle = msg.decode(input)?;
+                v.check()
+                    .map_err(|e| Error::Map(format!("{}: /vehicle: {e}", input.display())))?;
+                self.context.vehicle = v;
+            }
+            Some(ContextKind::Vehicle) => {}
             Some(ContextKind::Events) => {
                 let e: Event = msg.decode(input)?;
                 let failed = match e.kind {

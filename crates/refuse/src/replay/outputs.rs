@@ -113,6 +113,16 @@ impl Replay<'_> {
         let observer = self.opts.observer;
         let name = self.pipelines[pi].name();
         for f in self.fused.drain(..) {
+            if let (0, Some(s)) = (pi, &f.state) {
+                // The first pipeline's estimate: where place-dependent corrections are taken.
+                if s.chainage_m.is_finite() && s.speed_mps.is_finite() {
+                    self.context.whereabouts = Some(crate::measurement::Whereabouts {
+                        stamp_ns: s.stamp_ns,
+                        chainage_m: s.chainage_m,
+                        speed_mps: s.speed_mps,
+                    });
+                }
+            }
             if observer.is_some() {
                 if let Some(state) = &f.state {
                     observe(observer, &topics::fused_state(name), f.log_time_ns, state);

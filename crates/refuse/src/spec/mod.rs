@@ -61,6 +61,8 @@ pub struct Pipelines {
     /// `[can]` and `[sensor."<topic>"]`: sensors made from the CAN bus, the DBC read and the
     /// mapping checked against it.
     pub can: Option<CanSensors>,
+    /// `[vehicle]`: the train, checked (it wins over the log's `/vehicle`).
+    pub vehicle: Option<railfuse_catalog::messages::Vehicle>,
     pub pipeline: Vec<PipelineSpec>,
 }
 
@@ -187,6 +189,7 @@ impl Pipelines {
             pipeline.push(spec);
         }
         let track = read_track(path, file.track.as_deref())?;
+        let vehicle = read_vehicle(path, text, file.vehicle.as_ref(), &pipeline)?;
         let can = CanSensors::read(path, file.can, file.sensor)?;
         let (clock_offsets, align) = read_run(path, file.run.unwrap_or_default())?;
         Ok(Self {
@@ -195,6 +198,7 @@ impl Pipelines {
             clock_offsets,
             align,
             can,
+            vehicle,
             pipeline,
         })
     }
@@ -203,6 +207,38 @@ impl Pipelines {
     pub fn names(&self) -> impl Iterator<Item = &str> {
         self.pipeline.iter().map(|p| p.name.as_str())
     }
+}
+
+/// `[vehicle]`, checked: a length a train has, every sensor on the train and turned less than
+/// 45°, and each placed topic one a pipeline reads (a lever arm for anything else is a
+/// misspelt topic, which would leave the sensor it meant at the front end).
+fn read_vehicle(
+    path: &Path,
+    text: &str,
+    table: Option<&toml::Spanned<crate::config::VehicleConfig>>,
+    pipelines: &[PipelineSpec],
+) -> Result<Option<railfuse_catalog::messages::Vehicle>> {
+    let Some(table) = table else {
+        return Ok(None);
+    };
+    let (line, _) = line_column(text, table.span().start);
+    let fail = |message: String| Error::ConfigSyntax {
+        path: path.to_owned(),
+        message: format!("line {line}: [vehicle]: {message}"),
+    };
+    let vehicle = table.get_ref().vehicle();
+    vehicle.check().map_err(|e| fail(e.to_string()))?;
+    if let Some(s) = vehicle
+        .sensors
+        .iter()
+        .find(|s| !pipelines.iter().any(|p| p.sensor_for(&s.topic).is_some()))
+    {
+        return Err(fail(format!(
+            "sensor '{}' has a lever arm but no pipeline reads that topic",
+            s.topic
+        )));
+    }
+    Ok(Some(vehicle))
 }
 
 /// The configuration's track file (relative to it), read and checked.

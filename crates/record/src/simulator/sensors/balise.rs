@@ -21,6 +21,8 @@ pub struct BaliseParams {
 
 pub struct BaliseReader {
     p: BaliseParams,
+    /// The reader antenna's lever arm x (behind the front end), m.
+    along_m: f64,
     rng: ChaCha8Rng,
     balises: Vec<TrackBalise>,
     next: usize,
@@ -29,10 +31,16 @@ pub struct BaliseReader {
 }
 
 impl BaliseReader {
-    pub fn new(p: BaliseParams, balises: Vec<TrackBalise>, mut rng: ChaCha8Rng) -> Self {
+    pub fn new(
+        p: BaliseParams,
+        along_m: f64,
+        balises: Vec<TrackBalise>,
+        mut rng: ChaCha8Rng,
+    ) -> Self {
         let offset = gauss(&mut rng, p.detection_sigma_m);
         Self {
             p,
+            along_m,
             rng,
             balises,
             next: 0,
@@ -42,14 +50,15 @@ impl BaliseReader {
 }
 
 impl SimSensor for BaliseReader {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
         while let Some(b) = self.balises.get(self.next) {
             let at = b.chainage_m + self.offset;
-            if w.chainage_m < at {
+            // Detected when the antenna, not the front end, passes over it.
+            if w.chainage_at(self.along_m) < at {
                 return;
             }
             if !self.rng.random_bool(self.p.miss_probability) {
-                let stamp_ns = w.time_at(at);
+                let stamp_ns = w.time_at(at - self.along_m);
                 let msg = BalisePassage {
                     stamp_ns,
                     balise_id: b.balise_id.clone(),

@@ -223,6 +223,8 @@ fn poisson(rng: &mut impl rand::Rng, mean: f64) -> u32 {
 
 pub struct EddyCurrentSensor {
     p: EddyCurrentParams,
+    /// The leading sensor's lever arm x (behind the front end), m.
+    along_m: f64,
     track: TrackFeatures,
     /// Features from behind the trailing sensor's reach to ahead of the leading one's.
     window: VecDeque<Feature>,
@@ -243,6 +245,7 @@ impl EddyCurrentSensor {
     /// `layout_rng` lays the track's features, `rng` draws the vibration and the noise.
     pub fn new(
         p: EddyCurrentParams,
+        along_m: f64,
         map: &TrackMap,
         start_ns: u64,
         layout_rng: ChaCha8Rng,
@@ -252,6 +255,7 @@ impl EddyCurrentSensor {
         EddyCurrentSensor {
             track: TrackFeatures::new(map, &p, layout_rng),
             p,
+            along_m,
             window: VecDeque::new(),
             rng,
             start_ns,
@@ -305,8 +309,10 @@ impl EddyCurrentSensor {
 }
 
 impl SimSensor for EddyCurrentSensor {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
-        let Some((t0, s0)) = self.last.replace((w.t_ns, w.chainage_m)) else {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
+        // The leading sensor's place on the track.
+        let here = w.chainage_at(self.along_m);
+        let Some((t0, s0)) = self.last.replace((w.t_ns, here)) else {
             return;
         };
         let span = (w.t_ns - t0) as f64;
@@ -318,7 +324,7 @@ impl SimSensor for EddyCurrentSensor {
                 return;
             }
             // The chainage between the last two steps, linearly.
-            let x = s0 + (w.chainage_m - s0) * (t.saturating_sub(t0) as f64 / span);
+            let x = s0 + (here - s0) * (t.saturating_sub(t0) as f64 / span);
             if self.block_a.is_empty() {
                 self.block_stamp_ns = t;
             }

@@ -8,11 +8,12 @@
 //! of up to a metre for a minute after every reacquisition).
 
 use railfuse_catalog::geodesy::GeodeticOrigin;
-use railfuse_catalog::messages::{FixType, GnssFix};
+use railfuse_catalog::messages::{FixType, GnssFix, SensorMount};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::gauss;
+use crate::simulator::kinematics::motion;
 use crate::simulator::world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -44,6 +45,8 @@ pub struct GnssParams {
 
 pub struct Gnss {
     p: GnssParams,
+    /// The antenna's place on the train.
+    mount: SensorMount,
     origin: GeodeticOrigin,
     schedule: Schedule,
     rng: ChaCha8Rng,
@@ -57,12 +60,19 @@ pub struct Gnss {
 }
 
 impl Gnss {
-    pub fn new(p: GnssParams, origin: GeodeticOrigin, start_ns: u64, rng: ChaCha8Rng) -> Self {
+    pub fn new(
+        p: GnssParams,
+        mount: SensorMount,
+        origin: GeodeticOrigin,
+        start_ns: u64,
+        rng: ChaCha8Rng,
+    ) -> Self {
         // At the start the receiver has been running a while: long since fixed.
         let long_ago = start_ns.saturating_sub(seconds(3600.0));
         Self {
             schedule: Schedule::new(start_ns, p.rate_hz),
             p,
+            mount,
             origin,
             rng,
             sky_since_ns: Some(long_ago),
@@ -142,7 +152,7 @@ impl Gnss {
 }
 
 impl SimSensor for Gnss {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
         self.track_sky_and_corrections(w);
         if !self.schedule.due(w.t_ns) {
             return;
@@ -174,10 +184,13 @@ impl SimSensor for Gnss {
             course_rad: None,
         };
         if fix.has_position() {
+            // The antenna's phase centre, where it sits on the train.
+            let m = motion(w, &self.mount);
             let (me, mn) = w.gnss_multipath;
-            let e = w.east_m + bias.0 + me + gauss(&mut self.rng, sigma);
-            let n = w.north_m + bias.1 + mn + gauss(&mut self.rng, sigma);
-            let u = gauss(&mut self.rng, 1.8 * sigma);
+            let e = m.position.x + bias.0 + me + gauss(&mut self.rng, sigma);
+            let n = m.position.y + bias.1 + mn + gauss(&mut self.rng, sigma);
+            let u = m.position.z + gauss(&mut self.rng, 1.8 * sigma);
+            let ground_speed = m.velocity.xy().norm();
             let (lat, lon, alt) = self.origin.to_geodetic(e, n, u);
             let var = sigma * sigma + bias_sigma * bias_sigma;
             msg.latitude_deg = Some(lat);
@@ -186,9 +199,10 @@ impl SimSensor for Gnss {
             msg.position_covariance_enu_m2 =
                 Some([var, 0.0, 0.0, 0.0, var, 0.0, 0.0, 0.0, 3.24 * var]);
             msg.speed_mps =
-                Some((w.speed_mps + gauss(&mut self.rng, self.p.speed_sigma_mps)).max(0.0));
-            if w.speed_mps > 0.5 {
-                let c = w.heading_rad + gauss(&mut self.rng, self.p.speed_sigma_mps / w.speed_mps);
+                Some((ground_speed + gauss(&mut self.rng, self.p.speed_sigma_mps)).max(0.0));
+            if ground_speed > 0.5 {
+                let course = m.velocity.x.atan2(m.velocity.y);
+                let c = course + gauss(&mut self.rng, self.p.speed_sigma_mps / ground_speed);
                 msg.course_rad = Some(c.rem_euclid(std::f64::consts::TAU));
             }
         }
@@ -228,7 +242,15 @@ mod tests {
             longitude_deg: 10.93,
             altitude_m: 40.0,
         };
-        let mut gnss = Gnss::new(LineScenario::default_gnss(), origin, 0, rng_stream(7, 3));
+        let mut gnss = Gnss::new(
+            LineScenario::default_gnss(),
+            SensorMount::at_front("/gnss/fix"),
+            origin,
+            0,
+            rng_stream(7, 3),
+        );
+        let track = crate::simulator::track::straight_line(origin, None);
+        let vehicle = railfuse_catalog::messages::Vehicle::point();
         let mut out = Outbox::default();
         let mut got = Vec::new();
         let step = 10_000_000;
@@ -248,6 +270,9 @@ mod tests {
                 gnss_outage: false,
                 sky_view: 1.0,
                 gnss_multipath: (0.0, 0.0),
+                track: &track,
+                vehicle: &vehicle,
+                ride: Default::default(),
             };
             gnss.step(&w, &mut out);
             while let Some((_, Emit::Gnss(fix))) = out.pop_due(u64::MAX) {

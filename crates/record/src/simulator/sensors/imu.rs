@@ -1,11 +1,13 @@
-//! MEMS IMU: specific force and angular rate in the body frame (x forward, y left, z up) with
-//! turn-on bias, bias random walk, white noise and LSB quantisation.
+//! MEMS IMU: specific force and angular rate in its own axes (mounted in the body, x forward,
+//! y left, z up, by its [`SensorMount`]) at its place on the train, with turn-on bias, bias
+//! random walk, white noise and LSB quantisation.
 
-use railfuse_catalog::messages::Imu;
+use railfuse_catalog::messages::{Imu, SensorMount};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 
 use super::{gauss, quantise};
+use crate::simulator::kinematics::motion;
 use crate::simulator::world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
 
 pub const GRAVITY_MPS2: f64 = 9.80665;
@@ -28,6 +30,7 @@ pub struct ImuParams {
 
 pub struct ImuSensor {
     p: ImuParams,
+    mount: SensorMount,
     schedule: Schedule,
     rng: ChaCha8Rng,
     accel_bias: [f64; 3],
@@ -35,12 +38,13 @@ pub struct ImuSensor {
 }
 
 impl ImuSensor {
-    pub fn new(p: ImuParams, start_ns: u64, mut rng: ChaCha8Rng) -> Self {
+    pub fn new(p: ImuParams, mount: SensorMount, start_ns: u64, mut rng: ChaCha8Rng) -> Self {
         let accel_bias = std::array::from_fn(|_| gauss(&mut rng, p.accel_bias_mps2));
         let gyro_bias = std::array::from_fn(|_| gauss(&mut rng, p.gyro_bias_radps));
         Self {
             schedule: Schedule::new(start_ns, p.rate_hz),
             p,
+            mount,
             rng,
             accel_bias,
             gyro_bias,
@@ -49,7 +53,7 @@ impl ImuSensor {
 }
 
 impl SimSensor for ImuSensor {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
         if !self.schedule.due(w.t_ns) {
             return;
         }
@@ -61,14 +65,11 @@ impl SimSensor for ImuSensor {
         for b in &mut self.gyro_bias {
             *b += gauss(&mut self.rng, p.gyro_bias_walk * dt.sqrt());
         }
-        // A right-hand curve (positive curvature) pushes the body towards -y and yaws it
-        // clockwise, which is a negative rate about the up axis.
-        let truth_f = [
-            w.acceleration_mps2,
-            -w.speed_mps * w.speed_mps * w.curvature,
-            GRAVITY_MPS2,
-        ];
-        let truth_w = [0.0, 0.0, -w.speed_mps * w.curvature];
+        // On a level line a right-hand curve (positive curvature) pushes the body towards -y
+        // and yaws it clockwise, a negative rate about the up axis; gradients, cant, the
+        // body's lean and vibration, and the mounting add to that (see kinematics.rs).
+        let m = motion(w, &self.mount);
+        let (truth_f, truth_w) = (m.specific_force, m.angular_rate);
         let specific_force_mps2 = std::array::from_fn(|i| {
             quantise(
                 truth_f[i] + self.accel_bias[i] + gauss(&mut self.rng, p.accel_noise_mps2),

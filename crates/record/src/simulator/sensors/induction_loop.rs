@@ -25,14 +25,17 @@ pub struct LoopParams {
 
 pub struct InductionLoop {
     p: LoopParams,
+    /// The loop antenna's lever arm x (behind the front end), m.
+    along_m: f64,
     rng: ChaCha8Rng,
     next_crossing: u32,
 }
 
 impl InductionLoop {
-    pub fn new(p: LoopParams, rng: ChaCha8Rng) -> Self {
+    pub fn new(p: LoopParams, along_m: f64, rng: ChaCha8Rng) -> Self {
         Self {
             p,
+            along_m,
             rng,
             next_crossing: 1,
         }
@@ -40,15 +43,16 @@ impl InductionLoop {
 }
 
 impl SimSensor for InductionLoop {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
         let p = &self.p;
         loop {
             let at = self.next_crossing as f64 * p.crossing_spacing_m;
-            if w.chainage_m < at {
+            // The antenna's place, which the loop reports, crosses it.
+            if w.chainage_at(self.along_m) < at {
                 return;
             }
             let jitter = gauss(&mut self.rng, p.timing_sigma_s);
-            let stamp_ns = (w.time_at(at) as i64 + (jitter * 1e9) as i64) as u64;
+            let stamp_ns = (w.time_at(at - self.along_m) as i64 + (jitter * 1e9) as i64) as u64;
             let reported =
                 at * (1.0 + p.scale_error) + gauss(&mut self.rng, p.installation_sigma_m);
             let msg = LoopPosition {

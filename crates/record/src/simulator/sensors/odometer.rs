@@ -37,6 +37,8 @@ pub struct OdometerParams {
 pub struct OdometerSensor {
     p: OdometerParams,
     index: usize,
+    /// Its axle's lever arm x (behind the front end), m.
+    along_m: f64,
     schedule: Schedule,
     rng: ChaCha8Rng,
     wheel_distance_m: f64,
@@ -48,11 +50,18 @@ pub struct OdometerSensor {
 }
 
 impl OdometerSensor {
-    pub fn new(p: OdometerParams, index: usize, start_ns: u64, rng: ChaCha8Rng) -> Self {
+    pub fn new(
+        p: OdometerParams,
+        index: usize,
+        along_m: f64,
+        start_ns: u64,
+        rng: ChaCha8Rng,
+    ) -> Self {
         Self {
             schedule: Schedule::new(start_ns, p.rate_hz),
             p,
             index,
+            along_m,
             rng,
             wheel_distance_m: 0.0,
             history: VecDeque::new(),
@@ -63,7 +72,7 @@ impl OdometerSensor {
 }
 
 impl SimSensor for OdometerSensor {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
         let p = &self.p;
         if w.t_ns >= self.episode.1 {
             self.episode.0 = 0.0;
@@ -80,7 +89,8 @@ impl SimSensor for OdometerSensor {
                 self.episode = (sign * magnitude, w.t_ns + seconds(length));
             }
         }
-        self.wheel_distance_m += w.speed_mps * (1.0 + self.episode.0) * w.dt;
+        // The wheel rolls the rail, longer than the chainage on a gradient.
+        self.wheel_distance_m += w.rail_speed_at(self.along_m) * (1.0 + self.episode.0) * w.dt;
         if !self.schedule.due(w.t_ns) {
             return;
         }

@@ -27,16 +27,19 @@ pub struct RadarParams {
 
 pub struct Radar {
     p: RadarParams,
+    /// Its lever arm's x (behind the front end), m.
+    along_m: f64,
     schedule: Schedule,
     rng: ChaCha8Rng,
     dropout_until_ns: u64,
 }
 
 impl Radar {
-    pub fn new(p: RadarParams, start_ns: u64, rng: ChaCha8Rng) -> Self {
+    pub fn new(p: RadarParams, along_m: f64, start_ns: u64, rng: ChaCha8Rng) -> Self {
         Self {
             schedule: Schedule::new(start_ns, p.rate_hz),
             p,
+            along_m,
             rng,
             dropout_until_ns: 0,
         }
@@ -44,7 +47,7 @@ impl Radar {
 }
 
 impl SimSensor for Radar {
-    fn step(&mut self, w: &World, out: &mut Outbox) {
+    fn step(&mut self, w: &World<'_>, out: &mut Outbox) {
         if !self.schedule.due(w.t_ns) {
             return;
         }
@@ -53,11 +56,12 @@ impl SimSensor for Radar {
             self.dropout_until_ns =
                 w.t_ns + seconds(self.rng.random_range(p.dropout_s.0..p.dropout_s.1));
         }
+        // Over the ground under it, along the rail.
+        let ground = w.rail_speed_at(self.along_m);
         let sigma = p.sigma_base_mps + p.sigma_per_mps * w.speed_mps;
         let valid = w.speed_mps >= p.min_speed_mps && w.t_ns >= self.dropout_until_ns;
         let msg = if valid {
-            let speed =
-                (w.speed_mps * (1.0 + p.scale_error) + gauss(&mut self.rng, sigma)).max(0.0);
+            let speed = (ground * (1.0 + p.scale_error) + gauss(&mut self.rng, sigma)).max(0.0);
             RadarSpeed {
                 stamp_ns: w.t_ns,
                 speed_mps: speed,

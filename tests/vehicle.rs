@@ -1,0 +1,127 @@
+//! The railway in three dimensions and a train with its sensors where they sit: the
+//! `railway` scenario's run re-fused with the vehicle as installed, and with a compensation
+//! taken away from the pipeline but not from the simulator, which must cost about what it
+//! compensates.
+
+mod common;
+
+use std::path::Path;
+
+use common::*;
+use railfuse_catalog::log::read_metadata;
+use railfuse_catalog::messages::Vehicle;
+use railfuse_refuse::config::VehicleConfig;
+
+/// The train as the simulator installed it (the run's metadata), as a `[vehicle]` table
+/// placing the sensors the default pipeline reads.
+fn installed(log: &Path) -> Vehicle {
+    let run = read_metadata(log, railfuse_catalog::topics::metadata::RUN)
+        .unwrap()
+        .expect("run metadata");
+    serde_json::from_str(&run["vehicle_installed"]).unwrap()
+}
+
+/// The default pipeline (as `--save-config` writes it) with `vehicle` as its `[vehicle]`.
+fn config_with(dir: &Path, log: &Path, vehicle: &Vehicle, name: &str) -> std::path::PathBuf {
+    let default = dir.join("default.toml");
+    let out = dir.join("ignored.mcap");
+    ok(&[
+        "refuse",
+        s(log),
+        "-o",
+        s(&out),
+        "--save-config",
+        s(&default),
+    ]);
+    let text = std::fs::read_to_string(&default).unwrap();
+    let mut v = vehicle.clone();
+    v.sensors
+        .retain(|m| text.contains(&format!("topic = \"{}\"", m.topic)));
+    let table = std::collections::BTreeMap::from([("vehicle", VehicleConfig::of(&v))]);
+    let table = toml::to_string(&table).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, format!("{table}\n{text}")).unwrap();
+    path
+}
+
+fn position_rmse(log: &Path, config: &Path, out: &Path) -> f64 {
+    let report = ok_json(&["refuse", s(log), "-c", s(config), "-o", s(out), "--json"]);
+    pipeline_eval(&report, "default")["position_error_m"]["rmse"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{report}"))
+}
+
+#[test]
+fn the_front_end_is_found_where_the_sensors_sit_and_a_lever_arm_left_out_costs_its_length() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("railway.mcap");
+    simulate(
+        &["--scenario", "railway", "--duration", "300", "--seed", "5"],
+        &log,
+    );
+    let truth = installed(&log);
+    let gnss = truth.mount("/gnss/fix").expect("the antenna is placed");
+    assert!(gnss.lever_arm_m[0] < -12.0, "{gnss:?}");
+
+    let as_installed = config_with(dir.path(), &log, &truth, "installed.toml");
+    let good = position_rmse(&log, &as_installed, &dir.path().join("a.mcap"));
+    assert!(
+        good < 0.5,
+        "front end RMSE {good:.3} m with the vehicle as installed"
+    );
+
+    // The pipeline told every sensor is at the front end, the simulator not.
+    let mut point = truth.clone();
+    for m in &mut point.sensors {
+        m.lever_arm_m = [0.0; 3];
+    }
+    let without = config_with(dir.path(), &log, &point, "no_lever_arms.toml");
+    let bad = position_rmse(&log, &without, &dir.path().join("b.mcap"));
+    assert!(
+        bad > good + 5.0,
+        "without lever arms {bad:.3} m, with {good:.3} m: the antenna is 12.5 m back"
+    );
+}
+
+#[test]
+fn a_vehicle_table_that_puts_a_sensor_off_the_train_or_on_an_unread_topic_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("railway.mcap");
+    simulate(
+        &["--scenario", "railway", "--duration", "20", "--seed", "1"],
+        &log,
+    );
+    let mut v = installed(&log);
+    v.sensors.retain(|m| m.topic == "/gnss/fix");
+    v.sensors[0].lever_arm_m[0] = -150.0;
+    let cfg = config_with(dir.path(), &log, &v, "outside.toml");
+    let out = dir.path().join("x.mcap");
+    let e = fails(&["refuse", s(&log), "-c", s(&cfg), "-o", s(&out)]);
+    assert!(
+        e.contains("[vehicle]") && e.contains("outside the train"),
+        "{e}"
+    );
+
+    let mut v = installed(&log);
+    v.sensors.retain(|m| m.topic == "/gnss/fix");
+    v.sensors[0].mounting_deg[1] = 60.0;
+    let cfg = config_with(dir.path(), &log, &v, "turned.toml");
+    let e = fails(&["refuse", s(&log), "-c", s(&cfg), "-o", s(&out)]);
+    assert!(e.contains("pitch of 60°"), "{e}");
+
+    let text = std::fs::read_to_string(dir.path().join("default.toml")).unwrap();
+    let cfg = dir.path().join("unread.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[vehicle]\nlength_m = 104.0\n[vehicle.sensor.\"/gnss/fixx\"]\n\
+             lever_arm_m = [-12.5, 0.0, 4.1]\n\n{text}"
+        ),
+    )
+    .unwrap();
+    let e = fails(&["refuse", s(&log), "-c", s(&cfg), "-o", s(&out)]);
+    assert!(
+        e.contains("'/gnss/fixx'") && e.contains("no pipeline reads"),
+        "{e}"
+    );
+}
