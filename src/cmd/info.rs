@@ -79,12 +79,38 @@ pub fn run(a: Args) -> Result<()> {
             at.name, at.media_type, at.bytes
         );
     }
+    if let Some(v) = &s.vehicle {
+        print_vehicle(v);
+    }
     if s.fused_pipelines.is_empty() {
         println!("fused pipelines: none");
     } else {
         println!("fused pipelines: {}", s.fused_pipelines.join(", "));
     }
     Ok(())
+}
+
+/// The train of `/vehicle`: its length, and each sensor's lever arm and mounting.
+fn print_vehicle(v: &railfuse_catalog::messages::Vehicle) {
+    let lean = match v.roll_per_lateral_mps2 {
+        0.0 => String::new(),
+        k => format!(", leaning {k} rad per m/s² unbalanced"),
+    };
+    println!(
+        "vehicle '{}': {} m from front end to rear end{lean}",
+        v.name, v.length_m
+    );
+    let mut t = Table::new(&["sensor", "lever arm x y z m", "mounting roll pitch yaw °"]);
+    for m in &v.sensors {
+        let [x, y, z] = m.lever_arm_m;
+        let [r, p, w] = m.mounting_deg;
+        t.row(vec![
+            m.topic.clone(),
+            format!("{x:+.3} {y:+.3} {z:+.3}"),
+            format!("{r:+.2} {p:+.2} {w:+.2}"),
+        ]);
+    }
+    print!("{t}");
 }
 
 /// One line per file of the run (its span on the run's clock, messages, clock), then the

@@ -80,6 +80,9 @@ pub struct LogSummary {
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
     pub attachments: Vec<AttachmentSummary>,
     pub fused_pipelines: Vec<String>,
+    /// The train the run carries on `/vehicle` (its last), where it has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vehicle: Option<crate::messages::Vehicle>,
     /// Each input's clock against GNSS time, for a run of several inputs (as `--align gnss`
     /// applied them, or estimated to be shown).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -188,6 +191,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
     let mut metadata = Vec::new();
     let mut attachments = Vec::new();
     let mut messages = 0u64;
+    let mut vehicle = None;
     let mut gaps: HashMap<u16, Gaps> = HashMap::new();
     while let Some(record) = reader.next_with_part() {
         let (part, record) = record?;
@@ -206,6 +210,9 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
                     .expect("the reader checks channel ids");
                 c.add(m.log_time_ns);
                 gaps.entry(m.channel.id).or_default().push(m.log_time_ns);
+                if m.is::<crate::messages::Vehicle>() {
+                    vehicle = Some(m.decode(std::path::Path::new(&run.display()))?);
+                }
             }
             LogRecord::Metadata { name, metadata: m } => metadata.push((name, m)),
             LogRecord::Attachment {
@@ -253,6 +260,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
         metadata,
         attachments,
         fused_pipelines: fused.into_iter().collect(),
+        vehicle,
         clocks,
     })
 }

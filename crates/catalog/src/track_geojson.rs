@@ -16,6 +16,10 @@
 //!   chainage of each vertex after it measured along the line in the local plane.
 //! - The local east/north/up frame has its origin at the main line's first vertex (height
 //!   its third coordinate, else 0).
+//! - Heights: the coordinates' third value (ellipsoidal height, m), on every vertex of a line
+//!   or on none (then the line is flat). Cant: `cant_mm`, one value per vertex (mm, the left
+//!   rail's rise over the right's looking towards increasing chainage; a right-hand curve's
+//!   is positive), and `cant_base_m` on the main line (1.5 unless given).
 //!
 //! A CSV of latitude/longitude rows is read as one such line ([`csv_to_geojson`]).
 //!
@@ -59,7 +63,8 @@ pub fn read_track_file(path: &Path) -> Result<TrackMap, GeoJsonMapError> {
 
 /// A CSV of the main line's vertices, one a row, as GeoJSON: a header naming the columns
 /// `latitude` and `longitude` (degrees; `lat`, `lon` and `lng` do too) and optionally
-/// `altitude_m` (height, m) and `chainage_m` (else measured along the line from 0).
+/// `altitude_m` (ellipsoidal height of the top of rail, m), `cant_mm` and `chainage_m` (else
+/// measured along the line from 0).
 pub fn csv_to_geojson(text: &str, path: &str) -> Result<String, GeoJsonMapError> {
     let invalid = |cause: String| GeoJsonMapError::Invalid {
         path: path.to_owned(),
@@ -84,11 +89,12 @@ pub fn csv_to_geojson(text: &str, path: &str) -> Result<String, GeoJsonMapError>
             found.join(", ")
         )));
     };
-    let (alt, chainage) = (
-        column(&["altitude_m", "altitude"]),
+    let (alt, chainage, cant) = (
+        column(&["altitude_m", "altitude", "height_m"]),
         column(&["chainage_m", "chainage"]),
+        column(&["cant_mm", "cant"]),
     );
-    let (mut coordinates, mut chainages) = (Vec::new(), Vec::new());
+    let (mut coordinates, mut chainages, mut cants) = (Vec::new(), Vec::new(), Vec::new());
     for (k, row) in r.records().enumerate() {
         let row = row.map_err(|e| invalid(e.to_string()))?;
         let number = |i: usize| {
@@ -112,11 +118,17 @@ pub fn csv_to_geojson(text: &str, path: &str) -> Result<String, GeoJsonMapError>
         if let Some(c) = chainage {
             chainages.push(number(c)?);
         }
+        if let Some(c) = cant {
+            cants.push(number(c)?);
+        }
     }
     let mut properties = serde_json::Map::new();
     properties.insert("name".into(), path.into());
     if chainage.is_some() {
         properties.insert("chainage_m".into(), chainages.into());
+    }
+    if cant.is_some() {
+        properties.insert("cant_mm".into(), cants.into());
     }
     Ok(serde_json::json!({
         "type": "Feature",
@@ -204,7 +216,7 @@ pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapErr
     let origin = GeodeticOrigin {
         latitude_deg: first.0,
         longitude_deg: first.1,
-        altitude_m: first.2,
+        altitude_m: first.2.unwrap_or(0.0),
     };
     let mut tracks = Vec::new();
     for (name, points, props, _) in &lines {
@@ -216,8 +228,19 @@ pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapErr
         });
     }
     let main_line = tracks.remove(main);
+    let cant_base_m = match lines[main].2.get("cant_base_m") {
+        Some(v) => Some(
+            v.as_f64()
+                .filter(|b| (0.5..=2.0).contains(b))
+                .ok_or_else(|| {
+                    invalid("cant_base_m must be a number of metres, 0.5 to 2".into())
+                })?,
+        ),
+        None => None,
+    };
     let map = TrackMap {
         other_tracks: tracks,
+        cant_base_m,
         ..TrackMap::line(&main_line.name, origin, main_line.vertices)
     };
     map.check().map_err(|e| invalid(e.to_string()))?;
@@ -229,7 +252,7 @@ pub fn parse_track_map(text: &str, path: &str) -> Result<TrackMap, GeoJsonMapErr
 fn wgs84_points(
     coordinates: &[geojson::Position],
     name: &str,
-) -> Result<Vec<(f64, f64, f64)>, String> {
+) -> Result<Vec<(f64, f64, Option<f64>)>, String> {
     let mut points = Vec::with_capacity(coordinates.len());
     for (k, p) in coordinates.iter().enumerate() {
         let c = p.as_slice();
@@ -243,41 +266,34 @@ fn wgs84_points(
                 "track '{name}': vertex {k} is not a WGS-84 position ({c:?}: longitude within ±180°, latitude within ±90°)"
             ));
         }
-        points.push((lat, lon, alt.unwrap_or(0.0)));
+        points.push((lat, lon, alt));
     }
     Ok(points)
 }
 
-/// The vertices in the local plane, with their chainage.
+/// The vertices in the local plane, with their chainage, heights and cant.
 fn vertices(
     origin: &GeodeticOrigin,
-    points: &[(f64, f64, f64)],
+    points: &[(f64, f64, Option<f64>)],
     props: &JsonObject,
 ) -> Result<Vec<TrackVertex>, String> {
     let plane: Vec<(f64, f64)> = points
         .iter()
         .map(|&(lat, lon, alt)| {
-            let (e, n, _) = origin.to_enu(lat, lon, alt);
+            let (e, n, _) = origin.to_enu(lat, lon, alt.unwrap_or(origin.altitude_m));
             (e, n)
         })
         .collect();
-    let chainage: Vec<f64> = match props.get("chainage_m") {
-        Some(v) => {
-            let given = v
-                .as_array()
-                .ok_or("chainage_m must be an array of numbers")?;
-            if given.len() != plane.len() {
-                return Err(format!(
-                    "chainage_m has {} values for {} vertices",
-                    given.len(),
-                    plane.len()
-                ));
-            }
-            given
-                .iter()
-                .map(|x| x.as_f64().ok_or("chainage_m must be an array of numbers"))
-                .collect::<Result<_, _>>()?
-        }
+    let heights = points.iter().filter(|p| p.2.is_some()).count();
+    if heights > 0 && heights < points.len() {
+        return Err(format!(
+            "{heights} of {} vertices have a height: give every vertex one, or none",
+            points.len()
+        ));
+    }
+    let cant = per_vertex(props, "cant_mm", plane.len())?;
+    let chainage: Vec<f64> = match per_vertex(props, "chainage_m", plane.len())? {
+        Some(given) => given,
         None => {
             let start = match props.get("start_chainage_m") {
                 Some(v) => v.as_f64().ok_or("start_chainage_m must be a number")?,
@@ -298,8 +314,31 @@ fn vertices(
     Ok(plane
         .iter()
         .zip(chainage)
-        .map(|(&(east_m, north_m), chainage_m)| TrackVertex::at(chainage_m, east_m, north_m))
+        .enumerate()
+        .map(|(k, (&(east_m, north_m), chainage_m))| TrackVertex {
+            height_m: points[k].2.map(|alt| alt - origin.altitude_m),
+            cant_m: cant.as_ref().map(|c| c[k] / 1e3),
+            ..TrackVertex::at(chainage_m, east_m, north_m)
+        })
         .collect())
+}
+
+/// A property holding one number per vertex, if the feature has it.
+fn per_vertex(props: &JsonObject, key: &str, n: usize) -> Result<Option<Vec<f64>>, String> {
+    let Some(v) = props.get(key) else {
+        return Ok(None);
+    };
+    let numbers = v
+        .as_array()
+        .and_then(|a| a.iter().map(|x| x.as_f64()).collect::<Option<Vec<f64>>>())
+        .ok_or_else(|| format!("{key} must be an array of numbers"))?;
+    if numbers.len() != n {
+        return Err(format!(
+            "{key} has {} values for {n} vertices",
+            numbers.len()
+        ));
+    }
+    Ok(Some(numbers))
 }
 
 #[cfg(test)]

@@ -71,6 +71,7 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
     let has_track = track_in_log || track.is_some();
     let (mut used, mut left_out) = (Vec::new(), Vec::new());
     let mut sensors = String::new();
+    let mut sensor_topics = Vec::new();
     for c in &channels {
         let choice = |why: String| TopicChoice {
             topic: c.topic.clone(),
@@ -80,6 +81,7 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
             Ok((sensor, gives)) => {
                 if let Some(s) = sensor {
                     write_sensor(&mut sensors, &c.topic, &s);
+                    sensor_topics.push(c.topic.clone());
                 }
                 used.push(choice(gives));
             }
@@ -110,6 +112,20 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
         let t = std::path::absolute(t).unwrap_or_else(|_| t.to_owned());
         writeln!(text, "track = {}", toml_string(&t.display().to_string())).unwrap();
     }
+    if let Some(mut v) = log_vehicle(run, &channels)? {
+        // The pipeline reads the log's /vehicle as it is; written out, it is there to edit
+        // (a calibrated mounting), for the sensors the pipeline reads.
+        v.sensors.retain(|m| sensor_topics.contains(&m.topic));
+        let table =
+            std::collections::BTreeMap::from([("vehicle", crate::config::VehicleConfig::of(&v))]);
+        let table = toml::to_string(&table).expect("a vehicle serialises");
+        write!(
+            text,
+            "\n# The log's /vehicle: the train's length, where each sensor sits and how it is \
+             turned.\n{table}"
+        )
+        .unwrap();
+    }
     write!(
         text,
         "\n[[pipeline]]\nname = \"{NAME}\"\nfilter = \"kalman\"\n\
@@ -124,6 +140,28 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
         used,
         left_out,
     })
+}
+
+/// The log's `/vehicle` (its first), where it has that channel.
+fn log_vehicle(
+    run: &Run,
+    channels: &[Arc<ChannelInfo>],
+) -> Result<Option<railfuse_catalog::messages::Vehicle>> {
+    if !channels
+        .iter()
+        .any(|c| c.kind() == Some(MessageKind::Vehicle))
+    {
+        return Ok(None);
+    }
+    let mut reader = run.reader()?;
+    while let Some(record) = reader.next() {
+        if let LogRecord::Message(m) = record? {
+            if m.is::<railfuse_catalog::messages::Vehicle>() {
+                return Ok(Some(m.decode(&run.name())?));
+            }
+        }
+    }
+    Ok(None)
 }
 
 /// Every channel of the log, by topic: from the summary, or from the data section where the
