@@ -34,13 +34,21 @@ fn config_with(dir: &Path, log: &Path, vehicle: &Vehicle, name: &str) -> std::pa
         s(&default),
     ]);
     let text = std::fs::read_to_string(&default).unwrap();
+    // The saved configuration holds the log's drawing, for the sensors it reads.
+    let mut saved: toml::Table = toml::from_str(&text).unwrap();
+    let drawn = saved
+        .remove("vehicle")
+        .expect("the log's /vehicle is saved");
+    assert!(drawn["sensor"].get("/gnss/fix").is_some(), "{drawn}");
     let mut v = vehicle.clone();
     v.sensors
         .retain(|m| text.contains(&format!("topic = \"{}\"", m.topic)));
-    let table = std::collections::BTreeMap::from([("vehicle", VehicleConfig::of(&v))]);
-    let table = toml::to_string(&table).unwrap();
+    saved.insert(
+        "vehicle".into(),
+        toml::Value::try_from(VehicleConfig::of(&v)).unwrap(),
+    );
     let path = dir.join(name);
-    std::fs::write(&path, format!("{table}\n{text}")).unwrap();
+    std::fs::write(&path, toml::to_string(&saved).unwrap()).unwrap();
     path
 }
 
@@ -109,16 +117,17 @@ fn a_vehicle_table_that_puts_a_sensor_off_the_train_or_on_an_unread_topic_is_ref
     let e = fails(&["refuse", s(&log), "-c", s(&cfg), "-o", s(&out)]);
     assert!(e.contains("pitch of 60°"), "{e}");
 
-    let text = std::fs::read_to_string(dir.path().join("default.toml")).unwrap();
-    let cfg = dir.path().join("unread.toml");
-    std::fs::write(
-        &cfg,
-        format!(
-            "[vehicle]\nlength_m = 104.0\n[vehicle.sensor.\"/gnss/fixx\"]\n\
-             lever_arm_m = [-12.5, 0.0, 4.1]\n\n{text}"
-        ),
-    )
-    .unwrap();
+    // A misspelt topic.
+    let cfg = config_with(dir.path(), &log, &installed(&log), "unread.toml");
+    let mut table: toml::Table = toml::from_str(&std::fs::read_to_string(&cfg).unwrap()).unwrap();
+    let sensors = table["vehicle"]["sensor"].as_table().unwrap().clone();
+    let mut renamed = sensors.clone();
+    renamed.insert("/gnss/fixx".into(), sensors["/gnss/fix"].clone());
+    table["vehicle"]
+        .as_table_mut()
+        .unwrap()
+        .insert("sensor".into(), toml::Value::Table(renamed));
+    std::fs::write(&cfg, toml::to_string(&table).unwrap()).unwrap();
     let e = fails(&["refuse", s(&log), "-c", s(&cfg), "-o", s(&out)]);
     assert!(
         e.contains("'/gnss/fixx'") && e.contains("no pipeline reads"),

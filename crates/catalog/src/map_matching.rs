@@ -87,22 +87,7 @@ pub fn nearest_on(
 /// East, north and heading of a track at a chainage, interpolated along its polyline;
 /// clamped to the ends.
 pub fn locate_on(vertices: &[TrackVertex], chainage_m: f64) -> Option<(f64, f64, f64)> {
-    let v = vertices;
-    if v.len() < 2 {
-        return None;
-    }
-    let i = v
-        .partition_point(|p| p.chainage_m <= chainage_m)
-        .clamp(1, v.len() - 1);
-    let (a, b) = (v[i - 1], v[i]);
-    let len = b.chainage_m - a.chainage_m;
-    let f = if len > 0.0 {
-        ((chainage_m - a.chainage_m) / len).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
-    Some((a.east_m + f * de, a.north_m + f * dn, de.atan2(dn)))
+    crate::track_profile::plane_on(vertices, chainage_m)
 }
 
 /// Curvature of a track at a chainage (1/m, positive turning right, clockwise): the change of

@@ -17,7 +17,7 @@
 //! - The local east/north/up frame has its origin at the main line's first vertex (height
 //!   its third coordinate, else 0).
 //! - Heights: the coordinates' third value (ellipsoidal height, m), on every vertex of a line
-//!   or on none (then the line is flat). Cant: `cant_mm`, one value per vertex (mm, the left
+//!   or on none (then the line is flat), up in the local frame. Cant: `cant_mm`, one value per vertex (mm, the left
 //!   rail's rise over the right's looking towards increasing chainage; a right-hand curve's
 //!   is positive), and `cant_base_m` on the main line (1.5 unless given).
 //!
@@ -277,13 +277,11 @@ fn vertices(
     points: &[(f64, f64, Option<f64>)],
     props: &JsonObject,
 ) -> Result<Vec<TrackVertex>, String> {
-    let plane: Vec<(f64, f64)> = points
+    let enu: Vec<(f64, f64, f64)> = points
         .iter()
-        .map(|&(lat, lon, alt)| {
-            let (e, n, _) = origin.to_enu(lat, lon, alt.unwrap_or(origin.altitude_m));
-            (e, n)
-        })
+        .map(|&(lat, lon, alt)| origin.to_enu(lat, lon, alt.unwrap_or(origin.altitude_m)))
         .collect();
+    let plane: Vec<(f64, f64)> = enu.iter().map(|&(e, n, _)| (e, n)).collect();
     let heights = points.iter().filter(|p| p.2.is_some()).count();
     if heights > 0 && heights < points.len() {
         return Err(format!(
@@ -316,7 +314,7 @@ fn vertices(
         .zip(chainage)
         .enumerate()
         .map(|(k, (&(east_m, north_m), chainage_m))| TrackVertex {
-            height_m: points[k].2.map(|alt| alt - origin.altitude_m),
+            height_m: points[k].2.map(|_| enu[k].2),
             cant_m: cant.as_ref().map(|c| c[k] / 1e3),
             ..TrackVertex::at(chainage_m, east_m, north_m)
         })

@@ -139,7 +139,7 @@ impl TrackMap {
 
 /// A track's frame at a chainage, from its vertices.
 pub fn pose_on(v: &[TrackVertex], cant_base_m: f64, chainage_m: f64) -> Option<TrackPose> {
-    let (east_m, north_m, heading_rad) = crate::map_matching::locate_on(v, chainage_m)?;
+    let (east_m, north_m, heading_rad) = plane_on(v, chainage_m)?;
     let (i, f) = span(v, chainage_m)?;
     let (a, b) = (&v[i - 1], &v[i]);
     let up_m = lerp(a.height_m.unwrap_or(0.0), b.height_m.unwrap_or(0.0), f);
@@ -154,6 +154,15 @@ pub fn pose_on(v: &[TrackVertex], cant_base_m: f64, chainage_m: f64) -> Option<T
         gradient,
         cant_rad: (cant_m / cant_base_m).clamp(-1.0, 1.0).asin(),
     })
+}
+
+/// East, north and heading (clockwise from north) of a track at a chainage, interpolated
+/// along its polyline; clamped to the ends.
+pub(crate) fn plane_on(v: &[TrackVertex], chainage_m: f64) -> Option<(f64, f64, f64)> {
+    let (i, f) = span(v, chainage_m)?;
+    let (a, b) = (&v[i - 1], &v[i]);
+    let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
+    Some((a.east_m + f * de, a.north_m + f * dn, de.atan2(dn)))
 }
 
 fn cant(v: &TrackVertex) -> f64 {

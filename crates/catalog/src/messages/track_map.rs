@@ -13,10 +13,9 @@ pub struct TrackVertex {
     pub chainage_m: f64,
     pub east_m: f64,
     pub north_m: f64,
-    /// Height of the top of rail on the centre line above the origin's altitude, m, along the
-    /// local vertical (an ellipsoidal height less the origin's; not the tangent plane's up,
-    /// which falls away from the line by the Earth's curvature, 96 m at 35 km). Absent: the
-    /// map has no heights and the line is taken as flat.
+    /// Height of the top of rail on the centre line, m up in the local east/north/up frame (the
+    /// tangent plane at the origin, as east and north are). Absent: the map has no heights
+    /// and the line is taken as flat.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub height_m: Option<f64>,
     /// Cant, m: how much higher the left rail is than the right, looking towards increasing

@@ -191,10 +191,7 @@ impl SimSensor for Gnss {
             let n = m.position.y + bias.1 + mn + gauss(&mut self.rng, sigma);
             let u = m.position.z + gauss(&mut self.rng, 1.8 * sigma);
             let ground_speed = m.velocity.xy().norm();
-            // Heights are along the local vertical (the track's, and gravity's): the
-            // altitude is the origin's plus the height, not the tangent plane's up.
-            let (lat, lon, _) = self.origin.to_geodetic(e, n, 0.0);
-            let alt = self.origin.altitude_m + u;
+            let (lat, lon, alt) = self.origin.to_geodetic(e, n, u);
             let var = sigma * sigma + bias_sigma * bias_sigma;
             msg.latitude_deg = Some(lat);
             msg.longitude_deg = Some(lon);
