@@ -134,3 +134,24 @@ fn a_vehicle_table_that_puts_a_sensor_off_the_train_or_on_an_unread_topic_is_ref
         "{e}"
     );
 }
+
+#[test]
+fn a_track_map_without_heights_is_flat_and_said_once_not_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let (flat, railway) = (dir.path().join("flat.mcap"), dir.path().join("rail.mcap"));
+    simulate(&["--duration", "60", "--seed", "2"], &flat);
+    simulate(
+        &["--scenario", "railway", "--duration", "60", "--seed", "2"],
+        &railway,
+    );
+    let out = dir.path().join("out.mcap");
+    let said = stderr(&ok(&["refuse", s(&flat), "-o", s(&out)]));
+    let lines = said
+        .lines()
+        .filter(|l| l.contains("has no heights"))
+        .count();
+    assert_eq!(lines, 1, "{said}");
+    assert!(said.contains("taken as flat"), "{said}");
+    let said = stderr(&ok(&["refuse", s(&railway), "-o", s(&out)]));
+    assert!(!said.contains("has no heights"), "{said}");
+}

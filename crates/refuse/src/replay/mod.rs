@@ -126,6 +126,8 @@ pub struct RefuseReport {
     /// What the sensors made from the CAN bus made, and what of the bus they could not read.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub can: Option<railfuse_catalog::foreign::can::BridgeCounts>,
+    /// An IMU was fused on a track map without heights, which is then flat (said once).
+    pub flat_track: bool,
     pub pipelines: Vec<PipelineReport>,
 }
 
@@ -360,6 +362,7 @@ impl<'a> Replay<'a> {
                 stamped_by_log_time: BTreeSet::new(),
                 withheld: BTreeMap::new(),
                 can: None,
+                flat_track: false,
                 pipelines: Vec::new(),
             },
             last_log_time: 0,
@@ -790,6 +793,9 @@ impl<'a> Replay<'a> {
             return Ok(());
         };
         let input = self.input();
+        if model == SensorModel::ImuAcceleration {
+            self.say_if_flat();
+        }
         if let Err(e) = model.decode(msg, input, &self.context, &mut self.measurements) {
             self.report
                 .undecodable
@@ -797,6 +803,24 @@ impl<'a> Replay<'a> {
             return Ok(());
         }
         self.feed(id, msg)
+    }
+
+    /// Says once that the track map an IMU is fused on has no heights: the line is taken as
+    /// flat, and no gradient's gravity is taken out of the IMU's acceleration.
+    fn say_if_flat(&mut self) {
+        let Some(map) = self.context.track.as_ref() else {
+            return;
+        };
+        if self.report.flat_track || map.has_heights() {
+            return;
+        }
+        self.report.flat_track = true;
+        eprintln!(
+            "{}: the track map '{}' has no heights: the line is taken as flat (no gradient's \
+             gravity is taken out of the IMU)",
+            self.input().display(),
+            map.name
+        );
     }
 
     /// Counts a message read, and writes the configuration's track before the first.
