@@ -86,16 +86,7 @@ impl MessageKind {
                 "stations": [{"name": "A", "chainage_m": 0.0}],
                 "sleeper_spacing_m": 0.6, "loop_crossing_spacing_m": 25.0
             }),
-            MessageKind::Vehicle => json!({
-                "stamp_ns": T, "name": "test train", "length_m": 75.0,
-                "roll_per_lateral_mps2": 0.015,
-                "sensors": [
-                    {"topic": "/gnss/fix", "frame_id": "gnss", "lever_arm_m": [-12.0, 0.0, 4.1],
-                     "mounting_deg": [0.0, 0.0, 0.0]},
-                    {"topic": "/imu", "lever_arm_m": [-10.5, 0.3, 1.1],
-                     "mounting_deg": [0.8, -1.2, 1.5]}
-                ]
-            }),
+            MessageKind::Vehicle => vehicle_example(),
             MessageKind::GroundTruth => json!({
                 "stamp_ns": T, "chainage_m": 1250.2, "speed_mps": 22.5, "acceleration_mps2": 0.1,
                 "east_m": 1200.0, "north_m": 310.0, "latitude_deg": 44.61,
@@ -161,4 +152,18 @@ impl MessageKind {
         self.from_value(self.example_json())
             .expect("every sample fits its type")
     }
+}
+
+/// The example of a train: its length and two sensors' places.
+fn vehicle_example() -> Value {
+    json!({
+        "stamp_ns": T, "name": "test train", "length_m": 75.0,
+        "roll_per_lateral_mps2": 0.015,
+        "sensors": [
+            {"topic": "/gnss/fix", "frame_id": "gnss", "lever_arm_m": [-12.0, 0.0, 4.1],
+             "mounting_deg": [0.0, 0.0, 0.0]},
+            {"topic": "/imu", "lever_arm_m": [-10.5, 0.3, 1.1],
+             "mounting_deg": [0.8, -1.2, 1.5]}
+        ]
+    })
 }

@@ -444,20 +444,7 @@ fn simulate_line(
     log.fault_specs = faults.to_vec();
     let published = published_map(p, map, faults, seed);
     log.write(topics::TRACK_MAP, start, published.as_ref().unwrap_or(map))?;
-    let installed = match &p.vehicle {
-        Some(v) => {
-            let drawing = Vehicle {
-                stamp_ns: start,
-                ..v.drawing.clone()
-            };
-            log.write(topics::VEHICLE, start, &drawing)?;
-            v.installed(&mut rng_stream(seed, 41))
-        }
-        None => Vehicle::point(),
-    };
-    if p.vehicle.is_some() {
-        log.installed = Some(serde_json::to_string(&installed).expect("a vehicle serialises"));
-    }
+    let installed = publish_vehicle(p, &mut log, start, seed)?;
     let mut ride = p.ride.clone().map(|r| Ride::new(r, rng_stream(seed, 40)));
     let mut driver = Driver::new(
         p.driver.clone(),
@@ -499,17 +486,8 @@ fn simulate_line(
         if finished || limit_ns.is_some_and(|l| t_ns >= l) {
             break;
         }
-        let next_ns = t_ns + step_ns;
-        let stop = match driver.step(t, dt) {
-            Some(DriverEvent::Arrived(i)) => Some((EventKind::StationArrival, i)),
-            Some(DriverEvent::Departed(i)) => Some((EventKind::StationDeparture, i)),
-            None => None,
-        };
-        if let Some((kind, i)) = stop {
-            let text = map.stations[i].name.clone();
-            outbox.push(next_ns, event(next_ns, kind, text));
-        }
-        t_ns = next_ns;
+        t_ns += step_ns;
+        drive(&mut driver, map, t, dt, t_ns, &mut outbox);
     }
     while let Some((log_time, emit)) = outbox.pop_due(u64::MAX) {
         log.write_emit(log_time, emit)?;
@@ -519,6 +497,41 @@ fn simulate_line(
         log.write_frames()?;
     }
     log.finish(scenario, map, (t_ns - start) as f64 / 1e9)
+}
+
+/// Moves the train on by one step, to `next_ns`, with an event for a station it arrives at or
+/// leaves.
+fn drive(driver: &mut Driver, map: &TrackMap, t: f64, dt: f64, next_ns: u64, outbox: &mut Outbox) {
+    let stop = match driver.step(t, dt) {
+        Some(DriverEvent::Arrived(i)) => Some((EventKind::StationArrival, i)),
+        Some(DriverEvent::Departed(i)) => Some((EventKind::StationDeparture, i)),
+        None => None,
+    };
+    if let Some((kind, i)) = stop {
+        let text = map.stations[i].name.clone();
+        outbox.push(next_ns, event(next_ns, kind, text));
+    }
+}
+
+/// The train as installed, its drawing written on `/vehicle` and the installed truth kept for
+/// the run's metadata; a point train where the scenario has no vehicle.
+fn publish_vehicle(
+    p: &LineScenario,
+    log: &mut SimLog,
+    start: u64,
+    seed: u64,
+) -> railfuse_catalog::Result<Vehicle> {
+    let Some(v) = &p.vehicle else {
+        return Ok(Vehicle::point());
+    };
+    let drawing = Vehicle {
+        stamp_ns: start,
+        ..v.drawing.clone()
+    };
+    log.write(topics::VEHICLE, start, &drawing)?;
+    let installed = v.installed(&mut rng_stream(seed, 41));
+    log.installed = Some(serde_json::to_string(&installed).expect("a vehicle serialises"));
+    Ok(installed)
 }
 
 /// The scenario with each `corrections:dropout` fault's window among its correction-link

@@ -251,6 +251,29 @@ fn read_run<'a>(opts: &'a RefuseOptions<'a>) -> Result<Replay<'a>> {
     Ok(replay)
 }
 
+impl RefuseReport {
+    /// The report of a run from `input` to `output` before anything is read.
+    fn new(input: &Path, output: &Path) -> Self {
+        RefuseReport {
+            input: input.to_owned(),
+            output: output.to_owned(),
+            input_messages: 0,
+            input_bytes: 0,
+            fused_messages: 0,
+            merge: MergeCounts::default(),
+            out_of_order_messages: 0,
+            undecodable: Rejections::default(),
+            missing_sensors: BTreeSet::new(),
+            skipped: BTreeMap::new(),
+            stamped_by_log_time: BTreeSet::new(),
+            withheld: BTreeMap::new(),
+            can: None,
+            flat_track: false,
+            pipelines: Vec::new(),
+        }
+    }
+}
+
 /// One `refuse` run in progress.
 struct Replay<'a> {
     opts: &'a RefuseOptions<'a>,
@@ -348,23 +371,7 @@ impl<'a> Replay<'a> {
             eval,
             measurements: Vec::new(),
             fused: Vec::new(),
-            report: RefuseReport {
-                input: input.to_owned(),
-                output: opts.output.to_owned(),
-                input_messages: 0,
-                input_bytes: 0,
-                fused_messages: 0,
-                merge: MergeCounts::default(),
-                out_of_order_messages: 0,
-                undecodable: Rejections::default(),
-                missing_sensors: BTreeSet::new(),
-                skipped: BTreeMap::new(),
-                stamped_by_log_time: BTreeSet::new(),
-                withheld: BTreeMap::new(),
-                can: None,
-                flat_track: false,
-                pipelines: Vec::new(),
-            },
+            report: RefuseReport::new(input, opts.output),
             last_log_time: 0,
             reading: None,
             withholding,
