@@ -10,8 +10,6 @@ use super::{gauss, quantise};
 use crate::simulator::kinematics::motion;
 use crate::simulator::world::{seconds, Emit, Outbox, Schedule, SimSensor, World};
 
-pub const GRAVITY_MPS2: f64 = 9.80665;
-
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ImuParams {
     pub sensor_id: String,
