@@ -57,6 +57,9 @@ enum Command {
     /// Tune a pipeline's noise values (process noise, sensor variances, sensor states, gates)
     /// over one or many logs, and write the tuned configuration.
     Tune(cmd::tune::Args),
+    /// Find the IMU's mounting angles from runs over a mapped line (with σ, and which angles
+    /// the runs cannot show), and write the train with them for `refuse --vehicle`.
+    Calibrate(cmd::calibrate::Args),
     /// Accuracy of a fused log's pipelines against a reference, whole run and marked windows.
     Eval(cmd::eval::Args),
     /// Fit the track's centre line and chainage to the GNSS fixes of runs over it, and write
@@ -110,6 +113,7 @@ fn main() -> ExitCode {
         Command::Track(a) => cmd::track::run(a),
         Command::Export(a) => cmd::export::run(a),
         Command::Tune(a) => cmd::tune::run(a),
+        Command::Calibrate(a) => cmd::calibrate::run(a),
         Command::Recover(a) => cmd::recover::run(a),
         Command::Merge(a) => cmd::merge::run(a),
         Command::Import(a) => cmd::import::run(a),

@@ -7,6 +7,7 @@ pub mod bench_runs;
 pub mod bench_track;
 pub mod bench_tune;
 pub mod bench_viz;
+pub mod calibrate;
 pub mod demo;
 pub mod eval;
 pub mod export;

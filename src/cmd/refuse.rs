@@ -35,6 +35,10 @@ pub struct Args {
     /// Write the default pipeline's configuration here, to edit and pass with --config.
     #[arg(long, conflicts_with = "config", value_name = "FILE")]
     pub save_config: Option<PathBuf>,
+    /// The train (a TOML file's `[vehicle]` table, as `railfuse calibrate` writes it): wins
+    /// over the configuration's `[vehicle]` and the log's `/vehicle`.
+    #[arg(long, value_name = "FILE")]
+    pub vehicle: Option<PathBuf>,
     /// The output MCAP log: every input record plus the fused channels. May be the input
     /// itself: it is replaced only once the new file is complete.
     #[arg(short, long, required_unless_present = "config_schema")]
@@ -90,10 +94,13 @@ pub fn run(a: Args) -> Result<()> {
         true => output.with_extension("whole.mcap.partial"),
         false => output.to_owned(),
     };
-    let (config, source) = match loaded {
+    let (mut config, source) = match loaded {
         Some(loaded) => loaded,
         None => default_pipeline(input, a.track.as_deref(), a.save_config.as_deref())?,
     };
+    if let Some(vehicle) = &a.vehicle {
+        config.set_vehicle_from(vehicle)?;
+    }
     let (reference, withhold) = scoring(&a, &config, input)?;
     let live = match &a.viz {
         Some(target) => Some(LiveView::open(target)?),

@@ -33,6 +33,7 @@ pub mod run;
 pub mod topics;
 pub mod track_geojson;
 pub mod track_profile;
+pub mod train_motion;
 pub mod units;
 pub mod vehicle;
 

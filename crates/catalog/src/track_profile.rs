@@ -165,6 +165,32 @@ pub(crate) fn plane_on(v: &[TrackVertex], chainage_m: f64) -> Option<(f64, f64, 
     Some((a.east_m + f * de, a.north_m + f * dn, de.atan2(dn)))
 }
 
+/// A heading that turns smoothly along a polyline, and its rate (curvature, 1/m, positive
+/// turning clockwise): each segment's heading holds at its middle and turns linearly to the
+/// next one's. A polyline's own heading jumps at every vertex, which a rate or a second
+/// derivative (an IMU's yaw rate, a lever arm's acceleration) cannot be taken from.
+pub fn turning_heading_on(v: &[TrackVertex], chainage_m: f64) -> Option<(f64, f64)> {
+    let (i, _) = span(v, chainage_m)?;
+    let heading = |k: usize| {
+        let (a, b) = (&v[k - 1], &v[k]);
+        (b.east_m - a.east_m).atan2(b.north_m - a.north_m)
+    };
+    let middle = |k: usize| 0.5 * (v[k - 1].chainage_m + v[k].chainage_m);
+    let (j, k) = match chainage_m < middle(i) {
+        true if i > 1 => (i - 1, i),
+        false if i + 1 < v.len() => (i, i + 1),
+        _ => return Some((heading(i), 0.0)),
+    };
+    let length = middle(k) - middle(j);
+    if length <= 0.0 {
+        return Some((heading(i), 0.0));
+    }
+    let turn = (heading(k) - heading(j) + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU)
+        - std::f64::consts::PI;
+    let f = ((chainage_m - middle(j)) / length).clamp(0.0, 1.0);
+    Some((heading(j) + f * turn, turn / length))
+}
+
 fn cant(v: &TrackVertex) -> f64 {
     v.cant_m.unwrap_or(0.0)
 }

@@ -166,7 +166,7 @@ fn log_vehicle(
 
 /// Every channel of the log, by topic: from the summary, or from the data section where the
 /// summary does not list them.
-fn channels(run: &Run) -> Result<Vec<Arc<ChannelInfo>>> {
+pub fn channels(run: &Run) -> Result<Vec<Arc<ChannelInfo>>> {
     let mut reader = run.reader()?;
     let mut channels = match reader.summary().and_then(|s| s.channels.clone()) {
         Some(c) => c,

@@ -1,110 +1,60 @@
-//! What a sensor at its place on the train sees: its position, velocity, specific force and
-//! angular rate, from the track's exact geometry, the train's motion along it, the body's
-//! lean and vibration, and the sensor's lever arm and mounting ([`SensorMount`], the
-//! catalogue's one vehicle model).
-//!
-//! The centre line's point at the sensor's chainage `s` moves with `ṡ = v` along the track:
-//! velocity `v T` with `T = (sin ψ, cos ψ, G)` (chainage is measured in the plane, so `T`
-//! is a little longer than 1 on a gradient), acceleration `a T + v² (κ cos ψ, −κ sin ψ, G')`.
-//! The lever arm across the track, `(0, y, z)` in the body, turns with the body: its velocity
-//! and acceleration are the body rotation's, taken by central differences of the exact
-//! rotation 5 ms either side (smooth, small numbers: no cancellation). Specific force is
-//! `Rᵀ (acc + g ẑ)` in the body, turned into the sensor's axes by its mounting.
+//! What a sensor at its place on the train sees in the simulated world: the catalogue's
+//! [`point_motion`] on the track's exact geometry with the train as installed, plus the body's
+//! vibration, turned into the sensor's axes by its mounting.
 
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::Vector3;
 use railfuse_catalog::messages::SensorMount;
 use railfuse_catalog::track_profile::TrackPose;
-use railfuse_catalog::vehicle::GRAVITY_MPS2;
+use railfuse_catalog::train_motion::{
+    point_motion, AlongTrack, PointMotion, TrackGeometry, INSTANT_S,
+};
 
+use super::track::Track;
 use super::world::World;
 
-/// One sensor's motion at one simulation step.
-#[derive(Debug, Clone, Copy)]
-pub struct Motion {
-    /// The chainage of the sensor's place on the track.
-    pub chainage_m: f64,
-    /// Local east/north/up, m.
-    pub position: Vector3<f64>,
-    pub velocity: Vector3<f64>,
-    /// In the sensor's axes, m/s².
-    pub specific_force: Vector3<f64>,
-    /// In the sensor's axes, rad/s.
-    pub angular_rate: Vector3<f64>,
-    /// Speed along the rail at the sensor's place (what a wheel rolls), m/s.
-    pub rail_speed_mps: f64,
-}
+/// The track's exact frame: the published polyline's point, the exact heading, gradient and
+/// cant.
+impl TrackGeometry for Track {
+    fn pose(&self, chainage_m: f64) -> TrackPose {
+        let (east_m, north_m, _) = self
+            .map
+            .locate(chainage_m)
+            .expect("a built track has vertices");
+        TrackPose {
+            chainage_m,
+            east_m,
+            north_m,
+            up_m: self.height(chainage_m),
+            heading_rad: self.heading(chainage_m),
+            gradient: self.gradient(chainage_m),
+            cant_rad: (self.cant_m(chainage_m) / self.map.cant_base())
+                .clamp(-1.0, 1.0)
+                .asin(),
+        }
+    }
 
-/// Half the span of the central differences, s.
-const H: f64 = 0.005;
+    fn curvature(&self, chainage_m: f64) -> f64 {
+        Track::curvature(self, chainage_m)
+    }
 
-/// The track's exact frame at `chainage_m` (the published polyline's point, the exact heading,
-/// gradient and cant).
-pub fn track_pose(w: &World, chainage_m: f64) -> TrackPose {
-    let t = w.track;
-    let (east_m, north_m, _) = t
-        .map
-        .locate(chainage_m)
-        .expect("a built track has vertices");
-    TrackPose {
-        chainage_m,
-        east_m,
-        north_m,
-        up_m: t.height(chainage_m),
-        heading_rad: t.heading(chainage_m),
-        gradient: t.gradient(chainage_m),
-        cant_rad: (t.cant_m(chainage_m) / t.map.cant_base())
-            .clamp(-1.0, 1.0)
-            .asin(),
+    fn vertical_curvature(&self, chainage_m: f64) -> f64 {
+        Track::vertical_curvature(self, chainage_m)
     }
 }
 
-/// The body's rotation to east/north/up at time offset `tau` from now, for the place `along`
-/// metres of chainage from the front end.
-fn body_to_enu(w: &World, along: f64, tau: f64) -> Rotation3<f64> {
-    let s = w.chainage_m + along + w.speed_mps * tau + 0.5 * w.acceleration_mps2 * tau * tau;
-    let v = w.speed_mps + w.acceleration_mps2 * tau;
-    let pose = track_pose(w, s);
-    let roll = w.vehicle.body_roll(v, w.track.curvature(s), pose.cant_rad);
-    pose.body_to_enu(roll)
-}
-
-/// The motion of the sensor mounted at `mount`.
-pub fn motion(w: &World, mount: &SensorMount) -> Motion {
-    let along = mount.lever_arm_m[0];
-    let s = w.chainage_m + along;
-    let pose = track_pose(w, s);
-    let (v, a) = (w.speed_mps, w.acceleration_mps2);
-    let (kappa, psi, g) = (w.track.curvature(s), pose.heading_rad, pose.gradient);
-    let tangent = Vector3::new(psi.sin(), psi.cos(), g);
-    let bend = Vector3::new(
-        kappa * psi.cos(),
-        -kappa * psi.sin(),
-        w.track.vertical_curvature(s),
-    );
-    let centre_acceleration = a * tangent + v * v * bend;
-    let (before, now, after) = (
-        body_to_enu(w, along, -H),
-        body_to_enu(w, along, 0.0),
-        body_to_enu(w, along, H),
-    );
-    let across = Vector3::new(0.0, mount.lever_arm_m[1], mount.lever_arm_m[2]);
-    let (r0, r1, r2) = (before * across, now * across, after * across);
-    let lever_velocity = (r2 - r0) / (2.0 * H);
-    let lever_acceleration = (r2 - 2.0 * r1 + r0) / (H * H);
-    // Ω× = Rᵀ Ṙ, the body's rate in its own axes.
-    let omega = now.matrix().transpose() * (after.matrix() - before.matrix()) / (2.0 * H);
-    let body_rate = Vector3::new(omega[(2, 1)], omega[(0, 2)], omega[(1, 0)]);
-    let acceleration = centre_acceleration + lever_acceleration;
-    let body_force = now.inverse() * (acceleration + Vector3::new(0.0, 0.0, GRAVITY_MPS2))
-        + Vector3::from(w.ride.specific_force);
+/// The motion of the sensor mounted at `mount`, its specific force and rate in its own axes.
+pub fn motion(w: &World, mount: &SensorMount) -> PointMotion {
+    let along = AlongTrack {
+        chainage_m: w.chainage_m,
+        speed_mps: w.speed_mps,
+        acceleration_mps2: w.acceleration_mps2,
+    };
+    let m = point_motion(w.track, w.vehicle, along, mount, INSTANT_S);
     let to_sensor = mount.mounting().inverse();
-    Motion {
-        chainage_m: s,
-        position: pose.position() + r1,
-        velocity: v * tangent + lever_velocity,
-        specific_force: to_sensor * body_force,
-        angular_rate: to_sensor * (body_rate + Vector3::from(w.ride.angular_rate)),
-        rail_speed_mps: v * pose.rail_per_chainage(),
+    PointMotion {
+        specific_force: to_sensor * (m.specific_force + Vector3::from(w.ride.specific_force)),
+        angular_rate: to_sensor * (m.angular_rate + Vector3::from(w.ride.angular_rate)),
+        ..m
     }
 }
 
@@ -115,6 +65,7 @@ mod tests {
     use crate::simulator::track::{straight_line, GradientSection, Track, VerticalParams};
     use railfuse_catalog::geodesy::GeodeticOrigin;
     use railfuse_catalog::messages::Vehicle;
+    use railfuse_catalog::vehicle::GRAVITY_MPS2;
 
     fn world<'a>(track: &'a Track, vehicle: &'a Vehicle, s: f64, v: f64) -> World<'a> {
         World {

@@ -2,8 +2,11 @@
 //! and a gyro on the floor feel it.
 //!
 //! Each axis is a sum of resonances, each a damped oscillator driven by white noise
-//! (`ẍ = −ω²x − 2ζωẋ + σ_w w`) whose output `ω²x` has the stated RMS: the body's own modes
-//! (bounce about 1.1 Hz, sway 0.8 Hz, roll and pitch near 1 Hz) and the bogie and track band
+//! (`ẍ = −ω²x − 2ζωẋ + σ_w w`) whose output `2ζωẋ` has the stated RMS: a band around the mode
+//! with unit gain at its peak and none at 0 Hz (the body's displacement and velocity stay
+//! bounded, so it has no lasting acceleration; the spring force `ω²x` would carry the drive's
+//! white floor down to 0 Hz and look like a wandering accelerometer bias). The modes are the
+//! body's own (bounce about 1.1 Hz, sway 0.8 Hz, roll and pitch near 1 Hz) and the bogie and track band
 //! (6–10 Hz). The level grows with speed up to `reference_speed_mps` and is nothing at a
 //! standstill, as on a train: a car at rest in a station is still. The levels are those of a
 //! coach's floor at line speed: about 0.3 m/s² RMS vertically, 0.15 sideways, 0.05 along
@@ -100,12 +103,13 @@ impl Ride {
         let mut now = RideSample::default();
         for (r, (x, v)) in self.p.resonances.iter().zip(&mut self.states) {
             let omega = std::f64::consts::TAU * r.frequency_hz;
-            // Output ω²x has variance σ_w² ω / 4ζ: the drive that gives the stated RMS.
-            let drive = level * r.rms * (4.0 * r.damping / omega).sqrt();
+            // ẋ has variance σ_w² / 4ζω, so the output 2ζωẋ has ζωσ_w²: the drive that gives
+            // the stated RMS.
+            let drive = level * r.rms / (r.damping * omega).sqrt();
             *v += (-omega * omega * *x - 2.0 * r.damping * omega * *v) * dt
                 + drive * gauss(&mut self.rng, dt.sqrt());
             *x += *v * dt;
-            let out = omega * omega * *x;
+            let out = 2.0 * r.damping * omega * *v;
             match r.axis {
                 RideAxis::AlongX => now.specific_force[0] += out,
                 RideAxis::AlongY => now.specific_force[1] += out,

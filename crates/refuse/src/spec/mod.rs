@@ -149,6 +149,32 @@ impl Pipelines {
         Self::from_file(PipelinesFile::parse(text, path)?, text, path, registry)
     }
 
+    /// Takes the `[vehicle]` table of the TOML file `path` (what `railfuse calibrate` writes,
+    /// or another configuration) over this configuration's own, checked as its own is: the
+    /// command line's `--vehicle` wins over the file's value.
+    pub fn set_vehicle_from(&mut self, path: &Path) -> Result<()> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::ConfigRead {
+            path: path.to_owned(),
+            source,
+        })?;
+        #[derive(serde::Deserialize)]
+        struct VehicleFile {
+            vehicle: Option<Spanned<crate::config::VehicleConfig>>,
+        }
+        let file: VehicleFile = toml::from_str(&text).map_err(|e| Error::ConfigSyntax {
+            path: path.to_owned(),
+            message: e.to_string(),
+        })?;
+        if file.vehicle.is_none() {
+            return Err(Error::ConfigSyntax {
+                path: path.to_owned(),
+                message: "has no [vehicle] table".into(),
+            });
+        }
+        self.vehicle = read_vehicle(path, &text, file.vehicle.as_ref(), &self.pipeline)?;
+        Ok(())
+    }
+
     fn from_file(
         file: PipelinesFile,
         text: &str,
