@@ -15,7 +15,11 @@ writes for it:
 - `/fused/<name>/smoothed` where `smoother = true`: an RTS pass (filterpy's) over the filter's
   states on a 100 Hz grid, written at the end;
 - `/foxglove/fused/<name>/state`, a foxglove.LocationFix at most every 0.1 s (the chainage put
-  on the track map and turned into latitude and longitude).
+  on the track map and turned into latitude and longitude);
+- `/fused/<name>/train`, the whole train at most every 0.1 s: the front end with its safe
+  interval at the configuration's `confidence` (the normal quantile from the standard
+  library) and the rear end the `/vehicle`'s length behind (without the ends on the globe,
+  which railfuse adds).
 
 Filters: `kalman` is one filterpy KalmanFilter on the constant-acceleration model;
 `federated_kalman` one per device, each measurement updating its device's filter, fused by
@@ -30,6 +34,7 @@ It scores the first pipeline's states against /truth (RMSE and maximum of positi
 error). Prints one JSON line: messages, seconds, messages per second, the accuracy figures."""
 import bisect
 import json
+from statistics import NormalDist
 import math
 import sys
 import time
@@ -184,6 +189,9 @@ class Pipeline:
         self.ch_diag = reg(f"/fused/{self.name}/diagnostics", "railfuse.FusedDiagnostics")
         self.ch_smoothed = reg(f"/fused/{self.name}/smoothed", "railfuse.FusedState") if self.smoothing is not None else None
         self.ch_twin = reg(f"/foxglove/fused/{self.name}/state", "foxglove.LocationFix")
+        self.ch_train = reg(f"/fused/{self.name}/train", "railfuse.TrainPosition")
+        self.next_train = None
+        self.train = (0.0, 0.9999)  # length, confidence: set by main
         self.writer = writer
 
     def estimate(self, stamp):
@@ -205,6 +213,21 @@ class Pipeline:
                    "position_covariance": [P[0, 0], 0, 0, 0, P[0, 0], 0, 0, 0, 0],
                    "position_covariance_type": 1}
             self.writer.add_message(self.ch_twin, stamp, json.dumps(fix).encode(), stamp)
+        if self.next_train is None or stamp >= self.next_train:
+            self.next_train = stamp + TWIN_EVERY_NS
+            self.write_train(stamp, x, P)
+
+    def write_train(self, stamp, x, P):
+        length, confidence = self.train
+        sd, sv = math.sqrt(max(P[0, 0], 0.0)), math.sqrt(max(P[1, 1], 0.0))
+        half = NormalDist().inv_cdf(0.5 + 0.5 * confidence) * sd
+        front, rear = x[0], x[0] - length
+        train = {"stamp_ns": stamp, "length_m": length, "confidence": confidence,
+                 "front_chainage_m": front, "front_std_m": sd,
+                 "min_safe_front_m": front - half, "max_safe_front_m": front + half,
+                 "rear_chainage_m": rear, "min_safe_rear_m": rear - half, "max_safe_rear_m": rear + half,
+                 "speed_mps": x[1], "speed_std_mps": sv}
+        self.writer.add_message(self.ch_train, stamp, json.dumps(train).encode(), stamp)
 
     def ticks(self, upto, track):
         """States at the output ticks and smoothing epochs up to `upto`."""
@@ -346,7 +369,9 @@ def summary(messages, fused_states, elapsed, pos, spd):
 
 def main(inp, config_path, out):
     with open(config_path, "rb") as f:
-        specs = tomllib.load(f)["pipeline"]
+        config = tomllib.load(f)
+    specs = config["pipeline"]
+    confidence = config.get("confidence", 0.9999)
     started = time.perf_counter()
     truth_t, truth_s, truth_v = [], [], []
     messages, track = 0, None
@@ -356,8 +381,11 @@ def main(inp, config_path, out):
         writer.start(profile="railfuse", library="railfuse bench peer")
         schema_ids, channel_ids, decoders = {}, {}, DecoderFactory()
         schemas = {n: writer.register_schema(n, "jsonschema", b"{}") for n in
-                   ("railfuse.FusedState", "railfuse.FusedDiagnostics", "foxglove.LocationFix")}
+                   ("railfuse.FusedState", "railfuse.FusedDiagnostics", "foxglove.LocationFix",
+                    "railfuse.TrainPosition")}
         pipelines = [Pipeline(spec, writer, schemas) for spec in specs]
+        for p in pipelines:
+            p.train = (config.get("vehicle", {}).get("length_m", 0.0), confidence)
         readers = {}  # topic -> pipelines reading it
         for p in pipelines:
             for topic in p.sensors:
@@ -369,6 +397,11 @@ def main(inp, config_path, out):
             if topic == "/truth":
                 d = decoded(decoders, schema, channel, message.data)
                 truth_t.append(d("stamp_ns")), truth_s.append(d("chainage_m")), truth_v.append(d("speed_mps"))
+                continue
+            if topic == "/vehicle" and "vehicle" not in config:
+                length = decoded(decoders, schema, channel, message.data)("length_m") or 0.0
+                for p in pipelines:
+                    p.train = (length, confidence)
                 continue
             if topic == "/track/map":
                 track = Track(decoded(decoders, schema, channel, message.data))

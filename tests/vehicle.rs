@@ -155,3 +155,56 @@ fn a_track_map_without_heights_is_flat_and_said_once_not_an_error() {
     let said = stderr(&ok(&["refuse", s(&railway), "-o", s(&out)]));
     assert!(!said.contains("has no heights"), "{said}");
 }
+
+#[test]
+fn every_pipeline_writes_the_whole_train_with_its_safe_front_end_at_the_stated_confidence() {
+    use railfuse_catalog::messages::TrainPosition;
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("railway.mcap");
+    simulate(
+        &["--scenario", "railway", "--duration", "120", "--seed", "2"],
+        &log,
+    );
+    let out = dir.path().join("fused.mcap");
+    let train_of = |confidence: Option<&str>| {
+        let mut args = vec!["refuse", s(&log), "-o", s(&out), "--json"];
+        if let Some(c) = confidence {
+            args.extend(["--confidence", c]);
+        }
+        let report = ok_json(&args);
+        let trains: Vec<TrainPosition> = messages(&out, "/fused/default/train");
+        (report, trains)
+    };
+    let (report, trains) = train_of(None);
+    // Ten a second at most, over the two minutes.
+    assert!(
+        (1000..=1210).contains(&trains.len()),
+        "{} trains",
+        trains.len()
+    );
+    for t in &trains {
+        assert_eq!(t.length_m, 104.0);
+        assert!((t.front_chainage_m - t.rear_chainage_m - 104.0).abs() < 1e-9);
+        let k = (t.max_safe_front_m - t.front_chainage_m) / t.front_std_m;
+        assert!((k - 3.8906).abs() < 1e-3, "{t:?}");
+        assert!((t.min_safe_rear_m - (t.min_safe_front_m - 104.0)).abs() < 1e-9);
+        let (front, rear) = (t.front.unwrap(), t.rear.unwrap());
+        // 104 m of track apart on the map (a chord is shorter than the arc it spans).
+        let apart = (front.east_m - rear.east_m).hypot(front.north_m - rear.north_m);
+        assert!((100.0..=104.01).contains(&apart), "{apart}");
+    }
+    // Scored against the truth's front end, beside the confidence it claims.
+    let safe = &pipeline_eval(&report, "default")["safe_front"];
+    assert_eq!(safe["confidence"].as_f64(), Some(0.9999), "{report}");
+    assert!(safe["checked"].as_u64().unwrap() > 1000, "{safe}");
+    // The option wins over the configuration's default: a 95 % interval is ±1.96 σ.
+    let (_, narrow) = train_of(Some("0.95"));
+    let t = &narrow[narrow.len() / 2];
+    let k = (t.max_safe_front_m - t.front_chainage_m) / t.front_std_m;
+    assert!((k - 1.96).abs() < 1e-2, "{t:?}");
+    let e = fails(&["refuse", s(&log), "-o", s(&out), "--confidence", "1.5"]);
+    assert!(
+        e.contains("--confidence 1.5: a confidence must be at least 0.5"),
+        "{e}"
+    );
+}

@@ -168,6 +168,7 @@ pub fn print_eval(report: &EvalReport) {
             print_safety(&p.name, safety);
         }
     }
+    print_safe_front(report);
     for p in &report.pipelines {
         if let Some(f) = &p.reference_fixes {
             println!("{}: {}", p.name, describe_fix_match(f));
@@ -190,6 +191,26 @@ pub fn print_eval(report: &EvalReport) {
                 p.states
             );
         }
+    }
+}
+
+/// How often each pipeline's safe front end interval held the reference, beside the
+/// confidence it claims (fewer: the pipeline is surer of itself than it should be).
+fn print_safe_front(report: &EvalReport) {
+    for p in &report.pipelines {
+        let Some(f) = &p.safe_front else { continue };
+        let verdict = match f.share >= f.confidence {
+            true => "as claimed",
+            false => "less often than claimed: its σ is too small",
+        };
+        println!(
+            "{}: the safe front end interval ({:.2} %) held the reference's front end {:.2} % \
+             of {} times, {verdict}",
+            p.name,
+            100.0 * f.confidence,
+            100.0 * f.share,
+            f.checked
+        );
     }
 }
 

@@ -39,6 +39,11 @@ pub struct Args {
     /// over the configuration's `[vehicle]` and the log's `/vehicle`.
     #[arg(long, value_name = "FILE")]
     pub vehicle: Option<PathBuf>,
+    /// The probability that each pipeline's safe front end interval (`/fused/<name>/train`,
+    /// the min and max safe front end) holds the true front end: wins over the
+    /// configuration's `confidence` (default 0.9999, ±3.89 σ).
+    #[arg(long, value_name = "P")]
+    pub confidence: Option<f64>,
     /// The output MCAP log: every input record plus the fused channels. May be the input
     /// itself: it is replaced only once the new file is complete.
     #[arg(short, long, required_unless_present = "config_schema")]
@@ -100,6 +105,10 @@ pub fn run(a: Args) -> Result<()> {
     };
     if let Some(vehicle) = &a.vehicle {
         config.set_vehicle_from(vehicle)?;
+    }
+    if let Some(c) = a.confidence {
+        config.confidence = railfuse_refuse::spec::check_confidence(c)
+            .map_err(|e| anyhow::anyhow!("--confidence {e}"))?;
     }
     let (reference, withhold) = scoring(&a, &config, input)?;
     let live = match &a.viz {

@@ -72,9 +72,10 @@ def read_fused(path):
         states, diags, smoothed = {}, {}, {}
         for schema, channel, message in reader.iter_messages():
             parts = channel.topic.split("/")
-            if len(parts) == 4 and parts[1] == "fused":
+            kinds = {"state": states, "diagnostics": diags, "smoothed": smoothed}
+            if len(parts) == 4 and parts[1] == "fused" and parts[3] in kinds:
                 d = json_form(schema, channel, message.data)
-                {"state": states, "diagnostics": diags, "smoothed": smoothed}[parts[3]].setdefault(parts[2], []).append(d)
+                kinds[parts[3]].setdefault(parts[2], []).append(d)
     return configs, schema_of, states, diags, smoothed
 
 

@@ -80,6 +80,12 @@ pub fn fused_safety(pipeline: &str) -> String {
     format!("{FUSED_PREFIX}{pipeline}/safety")
 }
 
+/// `/fused/<pipeline>/train`: the whole train's position after the pipeline's states: front
+/// end with its safe interval, rear end, speed.
+pub fn fused_train(pipeline: &str) -> String {
+    format!("{FUSED_PREFIX}{pipeline}/train")
+}
+
 /// `/fused/<pipeline>/imu_error_model`: what a GNSS/INS pipeline learnt of its IMU's errors.
 pub fn fused_imu_error_model(pipeline: &str) -> String {
     format!("{FUSED_PREFIX}{pipeline}/imu_error_model")
@@ -105,6 +111,7 @@ pub enum FusedChannel {
     Smoothed,
     Safety,
     ImuErrorModel,
+    Train,
 }
 
 /// The pipeline and channel of a fused topic (`/fused/<pipeline>/<channel>`), if it is one.
@@ -116,6 +123,7 @@ pub fn parse_fused(topic: &str) -> Option<(&str, FusedChannel)> {
         "smoothed" => FusedChannel::Smoothed,
         "safety" => FusedChannel::Safety,
         "imu_error_model" => FusedChannel::ImuErrorModel,
+        "train" => FusedChannel::Train,
         _ => return None,
     };
     (!pipeline.is_empty()).then_some((pipeline, channel))
@@ -153,6 +161,7 @@ mod tests {
             (fused_smoothed("kf"), FusedChannel::Smoothed),
             (fused_safety("kf"), FusedChannel::Safety),
             (fused_imu_error_model("kf"), FusedChannel::ImuErrorModel),
+            (fused_train("kf"), FusedChannel::Train),
         ] {
             assert_eq!(parse_fused(&topic), Some(("kf", channel)));
             assert_eq!(fused_pipeline_of(&topic), Some("kf"));

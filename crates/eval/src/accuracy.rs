@@ -115,12 +115,23 @@ pub fn nees(state: &FusedState, position_error: f64, speed_error: f64) -> f64 {
 #[derive(Debug, Clone)]
 enum Waiting {
     State(Estimate),
-    /// A safe interval `[low, high]` along the track at a stamp (source 002's U_safe).
+    /// A safe interval `[low, high]` along the track at a stamp.
     Interval {
         stamp_ns: u64,
         low_m: f64,
         high_m: f64,
+        kind: Interval,
     },
+}
+
+/// Which safe interval: each is counted on its own.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Interval {
+    /// Source 002's U_safe, of a pipeline with safety checks.
+    SafetyCheck,
+    /// The min to max safe front end of a pipeline's train channel (ETCS's confidence
+    /// interval, at its stated confidence).
+    SafeFront,
 }
 
 impl Waiting {
@@ -220,7 +231,9 @@ pub struct AccuracyMeter {
     /// Estimates and intervals newer than the newest reference sample, waiting for it to
     /// catch up.
     waiting: VecDeque<Waiting>,
+    /// Source 002's U_safe, and the train channel's safe front end interval.
     pub containment: Containment,
+    pub safe_front: Containment,
     pub position: ErrorStats,
     pub speed: ErrorStats,
     pub nees: Consistency,
@@ -243,6 +256,7 @@ impl AccuracyMeter {
             reference: ReferenceTrack::new(lag_s + 2.0),
             waiting: VecDeque::new(),
             containment: Containment::default(),
+            safe_front: Containment::default(),
             position: ErrorStats::default(),
             speed: ErrorStats::default(),
             nees: Consistency::default(),
@@ -279,7 +293,8 @@ impl AccuracyMeter {
                     stamp_ns,
                     low_m,
                     high_m,
-                } => self.check_interval(stamp_ns, low_m, high_m),
+                    kind,
+                } => self.check_interval(stamp_ns, low_m, high_m, kind),
             }
         }
     }
@@ -304,33 +319,45 @@ impl AccuracyMeter {
     }
 
     /// A safe interval `[low, high]` at `stamp_ns`: does it hold the reference's chainage?
-    pub fn add_interval(&mut self, stamp_ns: u64, low_m: f64, high_m: f64) {
+    pub fn add_interval(&mut self, stamp_ns: u64, low_m: f64, high_m: f64, kind: Interval) {
         match self.reference.newest_ns() {
-            Some(newest) if newest >= stamp_ns => self.check_interval(stamp_ns, low_m, high_m),
+            Some(newest) if newest >= stamp_ns => {
+                self.check_interval(stamp_ns, low_m, high_m, kind)
+            }
             _ => self.waiting.push_back(Waiting::Interval {
                 stamp_ns,
                 low_m,
                 high_m,
+                kind,
             }),
         }
     }
 
-    fn check_interval(&mut self, stamp_ns: u64, low_m: f64, high_m: f64) {
-        match self.reference.lookup(stamp_ns) {
+    fn tally(&mut self, kind: Interval) -> &mut Containment {
+        match kind {
+            Interval::SafetyCheck => &mut self.containment,
+            Interval::SafeFront => &mut self.safe_front,
+        }
+    }
+
+    fn check_interval(&mut self, stamp_ns: u64, low_m: f64, high_m: f64, kind: Interval) {
+        let found = self.reference.lookup(stamp_ns);
+        let tally = self.tally(kind);
+        match found {
             Lookup::At(s, _) => {
-                self.containment.checked += 1;
-                self.containment.contained += u64::from((low_m..=high_m).contains(&s));
+                tally.checked += 1;
+                tally.contained += u64::from((low_m..=high_m).contains(&s));
             }
-            Lookup::Gap | Lookup::Outside => self.containment.unchecked += 1,
+            Lookup::Gap | Lookup::Outside => tally.unchecked += 1,
         }
     }
 
     /// What still waits at the end of the log had no reference after it.
     pub fn finish(&mut self) {
-        for w in self.waiting.drain(..) {
+        for w in std::mem::take(&mut self.waiting) {
             match w {
                 Waiting::State(_) => self.unmatched += 1,
-                Waiting::Interval { .. } => self.containment.unchecked += 1,
+                Waiting::Interval { kind, .. } => self.tally(kind).unchecked += 1,
             }
         }
     }

@@ -6,15 +6,15 @@ use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::log::{ChannelInfo, LogMessage, LogRecord};
 use railfuse_catalog::messages::{
     BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision,
-    GnssFix, GroundTruth, SafetyStatus, TrackMap,
+    GnssFix, GroundTruth, SafetyStatus, TrackMap, TrainPosition,
 };
 use railfuse_catalog::run::{Run, RunReader};
 use railfuse_catalog::topics::{self, FusedChannel};
 use serde::Serialize;
 
 use crate::accuracy::{
-    AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, PlaneMeter, PlaneSample,
-    PlaneSummary, Span, CHI2_95_1DOF,
+    AccuracyMeter, Consistency, ConsistencySummary, ErrorSummary, Interval, PlaneMeter,
+    PlaneSample, PlaneSummary, Span, CHI2_95_1DOF,
 };
 use crate::fix_match::{FixMatchReport, FixMeter, FixQuality, FixSample, Reference, StateAt};
 use crate::outages::{OutageEval, OutageWindow, Withheld};
@@ -73,10 +73,24 @@ pub struct PipelineEval {
     /// Pipelines with safety checks: S7, availability, containment and caught faults.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub safety: Option<SafetyEval>,
+    /// How often the train channel's safe front end interval held the reference's front
+    /// end, beside the confidence it states.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub safe_front: Option<SafeFrontEval>,
     /// 2-D pipelines against a ground-truth reference: east/north position and velocity
     /// errors in the plane.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plane: Option<PlaneSummary>,
+}
+
+/// The safe front end interval against the reference: held `share` of the time, where a
+/// filter honest about its error holds it at least `confidence` of the time.
+#[derive(Debug, Clone, Serialize)]
+pub struct SafeFrontEval {
+    pub confidence: f64,
+    pub checked: u64,
+    pub contained: u64,
+    pub share: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -109,6 +123,7 @@ enum Role {
     Smoothed(usize),
     Diagnostics(usize),
     Safety(usize),
+    Train(usize),
     TrackMap,
     Events,
     Balise,
@@ -132,6 +147,8 @@ struct Scored {
     plane: PlaneMeter,
     /// Against GNSS fixes: the states interpolated to each fix.
     fixes: FixMeter,
+    /// The confidence its train channel states for the safe front end interval.
+    safe_front_confidence: Option<f64>,
 }
 
 impl Scored {
@@ -148,6 +165,7 @@ impl Scored {
             resets: 0,
             device_fault: 0,
             safety: None,
+            safe_front_confidence: None,
             plane: PlaneMeter::new(lag_s),
             fixes: FixMeter::new(quality, lag_s),
         }
@@ -383,6 +401,9 @@ impl Evaluator {
                 (FusedChannel::Safety, s) if s == SafetyStatus::SCHEMA_NAME => {
                     Some(Role::Safety(self.index_of(p.to_owned(), p)))
                 }
+                (FusedChannel::Train, s) if s == TrainPosition::SCHEMA_NAME => {
+                    Some(Role::Train(self.index_of(p.to_owned(), p)))
+                }
                 _ => None,
             }
         } else if schema == TrackMap::SCHEMA_NAME {
@@ -439,6 +460,7 @@ impl Evaluator {
             Some(Role::State(_)) => self.fused_state(m.channel.id, &m.decode(path)?),
             Some(Role::Diagnostics(_)) => self.fused_diagnostics(m.channel.id, &m.decode(path)?),
             Some(Role::Safety(_)) => self.safety_status(m.channel.id, &m.decode(path)?),
+            Some(Role::Train(_)) => self.train_position(m.channel.id, &m.decode(path)?),
             Some(Role::TrackMap) => self.map = Some(m.decode(path)?),
             Some(Role::Events) => {
                 let e: Event = m.decode(path)?;
@@ -554,8 +576,22 @@ impl Evaluator {
             .get_or_insert_with(SafetyTally::default)
             .add(status, &self.spans);
         if let Some(u) = status.safe_interval.filter(|_| status.usable) {
-            s.meter.add_interval(status.stamp_ns, u.low_m, u.high_m);
+            s.meter
+                .add_interval(status.stamp_ns, u.low_m, u.high_m, Interval::SafetyCheck);
         }
+    }
+
+    /// A pipeline's train on channel `id`: does its safe front end interval hold the
+    /// reference?
+    pub fn train_position(&mut self, id: u16, train: &TrainPosition) {
+        let Some(Role::Train(i)) = self.roles.get(&id).copied() else {
+            return;
+        };
+        let s = &mut self.scored[i];
+        s.safe_front_confidence = Some(train.confidence);
+        let (low, high) = (train.min_safe_front_m, train.max_safe_front_m);
+        s.meter
+            .add_interval(train.stamp_ns, low, high, Interval::SafeFront);
     }
 
     /// A metadata record (pipeline records name each pipeline's filter; withheld records
@@ -660,6 +696,16 @@ fn pipeline_eval(
 ) -> PipelineEval {
     s.meter.finish();
     let safety = s.safety.take().map(|t| t.finish(s.meter.containment, t0));
+    let held = s.meter.safe_front;
+    let safe_front = s
+        .safe_front_confidence
+        .filter(|_| held.checked > 0)
+        .map(|confidence| SafeFrontEval {
+            confidence,
+            checked: held.checked,
+            contained: held.contained,
+            share: held.contained as f64 / held.checked as f64,
+        });
     let windows = |w: &[crate::accuracy::WindowStats]| {
         w.iter()
             .map(|w| WindowEval {
@@ -671,6 +717,7 @@ fn pipeline_eval(
     };
     let mut eval = PipelineEval {
         safety,
+        safe_front,
         plane: s.plane.summary(),
         filter: filters.get(&s.pipeline).cloned(),
         name: s.name,

@@ -59,6 +59,11 @@ pub struct PipelinesFile {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schemars(with = "Option<VehicleConfig>")]
     pub vehicle: Option<Spanned<VehicleConfig>>,
+    /// The probability that each pipeline's safe front end interval (`/fused/<name>/train`:
+    /// the min and max safe front end, as ETCS reports them) holds the true front end,
+    /// two-sided; 0.9999 when absent. `refuse --confidence` wins over it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub confidence: Option<f64>,
     /// The pipelines, each run over the same log in one pass.
     #[schemars(with = "Vec<PipelineConfig>")]
     pub pipeline: Vec<Spanned<PipelineConfig>>,
@@ -845,6 +850,7 @@ impl PipelineConfig {
             can: None,
             sensor: BTreeMap::new(),
             vehicle: None,
+            confidence: None,
             pipeline: vec![Spanned::new(0..0, self.clone())],
         })
         .expect("a config serialises")

@@ -70,6 +70,21 @@ pub fn fused_extent(pipeline: &str) -> String {
     format!("map/fused/{pipeline}/extent")
 }
 
+/// The train along the track after a pipeline's state, rear end to front end.
+pub fn fused_train(pipeline: &str) -> String {
+    format!("map/fused/{pipeline}/train")
+}
+
+/// A pipeline's safe front end interval (min to max safe front end) on the map.
+pub fn fused_safe_front(pipeline: &str) -> String {
+    format!("map/fused/{pipeline}/train/safe_front")
+}
+
+/// The train's sensors where they sit, after a pipeline's state.
+pub fn fused_train_sensors(pipeline: &str) -> String {
+    format!("map/fused/{pipeline}/train/sensors")
+}
+
 /// A 2-D pipeline's 3σ covariance ellipse on the map.
 pub fn fused_ellipse(pipeline: &str) -> String {
     format!("map/fused/{pipeline}/ellipse")

@@ -87,6 +87,7 @@ impl MessageKind {
                 "sleeper_spacing_m": 0.6, "loop_crossing_spacing_m": 25.0
             }),
             MessageKind::Vehicle => vehicle_example(),
+            MessageKind::TrainPosition => train_position_example(),
             MessageKind::GroundTruth => json!({
                 "stamp_ns": T, "chainage_m": 1250.2, "speed_mps": 22.5, "acceleration_mps2": 0.1,
                 "east_m": 1200.0, "north_m": 310.0, "latitude_deg": 44.61,
@@ -155,6 +156,21 @@ impl MessageKind {
 }
 
 /// The example of a train: its length and two sensors' places.
+fn train_position_example() -> Value {
+    let end = |east: f64, north: f64| {
+        json!({"east_m": east, "north_m": north, "up_m": 12.3, "latitude_deg": 44.61,
+               "longitude_deg": 10.92, "altitude_m": 47.3})
+    };
+    json!({
+        "stamp_ns": T, "length_m": 104.0, "confidence": 0.9999,
+        "front_chainage_m": 1250.2, "front_std_m": 0.3,
+        "min_safe_front_m": 1249.03, "max_safe_front_m": 1251.37,
+        "rear_chainage_m": 1146.2, "min_safe_rear_m": 1145.03, "max_safe_rear_m": 1147.37,
+        "speed_mps": 22.5, "speed_std_mps": 0.05,
+        "front": end(1200.0, 310.0), "rear": end(1110.0, 262.0)
+    })
+}
+
 fn vehicle_example() -> Value {
     json!({
         "stamp_ns": T, "name": "test train", "length_m": 75.0,

@@ -19,6 +19,7 @@ mod registry;
 mod safety;
 mod time_reference;
 mod track_map;
+mod train_position;
 mod tuning;
 mod vehicle;
 
@@ -44,6 +45,7 @@ pub use time_reference::TimeReference;
 pub use track_map::{
     SleeperSection, Station, TrackBalise, TrackLine, TrackMap, TrackSwitch, TrackVertex, Tunnel,
 };
+pub use train_position::{two_sided_quantile, TrainEnd, TrainPosition};
 pub use tuning::{TuneEvaluation, TunedValue};
 pub use vehicle::{SensorMount, Vehicle};
 

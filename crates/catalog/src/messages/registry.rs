@@ -143,6 +143,7 @@ registry!(
     FusedState,
     FusedDiagnostics,
     SafetyStatus,
+    TrainPosition,
     ImuErrorModel,
     RecorderDiagnostics,
     TuneEvaluation,
@@ -170,8 +171,8 @@ impl MessageKind {
             GnssFix | TimeReference | GroundTruth => StampClock::Gnss,
             Imu | RadarSpeed | Odometer | LoopPosition | BalisePassage | EddyCurrentBlock
             | Event | RecorderDiagnostics | CanFrame | CanSignals => StampClock::Recorder,
-            TrackMap | Vehicle | FusedState | FusedDiagnostics | SafetyStatus | ImuErrorModel
-            | TuneEvaluation => StampClock::Derived,
+            TrackMap | Vehicle | FusedState | FusedDiagnostics | SafetyStatus | TrainPosition
+            | ImuErrorModel | TuneEvaluation => StampClock::Derived,
         }
     }
 }

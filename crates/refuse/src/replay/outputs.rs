@@ -11,7 +11,7 @@ use railfuse_catalog::foxglove::TwinKind;
 use railfuse_catalog::log::{ChannelId, ChannelInfo, LogWriter};
 use railfuse_catalog::messages::{
     ChannelMessage, FusedDiagnostics, FusedState, ImuErrorModel, MessageKind, SafetyStatus,
-    TrackMap,
+    TrackMap, TrainPosition,
 };
 use railfuse_catalog::topics;
 
@@ -34,6 +34,10 @@ pub(super) struct Output {
     safety: Option<ChannelId>,
     /// GNSS/INS pipelines: `/fused/<name>/imu_error_model`.
     imu_error_model: Option<ChannelId>,
+    /// `/fused/<name>/train`: the whole train after its states, and the stamp of the last one
+    /// written.
+    train: Option<ChannelId>,
+    last_train_ns: Option<u64>,
     pub(super) states: u64,
     pub(super) smoothed_states: u64,
 }
@@ -54,7 +58,7 @@ impl Replay<'_> {
                     o.safety,
                 ]
                 .into_iter()
-                .chain([o.imu_error_model])
+                .chain([o.imu_error_model, o.train])
             })
             .flatten()
             .map(|c| c.0)
@@ -160,6 +164,18 @@ impl Replay<'_> {
                 self.eval.fused_state(out.state.0, state);
                 out.states += 1;
                 self.report.fused_messages += 1;
+                let confidence = self.opts.config.confidence;
+                let (writer, eval, context) = (&mut self.writer, &mut self.eval, &self.context);
+                if write_train(
+                    out,
+                    (writer, eval),
+                    context,
+                    confidence,
+                    f.log_time_ns,
+                    state,
+                )? {
+                    self.report.fused_messages += 1;
+                }
             }
             if let Some(d) = &f.diagnostics {
                 self.writer.write(out.diagnostics, f.log_time_ns, d)?;
@@ -212,6 +228,35 @@ impl Replay<'_> {
     }
 }
 
+/// The whole train after a pipeline's `state` on its train channel, at most ten times a
+/// second (a map needs no more; the state keeps every estimate); whether one was written.
+fn write_train(
+    out: &mut Output,
+    (writer, eval): (&mut LogWriter, &mut Evaluator),
+    context: &crate::measurement::SensorContext,
+    confidence: f64,
+    log_time_ns: u64,
+    state: &FusedState,
+) -> Result<bool> {
+    let Some(channel) = out.train else {
+        return Ok(false);
+    };
+    let due = out
+        .last_train_ns
+        .is_none_or(|last| state.stamp_ns >= last + LOCATION_TWIN_EVERY_NS);
+    let map = context.track.as_ref();
+    let train = due
+        .then(|| TrainPosition::of(state, &context.vehicle, map, confidence))
+        .flatten();
+    let Some(train) = train else {
+        return Ok(false);
+    };
+    writer.write(channel, log_time_ns, &train)?;
+    eval.train_position(channel.0, &train);
+    out.last_train_ns = Some(state.stamp_ns);
+    Ok(true)
+}
+
 /// Registers every pipeline's fused channels with the writer and the evaluation. They take
 /// the highest ids the input (`known`, its summary's channels) does not use, so copied
 /// records keep theirs (replaced channels' ids too: their records may sit in chunks copied
@@ -247,6 +292,14 @@ pub(super) fn register_outputs(
     let mut outputs = Vec::new();
     for p in &opts.config.pipeline {
         outputs.push(pipeline_output(p, &schemas, &mut ids, writer, eval)?);
+    }
+    // After the others, so that their ids stay as they were before trains were written.
+    let train_schema = ids.next()?;
+    for (o, p) in outputs.iter_mut().zip(&opts.config.pipeline) {
+        let topic = topics::fused_train(&p.name);
+        let id = writer.add_channel_with_ids::<TrainPosition>(train_schema, ids.next()?, &topic)?;
+        eval.channel(id.0, &topic, TrainPosition::SCHEMA_NAME);
+        o.train = Some(id);
     }
     let input_has_track = |channels: &[Arc<ChannelInfo>]| {
         channels
@@ -380,6 +433,8 @@ fn pipeline_output(
         smoothed,
         safety,
         imu_error_model,
+        train: None,
+        last_train_ns: None,
         states: 0,
         smoothed_states: 0,
     })

@@ -63,7 +63,24 @@ pub struct Pipelines {
     pub can: Option<CanSensors>,
     /// `[vehicle]`: the train, checked (it wins over the log's `/vehicle`).
     pub vehicle: Option<railfuse_catalog::messages::Vehicle>,
+    /// The confidence of the safe front end interval every pipeline's train channel gives.
+    pub confidence: f64,
     pub pipeline: Vec<PipelineSpec>,
+}
+
+/// The safe interval's confidence when the configuration states none: 99.99 %, a Gaussian
+/// error inside ±3.89 σ.
+pub const DEFAULT_CONFIDENCE: f64 = 0.9999;
+
+/// A confidence the safe interval can be taken at: above 50 % (below it the interval would
+/// hold the estimate less often than not) and below 1 (the interval would be infinite).
+pub fn check_confidence(c: f64) -> std::result::Result<f64, String> {
+    match c.is_finite() && (0.5..1.0).contains(&c) {
+        true => Ok(c),
+        false => Err(format!(
+            "{c}: a confidence must be at least 0.5 and below 1 (0.9999 is ±3.89 σ)"
+        )),
+    }
 }
 
 /// The vehicle's DBC and the sensors a configuration makes from its signals.
@@ -218,6 +235,13 @@ impl Pipelines {
         let vehicle = read_vehicle(path, text, file.vehicle.as_ref(), &pipeline)?;
         let can = CanSensors::read(path, file.can, file.sensor)?;
         let (clock_offsets, align) = read_run(path, file.run.unwrap_or_default())?;
+        let confidence =
+            check_confidence(file.confidence.unwrap_or(DEFAULT_CONFIDENCE)).map_err(|message| {
+                Error::ConfigSyntax {
+                    path: path.to_owned(),
+                    message,
+                }
+            })?;
         Ok(Self {
             path: path.to_owned(),
             track,
@@ -225,6 +249,7 @@ impl Pipelines {
             align,
             can,
             vehicle,
+            confidence,
             pipeline,
         })
     }

@@ -9,7 +9,11 @@ use rerun::{Color, Radius, SeriesLines, SeriesPoints};
 use super::*;
 use crate::blueprint::NIS_AXIS_MAX;
 use crate::series::SeriesId;
+use crate::series::{OutlinesId, SegmentsId};
 use crate::{entities as ent, map, palette, Error};
+
+/// How often a pipeline's train is drawn at most, ns.
+const TRAIN_EVERY_NS: i64 = 500_000_000;
 
 impl Logger {
     pub(super) fn fused(&mut self, p: usize, smoothed: bool, f: &FusedState) -> Result<(), Error> {
@@ -75,6 +79,78 @@ impl Logger {
             }
         }
         Ok(())
+    }
+
+    /// The whole train after a pipeline's state: its body along the track from the rear end
+    /// to the front end, the safe front end interval, and (with the log's drawing) each
+    /// sensor where it sits; twice a second at most (a train moves 20 m in that at line
+    /// speed, and a map holds few more).
+    pub(super) fn train(&mut self, p: usize, tp: &TrainPosition) -> Result<(), Error> {
+        let t = tp.stamp_ns as i64;
+        let Some(m) = &self.map else { return Ok(()) };
+        if self.pipelines[p]
+            .last_train_ns
+            .is_some_and(|last| t < last + TRAIN_EVERY_NS)
+        {
+            return Ok(());
+        }
+        let body = map::stretch(m, tp.rear_chainage_m, tp.front_chainage_m);
+        let safe = map::at(m, tp.min_safe_front_m).zip(map::at(m, tp.max_safe_front_m));
+        // Unlabelled: at a whole line's zoom eight labels on one spot hide the map; hovering
+        // a point in the viewer names its entity.
+        let sensors: Vec<[f32; 2]> = self
+            .vehicle
+            .iter()
+            .flat_map(|v| &v.sensors)
+            .filter_map(|s| map::at(m, s.chainage(tp.front_chainage_m)))
+            .collect();
+        let (body_id, safe_id) = match self.pipelines[p].train {
+            Some(ids) => ids,
+            None => self.register_train(p)?,
+        };
+        self.pipelines[p].last_train_ns = Some(t);
+        self.columns.outline(&self.rec, body_id, t, body)?;
+        if let Some((low, high)) = safe {
+            self.columns.segment(&self.rec, safe_id, t, [low, high])?;
+        }
+        if !sensors.is_empty() {
+            let entity = ent::fused_train_sensors(&self.pipelines[p].name);
+            self.rec
+                .set_timestamp_nanos_since_epoch(crate::series::TIMELINE, t);
+            self.rec
+                .log(
+                    entity.as_str(),
+                    &rerun::Points2D::new(sensors)
+                        .with_colors([palette::pipeline(self.pipelines[p].index)])
+                        .with_radii([Radius::new_ui_points(3.0)]),
+                )
+                .map_err(|e| Error::Rerun(e.to_string()))?;
+            self.entities.insert(entity);
+        }
+        Ok(())
+    }
+
+    /// The train's entities, styled in the pipeline's colour.
+    fn register_train(&mut self, p: usize) -> Result<(OutlinesId, SegmentsId), Error> {
+        let (name, index) = (self.pipelines[p].name.clone(), self.pipelines[p].index);
+        self.static_(
+            &ent::fused_train(&name),
+            &rerun::LineStrips2D::update_fields()
+                .with_colors([palette::pipeline(index)])
+                .with_radii([Radius::new_ui_points(4.0)]),
+        )?;
+        self.static_(
+            &ent::fused_safe_front(&name),
+            &rerun::LineStrips2D::update_fields()
+                .with_colors([palette::band(index)])
+                .with_radii([Radius::new_ui_points(7.0)]),
+        )?;
+        let ids = (
+            self.columns.outlines(&ent::fused_train(&name)),
+            self.columns.segments(&ent::fused_safe_front(&name)),
+        );
+        self.pipelines[p].train = Some(ids);
+        Ok(ids)
     }
 
     /// A 2-D pipeline: where it is in the plane, with its 3σ ellipse (its entity styled on

@@ -280,6 +280,10 @@ struct PipelineState {
     extent: SegmentsId,
     /// 2-D pipelines' covariance ellipse, registered when the first 2-D state comes.
     ellipse: Option<OutlinesId>,
+    /// The train along the track and its safe front end interval, registered when the first
+    /// train comes, and the log time it was last drawn at.
+    train: Option<(OutlinesId, SegmentsId)>,
+    last_train_ns: Option<i64>,
     /// NIS per measurement topic.
     nis: HashMap<String, SeriesId>,
     /// Markers per gate decision other than plain acceptance.
@@ -311,6 +315,8 @@ struct Logger {
     options: VizOptions,
     columns: Columns,
     map: Option<TrackMap>,
+    /// The train's drawing (the log's `/vehicle`): where its sensors are drawn.
+    vehicle: Option<Vehicle>,
     /// Where east/north are measured from: the map's origin, else the first fix.
     origin: Option<GeodeticOrigin>,
     truth: ReferenceTrack,
@@ -350,6 +356,7 @@ impl Logger {
             options,
             columns: Columns::new(decimation),
             map: None,
+            vehicle: None,
             origin: None,
             truth: ReferenceTrack::new(10.0 + longest_chunk_ns as f64 / 1e9),
             truth_velocity: TruthWindow::new(10.0 + longest_chunk_ns as f64 / 1e9),
@@ -526,6 +533,8 @@ impl Logger {
             position: self.columns.points(&position, None),
             extent: self.columns.segments(&extent),
             ellipse: None,
+            train: None,
+            last_train_ns: None,
             nis: HashMap::new(),
             gates: HashMap::new(),
             bounds,
@@ -588,7 +597,10 @@ impl Logger {
         let topic = m.channel.topic.as_str();
         let kind = m.channel.kind();
         // The references are read whatever the selection; the rest only when shown.
-        let reference = matches!(kind, Some(MessageKind::TrackMap | MessageKind::GroundTruth));
+        let reference = matches!(
+            kind,
+            Some(MessageKind::TrackMap | MessageKind::GroundTruth | MessageKind::Vehicle)
+        );
         if !reference && !self.in_window(m.log_time_ns) {
             return Ok(());
         }
@@ -602,6 +614,7 @@ impl Logger {
                 FusedChannel::Diagnostics => self.diagnostics(p, &m.decode(path)?),
                 FusedChannel::Safety => self.safety(p, &m.decode(path)?),
                 FusedChannel::ImuErrorModel => self.imu_error_model(p, &m.decode(path)?),
+                FusedChannel::Train => self.train(p, &m.decode(path)?),
             };
         }
         if !reference && !self.options.shows_topic(topic) {
@@ -609,6 +622,7 @@ impl Logger {
         }
         match kind {
             Some(MessageKind::TrackMap) => self.track_map(m.decode(path)?)?,
+            Some(MessageKind::Vehicle) => self.vehicle = Some(m.decode(path)?),
             Some(MessageKind::GroundTruth) => self.truth(&m.decode(path)?)?,
             Some(MessageKind::GnssFix) => self.gnss(&m.decode(path)?)?,
             Some(MessageKind::RadarSpeed) => {
