@@ -25,11 +25,12 @@ pub fn run(a: Args) -> Result<()> {
         dir.join("pipelines.toml"),
     );
     super::simulate::simulate_to("default", a.seed, None, &[], false, &raw)?;
-    // The default pipeline and the same with sensor states, side by side, as one config.
+    // The default pipeline with sensor states (honest about its covariance) and without,
+    // side by side, as one config.
     let (text, config) = railfuse_experiments::long_runs::side_by_side()?;
     std::fs::write(&config_path, &text)
         .with_context(|| format!("{}: cannot write", config_path.display()))?;
-    let source = "embedded samples/kalman.toml + samples/sensor-states.toml".into();
+    let source = "embedded samples/sensor-states.toml + samples/kalman.toml".into();
     let truth = railfuse_eval::Reference::topic(railfuse_catalog::topics::GROUND_TRUTH);
     let (_, eval) = refuse_and_evaluate(&raw, &fused, &config, source, &truth)?;
     let on_bus = can_bus(dir, a.seed, &truth, &eval)?;

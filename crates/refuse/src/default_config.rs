@@ -8,9 +8,14 @@
 //! The pipeline is written as configuration text and parsed like any file, so what it runs is
 //! exactly what `--save-config` writes for the user to edit.
 //!
-//! The variances are a first look's, not a tuned pipeline's: a GNSS fix's chainage 4 m² (a
-//! single fix's 2 m), speeds 0.1 (m/s)² with tight gates (scale errors are not modelled),
-//! an IMU's acceleration 0.01 (m/s²)², loops and balises as their messages report.
+//! The variances are a first look's, not a tuned pipeline's, but the errors that are not white
+//! noise are modelled as states, so that the covariance it reports is honest: each speed
+//! sensor's scale factor (a radar's mounting, a worn wheel), a loop's survey scale, an IMU's
+//! acceleration bias (a mounting's tilt of gravity among it), and a GNSS fix's chainage bias
+//! (the antenna's place and the map's survey). A GNSS fix's chainage takes the variance the
+//! fix reports where the log's fixes report one (an RTK fix's centimetres; a multipath-pulled
+//! single fix's metres), else 4 m²; speeds 0.1 (m/s)² with tight gates, an IMU's
+//! acceleration 0.01 (m/s²)², loops and balises as their messages report.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -18,7 +23,7 @@ use std::sync::Arc;
 
 use railfuse_catalog::foreign::{Role, Translator};
 use railfuse_catalog::log::{ChannelInfo, LogRecord};
-use railfuse_catalog::messages::MessageKind;
+use railfuse_catalog::messages::{GnssFix, MessageKind};
 use railfuse_catalog::run::Run;
 use railfuse_catalog::{foxglove, topics};
 
@@ -58,7 +63,20 @@ struct Sensor {
     fields: Option<&'static str>,
     variance: &'static str,
     gate_nis: Option<f64>,
+    /// Its error states (`scale_factor = …`), a line.
+    states: Option<&'static str>,
 }
+
+/// A speed sensor's scale factor: 1 % either way before the run shows it.
+const SPEED_SCALE: &str = "scale_factor = { std = 0.01 }";
+/// A loop's survey scale (it grows 2 cm a kilometre at 2e-5).
+const LOOP_SCALE: &str = "scale_factor = { std = 1e-4, quantity = \"chainage\" }";
+/// An IMU's acceleration bias: a mounting's tilt of gravity (3° is 0.5 m/s²) and the
+/// accelerometer's own, steady over a run.
+const IMU_BIAS: &str = "acceleration_bias = { std_mps2 = 0.5, time_constant_s = 3600.0 }";
+/// A GNSS fix's chainage bias: the antenna's place on the train and the map's survey, steady
+/// over a run.
+const GNSS_BIAS: &str = "chainage_bias = { std_m = 0.1, time_constant_s = 1e6 }";
 
 /// The default pipeline for the log at `input`; `track` is a track file (GeoJSON or CSV)
 /// for a log without one, which GNSS fixes need to give chainage.
@@ -69,6 +87,7 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
         .iter()
         .any(|c| c.kind() == Some(MessageKind::TrackMap));
     let has_track = track_in_log || track.is_some();
+    let gnss_reports = gnss_reports(run, &channels)?;
     let (mut used, mut left_out) = (Vec::new(), Vec::new());
     let mut sensors = String::new();
     let mut sensor_topics = Vec::new();
@@ -77,7 +96,7 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
             topic: c.topic.clone(),
             why,
         };
-        match sensor_of(c, has_track) {
+        match sensor_of(c, has_track, &gnss_reports) {
             Ok((sensor, gives)) => {
                 if let Some(s) = sensor {
                     write_sensor(&mut sensors, &c.topic, &s);
@@ -190,6 +209,7 @@ pub fn channels(run: &Run) -> Result<Vec<Arc<ChannelInfo>>> {
 fn sensor_of(
     c: &ChannelInfo,
     has_track: bool,
+    reports: &GnssReports,
 ) -> std::result::Result<(Option<Sensor>, String), String> {
     if c.topic.starts_with(topics::FUSED_PREFIX) {
         return Err("a fused output of an earlier re-fusion".into());
@@ -204,11 +224,12 @@ fn sensor_of(
         Some(kind) => (kind, None, false),
         None => foreign_kind(c)?,
     };
-    let sensor = |role, fields, variance, gate_nis| Sensor {
+    let sensor = |role, fields, variance, gate_nis, states| Sensor {
         role,
         fields,
         variance,
         gate_nis,
+        states,
     };
     let from_name = if named {
         ", its role from the topic's name"
@@ -216,25 +237,31 @@ fn sensor_of(
         ""
     };
     Ok(match kind {
-        MessageKind::GnssFix => return gnss(c, role, has_track, from_name),
+        MessageKind::GnssFix => return gnss(c, role, has_track, from_name, reports),
         MessageKind::Imu => (
-            Some(sensor(role, Some("[\"acceleration\"]"), "0.01", Some(25.0))),
-            format!("{schema}: the IMU's acceleration along the track"),
+            Some(sensor(
+                role,
+                Some("[\"acceleration\"]"),
+                "0.01",
+                Some(25.0),
+                Some(IMU_BIAS),
+            )),
+            format!("{schema}: the IMU's acceleration along the track, and its bias"),
         ),
         MessageKind::RadarSpeed => (
-            Some(sensor(role, None, "0.1", Some(16.0))),
-            format!("{schema}: a Doppler radar's speed{from_name}"),
+            Some(sensor(role, None, "0.1", Some(16.0), Some(SPEED_SCALE))),
+            format!("{schema}: a Doppler radar's speed{from_name}, and its scale factor"),
         ),
         MessageKind::Odometer => (
-            Some(sensor(role, None, "0.1", Some(9.0))),
-            format!("{schema}: an odometer's speed{from_name}"),
+            Some(sensor(role, None, "0.1", Some(9.0), Some(SPEED_SCALE))),
+            format!("{schema}: an odometer's speed{from_name}, and its scale factor"),
         ),
         MessageKind::LoopPosition => (
-            Some(sensor(None, None, "\"message\"", None)),
-            format!("{schema}: the cross-induction loop's chainage"),
+            Some(sensor(None, None, "\"message\"", None, Some(LOOP_SCALE))),
+            format!("{schema}: the cross-induction loop's chainage, and its survey's scale"),
         ),
         MessageKind::BalisePassage => (
-            Some(sensor(None, None, "\"message\"", Some(100.0))),
+            Some(sensor(None, None, "\"message\"", Some(100.0), None)),
             format!("{schema}: balise passages' chainage"),
         ),
         MessageKind::TrackMap => (None, "the track map: GNSS fixes' chainage".into()),
@@ -256,6 +283,46 @@ fn sensor_of(
     })
 }
 
+/// The GNSS topics whose fixes report their position's covariance (railfuse's own fixes, read
+/// up to the first of each topic that has a position).
+type GnssReports = std::collections::BTreeSet<String>;
+
+fn gnss_reports(run: &Run, channels: &[Arc<ChannelInfo>]) -> Result<GnssReports> {
+    let mut pending: std::collections::BTreeSet<&str> = channels
+        .iter()
+        .filter(|c| c.kind() == Some(MessageKind::GnssFix))
+        .map(|c| c.topic.as_str())
+        .collect();
+    let mut reports = GnssReports::new();
+    if pending.is_empty() {
+        return Ok(reports);
+    }
+    let mut reader = run.reader()?;
+    while let Some(record) = reader.next() {
+        let LogRecord::Message(m) = record? else {
+            continue;
+        };
+        let topic = m.channel.topic.as_str();
+        if !pending.contains(topic) || !m.is::<GnssFix>() {
+            continue;
+        }
+        let Ok(fix) = m.decode::<GnssFix>(&run.name()) else {
+            continue;
+        };
+        if fix.latitude_deg.is_none() {
+            continue;
+        }
+        if fix.position_covariance_enu_m2.is_some() {
+            reports.insert(topic.to_owned());
+        }
+        pending.remove(topic);
+        if pending.is_empty() {
+            break;
+        }
+    }
+    Ok(reports)
+}
+
 /// A GNSS channel's sensor: its speed (a receiver's velocity), its chainage on the track
 /// (other tools' fixes carry a position only), or both; refused without a track to put a
 /// position-only fix on.
@@ -264,30 +331,43 @@ fn gnss(
     role: Option<Role>,
     has_track: bool,
     from_name: &str,
+    reports: &GnssReports,
 ) -> std::result::Result<(Option<Sensor>, String), String> {
     let schema = c.schema_name();
-    let sensor = |fields, variance| Sensor {
+    let sensor = |fields, variance, states| Sensor {
         role,
         fields,
         variance,
         gate_nis: Some(16.0),
+        states,
     };
     Ok(match () {
         _ if role == Some(Role::Gnss) => (
-            Some(sensor(Some("[\"speed\"]"), "0.04")),
+            Some(sensor(Some("[\"speed\"]"), "0.04", None)),
             format!("{schema}: a GNSS receiver's velocity, its speed{from_name}"),
         ),
         // Other tools' fixes (NavSatFix, LocationFix) carry a position only.
         _ if has_track && c.kind().is_none() => (
-            Some(sensor(Some("[\"chainage\"]"), "4.0")),
+            Some(sensor(Some("[\"chainage\"]"), "4.0", None)),
             format!("{schema}: GNSS fixes, their chainage on the track"),
         ),
+        _ if has_track && reports.contains(&c.topic) => (
+            Some(sensor(
+                None,
+                "{ chainage = \"message\", speed = 0.04 }",
+                Some(GNSS_BIAS),
+            )),
+            format!(
+                "{schema}: GNSS fixes, their chainage on the track (with the variance each \
+                 reports, and a bias) and their speed"
+            ),
+        ),
         _ if has_track => (
-            Some(sensor(None, "{ chainage = 4.0, speed = 0.04 }")),
+            Some(sensor(None, "{ chainage = 4.0, speed = 0.04 }", None)),
             format!("{schema}: GNSS fixes, their chainage on the track and their speed"),
         ),
         _ if c.kind().is_some() => (
-            Some(sensor(Some("[\"speed\"]"), "0.04")),
+            Some(sensor(Some("[\"speed\"]"), "0.04", None)),
             format!(
                 "{schema}: GNSS speed only; its positions give chainage only on a track map, \
              and the log has none (name one with --track line.geojson)"
@@ -356,6 +436,9 @@ fn write_sensor(out: &mut String, topic: &str, s: &Sensor) {
     writeln!(out, "variance = {}", s.variance).unwrap();
     if let Some(g) = s.gate_nis {
         writeln!(out, "gate_nis = {g:?}").unwrap();
+    }
+    if let Some(states) = s.states {
+        writeln!(out, "{states}").unwrap();
     }
 }
 

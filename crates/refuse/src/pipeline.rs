@@ -638,6 +638,8 @@ pub enum AnyPipeline {
     Six(Pipeline<6>),
     Seven(Pipeline<7>),
     Eight(Pipeline<8>),
+    Nine(Pipeline<9>),
+    Ten(Pipeline<10>),
 }
 
 /// `$e` on the pipeline of whatever dimension, or `$safety` on a safety pipeline.
@@ -651,6 +653,8 @@ macro_rules! each {
             AnyPipeline::Six($p) => $e,
             AnyPipeline::Seven($p) => $e,
             AnyPipeline::Eight($p) => $e,
+            AnyPipeline::Nine($p) => $e,
+            AnyPipeline::Ten($p) => $e,
             AnyPipeline::Messages(_, $s) => $safety,
         }
     };
@@ -658,7 +662,7 @@ macro_rules! each {
 
 impl AnyPipeline {
     pub fn new(spec: PipelineSpec) -> Result<Self> {
-        const _: () = assert!(MAX_STATES == 8, "AnyPipeline has a variant per dimension");
+        const _: () = assert!(MAX_STATES == 10, "AnyPipeline has a variant per dimension");
         if let EstimatorSpec::Messages(kind) = &spec.estimator {
             let p = kind.build(spec.base())?;
             return Ok(AnyPipeline::Messages(Box::new(spec), p));
@@ -670,7 +674,9 @@ impl AnyPipeline {
             5 => AnyPipeline::Five(Pipeline::new(spec)?),
             6 => AnyPipeline::Six(Pipeline::new(spec)?),
             7 => AnyPipeline::Seven(Pipeline::new(spec)?),
-            _ => AnyPipeline::Eight(Pipeline::new(spec)?),
+            8 => AnyPipeline::Eight(Pipeline::new(spec)?),
+            9 => AnyPipeline::Nine(Pipeline::new(spec)?),
+            _ => AnyPipeline::Ten(Pipeline::new(spec)?),
         })
     }
 

@@ -35,7 +35,7 @@ use estimator::estimator;
 use sensor::{devices, sensor};
 
 /// The most state components a pipeline may have (motion and sensor states together).
-pub const MAX_STATES: usize = 8;
+pub const MAX_STATES: usize = 10;
 
 /// The device name reserved for the master filter of a federated pipeline.
 pub const MASTER_DEVICE: &str = "master";

@@ -286,8 +286,8 @@ fn sensor_state_quantities_speed_windows_and_the_state_limit() {
         "fields = [\"speed\"]\nacceleration_bias = { std_mps2 = 0.01, time_constant_s = 60.0 }",
     ));
     assert!(e.contains("acceleration_bias, but no acceleration"), "{e}");
-    // The loop's bias and scale, the radar's scale and three odometers' scales:
-    // 3 + 2 + 1 + 3 = 9 states.
+    // The loop's bias and scale, the radar's scale and five odometers' scales:
+    // 3 + 2 + 1 + 5 = 11 states.
     let odometer = |n: u32| {
         format!(
             "\n[[pipeline.sensor]]\ntopic = \"/odometer/{n}\"\nvariance = 0.1\n\
@@ -295,17 +295,19 @@ fn sensor_state_quantities_speed_windows_and_the_state_limit() {
         )
     };
     let e = err(&format!(
-        "{}{}{}{}",
+        "{}{}{}{}{}{}",
         with(
             "chainage_bias = { std_m = 2.0, time_constant_s = 60.0 }\nscale_factor = { std = 1e-4, quantity = \"chainage\" }",
             "scale_factor = { std = 0.01 }",
         ),
         odometer(1),
         odometer(2),
-        odometer(3)
+        odometer(3),
+        odometer(4),
+        odometer(5)
     ));
     assert!(
-        e.contains("3 motion states and 6 sensor states: at most 8"),
+        e.contains("3 motion states and 8 sensor states: at most 10"),
         "{e}"
     );
 }
