@@ -147,7 +147,8 @@ fn a_run_it_cannot_calibrate_from_is_refused_in_one_line() {
         "{e}"
     );
     assert!(!out.exists());
-    // `refuse --vehicle` with a file that has no train in it, or places a sensor nothing reads.
+    // `refuse --vehicle` with a file that has no train in it, or places a sensor on a topic
+    // neither the run nor a pipeline has.
     let fused = dir.path().join("fused.mcap");
     let no_table = dir.path().join("empty.toml");
     std::fs::write(&no_table, "# nothing\n").unwrap();
@@ -168,7 +169,7 @@ fn a_run_it_cannot_calibrate_from_is_refused_in_one_line() {
     .unwrap();
     let e = fails(&["refuse", s(&run), "--vehicle", s(&stray), "-o", s(&fused)]);
     assert!(
-        e.contains("line 1: [vehicle]: sensor '/radar/sped' has a lever arm but no pipeline reads"),
+        e.contains("stray.toml: [vehicle]: sensor '/radar/sped' is on no channel of the run"),
         "{e}"
     );
     assert!(!fused.exists());

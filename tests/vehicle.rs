@@ -208,3 +208,61 @@ fn every_pipeline_writes_the_whole_train_with_its_safe_front_end_at_the_stated_c
         "{e}"
     );
 }
+
+/// A `--vehicle` file of `vehicle`, every sensor it places.
+fn vehicle_file(dir: &Path, vehicle: &Vehicle, name: &str) -> std::path::PathBuf {
+    let mut table = toml::Table::new();
+    table.insert(
+        "vehicle".into(),
+        toml::Value::try_from(VehicleConfig::of(vehicle)).unwrap(),
+    );
+    let path = dir.join(name);
+    std::fs::write(&path, toml::to_string(&table).unwrap()).unwrap();
+    path
+}
+
+/// The pipelines that read whole messages (source 002's EKF with its safety checks, source
+/// 003's GNSS/INS, source 004's eddy-current correlation) place each sensor as the along-track
+/// ones do: told the train as installed they find its front end; told every sensor is at the
+/// front end (the simulator not), they miss it by about the lever arm of the sensor that
+/// positions them (the roof antenna 12.5 m back, the eddy-current sensor 6 m).
+#[test]
+fn the_pipelines_in_the_plane_and_the_eddy_current_one_place_each_sensor_where_it_sits() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("railway.mcap");
+    simulate(
+        &["--scenario", "railway", "--duration", "150", "--seed", "6"],
+        &log,
+    );
+    let truth = installed(&log);
+    let mut point = truth.clone();
+    point.sensors.clear();
+    let as_installed = vehicle_file(dir.path(), &truth, "installed.toml");
+    let point = vehicle_file(dir.path(), &point, "point.toml");
+    let samples = Path::new(env!("CARGO_MANIFEST_DIR")).join("samples");
+    for (config, pipeline, lever_arm, good_below) in [
+        ("seed002.toml", "ekf_safety_cal", 12.5, 1.5),
+        ("seed003.toml", "kf_track", 12.5, 0.5),
+        ("seed004.toml", "warped_kf", 6.0, 2.5),
+    ] {
+        let rmse = |vehicle: &Path, out: &str| {
+            let config = samples.join(config);
+            let out = dir.path().join(out);
+            let args = ["refuse", s(&log), "-c", s(&config), "--vehicle", s(vehicle)];
+            let report = ok_json(&[&args[..], &["-o", s(&out), "--json"]].concat());
+            pipeline_eval(&report, pipeline)["position_error_m"]["rmse"]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{report}"))
+        };
+        let good = rmse(&as_installed, "a.mcap");
+        let bad = rmse(&point, "b.mcap");
+        assert!(
+            good < good_below,
+            "{pipeline}: front end RMSE {good:.3} m with the train as installed"
+        );
+        assert!(
+            bad > good + 0.7 * lever_arm,
+            "{pipeline}: every sensor at the front end {bad:.3} m, as installed {good:.3} m"
+        );
+    }
+}

@@ -104,7 +104,8 @@ pub fn run(a: Args) -> Result<()> {
         None => default_pipeline(input, a.track.as_deref(), a.save_config.as_deref())?,
     };
     if let Some(vehicle) = &a.vehicle {
-        config.set_vehicle_from(vehicle)?;
+        let unread = config.set_vehicle_from(vehicle)?;
+        leave_aside(vehicle, &unread, input)?;
     }
     if let Some(c) = a.confidence {
         config.confidence = railfuse_refuse::spec::check_confidence(c)
@@ -175,6 +176,35 @@ fn split_output(
             .join(", ")
     );
     Ok(written.outputs)
+}
+
+/// The sensors a `--vehicle` file places that no pipeline reads: those on a channel of the
+/// run are the train's others, left aside in one line; one the run does not have either is a
+/// misspelt topic, which would leave the sensor it meant at the front end: refused.
+fn leave_aside(vehicle: &Path, unread: &[String], input: &Run) -> Result<()> {
+    if unread.is_empty() {
+        return Ok(());
+    }
+    let reader = input.reader()?;
+    let channels = reader.summary().and_then(|s| s.channels.as_ref());
+    if let Some(channels) = channels {
+        if let Some(t) = unread
+            .iter()
+            .find(|t| !channels.iter().any(|c| &c.topic == *t))
+        {
+            anyhow::bail!(
+                "{}: [vehicle]: sensor '{t}' is on no channel of the run and no pipeline reads it \
+                 (a misspelt topic?)",
+                vehicle.display()
+            );
+        }
+    }
+    eprintln!(
+        "{}: {} placed on the train, read by no pipeline of the configuration: left aside",
+        vehicle.display(),
+        unread.join(", ")
+    );
+    Ok(())
 }
 
 /// The default pipeline of a log given no configuration, with what it used and left out said

@@ -212,6 +212,34 @@ fn motion_at(states: &[(u64, f64, f64, f64)], t_ns: u64) -> Option<AlongTrack> {
     })
 }
 
+/// What the model says the IMU reads over a bin with the front end moving as `along`: the
+/// body's specific force and rate at the IMU's place, and their change per metre of chainage
+/// (what a chainage error of the reference turns into).
+fn modelled(
+    map: &TrackMap,
+    vehicle: &Vehicle,
+    mount: &SensorMount,
+    along: AlongTrack,
+) -> [Vector3<f64>; 4] {
+    let span = BIN_NS as f64 / 1e9;
+    let m = point_motion(map, vehicle, along, mount, span);
+    let shifted = |ds: f64| {
+        let at = AlongTrack {
+            chainage_m: along.chainage_m + ds,
+            ..along
+        };
+        point_motion(map, vehicle, at, mount, span)
+    };
+    let (ahead, behind) = (shifted(SHIFT_M), shifted(-SHIFT_M));
+    let per_m = |a: Vector3<f64>, b: Vector3<f64>| (a - b) / (2.0 * SHIFT_M);
+    [
+        m.specific_force,
+        m.angular_rate,
+        per_m(ahead.specific_force, behind.specific_force),
+        per_m(ahead.angular_rate, behind.angular_rate),
+    ]
+}
+
 /// The bins of one replayed run (`run`: its index among the runs calibrated together).
 pub fn run_bins(replay: &ReferenceReplay, config: &Pipelines, run: usize) -> Result<RunBins> {
     let read = read(&replay.fused, &replay.imu)?;
@@ -252,27 +280,9 @@ pub fn run_bins(replay: &ReferenceReplay, config: &Pipelines, run: usize) -> Res
             low_pass.restart();
         }
         last_ns = Some(b.mid_ns);
-        let span = BIN_NS as f64 / 1e9;
-        let m = point_motion(&map, &vehicle, along, &mount, span);
-        let shifted = |ds: f64| {
-            let at = AlongTrack {
-                chainage_m: along.chainage_m + ds,
-                ..along
-            };
-            point_motion(&map, &vehicle, at, &mount, span)
-        };
-        let (ahead, behind) = (shifted(SHIFT_M), shifted(-SHIFT_M));
-        let per_m = |a: Vector3<f64>, b: Vector3<f64>| (a - b) / (2.0 * SHIFT_M);
-        let signals = [
-            b.force,
-            b.rate,
-            m.specific_force,
-            m.angular_rate,
-            per_m(ahead.specific_force, behind.specific_force),
-            per_m(ahead.angular_rate, behind.angular_rate),
-        ];
+        let model = modelled(&map, &vehicle, &mount, along);
         let Some([force, rate, body_force, body_rate, force_per_m, rate_per_m]) =
-            low_pass.step(signals)
+            low_pass.step([b.force, b.rate, model[0], model[1], model[2], model[3]])
         else {
             continue;
         };

@@ -79,6 +79,14 @@ impl TrackPose {
         )
     }
 
+    /// The rotation from a car body standing here to the level frame that turns with it (x
+    /// forward and y left in the horizontal plane, z up): [`Self::body_to_enu`] without the
+    /// heading, `Ry(−atan G) · Rx(φ_cant + φ_body)`. A reading turned so has gravity on z
+    /// alone and the train's horizontal acceleration and turn rate on x, y and z.
+    pub fn body_to_level(&self, body_roll_rad: f64) -> Rotation3<f64> {
+        Rotation3::from_euler_angles(self.cant_rad + body_roll_rad, -self.gradient.atan(), 0.0)
+    }
+
     /// Metres of rail per metre of chainage, `√(1 + G²)`: what a wheel rolls and a radar sees
     /// beyond the chainage's rate.
     pub fn rail_per_chainage(&self) -> f64 {

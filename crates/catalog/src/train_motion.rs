@@ -69,6 +69,31 @@ impl TrackGeometry for TrackMap {
     }
 }
 
+/// The body's lean and attitude on a map, for the pipelines without an attitude of their own.
+impl Vehicle {
+    /// The body's lean where the point `chainage_m` of `map` is, at `speed_mps`: from the
+    /// map's curvature and cant ([`Self::body_roll`]).
+    pub fn lean_on(&self, map: &TrackMap, chainage_m: f64, speed_mps: f64) -> f64 {
+        if self.roll_per_lateral_mps2 == 0.0 {
+            return 0.0;
+        }
+        let cant = map.pose_at(chainage_m).map_or(0.0, |p| p.cant_rad);
+        self.body_roll(speed_mps, map.curvature(chainage_m), cant)
+    }
+
+    /// The rotation from the body to the level frame at the point `chainage_m` of `map`, the
+    /// train at `speed_mps` ([`TrackPose::body_to_level`] with the body's lean).
+    pub fn level_on(
+        &self,
+        map: &TrackMap,
+        chainage_m: f64,
+        speed_mps: f64,
+    ) -> Option<Rotation3<f64>> {
+        let pose = map.pose_at(chainage_m)?;
+        Some(pose.body_to_level(self.lean_on(map, chainage_m, speed_mps)))
+    }
+}
+
 /// The front end's motion along the track.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AlongTrack {

@@ -46,6 +46,21 @@ pub struct SensorPose {
     pub sensor_to_enu: Rotation3<f64>,
 }
 
+/// Where the train stands, for moving a position measured at one of its points to another
+/// ([`SensorMount::offset_from`]).
+#[derive(Debug, Clone, Copy)]
+pub enum TrainPlace<'a> {
+    /// On a map's main line: the front end at a chainage, the body leaning by a roll
+    /// ([`Vehicle::lean_on`]).
+    Map {
+        map: &'a TrackMap,
+        front_chainage_m: f64,
+        body_roll_rad: f64,
+    },
+    /// No map: on a straight, level line at a heading (clockwise from north).
+    Straight { heading_rad: f64 },
+}
+
 impl SensorMount {
     /// A sensor at the front end with the body's axes: every sensor of a point train.
     pub fn at_front(topic: &str) -> SensorMount {
@@ -93,6 +108,46 @@ impl SensorMount {
         let heading = pose.track.heading_rad;
         let along = offset.x * heading.sin() + offset.y * heading.cos();
         front - along
+    }
+
+    /// The sensor's place less the centre line's point `x_m` along the body (0: the front
+    /// end; negative: behind it), east/north/up, m: what to take off a position the sensor
+    /// measured to have that point's. On a map the two places are each on the track (a roof
+    /// antenna on a canted curve leans in by its height times the cant's and the body's
+    /// roll); without one the train is a rigid straight body at the heading.
+    pub fn offset_from(&self, place: TrainPlace<'_>, x_m: f64) -> Vector3<f64> {
+        let straight = |heading: f64| {
+            let [x, y, z] = self.lever_arm_m;
+            let (s, c) = heading.sin_cos();
+            // Forward is (sin ψ, cos ψ), left (−cos ψ, sin ψ).
+            let dx = x - x_m;
+            Vector3::new(dx * s - y * c, dx * c + y * s, z)
+        };
+        match place {
+            TrainPlace::Map {
+                map,
+                front_chainage_m,
+                body_roll_rad,
+            } => {
+                let sensor = self.pose(map, front_chainage_m, body_roll_rad);
+                match (sensor, map.pose_at(front_chainage_m + x_m)) {
+                    (Some(sensor), Some(point)) => sensor.position - point.position(),
+                    _ => straight(0.0),
+                }
+            }
+            TrainPlace::Straight { heading_rad } => straight(heading_rad),
+        }
+    }
+
+    /// A reading of this sensor (a specific force, an angular rate) in the level frame that
+    /// turns with the train (x forward and y left in the horizontal plane, z up): turned into
+    /// the body by the mounting, then by the track's gradient and the cant's and the body's
+    /// roll at `level` ([`TrackPose::body_to_level`]); without a track, in the body. What an
+    /// along-track or planar pipeline, which has no attitude of its own, takes gravity out
+    /// with (map-aided).
+    pub fn to_level(&self, level: Option<Rotation3<f64>>, reading: [f64; 3]) -> Vector3<f64> {
+        let body = self.mounting() * Vector3::from(reading);
+        level.map_or(body, |r| r * body)
     }
 
     /// Where the sensor is and how it is turned with the front end at `front_chainage_m` of
@@ -301,6 +356,53 @@ mod tests {
             "{p}"
         );
         assert_eq!(train().sensors[0].front_chainage(488.0), 500.0);
+    }
+
+    /// A fix of the roof antenna, moved by its offset, lands on the centre line's point asked
+    /// for: on the map (leaning with the cant) and, without one, on a rigid straight body.
+    #[test]
+    fn a_measured_point_moves_to_any_point_of_the_train_by_the_offset_between_them() {
+        let (map, antenna) = (canted_line(), &train().sensors[0]);
+        let place = TrainPlace::Map {
+            map: &map,
+            front_chainage_m: 500.0,
+            body_roll_rad: 0.0,
+        };
+        let fix = antenna.pose(&map, 500.0, 0.0).unwrap().position;
+        let imu_point = map.pose_at(487.0).unwrap().position();
+        assert!((fix - antenna.offset_from(place, -13.0) - imu_point).norm() < 1e-9);
+        let front = fix - antenna.offset_from(place, 0.0);
+        assert!((front - map.pose_at(500.0).unwrap().position()).norm() < 1e-9);
+        // Heading north-east, no map: 12 m behind the front end along the heading.
+        let h = std::f64::consts::FRAC_PI_4;
+        let o = antenna.offset_from(TrainPlace::Straight { heading_rad: h }, 0.0);
+        let back = 12.0 / 2f64.sqrt();
+        assert!((o - Vector3::new(-back, -back, 4.0)).norm() < 1e-9, "{o}");
+    }
+
+    /// An IMU standing on a canted gradient, turned by its mounting: its readings in the level
+    /// frame have gravity on z alone, whatever the mounting, cant and gradient.
+    #[test]
+    fn a_standing_imus_specific_force_in_the_level_frame_is_gravity_straight_up() {
+        let map = canted_line();
+        let imu = SensorMount {
+            mounting_deg: [1.5, -2.0, 3.0],
+            ..SensorMount::at_front("/imu")
+        };
+        // Standing, the body leans towards the low rail by the cant's unbalanced gravity.
+        let lean = train().lean_on(&map, 300.0, 0.0);
+        assert!((lean - 0.015 * 0.1 * GRAVITY_MPS2).abs() < 1e-9, "{lean}");
+        let pose = imu.pose(&map, 300.0, lean).unwrap();
+        let reading = pose.sensor_to_enu.inverse() * Vector3::new(0.0, 0.0, GRAVITY_MPS2);
+        let level = train().level_on(&map, 300.0, 0.0);
+        let f = imu.to_level(level, reading.into());
+        assert!(
+            (f - Vector3::new(0.0, 0.0, GRAVITY_MPS2)).norm() < 1e-9,
+            "{f}"
+        );
+        // Without the track's attitude, the cant's and the lean's roll put gravity sideways.
+        let f = imu.to_level(None, reading.into());
+        assert!((f.y - (0.1 + lean) * GRAVITY_MPS2).abs() < 0.01, "{f}");
     }
 
     #[test]

@@ -25,11 +25,13 @@ use std::path::Path;
 
 use nalgebra::RowSVector;
 use railfuse_catalog::log::LogMessage;
+use railfuse_catalog::map_matching::nearest_on;
 use railfuse_catalog::messages::{
     BalisePassage, FusedState, GnssFix, Imu, LoopPosition, MessageKind, Odometer, RadarSpeed,
     SensorMount, TrackMap, Vehicle,
 };
 use railfuse_catalog::track_profile::TrackPose;
+use railfuse_catalog::vehicle::TrainPlace;
 use railfuse_catalog::vehicle::GRAVITY_MPS2;
 
 use crate::error::Result;
@@ -127,6 +129,61 @@ impl SensorContext {
         let (map, w) = (self.track.as_ref()?, self.whereabouts?);
         let dt = railfuse_catalog::seconds_between(w.stamp_ns, stamp_ns).clamp(-5.0, 5.0);
         map.pose_at(mount.chainage(w.chainage_m + w.speed_mps * dt))
+    }
+
+    /// Where the train stands, for moving a measured position between its points: on `map`
+    /// with the front end at `front_chainage_m` (the body leaning at `speed_mps`), else on a
+    /// straight at `heading_rad`.
+    pub fn place<'m>(
+        &self,
+        map: Option<&'m TrackMap>,
+        front_chainage_m: Option<f64>,
+        speed_mps: f64,
+        heading_rad: f64,
+    ) -> TrainPlace<'m> {
+        match (map, front_chainage_m) {
+            (Some(map), Some(front)) => TrainPlace::Map {
+                map,
+                front_chainage_m: front,
+                body_roll_rad: self.vehicle.lean_on(map, front, speed_mps),
+            },
+            _ => TrainPlace::Straight { heading_rad },
+        }
+    }
+
+    /// The front end's chainage when the sensor on `topic` measured its own place at (east,
+    /// north): that point's nearest place on `map`'s main line, moved by the lever arm
+    /// (searched over the whole line: for a start, not for every fix).
+    pub fn front_chainage_of_measured(
+        &self,
+        map: &TrackMap,
+        topic: &str,
+        (east_m, north_m): (f64, f64),
+    ) -> Option<f64> {
+        let m = nearest_on(&map.vertices, 0..map.vertices.len(), east_m, north_m)?;
+        Some(
+            self.vehicle
+                .mount_or_front(topic)
+                .front_chainage(m.chainage_m),
+        )
+    }
+
+    /// A position the sensor on `topic` measured (east, north) moved to the centre line's
+    /// point `to_x_m` along the body (0: the front end), the train standing at `place`; as
+    /// it is for a sensor the vehicle does not place at the front end.
+    pub fn move_measured(
+        &self,
+        topic: &str,
+        (east_m, north_m): (f64, f64),
+        place: TrainPlace<'_>,
+        to_x_m: f64,
+    ) -> (f64, f64) {
+        let mount = self.vehicle.mount_or_front(topic);
+        if mount.lever_arm_m == [0.0; 3] && to_x_m == 0.0 {
+            return (east_m, north_m);
+        }
+        let offset = mount.offset_from(place, to_x_m);
+        (east_m - offset.x, north_m - offset.y)
     }
 
     /// A speed measured along the rail at `mount`'s place, as the chainage's rate.

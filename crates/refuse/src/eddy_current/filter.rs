@@ -25,7 +25,7 @@ impl EddyCurrentPipeline {
         self.last_out_ns = stamp_ns;
         let state = FusedState {
             stamp_ns,
-            chainage_m: chainage,
+            chainage_m: self.front_chainage(chainage),
             speed_mps: m.speed_mps,
             acceleration_mps2: a,
             covariance: [
@@ -52,7 +52,7 @@ impl EddyCurrentPipeline {
         let p = kf.estimate.covariance;
         let state = FusedState {
             stamp_ns: self.kf_ns,
-            chainage_m: x[0],
+            chainage_m: self.front_chainage(x[0]),
             speed_mps: x[1],
             acceleration_mps2: x[2],
             covariance: [

@@ -105,6 +105,10 @@ pub struct EddyCurrentPipeline {
     odometer_m: f64,
     /// Chainage = `count_origin + counter a's distance` once the first sleeper is seen.
     count_origin: Option<f64>,
+    /// The sensor's place behind the front end (its lever arm's x, ≤ 0), from the vehicle at
+    /// the first message. Every chainage inside is the sensor's own (switches and sleepers
+    /// pass under it); the states written are the front end's, `x` further on.
+    sensor_x_m: Option<f64>,
     /// Sleeper crossings not yet fused: when, and sensor a's counted distance then. The
     /// filter runs at its windows' middles, half a window behind the signal; a crossing
     /// waits until the filter reaches its time.
@@ -156,6 +160,7 @@ impl EddyCurrentPipeline {
             departure: None,
             counters: Default::default(),
             count_origin: None,
+            sensor_x_m: None,
             crossings: VecDeque::new(),
             next_window: 0,
             last_out_ns: 0,
@@ -190,6 +195,16 @@ impl MessagePipeline for EddyCurrentPipeline {
         context: &SensorContext,
         out: &mut Vec<Fused>,
     ) -> Result<()> {
+        if self.sensor_x_m.is_none() {
+            // The run starts with the front end at `initial_chainage_m`: the sensor is behind.
+            let topic = &self.base.topics[self.block_sensor];
+            let x = context
+                .vehicle
+                .mount(topic)
+                .map_or(0.0, |m| m.lever_arm_m[0]);
+            self.odometer_m += x;
+            self.sensor_x_m = Some(x);
+        }
         let mut o = Vec::new();
         match self.aiding.index(sensor) {
             Some(j) => self.aid_message(j, msg, input, context, &mut o)?,
@@ -461,6 +476,13 @@ impl EddyCurrentPipeline {
             diagnostics: Some(d),
             ..Default::default()
         });
+    }
+}
+
+impl EddyCurrentPipeline {
+    /// The front end's chainage with the sensor at `sensor_chainage_m`.
+    fn front_chainage(&self, sensor_chainage_m: f64) -> f64 {
+        sensor_chainage_m - self.sensor_x_m.unwrap_or(0.0)
     }
 }
 

@@ -41,7 +41,8 @@ pub struct EddyCurrentSettings {
     pub sleeper_spacing_m: f64,
     /// Distance by counting sleepers (else by integrating the speed).
     pub count_sleepers: bool,
-    /// Where the run starts, m: the chainage until a switch of the map's atlas fixes it.
+    /// Where the run starts (the front end's chainage), m: until a switch of the map's atlas
+    /// fixes it.
     pub initial_chainage_m: f64,
     /// A switch seen in the signal is looked for in the map this far either side of where
     /// the pipeline thinks it is, m (0: no landmarks).

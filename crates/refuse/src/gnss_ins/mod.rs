@@ -5,6 +5,7 @@
 //! |---|---|---|
 //! | gate | [`quality_gate`] | each fix judged on fix type, satellites and HDOP: RTK fixed taken as the reference, weaker fixes pre-filtered, the rest refused with the reason |
 //! | pre-filter | [`crate::prefilter`] | RLS, adaptive RLS or PU-RLS per GNSS axis (position, velocity); the unscented transform for speed and course to velocity |
+//! | train | [`train_geometry`] | the vehicle's geometry: the navigation point at the IMU's place, each fix moved there from the antenna, the IMU's readings levelled by its mounting and the map's gradient and cant, the front end written |
 //! | navigation | [`planar_ins`] | heading from the yaw rate, speed from the forward specific force, both bias-corrected, dead-reckoned at the IMU's rate |
 //! | fusion | [`error_state`] | the error-state filter `[δe, δn, δu, δw, δψ, δb_x, δb_y, δb_g, δk…]`, Joseph form, its estimate put into the navigation after each update |
 //! | train | [`constraints`] | railfuse's, not the source's: zero lateral speed (NHC) and the track map's centre line and heading, as pseudo-measurements |
@@ -29,6 +30,7 @@ pub mod quality_gate;
 pub mod settings;
 mod speed_sensors;
 mod static_bias;
+mod train_geometry;
 
 use std::path::Path;
 
@@ -139,6 +141,8 @@ pub struct GnssInsPipeline {
     pub counts: PipelineCounts,
     gate: GateTally,
     constraints: constraints::State,
+    /// The navigation point's chainage from the latest fix, before the navigation starts.
+    fix_chainage_m: Option<f64>,
 }
 
 /// What one step wrote.
@@ -197,6 +201,7 @@ impl GnssInsPipeline {
             counts: PipelineCounts::default(),
             gate: GateTally::default(),
             constraints: constraints::State::default(),
+            fix_chainage_m: None,
             settings,
         })
     }
@@ -315,8 +320,8 @@ impl GnssInsPipeline {
                 );
             } else {
                 match item {
-                    Input::Fix(fix) => self.fix(&fix, ctx.track.as_ref(), &mut o),
-                    Input::Imu(imu) => self.imu(&imu, ctx.track.as_ref(), &mut o),
+                    Input::Fix(fix) => self.fix(&fix, ctx, &mut o),
+                    Input::Imu(imu) => self.imu(&imu, ctx, &mut o),
                     Input::Speed(j, m) => self.speed(j, &m, &mut o),
                 }
             }
@@ -333,7 +338,8 @@ impl GnssInsPipeline {
 
     // --- IMU --------------------------------------------------------------------------
 
-    fn imu(&mut self, m: &Imu, map: Option<&TrackMap>, o: &mut Out) {
+    fn imu(&mut self, m: &Imu, ctx: &SensorContext, o: &mut Out) {
+        let map = ctx.track.as_ref();
         let topic = self.topic(self.roles.imu).to_owned();
         if let Err(why) = self.health.judge(m, &self.settings) {
             self.counts.rejected_invalid += 1;
@@ -343,13 +349,9 @@ impl GnssInsPipeline {
             }
             return;
         }
-        let (mut forward, lateral, mut yaw_rate) = (
-            m.specific_force_mps2[0],
-            m.specific_force_mps2[1],
-            m.angular_rate_radps[2],
-        );
+        let ([mut forward, lateral], mut yaw_rate) = self.level_reading(ctx, m);
         if self.standing {
-            self.standstill.push(m);
+            self.standstill.push(m.stamp_ns, forward, yaw_rate);
         }
         let dt = seconds_between(self.time_ns, m.stamp_ns);
         if self.nav.is_some() && dt > 0.0 {
@@ -376,7 +378,7 @@ impl GnssInsPipeline {
         self.advance(m.stamp_ns, [forward, lateral], yaw_rate, dt);
         self.constrain(m.stamp_ns, map);
         if m.stamp_ns >= self.next_output_ns {
-            self.output(m.stamp_ns, &topic, map, o);
+            self.output(m.stamp_ns, &topic, ctx, o);
         }
     }
 
@@ -428,13 +430,14 @@ impl GnssInsPipeline {
 
     // --- GNSS -------------------------------------------------------------------------
 
-    fn fix(&mut self, fix: &GnssFix, map: Option<&TrackMap>, o: &mut Out) {
+    fn fix(&mut self, fix: &GnssFix, ctx: &SensorContext, o: &mut Out) {
+        let map = ctx.track.as_ref();
         let topic = self.topic(self.roles.gnss).to_owned();
         let t = fix.stamp_ns;
         let verdict = quality_gate::judge(fix, &self.settings.gate);
         let checked = match &verdict {
             GateVerdict::Refused(why) => Err(why.clone()),
-            _ => self.check_fix(fix, map),
+            _ => self.check_fix(fix, ctx),
         };
         let (e, n, re, rn) = match checked {
             Ok(checked) => checked,
@@ -442,7 +445,7 @@ impl GnssInsPipeline {
                 self.counts.rejected_invalid += 1;
                 self.gate.refused += 1;
                 o.diagnostics(t, &topic, GateDecision::RejectedInvalid, &why);
-                return self.after_fix(t, &topic, map, o);
+                return self.after_fix(t, &topic, ctx, o);
             }
         };
         // Counted once the fix has passed every check: its class, or (above) refused.
@@ -454,11 +457,11 @@ impl GnssInsPipeline {
         let velocity = self.gnss_velocity(fix, speed);
         if self.nav.is_none() {
             self.start(fix, (e, n, re.max(rn)), speed, &topic, o);
-            return self.after_fix(t, &topic, map, o);
+            return self.after_fix(t, &topic, ctx, o);
         }
         self.advance_to(t);
         let (Some(nav), Some(_)) = (self.nav, self.filter.as_ref()) else {
-            return self.after_fix(t, &topic, map, o);
+            return self.after_fix(t, &topic, ctx, o);
         };
         // A fix beside the track is multipath, whatever its covariance says: at least as
         // wrong as its offset, and beyond the gate its position stays out (its Doppler speed
@@ -503,7 +506,7 @@ impl GnssInsPipeline {
             self.inject_and_learn(t, position_fused && verdict == GateVerdict::Reference);
             self.counts.accepted += 1;
         }
-        self.after_fix(t, &topic, map, o);
+        self.after_fix(t, &topic, ctx, o);
     }
 
     /// The fix's position (east, north and their variances) through the pre-filters where
@@ -555,13 +558,14 @@ impl GnssInsPipeline {
         self.update(1, m, [ve, vn], t, topic, axes, None, o)
     }
 
-    /// The fix's place in the plane and its variance per axis, or why it cannot be used.
+    /// The fix's place in the plane, moved from the antenna to the navigation point, and its
+    /// variance per axis, or why it cannot be used.
     fn check_fix(
         &mut self,
         fix: &GnssFix,
-        map: Option<&TrackMap>,
+        ctx: &SensorContext,
     ) -> Result<(f64, f64, f64, f64), String> {
-        let Some((e, n)) = self.plane(fix, map) else {
+        let Some((e, n)) = self.plane(fix, ctx.track.as_ref()) else {
             return Err(
                 "absurd coordinates (not finite, off the globe or too far from the origin)".into(),
             );
@@ -578,6 +582,7 @@ impl GnssInsPipeline {
         if !(re > 0.0 && rn > 0.0 && re.is_finite() && rn.is_finite()) {
             return Err("a fix with a variance that is not positive".into());
         }
+        let (e, n) = self.antenna_to_nav(ctx, (e, n), fix.course_rad);
         Ok((e, n, re, rn))
     }
 
@@ -802,9 +807,9 @@ impl GnssInsPipeline {
     }
 
     /// After every fix: a state (once started) and, once a second, the learnt IMU model.
-    fn after_fix(&mut self, t: u64, topic: &str, map: Option<&TrackMap>, o: &mut Out) {
+    fn after_fix(&mut self, t: u64, topic: &str, ctx: &SensorContext, o: &mut Out) {
         if self.nav.is_some() {
-            self.output(t, topic, map, o);
+            self.output(t, topic, ctx, o);
         }
     }
 }

@@ -3,18 +3,18 @@
 //! once a second, and a diagnostics record per measurement.
 
 use nalgebra::SMatrix;
-use railfuse_catalog::messages::{
-    FusedState, GateDecision, PlanePosition, SensorStateEstimate, TrackMap,
-};
+use railfuse_catalog::messages::{FusedState, GateDecision, PlanePosition, SensorStateEstimate};
 
 use super::error_state::{velocity_rows, ErrorVector, BA, BG, BY, DIM, E, K, N, V};
 use super::planar_ins::Navigation;
+use super::train_geometry::FrontEnd;
 use super::{GnssInsPipeline, Out};
 use crate::filter::Innovation;
 use crate::fused::{measurement_record, Fused};
+use crate::measurement::SensorContext;
 
 impl GnssInsPipeline {
-    pub(super) fn output(&mut self, t: u64, topic: &str, map: Option<&TrackMap>, o: &mut Out) {
+    pub(super) fn output(&mut self, t: u64, topic: &str, ctx: &SensorContext, o: &mut Out) {
         let (Some(nav), Some(filter)) = (self.nav, self.filter.as_ref()) else {
             return;
         };
@@ -25,11 +25,8 @@ impl GnssInsPipeline {
         along[N] = c;
         let chainage_var = (along.transpose() * p * along)[0];
         let chainage_speed = (along.transpose() * p.column(V))[0];
-        let chainage_m =
-            match map.and_then(|m| self.matcher.match_point(m, nav.east_m, nav.north_m, None)) {
-                Some(m) => m.chainage_m,
-                None => self.distance_m,
-            };
+        let front = self.front_end(ctx, &nav, ctx.track.as_ref());
+        let chainage_m = front.chainage_m;
         // The acceleration is the last reading's: its white noise over one IMU interval.
         let white = self.settings.imu_noise.accel_noise_density.powi(2) / self.imu_interval_s;
         let accel_var = p[(BA, BA)] + white;
@@ -53,7 +50,7 @@ impl GnssInsPipeline {
             covariance,
             source: topic.to_owned(),
             sensor_states,
-            plane: Some(self.plane_position(&nav, &p)),
+            plane: Some(self.plane_position(&nav, &front, &p)),
         };
         o.items.push(Fused {
             state: Some(state),
@@ -64,18 +61,25 @@ impl GnssInsPipeline {
         self.write_model(t, (nav.accel_bias_mps2, nav.gyro_bias_radps), o);
     }
 
-    /// The position in the plane with its covariance, on the globe, and the velocity.
-    fn plane_position(&self, nav: &Navigation, p: &SMatrix<f64, DIM, DIM>) -> PlanePosition {
+    /// The front end's position in the plane with its covariance, on the globe, and the
+    /// velocity.
+    fn plane_position(
+        &self,
+        nav: &Navigation,
+        front: &FrontEnd,
+        p: &SMatrix<f64, DIM, DIM>,
+    ) -> PlanePosition {
         let rows = velocity_rows(nav);
         let h = SMatrix::<f64, 2, DIM>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);
         let vc = h * p * h.transpose();
+        let pc = front.rows * p * front.rows.transpose();
         let origin = self.origin.expect("set by the first fix");
-        let (lat, lon, _) = origin.to_geodetic(nav.east_m, nav.north_m, 0.0);
+        let (lat, lon, _) = origin.to_geodetic(front.east_m, front.north_m, 0.0);
         let (ve, vn) = nav.velocity();
         PlanePosition {
-            east_m: nav.east_m,
-            north_m: nav.north_m,
-            covariance_en_m2: [p[(0, 0)], p[(0, 1)], p[(1, 0)], p[(1, 1)]],
+            east_m: front.east_m,
+            north_m: front.north_m,
+            covariance_en_m2: [pc[(0, 0)], pc[(0, 1)], pc[(1, 0)], pc[(1, 1)]],
             latitude_deg: lat,
             longitude_deg: lon,
             velocity_en_mps: Some([ve, vn]),

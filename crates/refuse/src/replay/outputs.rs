@@ -118,14 +118,7 @@ impl Replay<'_> {
         let name = self.pipelines[pi].name();
         for f in self.fused.drain(..) {
             if let (0, Some(s)) = (pi, &f.state) {
-                // The first pipeline's estimate: where place-dependent corrections are taken.
-                if s.chainage_m.is_finite() && s.speed_mps.is_finite() {
-                    self.context.whereabouts = Some(crate::measurement::Whereabouts {
-                        stamp_ns: s.stamp_ns,
-                        chainage_m: s.chainage_m,
-                        speed_mps: s.speed_mps,
-                    });
-                }
+                note_whereabouts(&mut self.context, s);
             }
             if observer.is_some() {
                 if let Some(state) = &f.state {
@@ -135,19 +128,9 @@ impl Replay<'_> {
                     observe(observer, &topics::fused_diagnostics(name), f.log_time_ns, d);
                 }
             }
-            // A map needs no more than 10 positions a second: the fused state keeps every one.
-            if let (Some(state), Some(channel)) = (&f.state, out.location) {
+            if let Some(state) = &f.state {
                 let map = self.context.track.as_ref();
-                let due = out
-                    .last_location_ns
-                    .is_none_or(|last| state.stamp_ns >= last + LOCATION_TWIN_EVERY_NS);
-                let twin = due
-                    .then(|| railfuse_catalog::foxglove::fused_location(name, state, map))
-                    .flatten();
-                if let Some(twin) = twin {
-                    self.writer.write_twin(channel, f.log_time_ns, &twin)?;
-                    out.last_location_ns = Some(state.stamp_ns);
-                }
+                write_location(out, &mut self.writer, map, name, f.log_time_ns, state)?;
             }
             if let (Some(state), Some(&(nav, odom))) = (&f.state, self.ros_outputs.get(pi)) {
                 let map = self.context.track.as_ref();
@@ -226,6 +209,43 @@ impl Replay<'_> {
         }
         Ok(())
     }
+}
+
+/// The first pipeline's estimate: where place-dependent corrections are taken.
+fn note_whereabouts(context: &mut crate::measurement::SensorContext, s: &FusedState) {
+    if s.chainage_m.is_finite() && s.speed_mps.is_finite() {
+        context.whereabouts = Some(crate::measurement::Whereabouts {
+            stamp_ns: s.stamp_ns,
+            chainage_m: s.chainage_m,
+            speed_mps: s.speed_mps,
+        });
+    }
+}
+
+/// The state's Foxglove location twin: a map needs no more than 10 positions a second (the
+/// fused state keeps every one).
+fn write_location(
+    out: &mut Output,
+    writer: &mut LogWriter,
+    map: Option<&railfuse_catalog::messages::TrackMap>,
+    name: &str,
+    log_time_ns: u64,
+    state: &FusedState,
+) -> Result<()> {
+    let Some(channel) = out.location else {
+        return Ok(());
+    };
+    let due = out
+        .last_location_ns
+        .is_none_or(|last| state.stamp_ns >= last + LOCATION_TWIN_EVERY_NS);
+    let twin = due
+        .then(|| railfuse_catalog::foxglove::fused_location(name, state, map))
+        .flatten();
+    if let Some(twin) = twin {
+        writer.write_twin(channel, log_time_ns, &twin)?;
+        out.last_location_ns = Some(state.stamp_ns);
+    }
+    Ok(())
 }
 
 /// The whole train after a pipeline's `state` on its train channel, at most ten times a

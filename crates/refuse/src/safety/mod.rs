@@ -222,7 +222,7 @@ impl SafetyPipeline {
             let own = self.own_map.clone();
             let map = own.as_deref().or(context.track.as_ref());
             let epoch = match item {
-                Input::Fix(fix) => self.fix(&fix, map),
+                Input::Fix(fix) => self.fix(&fix, map, context),
                 Input::Axle(0, m) => self.axle_1(&m, map),
                 Input::Axle(_, m) => {
                     self.axle_2(&m);
@@ -287,7 +287,7 @@ impl SafetyPipeline {
         }
     }
 
-    fn fix(&mut self, fix: &GnssFix, map: Option<&TrackMap>) -> Option<Epoch> {
+    fn fix(&mut self, fix: &GnssFix, map: Option<&TrackMap>, ctx: &SensorContext) -> Option<Epoch> {
         let sensor = self.roles.gnss;
         let topic = self.topic(sensor).to_owned();
         let mut epoch = Epoch::new(fix.stamp_ns, &topic);
@@ -299,7 +299,7 @@ impl SafetyPipeline {
                 let (e, n, _) =
                     map.origin
                         .to_enu(lat, lon, fix.altitude_m.unwrap_or(map.origin.altitude_m));
-                Some((e, n))
+                Some(self.antenna_to_front(ctx, map, (e, n), fix))
             }
             _ => None,
         };
@@ -358,6 +358,26 @@ impl SafetyPipeline {
             [(Axis::East, e, re), (Axis::North, n, rn)],
         );
         Some(self.finish_epoch(epoch, map))
+    }
+
+    /// The antenna's fix at (east, north) moved to the front end, which the filter estimates:
+    /// the train placed at the filter's chainage, or before it starts at the fix's own.
+    fn antenna_to_front(
+        &self,
+        ctx: &SensorContext,
+        map: &TrackMap,
+        (e, n): (f64, f64),
+        fix: &GnssFix,
+    ) -> (f64, f64) {
+        let topic = self.topic(self.roles.gnss);
+        let front = match (&self.filter, self.state_matcher.last()) {
+            (Some(_), Some((0, s))) => Some(s),
+            _ => ctx.front_chainage_of_measured(map, topic, (e, n)),
+        };
+        let speed = fix.speed_mps.filter(|v| v.is_finite()).unwrap_or(0.0);
+        let heading = fix.course_rad.unwrap_or(0.0);
+        let place = ctx.place(Some(map), front, speed, heading);
+        ctx.move_measured(topic, (e, n), place, 0.0)
     }
 
     /// What degraded mode weighs for an epoch at `chainage` (with its variance): a dropped

@@ -168,8 +168,11 @@ impl Pipelines {
 
     /// Takes the `[vehicle]` table of the TOML file `path` (what `railfuse calibrate` writes,
     /// or another configuration) over this configuration's own, checked as its own is: the
-    /// command line's `--vehicle` wins over the file's value.
-    pub fn set_vehicle_from(&mut self, path: &Path) -> Result<()> {
+    /// command line's `--vehicle` wins over the file's value. The file is the train's, which
+    /// may carry sensors this configuration does not read: those are left aside and their
+    /// topics returned (for the caller to say), where a configuration's own `[vehicle]`
+    /// refuses them.
+    pub fn set_vehicle_from(&mut self, path: &Path) -> Result<Vec<String>> {
         let text = std::fs::read_to_string(path).map_err(|source| Error::ConfigRead {
             path: path.to_owned(),
             source,
@@ -188,8 +191,10 @@ impl Pipelines {
                 message: "has no [vehicle] table".into(),
             });
         }
-        self.vehicle = read_vehicle(path, &text, file.vehicle.as_ref(), &self.pipeline)?;
-        Ok(())
+        let mut unread = Vec::new();
+        let table = file.vehicle.as_ref();
+        self.vehicle = read_vehicle(path, &text, table, &self.pipeline, Some(&mut unread))?;
+        Ok(unread)
     }
 
     fn from_file(
@@ -232,7 +237,7 @@ impl Pipelines {
             pipeline.push(spec);
         }
         let track = read_track(path, file.track.as_deref())?;
-        let vehicle = read_vehicle(path, text, file.vehicle.as_ref(), &pipeline)?;
+        let vehicle = read_vehicle(path, text, file.vehicle.as_ref(), &pipeline, None)?;
         let can = CanSensors::read(path, file.can, file.sensor)?;
         let (clock_offsets, align) = read_run(path, file.run.unwrap_or_default())?;
         let confidence =
@@ -262,12 +267,14 @@ impl Pipelines {
 
 /// `[vehicle]`, checked: a length a train has, every sensor on the train and turned less than
 /// 45°, and each placed topic one a pipeline reads (a lever arm for anything else is a
-/// misspelt topic, which would leave the sensor it meant at the front end).
+/// misspelt topic, which would leave the sensor it meant at the front end), unless `unread`
+/// takes such topics (a whole train's file beside a configuration that reads some of them).
 fn read_vehicle(
     path: &Path,
     text: &str,
     table: Option<&toml::Spanned<crate::config::VehicleConfig>>,
     pipelines: &[PipelineSpec],
+    unread: Option<&mut Vec<String>>,
 ) -> Result<Option<railfuse_catalog::messages::Vehicle>> {
     let Some(table) = table else {
         return Ok(None);
@@ -277,17 +284,28 @@ fn read_vehicle(
         path: path.to_owned(),
         message: format!("line {line}: [vehicle]: {message}"),
     };
-    let vehicle = table.get_ref().vehicle();
+    let mut vehicle = table.get_ref().vehicle();
     vehicle.check().map_err(|e| fail(e.to_string()))?;
-    if let Some(s) = vehicle
-        .sensors
-        .iter()
-        .find(|s| !pipelines.iter().any(|p| p.sensor_for(&s.topic).is_some()))
-    {
-        return Err(fail(format!(
-            "sensor '{}' has a lever arm but no pipeline reads that topic",
-            s.topic
-        )));
+    let read = |topic: &str| pipelines.iter().any(|p| p.sensor_for(topic).is_some());
+    match unread {
+        Some(unread) => {
+            unread.extend(
+                vehicle
+                    .sensors
+                    .iter()
+                    .filter(|s| !read(&s.topic))
+                    .map(|s| s.topic.clone()),
+            );
+            vehicle.sensors.retain(|s| read(&s.topic));
+        }
+        None => {
+            if let Some(s) = vehicle.sensors.iter().find(|s| !read(&s.topic)) {
+                return Err(fail(format!(
+                    "sensor '{}' has a lever arm but no pipeline reads that topic",
+                    s.topic
+                )));
+            }
+        }
     }
     Ok(Some(vehicle))
 }
