@@ -433,3 +433,55 @@ fn bad_runs_and_posts_are_one_line_each_before_any_output() {
     );
     assert!(!out.exists());
 }
+
+/// The height profile from two runs of the railway scenario: where the runs have fixes the
+/// fitted top of rail lies within centimetres of the simulator's (the antenna's height above
+/// the rail taken off from the log's vehicle); the gradients a dead reckoning needs come with
+/// the line.
+#[test]
+fn the_height_profile_is_fitted_from_the_fixes_heights() {
+    let d = tempfile::tempdir().unwrap();
+    let logs: Vec<PathBuf> = ["1", "2"]
+        .iter()
+        .map(|seed| {
+            let p = d.path().join(format!("rail{seed}.mcap"));
+            simulate(
+                &["--scenario", "railway", "--duration", "600", "--seed", seed],
+                &p,
+            );
+            p
+        })
+        .collect();
+    let truth: TrackMap = messages(&logs[0], "/track/map").remove(0);
+    let line = d.path().join("line.geojson");
+    let report = ok_json(&["track", s(&logs[0]), s(&logs[1]), "-o", s(&line), "--json"]);
+    assert_eq!(report["profile"]["outcome"], "fitted", "{report}");
+    let steepest = report["profile"]["steepest_gradient"].as_f64().unwrap();
+    assert!((0.035..0.045).contains(&steepest.abs()), "{steepest}");
+    let fitted = read_track_file(&line).unwrap();
+    let gaps = stretches(&report["gaps"]);
+    let mut errors = Vec::new();
+    for v in &fitted.vertices {
+        if gaps
+            .iter()
+            .any(|&(a, b)| (a - 50.0..=b + 50.0).contains(&v.chainage_m))
+        {
+            continue;
+        }
+        let (lat, lon, alt) = fitted
+            .origin
+            .to_geodetic(v.east_m, v.north_m, v.height_m.unwrap());
+        let (te, tn, tu) = truth.origin.to_enu(lat, lon, alt);
+        let m = nearest_on(&truth.vertices, 0..truth.vertices.len(), te, tn).unwrap();
+        if m.lateral_m.abs() < 1.0 && !m.beyond_end {
+            errors.push(tu - truth.height_at(m.chainage_m));
+        }
+    }
+    assert!(errors.len() > 500, "{} vertices compared", errors.len());
+    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    assert!(
+        rms < 0.10,
+        "height RMS {rms:.3} m over {} vertices",
+        errors.len()
+    );
+}

@@ -250,6 +250,20 @@ fn km(m: f64) -> String {
     format!("{:.3}", m / 1000.0)
 }
 
+/// The height profile's line: what it was fitted from, or why the line is flat.
+fn print_profile(s: &Summary) {
+    let Some(p) = &s.profile else { return };
+    // A stretch without fixes has no heights of its own: the spline bridges it.
+    let bridged = match (p, s.gaps.len()) {
+        (railfuse_track::profile::Profile::Fitted { .. }, n) if n > 0 => format!(
+            "; across the {n} stretch(es) without fixes below, heights are the spline's \
+             bridge between their ends"
+        ),
+        _ => String::new(),
+    };
+    println!("{}{bridged}", p.describe());
+}
+
 fn print_summary(s: &Summary, out: &std::path::Path) {
     println!(
         "fitted {} km of line from {} runs ({} fixes, {}): across the track the fixes lie {:.3} m RMS, {:.3} m p95 from it -> {}",
@@ -261,6 +275,7 @@ fn print_summary(s: &Summary, out: &std::path::Path) {
         s.lateral_residual_p95_m,
         out.display()
     );
+    print_profile(s);
     let mut t = Table::new(&[
         "run",
         "fixes",

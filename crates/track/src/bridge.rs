@@ -339,6 +339,7 @@ mod tests {
                     east_m: e,
                     north_m: n,
                     sigma_m: 0.02,
+                    up_m: None,
                 }
             })
             .collect();
@@ -386,6 +387,7 @@ mod tests {
                 east_m: 20.0 * t,
                 north_m: 0.0,
                 sigma_m: 0.02,
+                up_m: None,
             })
             .collect();
         let bias = |t: f64| 5e-4 * (std::f64::consts::TAU * t / 80.0).sin();

@@ -95,11 +95,12 @@ pub fn fit(runs: &[RunFixes], opts: &FitOptions) -> Result<Centreline, FitError>
     let placed = place_all(&line, runs, opts, &suspect);
     check_overlap(runs, &placed, &runs[seed].name)?;
     let aside = set_aside(&placed, &suspect);
+    let profile = crate::profile::fit(&mut line, runs, &placed, &aside);
     let crossed = match opts.cross_gaps {
         true => crossings(&line, runs, &placed, &aside),
         false => Vec::new(),
     };
-    Ok(crate::report::finish(
+    let mut centreline = crate::report::finish(
         line,
         runs,
         Fitted {
@@ -110,7 +111,9 @@ pub fn fit(runs: &[RunFixes], opts: &FitOptions) -> Result<Centreline, FitError>
         &crossed,
         opts.stretch_m,
         opts.disagreement_m,
-    ))
+    );
+    centreline.profile = Some(profile);
+    Ok(centreline)
 }
 
 /// Which fixes of each run lie in a stretch set aside.
@@ -357,6 +360,7 @@ mod tests {
                     east_m: e - tn * off + along * te,
                     north_m: n + te * off + along * tn,
                     sigma_m: 0.02,
+                    up_m: None,
                 }
             })
             .collect();
@@ -481,6 +485,7 @@ mod tests {
                     east_m: s + fix_noise.sample(&mut rng),
                     north_m: pull(s) + fix_noise.sample(&mut rng),
                     sigma_m: 0.02,
+                    up_m: None,
                 }
             })
             .collect();

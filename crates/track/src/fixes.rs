@@ -6,9 +6,9 @@ use std::collections::HashMap;
 
 use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::geodesy::GeodeticOrigin;
-use railfuse_catalog::log::LogRecord;
+use railfuse_catalog::log::{ChannelInfo, LogRecord};
 use railfuse_catalog::messages::{
-    FixType, FusedState, GnssFix, Imu, MessageKind, Odometer, RadarSpeed,
+    FixType, FusedState, GnssFix, Imu, MessageKind, Odometer, RadarSpeed, Vehicle,
 };
 use railfuse_catalog::run::Run;
 use railfuse_eval::FixQuality;
@@ -23,6 +23,9 @@ pub struct Fix {
     pub north_m: f64,
     /// Its horizontal 1σ, m (from the receiver's covariance, else its fix type).
     pub sigma_m: f64,
+    /// The top of rail's height under it, m up in the plane's frame: the antenna's height
+    /// less its lever arm's z on the run's vehicle; `None` for a fix without an altitude.
+    pub up_m: Option<f64>,
 }
 
 /// The receiver's course over ground, from its Doppler velocity: it holds where RTK is lost
@@ -88,6 +91,31 @@ struct Read {
 struct Sources {
     gnss: HashMap<u16, (String, Vec<Read>)>,
     fused: HashMap<u16, (String, Vec<Read>)>,
+    /// The motion sensors' channels, by kind.
+    motion: HashMap<u16, MessageKind>,
+    /// The installation drawing's channel (`/vehicle`).
+    vehicle: Option<u16>,
+}
+
+impl Sources {
+    /// Takes note of a channel: a GNSS or fused one if `wanted`, a motion sensor's, the
+    /// vehicle's.
+    fn channel(&mut self, c: &ChannelInfo, wanted: bool) {
+        let entry = (c.topic.clone(), Vec::new());
+        match c.kind() {
+            Some(MessageKind::GnssFix) if wanted => {
+                self.gnss.entry(c.id).or_insert(entry);
+            }
+            Some(MessageKind::FusedState) if wanted => {
+                self.fused.entry(c.id).or_insert(entry);
+            }
+            Some(MessageKind::Vehicle) => self.vehicle = Some(c.id),
+            Some(k @ (MessageKind::Imu | MessageKind::Odometer | MessageKind::RadarSpeed)) => {
+                self.motion.insert(c.id, k);
+            }
+            _ => {}
+        }
+    }
 }
 
 /// The σ a fix type stands for where the receiver reports no covariance, m.
@@ -113,9 +141,8 @@ pub fn read_fixes(
     let mut reader = run.reader()?;
     let mut foreign = ForeignChannels::default();
     let mut sources = Sources::default();
-    // The motion sensors' channels, by kind.
-    let mut motion_channels: HashMap<u16, MessageKind> = HashMap::new();
     let mut motion = MotionRecorder::default();
+    let mut vehicle = None::<Vehicle>;
     let mut buf = Vec::new();
     while let Some(record) = reader.next() {
         match record? {
@@ -124,25 +151,10 @@ pub fn read_fixes(
                     None => foreign.channel(c.clone(), None).unwrap_or(c),
                     Some(_) => c,
                 };
-                let wanted = topic.is_none_or(|t| t == c.topic);
-                let entry = (c.topic.clone(), Vec::new());
-                match c.kind() {
-                    Some(MessageKind::GnssFix) if wanted => {
-                        sources.gnss.entry(c.id).or_insert(entry);
-                    }
-                    Some(MessageKind::FusedState) if wanted => {
-                        sources.fused.entry(c.id).or_insert(entry);
-                    }
-                    Some(
-                        k @ (MessageKind::Imu | MessageKind::Odometer | MessageKind::RadarSpeed),
-                    ) => {
-                        motion_channels.insert(c.id, k);
-                    }
-                    _ => {}
-                }
+                sources.channel(&c, topic.is_none_or(|t| t == c.topic));
             }
             LogRecord::Message(m) => {
-                if let Some(kind) = motion_channels.get(&m.channel.id) {
+                if let Some(kind) = sources.motion.get(&m.channel.id) {
                     // A motion sample that does not decode is a gap in it.
                     match kind {
                         MessageKind::Imu => m.decode::<Imu>(&path).map(|x| motion.imu(&x)),
@@ -155,6 +167,11 @@ pub fn read_fixes(
                     continue;
                 }
                 let id = m.channel.id;
+                if Some(id) == sources.vehicle {
+                    // The installation drawing: where the antenna is above the rail.
+                    vehicle = m.decode(&path).ok();
+                    continue;
+                }
                 if let Some((_, read)) = sources.fused.get_mut(&id) {
                     let state: FusedState = m.decode(&path)?;
                     read.extend(fused_to_plane(&state, origin));
@@ -176,7 +193,14 @@ pub fn read_fixes(
         }
     }
     let (topic, read) = choose(&name, topic, sources)?;
+    let antenna_z = vehicle
+        .as_ref()
+        .and_then(|v| v.mount(&topic))
+        .map_or(0.0, |m| m.lever_arm_m[2]);
     let mut run = keep_quality(name, topic, read, quality)?;
+    for f in &mut run.fixes {
+        f.up_m = f.up_m.map(|u| u - antenna_z);
+    }
     run.motion = motion.finish();
     Ok(run)
 }
@@ -240,28 +264,28 @@ fn fused_to_plane(state: &FusedState, origin: &mut Option<GeodeticOrigin>) -> Op
     } else {
         sigma_of(FixType::RtkFloat)
     };
-    let (east_m, north_m) = plane_of(origin, lat, lon, 0.0);
+    let (east_m, north_m, _) = plane_of(origin, lat, lon, 0.0);
     Some(Read {
         fix: Fix {
             stamp_ns: state.stamp_ns,
             east_m,
             north_m,
             sigma_m,
+            up_m: None,
         },
         fix_type: None,
         course: None,
     })
 }
 
-/// (east, north) of a place in the plane of `origin`, which the first place read sets.
-fn plane_of(origin: &mut Option<GeodeticOrigin>, lat: f64, lon: f64, alt: f64) -> (f64, f64) {
+/// (east, north, up) of a place in the plane of `origin`, which the first place read sets.
+fn plane_of(origin: &mut Option<GeodeticOrigin>, lat: f64, lon: f64, alt: f64) -> (f64, f64, f64) {
     let o = *origin.get_or_insert(GeodeticOrigin {
         latitude_deg: lat,
         longitude_deg: lon,
         altitude_m: alt,
     });
-    let (east_m, north_m, _) = o.to_enu(lat, lon, alt);
-    (east_m, north_m)
+    o.to_enu(lat, lon, alt)
 }
 
 /// A fix with a position, in the plane of `origin`.
@@ -272,8 +296,9 @@ fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> 
     if !(fix.fix_type.has_position() && lat.is_finite() && lon.is_finite()) {
         return None;
     }
-    let alt = fix.altitude_m.filter(|a| a.is_finite()).unwrap_or(0.0);
-    let (east_m, north_m) = plane_of(origin, lat, lon, alt);
+    let altitude = fix.altitude_m.filter(|a| a.is_finite());
+    let alt = altitude.unwrap_or(0.0);
+    let (east_m, north_m, up_m) = plane_of(origin, lat, lon, alt);
     let sigma_m = fix
         .position_covariance_enu_m2
         .map(|c| ((c[0] + c[4]) / 2.0).sqrt())
@@ -295,6 +320,7 @@ fn to_plane(fix: &GnssFix, origin: &mut Option<GeodeticOrigin>) -> Option<Read> 
             east_m,
             north_m,
             sigma_m,
+            up_m: altitude.map(|_| up_m),
         },
         fix_type: Some(fix.fix_type),
         course,

@@ -30,6 +30,7 @@ pub mod motion;
 pub mod multipath;
 pub mod osm;
 pub mod output;
+pub mod profile;
 pub mod report;
 pub mod spline;
 pub mod tie;

@@ -149,9 +149,25 @@ impl Line {
     }
 }
 
-/// Every inner vertex of `run` lies within `tolerance_m` of the chord joining its ends.
+/// Every inner vertex of `run` lies within `tolerance_m` of the chord joining its ends, in
+/// the plane and, where the vertices have heights, in height along the chainage (a vertical
+/// curve on a straight keeps its vertices).
 fn chord_holds(run: &[TrackVertex], tolerance_m: f64) -> bool {
     let (a, b) = (run[0], run[run.len() - 1]);
+    if let (Some(ha), Some(hb)) = (a.height_m, b.height_m) {
+        let span = b.chainage_m - a.chainage_m;
+        let off = |p: &TrackVertex| {
+            let f = (p.chainage_m - a.chainage_m) / span;
+            p.height_m.map_or(0.0, |h| h - (ha + f * (hb - ha)))
+        };
+        if span > 0.0
+            && run[1..run.len() - 1]
+                .iter()
+                .any(|p| off(p).abs() > tolerance_m)
+        {
+            return false;
+        }
+    }
     let (de, dn) = (b.east_m - a.east_m, b.north_m - a.north_m);
     let len = de.hypot(dn);
     if len == 0.0 {

@@ -33,6 +33,9 @@ pub struct Summary {
     /// Stretches where runs' mean offsets differ by more than `disagreement_m`.
     pub runs_disagree: Vec<Disagreement>,
     pub placement: Placement,
+    /// The height profile: fitted from the fixes' heights, or why the line is flat.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub profile: Option<crate::profile::Profile>,
     /// The line against OpenStreetMap's rail ways, where an extract was given.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub osm: Option<OsmOffset>,
@@ -110,6 +113,7 @@ impl Summary {
                 .collect(),
             placement: *p,
             osm: None,
+            profile: c.profile.clone().map(|q| q.placed(|s| p.chainage(s))),
             knot_spacing_m: opts.knot_spacing_m,
             smoothing_m: opts.smoothing_m,
             tolerance_m,
@@ -146,13 +150,15 @@ impl RunSummary {
     }
 }
 
-/// Longitude and latitude of each vertex (degrees).
-fn lon_lat(vertices: &[TrackVertex], origin: &GeodeticOrigin) -> Vec<(f64, f64)> {
+/// Longitude, latitude (degrees) and, where the vertex has a height, its ellipsoidal
+/// height (m) of each vertex.
+fn lon_lat(vertices: &[TrackVertex], origin: &GeodeticOrigin) -> Vec<(f64, f64, Option<f64>)> {
     vertices
         .iter()
         .map(|v| {
-            let (lat, lon, _) = origin.to_geodetic(v.east_m, v.north_m, 0.0);
-            (lon, lat)
+            let up = v.height_m.unwrap_or(0.0);
+            let (lat, lon, alt) = origin.to_geodetic(v.east_m, v.north_m, up);
+            (lon, lat, v.height_m.map(|_| round_mm(alt)))
         })
         .collect()
 }
@@ -164,9 +170,10 @@ pub fn geojson(
     origin: &GeodeticOrigin,
     summary: &Summary,
 ) -> String {
-    let coordinates: Vec<[f64; 2]> = lon_lat(vertices, origin)
+    // A profile's heights are the coordinates' third value, on every vertex.
+    let coordinates: Vec<Vec<f64>> = lon_lat(vertices, origin)
         .into_iter()
-        .map(|(lon, lat)| [lon, lat])
+        .map(|(lon, lat, alt)| [lon, lat].into_iter().chain(alt).collect())
         .collect();
     let chainage: Vec<f64> = vertices.iter().map(|v| round_mm(v.chainage_m)).collect();
     let collection = json!({
@@ -187,9 +194,17 @@ pub fn geojson(
 
 /// The line as a CSV of latitude, longitude and chainage, one vertex a row.
 pub fn csv(vertices: &[TrackVertex], origin: &GeodeticOrigin) -> String {
-    let mut out = String::from("latitude,longitude,chainage_m\n");
-    for (v, (lon, lat)) in vertices.iter().zip(lon_lat(vertices, origin)) {
-        out.push_str(&format!("{lat:.10},{lon:.10},{:.3}\n", v.chainage_m));
+    let heights = vertices.iter().all(|v| v.height_m.is_some()) && !vertices.is_empty();
+    let mut out = match heights {
+        true => String::from("latitude,longitude,chainage_m,altitude_m\n"),
+        false => String::from("latitude,longitude,chainage_m\n"),
+    };
+    for (v, (lon, lat, alt)) in vertices.iter().zip(lon_lat(vertices, origin)) {
+        out.push_str(&format!("{lat:.10},{lon:.10},{:.3}", v.chainage_m));
+        if let (true, Some(alt)) = (heights, alt) {
+            out.push_str(&format!(",{alt:.3}"));
+        }
+        out.push('\n');
     }
     out
 }

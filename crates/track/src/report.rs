@@ -81,6 +81,8 @@ pub struct Centreline {
     pub first_run_start: (f64, bool),
     /// The residual across the track stretch by stretch (`FitOptions::stretch_m`).
     pub stretches: Vec<StretchResidual>,
+    /// The height profile, once fitted ([`crate::profile`]).
+    pub profile: Option<crate::profile::Profile>,
 }
 
 /// The fixes' residual across the track over one stretch of line.
@@ -190,6 +192,7 @@ pub(crate) fn finish(
         first_run_start,
         stretches: stretches(&with_sigma, stretch_m),
         line,
+        profile: None,
     }
 }
 

@@ -86,6 +86,37 @@ pub struct PlaneSpline {
     north: Vec<f64>,
 }
 
+/// A fitted height profile: the top of rail's height as a spline of chainage.
+#[derive(Debug, Clone)]
+pub struct ProfileSpline {
+    pub knots: Knots,
+    up: Vec<f64>,
+}
+
+impl ProfileSpline {
+    /// The penalised least-squares fit of `(chainage, weight, height)` points on `knots`,
+    /// smoothing over about `smoothing_m`: the plane's fit, on one coordinate.
+    pub fn fit(
+        knots: Knots,
+        points: &[(f64, f64, f64)],
+        smoothing_m: f64,
+    ) -> Result<Self, NotPositiveDefinite> {
+        let [up] = fit_columns(
+            &knots,
+            points.iter().map(|&(s, w, h)| (s, w, [h])),
+            smoothing_m,
+        )?;
+        Ok(Self { knots, up })
+    }
+
+    /// The height at chainage `s` (clamped to the knots' span).
+    pub fn at(&self, s: f64) -> f64 {
+        let (k, u) = self.knots.locate(s);
+        let b = basis(u);
+        (0..4).map(|i| b[i] * self.up[k + i]).sum()
+    }
+}
+
 /// One point to fit: its chainage, position and weight.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
@@ -93,6 +124,50 @@ pub struct Sample {
     pub east_m: f64,
     pub north_m: f64,
     pub weight: f64,
+}
+
+/// The penalised least-squares coefficients of `C` coordinates at once on `knots`, each point
+/// `(chainage, weight, values)`, smoothing over about `smoothing_m`: one system, `C` solves.
+fn fit_columns<const C: usize>(
+    knots: &Knots,
+    points: impl Iterator<Item = (f64, f64, [f64; C])>,
+    smoothing_m: f64,
+) -> Result<[Vec<f64>; C], NotPositiveDefinite> {
+    let n = knots.count;
+    let mut a = BandMatrix::zeros(n, 3);
+    let mut rhs: [Vec<f64>; C] = std::array::from_fn(|_| vec![0.0; n]);
+    let mut total_weight = 0.0;
+    for (s, w, values) in points {
+        let (k, u) = knots.locate(s);
+        let b = basis(u);
+        for i in 0..4 {
+            for j in 0..=i {
+                a.add(k + i, k + j, w * b[i] * b[j]);
+            }
+            for (c, v) in values.iter().enumerate() {
+                rhs[c][k + i] += w * b[i] * v;
+            }
+        }
+        total_weight += w;
+    }
+    let per_coefficient = (total_weight / n as f64).max(f64::MIN_POSITIVE);
+    let lambda = per_coefficient * (smoothing_m / knots.spacing_m).powi(4);
+    // D₂ᵀD₂: each row of D₂ is (1, −2, 1) on three neighbouring coefficients.
+    const D2: [f64; 3] = [1.0, -2.0, 1.0];
+    for r in 0..n.saturating_sub(2) {
+        for (i, di) in D2.iter().enumerate() {
+            for (j, dj) in D2[..=i].iter().enumerate() {
+                a.add(r + i, r + j, lambda * di * dj);
+            }
+        }
+    }
+    // A whisper of ridge keeps the system definite where a gap leaves only the penalty.
+    let ridge = 1e-9 * per_coefficient;
+    for i in 0..n {
+        a.add(i, i, ridge);
+    }
+    let l = a.cholesky()?;
+    Ok(std::array::from_fn(|c| l.solve(&rhs[c])))
 }
 
 impl PlaneSpline {
@@ -103,44 +178,11 @@ impl PlaneSpline {
         samples: &[Sample],
         smoothing_m: f64,
     ) -> Result<Self, NotPositiveDefinite> {
-        let n = knots.count;
-        let mut a = BandMatrix::zeros(n, 3);
-        let (mut be, mut bn) = (vec![0.0; n], vec![0.0; n]);
-        let mut total_weight = 0.0;
-        for s in samples {
-            let (k, u) = knots.locate(s.chainage_m);
-            let b = basis(u);
-            for i in 0..4 {
-                for j in 0..=i {
-                    a.add(k + i, k + j, s.weight * b[i] * b[j]);
-                }
-                be[k + i] += s.weight * b[i] * s.east_m;
-                bn[k + i] += s.weight * b[i] * s.north_m;
-            }
-            total_weight += s.weight;
-        }
-        let per_coefficient = (total_weight / n as f64).max(f64::MIN_POSITIVE);
-        let lambda = per_coefficient * (smoothing_m / knots.spacing_m).powi(4);
-        // D₂ᵀD₂: each row of D₂ is (1, −2, 1) on three neighbouring coefficients.
-        const D2: [f64; 3] = [1.0, -2.0, 1.0];
-        for r in 0..n.saturating_sub(2) {
-            for (i, di) in D2.iter().enumerate() {
-                for (j, dj) in D2[..=i].iter().enumerate() {
-                    a.add(r + i, r + j, lambda * di * dj);
-                }
-            }
-        }
-        // A whisper of ridge keeps the system definite where a gap leaves only the penalty.
-        let ridge = 1e-9 * per_coefficient;
-        for i in 0..n {
-            a.add(i, i, ridge);
-        }
-        let l = a.cholesky()?;
-        Ok(Self {
-            knots,
-            east: l.solve(&be),
-            north: l.solve(&bn),
-        })
+        let points = samples
+            .iter()
+            .map(|s| (s.chainage_m, s.weight, [s.east_m, s.north_m]));
+        let [east, north] = fit_columns(&knots, points, smoothing_m)?;
+        Ok(Self { knots, east, north })
     }
 
     /// East and north at chainage `s` (clamped to the knots' span).
