@@ -266,3 +266,41 @@ fn the_pipelines_in_the_plane_and_the_eddy_current_one_place_each_sensor_where_i
         );
     }
 }
+
+/// The drawing's installation tolerance is in every front end's covariance: a lever arm off by
+/// its tolerance moves the front end for good, which no filter sees. The railway run's default
+/// pipeline is honest with it (NEES in its 95 % interval at least 90 % of the time, at most
+/// 1 % of states beyond 3σ) and overconfident with the same drawing stated exact.
+#[test]
+fn the_installation_tolerance_keeps_the_front_ends_covariance_honest() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("railway.mcap");
+    simulate(
+        &["--scenario", "railway", "--duration", "300", "--seed", "9"],
+        &log,
+    );
+    let honesty = |vehicle: Option<&Path>, out: &str| {
+        let out = dir.path().join(out);
+        let mut args = vec!["refuse", s(&log), "-o", s(&out), "--json"];
+        if let Some(v) = vehicle {
+            args.extend(["--vehicle", s(v)]);
+        }
+        let p = pipeline_eval(&ok_json(&args), "default");
+        let inside = p["nees"]["inside_95"].as_f64().unwrap();
+        (inside, p["beyond_3_sigma"].as_f64().unwrap())
+    };
+    let drawing: Vehicle = messages(&log, "/vehicle").remove(0);
+    assert_eq!(drawing.installation_std_m, 0.03);
+    let (inside, beyond) = honesty(None, "a.mcap");
+    assert!(inside >= 0.9 && beyond <= 0.01, "{inside} in 95 %, {beyond} beyond 3σ");
+    let exact = Vehicle {
+        installation_std_m: 0.0,
+        ..drawing
+    };
+    let exact = vehicle_file(dir.path(), &exact, "exact.toml");
+    let (inside_exact, _) = honesty(Some(&exact), "b.mcap");
+    assert!(
+        inside_exact < inside - 0.1,
+        "stated exact: {inside_exact} in 95 %, with its tolerance {inside}"
+    );
+}

@@ -30,6 +30,9 @@ pub const MIN_HEIGHT_M: f64 = -0.3;
 pub const MAX_HEIGHT_M: f64 = 6.5;
 /// Longer than any train that runs (the longest freight trains are some 3.5 km).
 pub const MAX_LENGTH_M: f64 = 4_000.0;
+/// Looser than any installation drawing's tolerance, m (1σ): a sensor known no better is not
+/// placed.
+pub const MAX_INSTALLATION_STD_M: f64 = 0.5;
 /// Gravity, m/s² (standard).
 pub const GRAVITY_MPS2: f64 = 9.80665;
 
@@ -185,6 +188,7 @@ impl Vehicle {
             length_m: 0.0,
             roll_per_lateral_mps2: 0.0,
             sensors: Vec::new(),
+            installation_std_m: 0.0,
         }
     }
 
@@ -198,6 +202,14 @@ impl Vehicle {
         self.mount(topic)
             .cloned()
             .unwrap_or_else(|| SensorMount::at_front(topic))
+    }
+
+    /// The variance the drawing's installation tolerance adds to the front end's chainage,
+    /// m²: the front end is found through the sensors' lever arms, each known to
+    /// `installation_std_m`, a constant error no filter averages away (a consider term added
+    /// to what a pipeline reports, not to what it weighs its measurements with).
+    pub fn installation_variance(&self) -> f64 {
+        self.installation_std_m * self.installation_std_m
     }
 
     /// The rear end's chainage with the front end at `front_chainage_m`.
@@ -223,6 +235,11 @@ impl Vehicle {
             && (0.0..0.2).contains(&self.roll_per_lateral_mps2))
         {
             return Err(VehicleProblem::Roll(self.roll_per_lateral_mps2));
+        }
+        if !(self.installation_std_m.is_finite()
+            && (0.0..=MAX_INSTALLATION_STD_M).contains(&self.installation_std_m))
+        {
+            return Err(VehicleProblem::Installation(self.installation_std_m));
         }
         for (i, s) in self.sensors.iter().enumerate() {
             if self.sensors[..i].iter().any(|o| o.topic == s.topic) {
@@ -285,6 +302,8 @@ pub enum VehicleProblem {
     Length(f64),
     #[error("roll_per_lateral_mps2 = {0}: a body leans between 0 and 0.2 rad per m/s²")]
     Roll(f64),
+    #[error("installation_std_m = {0}: an installation tolerance is between 0 and 0.5 m (1σ)")]
+    Installation(f64),
     #[error("sensor '{0}' is placed twice")]
     Twice(String),
     #[error("sensor '{topic}' at lever arm {lever_arm_m:?} m is outside the train: {why}")]

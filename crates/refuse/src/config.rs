@@ -92,6 +92,11 @@ pub struct VehicleConfig {
     /// rad (about 0.015 for a coach); 0 or absent: not given.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub roll_per_lateral_mps2: f64,
+    /// The drawing's installation tolerance, 1σ of each lever arm component, m (0 or absent:
+    /// the sensors sit exactly where drawn). Every pipeline's front end carries it in its
+    /// chainage variance.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub installation_std_m: f64,
     /// Each sensor's place by its topic; a sensor not named here is at the front end.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub sensor: BTreeMap<String, MountConfig>,
@@ -128,6 +133,7 @@ impl VehicleConfig {
             name: self.name.clone(),
             length_m: self.length_m,
             roll_per_lateral_mps2: self.roll_per_lateral_mps2,
+            installation_std_m: self.installation_std_m,
             sensors: self
                 .sensor
                 .iter()
@@ -147,6 +153,7 @@ impl VehicleConfig {
             name: v.name.clone(),
             length_m: v.length_m,
             roll_per_lateral_mps2: v.roll_per_lateral_mps2,
+            installation_std_m: v.installation_std_m,
             sensor: v
                 .sensors
                 .iter()

@@ -23,6 +23,10 @@ pub struct Vehicle {
     pub roll_per_lateral_mps2: f64,
     /// Each sensor's place, by the topic its messages travel on.
     pub sensors: Vec<SensorMount>,
+    /// The drawing's installation tolerance, 1σ of each lever arm component, m: how far a
+    /// sensor may sit from where the drawing puts it (0: exactly there).
+    #[serde(default)]
+    pub installation_std_m: f64,
 }
 
 /// Where one sensor sits on the train and how it is turned.
@@ -49,6 +53,7 @@ protobuf_form!(Vehicle {
     length_m,
     roll_per_lateral_mps2,
     sensors,
+    installation_std_m,
 });
 protobuf_form!(SensorMount {
     topic,

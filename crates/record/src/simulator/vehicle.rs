@@ -34,6 +34,8 @@ impl VehicleParams {
                 name: "simulated EMU, 4 cars".into(),
                 length_m: 104.0,
                 roll_per_lateral_mps2: 0.015,
+                // The drawing states the tolerance the train is installed to.
+                installation_std_m: 0.03,
                 sensors: vec![
                     at(topics::GNSS_FIX, [-12.5, 0.0, 4.1]),
                     at(topics::IMU, [-13.0, 0.25, 1.2]),

@@ -116,7 +116,10 @@ impl Replay<'_> {
         let out = &mut self.outputs[pi];
         let observer = self.opts.observer;
         let name = self.pipelines[pi].name();
-        for f in self.fused.drain(..) {
+        for mut f in self.fused.drain(..) {
+            if let Some(s) = &mut f.state {
+                with_installation(s, &self.context.vehicle);
+            }
             if let (0, Some(s)) = (pi, &f.state) {
                 note_whereabouts(&mut self.context, s);
             }
@@ -193,7 +196,8 @@ impl Replay<'_> {
             source,
         };
         for state in smoothed.map_err(spill)? {
-            let state = state.map_err(spill)?;
+            let mut state = state.map_err(spill)?;
+            with_installation(&mut state, &self.context.vehicle);
             observe(
                 self.opts.observer,
                 &topics::fused_smoothed(&name),
@@ -209,6 +213,14 @@ impl Replay<'_> {
         }
         Ok(())
     }
+}
+
+/// A state as written: its chainage variance with the drawing's installation tolerance
+/// ([`Vehicle::installation_variance`](railfuse_catalog::messages::Vehicle)), which the
+/// pipeline cannot see (a sensor's lever arm off by its tolerance moves the front end it
+/// finds by as much, for good).
+fn with_installation(state: &mut FusedState, vehicle: &railfuse_catalog::messages::Vehicle) {
+    state.covariance[0] += vehicle.installation_variance();
 }
 
 /// The first pipeline's estimate: where place-dependent corrections are taken.
