@@ -175,6 +175,7 @@ fn vehicle_example() -> Value {
     json!({
         "stamp_ns": T, "name": "test train", "length_m": 75.0,
         "roll_per_lateral_mps2": 0.015,
+        "installation_std_m": 0.03,
         "sensors": [
             {"topic": "/gnss/fix", "frame_id": "gnss", "lever_arm_m": [-12.0, 0.0, 4.1],
              "mounting_deg": [0.0, 0.0, 0.0]},
