@@ -17,10 +17,22 @@ use railfuse_catalog::run::{Run, RunOptions};
 
 /// A bag of samples/short-run.mcap's sensors in `dir`, chunks compressed as `compression`.
 fn bag(dir: &Path, compression: &str) -> PathBuf {
-    let out = dir.join(format!("run-{compression}.bag"));
+    bag_with_tf(dir, compression, "point")
+}
+
+/// [`bag`] with the `/tf_static` variant `tf` of ros1_bag.py (`point`: every sensor frame at
+/// the front end, as the data has it).
+fn bag_with_tf(dir: &Path, compression: &str, tf: &str) -> PathBuf {
+    let out = dir.join(format!("run-{compression}-{tf}.bag"));
     let counts = python_ok(
         "ros1_bag.py",
-        &["write", s(&sample("short-run.mcap")), s(&out), compression],
+        &[
+            "write",
+            s(&sample("short-run.mcap")),
+            s(&out),
+            compression,
+            tf,
+        ],
     );
     assert_eq!(counts["/fix"], 901, "{counts}");
     out
@@ -151,17 +163,26 @@ fn tf_static_is_reported_and_unknown_types_are_kept_and_counted() {
     let info = railfuse(&["info", s(&bag)]);
     let text = format!("{}{}", String::from_utf8_lossy(&info.stdout), stderr(&info));
     assert!(
-        text.contains("frame gps in base_link at (-3.200, 0.000, 3.900) m"),
+        text.contains("frame gps in base_link at (10.000, 0.000, -0.500) m"),
         "{text}"
     );
-    assert!(text.contains("frame imu_link in base_link at (1.500, 0.200, 0.800) m, roll 0.0° pitch 0.0° yaw 90.0°"), "{text}");
+    // The train the transforms place: every sensor at its frame, the front end's frame the
+    // body's origin, the rear end's giving the length.
+    assert!(
+        text.contains("vehicle 'from /tf_static': 20 m from front end to rear end"),
+        "{text}"
+    );
+    assert!(
+        text.contains("/odom/1    wheel1  +0.000 +0.000 +0.000"),
+        "{text}"
+    );
     assert!(
         text.contains("kept as they are, of types railfuse does not read: 1 std_msgs/String"),
         "{text}"
     );
     let out = dir.path().join("bag.mcap");
     let r = ok_json(&["import", s(&bag), "-o", s(&out), "--json"]);
-    assert_eq!(r["frames"][0]["child"], "gps", "{r}");
+    assert_eq!(r["frames"][2]["child"], "gps", "{r}");
     assert_eq!(r["per_topic"]["/rosout_text"], 1, "{r}");
 }
 
@@ -288,4 +309,60 @@ fn bad_bags_say_what_in_one_line() {
     let problems = r["first_problems"].to_string();
     assert!(problems.contains("more than 256 MiB"), "{problems}");
     assert_eq!(r["skipped"]["a chunk that does not decompress"], 1, "{r}");
+}
+
+/// The fused front end's chainage (m) at each state's time, of `input` re-fused on `line`.
+fn fused_chainage(input: &Path, line: &Path, out: &Path) -> Vec<(u64, f64)> {
+    ok(&["refuse", s(input), "--track", s(line), "-o", s(out)]);
+    messages::<railfuse_catalog::messages::FusedState>(out, "/fused/default/state")
+        .iter()
+        .map(|f| (f.stamp_ns, f.chainage_m))
+        .collect()
+}
+
+#[test]
+fn tf_static_places_the_sensors_and_a_cycle_or_a_missing_frame_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let line = dir.path().join("line.geojson");
+    ok(&["track", s(&sample("short-run.mcap")), "-o", s(&line)]);
+    let point = bag_with_tf(dir.path(), "none", "point");
+    let back = bag_with_tf(dir.path(), "none", "antenna_back");
+    let a = fused_chainage(&point, &line, &dir.path().join("point.mcap"));
+    let b = fused_chainage(&back, &line, &dir.path().join("back.mcap"));
+    // The data has the antenna at the front end; a /tf_static that puts it 12 m behind moves
+    // each fix 12 m forward to the front end, and the fused front end with it.
+    let shifts: Vec<f64> = a
+        .iter()
+        .zip(&b)
+        .skip(a.len() / 4)
+        .map(|(x, y)| y.1 - x.1)
+        .collect();
+    let mean = shifts.iter().sum::<f64>() / shifts.len() as f64;
+    assert!(
+        (mean - 12.0).abs() < 0.5,
+        "the fused front end moved {mean} m"
+    );
+    for (tf, says) in [
+        (
+            "cycle",
+            "frames base_link → front_end → base_link form a cycle",
+        ),
+        (
+            "missing",
+            "topic /radar's frame 'radar' is in no transform (a missing frame)",
+        ),
+    ] {
+        let bag = bag_with_tf(dir.path(), "none", tf);
+        let out = dir.path().join(format!("{tf}.mcap"));
+        let r = railfuse(&["refuse", s(&bag), "--track", s(&line), "-o", s(&out)]);
+        let err = stderr(&r);
+        assert!(!r.status.success() && err.contains(says), "{tf}: {err}");
+        // One line says it (the others are the bag's conversion report).
+        assert_eq!(
+            err.lines().filter(|l| l.contains("error")).count(),
+            1,
+            "{err}"
+        );
+        assert!(!out.exists(), "{tf}: nothing is written");
+    }
 }

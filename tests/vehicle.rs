@@ -292,7 +292,10 @@ fn the_installation_tolerance_keeps_the_front_ends_covariance_honest() {
     let drawing: Vehicle = messages(&log, "/vehicle").remove(0);
     assert_eq!(drawing.installation_std_m, 0.03);
     let (inside, beyond) = honesty(None, "a.mcap");
-    assert!(inside >= 0.9 && beyond <= 0.01, "{inside} in 95 %, {beyond} beyond 3σ");
+    assert!(
+        inside >= 0.9 && beyond <= 0.01,
+        "{inside} in 95 %, {beyond} beyond 3σ"
+    );
     let exact = Vehicle {
         installation_std_m: 0.0,
         ..drawing

@@ -82,6 +82,9 @@ pub fn run(a: Args) -> Result<()> {
     if let Some(v) = &s.vehicle {
         print_vehicle(v);
     }
+    for note in &s.vehicle_notes {
+        println!("  vehicle: {note}");
+    }
     if s.fused_pipelines.is_empty() {
         println!("fused pipelines: none");
     } else {
@@ -100,12 +103,18 @@ fn print_vehicle(v: &railfuse_catalog::messages::Vehicle) {
         "vehicle '{}': {} m from front end to rear end{lean}",
         v.name, v.length_m
     );
-    let mut t = Table::new(&["sensor", "lever arm x y z m", "mounting roll pitch yaw °"]);
+    let mut t = Table::new(&[
+        "sensor",
+        "frame",
+        "lever arm x y z m",
+        "mounting roll pitch yaw °",
+    ]);
     for m in &v.sensors {
         let [x, y, z] = m.lever_arm_m;
         let [r, p, w] = m.mounting_deg;
         t.row(vec![
             m.topic.clone(),
+            m.frame_id.clone().unwrap_or_else(|| "-".into()),
             format!("{x:+.3} {y:+.3} {z:+.3}"),
             format!("{r:+.2} {p:+.2} {w:+.2}"),
         ]);

@@ -107,6 +107,9 @@ pub fn run(a: Args) -> Result<()> {
         let unread = config.set_vehicle_from(vehicle)?;
         leave_aside(vehicle, &unread, input)?;
     }
+    if config.vehicle.is_none() {
+        place_from_tf(&mut config, input)?;
+    }
     if let Some(c) = a.confidence {
         config.confidence = railfuse_refuse::spec::check_confidence(c)
             .map_err(|e| anyhow::anyhow!("--confidence {e}"))?;
@@ -176,6 +179,36 @@ fn split_output(
             .join(", ")
     );
     Ok(written.outputs)
+}
+
+/// For a configuration without `[vehicle]` on a ROS recording with a `/tf_static` and no
+/// `/vehicle`: the train the transforms place, each sensor a pipeline reads at its frame,
+/// said in one line with what was assumed.
+fn place_from_tf(config: &mut Pipelines, input: &Run) -> Result<()> {
+    let channels = railfuse_refuse::default_config::channels(input)?;
+    let topics = config.read_topics();
+    let Some((v, notes)) = railfuse_refuse::default_config::tf_vehicle(input, &channels, &topics)?
+    else {
+        return Ok(());
+    };
+    let placed: Vec<String> = v
+        .sensors
+        .iter()
+        .map(|s| format!("{} at {}", s.topic, s.frame_id.as_deref().unwrap_or("?")))
+        .collect();
+    let notes = notes.iter().map(|n| format!("; {n}")).collect::<String>();
+    crate::say!(
+        "{}: the train from /tf_static: {} ({:.1} m long){notes}",
+        input.name().display(),
+        if placed.is_empty() {
+            "no sensor a pipeline reads has a frame".to_owned()
+        } else {
+            placed.join(", ")
+        },
+        v.length_m
+    );
+    config.vehicle = Some(v);
+    Ok(())
 }
 
 /// The sensors a `--vehicle` file places that no pipeline reads: those on a channel of the

@@ -1,11 +1,11 @@
 """ROS 1 bags written and read by rosbags (and ROS 1 MCAP read by mcap-ros1-support), as a
 ROS 1 tool would, to check railfuse's bag reader message for message.
 
-    ros1_bag.py write IN.mcap OUT.bag none|bz2|lz4
+    ros1_bag.py write IN.mcap OUT.bag none|bz2|lz4 [point|antenna_back|cycle|missing]
         writes a railfuse log's sensors as `rosbag record` would have logged them (ROS Noetic
         types, ROS 1 serialisation, 1 MiB chunks): /fix NavSatFix, /imu Imu, /radar
         TwistWithCovarianceStamped, /odom/N Odometry, plus /tf_static (a TFMessage placing
-        gps and imu_link on base_link) and /rosout_text (std_msgs/String, a type railfuse
+        every sensor frame, front_end and rear_end on base_link) and /rosout_text (std_msgs/String, a type railfuse
         does not read); prints the message count per topic (JSON).
     ros1_bag.py read BAG
         reads every message with rosbags and prints, per topic, each message's time and the
@@ -123,25 +123,42 @@ def odometry(m, frame):
     )
 
 
-def tf_static(stamp_ns):
+def tf_static(stamp_ns, variant="point"):
+    """Where the sensor frames sit: the source log's train is a point (every sensor at its
+    front end, as railfuse's simulator logs one without /vehicle), so each frame is at
+    `front_end`, which with `rear_end` is placed on a `base_link` at the middle of a 20 m
+    car, 0.5 m above the top of rail. Variants, to check that railfuse uses the transforms:
+    `antenna_back` puts gps 12 m behind the front end and 4 m up (where the data has it at
+    the front end); `cycle` makes base_link front_end's child too; `missing` leaves out the
+    radar's frame."""
     T = TS.types
 
-    def tf(child, x, y, z, q):
+    def tf(child, x, y, z):
         return T["geometry_msgs/msg/TransformStamped"](
             header=header(stamp_ns, "base_link"),
             child_frame_id=child,
-            transform=T["geometry_msgs/msg/Transform"](translation=vec(x, y, z), rotation=quat(*q)),
+            transform=T["geometry_msgs/msg/Transform"](translation=vec(x, y, z), rotation=quat(0.0, 0.0, 0.0, 1.0)),
         )
 
-    return T["tf2_msgs/msg/TFMessage"](
-        transforms=[
-            tf("gps", -3.2, 0.0, 3.9, (0.0, 0.0, 0.0, 1.0)),
-            tf("imu_link", 1.5, 0.2, 0.8, (0.0, 0.0, 0.7071067811865476, 0.7071067811865476)),
-        ]
-    )
+    front = (10.0, 0.0, -0.5)
+    frames = {f: front for f in ("gps", "imu_link", "radar", "wheel1", "wheel2")}
+    if variant == "antenna_back":
+        frames["gps"] = (-2.0, 0.0, 3.5)
+    elif variant == "missing":
+        del frames["radar"]
+    transforms = [tf("front_end", *front), tf("rear_end", -10.0, 0.0, -0.5)]
+    transforms += [tf(f, *at) for f, at in frames.items()]
+    if variant == "cycle":
+        back = T["geometry_msgs/msg/TransformStamped"](
+            header=header(stamp_ns, "front_end"),
+            child_frame_id="base_link",
+            transform=T["geometry_msgs/msg/Transform"](translation=vec(-10.0, 0.0, 0.5), rotation=quat(0.0, 0.0, 0.0, 1.0)),
+        )
+        transforms.append(back)
+    return T["tf2_msgs/msg/TFMessage"](transforms=transforms)
 
 
-def write(source, out, compression):
+def write(source, out, compression, variant="point"):
     counts = {}
     writer = Writer(Path(out))
     if compression != "none":
@@ -156,7 +173,7 @@ def write(source, out, compression):
             writer.write(conns[topic], t, TS.serialize_ros1(msg, msgtype))
             counts[topic] = counts.get(topic, 0) + 1
 
-        sensors(source, put)
+        sensors(source, put, variant)
     print(json.dumps(counts))
 
 
@@ -182,12 +199,12 @@ def write_mcap(source, out):
     print(json.dumps(counts))
 
 
-def sensors(source, put):
+def sensors(source, put, variant="point"):
     """A railfuse log's sensors as ROS 1 messages, handed to `put(topic, type, message, t)`."""
     first = True
     for topic, t, m in json_messages(source):
         if first:
-            put("/tf_static", "tf2_msgs/msg/TFMessage", tf_static(t), t)
+            put("/tf_static", "tf2_msgs/msg/TFMessage", tf_static(t, variant), t)
             first = False
         if topic == "/gnss/fix":
             put("/fix", "sensor_msgs/msg/NavSatFix", nav_sat_fix(m), t)
@@ -273,7 +290,7 @@ def unindex(path, out):
 if __name__ == "__main__":
     what = sys.argv[1]
     if what == "write":
-        write(sys.argv[2], sys.argv[3], sys.argv[4])
+        write(*sys.argv[2:6])
     elif what == "read":
         read(sys.argv[2])
     elif what == "write-mcap":

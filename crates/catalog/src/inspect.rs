@@ -80,9 +80,14 @@ pub struct LogSummary {
     pub metadata: Vec<(String, BTreeMap<String, String>)>,
     pub attachments: Vec<AttachmentSummary>,
     pub fused_pipelines: Vec<String>,
-    /// The train the run carries on `/vehicle` (its last), where it has one.
+    /// The train the run carries on `/vehicle` (its last), where it has one; else the one
+    /// its `/tf_static` places (every stamped topic whose frame is in the tree).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vehicle: Option<crate::messages::Vehicle>,
+    /// What was assumed to place the train of a `/tf_static` (named "from /tf_static"), or
+    /// why it places none.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub vehicle_notes: Vec<String>,
     /// Each input's clock against GNSS time, for a run of several inputs (as `--align gnss`
     /// applied them, or estimated to be shown).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -192,6 +197,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
     let mut attachments = Vec::new();
     let mut messages = 0u64;
     let mut vehicle = None;
+    let mut frames = crate::foreign::frames::FrameCollector::default();
     let mut gaps: HashMap<u16, Gaps> = HashMap::new();
     while let Some(record) = reader.next_with_part() {
         let (part, record) = record?;
@@ -213,6 +219,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
                 if m.is::<crate::messages::Vehicle>() {
                     vehicle = Some(m.decode(std::path::Path::new(&run.display()))?);
                 }
+                frames.add(&m);
             }
             LogRecord::Metadata { name, metadata: m } => metadata.push((name, m)),
             LogRecord::Attachment {
@@ -238,6 +245,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
         .filter_map(|c| topics::fused_pipeline_of(&c.topic))
         .map(str::to_owned)
         .collect();
+    let (vehicle, vehicle_notes) = recorded_vehicle(vehicle, &frames);
     let gaps_between_files = gaps_between(&files, run);
     let clocks = match (run.alignment(), run.inputs().len()) {
         (Some(a), _) => Some(a.clone()),
@@ -261,8 +269,24 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
         attachments,
         fused_pipelines: fused.into_iter().collect(),
         vehicle,
+        vehicle_notes,
         clocks,
     })
+}
+
+/// The run's `/vehicle`, else the train its `/tf_static` places, with where it comes from.
+fn recorded_vehicle(
+    logged: Option<crate::messages::Vehicle>,
+    frames: &crate::foreign::frames::FrameCollector,
+) -> (Option<crate::messages::Vehicle>, Vec<String>) {
+    if logged.is_some() {
+        return (logged, Vec::new());
+    }
+    match frames.vehicle("from /tf_static", None) {
+        None => (None, Vec::new()),
+        Some(Ok((v, notes))) => (Some(v), notes),
+        Some(Err(e)) => (None, vec![e.to_string()]),
+    }
 }
 
 /// Stretches no file covers, longer than [`GAP_BETWEEN_FILES_NS`], and the spans of the parts

@@ -131,19 +131,15 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
         let t = std::path::absolute(t).unwrap_or_else(|_| t.to_owned());
         writeln!(text, "track = {}", toml_string(&t.display().to_string())).unwrap();
     }
-    if let Some(mut v) = log_vehicle(run, &channels)? {
-        // The pipeline reads the log's /vehicle as it is; written out, it is there to edit
-        // (a calibrated mounting), for the sensors the pipeline reads.
-        v.sensors.retain(|m| sensor_topics.contains(&m.topic));
-        let table =
-            std::collections::BTreeMap::from([("vehicle", crate::config::VehicleConfig::of(&v))]);
-        let table = toml::to_string(&table).expect("a vehicle serialises");
-        write!(
-            text,
-            "\n# The log's /vehicle: the train's length, where each sensor sits and how it is \
-             turned.\n{table}"
-        )
-        .unwrap();
+    if let Some(v) = log_vehicle(run, &channels)? {
+        write_vehicle(&mut text, v, &sensor_topics, "The log's /vehicle");
+    } else if let Some((v, _)) = tf_vehicle(run, &channels, &sensor_topics)? {
+        write_vehicle(
+            &mut text,
+            v,
+            &sensor_topics,
+            "The train the log's /tf_static places",
+        );
     }
     write!(
         text,
@@ -159,6 +155,48 @@ pub fn default_config(run: &Run, track: Option<&Path>) -> Result<DefaultConfig> 
         used,
         left_out,
     })
+}
+
+/// `v` as the configuration's `[vehicle]` table under a comment saying whence it came: the
+/// pipeline reads the log's train as it is; written out, it is there to edit (a calibrated
+/// mounting), for the sensors the pipeline reads.
+fn write_vehicle(
+    text: &mut String,
+    mut v: railfuse_catalog::messages::Vehicle,
+    sensor_topics: &[String],
+    whence: &str,
+) {
+    v.sensors.retain(|m| sensor_topics.contains(&m.topic));
+    let table =
+        std::collections::BTreeMap::from([("vehicle", crate::config::VehicleConfig::of(&v))]);
+    let table = toml::to_string(&table).expect("a vehicle serialises");
+    write!(
+        text,
+        "\n# {whence}: the train's length, where each sensor sits and how it is turned.\n{table}"
+    )
+    .unwrap();
+}
+
+/// The train a ROS recording's `/tf_static` places, for a run without `/vehicle`: each of
+/// `topics` at its messages' `header.frame_id`, with what was assumed (the front end, the
+/// length); `None` where the run has no `/tf_static`. A cycle, a missing frame or a sensor
+/// placed off the train is refused.
+pub fn tf_vehicle(
+    run: &Run,
+    channels: &[Arc<ChannelInfo>],
+    topics: &[String],
+) -> Result<Option<(railfuse_catalog::messages::Vehicle, Vec<String>)>> {
+    use railfuse_catalog::foreign::frames;
+    let has = |t: &str| channels.iter().any(|c| c.topic == t);
+    if has(topics::VEHICLE) || !has(frames::TF_STATIC) {
+        return Ok(None);
+    }
+    let collected = frames::scan(run, topics)?;
+    match collected.vehicle("from /tf_static", Some(topics)) {
+        None => Ok(None),
+        Some(Ok(v)) => Ok(Some(v)),
+        Some(Err(e)) => Err(Error::Map(format!("{}: {e}", run.name().display()))),
+    }
 }
 
 /// The log's `/vehicle` (its first), where it has that channel.
@@ -218,6 +256,9 @@ fn sensor_of(
         return Err(
             "railfuse's Foxglove twin of a channel of its own, for Foxglove's panels".into(),
         );
+    }
+    if c.topic == railfuse_catalog::foreign::frames::TF_STATIC {
+        return Ok((None, "the sensors' frames: where each sits on the train".into()));
     }
     let schema = c.schema_name();
     let (kind, role, named) = match c.kind() {

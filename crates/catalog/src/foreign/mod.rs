@@ -9,6 +9,7 @@
 
 pub mod can;
 pub mod foxglove;
+pub mod frames;
 pub mod protobuf;
 pub mod ros1;
 pub mod ros2;

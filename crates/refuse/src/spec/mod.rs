@@ -259,6 +259,18 @@ impl Pipelines {
         })
     }
 
+    /// Every topic a pipeline reads, once each.
+    pub fn read_topics(&self) -> Vec<String> {
+        let mut topics: Vec<String> = self
+            .pipeline
+            .iter()
+            .flat_map(|p| p.sensors.iter().map(|s| s.topic.clone()))
+            .collect();
+        topics.sort();
+        topics.dedup();
+        topics
+    }
+
     /// The names of the pipelines, in file order.
     pub fn names(&self) -> impl Iterator<Item = &str> {
         self.pipeline.iter().map(|p| p.name.as_str())
