@@ -63,7 +63,7 @@ fn one_railway_run_gives_the_imu_mounting_to_the_goal_with_an_honest_sigma() {
     simulate(
         &[
             "--scenario",
-            "railway",
+            "default",
             "--seed",
             "21",
             "--duration",
@@ -111,7 +111,7 @@ fn one_railway_run_gives_the_imu_mounting_to_the_goal_with_an_honest_sigma() {
 fn a_simulator_unlike_the_preset_is_calibrated_within_the_sigma_it_states() {
     // Twice the vibration, an IMU whose biases wander three times faster than the
     // calibration's prior allows for, and an IMU installed up to 3° off the drawing.
-    let mut p = LineScenario::railway();
+    let mut p = LineScenario::default_run();
     if let Some(ride) = &mut p.ride {
         ride.resonances.iter_mut().for_each(|r| r.rms *= 2.0);
     }
@@ -122,7 +122,7 @@ fn a_simulator_unlike_the_preset_is_calibrated_within_the_sigma_it_states() {
     }
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("run.mcap");
-    railfuse_record::simulate(&Scenario::Railway(Box::new(p)), 22, Some(1200.0), &[], &log)
+    railfuse_record::simulate(&Scenario::Default(Box::new(p)), 22, Some(1200.0), &[], &log)
         .unwrap();
     // Looser than the preset's goal, and said so (the docs give the figures): the σ must still
     // cover the error.
@@ -140,7 +140,7 @@ fn a_run_it_cannot_calibrate_from_is_refused_in_one_line() {
     assert!(e.contains("has no IMU channel to calibrate"), "{e}");
     // An IMU named that the run does not have.
     let run = dir.path().join("run.mcap");
-    simulate(&["--scenario", "railway", "--duration", "60"], &run);
+    simulate(&["--scenario", "default", "--duration", "60"], &run);
     let e = fails(&["calibrate", s(&run), "--imu", "/imu/2", "-o", s(&out)]);
     assert!(
         e.contains("has no IMU channel /imu/2 (its IMU channels: /imu)"),

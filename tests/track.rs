@@ -14,11 +14,16 @@ use railfuse_catalog::track_geojson::read_track_file;
 
 /// Default runs (507 s each) of `seeds`, in `dir`.
 fn runs(dir: &Path, seeds: &[&str]) -> Vec<PathBuf> {
+    runs_in(dir, "default", seeds)
+}
+
+/// [`runs`] of the scenario `scenario`.
+fn runs_in(dir: &Path, scenario: &str, seeds: &[&str]) -> Vec<PathBuf> {
     seeds
         .iter()
         .map(|seed| {
             let p = dir.join(format!("run{seed}.mcap"));
-            simulate(&["--seed", seed], &p);
+            simulate(&["--scenario", scenario, "--seed", seed], &p);
             p
         })
         .collect()
@@ -27,7 +32,10 @@ fn runs(dir: &Path, seeds: &[&str]) -> Vec<PathBuf> {
 #[test]
 fn three_runs_give_the_true_line_to_centimetres_and_its_chainage() {
     let d = tempfile::tempdir().unwrap();
-    let logs = runs(d.path(), &["1", "2", "3"]);
+    // The flat world: on the railway a roof antenna leans into a canted curve by its height
+    // times the cant (0.4 m at 150 mm), which `track` does not take out yet (it needs the
+    // cant, which the runs' IMUs could give).
+    let logs = runs_in(d.path(), "flat", &["1", "2", "3"]);
     let truth: TrackMap = messages(&logs[0], "/track/map").remove(0);
     // A kilometre post: where the true line is at 1 km.
     let (e, n, _) = truth.locate(1000.0).unwrap();
@@ -446,7 +454,7 @@ fn the_height_profile_is_fitted_from_the_fixes_heights() {
         .map(|seed| {
             let p = d.path().join(format!("rail{seed}.mcap"));
             simulate(
-                &["--scenario", "railway", "--duration", "600", "--seed", seed],
+                &["--scenario", "default", "--duration", "600", "--seed", seed],
                 &p,
             );
             p

@@ -64,7 +64,7 @@ fn the_front_end_is_found_where_the_sensors_sit_and_a_lever_arm_left_out_costs_i
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("railway.mcap");
     simulate(
-        &["--scenario", "railway", "--duration", "300", "--seed", "5"],
+        &["--scenario", "default", "--duration", "300", "--seed", "5"],
         &log,
     );
     let truth = installed(&log);
@@ -96,7 +96,7 @@ fn a_vehicle_table_that_puts_a_sensor_off_the_train_or_on_an_unread_topic_is_ref
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("railway.mcap");
     simulate(
-        &["--scenario", "railway", "--duration", "20", "--seed", "1"],
+        &["--scenario", "default", "--duration", "20", "--seed", "1"],
         &log,
     );
     let mut v = installed(&log);
@@ -139,9 +139,12 @@ fn a_vehicle_table_that_puts_a_sensor_off_the_train_or_on_an_unread_topic_is_ref
 fn a_track_map_without_heights_is_flat_and_said_once_not_an_error() {
     let dir = tempfile::tempdir().unwrap();
     let (flat, railway) = (dir.path().join("flat.mcap"), dir.path().join("rail.mcap"));
-    simulate(&["--duration", "60", "--seed", "2"], &flat);
     simulate(
-        &["--scenario", "railway", "--duration", "60", "--seed", "2"],
+        &["--scenario", "flat", "--duration", "60", "--seed", "2"],
+        &flat,
+    );
+    simulate(
+        &["--scenario", "default", "--duration", "60", "--seed", "2"],
         &railway,
     );
     let out = dir.path().join("out.mcap");
@@ -162,7 +165,7 @@ fn every_pipeline_writes_the_whole_train_with_its_safe_front_end_at_the_stated_c
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("railway.mcap");
     simulate(
-        &["--scenario", "railway", "--duration", "120", "--seed", "2"],
+        &["--scenario", "default", "--duration", "120", "--seed", "2"],
         &log,
     );
     let out = dir.path().join("fused.mcap");
@@ -231,7 +234,7 @@ fn the_pipelines_in_the_plane_and_the_eddy_current_one_place_each_sensor_where_i
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("railway.mcap");
     simulate(
-        &["--scenario", "railway", "--duration", "150", "--seed", "6"],
+        &["--scenario", "default", "--duration", "150", "--seed", "6"],
         &log,
     );
     let truth = installed(&log);
@@ -276,7 +279,7 @@ fn the_installation_tolerance_keeps_the_front_ends_covariance_honest() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("railway.mcap");
     simulate(
-        &["--scenario", "railway", "--duration", "300", "--seed", "9"],
+        &["--scenario", "default", "--duration", "300", "--seed", "9"],
         &log,
     );
     let honesty = |vehicle: Option<&Path>, out: &str| {

@@ -2,8 +2,10 @@
 //! as one file (chunks copied), as the same file through the run reader (record by record),
 //! as 20 parts of it (read part after part, chunks copied), as the 20 parts through the run
 //! reader (the k-way merge), and as three recorders' files on their own clocks with
-//! `--align gnss` (the clock estimate's extra pass included): wall time and peak memory of
-//! each, each the whole `refuse` command in a child process.
+//! `--align gnss` (the clock estimate's extra pass included), and beside the one file the same
+//! run in the flat point-train world (`--scenario flat`: what the railway in three dimensions
+//! and the train's geometry cost): wall time and peak memory of each, each the whole `refuse`
+//! command in a child process.
 
 use std::path::{Path, PathBuf};
 
@@ -23,12 +25,17 @@ struct Logs {
     whole: PathBuf,
     parts: PathBuf,
     three: Vec<PathBuf>,
+    /// The same run flattened, a point train.
+    flat: PathBuf,
 }
 
 fn write_logs(dir: &Path, secs: f64) -> Result<Logs> {
     let preset = Scenario::preset("default").expect("a built-in preset");
     let whole = dir.join(format!("runs-{secs:.0}s.mcap"));
     let sim = simulate(&preset, 1, Some(secs), &[], &whole)?;
+    let flat = dir.join(format!("runs-{secs:.0}s-flat.mcap"));
+    let flat_preset = Scenario::preset("flat").expect("a built-in preset");
+    simulate(&flat_preset, 1, Some(secs), &[], &flat)?;
     let parts = dir.join(format!("runs-{secs:.0}s-parts"));
     let _ = std::fs::remove_dir_all(&parts);
     std::fs::create_dir_all(&parts)?;
@@ -54,6 +61,7 @@ fn write_logs(dir: &Path, secs: f64) -> Result<Logs> {
         whole,
         parts,
         three: written.files.iter().map(PathBuf::from).collect(),
+        flat,
     })
 }
 
@@ -96,12 +104,13 @@ pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
         whole,
         parts,
         three: three_files,
+        flat,
     } = write_logs(dir, secs)?;
     let fused = dir.join("runs.fused.mcap");
     let three: Vec<&Path> = three_files.iter().map(PathBuf::as_path).collect();
     // Publish time is the log time in a simulated run: the same order, read record by
     // record through the run reader.
-    let cases: [(&str, &[&Path], &[&str]); 5] = [
+    let cases: [(&str, &[&Path], &[&str]); 6] = [
         ("one file (chunks copied)", &[&whole], &[]),
         (
             "one file, through the run reader",
@@ -115,6 +124,7 @@ pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
             &["--time", "publish"],
         ),
         ("3 recorders, --align gnss", &three, &["--align", "gnss"]),
+        ("one file, flat and a point train", &[&flat], &[]),
     ];
     let rows = measure(&cases, repeat, &config, &fused)?;
     println!(
@@ -130,6 +140,11 @@ pub fn run(dir: &Path, secs: f64, repeat: u32) -> Result<()> {
     let pct = |a: f64, b: f64| (a / b - 1.0) * 100.0;
     let kib = |row: &(f64, Option<u64>)| row.1.map_or(f64::NAN, |k| k as f64);
     for (what, row, base) in [
+        (
+            "the railway in three dimensions against the flat point-train world",
+            rows[0].1,
+            rows[5].1,
+        ),
         ("20 parts against one file", rows[2].1, rows[0].1),
         (
             "the k-way merge of 20 parts against one file, both through the run reader",

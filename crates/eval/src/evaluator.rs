@@ -6,7 +6,7 @@ use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::log::{ChannelInfo, LogMessage, LogRecord};
 use railfuse_catalog::messages::{
     BalisePassage, ChannelMessage, Event, EventKind, FusedDiagnostics, FusedState, GateDecision,
-    GnssFix, GroundTruth, SafetyStatus, TrackMap, TrainPosition,
+    GnssFix, GroundTruth, SafetyStatus, SensorMount, TrackMap, TrainPosition, Vehicle,
 };
 use railfuse_catalog::run::{Run, RunReader};
 use railfuse_catalog::topics::{self, FusedChannel};
@@ -125,6 +125,8 @@ enum Role {
     Safety(usize),
     Train(usize),
     TrackMap,
+    /// The log's `/vehicle`: where a GNSS reference's antenna sits.
+    Vehicle,
     Events,
     Balise,
 }
@@ -207,12 +209,13 @@ impl Scored {
     }
 }
 
-/// A reference sample from a reference message, if it gives one.
+/// A reference sample from a reference message, if it gives one (a GNSS fix moved from the
+/// `antenna` to the front end, which the states are).
 pub fn reference_sample(
     kind: ReferenceKind,
     m: &railfuse_catalog::log::LogMessage<'_>,
     path: &Path,
-    map: Option<&TrackMap>,
+    (map, antenna): (Option<&TrackMap>, Option<&SensorMount>),
 ) -> Result<Option<(u64, f64, f64)>> {
     Ok(match kind {
         ReferenceKind::Truth => {
@@ -225,20 +228,35 @@ pub fn reference_sample(
         }
         ReferenceKind::Gnss => {
             let g: GnssFix = m.decode(path)?;
-            match (map.and_then(|t| t.chainage_of_fix(&g)), g.speed_mps) {
-                (Some((s, _, _)), Some(v)) => Some((g.stamp_ns, s, v)),
+            let front = |(s, _, _)| front_chainage(map, antenna, s);
+            match (
+                map.and_then(|t| t.chainage_of_fix(&g)).map(front),
+                g.speed_mps,
+            ) {
+                (Some(s), Some(v)) => Some((g.stamp_ns, s, v)),
                 _ => None,
             }
         }
     })
 }
 
-/// A GNSS reference fix on the track map, with its speed where it has one; `None` for a fix
-/// without a position, off the line's ends, or before there is a map.
+/// The front end's chainage when the GNSS `antenna` (the log's `/vehicle` places it) is
+/// matched on the map at `chainage_m`: a roof antenna 12.5 m behind the cab gives fixes
+/// 12.5 m behind the front end the states are.
+fn front_chainage(map: Option<&TrackMap>, antenna: Option<&SensorMount>, chainage_m: f64) -> f64 {
+    match (map, antenna) {
+        (Some(map), Some(a)) => a.front_chainage_of_point(map, chainage_m),
+        _ => chainage_m,
+    }
+}
+
+/// A GNSS reference fix on the track map, moved from the `antenna` to the front end, with its
+/// speed where it has one; `None` for a fix without a position, off the line's ends, or
+/// before there is a map.
 pub fn fix_sample(
     m: &railfuse_catalog::log::LogMessage<'_>,
     path: &Path,
-    map: Option<&TrackMap>,
+    (map, antenna): (Option<&TrackMap>, Option<&SensorMount>),
 ) -> Result<Option<FixSample>> {
     let g: GnssFix = m.decode(path)?;
     Ok(map.and_then(|t| {
@@ -247,7 +265,7 @@ pub fn fix_sample(
             stamp_ns: g.stamp_ns,
             log_time_ns: m.log_time_ns,
             fix_type: g.fix_type,
-            chainage_m: s,
+            chainage_m: front_chainage(map, antenna, s),
             speed_mps: g.speed_mps,
             variance_m2,
             lateral_m: t.lateral_of_fix(&g),
@@ -283,6 +301,8 @@ pub struct Evaluator {
     spans: Vec<Span>,
     filters: BTreeMap<String, String>,
     map: Option<TrackMap>,
+    /// Where the reference's GNSS antenna sits on the train (the log's `/vehicle`).
+    antenna: Option<SensorMount>,
     reference: Option<ReferenceKind>,
     smoothed_channels: bool,
     /// Smoothed channels whose states come straight from the replay, each with the reference
@@ -310,6 +330,7 @@ impl Evaluator {
             spans: Vec::new(),
             filters: BTreeMap::new(),
             map: None,
+            antenna: None,
             reference: None,
             smoothed_channels: false,
             smoothed_fed: BTreeMap::new(),
@@ -408,6 +429,8 @@ impl Evaluator {
             }
         } else if schema == TrackMap::SCHEMA_NAME {
             Some(Role::TrackMap)
+        } else if schema == Vehicle::SCHEMA_NAME {
+            Some(Role::Vehicle)
         } else if schema == Event::SCHEMA_NAME {
             Some(Role::Events)
         } else if schema == BalisePassage::SCHEMA_NAME {
@@ -446,14 +469,16 @@ impl Evaluator {
                 }
             }
             Some(Role::Reference(ReferenceKind::Gnss)) => {
-                if let Some(fix) = fix_sample(m, path, self.map.as_ref())? {
+                let place = (self.map.as_ref(), self.antenna.as_ref());
+                if let Some(fix) = fix_sample(m, path, place)? {
                     for x in self.scored.iter_mut().filter(|x| !x.smoothed) {
                         x.fixes.add_fix(fix, &self.spans);
                     }
                 }
             }
             Some(Role::Reference(kind)) => {
-                if let Some((t, s, v)) = reference_sample(kind, m, path, self.map.as_ref())? {
+                let place = (self.map.as_ref(), self.antenna.as_ref());
+                if let Some((t, s, v)) = reference_sample(kind, m, path, place)? {
                     self.reference_sample(t, s, v);
                 }
             }
@@ -462,6 +487,10 @@ impl Evaluator {
             Some(Role::Safety(_)) => self.safety_status(m.channel.id, &m.decode(path)?),
             Some(Role::Train(_)) => self.train_position(m.channel.id, &m.decode(path)?),
             Some(Role::TrackMap) => self.map = Some(m.decode(path)?),
+            Some(Role::Vehicle) => {
+                let v: Vehicle = m.decode(path)?;
+                self.antenna = v.mount(&self.reference_topic).cloned();
+            }
             Some(Role::Events) => {
                 let e: Event = m.decode(path)?;
                 if let Some((label, opens)) = window_of(&e) {
@@ -827,6 +856,7 @@ struct ReferenceWalk {
     topic: String,
     roles: BTreeMap<u16, Role>,
     map: Option<TrackMap>,
+    antenna: Option<SensorMount>,
     foreign: ForeignChannels,
     translated: Vec<u8>,
     done: bool,
@@ -842,6 +872,7 @@ impl ReferenceWalk {
             topic: topic.to_owned(),
             roles: BTreeMap::new(),
             map: None,
+            antenna: None,
             foreign: ForeignChannels::default(),
             translated: Vec::new(),
             done: false,
@@ -866,26 +897,34 @@ impl ReferenceWalk {
                         _ if c.schema_name() == TrackMap::SCHEMA_NAME => {
                             self.roles.insert(c.id, Role::TrackMap);
                         }
+                        _ if c.schema_name() == Vehicle::SCHEMA_NAME => {
+                            self.roles.insert(c.id, Role::Vehicle);
+                        }
                         _ => {}
                     }
                 }
                 LogRecord::Message(m) => match self.roles.get(&m.channel.id).copied() {
                     Some(Role::TrackMap) => self.map = Some(m.decode(&self.path)?),
+                    Some(Role::Vehicle) => {
+                        let v: Vehicle = m.decode(&self.path)?;
+                        self.antenna = v.mount(&self.topic).cloned();
+                    }
                     Some(Role::Reference(kind)) => {
                         let Ok(Some(m)) = self.foreign.message(m, &mut self.translated) else {
                             continue; // a foreign sample that does not read: a gap
                         };
                         let t = match kind {
                             ReferenceKind::Gnss => {
-                                let fix = fix_sample(&m, &self.path, self.map.as_ref())?;
+                                let place = (self.map.as_ref(), self.antenna.as_ref());
+                                let fix = fix_sample(&m, &self.path, place)?;
                                 fix.map(|f| {
                                     scored.fixes.add_fix(f, spans);
                                     f.stamp_ns
                                 })
                             }
                             _ => {
-                                let sample =
-                                    reference_sample(kind, &m, &self.path, self.map.as_ref())?;
+                                let place = (self.map.as_ref(), self.antenna.as_ref());
+                                let sample = reference_sample(kind, &m, &self.path, place)?;
                                 sample.map(|(t, s, v)| {
                                     scored.meter.add_reference(t, s, v, spans);
                                     t

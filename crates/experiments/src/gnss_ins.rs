@@ -1,6 +1,8 @@
 //! Source 003's experiment: `samples/seed003.toml` (plain KF, AKF, adaptive RLS and PU-RLS)
-//! over seeds on the `seed003` preset (the source's hardware, a 150 s GNSS loss) and on the
-//! default scenario (a 200 Hz IMU whose errors the pipelines' IMU model does not describe),
+//! over seeds on the `seed003` preset (the source's hardware, a 150 s GNSS loss), on
+//! `seed003_3d` (the same on the railway in three dimensions with a 104 m train), and on the
+//! default scenario and its flat twin (a 200 Hz IMU whose errors the pipelines' IMU model does
+//! not describe),
 //! scored in the plane: velocity-error standard deviation and maximum east and north, the mean
 //! absolute east and north position error, and the position-error standard deviation through
 //! the loss, each beside the source's figure and as the improvement over the plain KF.
@@ -29,9 +31,15 @@ pub const TRAIN_PIPELINES: [&str; 2] = ["kf_track", "kf_track_speed"];
 /// The 95 % interval of χ² with one degree of freedom.
 const NEES_95: (f64, f64) = (0.000_982, 5.024);
 
-/// The scenarios, and the GNSS loss each has (s from the start, length), if scored.
-pub const SCENARIOS: [(&str, Option<(f64, f64)>); 2] =
-    [("seed003", Some((330.0, 150.0))), ("default", None)];
+/// The scenarios, and the GNSS loss each has (s from the start, length), if scored: the
+/// source's experiment in its flat world and on the railway in three dimensions with a 104 m
+/// train, and the default run in both worlds.
+pub const SCENARIOS: [(&str, Option<(f64, f64)>); 4] = [
+    ("seed003", Some((330.0, 150.0))),
+    ("seed003_3d", Some((330.0, 150.0))),
+    ("default", None),
+    ("flat", None),
+];
 
 /// A running mean, variance and largest magnitude.
 #[derive(Debug, Default, Clone, Copy, Serialize)]

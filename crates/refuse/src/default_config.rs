@@ -258,7 +258,10 @@ fn sensor_of(
         );
     }
     if c.topic == railfuse_catalog::foreign::frames::TF_STATIC {
-        return Ok((None, "the sensors' frames: where each sits on the train".into()));
+        return Ok((
+            None,
+            "the sensors' frames: where each sits on the train".into(),
+        ));
     }
     let schema = c.schema_name();
     let (kind, role, named) = match c.kind() {

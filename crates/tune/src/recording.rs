@@ -11,7 +11,7 @@ use std::sync::Arc;
 use railfuse_catalog::foreign::ForeignChannels;
 use railfuse_catalog::log::{ChannelInfo, LogMessage, LogRecord};
 use railfuse_catalog::messages::{
-    ChannelMessage, Event, EventKind, FusedState, GateDecision, TrackMap,
+    ChannelMessage, Event, EventKind, FusedState, GateDecision, SensorMount, TrackMap,
 };
 use railfuse_catalog::reference_track::ReferenceSample;
 use railfuse_catalog::run::Run;
@@ -66,6 +66,9 @@ pub struct Recording {
     lag_s: f64,
     /// Sensor messages that did not decode (skipped, as `refuse` skips them).
     pub undecodable: u64,
+    /// The drawing's installation tolerance as a chainage variance, m², added to every
+    /// state's as refuse writes it (a consider term), so NEES is scored alike.
+    pub installation_variance_m2: f64,
 }
 
 /// What one replay of a log did, and how well.
@@ -326,7 +329,7 @@ impl<'a> Scorer<'a> {
                 stamp_ns: state.stamp_ns,
                 chainage_m: state.chainage_m,
                 speed_mps: state.speed_mps,
-                variance_m2: state.covariance[0],
+                variance_m2: state.covariance[0] + self.rec.installation_variance_m2,
                 lateral_m: None,
             };
             self.fixes.add_state(&at, &[]);
@@ -347,7 +350,14 @@ impl<'a> Scorer<'a> {
                 .add_reference(r.stamp_ns, r.chainage_m, r.speed_mps, &[]);
             self.next_reference += 1;
         }
-        self.meter.add_estimate(state, &[]);
+        match self.rec.installation_variance_m2 {
+            0.0 => self.meter.add_estimate(state, &[]),
+            v => {
+                let mut state = state.clone();
+                state.covariance[0] += v;
+                self.meter.add_estimate(&state, &[]);
+            }
+        }
     }
 
     fn finish(mut self, counts: PipelineCounts) -> Score {
@@ -382,11 +392,11 @@ fn reference_message(
     kind: eval::ReferenceKind,
     m: &LogMessage<'_>,
     path: &Path,
-    track: Option<&TrackMap>,
+    place: (Option<&TrackMap>, Option<&SensorMount>),
 ) -> Result<()> {
     if kind == eval::ReferenceKind::Gnss {
-        rec.fixes.extend(fix_sample(m, path, track)?);
-    } else if let Some((t, s, v)) = reference_sample(kind, m, path, track)? {
+        rec.fixes.extend(fix_sample(m, path, place)?);
+    } else if let Some((t, s, v)) = reference_sample(kind, m, path, place)? {
         rec.reference.push(ReferenceSample {
             stamp_ns: t,
             chainage_m: s,
@@ -445,6 +455,7 @@ impl<'a> Loader<'a> {
             end_ns: 0,
             lag_s: eval::lag_allowance_s(None) + spec.reorder_window_ns as f64 / 1e9,
             undecodable: 0,
+            installation_variance_m2: 0.0,
         };
         Self {
             path,
@@ -541,7 +552,9 @@ impl<'a> Loader<'a> {
             {
                 // Not shown to the pipeline; where it is the reference, it scores it.
                 if let Some(kind) = *kind {
-                    reference_message(rec, kind, &m, path, self.context.track.as_ref())?;
+                    let antenna = self.context.vehicle.mount(&m.channel.topic);
+                    let place = (self.context.track.as_ref(), antenna);
+                    reference_message(rec, kind, &m, path, place)?;
                 }
             }
             Some(Role::Sensor(si, model, _)) => {
@@ -563,7 +576,10 @@ impl<'a> Loader<'a> {
                 });
             }
             Some(Role::Map) => self.context.track = Some(m.decode(path)?),
-            Some(Role::Vehicle) => self.context.vehicle = m.decode(path)?,
+            Some(Role::Vehicle) => {
+                self.context.vehicle = m.decode(path)?;
+                rec.installation_variance_m2 = self.context.vehicle.installation_variance();
+            }
             Some(Role::Events) => {
                 let e: Event = m.decode(path)?;
                 let failed = match e.kind {
@@ -581,7 +597,9 @@ impl<'a> Loader<'a> {
                 rec.steps.push(Step::Device { device, failed });
             }
             Some(Role::Reference(kind)) => {
-                reference_message(rec, *kind, &m, path, self.context.track.as_ref())?
+                let antenna = self.context.vehicle.mount(&m.channel.topic);
+                let place = (self.context.track.as_ref(), antenna);
+                reference_message(rec, *kind, &m, path, place)?
             }
             None => {}
         }

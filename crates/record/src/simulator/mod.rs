@@ -294,7 +294,8 @@ impl SimLog {
             | Scenario::Seed002(p)
             | Scenario::Seed003(p)
             | Scenario::Seed004(p)
-            | Scenario::Railway(p) => p.train.clone(),
+            | Scenario::Flat(p)
+            | Scenario::Seed003In3d(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
             Scenario::Seed000LoopDrift(_) => {
                 "maglev (source 000 simulation, loop error growing with distance)".into()
@@ -376,7 +377,10 @@ pub fn simulate(
         | Scenario::Seed002(p)
         | Scenario::Seed003(p)
         | Scenario::Seed004(p)
-        | Scenario::Railway(p) => simulate_line(scenario, p, seed, duration_s, faults, &[], out),
+        | Scenario::Flat(p)
+        | Scenario::Seed003In3d(p) => {
+            simulate_line(scenario, p, seed, duration_s, faults, &[], out)
+        }
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {
             seed000::simulate(scenario, p, seed, duration_s, out)
         }

@@ -70,6 +70,10 @@ pub struct LineScenario {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "preset", rename_all = "snake_case")]
 pub enum Scenario {
+    /// The default run on a railway in three dimensions with a train of 104 m (see
+    /// [`LineScenario::default_run`]); logs of before the flat world had its own name
+    /// carry it as `railway`.
+    #[serde(alias = "railway")]
     Default(Box<LineScenario>),
     Seed000(Seed000Params),
     /// Source 000 with the loop's error growing with distance.
@@ -84,27 +88,42 @@ pub enum Scenario {
     /// Source 004's eddy-current experiment: shunting moves, hard acceleration and braking,
     /// long stops and line speed over an atlas of sleeper sections and switches.
     Seed004(Box<LineScenario>),
-    /// The default run on a railway in three dimensions with a train of 104 m (see
-    /// [`LineScenario::railway`]).
-    Railway(Box<LineScenario>),
+    /// The default run's line and drive in the plane, with a point train (see
+    /// [`LineScenario::flattened`]).
+    Flat(Box<LineScenario>),
+    /// Source 003's experiment on the default run's railway in three dimensions with its
+    /// 104 m train (see [`LineScenario::in_three_dimensions`]).
+    Seed003In3d(Box<LineScenario>),
 }
 
 impl Scenario {
     pub const NAMES: &'static [&'static str] = &[
         "default",
+        "flat",
         "seed000",
         "seed000_loop_drift",
         "seed001",
         "seed002",
         "seed003",
+        "seed003_3d",
         "seed004",
-        "railway",
     ];
 
     /// What each preset of [`Self::NAMES`] is, in a line, for help texts.
     pub fn describe(name: &str) -> &'static str {
         match name {
-            "default" => "a mixed line run near Modena with every sensor",
+            "default" => {
+                "a mixed line run near Modena with every sensor, on a railway as it is: \
+                 gradients, cant, vibration, a 104 m train with each sensor where it sits"
+            }
+            "flat" => {
+                "the default run's line and drive flattened: no gradient or cant, a point \
+                 train (every sensor at the front end, a level IMU), no vibration"
+            }
+            "seed003_3d" => {
+                "source 003's hardware and GNSS loss on the default run's railway in three \
+                 dimensions, with its 104 m train"
+            }
             "seed000" => "source 000's maglev simulation, its parameters exactly as stated",
             "seed000_loop_drift" => "seed000 with the loop's error growing with distance",
             "seed001" => "source 001's: INS, BeiDou and Doppler radar, 500 s",
@@ -120,10 +139,6 @@ impl Scenario {
                 "source 004's: shunting, hard acceleration and braking, long stops and line \
                  speed over sleeper sections and switches, with the eddy-current sensor pair"
             }
-            "railway" => {
-                "the default run on a real railway: gradients, cant, vibration, a 104 m train \
-                 with each sensor where it sits"
-            }
             _ => "",
         }
     }
@@ -137,7 +152,12 @@ impl Scenario {
             "seed002" => Some(Scenario::Seed002(Box::new(LineScenario::seed002()))),
             "seed003" => Some(Scenario::Seed003(Box::new(LineScenario::seed003()))),
             "seed004" => Some(Scenario::Seed004(Box::new(LineScenario::seed004()))),
-            "railway" => Some(Scenario::Railway(Box::new(LineScenario::railway()))),
+            "flat" => Some(Scenario::Flat(Box::new(
+                LineScenario::default_run().flattened(),
+            ))),
+            "seed003_3d" => Some(Scenario::Seed003In3d(Box::new(
+                LineScenario::seed003().in_three_dimensions(),
+            ))),
             _ => None,
         }
     }
@@ -151,7 +171,8 @@ impl Scenario {
             Scenario::Seed002(_) => "seed002",
             Scenario::Seed003(_) => "seed003",
             Scenario::Seed004(_) => "seed004",
-            Scenario::Railway(_) => "railway",
+            Scenario::Flat(_) => "flat",
+            Scenario::Seed003In3d(_) => "seed003_3d",
         }
     }
 
@@ -163,7 +184,8 @@ impl Scenario {
             | Scenario::Seed002(p)
             | Scenario::Seed003(p)
             | Scenario::Seed004(p)
-            | Scenario::Railway(p) => Some(p),
+            | Scenario::Flat(p)
+            | Scenario::Seed003In3d(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -175,7 +197,8 @@ impl Scenario {
             | Scenario::Seed002(p)
             | Scenario::Seed003(p)
             | Scenario::Seed004(p)
-            | Scenario::Railway(p) => Some(p),
+            | Scenario::Flat(p)
+            | Scenario::Seed003In3d(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -239,8 +262,10 @@ impl Scenario {
 
 impl LineScenario {
     /// A mixed run near Modena: three stations 5.7 km apart, curves, a tunnel, a correction
-    /// link outage, every sensor at a realistic rate.
-    pub fn default_run() -> Self {
+    /// link outage, every sensor at a realistic rate, on a flat line with a point train (every
+    /// sensor at the front end, an IMU level and aligned): the world of railfuse's figures
+    /// before its vehicle model, and the base the sources' scenarios keep.
+    pub fn flat_run() -> Self {
         LineScenario {
             train: "simulated EMU, 4 cars".into(),
             track: Self::default_track(),
@@ -302,23 +327,27 @@ impl LineScenario {
         }
     }
 
-    /// The default run on a railway as it is: gradients to 35 ‰ (one stretch at 40 ‰) on
-    /// vertical curves of 2 500 m, canted curves with transitions (cant ramps of 1:400, up
-    /// to 150 mm, deficiency up to 129 mm on a 900 m curve), the body's lean and vibration,
-    /// and a 104 m train with its sensors where they sit, installed within tolerances.
-    pub fn railway() -> Self {
-        let mut p = Self::default_run();
-        p.train = "simulated EMU, 4 cars, 104 m".into();
-        p.track.name = "Modena test line in three dimensions (simulated)".into();
-        // Room behind the start for the train's 104 m.
-        p.track.lead_in_m = 200.0;
+    /// The default run: [`Self::flat_run`] on a railway as it is: gradients to 35 ‰ (one
+    /// stretch at 40 ‰) on vertical curves of 2 500 m, canted curves with transitions (cant
+    /// ramps of 1:400, up to 150 mm, deficiency up to 129 mm on a 900 m curve), the body's
+    /// lean and vibration, and a 104 m train with its sensors where they sit, installed
+    /// within tolerances.
+    pub fn default_run() -> Self {
+        Self::flat_run().in_three_dimensions()
+    }
+
+    /// This run on the default run's railway in three dimensions: its line's curves with
+    /// transitions and cant, its gradients and vertical curves, the body's lean and
+    /// vibration, and the 104 m EMU with every sensor where it sits (its stations, sites and
+    /// sensors as they are).
+    pub fn in_three_dimensions(self) -> Self {
         let curve = |radius_m, angle_deg, transition_m, cant_mm| Segment::Curve {
             radius_m,
             angle_deg,
             transition_m,
             cant_mm,
         };
-        p.track.pattern = vec![
+        let pattern = vec![
             Segment::Straight { length_m: 1800.0 },
             curve(1500.0, 35.0, 60.0, 110.0),
             Segment::Straight { length_m: 2600.0 },
@@ -329,7 +358,7 @@ impl LineScenario {
             curve(900.0, -30.0, 70.0, 60.0),
         ];
         let g = |length_m, permille| GradientSection { length_m, permille };
-        p.track.vertical = Some(VerticalParams {
+        let vertical = VerticalParams {
             // Climbs 32 m and comes back down: the pattern repeats at the same height.
             sections: vec![
                 g(1500.0, 0.0),
@@ -342,10 +371,21 @@ impl LineScenario {
                 g(1600.0, -20.0),
             ],
             curve_radius_m: 2500.0,
-        });
-        p.vehicle = Some(VehicleParams::emu());
-        p.ride = Some(RideParams::coach());
-        p
+        };
+        LineScenario {
+            train: format!("{}, 104 m", self.train),
+            track: TrackParams {
+                name: format!("{} in three dimensions", self.track.name),
+                // Room behind the start for the train's 104 m.
+                lead_in_m: 200.0,
+                pattern,
+                vertical: Some(vertical),
+                ..self.track
+            },
+            vehicle: Some(VehicleParams::emu()),
+            ride: Some(RideParams::coach()),
+            ..self
+        }
     }
 
     /// The same run in the world railfuse assumed before: the same line in the plane, flat and
@@ -485,7 +525,7 @@ impl LineScenario {
     /// either side of each stop and two more out on the line. The eddy-current pair is the
     /// default run's (D = 0.25 m, 10 kHz).
     pub fn seed004() -> Self {
-        let base = Self::default_run();
+        let base = Self::flat_run();
         LineScenario {
             train: "simulated EMU, 4 cars (source 004 eddy-current experiment)".into(),
             track: TrackParams {
@@ -524,7 +564,7 @@ impl LineScenario {
     /// 0.1 m/s; radar 50 Hz, 0.05 m/s + 0.2 % of speed, 0.3 % scale error; a navigation-grade
     /// MEMS INS at 100 Hz, 0.02 m/s² noise, 5 mm/s² turn-on bias.
     pub fn seed001() -> Self {
-        let base = Self::default_run();
+        let base = Self::flat_run();
         LineScenario {
             train: "maglev (source 001 simulation)".into(),
             track: TrackParams {
@@ -603,7 +643,7 @@ impl LineScenario {
     /// 20 m with a lateral error of 0.1 m σ wandering over 200 m. The tunnel, the correction
     /// outage, both axles' slip, slide and distinct wheel wear are the default run's.
     pub fn seed002() -> Self {
-        let base = Self::default_run();
+        let base = Self::flat_run();
         LineScenario {
             train: "simulated EMU, 4 cars (source 002 line)".into(),
             track: TrackParams {

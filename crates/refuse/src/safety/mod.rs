@@ -106,6 +106,9 @@ pub struct SafetyPipeline {
     /// Where the position σ was last within `max_position_std_m` (S3c passed): the wide
     /// interval's allowance grows with the distance from there.
     last_useful_chainage_m: Option<f64>,
+    /// The drawing's installation tolerance as a chainage variance, m²: in `U_safe` as in the
+    /// written state's covariance (a lever arm off by it moves the front end for good).
+    installation_variance_m2: f64,
     /// Without a map, S1 still judges the fixes, in a plane around the first of them.
     local_origin: Option<GeodeticOrigin>,
     queue: ReorderQueue<Input>,
@@ -158,6 +161,7 @@ impl SafetyPipeline {
             unfitting_since: None,
             fix_dropped: false,
             last_useful_chainage_m: None,
+            installation_variance_m2: 0.0,
             local_origin: None,
             queue: ReorderQueue::default(),
             counts: PipelineCounts::default(),
@@ -290,6 +294,7 @@ impl SafetyPipeline {
     fn fix(&mut self, fix: &GnssFix, map: Option<&TrackMap>, ctx: &SensorContext) -> Option<Epoch> {
         let sensor = self.roles.gnss;
         let topic = self.topic(sensor).to_owned();
+        self.installation_variance_m2 = ctx.vehicle.installation_variance();
         let mut epoch = Epoch::new(fix.stamp_ns, &topic);
         let Some(map) = map else {
             return Some(self.fix_without_map(fix, epoch));
@@ -786,7 +791,8 @@ impl SafetyPipeline {
         if let Some(cover) = cover {
             degraded::degrade(&mut checks, &cover);
         }
-        let interval = safe_interval::safe_interval(place.chainage_m, chainage_std, s.eta, margin);
+        let interval_std = (chainage_std.powi(2) + self.installation_variance_m2).sqrt();
+        let interval = safe_interval::safe_interval(place.chainage_m, interval_std, s.eta, margin);
         epoch.safety = Some(status(epoch.stamp_ns, checks, Some(interval)));
         epoch
     }
