@@ -93,6 +93,7 @@ pub enum Scenario {
     Flat(Box<LineScenario>),
     /// Source 003's experiment on the default run's railway in three dimensions with its
     /// 104 m train (see [`LineScenario::in_three_dimensions`]).
+    #[serde(rename = "seed003_3d")]
     Seed003In3d(Box<LineScenario>),
 }
 
@@ -713,5 +714,28 @@ impl LineScenario {
             }),
             ..base
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_preset_is_logged_under_the_name_it_is_asked_by_and_reads_back() {
+        for name in Scenario::NAMES {
+            let preset = Scenario::preset(name).expect("a listed preset");
+            assert_eq!(preset.name(), *name);
+            assert!(!Scenario::describe(name).is_empty(), "{name}");
+            let json = serde_json::to_value(&preset).unwrap();
+            assert_eq!(json["preset"], *name, "{name}");
+            let back: Scenario = serde_json::from_value(json).unwrap();
+            assert_eq!(back, preset, "{name}");
+        }
+        // A log of the railway before it was the default scenario reads as the default.
+        let mut old = serde_json::to_value(Scenario::preset("default").unwrap()).unwrap();
+        old["preset"] = "railway".into();
+        let read: Scenario = serde_json::from_value(old).unwrap();
+        assert_eq!(read.name(), "default");
     }
 }
