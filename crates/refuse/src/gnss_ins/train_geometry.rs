@@ -97,9 +97,15 @@ impl GnssInsPipeline {
             let (f, w) = (m.specific_force_mps2, m.angular_rate_radps);
             return ([f[0], f[1]], w[2]);
         }
-        let mount = mount
-            .cloned()
-            .unwrap_or_else(|| SensorMount::at_front(self.topic(self.roles.imu)));
+        // Borrowed: this runs for every IMU sample (200 a second).
+        let at_front;
+        let mount = match mount {
+            Some(mount) => mount,
+            None => {
+                at_front = SensorMount::at_front(self.topic(self.roles.imu));
+                &at_front
+            }
+        };
         let f = mount.to_level(level, m.specific_force_mps2);
         let w = mount.to_level(level, m.angular_rate_radps);
         ([f.x, f.y], w.z)
