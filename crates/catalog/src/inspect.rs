@@ -188,6 +188,15 @@ fn file_summaries(run: &Run) -> Vec<FileSummary> {
         .collect()
 }
 
+impl FileSummary {
+    /// One more message of the file, logged at `t`.
+    fn add(&mut self, t: u64) {
+        self.messages += 1;
+        self.first_log_time_ns = Some(self.first_log_time_ns.map_or(t, |a| a.min(t)));
+        self.last_log_time_ns = Some(self.last_log_time_ns.map_or(t, |b| b.max(t)));
+    }
+}
+
 /// Reads the whole run once and summarises it.
 pub fn summarise(run: &Run) -> Result<LogSummary> {
     let mut reader = run.reader()?;
@@ -207,10 +216,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
             }
             LogRecord::Message(m) => {
                 messages += 1;
-                let (f, t) = (&mut files[part], m.log_time_ns);
-                f.messages += 1;
-                f.first_log_time_ns = Some(f.first_log_time_ns.map_or(t, |a| a.min(t)));
-                f.last_log_time_ns = Some(f.last_log_time_ns.map_or(t, |b| b.max(t)));
+                files[part].add(m.log_time_ns);
                 let c = channels
                     .get_mut(&m.channel.id)
                     .expect("the reader checks channel ids");
@@ -247,11 +253,7 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
         .collect();
     let (vehicle, vehicle_notes) = recorded_vehicle(vehicle, &frames);
     let gaps_between_files = gaps_between(&files, run);
-    let clocks = match (run.alignment(), run.inputs().len()) {
-        (Some(a), _) => Some(a.clone()),
-        (None, 1) => None,
-        (None, _) => Some(run.estimate_clocks()?),
-    };
+    let clocks = clocks_of(run)?;
     Ok(LogSummary {
         file: run.display(),
         file_bytes: run.total_bytes(),
@@ -271,6 +273,16 @@ pub fn summarise(run: &Run) -> Result<LogSummary> {
         vehicle,
         vehicle_notes,
         clocks,
+    })
+}
+
+/// Each input's clock against GNSS time for a run of several inputs: as `--align gnss`
+/// applied them, or estimated to be shown.
+fn clocks_of(run: &Run) -> Result<Option<crate::run::Alignment>> {
+    Ok(match (run.alignment(), run.inputs().len()) {
+        (Some(a), _) => Some(a.clone()),
+        (None, 1) => None,
+        (None, _) => Some(run.estimate_clocks()?),
     })
 }
 

@@ -242,6 +242,25 @@ pub fn channels(run: &Run) -> Result<Vec<Arc<ChannelInfo>>> {
     Ok(channels)
 }
 
+/// What a channel's topic alone says of it, whatever its schema: railfuse's own outputs are
+/// left out, `/tf_static` places the sensors.
+fn by_topic(topic: &str) -> Option<std::result::Result<(Option<Sensor>, String), String>> {
+    if topic.starts_with(topics::FUSED_PREFIX) {
+        return Some(Err("a fused output of an earlier re-fusion".into()));
+    }
+    if topic.starts_with(foxglove::TOPIC_PREFIX) {
+        return Some(Err(
+            "railfuse's Foxglove twin of a channel of its own, for Foxglove's panels".into(),
+        ));
+    }
+    (topic == railfuse_catalog::foreign::frames::TF_STATIC).then(|| {
+        Ok((
+            None,
+            "the sensors' frames: where each sits on the train".into(),
+        ))
+    })
+}
+
 /// The sensor a channel feeds and what it gives (`None` sensor: used as context), or why it
 /// is left out.
 fn sensor_of(
@@ -249,19 +268,8 @@ fn sensor_of(
     has_track: bool,
     reports: &GnssReports,
 ) -> std::result::Result<(Option<Sensor>, String), String> {
-    if c.topic.starts_with(topics::FUSED_PREFIX) {
-        return Err("a fused output of an earlier re-fusion".into());
-    }
-    if c.topic.starts_with(foxglove::TOPIC_PREFIX) {
-        return Err(
-            "railfuse's Foxglove twin of a channel of its own, for Foxglove's panels".into(),
-        );
-    }
-    if c.topic == railfuse_catalog::foreign::frames::TF_STATIC {
-        return Ok((
-            None,
-            "the sensors' frames: where each sits on the train".into(),
-        ));
+    if let Some(said) = by_topic(&c.topic) {
+        return said;
     }
     let schema = c.schema_name();
     let (kind, role, named) = match c.kind() {

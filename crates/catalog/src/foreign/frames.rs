@@ -138,7 +138,7 @@ impl FrameTree {
             let (root, pose) = self.in_root(frame)?;
             placed.push((topic, frame, root, pose));
         }
-        let Some((_, first_frame, root, _)) = placed.first() else {
+        let Some((_, _, root, _)) = placed.first() else {
             return Ok((Vehicle::point(), notes));
         };
         let body = match self.knows(FRONT_END) {
@@ -158,8 +158,7 @@ impl FrameTree {
         };
         for (topic, frame, root, pose) in &placed {
             if *root != body.0 {
-                let other = if body.0 == *root { first_frame } else { frame };
-                return Err(FramesProblem::Apart((*other).clone(), body.0.clone()));
+                return Err(FramesProblem::Apart((*frame).clone(), body.0.clone()));
             }
             let in_body = from_body * pose;
             let (roll, pitch, yaw) = in_body.rotation.euler_angles();
@@ -244,11 +243,6 @@ impl FrameCollector {
     /// Whether a `/tf_static` was read.
     pub fn has_transforms(&self) -> bool {
         !self.transforms.is_empty()
-    }
-
-    /// The transforms read.
-    pub fn transforms(&self) -> &[FrameTransform] {
-        &self.transforms
     }
 
     /// The train of the transforms read, with each of `topics` (every topic with a frame in
