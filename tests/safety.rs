@@ -39,13 +39,8 @@ fn safety(fused: &Path, pipeline: &str) -> Vec<SafetyStatus> {
 
 /// A 320 s default run of seed 1 in `dir`, with `extra` arguments (faults).
 fn default_run(dir: &Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
-    run_in("default", dir, name, extra)
-}
-
-/// [`default_run`] of the scenario `scenario`.
-fn run_in(scenario: &str, dir: &Path, name: &str, extra: &[&str]) -> std::path::PathBuf {
     let run = dir.join(name);
-    let mut args = vec!["--scenario", scenario, "--seed", "1", "--duration", "320"];
+    let mut args = vec!["--seed", "1", "--duration", "320"];
     args.extend_from_slice(extra);
     simulate(&args, &run);
     run
@@ -69,10 +64,7 @@ fn refuse(run: &Path) -> std::path::PathBuf {
 /// containment over the whole run.
 fn check_failing_in(fault: &str, from_s: u64, to_s: u64, check: &str) -> (usize, usize, f64) {
     let d = tempfile::tempdir().unwrap();
-    // The flat world: on the railway ekf_safety_cal's first seconds of motion out of the
-    // station (parallel track, roof antenna 12.5 m back) give usable intervals that miss
-    // the front end (open: issue 58's note), which is not what these checks are about.
-    let run = run_in("flat", d.path(), "faulted.mcap", &["--fault", fault]);
+    let run = default_run(d.path(), "faulted.mcap", &["--fault", fault]);
     let fused = refuse(&run);
     let truth: Vec<GroundTruth> = messages(&fused, "/truth");
     let start = truth[0].stamp_ns;
@@ -505,9 +497,7 @@ fn degraded_modes_widen_the_interval_through_the_tunnel_and_judge_the_first_odom
 #[test]
 fn the_step_test_catches_a_3_m_map_offset_that_s4_alone_lets_through() {
     let d = tempfile::tempdir().unwrap();
-    // The flat world, as in `check_failing_in`.
-    let run = run_in(
-        "flat",
+    let run = default_run(
         d.path(),
         "offset.mcap",
         &["--fault", "map:offset=3:300:315"],

@@ -113,12 +113,12 @@ impl SiteParams {
     /// The map as surveyed: the true centre line resampled with its lateral survey error,
     /// and a parallel track beside each station.
     pub fn surveyed(&self, truth: &TrackMap, rng: &mut impl Rng) -> TrackMap {
-        let length = truth.length_m();
+        let (start, length) = (first_chainage(truth), truth.length_m());
         let step = self.map_survey_spacing_m.max(1.0);
         let phi = (-step / self.map_survey_correlation_m.max(step)).exp();
         let mut error = gauss(rng, self.map_survey_std_m);
         let mut vertices = Vec::new();
-        let mut s = 0.0;
+        let mut s = start;
         loop {
             vertices.push(left_of(truth, s, error));
             if s >= length {
@@ -132,7 +132,7 @@ impl SiteParams {
             .iter()
             .map(|st| {
                 let (a, b) = (
-                    (st.chainage_m - self.station_track_half_length_m).max(0.0),
+                    (st.chainage_m - self.station_track_half_length_m).max(start),
                     (st.chainage_m + self.station_track_half_length_m).min(length),
                 );
                 let n = ((b - a) / step).ceil().max(1.0) as usize;
@@ -148,11 +148,31 @@ impl SiteParams {
                 }
             })
             .collect();
-        TrackMap {
+        let mut map = TrackMap {
             vertices,
             other_tracks,
             ..truth.clone()
-        }
+        };
+        with_profile_of(truth, &mut map);
+        map
+    }
+}
+
+/// Where `map`'s main line starts: a line with a lead-in starts before chainage 0.
+fn first_chainage(map: &TrackMap) -> f64 {
+    map.vertices.first().map_or(0.0, |v| v.chainage_m)
+}
+
+/// `map`'s vertices (each track's) given `truth`'s height and cant at their chainage where
+/// `truth` has them: a survey errs across the track, and the line's gradient and cant are the
+/// truth's (without them a pipeline would take a hilly, canted line for a flat one).
+fn with_profile_of(truth: &TrackMap, map: &mut TrackMap) {
+    let (heights, cant) = (truth.has_heights(), truth.has_cant());
+    let tracks = std::iter::once(&mut map.vertices)
+        .chain(map.other_tracks.iter_mut().map(|t| &mut t.vertices));
+    for v in tracks.flatten() {
+        v.height_m = heights.then(|| truth.height_at(v.chainage_m));
+        v.cant_m = cant.then(|| truth.cant_at(v.chainage_m));
     }
 }
 
@@ -161,15 +181,15 @@ impl SiteParams {
 /// joined to the good survey would: the line resampled every `spacing_m`, and at the ends of
 /// each stretch and its ramps.
 pub fn with_offsets(map: &TrackMap, stretches: &[(f64, f64, f64)], spacing_m: f64) -> TrackMap {
-    let length = map.length_m();
+    let (start, length) = (first_chainage(map), map.length_m());
     let r = OFFSET_RAMP_M;
     let mut marks: Vec<f64> = stretches
         .iter()
         .flat_map(|&(a, b, _)| [a - r, a, b, b + r])
         .collect();
-    let n = (length / spacing_m).ceil() as usize;
-    marks.extend((0..=n).map(|k| (k as f64 * spacing_m).min(length)));
-    marks.retain(|s| (0.0..=length).contains(s));
+    let n = ((length - start) / spacing_m).ceil() as usize;
+    marks.extend((0..=n).map(|k| (start + k as f64 * spacing_m).min(length)));
+    marks.retain(|s| (start..=length).contains(s));
     marks.sort_by(f64::total_cmp);
     marks.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
     let vertices = marks
@@ -182,10 +202,12 @@ pub fn with_offsets(map: &TrackMap, stretches: &[(f64, f64, f64)], spacing_m: f6
             left_of(map, s, left)
         })
         .collect();
-    TrackMap {
+    let mut shifted = TrackMap {
         vertices,
         ..map.clone()
-    }
+    };
+    with_profile_of(map, &mut shifted);
+    shifted
 }
 
 /// The length over which a map offset eases in and out, m.
@@ -245,6 +267,39 @@ mod tests {
         );
         assert_eq!((at(455.0), at(555.0), at(600.0)), (5.0, 0.0, 0.0));
         assert_eq!(m.check(), Ok(()));
+    }
+
+    /// Without the line's heights and cant a pipeline takes a hilly line for a flat one (and
+    /// leaves a 40 ‰ gradient's 0.39 m/s² in its dead reckoning); without its lead-in a long
+    /// train's rear sensors start off the map.
+    #[test]
+    fn the_surveyed_and_the_offset_maps_keep_the_lines_lead_in_heights_and_cant() {
+        let v = |c: f64, up: f64, cant: f64| TrackVertex {
+            height_m: Some(up),
+            cant_m: Some(cant),
+            ..TrackVertex::at(c, c, 0.0)
+        };
+        let station = Station {
+            name: "A".into(),
+            chainage_m: 500.0,
+        };
+        // A lead-in before chainage 0, as the railway's (room behind the start for the train).
+        let truth = line(
+            vec![v(-100.0, -2.0, 0.0), v(1000.0, 20.0, 0.15)],
+            vec![station],
+        );
+        let surveyed = params().surveyed(&truth, &mut rand_chacha::ChaCha8Rng::seed_from_u64(3));
+        let offset = with_offsets(&truth, &[(300.0, 455.0, 5.0)], 50.0);
+        for m in [&surveyed, &offset] {
+            assert_eq!(m.check(), Ok(()));
+            assert_eq!(m.vertices[0].chainage_m, -100.0, "the lead-in is kept");
+            for c in [110.0, 500.0, 930.0] {
+                assert!((m.height_at(c) - truth.height_at(c)).abs() < 1e-9, "at {c}");
+                assert!((m.cant_at(c) - truth.cant_at(c)).abs() < 1e-9, "at {c}");
+            }
+        }
+        let side = &surveyed.other_tracks[0].vertices[0];
+        assert_eq!(side.height_m, Some(2.0));
     }
 
     #[test]
