@@ -153,6 +153,22 @@ impl SensorMount {
         level.map_or(body, |r| r * body)
     }
 
+    /// The rate at which the train's heading turns, counter-clockwise about up, from this
+    /// gyro's reading: the body's rates `(p, q, r)` (turned by the mounting) at the level's roll
+    /// `φ` and pitch `θ` give the Euler angles' yaw rate `(q sin φ + r cos φ) / cos θ`.
+    ///
+    /// Not the rate vector's vertical component ([`Self::to_level`]'s z), which is short of it
+    /// by `φ̇ sin θ`: on a gradient the roll rate of a cant ramp has a vertical share that
+    /// turns nothing. Taken as a turn it would leave the heading off by the cant's change times
+    /// the gradient for the length of the curve (0.1 rad of cant on 35 ‰: 0.2°, 3 m across
+    /// the track after a 900 m curve).
+    pub fn heading_rate(&self, level: Option<Rotation3<f64>>, reading: [f64; 3]) -> f64 {
+        let body = self.mounting() * Vector3::from(reading);
+        let Some(level) = level else { return body.z };
+        let (roll, pitch, _) = level.euler_angles();
+        (body.y * roll.sin() + body.z * roll.cos()) / pitch.cos()
+    }
+
     /// Where the sensor is and how it is turned with the front end at `front_chainage_m` of
     /// `map`'s main line and the body leaning `body_roll_rad` (see [`Vehicle::body_roll`]).
     pub fn pose(
@@ -422,6 +438,47 @@ mod tests {
         // Without the track's attitude, the cant's and the lean's roll put gravity sideways.
         let f = imu.to_level(None, reading.into());
         assert!((f.y - (0.1 + lean) * GRAVITY_MPS2).abs() < 0.01, "{f}");
+    }
+
+    /// A train running up 35 ‰ through a cant ramp (0 to 150 mm over 60 m) on a straight: the
+    /// body rolls and does not turn. The heading rate from its gyro is nil; the rate vector's
+    /// vertical component is the roll rate's share `φ̇ sin θ`.
+    #[test]
+    fn a_cant_ramp_on_a_gradient_rolls_the_body_without_turning_it() {
+        let v = |s: f64, cant: f64| TrackVertex {
+            height_m: Some(0.035 * s),
+            cant_m: Some(cant),
+            ..TrackVertex::at(s, s, 0.0)
+        };
+        let map = TrackMap {
+            vertices: vec![v(0.0, 0.0), v(500.0, 0.0), v(560.0, 0.15), v(1000.0, 0.15)],
+            ..canted_line()
+        };
+        let imu = SensorMount {
+            mounting_deg: [1.5, -2.0, 3.0],
+            ..SensorMount::at_front("/imu")
+        };
+        let (speed, at) = (30.0, 530.0);
+        let motion = crate::train_motion::AlongTrack {
+            chainage_m: at,
+            speed_mps: speed,
+            acceleration_mps2: 0.0,
+        };
+        let m = crate::train_motion::point_motion(&map, &train(), motion, &imu, 0.01);
+        // What the gyro reads: the body's rate turned into the misaligned sensor.
+        let reading = imu.mounting().inverse() * m.angular_rate;
+        let level = train().level_on(&map, at, speed);
+        let turn = imu.heading_rate(level, reading.into());
+        assert!(turn.abs() < 1e-6, "{turn} rad/s of turn on a straight");
+        // The cant's roll, and the body's lean towards the low rail with it (0.015 rad per m/s²
+        // of the cant's unbalanced gravity); the nose is up, a negative pitch.
+        let roll_rate = (0.15f64 / 1.5).asin() / 60.0 * speed * (1.0 + 0.015 * GRAVITY_MPS2);
+        let vertical = imu.to_level(level, reading.into()).z;
+        let share = roll_rate * 0.035f64.atan().sin();
+        assert!(
+            (vertical - share).abs() < 0.02 * share,
+            "{vertical} vs {share}"
+        );
     }
 
     #[test]

@@ -295,7 +295,8 @@ impl SimLog {
             | Scenario::Seed003(p)
             | Scenario::Seed004(p)
             | Scenario::Flat(p)
-            | Scenario::Seed003In3d(p) => p.train.clone(),
+            | Scenario::Seed003In3d(p)
+            | Scenario::Seed003In3dFlat(p) => p.train.clone(),
             Scenario::Seed000(_) => "maglev (source 000 simulation)".into(),
             Scenario::Seed000LoopDrift(_) => {
                 "maglev (source 000 simulation, loop error growing with distance)".into()
@@ -378,7 +379,8 @@ pub fn simulate(
         | Scenario::Seed003(p)
         | Scenario::Seed004(p)
         | Scenario::Flat(p)
-        | Scenario::Seed003In3d(p) => {
+        | Scenario::Seed003In3d(p)
+        | Scenario::Seed003In3dFlat(p) => {
             simulate_line(scenario, p, seed, duration_s, faults, &[], out)
         }
         Scenario::Seed000(p) | Scenario::Seed000LoopDrift(p) => {

@@ -95,6 +95,10 @@ pub enum Scenario {
     /// 104 m train (see [`LineScenario::in_three_dimensions`]).
     #[serde(rename = "seed003_3d")]
     Seed003In3d(Box<LineScenario>),
+    /// [`Self::Seed003In3d`]'s line and drive flattened with a point train: the flat world to
+    /// compare it with, as [`Self::Flat`] is the default's.
+    #[serde(rename = "seed003_3d_flat")]
+    Seed003In3dFlat(Box<LineScenario>),
 }
 
 impl Scenario {
@@ -107,6 +111,7 @@ impl Scenario {
         "seed002",
         "seed003",
         "seed003_3d",
+        "seed003_3d_flat",
         "seed004",
     ];
 
@@ -124,6 +129,10 @@ impl Scenario {
             "seed003_3d" => {
                 "source 003's hardware and GNSS loss on the default run's railway in three \
                  dimensions, with its 104 m train"
+            }
+            "seed003_3d_flat" => {
+                "seed003_3d's line and drive flattened, a point train: the flat world to \
+                 compare seed003_3d with"
             }
             "seed000" => "source 000's maglev simulation, its parameters exactly as stated",
             "seed000_loop_drift" => "seed000 with the loop's error growing with distance",
@@ -159,6 +168,9 @@ impl Scenario {
             "seed003_3d" => Some(Scenario::Seed003In3d(Box::new(
                 LineScenario::seed003().in_three_dimensions(),
             ))),
+            "seed003_3d_flat" => Some(Scenario::Seed003In3dFlat(Box::new(
+                LineScenario::seed003().in_three_dimensions().flattened(),
+            ))),
             _ => None,
         }
     }
@@ -174,6 +186,7 @@ impl Scenario {
             Scenario::Seed004(_) => "seed004",
             Scenario::Flat(_) => "flat",
             Scenario::Seed003In3d(_) => "seed003_3d",
+            Scenario::Seed003In3dFlat(_) => "seed003_3d_flat",
         }
     }
 
@@ -186,7 +199,8 @@ impl Scenario {
             | Scenario::Seed003(p)
             | Scenario::Seed004(p)
             | Scenario::Flat(p)
-            | Scenario::Seed003In3d(p) => Some(p),
+            | Scenario::Seed003In3d(p)
+            | Scenario::Seed003In3dFlat(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }
@@ -199,7 +213,8 @@ impl Scenario {
             | Scenario::Seed003(p)
             | Scenario::Seed004(p)
             | Scenario::Flat(p)
-            | Scenario::Seed003In3d(p) => Some(p),
+            | Scenario::Seed003In3d(p)
+            | Scenario::Seed003In3dFlat(p) => Some(p),
             Scenario::Seed000(_) | Scenario::Seed000LoopDrift(_) => None,
         }
     }

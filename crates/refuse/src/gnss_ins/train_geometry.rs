@@ -13,8 +13,8 @@
 //!   an IMU under it on a 1 km curve at 30 m/s) is left in the fix's noise.
 //! - **The IMU's readings** are turned into the body by its mounting and into the level frame
 //!   by the map's gradient, cant and the body's lean where the navigation point is
-//!   ([`SensorMount::to_level`]): the planar navigation then sees the horizontal acceleration
-//!   and the turn about the vertical, as on a flat line (map-aided: the pipeline has no
+//!   ([`SensorMount::to_level`], [`SensorMount::heading_rate`]): the planar navigation then
+//!   sees the horizontal acceleration and the heading's turn, as on a flat line (map-aided: the pipeline has no
 //!   attitude of its own; without a map only the mounting is taken out).
 //! - **The output** is the front end's: the navigation point moved forward by `−x_imu` along
 //!   the track (on the map) or the heading, its covariance with the heading error's share of
@@ -107,8 +107,7 @@ impl GnssInsPipeline {
             }
         };
         let f = mount.to_level(level, m.specific_force_mps2);
-        let w = mount.to_level(level, m.angular_rate_radps);
-        ([f.x, f.y], w.z)
+        ([f.x, f.y], mount.heading_rate(level, m.angular_rate_radps))
     }
 
     /// The front end's chainage (the navigation point's, matched on `map`, plus `−x_imu`; the
