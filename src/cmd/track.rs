@@ -296,6 +296,16 @@ fn print_summary(s: &Summary, out: &std::path::Path) {
     }
     print!("{t}");
     for r in &s.runs {
+        if let Some(l) = r.antenna_lean.filter(|l| l.moved > 0) {
+            println!(
+                "{}: the antenna's lean taken out of {} fixes with the IMU's roll, up to {:.2} m \
+                 ({:+.2}° of roll on the straights taken as the rest of the IMU's mounting)",
+                r.name,
+                l.moved,
+                l.max_m,
+                l.straight_roll_rad.to_degrees()
+            );
+        }
         for e in &r.leaves_line {
             let at = |x: Option<f64>| x.map_or("-".to_owned(), km);
             println!(

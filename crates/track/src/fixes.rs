@@ -13,6 +13,7 @@ use railfuse_catalog::messages::{
 use railfuse_catalog::run::Run;
 use railfuse_eval::FixQuality;
 
+use crate::lean::TiltRecorder;
 use crate::motion::{MotionRecorder, MotionStep};
 
 /// A position fix in the local plane.
@@ -52,6 +53,8 @@ pub struct RunFixes {
     pub courses: Vec<Course>,
     /// Its points are a 2-D pipeline's fused states, not GNSS fixes.
     pub fused: bool,
+    /// What taking the antenna's lean out of its fixes did ([`crate::lean`]).
+    pub lean: Option<crate::lean::Lean>,
 }
 
 /// Why a run's fixes could not be read.
@@ -91,8 +94,8 @@ struct Read {
 struct Sources {
     gnss: HashMap<u16, (String, Vec<Read>)>,
     fused: HashMap<u16, (String, Vec<Read>)>,
-    /// The motion sensors' channels, by kind.
-    motion: HashMap<u16, MessageKind>,
+    /// The motion sensors' channels: kind and topic.
+    motion: HashMap<u16, (MessageKind, String)>,
     /// The installation drawing's channel (`/vehicle`).
     vehicle: Option<u16>,
 }
@@ -111,7 +114,7 @@ impl Sources {
             }
             Some(MessageKind::Vehicle) => self.vehicle = Some(c.id),
             Some(k @ (MessageKind::Imu | MessageKind::Odometer | MessageKind::RadarSpeed)) => {
-                self.motion.insert(c.id, k);
+                self.motion.insert(c.id, (k, c.topic.clone()));
             }
             _ => {}
         }
@@ -143,6 +146,7 @@ pub fn read_fixes(
     let mut sources = Sources::default();
     let mut motion = MotionRecorder::default();
     let mut vehicle = None::<Vehicle>;
+    let mut tilt = TiltRecorder::default();
     let mut buf = Vec::new();
     while let Some(record) = reader.next() {
         match record? {
@@ -154,10 +158,13 @@ pub fn read_fixes(
                 sources.channel(&c, topic.is_none_or(|t| t == c.topic));
             }
             LogRecord::Message(m) => {
-                if let Some(kind) = sources.motion.get(&m.channel.id) {
+                if let Some((kind, topic)) = sources.motion.get(&m.channel.id) {
                     // A motion sample that does not decode is a gap in it.
                     match kind {
-                        MessageKind::Imu => m.decode::<Imu>(&path).map(|x| motion.imu(&x)),
+                        MessageKind::Imu => m.decode::<Imu>(&path).map(|x| {
+                            motion.imu(&x);
+                            tilt.imu(topic, &x);
+                        }),
                         MessageKind::Odometer => {
                             m.decode::<Odometer>(&path).map(|x| motion.odometer(&x))
                         }
@@ -197,11 +204,16 @@ pub fn read_fixes(
         .as_ref()
         .and_then(|v| v.mount(&topic))
         .map_or(0.0, |m| m.lever_arm_m[2]);
-    let mut run = keep_quality(name, topic, read, quality)?;
+    let mut run = keep_quality(name, topic.clone(), read, quality)?;
     for f in &mut run.fixes {
         f.up_m = f.up_m.map(|u| u - antenna_z);
     }
     run.motion = motion.finish();
+    let (imu, steps) = tilt.finish();
+    if let (Some(v), Some(imu)) = (&vehicle, imu) {
+        let (imu, antenna) = (v.mount_or_front(&imu), v.mount_or_front(&topic));
+        run.lean = crate::lean::take_out(&mut run, &steps, &imu, &antenna);
+    }
     Ok(run)
 }
 
@@ -363,5 +375,6 @@ fn keep_quality(
         motion: Vec::new(),
         courses,
         fused,
+        lean: None,
     })
 }

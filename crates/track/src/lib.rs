@@ -10,7 +10,8 @@
 //! fixes, where runs disagree and where a run leaves the line. Where a run has no fix, or
 //! its fixes bend where its gyro says the train did not (a steady multipath pull,
 //! [`multipath`]), its own motion crosses ([`bridge`], tied to its fixes, course and
-//! standstills by [`tie`]).
+//! standstills by [`tie`]). A roof antenna's lean in canted curves is taken out of its fixes
+//! first, with the roll the run's IMU measured ([`lean`]).
 //!
 //! Why a spline and not clothoids: a railway's alignment is straights, transition curves and
 //! arcs, and fitting those segments needs the segmentation right first (where each begins is
@@ -25,6 +26,7 @@ pub mod chainage;
 pub mod error;
 pub mod fit;
 pub mod fixes;
+pub mod lean;
 pub mod line;
 pub mod motion;
 pub mod multipath;

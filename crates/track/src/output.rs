@@ -56,6 +56,8 @@ pub struct RunSummary {
     pub direction: &'static str,
     pub lateral_rms_m: f64,
     pub leaves_line: Vec<Excursion>,
+    /// What taking its antenna's lean in canted curves out of its fixes did.
+    pub antenna_lean: Option<crate::lean::Lean>,
 }
 
 impl Summary {
@@ -146,6 +148,7 @@ impl RunSummary {
                     ..e.clone()
                 })
                 .collect(),
+            antenna_lean: r.antenna_lean,
         }
     }
 }

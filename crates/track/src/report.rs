@@ -53,6 +53,8 @@ pub struct RunReport {
     /// absent where it does not come back).
     pub leaves_line: Vec<Excursion>,
     pub lateral_rms_m: f64,
+    /// What taking its antenna's lean out of its fixes did.
+    pub antenna_lean: Option<crate::lean::Lean>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -252,6 +254,7 @@ fn run_report(run: &RunFixes, used: &[Option<OnLine>], on_line: &[Option<OnLine>
         increasing: increasing(on_line),
         leaves_line: excursions(run, on_line),
         lateral_rms_m: rms(used.iter().flatten().map(|m| m.lateral_m)),
+        antenna_lean: run.lean,
     }
 }
 

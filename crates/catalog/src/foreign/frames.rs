@@ -67,9 +67,8 @@ impl FrameTree {
             let [x, y, z, w] = t.rotation_xyzw;
             let q = Quaternion::new(w, x, y, z);
             let norm = q.norm();
-            if !(norm.is_finite() && (norm - 1.0).abs() < 1e-3)
-                || !t.translation_m.iter().all(|v| v.is_finite())
-            {
+            let unit = norm.is_finite() && (norm - 1.0).abs() < 1e-3;
+            if !(unit && t.translation_m.iter().all(|v| v.is_finite())) {
                 return Err(FramesProblem::Rotation(child.to_owned()));
             }
             let pose = Isometry3::from_parts(

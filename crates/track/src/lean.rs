@@ -1,0 +1,253 @@
+//! The roof antenna's lean, taken out of its fixes before the centre line is fitted through
+//! them.
+//!
+//! An antenna `z` above the rail leans with the body: in a curve with the cant's and the
+//! body's roll `φ` it sits `z sin φ` towards the inside of the curve (0.4 m for 4 m and 150 mm
+//! of cant), and a line fitted through its fixes runs that far inside the track. A run's IMU
+//! gives `φ` without a map: what it reads across and up in the body is the level frame's
+//! specific force (the centripetal `v ω` across, gravity `g` up) turned by the roll, so
+//!
+//! ```text
+//! φ = atan2(f_y, f_z) − atan2(v ω_z, g)
+//! ```
+//!
+//! with the IMU's readings turned into the body by its mounting (the drawing's, or
+//! `calibrate`'s), `v` the receiver's Doppler speed and `ω_z` the gyro's rate about up. What is
+//! left of the mounting's roll is the roll on the straights, where a line has no cant: their
+//! median is taken off. Each fix is then moved across the track, along its course, by the
+//! antenna's place across the level frame, `y cos φ − z sin φ`; a fix with no course within
+//! [`MAX_COURSE_AGE_S`] (a train that has not moved yet) is left where it is.
+
+use nalgebra::Vector3;
+use railfuse_catalog::messages::{Imu, SensorMount};
+use railfuse_catalog::vehicle::GRAVITY_MPS2;
+
+use crate::fixes::{Course, RunFixes};
+use crate::multipath::median;
+
+/// IMU samples are averaged over steps this long, ns.
+const STEP_NS: u64 = 200_000_000;
+/// A fix takes the roll of the steps this close to it, ns.
+const HALF_WINDOW_NS: u64 = 500_000_000;
+/// The newest course older (or newer) than this says nothing of a fix's heading, s.
+pub const MAX_COURSE_AGE_S: f64 = 30.0;
+/// A step turning slower than this at speed is on a straight, rad/s (a 60 km radius at
+/// 30 m/s).
+const STRAIGHT_RATE_RADPS: f64 = 5e-4;
+/// Straights need at least this many steps to say what is left of the mounting's roll.
+const MIN_STRAIGHT_STEPS: usize = 50;
+
+/// The IMU's mean specific force and rate over one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TiltStep {
+    pub stamp_ns: u64,
+    pub specific_force: [f64; 3],
+    pub angular_rate: [f64; 3],
+}
+
+/// Averages one IMU's samples into [`TiltStep`]s as they are read.
+#[derive(Debug, Default)]
+pub struct TiltRecorder {
+    topic: Option<String>,
+    steps: Vec<TiltStep>,
+    /// The open step: its first stamp, the sums and the count.
+    open: Option<(u64, Vector3<f64>, Vector3<f64>, u32)>,
+}
+
+impl TiltRecorder {
+    /// Takes a sample of the IMU on `topic` (the first IMU read; others are not this one).
+    pub fn imu(&mut self, topic: &str, m: &Imu) {
+        if self.topic.get_or_insert_with(|| topic.to_owned()) != topic {
+            return;
+        }
+        let (f, w) = (
+            Vector3::from(m.specific_force_mps2),
+            Vector3::from(m.angular_rate_radps),
+        );
+        if !(f.iter().chain(w.iter()).all(|x| x.is_finite())) {
+            return;
+        }
+        let open = self
+            .open
+            .get_or_insert((m.stamp_ns, Vector3::zeros(), Vector3::zeros(), 0));
+        if m.stamp_ns < open.0 {
+            return;
+        }
+        open.1 += f;
+        open.2 += w;
+        open.3 += 1;
+        if m.stamp_ns >= open.0 + STEP_NS {
+            self.close(m.stamp_ns);
+        }
+    }
+
+    fn close(&mut self, last_ns: u64) {
+        if let Some((first, f, w, n)) = self.open.take() {
+            let n = f64::from(n.max(1));
+            self.steps.push(TiltStep {
+                stamp_ns: first + (last_ns - first) / 2,
+                specific_force: (f / n).into(),
+                angular_rate: (w / n).into(),
+            });
+        }
+    }
+
+    /// The IMU's topic and its steps.
+    pub fn finish(mut self) -> (Option<String>, Vec<TiltStep>) {
+        if let Some((first, ..)) = self.open {
+            self.close(first + STEP_NS);
+        }
+        (self.topic, self.steps)
+    }
+}
+
+/// What taking the lean out did to a run.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Lean {
+    /// Fixes moved.
+    pub moved: usize,
+    /// The largest move, m.
+    pub max_m: f64,
+    /// The roll on the straights taken off as the rest of the IMU's mounting, rad.
+    pub straight_roll_rad: f64,
+}
+
+/// Moves `run`'s fixes from the antenna (`antenna` on the train) to the centre line across the
+/// track, with the roll from the steps of an IMU mounted as `imu`; `None` where there is
+/// nothing to move (the antenna on the centre line at rail height, no IMU steps).
+pub fn take_out(
+    run: &mut RunFixes,
+    steps: &[TiltStep],
+    imu: &SensorMount,
+    antenna: &SensorMount,
+) -> Option<Lean> {
+    let [_, y, z] = antenna.lever_arm_m;
+    if (y == 0.0 && z == 0.0) || steps.is_empty() || run.fused {
+        return None;
+    }
+    let rolls: Vec<(u64, f64, bool)> = steps
+        .iter()
+        .map(|s| roll_of(s, imu, &run.courses))
+        .collect();
+    let straight: Vec<f64> = rolls.iter().filter(|r| r.2).map(|r| r.1).collect();
+    let straight_roll_rad = match straight.len() >= MIN_STRAIGHT_STEPS {
+        true => median(straight),
+        false => 0.0,
+    };
+    let mut lean = Lean {
+        moved: 0,
+        max_m: 0.0,
+        straight_roll_rad,
+    };
+    for f in &mut run.fixes {
+        let Some(heading) = course_at(&run.courses, f.stamp_ns, MAX_COURSE_AGE_S) else {
+            continue;
+        };
+        let lo = rolls.partition_point(|r| r.0 + HALF_WINDOW_NS < f.stamp_ns);
+        let near: Vec<f64> = rolls[lo..]
+            .iter()
+            .take_while(|r| r.0 <= f.stamp_ns + HALF_WINDOW_NS)
+            .map(|r| r.1)
+            .collect();
+        if near.is_empty() {
+            continue;
+        }
+        let phi = near.iter().sum::<f64>() / near.len() as f64 - straight_roll_rad;
+        // The antenna's place to the left of the centre line, in the level frame.
+        let left = y * phi.cos() - z * phi.sin();
+        let (s, c) = heading.course_rad.sin_cos();
+        // Left of a heading ψ clockwise from north is (−cos ψ, sin ψ).
+        f.east_m += left * c;
+        f.north_m -= left * s;
+        lean.moved += 1;
+        lean.max_m = lean.max_m.max(left.abs());
+    }
+    Some(lean)
+}
+
+/// A step's roll (rad, the left side up positive) and whether it is on a straight at speed.
+fn roll_of(s: &TiltStep, imu: &SensorMount, courses: &[Course]) -> (u64, f64, bool) {
+    let r = imu.mounting();
+    let f = r * Vector3::from(s.specific_force);
+    let w = r * Vector3::from(s.angular_rate);
+    let v = course_at(courses, s.stamp_ns, 1.0).map_or(0.0, |c| c.speed_mps);
+    let roll = |turn: f64| f.y.atan2(f.z) - (v * turn).atan2(GRAVITY_MPS2);
+    // The turn about up is the body's rates rolled back (`q sin φ + r cos φ`): once with the
+    // roll the body's z rate gives, which is enough (0.1 rad of roll: 2 mm at 4 m otherwise).
+    let first = roll(w.z);
+    let phi = roll(w.y * first.sin() + w.z * first.cos());
+    let straight = v >= crate::fixes::MIN_COURSE_SPEED_MPS && w.z.abs() < STRAIGHT_RATE_RADPS;
+    (s.stamp_ns, phi, straight)
+}
+
+/// The course nearest `stamp_ns`, if one is within `max_age_s`.
+fn course_at(courses: &[Course], stamp_ns: u64, max_age_s: f64) -> Option<Course> {
+    let i = courses.partition_point(|c| c.stamp_ns < stamp_ns);
+    let near = [i.checked_sub(1), Some(i)]
+        .into_iter()
+        .flatten()
+        .filter_map(|k| courses.get(k))
+        .min_by_key(|c| c.stamp_ns.abs_diff(stamp_ns))?;
+    (near.stamp_ns.abs_diff(stamp_ns) as f64 / 1e9 <= max_age_s).then_some(*near)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fixes::Fix;
+    use nalgebra::Rotation3;
+
+    /// A train heading north at 30 m/s through a right-hand curve of 1 km rolled 0.1 rad (left
+    /// side up), its IMU turned 1° in roll: the antenna 4 m up sits 0.4 m right of the centre
+    /// line (east), and the fix is moved back west by that.
+    #[test]
+    fn a_roof_antennas_fix_in_a_canted_curve_moves_back_to_the_centre_line() {
+        let (v, omega_z, phi) = (30.0, -30.0 / 1000.0, 0.1);
+        let imu = SensorMount {
+            mounting_deg: [1.0, 0.0, 0.0],
+            ..SensorMount::at_front("/imu")
+        };
+        let level = Vector3::new(0.0, v * omega_z, GRAVITY_MPS2);
+        let body = Rotation3::from_euler_angles(phi, 0.0, 0.0).inverse() * level;
+        let rate =
+            Rotation3::from_euler_angles(phi, 0.0, 0.0).inverse() * Vector3::new(0.0, 0.0, omega_z);
+        let sensor = |x: Vector3<f64>| (imu.mounting().inverse() * x).into();
+        let s = 1_000_000_000u64;
+        let steps: Vec<TiltStep> = (0..20)
+            .map(|k| TiltStep {
+                stamp_ns: k * s / 10,
+                specific_force: sensor(body),
+                angular_rate: sensor(rate),
+            })
+            .collect();
+        let course = |k: u64| Course {
+            stamp_ns: k * s / 10,
+            course_rad: 0.0,
+            speed_mps: v,
+        };
+        let fix = Fix {
+            stamp_ns: s,
+            east_m: 0.4,
+            north_m: 0.0,
+            sigma_m: 0.02,
+            up_m: None,
+        };
+        let mut run = RunFixes {
+            fixes: vec![fix],
+            courses: (0..20).map(course).collect(),
+            ..RunFixes::default()
+        };
+        let antenna = SensorMount {
+            lever_arm_m: [-12.0, 0.0, 4.0],
+            ..SensorMount::at_front("/gnss/fix")
+        };
+        let lean = take_out(&mut run, &steps, &imu, &antenna).unwrap();
+        assert_eq!(lean.moved, 1);
+        let moved = run.fixes[0];
+        assert!(
+            (moved.east_m - (0.4 - 4.0 * phi.sin())).abs() < 1e-5,
+            "{moved:?}"
+        );
+        assert!(moved.north_m.abs() < 1e-9);
+    }
+}
