@@ -262,6 +262,15 @@ fn print_profile(s: &Summary) {
         _ => String::new(),
     };
     println!("{}{bridged}", p.describe());
+    if let Some(c) = &s.cant {
+        let bridged = match (c, s.gaps.len()) {
+            (railfuse_track::cant::Cant::Fitted { .. }, n) if n > 0 => {
+                format!("; across the {n} stretch(es) without fixes, the spline's bridge")
+            }
+            _ => String::new(),
+        };
+        println!("{}{bridged}", c.describe());
+    }
 }
 
 fn print_summary(s: &Summary, out: &std::path::Path) {

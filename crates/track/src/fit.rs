@@ -96,6 +96,7 @@ pub fn fit(runs: &[RunFixes], opts: &FitOptions) -> Result<Centreline, FitError>
     check_overlap(runs, &placed, &runs[seed].name)?;
     let aside = set_aside(&placed, &suspect);
     let profile = crate::profile::fit(&mut line, runs, &placed, &aside);
+    let cant = crate::cant::fit(&mut line, runs, &placed, &aside);
     let crossed = match opts.cross_gaps {
         true => crossings(&line, runs, &placed, &aside),
         false => Vec::new(),
@@ -113,6 +114,7 @@ pub fn fit(runs: &[RunFixes], opts: &FitOptions) -> Result<Centreline, FitError>
         opts.disagreement_m,
     );
     centreline.profile = Some(profile);
+    centreline.cant = Some(cant);
     Ok(centreline)
 }
 

@@ -55,6 +55,9 @@ pub struct RunFixes {
     pub fused: bool,
     /// What taking the antenna's lean out of its fixes did ([`crate::lean`]).
     pub lean: Option<crate::lean::Lean>,
+    /// Each fix's cant from the run's IMU, rad, the left rail up positive looking the way the
+    /// run travels (empty without an IMU and a vehicle).
+    pub cant_rad: Vec<Option<f64>>,
 }
 
 /// Why a run's fixes could not be read.
@@ -211,8 +214,7 @@ pub fn read_fixes(
     run.motion = motion.finish();
     let (imu, steps) = tilt.finish();
     if let (Some(v), Some(imu)) = (&vehicle, imu) {
-        let (imu, antenna) = (v.mount_or_front(&imu), v.mount_or_front(&topic));
-        run.lean = crate::lean::take_out(&mut run, &steps, &imu, &antenna);
+        run.lean = crate::lean::take_out(&mut run, &steps, v, (&imu, &topic));
     }
     Ok(run)
 }
@@ -376,5 +378,6 @@ fn keep_quality(
         courses,
         fused,
         lean: None,
+        cant_rad: Vec::new(),
     })
 }

@@ -19,7 +19,7 @@
 //! [`MAX_COURSE_AGE_S`] (a train that has not moved yet) is left where it is.
 
 use nalgebra::Vector3;
-use railfuse_catalog::messages::{Imu, SensorMount};
+use railfuse_catalog::messages::{Imu, SensorMount, Vehicle};
 use railfuse_catalog::vehicle::GRAVITY_MPS2;
 
 use crate::fixes::{Course, RunFixes};
@@ -112,22 +112,28 @@ pub struct Lean {
     pub straight_roll_rad: f64,
 }
 
-/// Moves `run`'s fixes from the antenna (`antenna` on the train) to the centre line across the
-/// track, with the roll from the steps of an IMU mounted as `imu`; `None` where there is
-/// nothing to move (the antenna on the centre line at rail height, no IMU steps).
+/// Moves `run`'s fixes from its antenna (`antenna`, a topic of `vehicle`) to the centre line
+/// across the track, with the roll from the steps of its IMU (`imu`), and keeps each fix's
+/// cant (the roll less the body's lean, [`Vehicle::body_roll`]) in `run.cant_rad`; `None`
+/// without IMU steps.
 pub fn take_out(
     run: &mut RunFixes,
     steps: &[TiltStep],
-    imu: &SensorMount,
-    antenna: &SensorMount,
+    vehicle: &Vehicle,
+    (imu, antenna): (&str, &str),
 ) -> Option<Lean> {
+    let (imu, antenna) = (vehicle.mount_or_front(imu), vehicle.mount_or_front(antenna));
     let [_, y, z] = antenna.lever_arm_m;
-    if (y == 0.0 && z == 0.0) || steps.is_empty() || run.fused {
+    if steps.is_empty() || run.fused {
         return None;
     }
     let rolls: Vec<(u64, f64, bool)> = steps
         .iter()
-        .map(|s| roll_of(s, imu, &run.courses))
+        .map(|s| roll_of(s, &imu, &run.courses))
+        .collect();
+    let turns: Vec<(f64, f64)> = steps
+        .iter()
+        .map(|s| turn_of(s, &imu, &run.courses))
         .collect();
     let straight: Vec<f64> = rolls.iter().filter(|r| r.2).map(|r| r.1).collect();
     let straight_roll_rad = match straight.len() >= MIN_STRAIGHT_STEPS {
@@ -139,20 +145,22 @@ pub fn take_out(
         max_m: 0.0,
         straight_roll_rad,
     };
-    for f in &mut run.fixes {
+    run.cant_rad = vec![None; run.fixes.len()];
+    for (f, cant) in run.fixes.iter_mut().zip(&mut run.cant_rad) {
+        let lo = rolls.partition_point(|r| r.0 + HALF_WINDOW_NS < f.stamp_ns);
+        let hi = lo + rolls[lo..].partition_point(|r| r.0 <= f.stamp_ns + HALF_WINDOW_NS);
+        if hi == lo {
+            continue;
+        }
+        let n = (hi - lo) as f64;
+        let phi = rolls[lo..hi].iter().map(|r| r.1).sum::<f64>() / n - straight_roll_rad;
+        let (v, turn) = turns[lo..hi]
+            .iter()
+            .fold((0.0, 0.0), |a, t| (a.0 + t.0 / n, a.1 + t.1 / n));
+        *cant = Some(cant_of(vehicle, phi, v, turn));
         let Some(heading) = course_at(&run.courses, f.stamp_ns, MAX_COURSE_AGE_S) else {
             continue;
         };
-        let lo = rolls.partition_point(|r| r.0 + HALF_WINDOW_NS < f.stamp_ns);
-        let near: Vec<f64> = rolls[lo..]
-            .iter()
-            .take_while(|r| r.0 <= f.stamp_ns + HALF_WINDOW_NS)
-            .map(|r| r.1)
-            .collect();
-        if near.is_empty() {
-            continue;
-        }
-        let phi = near.iter().sum::<f64>() / near.len() as f64 - straight_roll_rad;
         // The antenna's place to the left of the centre line, in the level frame.
         let left = y * phi.cos() - z * phi.sin();
         let (s, c) = heading.course_rad.sin_cos();
@@ -163,6 +171,28 @@ pub fn take_out(
         lean.max_m = lean.max_m.max(left.abs());
     }
     Some(lean)
+}
+
+/// The cant's roll in a body rolled `phi` at `v` turning `turn` (counter-clockwise about up):
+/// `phi` less the body's lean, which itself depends on the cant (a few fixed-point steps: the
+/// lean is a tenth of the roll).
+fn cant_of(vehicle: &Vehicle, phi: f64, v: f64, turn: f64) -> f64 {
+    let curvature = match v > 1.0 {
+        true => -turn / v,
+        false => 0.0,
+    };
+    let mut cant = phi;
+    for _ in 0..4 {
+        cant = phi - vehicle.body_roll(v, curvature, cant);
+    }
+    cant
+}
+
+/// A step's speed and turn about up (counter-clockwise), from the receiver and the gyro.
+fn turn_of(s: &TiltStep, imu: &SensorMount, courses: &[Course]) -> (f64, f64) {
+    let w = imu.mounting() * Vector3::from(s.angular_rate);
+    let v = course_at(courses, s.stamp_ns, 1.0).map_or(0.0, |c| c.speed_mps);
+    (v, w.z)
 }
 
 /// A step's roll (rad, the left side up positive) and whether it is on a straight at speed.

@@ -11,7 +11,9 @@
 //! its fixes bend where its gyro says the train did not (a steady multipath pull,
 //! [`multipath`]), its own motion crosses ([`bridge`], tied to its fixes, course and
 //! standstills by [`tie`]). A roof antenna's lean in canted curves is taken out of its fixes
-//! first, with the roll the run's IMU measured ([`lean`]).
+//! first, with the roll the run's IMU measured ([`lean`]); the same roll, less the body's
+//! lean, gives the line's cant ([`cant`]), as the fixes' heights give its profile
+//! ([`profile`]).
 //!
 //! Why a spline and not clothoids: a railway's alignment is straights, transition curves and
 //! arcs, and fitting those segments needs the segmentation right first (where each begins is
@@ -22,6 +24,7 @@
 
 pub mod banded;
 pub mod bridge;
+pub mod cant;
 pub mod chainage;
 pub mod error;
 pub mod fit;

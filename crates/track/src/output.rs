@@ -36,6 +36,9 @@ pub struct Summary {
     /// The height profile: fitted from the fixes' heights, or why the line is flat.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub profile: Option<crate::profile::Profile>,
+    /// The cant: fitted from the runs' IMU roll, or why the line has none.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cant: Option<crate::cant::Cant>,
     /// The line against OpenStreetMap's rail ways, where an extract was given.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub osm: Option<OsmOffset>,
@@ -116,6 +119,7 @@ impl Summary {
             placement: *p,
             osm: None,
             profile: c.profile.clone().map(|q| q.placed(|s| p.chainage(s))),
+            cant: c.cant.clone().map(|q| q.placed(|s| p.chainage(s))),
             knot_spacing_m: opts.knot_spacing_m,
             smoothing_m: opts.smoothing_m,
             tolerance_m,
@@ -179,33 +183,55 @@ pub fn geojson(
         .map(|(lon, lat, alt)| [lon, lat].into_iter().chain(alt).collect())
         .collect();
     let chainage: Vec<f64> = vertices.iter().map(|v| round_mm(v.chainage_m)).collect();
+    let mut properties = json!({
+        "name": name,
+        "role": "main",
+        "chainage_m": chainage,
+        "railfuse_track": summary,
+    });
+    if let Some(cant) = cant_mm(vertices) {
+        properties["cant_mm"] = cant.into();
+    }
     let collection = json!({
         "type": "FeatureCollection",
         "features": [{
             "type": "Feature",
-            "properties": {
-                "name": name,
-                "role": "main",
-                "chainage_m": chainage,
-                "railfuse_track": summary,
-            },
+            "properties": properties,
             "geometry": { "type": "LineString", "coordinates": coordinates },
         }],
     });
     serde_json::to_string_pretty(&collection).expect("a summary serialises")
 }
 
-/// The line as a CSV of latitude, longitude and chainage, one vertex a row.
+/// Every vertex's cant in mm, where every vertex has one.
+fn cant_mm(vertices: &[TrackVertex]) -> Option<Vec<f64>> {
+    let cant: Option<Vec<f64>> = vertices
+        .iter()
+        .map(|v| v.cant_m.map(|c| (c * 1e3).round()))
+        .collect();
+    cant.filter(|c| !c.is_empty())
+}
+
+/// The line as a CSV of latitude, longitude and chainage (and altitude and cant where the
+/// line has them), one vertex a row.
 pub fn csv(vertices: &[TrackVertex], origin: &GeodeticOrigin) -> String {
     let heights = vertices.iter().all(|v| v.height_m.is_some()) && !vertices.is_empty();
-    let mut out = match heights {
-        true => String::from("latitude,longitude,chainage_m,altitude_m\n"),
-        false => String::from("latitude,longitude,chainage_m\n"),
-    };
-    for (v, (lon, lat, alt)) in vertices.iter().zip(lon_lat(vertices, origin)) {
+    let cant = cant_mm(vertices);
+    let mut out = String::from("latitude,longitude,chainage_m");
+    if heights {
+        out.push_str(",altitude_m");
+    }
+    if cant.is_some() {
+        out.push_str(",cant_mm");
+    }
+    out.push('\n');
+    for (k, (v, (lon, lat, alt))) in vertices.iter().zip(lon_lat(vertices, origin)).enumerate() {
         out.push_str(&format!("{lat:.10},{lon:.10},{:.3}", v.chainage_m));
         if let (true, Some(alt)) = (heights, alt) {
             out.push_str(&format!(",{alt:.3}"));
+        }
+        if let Some(c) = &cant {
+            out.push_str(&format!(",{:.0}", c[k]));
         }
         out.push('\n');
     }

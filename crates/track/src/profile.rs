@@ -127,28 +127,14 @@ pub fn fit(
             used,
         };
     }
-    let knots = Knots::covering(line.start_m(), line.end_m(), KNOT_SPACING_M);
-    let Ok(first) = ProfileSpline::fit(knots, &points, SMOOTHING_M) else {
+    let Some(RobustFit { spline, kept, rms }) =
+        robust_fit(line, &points, KNOT_SPACING_M, SMOOTHING_M)
+    else {
         return Profile::NoHeights {
             with_height: points.len(),
             used,
         };
     };
-    let residual = |s: &ProfileSpline, p: &(f64, f64, f64)| p.2 - s.at(p.0);
-    let robust_sigma = 1.4826 * median(points.iter().map(|p| residual(&first, p).abs()));
-    let limit = OUTLIER_SIGMAS * robust_sigma.max(1e-3);
-    let kept: Vec<(f64, f64, f64)> = points
-        .iter()
-        .copied()
-        .filter(|p| residual(&first, p).abs() <= limit)
-        .collect();
-    let spline = ProfileSpline::fit(knots, &kept, SMOOTHING_M).unwrap_or(first);
-    let rms = (kept
-        .iter()
-        .map(|p| residual(&spline, p).powi(2))
-        .sum::<f64>()
-        / kept.len() as f64)
-        .sqrt();
     let (gradient, at_m) = steepest(line, &spline);
     if gradient.abs() > MAX_GRADIENT {
         return Profile::TooSteep { gradient, at_m };
@@ -157,12 +143,54 @@ pub fn fit(
         v.height_m = Some(spline.at(v.chainage_m));
     }
     Profile::Fitted {
-        fixes: kept.len(),
-        outliers: points.len() - kept.len(),
+        fixes: kept,
+        outliers: points.len() - kept,
         residual_rms_m: rms,
         steepest_gradient: gradient,
         steepest_at_m: at_m,
     }
+}
+
+/// A smooth function of chainage fitted through `(chainage, weight, value)` points over
+/// `line`, and refitted once without the points more than [`OUTLIER_SIGMAS`] robust σ off the
+/// first fit.
+pub(crate) struct RobustFit {
+    pub spline: ProfileSpline,
+    /// Points kept in the second fit.
+    pub kept: usize,
+    /// RMS of the kept points about it.
+    pub rms: f64,
+}
+
+/// [`RobustFit`] with knots every `knot_spacing_m`, smoothed over `smoothing_m`.
+pub(crate) fn robust_fit(
+    line: &Line,
+    points: &[(f64, f64, f64)],
+    knot_spacing_m: f64,
+    smoothing_m: f64,
+) -> Option<RobustFit> {
+    let knots = Knots::covering(line.start_m(), line.end_m(), knot_spacing_m);
+    let first = ProfileSpline::fit(knots, points, smoothing_m).ok()?;
+    let residual = |s: &ProfileSpline, p: &(f64, f64, f64)| p.2 - s.at(p.0);
+    let robust_sigma = 1.4826 * median(points.iter().map(|p| residual(&first, p).abs()));
+    let limit = OUTLIER_SIGMAS * robust_sigma.max(1e-3);
+    let kept: Vec<(f64, f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|p| residual(&first, p).abs() <= limit)
+        .collect();
+    let spline = ProfileSpline::fit(knots, &kept, smoothing_m).unwrap_or(first);
+    let rms = (kept
+        .iter()
+        .map(|p| residual(&spline, p).powi(2))
+        .sum::<f64>()
+        / kept.len().max(1) as f64)
+        .sqrt();
+    Some(RobustFit {
+        spline,
+        kept: kept.len(),
+        rms,
+    })
 }
 
 /// The steepest gradient between neighbouring vertices of `line` on the profile, and where.

@@ -85,6 +85,8 @@ pub struct Centreline {
     pub stretches: Vec<StretchResidual>,
     /// The height profile, once fitted ([`crate::profile`]).
     pub profile: Option<crate::profile::Profile>,
+    /// The cant, once fitted ([`crate::cant`]).
+    pub cant: Option<crate::cant::Cant>,
 }
 
 /// The fixes' residual across the track over one stretch of line.
@@ -195,6 +197,7 @@ pub(crate) fn finish(
         stretches: stretches(&with_sigma, stretch_m),
         line,
         profile: None,
+        cant: None,
     }
 }
 
@@ -232,7 +235,7 @@ fn stretches(on: &[(&OnLine, f64)], length_m: f64) -> Vec<StretchResidual> {
 }
 
 /// Whether a run's fixes on the line mostly go towards increasing chainage.
-fn increasing(placed: &[Option<OnLine>]) -> bool {
+pub(crate) fn increasing(placed: &[Option<OnLine>]) -> bool {
     let s: Vec<f64> = placed.iter().flatten().map(|m| m.chainage_m).collect();
     let up = s.windows(2).filter(|w| w[1] > w[0]).count();
     let down = s.windows(2).filter(|w| w[1] < w[0]).count();
