@@ -229,7 +229,7 @@ mod tests {
 
     /// A train heading north at 30 m/s through a right-hand curve of 1 km rolled 0.1 rad (left
     /// side up), its IMU turned 1° in roll: the antenna 4 m up sits 0.4 m right of the centre
-    /// line (east), and the fix is moved back west by that.
+    /// line (east), and the fix is moved back west by that; the cant is the roll.
     #[test]
     fn a_roof_antennas_fix_in_a_canted_curve_moves_back_to_the_centre_line() {
         let (v, omega_z, phi) = (30.0, -30.0 / 1000.0, 0.1);
@@ -271,8 +271,18 @@ mod tests {
             lever_arm_m: [-12.0, 0.0, 4.0],
             ..SensorMount::at_front("/gnss/fix")
         };
-        let lean = take_out(&mut run, &steps, &imu, &antenna).unwrap();
+        let vehicle = Vehicle {
+            sensors: vec![imu, antenna],
+            ..Vehicle::point()
+        };
+        let lean = take_out(&mut run, &steps, &vehicle, ("/imu", "/gnss/fix")).unwrap();
         assert_eq!(lean.moved, 1);
+        // A body without suspension: its roll is the cant.
+        assert!(
+            (run.cant_rad[0].unwrap() - phi).abs() < 1e-5,
+            "{:?}",
+            run.cant_rad
+        );
         let moved = run.fixes[0];
         assert!(
             (moved.east_m - (0.4 - 4.0 * phi.sin())).abs() < 1e-5,
