@@ -191,12 +191,9 @@ fn read_runs(
     };
     for path in &a.runs {
         let run = Run::open(std::slice::from_ref(path), &options)?;
-        runs.push(read_fixes(
-            &run,
-            a.topic.as_deref(),
-            &a.quality,
-            &mut origin,
-        )?);
+        let mut fixes = read_fixes(&run, a.topic.as_deref(), &a.quality, &mut origin)?;
+        railfuse_track::lean::take_out(&mut fixes);
+        runs.push(fixes);
     }
     Ok((runs, origin.expect("a run with fixes set the plane")))
 }

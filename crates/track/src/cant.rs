@@ -78,7 +78,7 @@ pub fn fit(
 ) -> Cant {
     let mut points = Vec::new();
     for ((run, placed), aside) in runs.iter().zip(placed).zip(aside) {
-        let sense = match crate::report::increasing(placed) {
+        let sense = match crate::line::increasing(placed) {
             true => 1.0,
             false => -1.0,
         };

@@ -13,8 +13,7 @@ use railfuse_catalog::messages::{
 use railfuse_catalog::run::Run;
 use railfuse_eval::FixQuality;
 
-use crate::lean::TiltRecorder;
-use crate::motion::{MotionRecorder, MotionStep};
+use crate::motion::{Lean, MotionRecorder, MotionStep, Tilt, TiltRecorder};
 
 /// A position fix in the local plane.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,8 +52,11 @@ pub struct RunFixes {
     pub courses: Vec<Course>,
     /// Its points are a 2-D pipeline's fused states, not GNSS fixes.
     pub fused: bool,
-    /// What taking the antenna's lean out of its fixes did ([`crate::lean`]).
-    pub lean: Option<crate::lean::Lean>,
+    /// Its IMU's roll, with the vehicle that places it and the antenna, until the lean's
+    /// `take_out` takes the antenna's lean and the cant from it.
+    pub tilt: Option<Tilt>,
+    /// What taking the antenna's lean out of its fixes did.
+    pub lean: Option<Lean>,
     /// Each fix's cant from the run's IMU, rad, the left rail up positive looking the way the
     /// run travels (empty without an IMU and a vehicle).
     pub cant_rad: Vec<Option<f64>>,
@@ -213,9 +215,12 @@ pub fn read_fixes(
     }
     run.motion = motion.finish();
     let (imu, steps) = tilt.finish();
-    if let (Some(v), Some(imu)) = (&vehicle, imu) {
-        run.lean = crate::lean::take_out(&mut run, &steps, v, (&imu, &topic));
-    }
+    run.tilt = vehicle.zip(imu).map(|(vehicle, imu)| Tilt {
+        steps,
+        vehicle,
+        imu,
+        antenna: topic,
+    });
     Ok(run)
 }
 
@@ -377,6 +382,7 @@ fn keep_quality(
         motion: Vec::new(),
         courses,
         fused,
+        tilt: None,
         lean: None,
         cant_rad: Vec::new(),
     })

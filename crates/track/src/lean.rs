@@ -19,14 +19,13 @@
 //! [`MAX_COURSE_AGE_S`] (a train that has not moved yet) is left where it is.
 
 use nalgebra::Vector3;
-use railfuse_catalog::messages::{Imu, SensorMount, Vehicle};
+use railfuse_catalog::messages::{SensorMount, Vehicle};
 use railfuse_catalog::vehicle::GRAVITY_MPS2;
 
 use crate::fixes::{Course, RunFixes};
+use crate::motion::{Lean, TiltStep};
 use crate::multipath::median;
 
-/// IMU samples are averaged over steps this long, ns.
-const STEP_NS: u64 = 200_000_000;
 /// A fix takes the roll of the steps this close to it, ns.
 const HALF_WINDOW_NS: u64 = 500_000_000;
 /// The newest course older (or newer) than this says nothing of a fix's heading, s.
@@ -37,86 +36,18 @@ const STRAIGHT_RATE_RADPS: f64 = 5e-4;
 /// Straights need at least this many steps to say what is left of the mounting's roll.
 const MIN_STRAIGHT_STEPS: usize = 50;
 
-/// The IMU's mean specific force and rate over one step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TiltStep {
-    pub stamp_ns: u64,
-    pub specific_force: [f64; 3],
-    pub angular_rate: [f64; 3],
+/// Moves `run`'s fixes from its antenna to the centre line across the track, with the roll
+/// from its IMU's steps ([`crate::fixes::RunFixes::tilt`]), keeps each fix's cant (the roll
+/// less the body's lean, [`Vehicle::body_roll`]) in `run.cant_rad`, and notes what it did in
+/// `run.lean`. A run without an IMU and a vehicle is left as it is.
+pub fn take_out(run: &mut RunFixes) {
+    let Some(tilt) = run.tilt.take() else { return };
+    run.lean = take_out_with(run, &tilt.steps, &tilt.vehicle, (&tilt.imu, &tilt.antenna));
 }
 
-/// Averages one IMU's samples into [`TiltStep`]s as they are read.
-#[derive(Debug, Default)]
-pub struct TiltRecorder {
-    topic: Option<String>,
-    steps: Vec<TiltStep>,
-    /// The open step: its first stamp, the sums and the count.
-    open: Option<(u64, Vector3<f64>, Vector3<f64>, u32)>,
-}
-
-impl TiltRecorder {
-    /// Takes a sample of the IMU on `topic` (the first IMU read; others are not this one).
-    pub fn imu(&mut self, topic: &str, m: &Imu) {
-        if self.topic.get_or_insert_with(|| topic.to_owned()) != topic {
-            return;
-        }
-        let (f, w) = (
-            Vector3::from(m.specific_force_mps2),
-            Vector3::from(m.angular_rate_radps),
-        );
-        if !(f.iter().chain(w.iter()).all(|x| x.is_finite())) {
-            return;
-        }
-        let open = self
-            .open
-            .get_or_insert((m.stamp_ns, Vector3::zeros(), Vector3::zeros(), 0));
-        if m.stamp_ns < open.0 {
-            return;
-        }
-        open.1 += f;
-        open.2 += w;
-        open.3 += 1;
-        if m.stamp_ns >= open.0 + STEP_NS {
-            self.close(m.stamp_ns);
-        }
-    }
-
-    fn close(&mut self, last_ns: u64) {
-        if let Some((first, f, w, n)) = self.open.take() {
-            let n = f64::from(n.max(1));
-            self.steps.push(TiltStep {
-                stamp_ns: first + (last_ns - first) / 2,
-                specific_force: (f / n).into(),
-                angular_rate: (w / n).into(),
-            });
-        }
-    }
-
-    /// The IMU's topic and its steps.
-    pub fn finish(mut self) -> (Option<String>, Vec<TiltStep>) {
-        if let Some((first, ..)) = self.open {
-            self.close(first + STEP_NS);
-        }
-        (self.topic, self.steps)
-    }
-}
-
-/// What taking the lean out did to a run.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct Lean {
-    /// Fixes moved.
-    pub moved: usize,
-    /// The largest move, m.
-    pub max_m: f64,
-    /// The roll on the straights taken off as the rest of the IMU's mounting, rad.
-    pub straight_roll_rad: f64,
-}
-
-/// Moves `run`'s fixes from its antenna (`antenna`, a topic of `vehicle`) to the centre line
-/// across the track, with the roll from the steps of its IMU (`imu`), and keeps each fix's
-/// cant (the roll less the body's lean, [`Vehicle::body_roll`]) in `run.cant_rad`; `None`
-/// without IMU steps.
-pub fn take_out(
+/// [`take_out`] with the IMU's `steps`, `imu` and `antenna` being topics placed by `vehicle`;
+/// `None` without IMU steps.
+fn take_out_with(
     run: &mut RunFixes,
     steps: &[TiltStep],
     vehicle: &Vehicle,
@@ -275,7 +206,7 @@ mod tests {
             sensors: vec![imu, antenna],
             ..Vehicle::point()
         };
-        let lean = take_out(&mut run, &steps, &vehicle, ("/imu", "/gnss/fix")).unwrap();
+        let lean = take_out_with(&mut run, &steps, &vehicle, ("/imu", "/gnss/fix")).unwrap();
         assert_eq!(lean.moved, 1);
         // A body without suspension: its roll is the cant.
         assert!(

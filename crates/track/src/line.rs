@@ -179,6 +179,14 @@ fn chord_holds(run: &[TrackVertex], tolerance_m: f64) -> bool {
     })
 }
 
+/// Whether a run's fixes on the line mostly go towards increasing chainage.
+pub fn increasing(placed: &[Option<OnLine>]) -> bool {
+    let s: Vec<f64> = placed.iter().flatten().map(|m| m.chainage_m).collect();
+    let up = s.windows(2).filter(|w| w[1] > w[0]).count();
+    let down = s.windows(2).filter(|w| w[1] < w[0]).count();
+    up >= down
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

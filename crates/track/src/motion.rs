@@ -1,9 +1,11 @@
 //! A run's own motion between its fixes: the turn its IMU measured and the distance its
 //! odometer (or radar) ran, summed into steps of a tenth of a second. Where a run has no fix
 //! (a tunnel, a stretch without RTK), this is what carries its shape across
-//! ([`crate::bridge`]).
+//! ([`crate::bridge`]). Its IMU's mean specific force and rate over short steps are kept too:
+//! the body's roll, which [`crate::lean`] takes the antenna's lean and the cant from.
 
-use railfuse_catalog::messages::{Imu, Odometer, RadarSpeed};
+use nalgebra::Vector3;
+use railfuse_catalog::messages::{Imu, Odometer, RadarSpeed, Vehicle};
 
 /// Motion is summed over steps this long, ns.
 const STEP_NS: u64 = 100_000_000;
@@ -91,4 +93,91 @@ impl MotionRecorder {
         self.steps.extend(self.open.take());
         self.steps
     }
+}
+
+/// IMU samples are averaged over tilt steps this long, ns.
+const TILT_STEP_NS: u64 = 200_000_000;
+/// What the run's lean and cant are taken from: its IMU's steps, the vehicle that places it
+/// and the antenna, and their topics.
+#[derive(Debug, Clone)]
+pub struct Tilt {
+    pub steps: Vec<TiltStep>,
+    pub vehicle: Vehicle,
+    pub imu: String,
+    pub antenna: String,
+}
+
+/// The IMU's mean specific force and rate over one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TiltStep {
+    pub stamp_ns: u64,
+    pub specific_force: [f64; 3],
+    pub angular_rate: [f64; 3],
+}
+
+/// Averages one IMU's samples into [`TiltStep`]s as they are read.
+#[derive(Debug, Default)]
+pub struct TiltRecorder {
+    topic: Option<String>,
+    steps: Vec<TiltStep>,
+    /// The open step: its first stamp, the sums and the count.
+    open: Option<(u64, Vector3<f64>, Vector3<f64>, u32)>,
+}
+
+impl TiltRecorder {
+    /// Takes a sample of the IMU on `topic` (the first IMU read; others are not this one).
+    pub fn imu(&mut self, topic: &str, m: &Imu) {
+        if self.topic.get_or_insert_with(|| topic.to_owned()) != topic {
+            return;
+        }
+        let (f, w) = (
+            Vector3::from(m.specific_force_mps2),
+            Vector3::from(m.angular_rate_radps),
+        );
+        if !(f.iter().chain(w.iter()).all(|x| x.is_finite())) {
+            return;
+        }
+        let open = self
+            .open
+            .get_or_insert((m.stamp_ns, Vector3::zeros(), Vector3::zeros(), 0));
+        if m.stamp_ns < open.0 {
+            return;
+        }
+        open.1 += f;
+        open.2 += w;
+        open.3 += 1;
+        if m.stamp_ns >= open.0 + TILT_STEP_NS {
+            self.close(m.stamp_ns);
+        }
+    }
+
+    fn close(&mut self, last_ns: u64) {
+        if let Some((first, f, w, n)) = self.open.take() {
+            let n = f64::from(n.max(1));
+            self.steps.push(TiltStep {
+                stamp_ns: first + (last_ns - first) / 2,
+                specific_force: (f / n).into(),
+                angular_rate: (w / n).into(),
+            });
+        }
+    }
+
+    /// The IMU's topic and its steps.
+    pub fn finish(mut self) -> (Option<String>, Vec<TiltStep>) {
+        if let Some((first, ..)) = self.open {
+            self.close(first + TILT_STEP_NS);
+        }
+        (self.topic, self.steps)
+    }
+}
+
+/// What taking the antenna's lean out of a run's fixes did ([`crate::lean`]).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Lean {
+    /// Fixes moved.
+    pub moved: usize,
+    /// The largest move, m.
+    pub max_m: f64,
+    /// The roll on the straights taken off as the rest of the IMU's mounting, rad.
+    pub straight_roll_rad: f64,
 }

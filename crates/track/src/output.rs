@@ -60,7 +60,7 @@ pub struct RunSummary {
     pub lateral_rms_m: f64,
     pub leaves_line: Vec<Excursion>,
     /// What taking its antenna's lean in canted curves out of its fixes did.
-    pub antenna_lean: Option<crate::lean::Lean>,
+    pub antenna_lean: Option<crate::motion::Lean>,
 }
 
 impl Summary {

@@ -8,7 +8,7 @@ use serde::Serialize;
 use crate::bridge::Crossings;
 use crate::error::FitError;
 use crate::fixes::RunFixes;
-use crate::line::{Line, OnLine};
+use crate::line::{increasing, Line, OnLine};
 use crate::multipath::SetAside;
 
 /// A chainage stretch, m (in the line's provisional chainage until [`crate::chainage`]
@@ -54,7 +54,7 @@ pub struct RunReport {
     pub leaves_line: Vec<Excursion>,
     pub lateral_rms_m: f64,
     /// What taking its antenna's lean out of its fixes did.
-    pub antenna_lean: Option<crate::lean::Lean>,
+    pub antenna_lean: Option<crate::motion::Lean>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -232,14 +232,6 @@ fn stretches(on: &[(&OnLine, f64)], length_m: f64) -> Vec<StretchResidual> {
             rms_m: (swr / sw).sqrt(),
         })
         .collect()
-}
-
-/// Whether a run's fixes on the line mostly go towards increasing chainage.
-pub(crate) fn increasing(placed: &[Option<OnLine>]) -> bool {
-    let s: Vec<f64> = placed.iter().flatten().map(|m| m.chainage_m).collect();
-    let up = s.windows(2).filter(|w| w[1] > w[0]).count();
-    let down = s.windows(2).filter(|w| w[1] < w[0]).count();
-    up >= down
 }
 
 /// A run's report from its fixes `used` and all it has on the line.
