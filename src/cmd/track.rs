@@ -270,18 +270,9 @@ fn print_profile(s: &Summary) {
     }
 }
 
-fn print_summary(s: &Summary, out: &std::path::Path) {
-    println!(
-        "fitted {} km of line from {} runs ({} fixes, {}): across the track the fixes lie {:.3} m RMS, {:.3} m p95 from it -> {}",
-        km(s.length_m),
-        s.runs.len(),
-        s.fixes_used,
-        s.fix_quality,
-        s.lateral_residual_rms_m,
-        s.lateral_residual_p95_m,
-        out.display()
-    );
-    print_profile(s);
+/// Each run: its table row, how far its fixes moved for the antenna's lean, where it leaves
+/// the line.
+fn print_runs(s: &Summary) {
     let mut t = Table::new(&[
         "run",
         "fixes",
@@ -324,6 +315,21 @@ fn print_summary(s: &Summary, out: &std::path::Path) {
             );
         }
     }
+}
+
+fn print_summary(s: &Summary, out: &std::path::Path) {
+    println!(
+        "fitted {} km of line from {} runs ({} fixes, {}): across the track the fixes lie {:.3} m RMS, {:.3} m p95 from it -> {}",
+        km(s.length_m),
+        s.runs.len(),
+        s.fixes_used,
+        s.fix_quality,
+        s.lateral_residual_rms_m,
+        s.lateral_residual_p95_m,
+        out.display()
+    );
+    print_profile(s);
+    print_runs(s);
     for a in &s.set_aside {
         println!(
             "fixes set aside from km {} to {}: the runs' motion says they bend up to {:.2} m off (a steady multipath pull)",

@@ -205,15 +205,23 @@ pub fn read_fixes(
         }
     }
     let (topic, read) = choose(&name, topic, sources)?;
+    let mut run = keep_quality(name, topic.clone(), read, quality)?;
+    run.motion = motion.finish();
+    on_the_train(&mut run, vehicle, topic, tilt);
+    Ok(run)
+}
+
+/// What the run's `vehicle` says of its fixes from the antenna `topic`: their heights are
+/// the antenna's less its height above the rail, and with the IMU's `tilt` its lean can be
+/// taken out.
+fn on_the_train(run: &mut RunFixes, vehicle: Option<Vehicle>, topic: String, tilt: TiltRecorder) {
     let antenna_z = vehicle
         .as_ref()
         .and_then(|v| v.mount(&topic))
         .map_or(0.0, |m| m.lever_arm_m[2]);
-    let mut run = keep_quality(name, topic.clone(), read, quality)?;
     for f in &mut run.fixes {
         f.up_m = f.up_m.map(|u| u - antenna_z);
     }
-    run.motion = motion.finish();
     let (imu, steps) = tilt.finish();
     run.tilt = vehicle.zip(imu).map(|(vehicle, imu)| Tilt {
         steps,
@@ -221,7 +229,6 @@ pub fn read_fixes(
         imu,
         antenna: topic,
     });
-    Ok(run)
 }
 
 /// The channel to fit: the one named (GNSS or fused), else the one GNSS channel that is not

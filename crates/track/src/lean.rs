@@ -58,15 +58,15 @@ fn take_out_with(
     if steps.is_empty() || run.fused {
         return None;
     }
-    let rolls: Vec<(u64, f64, bool)> = steps
+    let rolls: Vec<StepRoll> = steps
         .iter()
         .map(|s| roll_of(s, &imu, &run.courses))
         .collect();
-    let turns: Vec<(f64, f64)> = steps
+    let straight: Vec<f64> = rolls
         .iter()
-        .map(|s| turn_of(s, &imu, &run.courses))
+        .filter(|r| r.straight)
+        .map(|r| r.roll_rad)
         .collect();
-    let straight: Vec<f64> = rolls.iter().filter(|r| r.2).map(|r| r.1).collect();
     let straight_roll_rad = match straight.len() >= MIN_STRAIGHT_STEPS {
         true => median(straight),
         false => 0.0,
@@ -78,16 +78,15 @@ fn take_out_with(
     };
     run.cant_rad = vec![None; run.fixes.len()];
     for (f, cant) in run.fixes.iter_mut().zip(&mut run.cant_rad) {
-        let lo = rolls.partition_point(|r| r.0 + HALF_WINDOW_NS < f.stamp_ns);
-        let hi = lo + rolls[lo..].partition_point(|r| r.0 <= f.stamp_ns + HALF_WINDOW_NS);
+        let lo = rolls.partition_point(|r| r.stamp_ns + HALF_WINDOW_NS < f.stamp_ns);
+        let hi = lo + rolls[lo..].partition_point(|r| r.stamp_ns <= f.stamp_ns + HALF_WINDOW_NS);
         if hi == lo {
             continue;
         }
-        let n = (hi - lo) as f64;
-        let phi = rolls[lo..hi].iter().map(|r| r.1).sum::<f64>() / n - straight_roll_rad;
-        let (v, turn) = turns[lo..hi]
-            .iter()
-            .fold((0.0, 0.0), |a, t| (a.0 + t.0 / n, a.1 + t.1 / n));
+        let (near, n) = (&rolls[lo..hi], (hi - lo) as f64);
+        let mean = |x: fn(&StepRoll) -> f64| near.iter().map(x).sum::<f64>() / n;
+        let phi = mean(|r| r.roll_rad) - straight_roll_rad;
+        let (v, turn) = (mean(|r| r.speed_mps), mean(|r| r.turn_radps));
         *cant = Some(cant_of(vehicle, phi, v, turn));
         let Some(heading) = course_at(&run.courses, f.stamp_ns, MAX_COURSE_AGE_S) else {
             continue;
@@ -119,15 +118,21 @@ fn cant_of(vehicle: &Vehicle, phi: f64, v: f64, turn: f64) -> f64 {
     cant
 }
 
-/// A step's speed and turn about up (counter-clockwise), from the receiver and the gyro.
-fn turn_of(s: &TiltStep, imu: &SensorMount, courses: &[Course]) -> (f64, f64) {
-    let w = imu.mounting() * Vector3::from(s.angular_rate);
-    let v = course_at(courses, s.stamp_ns, 1.0).map_or(0.0, |c| c.speed_mps);
-    (v, w.z)
+/// What one IMU step says of the body.
+struct StepRoll {
+    stamp_ns: u64,
+    /// The left side up positive.
+    roll_rad: f64,
+    /// On a straight at speed.
+    straight: bool,
+    /// The receiver's speed.
+    speed_mps: f64,
+    /// The gyro's rate about the body's up axis (counter-clockwise).
+    turn_radps: f64,
 }
 
-/// A step's roll (rad, the left side up positive) and whether it is on a straight at speed.
-fn roll_of(s: &TiltStep, imu: &SensorMount, courses: &[Course]) -> (u64, f64, bool) {
+/// A step's roll, speed and turn, the IMU's readings turned into the body by its mounting.
+fn roll_of(s: &TiltStep, imu: &SensorMount, courses: &[Course]) -> StepRoll {
     let r = imu.mounting();
     let f = r * Vector3::from(s.specific_force);
     let w = r * Vector3::from(s.angular_rate);
@@ -137,8 +142,13 @@ fn roll_of(s: &TiltStep, imu: &SensorMount, courses: &[Course]) -> (u64, f64, bo
     // roll the body's z rate gives, which is enough (0.1 rad of roll: 2 mm at 4 m otherwise).
     let first = roll(w.z);
     let phi = roll(w.y * first.sin() + w.z * first.cos());
-    let straight = v >= crate::fixes::MIN_COURSE_SPEED_MPS && w.z.abs() < STRAIGHT_RATE_RADPS;
-    (s.stamp_ns, phi, straight)
+    StepRoll {
+        stamp_ns: s.stamp_ns,
+        roll_rad: phi,
+        straight: v >= crate::fixes::MIN_COURSE_SPEED_MPS && w.z.abs() < STRAIGHT_RATE_RADPS,
+        speed_mps: v,
+        turn_radps: w.z,
+    }
 }
 
 /// The course nearest `stamp_ns`, if one is within `max_age_s`.
