@@ -21,6 +21,8 @@
 //!   gate, pre-filters, AKF and IMU error learning;
 //! - [`eddy_current`]: source 004's eddy-current speed and distance: filtering, correlation,
 //!   warping;
+//! - [`tilt`]: the level an IMU's readings are turned into, the map's looked up where the
+//!   gyro's roll puts the cant ramps through a GNSS loss;
 //! - [`safety`]: source 002's EKF in the plane with its safety checks and safe interval;
 //! - [`replay`]: the `refuse` run, streaming input to output.
 //!
@@ -44,6 +46,7 @@ pub mod reorder;
 pub mod replay;
 pub mod safety;
 pub mod spec;
+pub mod tilt;
 
 pub use error::{Error, Result};
 // The estimation maths, under the paths the pipelines have always used.

@@ -5,7 +5,7 @@
 //! |---|---|---|
 //! | gate | [`quality_gate`] | each fix judged on fix type, satellites and HDOP: RTK fixed taken as the reference, weaker fixes pre-filtered, the rest refused with the reason |
 //! | pre-filter | [`crate::prefilter`] | RLS, adaptive RLS or PU-RLS per GNSS axis (position, velocity); the unscented transform for speed and course to velocity |
-//! | train | [`train_geometry`] | the vehicle's geometry: the navigation point at the IMU's place, each fix moved there from the antenna, the IMU's readings levelled by its mounting and the map's gradient and cant, the front end written |
+//! | train | [`train_geometry`] | the vehicle's geometry: the navigation point at the IMU's place, each fix moved there from the antenna, the IMU's readings levelled by its mounting and the map's gradient and cant (looked up through a loss where the gyro's roll puts the cant ramps: [`crate::tilt`]), the front end written |
 //! | navigation | [`planar_ins`] | heading from the yaw rate, speed from the forward specific force, both bias-corrected, dead-reckoned at the IMU's rate |
 //! | fusion | [`error_state`] | the error-state filter `[δe, δn, δu, δw, δψ, δb_x, δb_y, δb_g, δk…]`, Joseph form, its estimate put into the navigation after each update |
 //! | train | [`constraints`] | railfuse's, not the source's: zero lateral speed (NHC) and the track map's centre line and heading, as pseudo-measurements |
@@ -143,6 +143,8 @@ pub struct GnssInsPipeline {
     constraints: constraints::State,
     /// The navigation point's chainage from the latest fix, before the navigation starts.
     fix_chainage_m: Option<f64>,
+    /// The level the IMU's readings are turned into, the gyro carrying the map's.
+    tilt: crate::tilt::GyroTilt,
 }
 
 /// What one step wrote.
@@ -202,6 +204,7 @@ impl GnssInsPipeline {
             gate: GateTally::default(),
             constraints: constraints::State::default(),
             fix_chainage_m: None,
+            tilt: Default::default(),
             settings,
         })
     }

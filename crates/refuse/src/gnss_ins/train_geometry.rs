@@ -14,13 +14,15 @@
 //! - **The IMU's readings** are turned into the body by its mounting and into the level frame
 //!   by the map's gradient, cant and the body's lean where the navigation point is
 //!   ([`SensorMount::to_level`], [`SensorMount::heading_rate`]): the planar navigation then
-//!   sees the horizontal acceleration and the heading's turn, as on a flat line (map-aided: the pipeline has no
-//!   attitude of its own; without a map only the mounting is taken out).
+//!   sees the horizontal acceleration and the heading's turn, as on a flat line (map-aided:
+//!   the pipeline has no attitude of its own; without a map only the mounting is taken out).
+//!   Through a GNSS loss the map is looked up where the gyro's roll puts the cant ramps
+//!   ([`GyroTilt`](crate::tilt::GyroTilt)), not at the drifting chainage.
 //! - **The output** is the front end's: the navigation point moved forward by `−x_imu` along
 //!   the track (on the map) or the heading, its covariance with the heading error's share of
 //!   that lever arm.
 
-use nalgebra::SMatrix;
+use nalgebra::{SMatrix, Vector3};
 use railfuse_catalog::messages::{Imu, SensorMount, TrackMap};
 use railfuse_catalog::vehicle::TrainPlace;
 
@@ -84,12 +86,15 @@ impl GnssInsPipeline {
     /// The IMU's reading as the planar navigation takes it: forward and lateral specific
     /// force and the rate about the vertical, in the level frame where the navigation point
     /// is.
-    pub(super) fn level_reading(&self, ctx: &SensorContext, m: &Imu) -> ([f64; 2], f64) {
+    pub(super) fn level_reading(&mut self, ctx: &SensorContext, m: &Imu) -> ([f64; 2], f64) {
         let mount = self.mount(ctx, self.roles.imu);
         let level = match (ctx.track.as_ref(), self.nav_chainage()) {
             (Some(map), Some(s)) => {
                 let speed = self.nav.map_or(0.0, |n| n.speed_mps);
-                ctx.vehicle.level_on(map, s, speed)
+                let rate = Vector3::from(m.angular_rate_radps);
+                let rate = mount.map_or(rate, |mount| mount.mounting() * rate);
+                let level_at = |shift: f64| ctx.vehicle.level_on(map, s + shift, speed);
+                self.tilt.level(m.stamp_ns, level_at, rate, self.in_loss)
             }
             _ => None,
         };
