@@ -449,6 +449,17 @@ fn bad_runs_and_posts_are_one_line_each_before_any_output() {
         &[s(run), "--quality", "all"],
         "m RMS across the track between chainage",
     );
+    // A run without its IMU keeps the roof antenna's lean (0.4 m in the canted curves): the
+    // fit cannot keep its promise, and says which run is the likely cause.
+    let no_imu = d.path().join("no_imu.mcap");
+    simulate(&["--seed", "2", "--fault", "imu:dropout:0:100000"], &no_imu);
+    fails(
+        &[s(run), s(&no_imu)],
+        &format!(
+            "keep the roof antenna's lean in canted curves (no IMU to take it out: {})",
+            no_imu.display()
+        ),
+    );
     fails(
         &[s(run), "--chainage-at", "45.0,11.0=3"],
         "--chainage-at 45.0,11.0=3 lies",

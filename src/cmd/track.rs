@@ -303,6 +303,15 @@ fn print_runs(s: &Summary) {
                 l.straight_roll_rad.to_degrees()
             );
         }
+        if let Some(z) = r.antenna_lean_kept_m {
+            println!(
+                "{}: the antenna's lean left in its fixes: {z:.2} m above the rail and no IMU \
+                 in the run to take it out ({:.2} m towards the inside of a curve per 100 mm \
+                 of cant)",
+                r.name,
+                z * 0.1 / railfuse_catalog::track_profile::STANDARD_CANT_BASE_M
+            );
+        }
         for e in &r.leaves_line {
             let at = |x: Option<f64>| x.map_or("-".to_owned(), km);
             println!(

@@ -16,12 +16,14 @@ pub enum FitError {
         fixes: usize,
         on_line: usize,
     },
-    #[error("the fit leaves {rms_m:.3} m RMS across the track between chainage {from_m:.0} and {to_m:.0} m, more than the {tolerance_m} m promised (--tolerance): fixes of a worse quality there, or runs on different tracks")]
+    #[error("the fit leaves {rms_m:.3} m RMS across the track between chainage {from_m:.0} and {to_m:.0} m, more than the {tolerance_m} m promised (--tolerance): fixes of a worse quality there, or runs on different tracks{leaning}")]
     Tolerance {
         from_m: f64,
         to_m: f64,
         rms_m: f64,
         tolerance_m: f64,
+        /// The runs whose fixes keep their roof antenna's lean (no IMU), said as a cause.
+        leaning: String,
     },
     #[error("the spline cannot be solved: {0}")]
     Solve(#[from] NotPositiveDefinite),

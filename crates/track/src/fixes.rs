@@ -57,6 +57,10 @@ pub struct RunFixes {
     pub tilt: Option<Tilt>,
     /// What taking the antenna's lean out of its fixes did.
     pub lean: Option<Lean>,
+    /// The antenna's height above the rail where the vehicle puts it up but the run has no
+    /// IMU to take its lean out with, m: its fixes lean into each canted curve by
+    /// `z sin φ` (0.44 m for 4.1 m and 160 mm of cant), left in.
+    pub lean_kept_m: Option<f64>,
     /// Each fix's cant from the run's IMU, rad, the left rail up positive looking the way the
     /// run travels (empty without an IMU and a vehicle).
     pub cant_rad: Vec<Option<f64>>,
@@ -223,6 +227,7 @@ fn on_the_train(run: &mut RunFixes, vehicle: Option<Vehicle>, topic: String, til
         f.up_m = f.up_m.map(|u| u - antenna_z);
     }
     let (imu, steps) = tilt.finish();
+    run.lean_kept_m = (imu.is_none() && antenna_z > 0.0 && !run.fused).then_some(antenna_z);
     run.tilt = vehicle.zip(imu).map(|(vehicle, imu)| Tilt {
         steps,
         vehicle,
@@ -391,6 +396,7 @@ fn keep_quality(
         fused,
         tilt: None,
         lean: None,
+        lean_kept_m: None,
         cant_rad: Vec::new(),
     })
 }

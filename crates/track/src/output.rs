@@ -61,6 +61,9 @@ pub struct RunSummary {
     pub leaves_line: Vec<Excursion>,
     /// What taking its antenna's lean in canted curves out of its fixes did.
     pub antenna_lean: Option<crate::motion::Lean>,
+    /// The antenna's height above the rail when the run had no IMU to take its lean out
+    /// with, m (its fixes keep the lean).
+    pub antenna_lean_kept_m: Option<f64>,
 }
 
 impl Summary {
@@ -153,6 +156,7 @@ impl RunSummary {
                 })
                 .collect(),
             antenna_lean: r.antenna_lean,
+            antenna_lean_kept_m: r.antenna_lean_kept_m,
         }
     }
 }

@@ -55,6 +55,8 @@ pub struct RunReport {
     pub lateral_rms_m: f64,
     /// What taking its antenna's lean out of its fixes did.
     pub antenna_lean: Option<crate::motion::Lean>,
+    /// The antenna's height when its lean is left in (no IMU), m.
+    pub antenna_lean_kept_m: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -106,11 +108,26 @@ impl Centreline {
             None => Ok(()),
             Some(s) => {
                 let (a, b) = (chainage(s.from_m), chainage(s.to_m));
+                let leaning: Vec<&str> = self
+                    .runs
+                    .iter()
+                    .filter(|r| r.antenna_lean_kept_m.is_some())
+                    .map(|r| r.name.as_str())
+                    .collect();
+                let leaning = match leaning.is_empty() {
+                    true => String::new(),
+                    false => format!(
+                        ", or runs whose fixes keep the roof antenna's lean in canted curves \
+                         (no IMU to take it out: {})",
+                        leaning.join(", ")
+                    ),
+                };
                 Err(FitError::Tolerance {
                     from_m: a.min(b),
                     to_m: a.max(b),
                     rms_m: s.rms_m,
                     tolerance_m,
+                    leaning,
                 })
             }
         }
@@ -250,6 +267,7 @@ fn run_report(run: &RunFixes, used: &[Option<OnLine>], on_line: &[Option<OnLine>
         leaves_line: excursions(run, on_line),
         lateral_rms_m: rms(used.iter().flatten().map(|m| m.lateral_m)),
         antenna_lean: run.lean,
+        antenna_lean_kept_m: run.lean_kept_m,
     }
 }
 
