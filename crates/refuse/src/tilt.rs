@@ -116,9 +116,9 @@ impl GyroTilt {
             *self = Self::default();
             return None;
         };
-        let roll = roll_of(&level);
+        // Once per IMU sample: the map's roll and pitch at the lookup.
+        let (roll, pitch, _) = level.euler_angles();
         if let (Some(before), true) = (self.map_roll, dt > 0.0) {
-            let (_, pitch, _) = level.euler_angles();
             let phi = before + self.offset;
             let (s, c) = phi.sin_cos();
             let gyro = rate.x + (rate.y * s + rate.z * c) * pitch.tan();
