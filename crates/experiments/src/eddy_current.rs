@@ -18,7 +18,7 @@ use railfuse_refuse::config::embedded_path;
 use railfuse_refuse::spec::Pipelines;
 use serde::Serialize;
 
-use crate::{Error, Result};
+use crate::{Error, Result, Train};
 
 pub const SEED004_PIPELINES: &str = include_str!("../../../samples/seed004.toml");
 
@@ -177,7 +177,7 @@ pub fn run_all(dir: &Path, seeds: u64, step: &dyn Fn(u64)) -> Result<EddyCurrent
             .collect();
         for seed in 1..=seeds {
             // The rough track runs under the preset's name: tag it apart.
-            crate::score_fused_run(dir, &preset, seed, &pipelines, name, |fused| {
+            crate::score_fused_run(dir, &preset, seed, (&pipelines, Train::AsConfigured), name, |fused| {
                 score(fused, &mut acc)
             })?;
             done += 1;

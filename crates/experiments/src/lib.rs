@@ -49,6 +49,8 @@ pub enum Error {
     Refuse(#[from] railfuse_refuse::Error),
     #[error(transparent)]
     Tune(#[from] railfuse_tune::Error),
+    #[error(transparent)]
+    Calibrate(#[from] railfuse_calibrate::Error),
     #[error("a pipeline variant does not read back: {0}")]
     Toml(toml::de::Error),
     #[error("{}: {source}", path.display())]
@@ -97,7 +99,7 @@ pub fn run_scenario(
         dir,
         scenario,
         (seed, duration_s, faults),
-        pipelines,
+        (pipelines, Train::AsConfigured),
         tag,
         |_, eval| Ok(eval.pipelines),
     )?;
@@ -107,13 +109,25 @@ pub fn run_scenario(
     })
 }
 
-/// Simulates `scenario` with `seed` into `dir`, re-fuses it with `pipelines`, hands the fused
-/// log to `score`, and removes both logs whatever happened.
+/// The train a run is re-fused with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Train {
+    /// The configuration's `[vehicle]`, else the log's drawing.
+    AsConfigured,
+    /// The log's drawing with the IMU's mounting from `railfuse calibrate` on the same run:
+    /// how a field engineer re-fuses a run whose train was built to a tolerance of its
+    /// drawing (the railway scenarios), since the drawing's degree or two of mounting is
+    /// `g` times that in the IMU's forward and lateral acceleration.
+    Calibrated,
+}
+
+/// Simulates `scenario` with `seed` into `dir`, re-fuses it with `pipelines` and the `train`,
+/// hands the fused log to `score`, and removes both logs whatever happened.
 pub(crate) fn score_fused_run(
     dir: &Path,
     scenario: &Scenario,
     seed: u64,
-    pipelines: &Pipelines,
+    (pipelines, train): (&Pipelines, Train),
     tag: &str,
     score: impl FnOnce(&Path) -> Result<()>,
 ) -> Result<()> {
@@ -121,7 +135,7 @@ pub(crate) fn score_fused_run(
         dir,
         scenario,
         (seed, None, &[]),
-        pipelines,
+        (pipelines, train),
         tag,
         |fused, _| score(fused),
     )
@@ -135,7 +149,7 @@ fn fused_run<T>(
     dir: &Path,
     scenario: &Scenario,
     (seed, duration_s, faults): (u64, Option<f64>, &[FaultSpec]),
-    pipelines: &Pipelines,
+    (pipelines, train): (&Pipelines, Train),
     tag: &str,
     score: impl FnOnce(&Path, railfuse_eval::EvalReport) -> Result<T>,
 ) -> Result<(T, f64)> {
@@ -143,22 +157,42 @@ fn fused_run<T>(
     let raw = dir.join(format!("{name}-{tag}-seed{seed}.mcap"));
     let fused = dir.join(format!("{name}-{tag}-seed{seed}.fused.mcap"));
     let sim = simulate(scenario, seed, duration_s, faults, &raw)?;
-    let result = refuse(&RefuseOptions {
-        run: &railfuse_catalog::run::Run::file(&raw),
-        output: &fused,
-        config: pipelines,
-        config_source: pipelines.path.display().to_string(),
-        reference: &railfuse_eval::Reference::topic(topics::GROUND_TRUTH),
-        withhold: None,
-        progress: None,
-        observer: None,
+    let run = railfuse_catalog::run::Run::file(&raw);
+    let result = match train {
+        Train::AsConfigured => Ok(None),
+        Train::Calibrated => calibrated(&run).map(Some),
+    }
+    .and_then(|vehicle| {
+        let mut config = pipelines.clone();
+        if vehicle.is_some() {
+            config.vehicle = vehicle;
+        }
+        refuse(&RefuseOptions {
+            run: &run,
+            output: &fused,
+            config: &config,
+            config_source: pipelines.path.display().to_string(),
+            reference: &railfuse_eval::Reference::topic(topics::GROUND_TRUTH),
+            withhold: None,
+            progress: None,
+            observer: None,
+        })
+        .map_err(Error::from)
     });
     std::fs::remove_file(&raw).ok();
-    let scored = result
-        .map_err(Error::from)
-        .and_then(|(_, eval)| score(&fused, eval));
+    let scored = result.and_then(|(_, eval)| score(&fused, eval));
     std::fs::remove_file(&fused).ok();
     Ok((scored?, sim.duration_s))
+}
+
+/// The run's drawing with the IMU's mounting calibrated from the run itself, replayed with
+/// its default pipeline as `railfuse calibrate RUN` does.
+fn calibrated(run: &railfuse_catalog::run::Run) -> Result<railfuse_catalog::messages::Vehicle> {
+    let default = railfuse_refuse::default_config::default_config(run, None)?;
+    let config = default.pipelines(Path::new("default pipeline"))?;
+    let priors = railfuse_calibrate::mounting::MountingPriors::default();
+    let c = railfuse_calibrate::calibrate(&[(run.clone(), config)], None, &priors)?;
+    Ok(c.vehicle())
 }
 
 /// Envelopes over `seeds` runs of each of `names`, `run(seed)` giving one run.

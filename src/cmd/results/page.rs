@@ -27,9 +27,11 @@ pub struct Args {
     /// U_safe, faults flagged; written to docs/safety.md.
     #[arg(long, conflicts_with = "tuning")]
     pub safety: bool,
-    /// Run source 003's GNSS/INS experiment instead (samples/seed003.toml on the seed003 and
-    /// default scenarios): velocity and position errors in the plane and through the 150 s
-    /// GNSS loss, beside the source's figures; written to docs/gnss_ins.md.
+    /// Run source 003's GNSS/INS experiment instead (samples/seed003.toml on seed003, on its
+    /// railway in three dimensions seed003_3d and that railway's flat twin, and on the default
+    /// run and its flat twin; each railway run with the IMU's mounting calibrated from it):
+    /// velocity and position errors in the plane and through the 150 s GNSS loss, beside the
+    /// source's figures; written to docs/gnss_ins.md.
     #[arg(long, conflicts_with_all = ["tuning", "safety"])]
     pub gnss_ins: bool,
     /// Run source 004's eddy-current experiment instead (samples/seed004.toml on the seed004

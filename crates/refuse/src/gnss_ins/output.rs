@@ -61,8 +61,8 @@ impl GnssInsPipeline {
         self.write_model(t, (nav.accel_bias_mps2, nav.gyro_bias_radps), o);
     }
 
-    /// The front end's position in the plane with its covariance, on the globe, and the
-    /// velocity.
+    /// The front end's position in the plane with its covariance, on the globe, and its
+    /// velocity and heading.
     fn plane_position(
         &self,
         nav: &Navigation,
@@ -71,11 +71,10 @@ impl GnssInsPipeline {
     ) -> PlanePosition {
         let rows = velocity_rows(nav);
         let h = SMatrix::<f64, 2, DIM>::from_rows(&[rows[0].transpose(), rows[1].transpose()]);
-        let vc = h * p * h.transpose();
+        let ((ve, vn), vc) = front.velocity(nav.velocity(), h * p * h.transpose());
         let pc = front.rows * p * front.rows.transpose();
         let origin = self.origin.expect("set by the first fix");
         let (lat, lon, _) = origin.to_geodetic(front.east_m, front.north_m, 0.0);
-        let (ve, vn) = nav.velocity();
         PlanePosition {
             east_m: front.east_m,
             north_m: front.north_m,
@@ -84,7 +83,7 @@ impl GnssInsPipeline {
             longitude_deg: lon,
             velocity_en_mps: Some([ve, vn]),
             velocity_covariance_en: Some([vc[(0, 0)], vc[(0, 1)], vc[(1, 0)], vc[(1, 1)]]),
-            heading_rad: Some(nav.heading_rad),
+            heading_rad: Some(nav.heading_rad + front.turn_rad),
         }
     }
 
