@@ -262,7 +262,10 @@ fn the_pipelines_in_the_plane_and_the_eddy_current_one_place_each_sensor_where_i
             // The front end's velocity, not the IMU's: on the run's 1 500 m curve the track
             // turns 0.5° between the two, 0.3 m/s across at line speed.
             let worst = front_velocity_error_max(&dir.path().join("a.mcap"), pipeline);
-            assert!(worst < 0.25, "{pipeline}: front end velocity off by {worst:.3} m/s");
+            assert!(
+                worst < 0.25,
+                "{pipeline}: front end velocity off by {worst:.3} m/s"
+            );
         }
         let bad = rmse(&point, "b.mcap");
         assert!(
@@ -295,10 +298,16 @@ fn front_velocity_error_max(fused: &Path, pipeline: &str) -> f64 {
         if g.stamp_ns - st.stamp_ns > 10_000_000 || g.speed_mps < 5.0 {
             continue;
         }
-        let (te, tn) = (g.speed_mps * g.heading_rad.sin(), g.speed_mps * g.heading_rad.cos());
+        let (te, tn) = (
+            g.speed_mps * g.heading_rad.sin(),
+            g.speed_mps * g.heading_rad.cos(),
+        );
         worst = worst.max((ve - te).hypot(vn - tn));
     }
-    assert!(worst > 0.0, "no state of {pipeline} met the truth at its stamp");
+    assert!(
+        worst > 0.0,
+        "no state of {pipeline} met the truth at its stamp"
+    );
     worst
 }
 

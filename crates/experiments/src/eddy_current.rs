@@ -177,9 +177,14 @@ pub fn run_all(dir: &Path, seeds: u64, step: &dyn Fn(u64)) -> Result<EddyCurrent
             .collect();
         for seed in 1..=seeds {
             // The rough track runs under the preset's name: tag it apart.
-            crate::score_fused_run(dir, &preset, seed, (&pipelines, Train::AsConfigured), name, |fused| {
-                score(fused, &mut acc)
-            })?;
+            crate::score_fused_run(
+                dir,
+                &preset,
+                seed,
+                (&pipelines, Train::AsConfigured),
+                name,
+                |fused| score(fused, &mut acc),
+            )?;
             done += 1;
             step(done);
         }

@@ -146,9 +146,14 @@ pub fn run_all(dir: &Path, seeds: u64, step: &dyn Fn(u64)) -> Result<GnssInsResu
             })
             .collect();
         for seed in 1..=seeds {
-            crate::score_fused_run(dir, &preset, seed, (&pipelines, train), "gnss_ins", |fused| {
-                score(fused, outage, &mut acc)
-            })?;
+            crate::score_fused_run(
+                dir,
+                &preset,
+                seed,
+                (&pipelines, train),
+                "gnss_ins",
+                |fused| score(fused, outage, &mut acc),
+            )?;
             done += 1;
             step(done);
         }

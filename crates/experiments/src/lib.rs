@@ -25,6 +25,7 @@ pub mod sharing;
 pub mod sources;
 pub mod tuning;
 
+use std::borrow::Cow;
 use std::path::Path;
 
 use railfuse_catalog::topics;
@@ -159,14 +160,14 @@ fn fused_run<T>(
     let sim = simulate(scenario, seed, duration_s, faults, &raw)?;
     let run = railfuse_catalog::run::Run::file(&raw);
     let result = match train {
-        Train::AsConfigured => Ok(None),
-        Train::Calibrated => calibrated(&run).map(Some),
+        Train::AsConfigured => Ok(Cow::Borrowed(pipelines)),
+        Train::Calibrated => calibrated(&run).map(|vehicle| {
+            let mut config = pipelines.clone();
+            config.vehicle = Some(vehicle);
+            Cow::Owned(config)
+        }),
     }
-    .and_then(|vehicle| {
-        let mut config = pipelines.clone();
-        if vehicle.is_some() {
-            config.vehicle = vehicle;
-        }
+    .and_then(|config| {
         refuse(&RefuseOptions {
             run: &run,
             output: &fused,

@@ -132,11 +132,16 @@ fn goal(
         .find(|s| s.pipeline == "pu_rls")?
         .outage_std_en?;
     match (scenario, pipeline) {
-        ("seed003", "kf_track") => Some((pu_rls.0, pu_rls.1, true, "below the source's PU-RLS".into())),
+        ("seed003", "kf_track") => {
+            Some((pu_rls.0, pu_rls.1, true, "below the source's PU-RLS".into()))
+        }
         ("seed003", "kf_track_speed") => Some((1.0, 1.0, false, "at most 1 m".into())),
         ("seed003_3d", _) => {
             let twin = twin?;
-            let (e, n) = (1.25 * twin.outage_east.std(), 1.25 * twin.outage_north.std());
+            let (e, n) = (
+                1.25 * twin.outage_east.std(),
+                1.25 * twin.outage_north.std(),
+            );
             Some((
                 e.min(pu_rls.0),
                 n.min(pu_rls.1),
@@ -169,9 +174,11 @@ fn constraints(r: &GnssInsResults) -> Table {
         .find(|s| s.pipeline == "pu_rls")
         .and_then(|s| s.outage_std_en);
     for scenario in ["seed003", "seed003_3d_flat", "seed003_3d"] {
-        for row in r.rows.iter().filter(|x| {
-            x.scenario == scenario && TRAIN_PIPELINES.contains(&x.pipeline.as_str())
-        }) {
+        for row in r
+            .rows
+            .iter()
+            .filter(|x| x.scenario == scenario && TRAIN_PIPELINES.contains(&x.pipeline.as_str()))
+        {
             let twin = r
                 .rows
                 .iter()

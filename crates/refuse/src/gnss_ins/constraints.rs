@@ -168,7 +168,7 @@ impl GnssInsPipeline {
 }
 
 /// An angle wrapped into (−π, π].
-fn wrap(a: f64) -> f64 {
+pub(super) fn wrap(a: f64) -> f64 {
     let w = a.rem_euclid(std::f64::consts::TAU);
     if w > std::f64::consts::PI {
         w - std::f64::consts::TAU

@@ -131,11 +131,11 @@ impl GnssInsPipeline {
         // The track turns between the navigation point and the front end (13 m on a 900 m
         // curve: 0.8°), and the front end moves along the track where it is.
         let heading = |s: f64| map.and_then(|m| m.pose_at(s)).map(|p| p.heading_rad);
-        let turn_rad = match (matched.and_then(|m| heading(m.chainage_m)), heading(chainage_m)) {
-            (Some(at_nav), Some(at_front)) => {
-                let d = at_front - at_nav;
-                d.sin().atan2(d.cos())
-            }
+        let turn_rad = match (
+            matched.and_then(|m| heading(m.chainage_m)),
+            heading(chainage_m),
+        ) {
+            (Some(at_nav), Some(at_front)) => super::constraints::wrap(at_front - at_nav),
             _ => 0.0,
         };
         let front = SensorMount::at_front("");
@@ -182,6 +182,9 @@ impl FrontEnd {
         // A heading clockwise from north: v (sin ψ, cos ψ) turned to v (sin(ψ+Δ), cos(ψ+Δ)).
         let (s, c) = self.turn_rad.sin_cos();
         let j = SMatrix::<f64, 2, 2>::new(c, s, -s, c);
-        ((c * ve + s * vn, c * vn - s * ve), j * covariance * j.transpose())
+        (
+            (c * ve + s * vn, c * vn - s * ve),
+            j * covariance * j.transpose(),
+        )
     }
 }
